@@ -1,0 +1,135 @@
+//! Dispersion functions D(z, w): how complex it is to interpolate the points (z_k, w_k).
+//!
+//! A dispersion is turned into a [`Penalty`] once the sample points z are known. The penalty is
+//! what a solver sees; its kind (quadratic today, conic for total variation) decides which
+//! solvers can handle it, so [`crate::identify`] never needs to know the concrete dispersion type.
+
+use std::fmt;
+use std::ops::Range;
+use std::sync::Arc;
+
+use structid_lti::Signal;
+
+use crate::error::Result;
+use crate::interpolant::Interpolant;
+use crate::kernel::{GaussianKernel, Kernel, KernelExpansion};
+
+/// A dispersion function D(z, w) for one nonlinear block.
+pub trait Dispersion: Send + Sync + fmt::Debug {
+    /// A short description, e.g. `gaussian(sigma=0.4)`.
+    fn describe(&self) -> String;
+
+    /// Named numeric parameters for reports (σ, …).
+    fn parameters(&self) -> Vec<(String, f64)> {
+        Vec::new()
+    }
+
+    /// The penalty on w once the block's inputs `z` (one point per sample) are fixed.
+    fn penalty(&self, z: &Signal) -> Result<Penalty>;
+}
+
+/// What a dispersion looks like to a solver once its sample points are fixed.
+#[non_exhaustive]
+pub enum Penalty {
+    /// D(w) = wᵀK⁻¹w for a positive semi-definite Gram matrix K (an RKHS norm). Solvers use K
+    /// only through its columns and never invert it.
+    Quadratic(Box<dyn QuadraticPenalty>),
+}
+
+impl fmt::Debug for Penalty {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Penalty::Quadratic(q) => write!(f, "Quadratic(len = {})", q.len()),
+        }
+    }
+}
+
+/// A quadratic penalty wᵀK⁻¹w given through its Gram matrix K (L × L).
+pub trait QuadraticPenalty: Send + Sync {
+    /// Number of sample points L.
+    fn len(&self) -> usize;
+
+    /// Whether there are no samples.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Writes columns `cols` of K, column-major with leading dimension [`QuadraticPenalty::len`].
+    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]);
+
+    /// The interpolant N̂(z) = Σ_k α_k K(z, z_k) for the dual coefficients α (ŵ = Kα).
+    fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant>;
+}
+
+/// Any [`Kernel`] as a quadratic dispersion: D(z, w) = wᵀK⁻¹w with K_ij = k(z_i, z_j).
+///
+/// ```
+/// use structid_core::{Dispersion, GaussianKernel, KernelDispersion};
+/// let d = KernelDispersion::gaussian(0.4).unwrap();
+/// assert_eq!(d.describe(), "gaussian(sigma=0.4)");
+/// ```
+#[derive(Debug, Clone)]
+pub struct KernelDispersion<K: Kernel> {
+    kernel: Arc<K>,
+}
+
+impl<K: Kernel + 'static> KernelDispersion<K> {
+    /// Wraps a kernel.
+    pub fn new(kernel: K) -> Self {
+        Self {
+            kernel: Arc::new(kernel),
+        }
+    }
+
+    /// The kernel.
+    pub fn kernel(&self) -> &K {
+        &self.kernel
+    }
+}
+
+impl KernelDispersion<GaussianKernel> {
+    /// The Gaussian RKHS dispersion of width `sigma` (> 0).
+    pub fn gaussian(sigma: f64) -> Result<Self> {
+        Ok(Self::new(GaussianKernel::new(sigma)?))
+    }
+}
+
+impl<K: Kernel + 'static> Dispersion for KernelDispersion<K> {
+    fn describe(&self) -> String {
+        self.kernel.describe()
+    }
+
+    fn parameters(&self) -> Vec<(String, f64)> {
+        self.kernel.parameters()
+    }
+
+    fn penalty(&self, z: &Signal) -> Result<Penalty> {
+        Ok(Penalty::Quadratic(Box::new(KernelGram {
+            kernel: Arc::clone(&self.kernel),
+            z: z.clone(),
+        })))
+    }
+}
+
+struct KernelGram<K: Kernel> {
+    kernel: Arc<K>,
+    z: Signal,
+}
+
+impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
+    fn len(&self) -> usize {
+        self.z.len()
+    }
+
+    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]) {
+        self.kernel.fill_gram_columns(&self.z, cols, out);
+    }
+
+    fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {
+        Box::new(KernelExpansion::new(
+            Arc::clone(&self.kernel),
+            self.z.clone(),
+            alpha,
+        ))
+    }
+}

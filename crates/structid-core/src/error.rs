@@ -1,0 +1,124 @@
+//! The error type of `structid-core`.
+
+use structid_lti::LtiError;
+
+/// Everything that can go wrong while building a model, preparing data or identifying maps.
+///
+/// Each variant carries enough context for a command-line user to act on it without reading code.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// An error from the linear-systems layer (dimensions, non-finite matrix entries, …).
+    #[error(transparent)]
+    Lti(#[from] LtiError),
+
+    /// Two things that must agree in size do not.
+    #[error("dimension mismatch in {what}: expected {expected}, found {found}")]
+    DimensionMismatch {
+        /// What was being checked.
+        what: String,
+        /// The size that was required.
+        expected: String,
+        /// The size that was given.
+        found: String,
+    },
+
+    /// A data sample is NaN or infinite.
+    #[error("non-finite value {value} in {signal} at sample {sample}, channel {channel}")]
+    NonFiniteData {
+        /// Which signal (u, y, z, …).
+        signal: String,
+        /// Zero-based sample index.
+        sample: usize,
+        /// Zero-based channel index.
+        channel: usize,
+        /// The offending value.
+        value: f64,
+    },
+
+    /// A tuning parameter is out of its valid range (σ ≤ 0, β ≤ 0, …).
+    #[error("invalid parameter {name} = {value}: {reason}")]
+    InvalidParameter {
+        /// Parameter name.
+        name: String,
+        /// Value that was given.
+        value: f64,
+        /// What is required instead.
+        reason: String,
+    },
+
+    /// The nonlinear blocks do not fit the LFT (indices out of range, a w channel without a block, …).
+    #[error("invalid model structure: {0}")]
+    InvalidStructure(String),
+
+    /// z cannot be computed from u and y (paper, Definition 1).
+    #[error("z is not measurable: {explanation}")]
+    NotMeasurable {
+        /// Why, and what to provide instead.
+        explanation: String,
+    },
+
+    /// The simulation would need w_k to compute z_k (D_zw ≠ 0).
+    #[error(
+        "algebraic loop: D_zw has a non-zero entry ({value}) at row {row}, column {col}, so z_k depends on w_k = N(z_k); \
+         simulation needs D_zw = 0 (add a delay in the loop or move the direct term into the linear block)"
+    )]
+    AlgebraicLoop {
+        /// Row of D_zw.
+        row: usize,
+        /// Column of D_zw.
+        col: usize,
+        /// The non-zero entry.
+        value: f64,
+    },
+
+    /// The problem would not fit in the memory budget of the chosen solver.
+    #[error(
+        "problem too large for the {solver} solver: it needs about {needed_mib} MiB but the limit is {limit_mib} MiB \
+         (L·n_y = {size}). {suggestion}"
+    )]
+    TooLarge {
+        /// Solver that refused.
+        solver: String,
+        /// Estimated peak memory in MiB.
+        needed_mib: u64,
+        /// Budget in MiB.
+        limit_mib: u64,
+        /// Size of the system matrix.
+        size: usize,
+        /// What to do instead.
+        suggestion: String,
+    },
+
+    /// No solver supports the combination of dispersions in the model.
+    #[error("unsupported dispersion combination: {0}")]
+    Unsupported(String),
+
+    /// A numerical step failed in a way that cannot be repaired automatically.
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+
+    /// An expression for a static map could not be parsed or uses unknown variables.
+    #[error("invalid map expression `{expression}`: {reason}")]
+    Expression {
+        /// The expression text.
+        expression: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+/// Result alias used across `structid-core`.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+pub(crate) fn positive_finite(name: &str, value: f64) -> Result<f64> {
+    if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        Err(Error::InvalidParameter {
+            name: name.to_string(),
+            value,
+            reason: "must be a finite number greater than zero".into(),
+        })
+    }
+}

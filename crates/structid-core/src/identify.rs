@@ -1,0 +1,288 @@
+//! The `identify` executor: settings in, an [`Identification`] out.
+
+use std::time::Instant;
+
+use structid_lti::Signal;
+
+use crate::error::{Error, Result, positive_finite};
+use crate::interpolant::Interpolant;
+use crate::measurability::ZSource;
+use crate::model::{Data, Model};
+use crate::problem::Problem;
+use crate::solver;
+
+/// Which solver `identify` uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[non_exhaustive]
+pub enum SolverChoice {
+    /// Pick from the dispersions and the problem size.
+    #[default]
+    Auto,
+    /// The exact dual (representer) solve with the dense L·n_y × L·n_y matrix M.
+    Exact,
+}
+
+/// Settings of [`identify`]; build them with [`IdentifySettings::builder`].
+///
+/// ```
+/// use structid_core::IdentifySettings;
+/// let s = IdentifySettings::builder().beta(0.1).build().unwrap();
+/// assert_eq!(s.beta(), 0.1);
+/// assert!(IdentifySettings::builder().beta(-1.0).build().is_err());
+/// ```
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct IdentifySettings {
+    beta: f64,
+    solver: SolverChoice,
+    memory_limit_bytes: Option<u64>,
+}
+
+impl Default for IdentifySettings {
+    /// β = 0.01 (the middle of the paper's range 0.001–0.1), automatic solver, memory limit
+    /// three quarters of the memory available when identification starts.
+    fn default() -> Self {
+        Self {
+            beta: 0.01,
+            solver: SolverChoice::Auto,
+            memory_limit_bytes: None,
+        }
+    }
+}
+
+impl IdentifySettings {
+    /// A builder starting from the defaults.
+    pub fn builder() -> IdentifySettingsBuilder {
+        IdentifySettingsBuilder {
+            inner: Self::default(),
+        }
+    }
+
+    /// The weight β of the dispersion against the noise energy.
+    pub fn beta(&self) -> f64 {
+        self.beta
+    }
+
+    /// The solver choice.
+    pub fn solver(&self) -> SolverChoice {
+        self.solver
+    }
+
+    /// The memory budget in bytes (`None`: detect at run time).
+    pub fn memory_limit_bytes(&self) -> Option<u64> {
+        self.memory_limit_bytes
+    }
+
+    /// The budget that applies now: the explicit limit, or ¾ of `MemAvailable`
+    /// (4 GiB when it cannot be read).
+    pub fn effective_memory_limit(&self) -> u64 {
+        self.memory_limit_bytes.unwrap_or_else(|| {
+            available_memory_bytes().map_or(4 << 30, |b| b / 4 * 3)
+        })
+    }
+}
+
+fn available_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Builder for [`IdentifySettings`]; [`IdentifySettingsBuilder::build`] validates.
+#[derive(Clone, Debug)]
+pub struct IdentifySettingsBuilder {
+    inner: IdentifySettings,
+}
+
+impl IdentifySettingsBuilder {
+    /// β > 0.
+    pub fn beta(mut self, beta: f64) -> Self {
+        self.inner.beta = beta;
+        self
+    }
+    /// The solver.
+    pub fn solver(mut self, solver: SolverChoice) -> Self {
+        self.inner.solver = solver;
+        self
+    }
+    /// An explicit memory budget in bytes.
+    pub fn memory_limit_bytes(mut self, bytes: u64) -> Self {
+        self.inner.memory_limit_bytes = Some(bytes);
+        self
+    }
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<IdentifySettings> {
+        positive_finite("beta", self.inner.beta)?;
+        if self.inner.memory_limit_bytes == Some(0) {
+            return Err(Error::InvalidParameter {
+                name: "memory_limit_bytes".into(),
+                value: 0.0,
+                reason: "must be positive".into(),
+            });
+        }
+        Ok(self.inner)
+    }
+}
+
+/// The cost terms of eq. (4) at the optimum.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CostTerms {
+    /// μ = (1/L)·Σ_k |ê_k|².
+    pub noise: f64,
+    /// D_i(z^[i], ŵ^[i]) for each block.
+    pub dispersions: Vec<f64>,
+    /// β.
+    pub beta: f64,
+    /// J = μ + β·Σ_i D_i.
+    pub total: f64,
+}
+
+/// Wall-clock timings in seconds.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Timings {
+    /// Computing z, r and the penalties.
+    pub prepare: f64,
+    /// Forming the system matrix.
+    pub assemble: f64,
+    /// Factorising it.
+    pub factor: f64,
+    /// Solving and recovering ŵ, ê and the maps.
+    pub solve: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// Solver diagnostics.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Diagnostics {
+    /// Which solver ran.
+    pub solver: String,
+    /// Dimension of the system matrix M (L·n_y, less dropped samples).
+    pub system_size: usize,
+    /// Output samples (index k·n_y + channel) that depend on neither e nor w and were left out.
+    pub dropped_samples: Vec<usize>,
+    /// Largest |r| over the dropped samples: their consistency with the model (should be ≈ 0).
+    pub dropped_max_abs_residual: f64,
+    /// Pivots of the Cholesky factorisation that had to be regularised (M numerically singular).
+    pub regularized_pivots: usize,
+    /// (max Lᵢᵢ / min Lᵢᵢ)² of the Cholesky factor: a lower bound on the condition number of M.
+    pub condition_lower_bound: f64,
+    /// ‖T_ye·ê + T_yw·ŵ − r‖ / ‖r‖ over the samples kept.
+    pub feasibility_residual: f64,
+    /// Estimated peak memory of the solver in bytes.
+    pub peak_memory_bytes: u64,
+    /// Timings.
+    pub timings: Timings,
+    /// Anything the user should know about.
+    pub warnings: Vec<String>,
+}
+
+/// The estimate of one static block.
+pub struct BlockEstimate {
+    /// Block name.
+    pub name: String,
+    /// The w channel it produces.
+    pub output: usize,
+    /// Description of its dispersion, e.g. `gaussian(sigma=0.4)`.
+    pub dispersion: String,
+    /// The dispersion's parameters.
+    pub parameters: Vec<(String, f64)>,
+    /// Its input samples z^[i].
+    pub z: Signal,
+    /// ŵ^[i] at the samples.
+    pub w_hat: Vec<f64>,
+    /// D_i(z^[i], ŵ^[i]).
+    pub dispersion_value: f64,
+    /// The interpolant N̂_i.
+    pub map: Box<dyn Interpolant>,
+}
+
+impl BlockEstimate {
+    /// N̂_i(z).
+    pub fn predict(&self, z: &[f64]) -> f64 {
+        self.map.eval(z)
+    }
+}
+
+impl std::fmt::Debug for BlockEstimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BlockEstimate")
+            .field("name", &self.name)
+            .field("output", &self.output)
+            .field("dispersion", &self.dispersion)
+            .field("dispersion_value", &self.dispersion_value)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The result of [`identify`].
+#[derive(Debug)]
+pub struct Identification {
+    /// ŵ (L × n_w), channel c from the block with `output == c`.
+    pub w_hat: Signal,
+    /// ê (L × n_e).
+    pub e_hat: Signal,
+    /// One estimate per block, in the problem's block order.
+    pub blocks: Vec<BlockEstimate>,
+    /// Cost terms.
+    pub cost: CostTerms,
+    /// How z was obtained.
+    pub z_source: ZSource,
+    /// Diagnostics.
+    pub diagnostics: Diagnostics,
+}
+
+impl Identification {
+    /// The estimate of the block called `name`.
+    pub fn block(&self, name: &str) -> Option<&BlockEstimate> {
+        self.blocks.iter().find(|b| b.name == name)
+    }
+
+    /// The estimated maps, in block order, ready for [`Model::simulate`].
+    pub fn maps(&self) -> Vec<&dyn Interpolant> {
+        self.blocks.iter().map(|b| b.map.as_ref()).collect()
+    }
+}
+
+/// Identifies the static maps of `model` from `data`: the minimiser of the paper's eq. (4),
+///
+/// J(e, w) = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^[i], w^[i]) subject to T_ye·e + T_yw·w = y − T_yu·u,
+///
+/// with a zero initial state.
+///
+/// ```
+/// use std::sync::Arc;
+/// use nalgebra::dmatrix;
+/// use structid_core::*;
+/// use structid_lti::Signal;
+/// // y_k = tanh(u_k) + e_k, observed without noise here.
+/// let lft = Lft::new(LftMatrices {
+///     a: dmatrix![0.0], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![0.0],
+///     cy: dmatrix![0.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![1.0],
+///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+/// }).unwrap();
+/// let f = NonlinearBlock::new("f", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()));
+/// let model = Model::new(lft, vec![f]).unwrap();
+/// let u = Signal::from_fn(200, 1, |k, _| -2.0 + 4.0 * k as f64 / 199.0);
+/// let y = Signal::from_fn(200, 1, |k, _| u.get(k, 0).tanh());
+/// let data = Data::new(u, y).unwrap();
+/// let settings = IdentifySettings::builder().beta(1e-4).build().unwrap();
+/// let id = identify(&model, &data, &settings).unwrap();
+/// assert!((id.blocks[0].predict(&[0.5]) - 0.5f64.tanh()).abs() < 0.01);
+/// ```
+pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Result<Identification> {
+    let t0 = Instant::now();
+    let problem = Problem::from_model(model, data)?;
+    let mut id = identify_problem(&problem, settings)?;
+    id.diagnostics.timings.prepare += t0.elapsed().as_secs_f64() - id.diagnostics.timings.total;
+    id.diagnostics.timings.total = t0.elapsed().as_secs_f64();
+    Ok(id)
+}
+
+/// [`identify`] for a problem posed directly in operator form.
+pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
+    positive_finite("beta", settings.beta)?;
+    match settings.solver {
+        SolverChoice::Auto | SolverChoice::Exact => solver::exact::solve(problem, settings),
+    }
+}

@@ -1,0 +1,350 @@
+//! The exact dual (representer) solver for quadratic dispersions.
+//!
+//! With K the block-diagonal Gram matrix over the blocks, the optimum of eq. (4) is
+//!
+//! ```text
+//! M = L·β·T_ye·T_yeᵀ + Σ_i T_i·K_i·T_iᵀ          (L·n_y × L·n_y, symmetric PSD)
+//! λ = M⁻¹ r,   α_i = T_iᵀ λ,   ŵ_i = K_i α_i,   ê = L·β·T_yeᵀ λ,   N̂_i(z) = Σ_k α_{i,k} K_i(z, z_k)
+//! ```
+//!
+//! which needs no K⁻¹ (Gaussian Gram matrices are numerically singular). M is assembled by
+//! applying the operators to panels of Gram columns, Q_i = T_i·K_i, then M += T_i·Q_iᵀ
+//! (valid because K_i and M are symmetric), so the peak memory is M plus one Q (two L×L
+//! matrices for SISO). ŵ of the last block is Q_iᵀλ; the others are recomputed panel by panel.
+//!
+//! Output samples that depend on neither e nor w (a strictly proper path from a zero initial
+//! state) make M singular: their rows of M are zero. They are detected on M's diagonal,
+//! checked for consistency (r ≈ 0 there) and left out.
+
+use std::time::Instant;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
+use faer::{Accum, Conj, Mat, MatRef};
+use structid_lti::{LinearSystem, Signal};
+
+use crate::dispersion::{Penalty, QuadraticPenalty};
+use crate::error::{Error, Result};
+use crate::identify::{BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings};
+use crate::problem::Problem;
+
+/// Gram columns are generated and pushed through T_i in panels of this many columns.
+const PANEL: usize = 256;
+
+/// Estimated peak memory of the exact solver in bytes.
+pub fn peak_memory_bytes(len: usize, outputs: usize, noise_inputs: usize, noise_dynamic: bool) -> u64 {
+    let n = (len * outputs) as u64;
+    let l = len as u64;
+    let p = PANEL.min(len.max(1)) as u64;
+    let mut words = n * n + n * l + l * p + 8 * n;
+    if noise_dynamic {
+        words += (n + (len * noise_inputs) as u64) * p;
+    }
+    8 * words
+}
+
+fn solver_name() -> &'static str {
+    "exact"
+}
+
+/// Solves the problem exactly; see the module documentation.
+pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
+    let t_start = Instant::now();
+    let beta = settings.beta();
+    let len = problem.len();
+    let ny = problem.outputs();
+    let n = len * ny;
+    let noise = problem.noise();
+    let ne = noise.inputs();
+    let noise_dynamic = noise.order() > 0;
+
+    let need = peak_memory_bytes(len, ny, ne, noise_dynamic);
+    let limit = settings.effective_memory_limit();
+    if need > limit {
+        let max_len = (1..=len)
+            .rev()
+            .step_by((len / 64).max(1))
+            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic) <= limit)
+            .unwrap_or(0);
+        return Err(Error::TooLarge {
+            solver: solver_name().into(),
+            needed_mib: need >> 20,
+            limit_mib: limit >> 20,
+            size: n,
+            suggestion: format!(
+                "The exact solver stores the dense {n}×{n} matrix M. Identify on a window of at most about \
+                 {max_len} samples, or raise the memory limit if the machine has the memory."
+            ),
+        });
+    }
+
+    let penalties: Vec<Box<dyn QuadraticPenalty>> = problem
+        .blocks()
+        .iter()
+        .map(|b| {
+            let p = b.dispersion.penalty(&b.z)?;
+            let Penalty::Quadratic(q) = p;
+            if q.len() != len {
+                return Err(Error::DimensionMismatch {
+                    what: format!("Gram matrix of block `{}`", b.name),
+                    expected: len.to_string(),
+                    found: q.len().to_string(),
+                });
+            }
+            Ok(q)
+        })
+        .collect::<Result<_>>()?;
+    let t_prepared = Instant::now();
+
+    // --- assemble M ---------------------------------------------------------------------
+    let lb = len as f64 * beta;
+    let mut m = Mat::<f64>::zeros(n, n);
+    let mut q = Mat::<f64>::zeros(n, len);
+    let panel = PANEL.min(len);
+    let mut gram = vec![0.0; len * panel];
+    let nblocks = problem.blocks().len();
+    for (bi, (block, pen)) in problem.blocks().iter().zip(&penalties).enumerate() {
+        for j0 in (0..len).step_by(panel) {
+            let w = panel.min(len - j0);
+            let g = &mut gram[..len * w];
+            pen.fill_columns(j0..j0 + w, g);
+            let g = MatRef::from_column_major_slice(g, len, w);
+            block
+                .path
+                .apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+        }
+        let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
+        block.path.apply_columns(q.transpose(), m.as_mut(), accum, 1.0);
+    }
+    add_noise_term(noise, len, lb, &mut m);
+
+    // --- leave out samples that depend on neither e nor w ---------------------------------
+    let r = problem.residual().as_slice();
+    let max_diag = (0..n).map(|i| m[(i, i)]).fold(0.0f64, f64::max);
+    if max_diag <= 0.0 || !max_diag.is_finite() {
+        return Err(Error::Numerical(format!(
+            "the system matrix M has no positive diagonal entry (max {max_diag}): no output depends on e or w"
+        )));
+    }
+    let dead_tol = 1e-14 * max_diag;
+    let kept: Vec<usize> = (0..n).filter(|&i| m[(i, i)] > dead_tol).collect();
+    let dropped: Vec<usize> = (0..n).filter(|&i| m[(i, i)] <= dead_tol).collect();
+    let dropped_max = dropped.iter().map(|&i| r[i].abs()).fold(0.0, f64::max);
+    let nk = kept.len();
+    if !dropped.is_empty() {
+        // In-place compaction: destinations never overtake their sources in column-major order.
+        for (jj, &j) in kept.iter().enumerate() {
+            for (ii, &i) in kept.iter().enumerate() {
+                m[(ii, jj)] = m[(i, j)];
+            }
+        }
+    }
+    let t_assembled = Instant::now();
+
+    // --- factor -----------------------------------------------------------------------------
+    let par = faer::get_global_parallelism();
+    let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
+    let reg = LltRegularization {
+        dynamic_regularization_delta: 1e-10 * max_diag,
+        dynamic_regularization_epsilon: 1e-13 * max_diag,
+    };
+    let mut buf = MemBuffer::new(
+        cholesky_in_place_scratch::<f64>(nk, par, Default::default())
+            .or(solve_in_place_scratch::<f64>(nk, 1, par)),
+    );
+    let stack = MemStack::new(&mut buf);
+    let info = cholesky_in_place(mk.as_mut(), reg, par, stack, Default::default())
+        .map_err(|e| Error::Numerical(format!("Cholesky factorisation of M failed: {e}")))?;
+    let t_factored = Instant::now();
+
+    // --- solve and recover ------------------------------------------------------------------
+    let mut rhs = Mat::<f64>::from_fn(nk, 1, |i, _| r[kept[i]]);
+    solve_in_place_with_conj(mk.as_ref(), Conj::No, rhs.as_mut(), par, stack);
+    let (dmin, dmax) = (0..nk).fold((f64::INFINITY, 0.0f64), |(lo, hi), i| {
+        let d = mk[(i, i)];
+        (lo.min(d), hi.max(d))
+    });
+    let mut lambda = vec![0.0; n];
+    for (i, &row) in kept.iter().enumerate() {
+        lambda[row] = rhs[(i, 0)];
+    }
+    if lambda.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Numerical(
+            "the solve of M·λ = r produced non-finite values".into(),
+        ));
+    }
+
+    let mut blocks = Vec::with_capacity(nblocks);
+    let mut w_all = Signal::zeros(len, nblocks.max(1));
+    let mut dispersions = Vec::with_capacity(nblocks);
+    let mut fitted = vec![0.0; n];
+    let mut tmp = vec![0.0; n];
+    for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
+        let mut alpha = vec![0.0; len];
+        block.path.apply_adjoint(&lambda, &mut alpha);
+        let w_hat = if bi + 1 == nblocks {
+            // Q = T·K of the last block is still in memory: ŵ = K·α = Qᵀ·λ.
+            let lam = faer::Col::<f64>::from_fn(n, |i| lambda[i]);
+            let w = q.transpose() * &lam;
+            (0..len).map(|k| w[k]).collect::<Vec<_>>()
+        } else {
+            gram_times(pen.as_ref(), &alpha, &mut gram, panel)
+        };
+        block.path.apply(&w_hat, &mut tmp);
+        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
+        let d_i: f64 = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
+        dispersions.push(d_i);
+        blocks.push(BlockEstimate {
+            name: block.name.clone(),
+            output: block.output,
+            dispersion: block.dispersion.describe(),
+            parameters: block.dispersion.parameters(),
+            z: block.z.clone(),
+            w_hat,
+            dispersion_value: d_i,
+            map: pen.interpolant(alpha),
+        });
+    }
+    for (bi, b) in blocks.iter().enumerate() {
+        // ŵ columns follow the w channel numbering when the blocks cover 0..n_w.
+        let col = if b.output < nblocks { b.output } else { bi };
+        for k in 0..len {
+            w_all.sample_mut(k)[col] = b.w_hat[k];
+        }
+    }
+    let mut e_hat = vec![0.0; len * ne];
+    noise.apply_adjoint(&lambda, &mut e_hat);
+    e_hat.iter_mut().for_each(|v| *v *= lb);
+    let mut te = vec![0.0; n];
+    noise.apply(&e_hat, &mut te);
+    let (mut res2, mut r2) = (0.0, 0.0);
+    for &i in &kept {
+        let d = te[i] + fitted[i] - r[i];
+        res2 += d * d;
+        r2 += r[i] * r[i];
+    }
+    let mu = e_hat.iter().map(|v| v * v).sum::<f64>() / len as f64;
+    let total = mu + beta * dispersions.iter().sum::<f64>();
+    let t_end = Instant::now();
+
+    let mut warnings = Vec::new();
+    if !dropped.is_empty() {
+        let scale = r.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(f64::MIN_POSITIVE);
+        warnings.push(format!(
+            "{} output sample(s) depend on neither e nor w (strictly proper paths from a zero initial state) \
+             and were left out; max |r| there = {dropped_max:.3e}{}",
+            dropped.len(),
+            if dropped_max > 1e-8 * scale {
+                " — the data are NOT consistent with the model at those samples"
+            } else {
+                ""
+            }
+        ));
+    }
+    if info.dynamic_regularization_count > 0 {
+        warnings.push(format!(
+            "M is numerically singular: {} Cholesky pivot(s) were regularised (e.g. no noise path and a \
+             numerically singular Gram matrix); the estimate is the minimum-norm-like solution",
+            info.dynamic_regularization_count
+        ));
+    }
+    let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
+    let w_cols = w_all;
+    Ok(Identification {
+        w_hat: w_cols,
+        e_hat: Signal::new(ne, e_hat).map_err(Error::from)?,
+        blocks,
+        cost: CostTerms {
+            noise: mu,
+            dispersions,
+            beta,
+            total,
+        },
+        z_source: problem.z_source().clone(),
+        diagnostics: Diagnostics {
+            solver: solver_name().into(),
+            system_size: nk,
+            dropped_samples: dropped,
+            dropped_max_abs_residual: dropped_max,
+            regularized_pivots: info.dynamic_regularization_count,
+            condition_lower_bound: if dmin > 0.0 { (dmax / dmin).powi(2) } else { f64::INFINITY },
+            feasibility_residual: if r2 > 0.0 { (res2 / r2).sqrt() } else { res2.sqrt() },
+            peak_memory_bytes: need,
+            timings: Timings {
+                prepare: secs(t_start, t_prepared),
+                assemble: secs(t_prepared, t_assembled),
+                factor: secs(t_assembled, t_factored),
+                solve: secs(t_factored, t_end),
+                total: secs(t_start, t_end),
+            },
+            warnings,
+        },
+    })
+}
+
+/// M += L·β·T_ye·T_yeᵀ: a block-diagonal D_ye·D_yeᵀ for a static noise path, otherwise built
+/// panel by panel from T_yeᵀ applied to identity columns.
+fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &mut Mat<f64>) {
+    let ny = noise.outputs();
+    let ne = noise.inputs();
+    let n = len * ny;
+    if ne == 0 {
+        return;
+    }
+    if noise.order() == 0 {
+        let mut d = vec![0.0; ny * ne]; // column-major D_ye
+        let mut unit = vec![0.0; ne];
+        for c in 0..ne {
+            unit.iter_mut().for_each(|v| *v = 0.0);
+            unit[c] = 1.0;
+            noise.apply(&unit, &mut d[c * ny..(c + 1) * ny]);
+        }
+        for k in 0..len {
+            for i in 0..ny {
+                for j in 0..ny {
+                    let ddt: f64 = (0..ne).map(|c| d[c * ny + i] * d[c * ny + j]).sum();
+                    m[(k * ny + i, k * ny + j)] += lb * ddt;
+                }
+            }
+        }
+        return;
+    }
+    let panel = PANEL.min(n);
+    let mut x = Mat::<f64>::zeros(len * ne, panel);
+    let mut ident = Mat::<f64>::zeros(n, panel);
+    for j0 in (0..n).step_by(panel) {
+        let w = panel.min(n - j0);
+        ident.fill(0.0);
+        for jj in 0..w {
+            ident[(j0 + jj, jj)] = 1.0;
+        }
+        noise.apply_adjoint_columns(
+            ident.as_ref().subcols(0, w),
+            x.as_mut().subcols_mut(0, w),
+            Accum::Replace,
+            1.0,
+        );
+        noise.apply_columns(x.as_ref().subcols(0, w), m.as_mut().subcols_mut(j0, w), Accum::Add, lb);
+    }
+}
+
+/// K·α computed panel by panel from the Gram columns (no L×L storage).
+fn gram_times(pen: &dyn QuadraticPenalty, alpha: &[f64], scratch: &mut [f64], panel: usize) -> Vec<f64> {
+    let len = alpha.len();
+    let mut out = vec![0.0; len];
+    for j0 in (0..len).step_by(panel.max(1)) {
+        let w = panel.min(len - j0);
+        let g = &mut scratch[..len * w];
+        pen.fill_columns(j0..j0 + w, g);
+        for jj in 0..w {
+            let a = alpha[j0 + jj];
+            if a != 0.0 {
+                out.iter_mut()
+                    .zip(&g[jj * len..(jj + 1) * len])
+                    .for_each(|(o, v)| *o += a * v);
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,54 @@
+//! Linear time-invariant (LTI) systems for `structid`.
+//!
+//! # Model
+//! A discrete-time state-space system ([`StateSpace`]) is
+//!
+//! ```text
+//! x_{k+1} = A x_k + B u_k,      y_k = C x_k + D u_k,      x_0 = 0,
+//! ```
+//!
+//! with `n` states, `m` inputs and `p` outputs. Over a horizon of `L` samples it is the
+//! linear map `y = T u` where `u` and `y` are *stacked* signals in time-major order
+//! (index `k * channels + c`, see [`Signal`]) and `T` is the `(L p) x (L m)` block
+//! lower-triangular Toeplitz matrix of the Markov parameters
+//!
+//! ```text
+//! h_0 = D,   h_j = C A^{j-1} B  (j >= 1),     T[i, j] = h_{i-j}  for i >= j, 0 otherwise.
+//! ```
+//!
+//! The adjoint `T^T` is block *upper* triangular; it corresponds to running the
+//! transposed system backwards in time: with the costate `s_L = 0`,
+//! `u_k = D^T y_k + B^T s_{k+1}`, `s_k = A^T s_{k+1} + C^T y_k`.
+//!
+//! # Why recursion
+//! Forming `T` costs `O(L^2 p m)` memory and every product `O(L^2 p m)` flops. The
+//! recursion above costs `O(L n (n + m + p))` per signal and no memory beyond the state, so
+//! [`LinearSystem::apply`] and [`LinearSystem::apply_adjoint`] never form `T`
+//! ([`StateSpace::toeplitz_dense`] exists only as a test reference). When many signals are
+//! processed at once ([`LinearSystem::apply_columns`]), a *blocked* recursion groups `b`
+//! time steps into small dense matrix products so that SIMD matrix multiplication does the
+//! work.
+//!
+//! # Contents
+//! - [`Signal`]: multichannel sampled signals (time-major);
+//! - [`StateSpace`], [`ContinuousStateSpace`] (with zero-order-hold discretisation);
+//! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1` and their realisation;
+//! - [`LinearSystem`]: the operator trait used by the solvers;
+//! - [`LtiError`]: the error type;
+//! - [`testing`]: deterministic random systems and signals for tests and benchmarks.
+
+pub mod error;
+pub mod operator;
+pub mod signal;
+pub mod state_space;
+pub mod testing;
+pub mod transfer_function;
+
+pub use error::LtiError;
+pub use operator::LinearSystem;
+pub use signal::Signal;
+pub use state_space::{ContinuousStateSpace, StateSpace};
+pub use transfer_function::{Siso, TransferFunction};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,925 @@
+//! Discrete-time state-space systems (with recursive and blocked Toeplitz operators) and
+//! continuous-time state-space systems with zero-order-hold discretisation.
+
+use crate::error::{LtiError, check_matrix_finite};
+use crate::operator::{LinearSystem, horizon};
+use crate::signal::Signal;
+use faer::linalg::matmul::matmul;
+use faer::prelude::{Reborrow, ReborrowMut};
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+use nalgebra::DMatrix;
+
+/// Time-block length of the blocked many-column operators (tuned on a 2-core AVX-512
+/// machine for SISO systems of low order).
+const TIME_BLOCK: usize = 32;
+/// Width of the column chunks each thread processes at once (keeps a time block of the
+/// operand in cache).
+const COL_CHUNK: usize = 256;
+/// Do not split the columns across threads below this many columns per task.
+const MIN_PAR_COLS: usize = 64;
+
+/// Checks the shapes `a: n x n`, `b: n x m`, `c: p x n`, `d: p x m` and finiteness.
+fn validate(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+    d: &DMatrix<f64>,
+) -> Result<(), LtiError> {
+    let n = a.nrows();
+    if a.ncols() != n {
+        return Err(LtiError::dims(
+            "state matrix A",
+            "a square matrix",
+            format!("{} x {}", a.nrows(), a.ncols()),
+        ));
+    }
+    if b.nrows() != n {
+        return Err(LtiError::dims(
+            "input matrix B rows",
+            format!("{n} (the order of A)"),
+            b.nrows(),
+        ));
+    }
+    if c.ncols() != n {
+        return Err(LtiError::dims(
+            "output matrix C columns",
+            format!("{n} (the order of A)"),
+            c.ncols(),
+        ));
+    }
+    if d.nrows() != c.nrows() || d.ncols() != b.ncols() {
+        return Err(LtiError::dims(
+            "feedthrough matrix D",
+            format!("{} x {} (outputs x inputs)", c.nrows(), b.ncols()),
+            format!("{} x {}", d.nrows(), d.ncols()),
+        ));
+    }
+    check_matrix_finite("A", a)?;
+    check_matrix_finite("B", b)?;
+    check_matrix_finite("C", c)?;
+    check_matrix_finite("D", d)?;
+    Ok(())
+}
+
+fn check_sample_time(ts: f64) -> Result<(), LtiError> {
+    if ts.is_finite() && ts > 0.0 {
+        Ok(())
+    } else {
+        Err(LtiError::param(
+            "sample_time",
+            format!("must be positive and finite, got {ts}"),
+        ))
+    }
+}
+
+fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+    let mut v = Vec::with_capacity(m.len());
+    for i in 0..m.nrows() {
+        for j in 0..m.ncols() {
+            v.push(m[(i, j)]);
+        }
+    }
+    v
+}
+
+fn to_faer(m: &DMatrix<f64>) -> Mat<f64> {
+    Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+}
+
+/// Row-major copies of A, B, C, D for the scalar per-sample recursions.
+#[derive(Clone, Debug, PartialEq, Default)]
+struct RowMajor {
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c: Vec<f64>,
+    d: Vec<f64>,
+}
+
+/// A discrete-time state-space system
+/// `x_{k+1} = A x_k + B u_k`, `y_k = C x_k + D u_k`.
+///
+/// Order `n = 0` (a static gain `y_k = D u_k`) is allowed, as are zero inputs or outputs.
+/// Implements [`LinearSystem`]: `T` is the block lower-triangular Toeplitz matrix of the
+/// Markov parameters, applied by recursion (never formed densely).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StateSpace {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    d: DMatrix<f64>,
+    sample_time: Option<f64>,
+    rm: RowMajor,
+}
+
+/// Precomputed matrices of the blocked recursion for a time block of `b` samples.
+struct BlockPlan {
+    b: usize,
+    /// (b p) x (b m) Toeplitz of h_0 .. h_{b-1}
+    tb: Mat<f64>,
+    /// (b p) x n: [C; C A; ...; C A^{b-1}]
+    gamma: Mat<f64>,
+    /// n x (b m): [A^{b-1} B, ..., A B, B]
+    r: Mat<f64>,
+    /// A^b
+    ab: Mat<f64>,
+}
+
+impl StateSpace {
+    /// Creates a validated system: `a` is `n x n`, `b` is `n x m`, `c` is `p x n`,
+    /// `d` is `p x m`, all entries finite. `n = 0` is allowed (`0 x 0` A, `0 x m` B,
+    /// `p x 0` C).
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::{LinearSystem, Signal, StateSpace};
+    /// // y_k = x_k, x_{k+1} = 0.5 x_k + u_k  (impulse response 0, 1, 0.5, 0.25, ...)
+    /// let sys = StateSpace::new(
+    ///     DMatrix::from_element(1, 1, 0.5),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::zeros(1, 1),
+    /// )
+    /// .unwrap();
+    /// let u = Signal::new(1, vec![1.0, 0.0, 0.0, 0.0]).unwrap();
+    /// let y = sys.simulate(&u).unwrap();
+    /// assert_eq!(y.as_slice(), &[0.0, 1.0, 0.5, 0.25]);
+    /// ```
+    pub fn new(
+        a: DMatrix<f64>,
+        b: DMatrix<f64>,
+        c: DMatrix<f64>,
+        d: DMatrix<f64>,
+    ) -> Result<Self, LtiError> {
+        validate(&a, &b, &c, &d)?;
+        let rm = RowMajor {
+            a: row_major(&a),
+            b: row_major(&b),
+            c: row_major(&c),
+            d: row_major(&d),
+        };
+        Ok(StateSpace {
+            a,
+            b,
+            c,
+            d,
+            sample_time: None,
+            rm,
+        })
+    }
+
+    /// A static gain `y_k = D u_k` (order 0). Fails if `d` has non-finite entries.
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::{LinearSystem, Signal, StateSpace};
+    /// let g = StateSpace::static_gain(DMatrix::from_row_slice(1, 2, &[2.0, -1.0])).unwrap();
+    /// assert_eq!(g.order(), 0);
+    /// let y = g.simulate(&Signal::new(2, vec![1.0, 1.0, 3.0, 0.0]).unwrap()).unwrap();
+    /// assert_eq!(y.as_slice(), &[1.0, 6.0]);
+    /// ```
+    pub fn static_gain(d: DMatrix<f64>) -> Result<Self, LtiError> {
+        let (p, m) = d.shape();
+        Self::new(DMatrix::zeros(0, 0), DMatrix::zeros(0, m), DMatrix::zeros(p, 0), d)
+    }
+
+    /// Attaches a sample time (seconds, positive and finite). It is metadata only: the
+    /// operators work in samples.
+    pub fn with_sample_time(mut self, ts: f64) -> Result<Self, LtiError> {
+        check_sample_time(ts)?;
+        self.sample_time = Some(ts);
+        Ok(self)
+    }
+
+    /// The sample time, if one was attached.
+    pub fn sample_time(&self) -> Option<f64> {
+        self.sample_time
+    }
+
+    /// State matrix `A` (`n x n`).
+    pub fn a(&self) -> &DMatrix<f64> {
+        &self.a
+    }
+
+    /// Input matrix `B` (`n x m`).
+    pub fn b(&self) -> &DMatrix<f64> {
+        &self.b
+    }
+
+    /// Output matrix `C` (`p x n`).
+    pub fn c(&self) -> &DMatrix<f64> {
+        &self.c
+    }
+
+    /// Feedthrough matrix `D` (`p x m`).
+    pub fn d(&self) -> &DMatrix<f64> {
+        &self.d
+    }
+
+    /// Number of states `n`.
+    pub fn order(&self) -> usize {
+        self.a.nrows()
+    }
+
+    /// Number of inputs `m`.
+    pub fn inputs(&self) -> usize {
+        self.b.ncols()
+    }
+
+    /// Number of outputs `p`.
+    pub fn outputs(&self) -> usize {
+        self.c.nrows()
+    }
+
+    /// The first `count` Markov parameters: `h_0 = D`, `h_j = C A^{j-1} B`.
+    pub fn markov_parameters(&self, count: usize) -> Vec<DMatrix<f64>> {
+        let mut out = Vec::with_capacity(count);
+        if count == 0 {
+            return out;
+        }
+        out.push(self.d.clone());
+        let mut ajb = self.b.clone();
+        for _ in 1..count {
+            out.push(&self.c * &ajb);
+            ajb = &self.a * &ajb;
+        }
+        out
+    }
+
+    /// Spectral radius of `A` (largest eigenvalue modulus); 0 for `n = 0`.
+    pub fn spectral_radius(&self) -> f64 {
+        if self.order() == 0 {
+            return 0.0;
+        }
+        self.a
+            .complex_eigenvalues()
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max)
+    }
+
+    /// `true` when the spectral radius of `A` is strictly below 1 (asymptotic stability).
+    pub fn is_stable(&self) -> bool {
+        self.spectral_radius() < 1.0
+    }
+
+    fn check_x0_u(&self, x0: &[f64], u: &Signal) -> Result<(), LtiError> {
+        if x0.len() != self.order() {
+            return Err(LtiError::dims(
+                "initial state length",
+                self.order(),
+                x0.len(),
+            ));
+        }
+        if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
+            return Err(LtiError::NonFiniteMatrix {
+                what: "initial state".into(),
+                row: i,
+                col: 0,
+                value: x0[i],
+            });
+        }
+        if u.channels() != self.inputs() {
+            return Err(LtiError::dims(
+                "input signal channels",
+                self.inputs(),
+                u.channels(),
+            ));
+        }
+        u.check_finite("input signal")
+    }
+
+    /// Scalar recursion from `x0`; writes `y` (and the states `x_0 .. x_{L-1}` when asked),
+    /// returns the final state `x_L`.
+    fn run(
+        &self,
+        x0: &[f64],
+        u: &[f64],
+        y: &mut [f64],
+        len: usize,
+        mut states: Option<&mut [f64]>,
+    ) -> Vec<f64> {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        let RowMajor { a, b, c, d } = &self.rm;
+        let mut x = x0.to_vec();
+        let mut xn = vec![0.0; n];
+        for k in 0..len {
+            let uk = &u[k * m..(k + 1) * m];
+            if let Some(st) = states.as_deref_mut() {
+                st[k * n..(k + 1) * n].copy_from_slice(&x);
+            }
+            let yk = &mut y[k * p..(k + 1) * p];
+            for i in 0..p {
+                let crow = &c[i * n..(i + 1) * n];
+                let drow = &d[i * m..(i + 1) * m];
+                let mut acc = 0.0;
+                for j in 0..n {
+                    acc += crow[j] * x[j];
+                }
+                for j in 0..m {
+                    acc += drow[j] * uk[j];
+                }
+                yk[i] = acc;
+            }
+            if n > 0 {
+                for i in 0..n {
+                    let arow = &a[i * n..(i + 1) * n];
+                    let brow = &b[i * m..(i + 1) * m];
+                    let mut acc = 0.0;
+                    for j in 0..n {
+                        acc += arow[j] * x[j];
+                    }
+                    for j in 0..m {
+                        acc += brow[j] * uk[j];
+                    }
+                    xn[i] = acc;
+                }
+                std::mem::swap(&mut x, &mut xn);
+            }
+        }
+        x
+    }
+
+    /// Simulates from the initial state `x0` (length `n`). Returns `(y, x_L)`: the output
+    /// signal and the final state after the last sample. Checks dimensions and finiteness.
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::{Signal, StateSpace};
+    /// let sys = StateSpace::new(
+    ///     DMatrix::from_element(1, 1, 0.5),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::zeros(1, 1),
+    /// )
+    /// .unwrap();
+    /// let (y, x_end) = sys.simulate_from(&[4.0], &Signal::zeros(3, 1)).unwrap();
+    /// assert_eq!(y.as_slice(), &[4.0, 2.0, 1.0]);
+    /// assert_eq!(x_end, vec![0.5]);
+    /// ```
+    pub fn simulate_from(&self, x0: &[f64], u: &Signal) -> Result<(Signal, Vec<f64>), LtiError> {
+        self.check_x0_u(x0, u)?;
+        let mut y = Signal::zeros(u.len(), self.outputs());
+        let xl = self.run(x0, u.as_slice(), y.as_mut_slice(), u.len(), None);
+        Ok((y, xl))
+    }
+
+    /// Like [`simulate_from`](StateSpace::simulate_from) but returns the state trajectory:
+    /// `(y, x)` where `x` has `n` channels and holds `x_0 .. x_{L-1}`.
+    pub fn simulate_states(&self, x0: &[f64], u: &Signal) -> Result<(Signal, Signal), LtiError> {
+        self.check_x0_u(x0, u)?;
+        let mut y = Signal::zeros(u.len(), self.outputs());
+        let mut x = Signal::zeros(u.len(), self.order());
+        self.run(
+            x0,
+            u.as_slice(),
+            y.as_mut_slice(),
+            u.len(),
+            Some(x.as_mut_slice()),
+        );
+        Ok((y, x))
+    }
+
+    /// The subsystem driven by the inputs `idx` (columns of `B` and `D`, in that order);
+    /// `A`, `C` and the sample time are kept.
+    pub fn select_inputs(&self, idx: &[usize]) -> Result<StateSpace, LtiError> {
+        if let Some(&bad) = idx.iter().find(|&&i| i >= self.inputs()) {
+            return Err(LtiError::param(
+                "input index",
+                format!("{bad} is out of range for a system with {} inputs", self.inputs()),
+            ));
+        }
+        let mut s = StateSpace::new(
+            self.a.clone(),
+            self.b.select_columns(idx.iter()),
+            self.c.clone(),
+            self.d.select_columns(idx.iter()),
+        )?;
+        s.sample_time = self.sample_time;
+        Ok(s)
+    }
+
+    /// The subsystem seen from the outputs `idx` (rows of `C` and `D`, in that order);
+    /// `A`, `B` and the sample time are kept.
+    pub fn select_outputs(&self, idx: &[usize]) -> Result<StateSpace, LtiError> {
+        if let Some(&bad) = idx.iter().find(|&&i| i >= self.outputs()) {
+            return Err(LtiError::param(
+                "output index",
+                format!("{bad} is out of range for a system with {} outputs", self.outputs()),
+            ));
+        }
+        let mut s = StateSpace::new(
+            self.a.clone(),
+            self.b.clone(),
+            self.c.select_rows(idx.iter()),
+            self.d.select_rows(idx.iter()),
+        )?;
+        s.sample_time = self.sample_time;
+        Ok(s)
+    }
+
+    /// The dense `(len * outputs) x (len * inputs)` block lower-triangular Toeplitz matrix
+    /// `T` (block `(i, j)` is `h_{i-j}` for `i >= j`).
+    ///
+    /// **For tests and small reference code only**: it costs `O(len^2)` memory and the
+    /// operators of [`LinearSystem`] never form it.
+    pub fn toeplitz_dense(&self, len: usize) -> DMatrix<f64> {
+        let (m, p) = (self.inputs(), self.outputs());
+        let h = self.markov_parameters(len);
+        let mut t = DMatrix::zeros(len * p, len * m);
+        for i in 0..len {
+            for j in 0..=i {
+                t.view_mut((i * p, j * m), (p, m)).copy_from(&h[i - j]);
+            }
+        }
+        t
+    }
+
+    /// Series connection `y = self(other(u))`: `other`'s outputs feed `self`'s inputs.
+    /// The state is `[x_other; x_self]`. Sample times must agree when both are set.
+    pub fn series(&self, other: &StateSpace) -> Result<StateSpace, LtiError> {
+        if other.outputs() != self.inputs() {
+            return Err(LtiError::dims(
+                "series connection (outputs of the first system vs inputs of the second)",
+                self.inputs(),
+                other.outputs(),
+            ));
+        }
+        let sample_time = match (self.sample_time, other.sample_time) {
+            (Some(a), Some(b)) if a != b => {
+                return Err(LtiError::param(
+                    "sample_time",
+                    format!("series connection of systems with different sample times {b} and {a}"),
+                ));
+            }
+            (a, b) => a.or(b),
+        };
+        let (n1, n2) = (self.order(), other.order());
+        let n = n1 + n2;
+        let m = other.inputs();
+        let p = self.outputs();
+        let mut a = DMatrix::zeros(n, n);
+        a.view_mut((0, 0), (n2, n2)).copy_from(&other.a);
+        a.view_mut((n2, 0), (n1, n2)).copy_from(&(&self.b * &other.c));
+        a.view_mut((n2, n2), (n1, n1)).copy_from(&self.a);
+        let mut b = DMatrix::zeros(n, m);
+        b.view_mut((0, 0), (n2, m)).copy_from(&other.b);
+        b.view_mut((n2, 0), (n1, m)).copy_from(&(&self.b * &other.d));
+        let mut c = DMatrix::zeros(p, n);
+        c.view_mut((0, 0), (p, n2)).copy_from(&(&self.d * &other.c));
+        c.view_mut((0, n2), (p, n1)).copy_from(&self.c);
+        let d = &self.d * &other.d;
+        let mut s = StateSpace::new(a, b, c, d)?;
+        s.sample_time = sample_time;
+        Ok(s)
+    }
+
+    /// Matrices of the blocked recursion for a horizon of `len` samples.
+    fn block_plan(&self, len: usize) -> BlockPlan {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        let bsz = if n == 0 { 1 } else { TIME_BLOCK.min(len.max(1)) };
+        // powers A^i B for i < b and C A^i for i < b
+        let mut aib = Vec::with_capacity(bsz);
+        let mut cai = Vec::with_capacity(bsz);
+        let mut ab = DMatrix::<f64>::identity(n, n);
+        let mut cur = self.b.clone();
+        for _ in 0..bsz {
+            cai.push(&self.c * &ab);
+            ab = &self.a * &ab;
+            aib.push(cur.clone());
+            cur = &self.a * &cur;
+        }
+        let mut tb = Mat::<f64>::zeros(bsz * p, bsz * m);
+        for i in 0..bsz {
+            for j in 0..=i {
+                let h = if i == j {
+                    self.d.clone()
+                } else {
+                    &self.c * &aib[i - j - 1]
+                };
+                for r in 0..p {
+                    for s in 0..m {
+                        tb[(i * p + r, j * m + s)] = h[(r, s)];
+                    }
+                }
+            }
+        }
+        let mut gamma = Mat::<f64>::zeros(bsz * p, n);
+        for (i, g) in cai.iter().enumerate() {
+            for r in 0..p {
+                for s in 0..n {
+                    gamma[(i * p + r, s)] = g[(r, s)];
+                }
+            }
+        }
+        let mut rmat = Mat::<f64>::zeros(n, bsz * m);
+        for j in 0..bsz {
+            let blk = &aib[bsz - 1 - j];
+            for r in 0..n {
+                for s in 0..m {
+                    rmat[(r, j * m + s)] = blk[(r, s)];
+                }
+            }
+        }
+        BlockPlan {
+            b: bsz,
+            tb,
+            gamma,
+            r: rmat,
+            ab: to_faer(&ab),
+        }
+    }
+}
+
+/// Splits the columns of `x`/`out` across the available threads and runs `leaf` on each
+/// part.
+fn par_columns(
+    x: MatRef<'_, f64>,
+    out: MatMut<'_, f64>,
+    par: Par,
+    leaf: &(dyn Fn(MatRef<'_, f64>, MatMut<'_, f64>) + Sync),
+) {
+    let nc = x.ncols();
+    if par.degree() <= 1 || nc < 2 * MIN_PAR_COLS {
+        leaf(x, out);
+        return;
+    }
+    let mid = nc / 2;
+    let (x0, x1) = x.split_at_col(mid);
+    let (o0, o1) = out.split_at_col_mut(mid);
+    faer::utils::thread::join_raw(
+        move |p| par_columns(x0, o0, p, leaf),
+        move |p| par_columns(x1, o1, p, leaf),
+        par,
+    );
+}
+
+/// Runs `f` on column chunks of at most `COL_CHUNK` columns.
+fn chunked(
+    x: MatRef<'_, f64>,
+    mut out: MatMut<'_, f64>,
+    mut f: impl FnMut(MatRef<'_, f64>, MatMut<'_, f64>),
+) {
+    let nc = x.ncols();
+    let mut j = 0;
+    while j < nc {
+        let w = COL_CHUNK.min(nc - j);
+        f(x.subcols(j, w), out.rb_mut().subcols_mut(j, w));
+        j += w;
+    }
+}
+
+/// Blocked forward recursion on one group of columns (sequential matmuls).
+fn forward_leaf(
+    plan: &BlockPlan,
+    dims: (usize, usize, usize, usize),
+    x: MatRef<'_, f64>,
+    out: MatMut<'_, f64>,
+    accum: Accum,
+    alpha: f64,
+) {
+    let (len, n, m, p) = dims;
+    let b = plan.b;
+    let nblocks = len.div_ceil(b);
+    let w = COL_CHUNK.min(x.ncols());
+    let mut s_buf = Mat::<f64>::zeros(n, w);
+    let mut s2_buf = Mat::<f64>::zeros(n, w);
+    chunked(x, out, |x, mut out| {
+        let nc = x.ncols();
+        let mut s = s_buf.as_mut().subcols_mut(0, nc);
+        let mut s2 = s2_buf.as_mut().subcols_mut(0, nc);
+        for blk in 0..nblocks {
+            let t0 = blk * b;
+            let bk = b.min(len - t0);
+            let xk = x.subrows(t0 * m, bk * m);
+            let mut yk = out.rb_mut().subrows_mut(t0 * p, bk * p);
+            matmul(
+                yk.rb_mut(),
+                accum,
+                plan.tb.as_ref().submatrix(0, 0, bk * p, bk * m),
+                xk,
+                alpha,
+                Par::Seq,
+            );
+            if n == 0 {
+                continue;
+            }
+            if blk > 0 {
+                matmul(
+                    yk.rb_mut(),
+                    Accum::Add,
+                    plan.gamma.as_ref().subrows(0, bk * p),
+                    s.rb(),
+                    alpha,
+                    Par::Seq,
+                );
+            }
+            if blk + 1 < nblocks {
+                // here bk == b
+                if blk > 0 {
+                    matmul(s2.rb_mut(), Accum::Replace, plan.ab.as_ref(), s.rb(), 1.0, Par::Seq);
+                    matmul(s2.rb_mut(), Accum::Add, plan.r.as_ref(), xk, 1.0, Par::Seq);
+                } else {
+                    matmul(s2.rb_mut(), Accum::Replace, plan.r.as_ref(), xk, 1.0, Par::Seq);
+                }
+                std::mem::swap(&mut s, &mut s2);
+            }
+        }
+    });
+}
+
+/// Blocked backward (adjoint) recursion on one group of columns.
+fn adjoint_leaf(
+    plan: &BlockPlan,
+    dims: (usize, usize, usize, usize),
+    x: MatRef<'_, f64>,
+    out: MatMut<'_, f64>,
+    accum: Accum,
+    alpha: f64,
+) {
+    let (len, n, m, p) = dims;
+    let b = plan.b;
+    let nblocks = len.div_ceil(b);
+    let w = COL_CHUNK.min(x.ncols());
+    let mut s_buf = Mat::<f64>::zeros(n, w);
+    let mut s2_buf = Mat::<f64>::zeros(n, w);
+    chunked(x, out, |x, mut out| {
+        let nc = x.ncols();
+        let mut s = s_buf.as_mut().subcols_mut(0, nc);
+        let mut s2 = s2_buf.as_mut().subcols_mut(0, nc);
+        for blk in (0..nblocks).rev() {
+            let t0 = blk * b;
+            let bk = b.min(len - t0);
+            let yk = x.subrows(t0 * p, bk * p);
+            let mut uk = out.rb_mut().subrows_mut(t0 * m, bk * m);
+            matmul(
+                uk.rb_mut(),
+                accum,
+                plan.tb.as_ref().submatrix(0, 0, bk * p, bk * m).transpose(),
+                yk,
+                alpha,
+                Par::Seq,
+            );
+            if n == 0 {
+                continue;
+            }
+            let later = blk + 1 < nblocks; // costate s is nonzero, and bk == b
+            if later {
+                matmul(
+                    uk.rb_mut(),
+                    Accum::Add,
+                    plan.r.as_ref().transpose(),
+                    s.rb(),
+                    alpha,
+                    Par::Seq,
+                );
+            }
+            if blk > 0 {
+                let g = plan.gamma.as_ref().subrows(0, bk * p).transpose();
+                if later {
+                    matmul(
+                        s2.rb_mut(),
+                        Accum::Replace,
+                        plan.ab.as_ref().transpose(),
+                        s.rb(),
+                        1.0,
+                        Par::Seq,
+                    );
+                    matmul(s2.rb_mut(), Accum::Add, g, yk, 1.0, Par::Seq);
+                } else {
+                    matmul(s2.rb_mut(), Accum::Replace, g, yk, 1.0, Par::Seq);
+                }
+                std::mem::swap(&mut s, &mut s2);
+            }
+        }
+    });
+}
+
+/// Handles the degenerate shapes shared by both blocked operators; returns `true` when
+/// nothing is left to do.
+fn trivial_columns(
+    in_ch: usize,
+    out_ch: usize,
+    len: usize,
+    out: &mut MatMut<'_, f64>,
+    accum: Accum,
+) -> bool {
+    if out.ncols() == 0 || out_ch == 0 || len == 0 {
+        return true;
+    }
+    if in_ch == 0 {
+        if let Accum::Replace = accum {
+            out.fill(0.0);
+        }
+        return true;
+    }
+    false
+}
+
+impl LinearSystem for StateSpace {
+    fn inputs(&self) -> usize {
+        self.b.ncols()
+    }
+
+    fn outputs(&self) -> usize {
+        self.c.nrows()
+    }
+
+    fn order(&self) -> usize {
+        self.a.nrows()
+    }
+
+    fn apply(&self, u: &[f64], y: &mut [f64]) {
+        let len = horizon(self.inputs(), self.outputs(), u.len(), y.len());
+        let x0 = vec![0.0; self.order()];
+        self.run(&x0, u, y, len, None);
+    }
+
+    fn apply_adjoint(&self, y: &[f64], u: &mut [f64]) {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        let len = horizon(m, p, u.len(), y.len());
+        let RowMajor { a, b, c, d } = &self.rm;
+        let mut s = vec![0.0; n];
+        let mut sn = vec![0.0; n];
+        for k in (0..len).rev() {
+            let yk = &y[k * p..(k + 1) * p];
+            let uk = &mut u[k * m..(k + 1) * m];
+            // u_k = D^T y_k + B^T s_{k+1}
+            uk.fill(0.0);
+            for i in 0..p {
+                let drow = &d[i * m..(i + 1) * m];
+                let yi = yk[i];
+                for j in 0..m {
+                    uk[j] += drow[j] * yi;
+                }
+            }
+            if n == 0 {
+                continue;
+            }
+            for i in 0..n {
+                let brow = &b[i * m..(i + 1) * m];
+                let si = s[i];
+                for j in 0..m {
+                    uk[j] += brow[j] * si;
+                }
+            }
+            // s_k = A^T s_{k+1} + C^T y_k
+            sn.fill(0.0);
+            for i in 0..n {
+                let arow = &a[i * n..(i + 1) * n];
+                let si = s[i];
+                for j in 0..n {
+                    sn[j] += arow[j] * si;
+                }
+            }
+            for i in 0..p {
+                let crow = &c[i * n..(i + 1) * n];
+                let yi = yk[i];
+                for j in 0..n {
+                    sn[j] += crow[j] * yi;
+                }
+            }
+            std::mem::swap(&mut s, &mut sn);
+        }
+    }
+
+    /// Blocked recursion: time is split into blocks of `b` samples and, for block `k`
+    /// with rows `X_k`, `Y_k = T_b X_k + Gamma S`, `S <- A^b S + R X_k`, all with
+    /// (SIMD) matrix products; columns are split across faer's global thread pool.
+    fn apply_columns(
+        &self,
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        assert_eq!(x.ncols(), out.ncols(), "x and out must have the same number of columns");
+        let len = horizon(m, p, x.nrows(), out.nrows());
+        if trivial_columns(m, p, len, &mut out, accum) {
+            return;
+        }
+        let plan = self.block_plan(len);
+        let dims = (len, n, m, p);
+        par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
+            forward_leaf(&plan, dims, x, out, accum, alpha)
+        });
+    }
+
+    /// Blocked backward recursion with the transposed block matrices (costate `n x ncols`).
+    fn apply_adjoint_columns(
+        &self,
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        assert_eq!(x.ncols(), out.ncols(), "x and out must have the same number of columns");
+        let len = horizon(p, m, x.nrows(), out.nrows());
+        if trivial_columns(p, m, len, &mut out, accum) {
+            return;
+        }
+        let plan = self.block_plan(len);
+        let dims = (len, n, m, p);
+        par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
+            adjoint_leaf(&plan, dims, x, out, accum, alpha)
+        });
+    }
+}
+
+/// A continuous-time state-space system `x' = A x + B u`, `y = C x + D u`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousStateSpace {
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    c: DMatrix<f64>,
+    d: DMatrix<f64>,
+}
+
+impl ContinuousStateSpace {
+    /// Creates a validated continuous-time system (same shape and finiteness rules as
+    /// [`StateSpace::new`]).
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::ContinuousStateSpace;
+    /// // x' = -x + u, y = x, sampled with a zero-order hold at ts = 0.1
+    /// let sys = ContinuousStateSpace::new(
+    ///     DMatrix::from_element(1, 1, -1.0),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::zeros(1, 1),
+    /// )
+    /// .unwrap();
+    /// let d = sys.discretize_zoh(0.1).unwrap();
+    /// assert!((d.a()[(0, 0)] - (-0.1f64).exp()).abs() < 1e-14);
+    /// assert_eq!(d.sample_time(), Some(0.1));
+    /// ```
+    pub fn new(
+        a: DMatrix<f64>,
+        b: DMatrix<f64>,
+        c: DMatrix<f64>,
+        d: DMatrix<f64>,
+    ) -> Result<Self, LtiError> {
+        validate(&a, &b, &c, &d)?;
+        Ok(ContinuousStateSpace { a, b, c, d })
+    }
+
+    /// State matrix `A`.
+    pub fn a(&self) -> &DMatrix<f64> {
+        &self.a
+    }
+
+    /// Input matrix `B`.
+    pub fn b(&self) -> &DMatrix<f64> {
+        &self.b
+    }
+
+    /// Output matrix `C`.
+    pub fn c(&self) -> &DMatrix<f64> {
+        &self.c
+    }
+
+    /// Feedthrough matrix `D`.
+    pub fn d(&self) -> &DMatrix<f64> {
+        &self.d
+    }
+
+    /// Number of states.
+    pub fn order(&self) -> usize {
+        self.a.nrows()
+    }
+
+    /// Number of inputs.
+    pub fn inputs(&self) -> usize {
+        self.b.ncols()
+    }
+
+    /// Number of outputs.
+    pub fn outputs(&self) -> usize {
+        self.c.nrows()
+    }
+
+    /// Zero-order-hold discretisation with sample time `ts` (positive, finite):
+    /// `exp([[A, B], [0, 0]] ts) = [[Ad, Bd], [0, I]]`; the result is `(Ad, Bd, C, D)` with
+    /// sample time `ts`.
+    pub fn discretize_zoh(&self, ts: f64) -> Result<StateSpace, LtiError> {
+        check_sample_time(ts)?;
+        let (n, m) = (self.order(), self.inputs());
+        let (ad, bd) = if n == 0 {
+            (DMatrix::zeros(0, 0), DMatrix::zeros(0, m))
+        } else {
+            let mut big = DMatrix::zeros(n + m, n + m);
+            big.view_mut((0, 0), (n, n)).copy_from(&(&self.a * ts));
+            big.view_mut((0, n), (n, m)).copy_from(&(&self.b * ts));
+            let e = big.exp();
+            (
+                e.view((0, 0), (n, n)).into_owned(),
+                e.view((0, n), (n, m)).into_owned(),
+            )
+        };
+        check_matrix_finite("discretised A (matrix exponential overflow?)", &ad)?;
+        check_matrix_finite("discretised B (matrix exponential overflow?)", &bd)?;
+        StateSpace::new(ad, bd, self.c.clone(), self.d.clone())?.with_sample_time(ts)
+    }
+}
