@@ -163,8 +163,8 @@ pub struct Diagnostics {
     pub dropped_samples: Vec<usize>,
     /// Largest |r| over the dropped samples: their consistency with the model (should be ≈ 0).
     pub dropped_max_abs_residual: f64,
-    /// Pivots of the Cholesky factorisation that had to be regularised (M numerically singular).
-    pub regularized_pivots: usize,
+    /// Jitter added to the diagonal of M when it was numerically singular (0 when not needed).
+    pub diagonal_jitter: f64,
     /// (max Lᵢᵢ / min Lᵢᵢ)² of the Cholesky factor: a lower bound on the condition number of M.
     pub condition_lower_bound: f64,
     /// ‖T_ye·ê + T_yw·ŵ − r‖ / ‖r‖ over the samples kept.

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use nalgebra::{DMatrix, dmatrix};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use rand_distr::{Distribution, Normal};
-use structid_lti::{LinearSystem, Signal};
+use structid_lti::Signal;
 
 use crate::dispersion::{Dispersion, KernelDispersion};
 use crate::error::Result;

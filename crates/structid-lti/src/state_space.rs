@@ -11,12 +11,12 @@ use nalgebra::DMatrix;
 
 /// Time-block length of the blocked many-column operators (tuned on a 2-core AVX-512
 /// machine for SISO systems of low order).
-const TIME_BLOCK: usize = 32;
+fn tb_env()->usize{std::env::var("TB").ok().and_then(|v|v.parse().ok()).unwrap_or(32)}
 /// Width of the column chunks each thread processes at once (keeps a time block of the
 /// operand in cache).
-const COL_CHUNK: usize = 256;
+fn cc_env()->usize{std::env::var("CC").ok().and_then(|v|v.parse().ok()).unwrap_or(256)}
 /// Do not split the columns across threads below this many columns per task.
-const MIN_PAR_COLS: usize = 64;
+fn mp_env()->usize{std::env::var("MP").ok().and_then(|v|v.parse().ok()).unwrap_or(64)}
 
 /// Checks the shapes `a: n x n`, `b: n x m`, `c: p x n`, `d: p x m` and finiteness.
 fn validate(
@@ -476,7 +476,7 @@ impl StateSpace {
     /// Matrices of the blocked recursion for a horizon of `len` samples.
     fn block_plan(&self, len: usize) -> BlockPlan {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        let bsz = if n == 0 { 1 } else { TIME_BLOCK.min(len.max(1)) };
+        let bsz = if n == 0 { 1 } else { tb_env().min(len.max(1)) };
         // powers A^i B for i < b and C A^i for i < b
         let mut aib = Vec::with_capacity(bsz);
         let mut cai = Vec::with_capacity(bsz);
@@ -539,7 +539,7 @@ fn par_columns(
     leaf: &(dyn Fn(MatRef<'_, f64>, MatMut<'_, f64>) + Sync),
 ) {
     let nc = x.ncols();
-    if par.degree() <= 1 || nc < 2 * MIN_PAR_COLS {
+    if par.degree() <= 1 || nc < 2 * mp_env() {
         leaf(x, out);
         return;
     }
@@ -562,7 +562,7 @@ fn chunked(
     let nc = x.ncols();
     let mut j = 0;
     while j < nc {
-        let w = COL_CHUNK.min(nc - j);
+        let w = cc_env().min(nc - j);
         f(x.subcols(j, w), out.rb_mut().subcols_mut(j, w));
         j += w;
     }
@@ -580,7 +580,7 @@ fn forward_leaf(
     let (len, n, m, p) = dims;
     let b = plan.b;
     let nblocks = len.div_ceil(b);
-    let w = COL_CHUNK.min(x.ncols());
+    let w = cc_env().min(x.ncols());
     let mut s_buf = Mat::<f64>::zeros(n, w);
     let mut s2_buf = Mat::<f64>::zeros(n, w);
     chunked(x, out, |x, mut out| {
@@ -639,7 +639,7 @@ fn adjoint_leaf(
     let (len, n, m, p) = dims;
     let b = plan.b;
     let nblocks = len.div_ceil(b);
-    let w = COL_CHUNK.min(x.ncols());
+    let w = cc_env().min(x.ncols());
     let mut s_buf = Mat::<f64>::zeros(n, w);
     let mut s2_buf = Mat::<f64>::zeros(n, w);
     chunked(x, out, |x, mut out| {

@@ -30,6 +30,7 @@ use std::path::Path;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// Default size in pixels of a single chart, `(width, height)`.
 pub const DEFAULT_SIZE: (u32, u32) = (800, 500);
@@ -841,6 +842,7 @@ fn viridis(t: f64) -> RGBColor {
 
 const COLOUR_BAR_WIDTH: u32 = 100;
 const COLOUR_BAR_STEPS: usize = 64;
+const COLOUR_BAR_THICKNESS: u32 = 22;
 
 fn draw_heatmap(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
@@ -891,18 +893,15 @@ fn draw_heatmap(
     });
     cc.draw_series(cells).map_err(backend_err)?;
 
-    // Colour bar, vertically aligned with the plot area.
-    let ticks: Vec<f64> = (0..=4)
-        .map(|k| if k == 4 { vhi } else { vlo + span * k as f64 / 4.0 })
-        .collect();
+    // Colour bar, vertically aligned with the plot area; tick labels at the
+    // minimum, the maximum and three evenly spaced values in between.
     let mut bar = ChartBuilder::on(&bar_area)
         .margin_top(MARGIN)
         .margin_bottom(MARGIN)
         .margin_left(8)
-        .margin_right(4)
+        .margin_right(COLOUR_BAR_WIDTH.saturating_sub(8 + COLOUR_BAR_THICKNESS))
         .x_label_area_size(X_LABEL_AREA)
-        .right_y_label_area_size(COLOUR_BAR_WIDTH.saturating_sub(40))
-        .build_cartesian_2d(0.0f64..1.0f64, (vlo..vhi).with_key_points(ticks))
+        .build_cartesian_2d(0.0f64..1.0f64, vlo..vhi)
         .map_err(backend_err)?;
     let steps = (0..COLOUR_BAR_STEPS).map(|k| {
         let (a, b) = (
@@ -920,13 +919,16 @@ fn draw_heatmap(
         BLACK.stroke_width(1),
     )))
     .map_err(backend_err)?;
-    bar.configure_mesh()
-        .disable_x_axis()
-        .disable_mesh()
-        .label_style((FONT, TICK_SIZE))
-        .y_label_formatter(&|v| format_value(*v))
-        .draw()
-        .map_err(backend_err)?;
+    let label_style = TextStyle::from((FONT, TICK_SIZE).into_font())
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Left, VPos::Center));
+    let ticks = (0..=4).map(|k| {
+        let v = if k == 4 { vhi } else { vlo + span * k as f64 / 4.0 };
+        EmptyElement::at((1.0, v))
+            + PathElement::new(vec![(0, 0), (5, 0)], BLACK)
+            + Text::new(format_value(v), (8, 0), label_style.clone())
+    });
+    bar.draw_series(ticks).map_err(backend_err)?;
     Ok(())
 }
 

@@ -32,6 +32,9 @@ use crate::problem::Problem;
 /// Gram columns are generated and pushed through T_i in panels of this many columns.
 const PANEL: usize = 256;
 
+/// Relative diagonal jitters tried, in order, when M is numerically singular.
+const JITTER_LADDER: [f64; 3] = [1e-13, 1e-10, 1e-7];
+
 /// Estimated peak memory of the exact solver in bytes.
 pub fn peak_memory_bytes(len: usize, outputs: usize, noise_inputs: usize, noise_dynamic: bool) -> u64 {
     let n = (len * outputs) as u64;
@@ -97,65 +100,51 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         .collect::<Result<_>>()?;
     let t_prepared = Instant::now();
 
-    // --- assemble M ---------------------------------------------------------------------
+    // --- assemble M, leave out samples that depend on neither e nor w, factor -------------
     let lb = len as f64 * beta;
     let mut m = Mat::<f64>::zeros(n, n);
     let mut q = Mat::<f64>::zeros(n, len);
     let panel = PANEL.min(len);
     let mut gram = vec![0.0; len * panel];
     let nblocks = problem.blocks().len();
-    for (bi, (block, pen)) in problem.blocks().iter().zip(&penalties).enumerate() {
-        for j0 in (0..len).step_by(panel) {
-            let w = panel.min(len - j0);
-            let g = &mut gram[..len * w];
-            pen.fill_columns(j0..j0 + w, g);
-            let g = MatRef::from_column_major_slice(g, len, w);
-            block
-                .path
-                .apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
-        }
-        let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
-        block.path.apply_columns(q.transpose(), m.as_mut(), accum, 1.0);
-    }
-    add_noise_term(noise, len, lb, &mut m);
-
-    // --- leave out samples that depend on neither e nor w ---------------------------------
     let r = problem.residual().as_slice();
-    let max_diag = (0..n).map(|i| m[(i, i)]).fold(0.0f64, f64::max);
-    if max_diag <= 0.0 || !max_diag.is_finite() {
-        return Err(Error::Numerical(format!(
-            "the system matrix M has no positive diagonal entry (max {max_diag}): no output depends on e or w"
-        )));
-    }
-    let dead_tol = 1e-14 * max_diag;
-    let kept: Vec<usize> = (0..n).filter(|&i| m[(i, i)] > dead_tol).collect();
-    let dropped: Vec<usize> = (0..n).filter(|&i| m[(i, i)] <= dead_tol).collect();
-    let dropped_max = dropped.iter().map(|&i| r[i].abs()).fold(0.0, f64::max);
-    let nk = kept.len();
-    if !dropped.is_empty() {
-        // In-place compaction: destinations never overtake their sources in column-major order.
-        for (jj, &j) in kept.iter().enumerate() {
-            for (ii, &i) in kept.iter().enumerate() {
-                m[(ii, jj)] = m[(i, j)];
-            }
-        }
-    }
-    let t_assembled = Instant::now();
-
-    // --- factor -----------------------------------------------------------------------------
+    let mut t_assembled;
     let par = faer::get_global_parallelism();
-    let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
-    let reg = LltRegularization {
-        dynamic_regularization_delta: 1e-10 * max_diag,
-        dynamic_regularization_epsilon: 1e-13 * max_diag,
-    };
     let mut buf = MemBuffer::new(
-        cholesky_in_place_scratch::<f64>(nk, par, Default::default())
-            .or(solve_in_place_scratch::<f64>(nk, 1, par)),
+        cholesky_in_place_scratch::<f64>(n, par, Default::default()).or(solve_in_place_scratch::<f64>(n, 1, par)),
     );
     let stack = MemStack::new(&mut buf);
-    let info = cholesky_in_place(mk.as_mut(), reg, par, stack, Default::default())
-        .map_err(|e| Error::Numerical(format!("Cholesky factorisation of M failed: {e}")))?;
+    // A failed factorisation (M numerically singular) is repaired by re-assembling M and adding
+    // a small diagonal jitter, equivalent to a little extra white noise on y; it is reported.
+    let mut jitter = 0.0;
+    let mut attempt = 0;
+    let (kept, dropped, max_diag) = loop {
+        assemble(problem, &penalties, lb, &mut m, &mut q, &mut gram);
+        let (kept, dropped, max_diag) = compact_live_rows(&mut m)?;
+        let nk = kept.len();
+        let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
+        if jitter > 0.0 {
+            for i in 0..nk {
+                mk[(i, i)] += jitter;
+            }
+        }
+        t_assembled = Instant::now();
+        match cholesky_in_place(mk, LltRegularization::default(), par, stack, Default::default()) {
+            Ok(_) => break (kept, dropped, max_diag),
+            Err(e) => {
+                attempt += 1;
+                jitter = JITTER_LADDER.get(attempt - 1).copied().unwrap_or(f64::INFINITY) * max_diag;
+                if !jitter.is_finite() {
+                    return Err(Error::Numerical(format!(
+                        "Cholesky factorisation of M failed even with a diagonal jitter of 1e-7·max(diag M): {e}"
+                    )));
+                }
+            }
+        }
+    };
+    let nk = kept.len();
+    let mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
+    let dropped_max = dropped.iter().map(|&i| r[i].abs()).fold(0.0, f64::max);
     let t_factored = Instant::now();
 
     // --- solve and recover ------------------------------------------------------------------
@@ -242,11 +231,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             }
         ));
     }
-    if info.dynamic_regularization_count > 0 {
+    if jitter > 0.0 {
         warnings.push(format!(
-            "M is numerically singular: {} Cholesky pivot(s) were regularised (e.g. no noise path and a \
-             numerically singular Gram matrix); the estimate is the minimum-norm-like solution",
-            info.dynamic_regularization_count
+            "M is numerically singular (e.g. no noise path and a numerically singular Gram matrix): a jitter of \
+             {:.1e}·max(diag M) was added to its diagonal, so the data are fitted up to that level",
+            jitter / max_diag
         ));
     }
     let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
@@ -267,7 +256,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             system_size: nk,
             dropped_samples: dropped,
             dropped_max_abs_residual: dropped_max,
-            regularized_pivots: info.dynamic_regularization_count,
+            diagonal_jitter: jitter,
             condition_lower_bound: if dmin > 0.0 { (dmax / dmin).powi(2) } else { f64::INFINITY },
             feasibility_residual: if r2 > 0.0 { (res2 / r2).sqrt() } else { res2.sqrt() },
             peak_memory_bytes: need,
@@ -281,6 +270,55 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             warnings,
         },
     })
+}
+
+/// M = Σ_i T_i·K_i·T_iᵀ + L·β·T_ye·T_yeᵀ, through Q_i = T_i·K_i built from panels of Gram columns.
+/// On return `q` holds Q of the last block.
+fn assemble(
+    problem: &Problem,
+    penalties: &[Box<dyn QuadraticPenalty>],
+    lb: f64,
+    m: &mut Mat<f64>,
+    q: &mut Mat<f64>,
+    gram: &mut [f64],
+) {
+    let len = problem.len();
+    let panel = PANEL.min(len);
+    for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
+        for j0 in (0..len).step_by(panel) {
+            let w = panel.min(len - j0);
+            let g = &mut gram[..len * w];
+            pen.fill_columns(j0..j0 + w, g);
+            let g = MatRef::from_column_major_slice(g, len, w);
+            block.path.apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+        }
+        let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
+        block.path.apply_columns(q.transpose(), m.as_mut(), accum, 1.0);
+    }
+    add_noise_term(problem.noise(), len, lb, m);
+}
+
+/// Finds the rows of M that are (numerically) zero — samples that depend on neither e nor w —
+/// and compacts the others into the leading block. Returns (kept, dropped, max diag).
+fn compact_live_rows(m: &mut Mat<f64>) -> Result<(Vec<usize>, Vec<usize>, f64)> {
+    let n = m.nrows();
+    let max_diag = (0..n).map(|i| m[(i, i)]).fold(0.0f64, f64::max);
+    if max_diag <= 0.0 || !max_diag.is_finite() {
+        return Err(Error::Numerical(format!(
+            "the system matrix M has no positive diagonal entry (max {max_diag}): no output depends on e or w"
+        )));
+    }
+    let dead_tol = 1e-14 * max_diag;
+    let (kept, dropped): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| m[(i, i)] > dead_tol);
+    if !dropped.is_empty() {
+        // In place: destinations never overtake their sources in column-major order.
+        for (jj, &j) in kept.iter().enumerate() {
+            for (ii, &i) in kept.iter().enumerate() {
+                m[(ii, jj)] = m[(i, j)];
+            }
+        }
+    }
+    Ok((kept, dropped, max_diag))
 }
 
 /// M += L·β·T_ye·T_yeᵀ: a block-diagonal D_ye·D_yeᵀ for a static noise path, otherwise built

@@ -1,0 +1,536 @@
+//! Properties of the exact solver, checked against independent dense computations.
+//!
+//! The reference is the paper's printed formulation: Q = K⁻¹ (formed explicitly here, on small
+//! problems with a well-conditioned Gram matrix), the feasible set parametrised by the null
+//! space of [T_ye T_yw], and the resulting least-squares problem solved densely.
+
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector};
+use proptest::prelude::*;
+use structid_core::*;
+use structid_lti::testing::random_stable_system;
+use structid_lti::{LinearSystem, Signal, StateSpace};
+
+/// A random problem with measured z (paper Definition 1, case 1).
+struct Case {
+    model: Model,
+    data: Data,
+    kernels: Vec<GaussianKernel>,
+    len: usize,
+}
+
+/// Points spread over [−1, 1] with spacing h in a scrambled order; with σ = h the Gram matrix
+/// exp(−(i−j)²/2)-like is well conditioned (≈ 70), so forming K⁻¹ in the reference is safe.
+fn spread_points(len: usize, seed: u64, shift: usize) -> Vec<f64> {
+    let h = 2.0 / len as f64;
+    let step = [7usize, 11, 13, 17, 19][(seed as usize + shift) % 5];
+    let step = if len % step == 0 { 1 } else { step };
+    (0..len).map(|k| -1.0 + h * ((k * step + shift) % len) as f64).collect()
+}
+
+fn make_case(seed: u64, n: usize, ne: usize, nw: usize, ny: usize, len: usize) -> Case {
+    // At least as many noise channels as outputs keeps T_ye·T_yeᵀ, hence M, well conditioned.
+    let ne = ne.max(ny);
+    let nu = 1;
+    let sys = random_stable_system(seed, n, nu + ne + nw, ny, 0.9);
+    let mut lft_sys_c = DMatrix::zeros(ny + nw, n);
+    lft_sys_c.rows_mut(0, ny).copy_from(sys.c());
+    let mut d = DMatrix::zeros(ny + nw, nu + ne + nw);
+    d.rows_mut(0, ny).copy_from(sys.d());
+    // Make the noise path comfortably full rank.
+    for i in 0..ny.min(ne) {
+        d[(i, nu + i)] += 1.0;
+    }
+    let full = StateSpace::new(sys.a().clone(), sys.b().clone(), lft_sys_c, d).unwrap();
+    let lft = Lft::from_state_space(&full, nu, ne, ny).unwrap();
+    let h = 2.0 / len as f64;
+    let kernels: Vec<GaussianKernel> = (0..nw).map(|_| GaussianKernel::new(h).unwrap()).collect();
+    let blocks = (0..nw)
+        .map(|c| {
+            NonlinearBlock::new(
+                format!("n{c}"),
+                vec![c],
+                c,
+                Arc::new(KernelDispersion::new(kernels[c])) as Arc<dyn Dispersion>,
+            )
+        })
+        .collect();
+    let model = Model::new(lft, blocks).unwrap();
+    let mut rng = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut next = || {
+        rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((rng >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    };
+    let u = Signal::from_fn(len, nu, |_, _| next());
+    let y = Signal::from_fn(len, ny, |_, _| next());
+    let zcols: Vec<Vec<f64>> = (0..nw).map(|c| spread_points(len, seed, c)).collect();
+    let z = Signal::from_channels(&zcols).unwrap();
+    let data = Data::new(u, y).unwrap().with_z(z).unwrap();
+    Case {
+        model,
+        data,
+        kernels,
+        len,
+    }
+}
+
+struct Dense {
+    t_ye: DMatrix<f64>,
+    t_yw: DMatrix<f64>,
+    k: DMatrix<f64>,
+    r: DVector<f64>,
+}
+
+/// Dense operators with the solver's ordering: time-major, w channel c ↔ block c.
+fn dense(case: &Case) -> Dense {
+    let lft = case.model.lft();
+    let len = case.len;
+    let t_ye = lft.t_ye().toeplitz_dense(len);
+    let t_yw = lft.t_yw().toeplitz_dense(len);
+    let nw = lft.dims().w;
+    let z = case.data.z().unwrap();
+    let mut k = DMatrix::zeros(len * nw, len * nw);
+    for c in 0..nw {
+        for i in 0..len {
+            for j in 0..len {
+                k[(i * nw + c, j * nw + c)] = case.kernels[c].eval(&[z.get(i, c)], &[z.get(j, c)]);
+            }
+        }
+    }
+    let r = lft.residual(case.data.u(), case.data.y()).unwrap();
+    Dense {
+        t_ye,
+        t_yw,
+        k,
+        r: DVector::from_column_slice(r.as_slice()),
+    }
+}
+
+/// The paper's formulation: minimise (1/L)|e|² + β wᵀQw over {T_ye e + T_yw w = r}, Q = K⁻¹.
+/// Returns (e, w, null-space basis, Hessian-half H).
+fn paper_reference(d: &Dense, beta: f64, len: usize) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let (ne, nw) = (d.t_ye.ncols(), d.t_yw.ncols());
+    let a = {
+        let mut a = DMatrix::zeros(d.r.len(), ne + nw);
+        a.columns_mut(0, ne).copy_from(&d.t_ye);
+        a.columns_mut(ne, nw).copy_from(&d.t_yw);
+        a
+    };
+    let q = d.k.clone().try_inverse().expect("well-conditioned K in the reference");
+    let mut h = DMatrix::zeros(ne + nw, ne + nw);
+    h.view_mut((0, 0), (ne, ne)).fill_with_identity();
+    h.view_mut((0, 0), (ne, ne)).scale_mut(1.0 / len as f64);
+    h.view_mut((ne, ne), (nw, nw)).copy_from(&(q * beta));
+    let svd = a.clone().svd(true, true);
+    let tol = 1e-10 * svd.singular_values.max();
+    let x_p = svd.solve(&d.r, tol).unwrap();
+    let v_t = svd.v_t.unwrap();
+    let rank = svd.singular_values.iter().filter(|s| **s > tol).count();
+    // Null space: right singular vectors beyond the rank (complete them if v_t is thin).
+    let full_v = {
+        let thin = v_t.transpose();
+        let mut basis: Vec<DVector<f64>> = thin.column_iter().take(rank).map(|c| c.into_owned()).collect();
+        let dim = ne + nw;
+        for i in 0..dim {
+            let mut v = DVector::zeros(dim);
+            v[i] = 1.0;
+            for b in &basis {
+                let p = b.dot(&v);
+                v -= b * p;
+            }
+            for b in &basis {
+                let p = b.dot(&v);
+                v -= b * p;
+            }
+            if v.norm() > 1e-6 {
+                basis.push(v.normalize());
+            }
+            if basis.len() == dim {
+                break;
+            }
+        }
+        DMatrix::from_columns(&basis[rank..])
+    };
+    let nmat = full_v;
+    let lhs = nmat.transpose() * &h * &nmat;
+    let rhs = -(nmat.transpose() * &h * &x_p);
+    let v = lhs.cholesky().expect("reduced Hessian is positive definite").solve(&rhs);
+    let x = x_p + &nmat * v;
+    (x.rows(0, ne).into_owned(), x.rows(ne, nw).into_owned(), nmat, h)
+}
+
+fn settings(beta: f64) -> IdentifySettings {
+    IdentifySettings::builder().beta(beta).build().unwrap()
+}
+
+fn rel(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    (a - b).norm() / a.norm().max(b.norm()).max(1e-300)
+}
+
+fn stack_w(id: &Identification) -> DVector<f64> {
+    DVector::from_column_slice(id.w_hat.as_slice())
+}
+
+fn case_strategy() -> impl Strategy<Value = (u64, usize, usize, usize, usize, usize, f64)> {
+    (any::<u64>(), 0usize..4, 1usize..3, 1usize..3, 1usize..3, 6usize..22, -3.0f64..1.0)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, .. ProptestConfig::default() })]
+
+    /// Property 1: the estimate is feasible, T_ye·ê + T_yw·ŵ = r.
+    #[test]
+    fn prop_estimate_is_feasible((seed, n, ne, nw, ny, len, lb) in case_strategy()) {
+        let case = make_case(seed, n, ne, nw, ny, len);
+        let id = identify(&case.model, &case.data, &settings(10f64.powf(lb))).unwrap();
+        let d = dense(&case);
+        let lhs = &d.t_ye * DVector::from_column_slice(id.e_hat.as_slice()) + &d.t_yw * stack_w(&id);
+        prop_assert!(rel(&lhs, &d.r) < 1e-9, "relative feasibility error {}", rel(&lhs, &d.r));
+    }
+
+    /// Property 2: the estimate equals the paper's Q = K⁻¹ null-space least-squares solution,
+    /// and the projected gradient of J vanishes there.
+    #[test]
+    fn prop_matches_paper_formulation_and_is_stationary((seed, n, ne, nw, ny, len, lb) in case_strategy()) {
+        let beta = 10f64.powf(lb);
+        let case = make_case(seed, n, ne, nw, ny, len);
+        let id = identify(&case.model, &case.data, &settings(beta)).unwrap();
+        let d = dense(&case);
+        let (e_ref, w_ref, nmat, h) = paper_reference(&d, beta, len);
+        let w = stack_w(&id);
+        let e = DVector::from_column_slice(id.e_hat.as_slice());
+        prop_assert!(rel(&w_ref, &w) < 1e-7, "ŵ differs: {}", rel(&w_ref, &w));
+        prop_assert!(rel(&e_ref, &e) < 1e-7, "ê differs: {}", rel(&e_ref, &e));
+        let mut x = DVector::zeros(e.len() + w.len());
+        x.rows_mut(0, e.len()).copy_from(&e);
+        x.rows_mut(e.len(), w.len()).copy_from(&w);
+        let grad = &h * &x * 2.0;
+        let projected = nmat.transpose() * &grad;
+        prop_assert!(projected.norm() <= 1e-7 * grad.norm().max(1e-12),
+            "projected gradient {} vs gradient {}", projected.norm(), grad.norm());
+        // The reported cost terms agree with J evaluated on the reference.
+        let q = d.k.clone().try_inverse().unwrap();
+        let j_ref = e_ref.norm_squared() / len as f64 + beta * (w_ref.transpose() * q * &w_ref)[(0, 0)];
+        prop_assert!((id.cost.total - j_ref).abs() <= 1e-7 * j_ref.abs().max(1e-12));
+    }
+
+    /// Property 3: each interpolant reproduces ŵ at the data points.
+    #[test]
+    fn prop_interpolant_reproduces_estimate_at_data((seed, n, ne, nw, ny, len, lb) in case_strategy()) {
+        let case = make_case(seed, n, ne, nw, ny, len);
+        let id = identify(&case.model, &case.data, &settings(10f64.powf(lb))).unwrap();
+        for b in &id.blocks {
+            let scale = b.w_hat.iter().fold(1e-12f64, |a, v| a.max(v.abs()));
+            for k in 0..len {
+                let v = b.predict(b.z.sample(k));
+                prop_assert!((v - b.w_hat[k]).abs() <= 1e-9 * scale, "block {} sample {k}: {v} vs {}", b.name, b.w_hat[k]);
+            }
+        }
+    }
+
+    /// Property 4: ŵ is linear in the data, ŵ(r₁ + r₂) = ŵ(r₁) + ŵ(r₂).
+    #[test]
+    fn prop_estimate_is_linear_in_data((seed, n, ne, nw, ny, len, lb) in case_strategy()) {
+        let s = settings(10f64.powf(lb));
+        let c1 = make_case(seed, n, ne, nw, ny, len);
+        let c2 = make_case(seed ^ 0xabcdef, n, ne, nw, ny, len);
+        let z = c1.data.z().unwrap().clone();
+        let with = |u: &Signal, y: &Signal| Data::new(u.clone(), y.clone()).unwrap().with_z(z.clone()).unwrap();
+        let sum = |a: &Signal, b: &Signal| {
+            let v: Vec<f64> = a.as_slice().iter().zip(b.as_slice()).map(|(x, y)| x + y).collect();
+            Signal::new(a.channels(), v).unwrap()
+        };
+        let d1 = with(c1.data.u(), c1.data.y());
+        let d2 = with(c2.data.u(), c2.data.y());
+        let d12 = with(&sum(c1.data.u(), c2.data.u()), &sum(c1.data.y(), c2.data.y()));
+        let w1 = stack_w(&identify(&c1.model, &d1, &s).unwrap());
+        let w2 = stack_w(&identify(&c1.model, &d2, &s).unwrap());
+        let w12 = stack_w(&identify(&c1.model, &d12, &s).unwrap());
+        prop_assert!(rel(&w12, &(&w1 + &w2)) < 1e-9);
+    }
+}
+
+/// Property 5: ŵ → 0 as β → ∞ and ê → 0 as β → 0.
+#[test]
+fn limits_in_beta() {
+    for seed in 0..6 {
+        let case = make_case(seed, 2, 1, 1, 1, 16);
+        let r = dense(&case).r.norm();
+        let big = identify(&case.model, &case.data, &settings(1e9)).unwrap();
+        assert!(stack_w(&big).norm() < 1e-6 * r, "ŵ at β = 1e9: {}", stack_w(&big).norm());
+        let small = identify(&case.model, &case.data, &settings(1e-12)).unwrap();
+        let e = DVector::from_column_slice(small.e_hat.as_slice());
+        assert!(e.norm() < 1e-6 * r, "ê at β = 1e-12: {}", e.norm());
+        // Monotone in between: the noise share grows with β.
+        let mut last = 0.0;
+        for b in [1e-4, 1e-2, 1.0, 1e2] {
+            let id = identify(&case.model, &case.data, &settings(b)).unwrap();
+            assert!(id.cost.noise >= last - 1e-12);
+            last = id.cost.noise;
+        }
+    }
+}
+
+/// Samples that depend on neither e nor w are left out, checked for consistency and reported.
+#[test]
+fn strictly_proper_paths_drop_unreachable_samples() {
+    use nalgebra::dmatrix;
+    // No noise, w reaches y only through a delay: y_0 = 0 whatever w is.
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![0.5],
+        bu: dmatrix![0.0],
+        be: dmatrix![0.0],
+        bw: dmatrix![1.0],
+        cy: dmatrix![1.0],
+        dyu: dmatrix![1.0],
+        dye: dmatrix![0.0],
+        dyw: dmatrix![0.0],
+        cz: dmatrix![0.0],
+        dzu: dmatrix![1.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    })
+    .unwrap();
+    let kernel = GaussianKernel::new(0.1).unwrap();
+    let model = Model::new(
+        lft,
+        vec![NonlinearBlock::new("f", vec![0], 0, Arc::new(KernelDispersion::new(kernel)))],
+    )
+    .unwrap();
+    let len = 20;
+    let u = Signal::from_fn(len, 1, |k, _| spread_points(len, 3, 0)[k]);
+    let f = |z: &[f64]| z[0].tanh();
+    let sim = model.simulate(&[&f], &u, None, None).unwrap();
+    let data = Data::new(u, sim.y).unwrap();
+    let id = identify(&model, &data, &settings(1e-3)).unwrap();
+    assert_eq!(id.diagnostics.dropped_samples, vec![0]);
+    assert!(id.diagnostics.dropped_max_abs_residual < 1e-14);
+    assert_eq!(id.diagnostics.system_size, len - 1);
+    assert!(id.diagnostics.feasibility_residual < 1e-9);
+    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("left out")));
+    assert!(!id.diagnostics.warnings.iter().any(|w| w.contains("NOT consistent")));
+    // Inconsistent data at the dropped sample is reported, not hidden.
+    let mut y = data.y().clone();
+    y.sample_mut(0)[0] += 1.0;
+    let bad = Data::new(data.u().clone(), y).unwrap();
+    let id = identify(&model, &bad, &settings(1e-3)).unwrap();
+    assert!((id.diagnostics.dropped_max_abs_residual - 1.0).abs() < 1e-12);
+    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("NOT consistent")));
+}
+
+/// Property 7: z computed through Ψ equals the simulated z, and the three measurability cases
+/// are told apart.
+#[test]
+fn measurability_psi_reproduces_simulated_z() {
+    use nalgebra::dmatrix;
+    for seed in 0..20u64 {
+        let n = 1 + (seed as usize % 4);
+        let (nu, ne, nw, ny, nz) = (2, 1 + (seed as usize % 2), 1, 2, 2);
+        let s = random_stable_system(seed, n, nu + ne + nw, ny, 0.9);
+        let b = s.b();
+        let mut dyw = s.d().columns(nu + ne, nw).into_owned();
+        dyw.fill(0.0); // D_zw = Ψ·D_yw must vanish for simulation
+        let psi = random_stable_system(seed + 100, 0, ny, nz, 0.5).d().clone();
+        let dzu = random_stable_system(seed + 200, 0, nu, nz, 0.5).d().clone();
+        let m = LftMatrices {
+            a: s.a().clone(),
+            bu: b.columns(0, nu).into_owned(),
+            be: b.columns(nu, ne).into_owned(),
+            bw: b.columns(nu + ne, nw).into_owned(),
+            cy: s.c().clone(),
+            dyu: s.d().columns(0, nu).into_owned(),
+            dye: s.d().columns(nu, ne).into_owned(),
+            dyw: dyw.clone(),
+            cz: &psi * s.c(),
+            dzu,
+            dze: &psi * s.d().columns(nu, ne),
+            dzw: &psi * &dyw,
+        };
+        let lft = Lft::new(m).unwrap();
+        let source = lft.measurability().unwrap();
+        assert!(matches!(source, ZSource::OutputInjection { .. }), "seed {seed}: {source:?}");
+        let len = 60;
+        let u = Signal::from_fn(len, nu, |k, c| ((k * (c + 3)) as f64 * 0.37).sin());
+        let e = Signal::from_fn(len, ne, |k, c| ((k * (c + 5)) as f64 * 0.91).cos() * 0.3);
+        let map = |z: &[f64]| (z[0] - 0.5 * z[1]).tanh();
+        let sim = lft
+            .simulate(&[MapBinding { inputs: &[0, 1], output: 0, map: &map }], &u, Some(&e), None)
+            .unwrap();
+        let (z, _) = lft.compute_z(&u, &sim.y).unwrap();
+        let err = z.as_slice().iter().zip(sim.z.as_slice()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let scale = sim.z.as_slice().iter().fold(1.0f64, |a, b| a.max(b.abs()));
+        assert!(err < 1e-10 * scale, "seed {seed}: max |z − z_sim| = {err}");
+    }
+    // Case 2: C_z ≠ 0 but orthogonal to everything (e, w) can reach → z = L_zu·u.
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![0.5, 0.0; 0.0, 0.3],
+        bu: dmatrix![1.0; 1.0],
+        be: dmatrix![1.0; 0.0],
+        bw: dmatrix![1.0; 0.0],
+        cy: dmatrix![1.0, 0.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![0.0],
+        cz: dmatrix![0.0, 1.0],
+        dzu: dmatrix![0.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    })
+    .unwrap();
+    assert_eq!(lft.measurability().unwrap(), ZSource::InputOnly);
+    // Not measurable: z sees the second state, which w drives but y does not.
+    let mut m = lft.matrices().clone();
+    m.bw = dmatrix![0.0; 1.0];
+    let lft = Lft::new(m).unwrap();
+    let err = lft.measurability().unwrap_err();
+    assert!(matches!(err, Error::NotMeasurable { .. }));
+    assert!(err.to_string().contains("provide z as measured data"));
+}
+
+/// Property 8 (library part): bad input gives the right error variant, never a panic.
+#[test]
+fn bad_input_gives_typed_errors() {
+    use nalgebra::dmatrix;
+    let case = make_case(1, 2, 1, 1, 1, 12);
+    // NaN in data.
+    let mut y = case.data.y().clone();
+    y.sample_mut(3)[0] = f64::NAN;
+    let e = Data::new(case.data.u().clone(), y).unwrap_err();
+    assert!(matches!(e, Error::NonFiniteData { sample: 3, .. }), "{e}");
+    let mut u = case.data.u().clone();
+    u.sample_mut(2)[0] = f64::INFINITY;
+    assert!(matches!(Data::new(u, case.data.y().clone()), Err(Error::NonFiniteData { .. })));
+    // Mismatched lengths and channel counts.
+    let short = case.data.y().slice(0..5);
+    assert!(matches!(Data::new(case.data.u().clone(), short), Err(Error::DimensionMismatch { .. })));
+    let two = Signal::zeros(12, 2);
+    let d = Data::new(two, case.data.y().clone()).unwrap();
+    assert!(matches!(identify(&case.model, &d, &settings(1.0)), Err(Error::DimensionMismatch { .. })));
+    // σ ≤ 0 and β ≤ 0.
+    assert!(matches!(KernelDispersion::gaussian(0.0), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(KernelDispersion::gaussian(-1.0), Err(Error::InvalidParameter { .. })));
+    for b in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(matches!(IdentifySettings::builder().beta(b).build(), Err(Error::InvalidParameter { .. })));
+    }
+    // Algebraic loop in simulation.
+    let mut m = case.model.lft().matrices().clone();
+    m.dzw[(0, 0)] = 0.5;
+    let lft = Lft::new(m).unwrap();
+    let f = |z: &[f64]| z[0];
+    let e = lft
+        .simulate(&[MapBinding { inputs: &[0], output: 0, map: &f }], case.data.u(), None, None)
+        .unwrap_err();
+    assert!(matches!(e, Error::AlgebraicLoop { row: 0, col: 0, .. }), "{e}");
+    // Structural errors.
+    let bad_lft = Lft::new(LftMatrices {
+        a: dmatrix![0.5],
+        bu: dmatrix![1.0, 2.0],
+        be: dmatrix![0.0],
+        bw: dmatrix![1.0],
+        cy: dmatrix![1.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![0.0],
+        cz: dmatrix![0.0],
+        dzu: dmatrix![1.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    });
+    assert!(matches!(bad_lft, Err(Error::DimensionMismatch { .. })));
+    let disp: Arc<dyn Dispersion> = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
+    let lft = case.model.lft().clone();
+    assert!(matches!(
+        Model::new(lft.clone(), vec![NonlinearBlock::new("f", vec![3], 0, disp.clone())]),
+        Err(Error::InvalidStructure(_))
+    ));
+    assert!(matches!(Model::new(lft, vec![]), Err(Error::InvalidStructure(_))));
+    // Too large for memory: refused up front with a size estimate and advice.
+    let tiny = IdentifySettings::builder().beta(1.0).memory_limit_bytes(1000).build().unwrap();
+    let e = identify(&case.model, &case.data, &tiny).unwrap_err();
+    assert!(matches!(e, Error::TooLarge { .. }), "{e}");
+    assert!(e.to_string().contains("window of at most"));
+}
+
+/// A custom operator (an FIR filter implemented by hand) plugs into `identify_problem` through
+/// the `LinearSystem` trait and gives the same estimate as the equivalent state-space model.
+#[test]
+fn user_linear_system_plugs_into_identify() {
+    struct Fir(Vec<f64>);
+    impl LinearSystem for Fir {
+        fn inputs(&self) -> usize { 1 }
+        fn outputs(&self) -> usize { 1 }
+        fn order(&self) -> usize { self.0.len() - 1 }
+        fn apply(&self, u: &[f64], y: &mut [f64]) {
+            for k in 0..y.len() {
+                y[k] = (0..self.0.len()).filter(|&j| j <= k).map(|j| self.0[j] * u[k - j]).sum();
+            }
+        }
+        fn apply_adjoint(&self, y: &[f64], u: &mut [f64]) {
+            for k in 0..u.len() {
+                u[k] = (0..self.0.len()).filter(|&j| k + j < y.len()).map(|j| self.0[j] * y[k + j]).sum();
+            }
+        }
+    }
+    let taps = vec![1.0, 0.5, -0.25];
+    let len = 30;
+    let z = Signal::from_channels(&[spread_points(len, 5, 0)]).unwrap();
+    let r = Signal::from_fn(len, 1, |k, _| (k as f64 * 0.3).sin());
+    let disp: Arc<dyn Dispersion> = Arc::new(KernelDispersion::gaussian(2.0 / len as f64).unwrap());
+    let fir_problem = Problem::new(
+        r.clone(),
+        Arc::new(StateSpace::static_gain(DMatrix::from_element(1, 1, 1.0)).unwrap()),
+        vec![ProblemBlock { name: "f".into(), output: 0, path: Arc::new(Fir(taps.clone())), z: z.clone(), dispersion: disp.clone() }],
+    )
+    .unwrap();
+    let ss = structid_lti::TransferFunction::siso(taps, vec![1.0]).unwrap().to_state_space();
+    let ss_problem = Problem::new(
+        r,
+        Arc::new(StateSpace::static_gain(DMatrix::from_element(1, 1, 1.0)).unwrap()),
+        vec![ProblemBlock { name: "f".into(), output: 0, path: Arc::new(ss), z, dispersion: disp }],
+    )
+    .unwrap();
+    let a = identify_problem(&fir_problem, &settings(0.05)).unwrap();
+    let b = identify_problem(&ss_problem, &settings(0.05)).unwrap();
+    let (wa, wb) = (stack_w(&a), stack_w(&b));
+    assert!(rel(&wa, &wb) < 1e-10, "{}", rel(&wa, &wb));
+}
+
+
+/// A singular M (no noise path and repeated z, so K has equal columns) is regularised and
+/// reported; the estimate stays finite and still fits the data.
+#[test]
+fn singular_system_matrix_is_regularised_and_reported() {
+    use nalgebra::dmatrix;
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![0.0],
+        bu: dmatrix![0.0],
+        be: dmatrix![0.0],
+        bw: dmatrix![0.0],
+        cy: dmatrix![0.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![0.0],
+        dyw: dmatrix![1.0],
+        cz: dmatrix![0.0],
+        dzu: dmatrix![1.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    })
+    .unwrap();
+    let model = Model::new(
+        lft,
+        vec![NonlinearBlock::new("f", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))],
+    )
+    .unwrap();
+    let z: Vec<f64> = (0..40).map(|k| ((k % 10) as f64) / 10.0).collect();
+    let u = Signal::from_channels(&[z.clone()]).unwrap();
+    let y = Signal::from_channels(&[z.iter().map(|v| v.sin()).collect()]).unwrap();
+    let id = identify(&model, &Data::new(u, y).unwrap(), &settings(0.01)).unwrap();
+    assert!(id.w_hat.as_slice().iter().all(|v| v.is_finite()));
+    assert!(id.diagnostics.diagonal_jitter > 0.0);
+    assert!(id.diagnostics.feasibility_residual < 1e-6, "{:?}", id.diagnostics);
+    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("numerically singular")));
+    for (k, zk) in z.iter().enumerate() {
+        assert!((id.w_hat.get(k, 0) - zk.sin()).abs() < 1e-4, "sample {k}: {} vs {} ({:?})", id.w_hat.get(k, 0), zk.sin(), id.diagnostics);
+    }
+}
