@@ -67,6 +67,7 @@ pub mod metrics;
 pub mod model;
 pub mod paper;
 pub mod problem;
+pub mod scenarios;
 pub mod simulate;
 pub mod solver;
 

@@ -1,1 +1,52 @@
-//! placeholder
+//! # structid-io: files in and out of structid
+//!
+//! * [`ModelFile`]: the model file (TOML) — the known linear block of the LFT, the names of
+//!   the data columns and the unknown static maps with their dispersions and, optionally,
+//!   their true maps. Every error names the line of the offending key. See [`model_file`] for
+//!   the format.
+//! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
+//! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
+//! * [`Report`]: the `report.json` of an identification.
+//!
+//! ```
+//! use structid_core::{identify, IdentifySettings};
+//! use structid_io::{DataTable, ModelFile};
+//! let model = ModelFile::parse(r#"
+//!     [lft]
+//!     A = []
+//!     Dye = [[1.0]]
+//!     Dyw = [[1.0]]
+//!     Dzu = [[1.0]]
+//!     [signals]
+//!     u = ["u"]
+//!     y = ["y"]
+//!     [[nonlinearity]]
+//!     name = "N"
+//!     inputs = [0]
+//!     output = 0
+//!     dispersion = { kind = "gaussian", sigma = 0.5 }
+//!     truth = "z0^2"
+//! "#, None).unwrap();
+//! let mut csv = String::from("u,y\n");
+//! for k in 0..50 {
+//!     let u = -2.0 + 4.0 * k as f64 / 49.0;
+//!     csv.push_str(&format!("{u},{}\n", u * u));
+//! }
+//! let data = model.select_data(&DataTable::parse(&csv, None).unwrap()).unwrap();
+//! let id = identify(&model.to_model(None, None).unwrap(), &data, &IdentifySettings::default()).unwrap();
+//! assert!((id.blocks[0].predict(&[1.0]) - 1.0).abs() < 0.05);
+//! ```
+
+pub mod data_file;
+pub mod error;
+pub mod model_file;
+pub mod output;
+pub mod report;
+
+pub use data_file::{DataFile, DataTable, csv_bytes, format_number, write_csv};
+pub use error::{ErrorChain, IoError, core_is_input_error};
+pub use model_file::{
+    BlockSpec, DispersionSpec, ModelFile, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec, default_sigma,
+};
+pub use output::{OutputGuard, write_atomic};
+pub use report::{BlockReport, BlockSettings, DiagnosticsReport, Report, SettingsReport};

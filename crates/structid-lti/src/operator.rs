@@ -3,7 +3,9 @@
 
 use crate::error::LtiError;
 use crate::signal::Signal;
-use faer::{Accum, MatMut, MatRef};
+use faer::linalg::matmul::matmul;
+use faer::prelude::ReborrowMut;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 /// A causal discrete-time LTI system seen as a linear operator `T` on stacked signals.
 ///
@@ -143,4 +145,198 @@ fn columns_via(
             };
         }
     }
+}
+
+/// Width of the column chunks processed at once by one thread (keeps the packed block
+/// of the operand in cache).
+fn col_chunk() -> usize { std::env::var("CC").ok().and_then(|v| v.parse().ok()).unwrap_or(256) }
+/// Do not split the columns across threads below this many columns per task.
+const MIN_PAR_COLS: usize = 32;
+
+/// A blocked recursion of a state-space operator (forward `T` or adjoint `T^T`), applied
+/// to many columns at once with dense matrix products.
+///
+/// Time is cut into blocks of `b` samples. For each block, the packed operand
+/// `W = [X_k; S]` (the `b * cin` rows of the block, then the `n x ncols` state) is
+/// multiplied by `m1` to give the `b * cout` output rows of the block, and by `m2` to give
+/// the next state. Forward: `m1 = [T_b, Gamma]`, `m2 = [R, A^b]`. Adjoint (blocks in
+/// reverse time order): `m1 = [T_b^T, R^T]`, `m2 = [Gamma^T, (A^b)^T]`.
+pub(crate) struct BlockedRecursion {
+    /// samples per block
+    pub b: usize,
+    /// channels of the operand
+    pub cin: usize,
+    /// channels of the result
+    pub cout: usize,
+    /// state dimension
+    pub n: usize,
+    /// `(b cout) x (b cin + n)`
+    pub m1: Mat<f64>,
+    /// `n x (b cin + n)`
+    pub m2: Mat<f64>,
+    /// process the blocks backwards in time (adjoint)
+    pub reverse: bool,
+}
+
+impl BlockedRecursion {
+    /// `out = alpha * Op x` (`Replace`) or `out += alpha * Op x` (`Add`) over `len` samples.
+    pub(crate) fn run(
+        &self,
+        len: usize,
+        x: MatRef<'_, f64>,
+        out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
+        par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
+            self.leaf(len, x, out, accum, alpha)
+        });
+    }
+
+    fn leaf(&self, len: usize, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, accum: Accum, alpha: f64) {
+        let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
+        let k = b * cin + n;
+        let nb = len.div_ceil(b);
+        let nc = x.ncols();
+        // pack in the layout of x so that packing is a plain copy of contiguous runs
+        let row_major = x.col_stride() == 1 && x.row_stride() != 1;
+        let wmax = col_chunk().min(nc);
+        let mut buf0 = vec![0.0; k * wmax];
+        let mut buf1 = vec![0.0; k * wmax];
+        let mut j0 = 0;
+        while j0 < nc {
+            let w = col_chunk().min(nc - j0);
+            let xc = x.subcols(j0, w);
+            let mut oc = out.rb_mut().subcols_mut(j0, w);
+            let mut cur = &mut buf0[..k * w];
+            let mut nxt = &mut buf1[..k * w];
+            for step in 0..nb {
+                let blk = if self.reverse { nb - 1 - step } else { step };
+                let t0 = blk * b;
+                let bk = b.min(len - t0);
+                pack(xc, t0 * cin, bk * cin, b * cin, cur, row_major, step == 0, k);
+                let wv = if row_major {
+                    MatRef::from_row_major_slice(&cur[..], k, w)
+                } else {
+                    MatRef::from_column_major_slice(&cur[..], k, w)
+                };
+                matmul(
+                    oc.rb_mut().subrows_mut(t0 * cout, bk * cout),
+                    accum,
+                    self.m1.as_ref().subrows(0, bk * cout),
+                    wv,
+                    alpha,
+                    Par::Seq,
+                );
+                if n > 0 && step + 1 < nb {
+                    let sv = if row_major {
+                        MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)
+                    } else {
+                        MatMut::from_column_major_slice_with_stride_mut(&mut nxt[b * cin..], n, w, k)
+                    };
+                    matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
+                    std::mem::swap(&mut cur, &mut nxt);
+                }
+            }
+            j0 += w;
+        }
+    }
+}
+
+/// Copies `rows` rows of `x` starting at `r0` into the packed buffer `w` (a `k x ncols`
+/// matrix, row- or column-major), zero-fills the rows `rows..pad` and, if `zero_state`,
+/// the state rows `pad..k`.
+fn pack(
+    x: MatRef<'_, f64>,
+    r0: usize,
+    rows: usize,
+    pad: usize,
+    w: &mut [f64],
+    row_major: bool,
+    zero_state: bool,
+    k: usize,
+) {
+    let nc = x.ncols();
+    if row_major {
+        for i in 0..rows {
+            let dst = &mut w[i * nc..(i + 1) * nc];
+            let src = x.row(r0 + i);
+            match src.try_as_row_major() {
+                Some(s) => dst.copy_from_slice(s.as_slice()),
+                None => {
+                    for (j, d) in dst.iter_mut().enumerate() {
+                        *d = x[(r0 + i, j)];
+                    }
+                }
+            }
+        }
+        w[rows * nc..pad * nc].fill(0.0);
+        if zero_state {
+            w[pad * nc..k * nc].fill(0.0);
+        }
+    } else {
+        for j in 0..nc {
+            let col = &mut w[j * k..(j + 1) * k];
+            let src = x.col(j).subrows(r0, rows);
+            match src.try_as_col_major() {
+                Some(s) => col[..rows].copy_from_slice(s.as_slice()),
+                None => {
+                    for (i, d) in col[..rows].iter_mut().enumerate() {
+                        *d = x[(r0 + i, j)];
+                    }
+                }
+            }
+            col[rows..pad].fill(0.0);
+            if zero_state {
+                col[pad..].fill(0.0);
+            }
+        }
+    }
+}
+
+/// Static operator (no state): `out_k = alpha * g x_k (+ out_k)` for every sample `k`,
+/// where `g` is `cout x cin` (`D` or `D^T`).
+pub(crate) fn static_columns(
+    g: MatRef<'_, f64>,
+    len: usize,
+    x: MatRef<'_, f64>,
+    out: MatMut<'_, f64>,
+    accum: Accum,
+    alpha: f64,
+) {
+    let (cout, cin) = (g.nrows(), g.ncols());
+    par_columns(x, out, faer::get_global_parallelism(), &|x, mut out| {
+        for t in 0..len {
+            matmul(
+                out.rb_mut().subrows_mut(t * cout, cout),
+                accum,
+                g,
+                x.subrows(t * cin, cin),
+                alpha,
+                Par::Seq,
+            );
+        }
+    });
+}
+
+/// Splits the columns of `x`/`out` across the threads of `par` and runs `leaf` on each part.
+fn par_columns(
+    x: MatRef<'_, f64>,
+    out: MatMut<'_, f64>,
+    par: Par,
+    leaf: &(dyn Fn(MatRef<'_, f64>, MatMut<'_, f64>) + Sync),
+) {
+    let nc = x.ncols();
+    if par.degree() <= 1 || nc < 2 * MIN_PAR_COLS {
+        leaf(x, out);
+        return;
+    }
+    let mid = nc / 2;
+    let (x0, x1) = x.split_at_col(mid);
+    let (o0, o1) = out.split_at_col_mut(mid);
+    faer::utils::thread::join_raw(
+        move |p| par_columns(x0, o0, p, leaf),
+        move |p| par_columns(x1, o1, p, leaf),
+        par,
+    );
 }

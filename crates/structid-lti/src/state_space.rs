@@ -2,21 +2,16 @@
 //! continuous-time state-space systems with zero-order-hold discretisation.
 
 use crate::error::{LtiError, check_matrix_finite};
-use crate::operator::{LinearSystem, horizon};
+use crate::operator::{BlockedRecursion, LinearSystem, horizon, static_columns};
 use crate::signal::Signal;
-use faer::linalg::matmul::matmul;
-use faer::prelude::{Reborrow, ReborrowMut};
-use faer::{Accum, Mat, MatMut, MatRef, Par};
+use faer::{Accum, Mat, MatMut, MatRef};
 use nalgebra::DMatrix;
 
-/// Time-block length of the blocked many-column operators (tuned on a 2-core AVX-512
-/// machine for SISO systems of low order).
-fn tb_env()->usize{std::env::var("TB").ok().and_then(|v|v.parse().ok()).unwrap_or(32)}
-/// Width of the column chunks each thread processes at once (keeps a time block of the
-/// operand in cache).
-fn cc_env()->usize{std::env::var("CC").ok().and_then(|v|v.parse().ok()).unwrap_or(256)}
-/// Do not split the columns across threads below this many columns per task.
-fn mp_env()->usize{std::env::var("MP").ok().and_then(|v|v.parse().ok()).unwrap_or(64)}
+/// Time-block length of the blocked many-column operators for a system of order `n`
+/// (the cost per sample and column is about `2 (b p + n)(b m + n) / b` flops).
+fn time_block(n: usize) -> usize {
+    std::env::var("TB").ok().and_then(|v| v.parse().ok()).unwrap_or(16).max(n.min(1))
+}
 
 /// Checks the shapes `a: n x n`, `b: n x m`, `c: p x n`, `d: p x m` and finiteness.
 fn validate(
@@ -109,19 +104,6 @@ pub struct StateSpace {
     d: DMatrix<f64>,
     sample_time: Option<f64>,
     rm: RowMajor,
-}
-
-/// Precomputed matrices of the blocked recursion for a time block of `b` samples.
-struct BlockPlan {
-    b: usize,
-    /// (b p) x (b m) Toeplitz of h_0 .. h_{b-1}
-    tb: Mat<f64>,
-    /// (b p) x n: [C; C A; ...; C A^{b-1}]
-    gamma: Mat<f64>,
-    /// n x (b m): [A^{b-1} B, ..., A B, B]
-    r: Mat<f64>,
-    /// A^b
-    ab: Mat<f64>,
 }
 
 impl StateSpace {
@@ -473,11 +455,11 @@ impl StateSpace {
         Ok(s)
     }
 
-    /// Matrices of the blocked recursion for a horizon of `len` samples.
-    fn block_plan(&self, len: usize) -> BlockPlan {
+    /// The blocked recursion (forward or adjoint) for a horizon of `len` samples.
+    fn blocked(&self, len: usize, adjoint: bool) -> BlockedRecursion {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        let bsz = if n == 0 { 1 } else { tb_env().min(len.max(1)) };
-        // powers A^i B for i < b and C A^i for i < b
+        let bsz = time_block(n).min(len.max(1));
+        // A^i B and C A^i for i < b, and A^b
         let mut aib = Vec::with_capacity(bsz);
         let mut cai = Vec::with_capacity(bsz);
         let mut ab = DMatrix::<f64>::identity(n, n);
@@ -488,210 +470,78 @@ impl StateSpace {
             aib.push(cur.clone());
             cur = &self.a * &cur;
         }
-        let mut tb = Mat::<f64>::zeros(bsz * p, bsz * m);
+        let markov = |k: usize| -> DMatrix<f64> {
+            if k == 0 {
+                self.d.clone()
+            } else {
+                &self.c * &aib[k - 1]
+            }
+        };
+        let h: Vec<DMatrix<f64>> = (0..bsz).map(markov).collect();
+        // forward: m1 = [T_b, Gamma] ((b p) x (b m + n)), m2 = [R, A^b] (n x (b m + n))
+        let kf = bsz * m + n;
+        let mut m1 = Mat::<f64>::zeros(bsz * p, kf);
+        let mut m2 = Mat::<f64>::zeros(n, kf);
         for i in 0..bsz {
             for j in 0..=i {
-                let h = if i == j {
-                    self.d.clone()
-                } else {
-                    &self.c * &aib[i - j - 1]
-                };
                 for r in 0..p {
                     for s in 0..m {
-                        tb[(i * p + r, j * m + s)] = h[(r, s)];
+                        m1[(i * p + r, j * m + s)] = h[i - j][(r, s)];
                     }
                 }
             }
-        }
-        let mut gamma = Mat::<f64>::zeros(bsz * p, n);
-        for (i, g) in cai.iter().enumerate() {
             for r in 0..p {
                 for s in 0..n {
-                    gamma[(i * p + r, s)] = g[(r, s)];
+                    m1[(i * p + r, bsz * m + s)] = cai[i][(r, s)];
                 }
             }
         }
-        let mut rmat = Mat::<f64>::zeros(n, bsz * m);
         for j in 0..bsz {
             let blk = &aib[bsz - 1 - j];
             for r in 0..n {
                 for s in 0..m {
-                    rmat[(r, j * m + s)] = blk[(r, s)];
+                    m2[(r, j * m + s)] = blk[(r, s)];
                 }
             }
         }
-        BlockPlan {
+        for r in 0..n {
+            for s in 0..n {
+                m2[(r, bsz * m + s)] = ab[(r, s)];
+            }
+        }
+        if !adjoint {
+            return BlockedRecursion {
+                b: bsz,
+                cin: m,
+                cout: p,
+                n,
+                m1,
+                m2,
+                reverse: false,
+            };
+        }
+        // adjoint: m1' = [T_b^T, R^T] ((b m) x (b p + n)), m2' = [Gamma^T, (A^b)^T]
+        let ka = bsz * p + n;
+        let t1 = m1.as_ref().transpose(); // (b m + n) x (b p)
+        let t2 = m2.as_ref().transpose(); // (b m + n) x n
+        let m1a = Mat::from_fn(bsz * m, ka, |i, j| if j < bsz * p { t1[(i, j)] } else { t2[(i, j - bsz * p)] });
+        let m2a = Mat::from_fn(n, ka, |i, j| {
+            if j < bsz * p {
+                t1[(bsz * m + i, j)]
+            } else {
+                t2[(bsz * m + i, j - bsz * p)]
+            }
+        });
+        BlockedRecursion {
             b: bsz,
-            tb,
-            gamma,
-            r: rmat,
-            ab: to_faer(&ab),
+            cin: p,
+            cout: m,
+            n,
+            m1: m1a,
+            m2: m2a,
+            reverse: true,
         }
     }
-}
-
-/// Splits the columns of `x`/`out` across the available threads and runs `leaf` on each
-/// part.
-fn par_columns(
-    x: MatRef<'_, f64>,
-    out: MatMut<'_, f64>,
-    par: Par,
-    leaf: &(dyn Fn(MatRef<'_, f64>, MatMut<'_, f64>) + Sync),
-) {
-    let nc = x.ncols();
-    if par.degree() <= 1 || nc < 2 * mp_env() {
-        leaf(x, out);
-        return;
-    }
-    let mid = nc / 2;
-    let (x0, x1) = x.split_at_col(mid);
-    let (o0, o1) = out.split_at_col_mut(mid);
-    faer::utils::thread::join_raw(
-        move |p| par_columns(x0, o0, p, leaf),
-        move |p| par_columns(x1, o1, p, leaf),
-        par,
-    );
-}
-
-/// Runs `f` on column chunks of at most `COL_CHUNK` columns.
-fn chunked(
-    x: MatRef<'_, f64>,
-    mut out: MatMut<'_, f64>,
-    mut f: impl FnMut(MatRef<'_, f64>, MatMut<'_, f64>),
-) {
-    let nc = x.ncols();
-    let mut j = 0;
-    while j < nc {
-        let w = cc_env().min(nc - j);
-        f(x.subcols(j, w), out.rb_mut().subcols_mut(j, w));
-        j += w;
-    }
-}
-
-/// Blocked forward recursion on one group of columns (sequential matmuls).
-fn forward_leaf(
-    plan: &BlockPlan,
-    dims: (usize, usize, usize, usize),
-    x: MatRef<'_, f64>,
-    out: MatMut<'_, f64>,
-    accum: Accum,
-    alpha: f64,
-) {
-    let (len, n, m, p) = dims;
-    let b = plan.b;
-    let nblocks = len.div_ceil(b);
-    let w = cc_env().min(x.ncols());
-    let mut s_buf = Mat::<f64>::zeros(n, w);
-    let mut s2_buf = Mat::<f64>::zeros(n, w);
-    chunked(x, out, |x, mut out| {
-        let nc = x.ncols();
-        let mut s = s_buf.as_mut().subcols_mut(0, nc);
-        let mut s2 = s2_buf.as_mut().subcols_mut(0, nc);
-        for blk in 0..nblocks {
-            let t0 = blk * b;
-            let bk = b.min(len - t0);
-            let xk = x.subrows(t0 * m, bk * m);
-            let mut yk = out.rb_mut().subrows_mut(t0 * p, bk * p);
-            matmul(
-                yk.rb_mut(),
-                accum,
-                plan.tb.as_ref().submatrix(0, 0, bk * p, bk * m),
-                xk,
-                alpha,
-                Par::Seq,
-            );
-            if n == 0 {
-                continue;
-            }
-            if blk > 0 {
-                matmul(
-                    yk.rb_mut(),
-                    Accum::Add,
-                    plan.gamma.as_ref().subrows(0, bk * p),
-                    s.rb(),
-                    alpha,
-                    Par::Seq,
-                );
-            }
-            if blk + 1 < nblocks {
-                // here bk == b
-                if blk > 0 {
-                    matmul(s2.rb_mut(), Accum::Replace, plan.ab.as_ref(), s.rb(), 1.0, Par::Seq);
-                    matmul(s2.rb_mut(), Accum::Add, plan.r.as_ref(), xk, 1.0, Par::Seq);
-                } else {
-                    matmul(s2.rb_mut(), Accum::Replace, plan.r.as_ref(), xk, 1.0, Par::Seq);
-                }
-                std::mem::swap(&mut s, &mut s2);
-            }
-        }
-    });
-}
-
-/// Blocked backward (adjoint) recursion on one group of columns.
-fn adjoint_leaf(
-    plan: &BlockPlan,
-    dims: (usize, usize, usize, usize),
-    x: MatRef<'_, f64>,
-    out: MatMut<'_, f64>,
-    accum: Accum,
-    alpha: f64,
-) {
-    let (len, n, m, p) = dims;
-    let b = plan.b;
-    let nblocks = len.div_ceil(b);
-    let w = cc_env().min(x.ncols());
-    let mut s_buf = Mat::<f64>::zeros(n, w);
-    let mut s2_buf = Mat::<f64>::zeros(n, w);
-    chunked(x, out, |x, mut out| {
-        let nc = x.ncols();
-        let mut s = s_buf.as_mut().subcols_mut(0, nc);
-        let mut s2 = s2_buf.as_mut().subcols_mut(0, nc);
-        for blk in (0..nblocks).rev() {
-            let t0 = blk * b;
-            let bk = b.min(len - t0);
-            let yk = x.subrows(t0 * p, bk * p);
-            let mut uk = out.rb_mut().subrows_mut(t0 * m, bk * m);
-            matmul(
-                uk.rb_mut(),
-                accum,
-                plan.tb.as_ref().submatrix(0, 0, bk * p, bk * m).transpose(),
-                yk,
-                alpha,
-                Par::Seq,
-            );
-            if n == 0 {
-                continue;
-            }
-            let later = blk + 1 < nblocks; // costate s is nonzero, and bk == b
-            if later {
-                matmul(
-                    uk.rb_mut(),
-                    Accum::Add,
-                    plan.r.as_ref().transpose(),
-                    s.rb(),
-                    alpha,
-                    Par::Seq,
-                );
-            }
-            if blk > 0 {
-                let g = plan.gamma.as_ref().subrows(0, bk * p).transpose();
-                if later {
-                    matmul(
-                        s2.rb_mut(),
-                        Accum::Replace,
-                        plan.ab.as_ref().transpose(),
-                        s.rb(),
-                        1.0,
-                        Par::Seq,
-                    );
-                    matmul(s2.rb_mut(), Accum::Add, g, yk, 1.0, Par::Seq);
-                } else {
-                    matmul(s2.rb_mut(), Accum::Replace, g, yk, 1.0, Par::Seq);
-                }
-                std::mem::swap(&mut s, &mut s2);
-            }
-        }
-    });
 }
 
 /// Handles the degenerate shapes shared by both blocked operators; returns `true` when
@@ -783,8 +633,9 @@ impl LinearSystem for StateSpace {
     }
 
     /// Blocked recursion: time is split into blocks of `b` samples and, for block `k`
-    /// with rows `X_k`, `Y_k = T_b X_k + Gamma S`, `S <- A^b S + R X_k`, all with
-    /// (SIMD) matrix products; columns are split across faer's global thread pool.
+    /// with rows `X_k`, `Y_k = T_b X_k + Gamma S`, `S <- A^b S + R X_k`, each as one
+    /// (SIMD) matrix product on the packed `[X_k; S]`; columns are split across faer's
+    /// global thread pool (`faer::get_global_parallelism()`).
     fn apply_columns(
         &self,
         x: MatRef<'_, f64>,
@@ -798,11 +649,11 @@ impl LinearSystem for StateSpace {
         if trivial_columns(m, p, len, &mut out, accum) {
             return;
         }
-        let plan = self.block_plan(len);
-        let dims = (len, n, m, p);
-        par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
-            forward_leaf(&plan, dims, x, out, accum, alpha)
-        });
+        if n == 0 {
+            static_columns(to_faer(&self.d).as_ref(), len, x, out, accum, alpha);
+        } else {
+            self.blocked(len, false).run(len, x, out, accum, alpha);
+        }
     }
 
     /// Blocked backward recursion with the transposed block matrices (costate `n x ncols`).
@@ -819,11 +670,11 @@ impl LinearSystem for StateSpace {
         if trivial_columns(p, m, len, &mut out, accum) {
             return;
         }
-        let plan = self.block_plan(len);
-        let dims = (len, n, m, p);
-        par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
-            adjoint_leaf(&plan, dims, x, out, accum, alpha)
-        });
+        if n == 0 {
+            static_columns(to_faer(&self.d).as_ref().transpose(), len, x, out, accum, alpha);
+        } else {
+            self.blocked(len, true).run(len, x, out, accum, alpha);
+        }
     }
 }
 

@@ -496,6 +496,55 @@ fn tf_mimo_and_validation() {
 /// (`cargo test -p structid-lti --release -- --ignored --nocapture bench_apply_columns`).
 #[test]
 #[ignore]
+fn bench_transposed_forward_only() {
+    let len = 4000;
+    let sys = random_stable_system(1, 4, 1, 1, 0.95);
+    let q = Mat::from_fn(len, len, |i, j| ((i * 7 + j * 13) % 17) as f64 - 8.0);
+    let mut out = Mat::<f64>::zeros(len, len);
+    let adj = std::env::var("ADJ").is_ok();
+    let plain = std::env::var("PLAIN").is_ok();
+    let xv = if plain { q.as_ref() } else { q.as_ref().transpose() };
+    faer::set_global_parallelism(faer::Par::Seq);
+    let cpu = || -> f64 {
+        let s = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
+        s.split_whitespace().next().unwrap().parse::<f64>().unwrap() * 1e-6
+    };
+    let reps = 8;
+    let mut best = f64::INFINITY;
+    let mut tot = 0.0;
+    for _ in 0..reps {
+        let c0 = cpu();
+        if adj {
+            sys.apply_adjoint_columns(xv, out.as_mut(), Accum::Replace, 1.0);
+        } else {
+            sys.apply_columns(xv, out.as_mut(), Accum::Replace, 1.0);
+        }
+        let d = cpu() - c0;
+        best = best.min(d);
+        tot += d;
+    }
+    let l = Mat::from_fn(len, 32, |i, j| (i + j) as f64);
+    let r = Mat::from_fn(32, len, |i, j| (i * j) as f64);
+    let mut rb = f64::INFINITY;
+    for _ in 0..3 {
+        let c0 = cpu();
+        faer::linalg::matmul::matmul(out.as_mut(), Accum::Replace, l.as_ref(), r.as_ref(), 1.0, faer::Par::Seq);
+        rb = rb.min(cpu() - c0);
+    }
+    let v1 = vec![1.0f64; len * len];
+    let mut v2 = vec![0.0f64; len * len];
+    let mut cb = f64::INFINITY;
+    for _ in 0..3 {
+        let c0 = cpu();
+        v2.copy_from_slice(std::hint::black_box(&v1));
+        std::hint::black_box(&v2);
+        cb = cb.min(cpu() - c0);
+    }
+    println!("CPU ms: best {best:.1} mean {:.1}   (ref rank-32 matmul {rb:.1}, memcpy {cb:.1})", tot / reps as f64);
+}
+
+#[test]
+#[ignore]
 fn bench_apply_columns() {
     let len = 4000;
     let sys = random_stable_system(1, 4, 1, 1, 0.95);

@@ -1,0 +1,211 @@
+//! The error type of `structid-io`.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Everything that can go wrong while reading model or data files and writing results.
+///
+/// Messages are written for a command-line user: they name the file, the line (and column
+/// where it helps) and what to change. Underlying system errors are exposed through
+/// [`std::error::Error::source`] rather than repeated in the message.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum IoError {
+    /// A model file is malformed (TOML syntax or content).
+    #[error("{}", model_message(path.as_deref(), *line, *column, message))]
+    Model {
+        /// The model file, when it was read from disk.
+        path: Option<PathBuf>,
+        /// One-based line of the offending text, when known.
+        line: Option<usize>,
+        /// One-based column of the offending text, when known.
+        column: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// A data (CSV) file is malformed.
+    #[error("{}", data_message(path.as_deref(), *line, column.as_deref(), message))]
+    Data {
+        /// The data file, when it was read from disk.
+        path: Option<PathBuf>,
+        /// One-based line in the file, when known.
+        line: Option<u64>,
+        /// Name of the offending column, when known.
+        column: Option<String>,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// A column requested from a data file does not exist.
+    #[error(
+        "{} has no column `{column}`; available columns: {}",
+        source_name(path.as_deref()),
+        list(available)
+    )]
+    MissingColumn {
+        /// The data file, when known.
+        path: Option<PathBuf>,
+        /// The column that was asked for.
+        column: String,
+        /// The columns the file has.
+        available: Vec<String>,
+    },
+
+    /// A file could not be read.
+    #[error("cannot read `{}`", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The system error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A file could not be written (or its directory created).
+    #[error("cannot write `{}`", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The system error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// An output path designates one of the input files.
+    #[error(
+        "refusing to write `{}`: it is the input file `{}`; choose a different output path",
+        path.display(),
+        input.display()
+    )]
+    WouldOverwriteInput {
+        /// The output path that was requested.
+        path: PathBuf,
+        /// The input file it would overwrite.
+        input: PathBuf,
+    },
+
+    /// An argument given by the caller is invalid (σ ≤ 0, mismatched lengths, …).
+    #[error("{0}")]
+    InvalidArgument(String),
+
+    /// An error from `structid-core` (model structure, identification, …).
+    #[error(transparent)]
+    Core(#[from] structid_core::Error),
+
+    /// JSON serialisation failed.
+    #[error("cannot serialise JSON")]
+    Json(#[from] serde_json::Error),
+}
+
+impl IoError {
+    /// A model-file error without a location (a location is added by the parser when known).
+    pub fn model(message: impl Into<String>) -> Self {
+        IoError::Model {
+            path: None,
+            line: None,
+            column: None,
+            message: message.into(),
+        }
+    }
+
+    /// Whether the error is caused by the user's input (files, arguments, model structure) as
+    /// opposed to a failure while running (writing files, numerical breakdown, memory).
+    ///
+    /// The command-line tool maps input errors to exit code 2 and the rest to exit code 1.
+    pub fn is_input_error(&self) -> bool {
+        match self {
+            IoError::Model { .. }
+            | IoError::Data { .. }
+            | IoError::MissingColumn { .. }
+            | IoError::Read { .. }
+            | IoError::WouldOverwriteInput { .. }
+            | IoError::InvalidArgument(_) => true,
+            IoError::Write { .. } | IoError::Json(_) => false,
+            IoError::Core(e) => core_is_input_error(e),
+        }
+    }
+
+    pub(crate) fn with_path(mut self, p: &Path) -> Self {
+        match &mut self {
+            IoError::Model { path, .. } | IoError::Data { path, .. } | IoError::MissingColumn { path, .. } => {
+                if path.is_none() {
+                    *path = Some(p.to_path_buf());
+                }
+            }
+            _ => {}
+        }
+        self
+    }
+}
+
+/// Whether a `structid-core` error is caused by the user's input (see [`IoError::is_input_error`]).
+pub fn core_is_input_error(e: &structid_core::Error) -> bool {
+    use structid_core::Error as E;
+    !matches!(e, E::TooLarge { .. } | E::Numerical(_))
+}
+
+fn source_name(path: Option<&Path>) -> String {
+    match path {
+        Some(p) => format!("data file `{}`", p.display()),
+        None => "the data".to_string(),
+    }
+}
+
+fn list(names: &[String]) -> String {
+    if names.is_empty() {
+        return "(none)".into();
+    }
+    names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+}
+
+fn model_message(path: Option<&Path>, line: Option<usize>, column: Option<usize>, message: &str) -> String {
+    let mut s = match path {
+        Some(p) => format!("model file `{}`: {message}", p.display()),
+        None => format!("model file: {message}"),
+    };
+    match (line, column) {
+        (Some(l), Some(c)) => s.push_str(&format!(" (line {l}, column {c})")),
+        (Some(l), None) => s.push_str(&format!(" (line {l})")),
+        _ => {}
+    }
+    s
+}
+
+fn data_message(path: Option<&Path>, line: Option<u64>, column: Option<&str>, message: &str) -> String {
+    let mut s = match path {
+        Some(p) => format!("data file `{}`", p.display()),
+        None => "data".to_string(),
+    };
+    if let Some(l) = line {
+        s.push_str(&format!(", line {l}"));
+    }
+    if let Some(c) = column {
+        s.push_str(&format!(", column `{c}`"));
+    }
+    s.push_str(": ");
+    s.push_str(message);
+    s
+}
+
+/// Formats an error and its chain of causes on one line each: `message`, then
+/// `  caused by: cause` lines. Used by the command-line tool.
+pub struct ErrorChain<'a>(pub &'a (dyn std::error::Error + 'static));
+
+impl fmt::Display for ErrorChain<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)?;
+        let mut cur = self.0.source();
+        let mut last = self.0.to_string();
+        while let Some(e) = cur {
+            let s = e.to_string();
+            // `#[error(transparent)]` wrappers repeat their source's message; skip repeats.
+            if s != last && !last.ends_with(&s) {
+                write!(f, "\n  caused by: {s}")?;
+            }
+            last = s;
+            cur = e.source();
+        }
+        Ok(())
+    }
+}

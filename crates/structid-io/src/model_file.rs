@@ -1,0 +1,1250 @@
+//! Model files: the known linear block, the signal names and the unknown static maps, in TOML.
+//!
+//! # Format
+//!
+//! ```toml
+//! [lft]                      # discrete-time realisation of the known block, paper eq. (7)
+//! sample_time = 1.0          # optional
+//! A = [[0.5]]                # n×n ; an empty list [] when n = 0
+//! Bu = [[1.0]]
+//! Be = [[0.0]]
+//! Bw = [[1.0]]
+//! Cy = [[1.0]]
+//! Dyu = [[0.0]]
+//! Dye = [[1.0]]
+//! Dyw = [[0.0]]
+//! Cz = [[0.0]]
+//! Dzu = [[1.0]]
+//! Dze = [[0.0]]
+//! Dzw = [[0.0]]
+//!
+//! [signals]
+//! u = ["u0"]                 # CSV column names of the known inputs, in order
+//! y = ["y0"]                 # CSV column names of the measured outputs, in order
+//! # z = ["z0"]               # optional: measured z columns; otherwise z is computed from u and y
+//!
+//! [[nonlinearity]]
+//! name = "f"
+//! inputs = [0]               # indices into z
+//! output = 0                 # index into w
+//! dispersion = { kind = "gaussian", sigma = 0.4 }
+//! truth = "tanh(z0)"         # optional, used by `simulate` and for error reports
+//! ```
+//!
+//! ## `[lft]`
+//! The twelve matrices of x⁺ = A x + Bu u + Be e + Bw w, y = Cy x + Dyu u + Dye e + Dyw w,
+//! z = Cz x + Dzu u + Dze e + Dzw w, each a list of rows. Dimensions are inferred: n from the
+//! rows of A, n_u from `[signals].u`, n_y from `[signals].y`, n_e from the columns of Be, Dye or
+//! Dze, n_w from the columns of Bw, Dyw or Dzw, and n_z from the rows of Cz, Dzu, Dze or Dzw
+//! (or from `[signals].z`). A matrix with a zero dimension may be written `[]` (for example
+//! `A = []`, `Bu = []` and `Cy = []` when n = 0). An omitted matrix is all zeros. Integers are
+//! accepted where numbers are expected.
+//!
+//! `time = "continuous"` (with `sample_time` required) declares A, Bu, Be and Bw as a
+//! continuous-time realisation, discretised by a zero-order hold on the whole input [u e w]
+//! (C and D are unchanged). The default is `time = "discrete"`.
+//!
+//! ## `[[nonlinearity]]`
+//! One table per unknown static map: a unique `name`, the z channels it reads (`inputs`, indices
+//! into z), the w channel it writes (`output`), its `dispersion` and optionally its `truth`.
+//! Every w channel must be written by exactly one block.
+//!
+//! * `dispersion = { kind = "gaussian", sigma = 0.4 }`: the Gaussian RKHS dispersion. When
+//!   `sigma` is omitted (or the whole `dispersion` key is), σ is chosen when the data are known:
+//!   **σ = 0.1 × the largest range (max − min) of the block's input channels of z** (0.1 when
+//!   that range is zero). Supported kinds: `gaussian`.
+//! * `truth = "tanh(z0)"`: the true map as an expression in `z0, z1, …` (the block's inputs in
+//!   order, or `z` for a single input); see [`structid_core::ExprMap`].
+//! * `truth = { table = "file.csv" }` (or `table = "file.csv"` in the block): a lookup table, a
+//!   CSV file with a header and columns `z…, value` (piecewise linear in one input, bilinear on
+//!   a complete grid in two), the path relative to the model file's directory.
+//!
+//! Every error names the line of the offending key.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use nalgebra::DMatrix;
+use serde::Deserialize;
+use structid_core::{
+    Data, Dispersion, ExprMap, Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, Model,
+    NonlinearBlock,
+};
+use structid_lti::{ContinuousStateSpace, Signal};
+use toml::Spanned;
+
+use crate::data_file::{DataTable, format_number};
+use crate::error::IoError;
+
+/// The names of the data columns that carry each signal.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SignalNames {
+    /// Columns of the known inputs u, in order (n_u of them).
+    pub u: Vec<String>,
+    /// Columns of the measured outputs y, in order (n_y of them).
+    pub y: Vec<String>,
+    /// Columns of measured z, when z is measured (n_z of them); otherwise z is computed from u
+    /// and y.
+    pub z: Option<Vec<String>>,
+}
+
+/// The dispersion of a block as written in the model file.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum DispersionSpec {
+    /// The Gaussian RKHS dispersion of width σ; `None` picks σ from the data (see
+    /// [`default_sigma`]).
+    Gaussian {
+        /// Kernel width σ (> 0), if given.
+        sigma: Option<f64>,
+    },
+}
+
+/// The dispersion kinds a model file may name.
+pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian"];
+
+/// The default kernel width for a block whose inputs are `z` (one point per sample):
+/// 0.1 × the largest range (max − min) over its channels, or 0.1 when every channel is
+/// constant.
+///
+/// ```
+/// use structid_io::default_sigma;
+/// use structid_lti::Signal;
+/// let z = Signal::from_channels(&[vec![-1.0, 3.0], vec![0.0, 1.0]]).unwrap();
+/// assert!((default_sigma(&z) - 0.4).abs() < 1e-15);
+/// ```
+pub fn default_sigma(z: &Signal) -> f64 {
+    let mut widest = 0.0f64;
+    for c in 0..z.channels() {
+        let (lo, hi) = z
+            .channel(c)
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        if hi > lo {
+            widest = widest.max(hi - lo);
+        }
+    }
+    if widest.is_finite() && widest > 0.0 { 0.1 * widest } else { 0.1 }
+}
+
+impl DispersionSpec {
+    /// The kind as written in the file (`"gaussian"`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            DispersionSpec::Gaussian { .. } => "gaussian",
+        }
+    }
+
+    /// The kernel width given in the file, if any.
+    pub fn sigma(&self) -> Option<f64> {
+        match self {
+            DispersionSpec::Gaussian { sigma } => *sigma,
+        }
+    }
+
+    /// Builds the dispersion. `sigma_override` replaces the file's σ; without either, σ is
+    /// [`default_sigma`] of `block_z` (the block's input samples), which is then required.
+    pub fn build(&self, sigma_override: Option<f64>, block_z: Option<&Signal>) -> Result<Arc<dyn Dispersion>, IoError> {
+        match self {
+            DispersionSpec::Gaussian { sigma } => {
+                let s = match (sigma_override, *sigma, block_z) {
+                    (Some(s), _, _) | (None, Some(s), _) => s,
+                    (None, None, Some(z)) => default_sigma(z),
+                    (None, None, None) => {
+                        return Err(IoError::InvalidArgument(
+                            "the gaussian dispersion has no sigma and no data were given to choose one".into(),
+                        ));
+                    }
+                };
+                Ok(Arc::new(KernelDispersion::gaussian(s)?))
+            }
+        }
+    }
+}
+
+/// The true map of a block, when the model file gives one.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum TruthSpec {
+    /// An expression in `z0, z1, …` (see [`structid_core::ExprMap`]).
+    Expression(String),
+    /// A lookup table read from a CSV file.
+    Table {
+        /// The file name as written in the model file (relative to its directory).
+        file: String,
+        /// The table.
+        table: LookupTable,
+    },
+}
+
+impl TruthSpec {
+    /// The map as an interpolant of `dim` inputs.
+    pub fn to_interpolant(&self, dim: usize) -> Result<Box<dyn Interpolant>, IoError> {
+        match self {
+            TruthSpec::Expression(text) => Ok(Box::new(ExprMap::parse(text, dim)?)),
+            TruthSpec::Table { table, file } => {
+                if table.dim() != dim {
+                    return Err(IoError::InvalidArgument(format!(
+                        "truth table `{file}` has {} input column(s) but the block has {dim} input(s)",
+                        table.dim()
+                    )));
+                }
+                Ok(Box::new(table.clone()))
+            }
+        }
+    }
+
+    /// A one-line description: the expression, or `table <file>`.
+    pub fn describe(&self) -> String {
+        match self {
+            TruthSpec::Expression(t) => t.clone(),
+            TruthSpec::Table { file, .. } => format!("table {file}"),
+        }
+    }
+}
+
+/// One `[[nonlinearity]]` entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BlockSpec {
+    /// Unique name, used in reports and output file names.
+    pub name: String,
+    /// Indices into z of the block's inputs.
+    pub inputs: Vec<usize>,
+    /// Index into w of the block's output.
+    pub output: usize,
+    /// Its dispersion.
+    pub dispersion: DispersionSpec,
+    /// Its true map, if known.
+    pub truth: Option<TruthSpec>,
+}
+
+impl BlockSpec {
+    /// The true map as an interpolant, if the block has one.
+    pub fn truth_map(&self) -> Result<Option<Box<dyn Interpolant>>, IoError> {
+        self.truth
+            .as_ref()
+            .map(|t| t.to_interpolant(self.inputs.len()))
+            .transpose()
+    }
+}
+
+/// A parsed and validated model file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelFile {
+    /// The known linear block (discrete time).
+    pub lft: Lft,
+    /// Data column names.
+    pub signals: SignalNames,
+    /// The unknown static maps, in file order.
+    pub blocks: Vec<BlockSpec>,
+    /// The file it was read from.
+    pub path: Option<PathBuf>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Raw (serde) form
+
+type RawMatrix = Spanned<Vec<Spanned<Vec<f64>>>>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    lft: Spanned<RawLft>,
+    signals: Spanned<RawSignals>,
+    #[serde(default)]
+    nonlinearity: Vec<Spanned<RawBlock>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLft {
+    time: Option<Spanned<String>>,
+    sample_time: Option<Spanned<f64>>,
+    #[serde(rename = "A", alias = "a")]
+    a: Option<RawMatrix>,
+    #[serde(rename = "Bu", alias = "bu", alias = "B_u")]
+    bu: Option<RawMatrix>,
+    #[serde(rename = "Be", alias = "be", alias = "B_e")]
+    be: Option<RawMatrix>,
+    #[serde(rename = "Bw", alias = "bw", alias = "B_w")]
+    bw: Option<RawMatrix>,
+    #[serde(rename = "Cy", alias = "cy", alias = "C_y")]
+    cy: Option<RawMatrix>,
+    #[serde(rename = "Dyu", alias = "dyu", alias = "D_yu")]
+    dyu: Option<RawMatrix>,
+    #[serde(rename = "Dye", alias = "dye", alias = "D_ye")]
+    dye: Option<RawMatrix>,
+    #[serde(rename = "Dyw", alias = "dyw", alias = "D_yw")]
+    dyw: Option<RawMatrix>,
+    #[serde(rename = "Cz", alias = "cz", alias = "C_z")]
+    cz: Option<RawMatrix>,
+    #[serde(rename = "Dzu", alias = "dzu", alias = "D_zu")]
+    dzu: Option<RawMatrix>,
+    #[serde(rename = "Dze", alias = "dze", alias = "D_ze")]
+    dze: Option<RawMatrix>,
+    #[serde(rename = "Dzw", alias = "dzw", alias = "D_zw")]
+    dzw: Option<RawMatrix>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSignals {
+    u: Option<Spanned<Vec<String>>>,
+    y: Option<Spanned<Vec<String>>>,
+    z: Option<Spanned<Vec<String>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBlock {
+    name: Spanned<String>,
+    inputs: Spanned<toml::Value>,
+    output: Spanned<i64>,
+    dispersion: Option<Spanned<toml::Value>>,
+    truth: Option<Spanned<toml::Value>>,
+    table: Option<Spanned<String>>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Locations
+
+struct Source<'a> {
+    text: &'a str,
+    line_starts: Vec<usize>,
+}
+
+impl<'a> Source<'a> {
+    fn new(text: &'a str) -> Self {
+        let mut line_starts = vec![0];
+        line_starts.extend(text.match_indices('\n').map(|(i, _)| i + 1));
+        Self { text, line_starts }
+    }
+
+    /// One-based (line, column) of a byte offset; the column counts characters.
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let offset = offset.min(self.text.len());
+        let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
+        let start = self.line_starts[line - 1];
+        let col = self
+            .text
+            .get(start..offset)
+            .map_or(offset - start, |s| s.chars().count())
+            + 1;
+        (line, col)
+    }
+
+    fn line(&self, offset: usize) -> usize {
+        self.line_col(offset).0
+    }
+
+    fn line_text(&self, line: usize) -> &str {
+        let start = self.line_starts.get(line - 1).copied().unwrap_or(self.text.len());
+        let end = self.line_starts.get(line).copied().unwrap_or(self.text.len());
+        self.text.get(start..end).unwrap_or("").trim_end_matches(['\n', '\r'])
+    }
+}
+
+fn err_at(line: usize, message: impl Into<String>) -> IoError {
+    IoError::Model {
+        path: None,
+        line: Some(line),
+        column: None,
+        message: message.into(),
+    }
+}
+
+fn plural(n: usize, word: &str) -> String {
+    if n == 1 { format!("{n} {word}") } else { format!("{n} {word}s") }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Matrices and dimensions
+
+struct MatIn {
+    name: &'static str,
+    given: bool,
+    line: usize,
+    rows: Vec<Vec<f64>>,
+    row_lines: Vec<usize>,
+}
+
+impl MatIn {
+    fn new(name: &'static str, raw: Option<RawMatrix>, src: &Source<'_>, fallback_line: usize) -> Result<Self, IoError> {
+        let Some(raw) = raw else {
+            return Ok(Self {
+                name,
+                given: false,
+                line: fallback_line,
+                rows: Vec::new(),
+                row_lines: Vec::new(),
+            });
+        };
+        let line = src.line(raw.span().start);
+        let mut rows = Vec::new();
+        let mut row_lines = Vec::new();
+        for r in raw.into_inner() {
+            row_lines.push(src.line(r.span().start));
+            rows.push(r.into_inner());
+        }
+        let m = Self {
+            name,
+            given: true,
+            line,
+            rows,
+            row_lines,
+        };
+        if let Some(first) = m.rows.first() {
+            for (i, r) in m.rows.iter().enumerate() {
+                if r.len() != first.len() {
+                    return Err(err_at(
+                        m.row_lines[i],
+                        format!(
+                            "matrix {name}: row {} has {} but row 1 has {}; all rows need the same length",
+                            i + 1,
+                            plural(r.len(), "entry").replace("entrys", "entries"),
+                            plural(first.len(), "entry").replace("entrys", "entries"),
+                        ),
+                    ));
+                }
+                if let Some(j) = r.iter().position(|v| !v.is_finite()) {
+                    return Err(err_at(
+                        m.row_lines[i],
+                        format!(
+                            "matrix {name} has the non-finite entry {} at row {}, column {}",
+                            r[j],
+                            i + 1,
+                            j + 1
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(m)
+    }
+
+    /// Rows, when the matrix is given and not `[]`.
+    fn known_rows(&self) -> Option<usize> {
+        (self.given && !self.rows.is_empty()).then_some(self.rows.len())
+    }
+
+    /// Columns, when the matrix is given and has at least one row.
+    fn known_cols(&self) -> Option<usize> {
+        self.rows.first().map(Vec::len)
+    }
+
+    fn to_matrix(&self, rows: &Dim, cols: &Dim) -> Result<DMatrix<f64>, IoError> {
+        let (r, c) = (rows.value, cols.value);
+        if !self.given {
+            return Ok(DMatrix::zeros(r, c));
+        }
+        if self.rows.is_empty() {
+            if r == 0 || c == 0 {
+                return Ok(DMatrix::zeros(r, c));
+            }
+            return Err(err_at(
+                self.line,
+                format!(
+                    "matrix {} is empty but must be {r}×{c}: {}, and {}",
+                    self.name, rows.source, cols.source
+                ),
+            ));
+        }
+        if self.rows.len() != r {
+            return Err(err_at(
+                self.line,
+                format!(
+                    "matrix {} has {} but {}",
+                    self.name,
+                    plural(self.rows.len(), "row"),
+                    rows.source
+                ),
+            ));
+        }
+        let nc = self.rows[0].len();
+        if nc != c {
+            return Err(err_at(
+                self.line,
+                format!(
+                    "matrix {} has {} but {}",
+                    self.name,
+                    plural(nc, "column"),
+                    cols.source
+                ),
+            ));
+        }
+        Ok(DMatrix::from_fn(r, c, |i, j| self.rows[i][j]))
+    }
+}
+
+/// A dimension and a phrase saying where it comes from, for error messages.
+struct Dim {
+    value: usize,
+    source: String,
+    line: Option<usize>,
+}
+
+fn infer_cols(mats: &[&MatIn], what: &str, sym: &str) -> Dim {
+    for m in mats {
+        if let Some(c) = m.known_cols() {
+            return Dim {
+                value: c,
+                source: format!("{} has {} ({sym} = {})", m.name, plural(c, "column"), plural(c, what)),
+                line: Some(m.line),
+            };
+        }
+    }
+    let names: Vec<&str> = mats.iter().map(|m| m.name).collect();
+    Dim {
+        value: 0,
+        source: format!("none of {} has a column, so {sym} = 0", names.join(", ")),
+        line: None,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parsing
+
+fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
+    let message = e.message().trim().to_string();
+    match e.span() {
+        Some(span) => {
+            let (line, column) = src.line_col(span.start);
+            let text = src.line_text(line).trim();
+            let mut message = format!("invalid TOML: {message}");
+            if !text.is_empty() {
+                let _ = write!(message, " in `{text}`");
+            }
+            IoError::Model {
+                path: None,
+                line: Some(line),
+                column: Some(column),
+                message,
+            }
+        }
+        None => IoError::model(format!("invalid TOML: {message}")),
+    }
+}
+
+fn check_names(list: &Spanned<Vec<String>>, key: &str, src: &Source<'_>) -> Result<Vec<String>, IoError> {
+    let line = src.line(list.span().start);
+    let names = list.get_ref().clone();
+    for (i, n) in names.iter().enumerate() {
+        if n.trim().is_empty() {
+            return Err(err_at(line, format!("[signals].{key} contains an empty column name")));
+        }
+        if names[..i].contains(n) {
+            return Err(err_at(
+                line,
+                format!("[signals].{key} names the column `{n}` twice"),
+            ));
+        }
+    }
+    Ok(names)
+}
+
+fn value_kind(v: &toml::Value) -> &'static str {
+    match v {
+        toml::Value::String(_) => "a string",
+        toml::Value::Integer(_) => "an integer",
+        toml::Value::Float(_) => "a float",
+        toml::Value::Boolean(_) => "a boolean",
+        toml::Value::Datetime(_) => "a date",
+        toml::Value::Array(_) => "an array",
+        toml::Value::Table(_) => "a table",
+    }
+}
+
+fn parse_dispersion(v: Option<&Spanned<toml::Value>>, block: &str, src: &Source<'_>) -> Result<DispersionSpec, IoError> {
+    let Some(v) = v else {
+        return Ok(DispersionSpec::Gaussian { sigma: None });
+    };
+    let line = src.line(v.span().start);
+    let supported = SUPPORTED_DISPERSIONS.join(", ");
+    let unknown_kind = |k: &str| {
+        err_at(
+            line,
+            format!("block `{block}`: unknown dispersion kind `{k}`; supported kinds: {supported}"),
+        )
+    };
+    match v.get_ref() {
+        toml::Value::String(k) => match k.as_str() {
+            "gaussian" => Ok(DispersionSpec::Gaussian { sigma: None }),
+            other => Err(unknown_kind(other)),
+        },
+        toml::Value::Table(t) => {
+            let kind = match t.get("kind") {
+                Some(toml::Value::String(k)) => k.as_str(),
+                Some(other) => {
+                    return Err(err_at(
+                        line,
+                        format!(
+                            "block `{block}`: dispersion `kind` must be a string (one of: {supported}), not {}",
+                            value_kind(other)
+                        ),
+                    ));
+                }
+                None => {
+                    return Err(err_at(
+                        line,
+                        format!(
+                            "block `{block}`: the dispersion needs a `kind` (one of: {supported}), \
+                             e.g. dispersion = {{ kind = \"gaussian\", sigma = 0.4 }}"
+                        ),
+                    ));
+                }
+            };
+            match kind {
+                "gaussian" => {
+                    if let Some(key) = t.keys().find(|k| !["kind", "sigma"].contains(&k.as_str())) {
+                        return Err(err_at(
+                            line,
+                            format!(
+                                "block `{block}`: unknown key `{key}` in the gaussian dispersion; it takes `sigma` only"
+                            ),
+                        ));
+                    }
+                    let sigma = match t.get("sigma") {
+                        None => None,
+                        Some(toml::Value::Float(s)) => Some(*s),
+                        Some(toml::Value::Integer(s)) => Some(*s as f64),
+                        Some(other) => {
+                            return Err(err_at(
+                                line,
+                                format!(
+                                    "block `{block}`: sigma must be a number, not {}",
+                                    value_kind(other)
+                                ),
+                            ));
+                        }
+                    };
+                    if let Some(s) = sigma
+                        && !(s.is_finite() && s > 0.0)
+                    {
+                        return Err(err_at(
+                            line,
+                            format!(
+                                "block `{block}`: sigma = {s} is invalid; it must be a finite number greater than zero"
+                            ),
+                        ));
+                    }
+                    Ok(DispersionSpec::Gaussian { sigma })
+                }
+                other => Err(unknown_kind(other)),
+            }
+        }
+        other => Err(err_at(
+            line,
+            format!(
+                "block `{block}`: dispersion must be a table such as {{ kind = \"gaussian\", sigma = 0.4 }}, not {}",
+                value_kind(other)
+            ),
+        )),
+    }
+}
+
+fn load_table_truth(file: &str, dim: usize, block: &str, base_dir: Option<&Path>, line: usize) -> Result<TruthSpec, IoError> {
+    let path = match base_dir {
+        Some(d) => d.join(file),
+        None => PathBuf::from(file),
+    };
+    let table = DataTable::read(&path).map_err(|e| {
+        let cause = match &e {
+            IoError::Read { source, .. } => format!("cannot read `{}`: {source}", path.display()),
+            other => other.to_string(),
+        };
+        err_at(line, format!("truth table of block `{block}`: {cause}"))
+    })?;
+    if table.names.len() != dim + 1 {
+        return Err(err_at(
+            line,
+            format!(
+                "truth table `{}` of block `{block}` has {} but the block has {} (expected columns z…, value)",
+                path.display(),
+                plural(table.names.len(), "column"),
+                plural(dim, "input"),
+            ),
+        ));
+    }
+    if let Some((c, _)) = table.columns.iter().enumerate().find(|(_, col)| col.iter().any(|v| v.is_nan())) {
+        return Err(err_at(
+            line,
+            format!(
+                "truth table `{}` of block `{block}` has an empty field in column `{}`",
+                path.display(),
+                table.names[c]
+            ),
+        ));
+    }
+    let rows: Vec<Vec<f64>> = (0..table.len())
+        .map(|k| table.columns.iter().map(|c| c[k]).collect())
+        .collect();
+    let lookup = LookupTable::from_rows(&rows).map_err(|e| {
+        err_at(
+            line,
+            format!("truth table `{}` of block `{block}`: {e}", path.display()),
+        )
+    })?;
+    Ok(TruthSpec::Table {
+        file: file.to_string(),
+        table: lookup,
+    })
+}
+
+fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>, src: &Source<'_>) -> Result<Option<TruthSpec>, IoError> {
+    let table = raw.table.as_ref();
+    let truth = raw.truth.as_ref();
+    if let (Some(_), Some(t)) = (truth, table) {
+        return Err(err_at(
+            src.line(t.span().start),
+            format!("block `{block}` gives both `truth` and `table`; keep one"),
+        ));
+    }
+    if let Some(t) = table {
+        return load_table_truth(t.get_ref(), dim, block, base_dir, src.line(t.span().start)).map(Some);
+    }
+    let Some(truth) = truth else {
+        return Ok(None);
+    };
+    let line = src.line(truth.span().start);
+    match truth.get_ref() {
+        toml::Value::String(expr) => {
+            ExprMap::parse(expr, dim).map_err(|e| err_at(line, format!("truth of block `{block}`: {e}")))?;
+            Ok(Some(TruthSpec::Expression(expr.clone())))
+        }
+        toml::Value::Table(t) => {
+            if let Some(key) = t.keys().find(|k| k.as_str() != "table") {
+                return Err(err_at(
+                    line,
+                    format!(
+                        "block `{block}`: unknown key `{key}` in truth; use truth = \"expression\" or truth = {{ table = \"file.csv\" }}"
+                    ),
+                ));
+            }
+            match t.get("table") {
+                Some(toml::Value::String(file)) => load_table_truth(file, dim, block, base_dir, line).map(Some),
+                _ => Err(err_at(
+                    line,
+                    format!("block `{block}`: truth = {{ table = \"file.csv\" }} needs a file name string"),
+                )),
+            }
+        }
+        other => Err(err_at(
+            line,
+            format!(
+                "block `{block}`: truth must be an expression string or {{ table = \"file.csv\" }}, not {}",
+                value_kind(other)
+            ),
+        )),
+    }
+}
+
+fn parse_index_list(v: &Spanned<toml::Value>, block: &str, src: &Source<'_>) -> Result<Vec<usize>, IoError> {
+    let line = src.line(v.span().start);
+    let bad = |what: String| err_at(line, format!("block `{block}`: inputs {what}; write e.g. inputs = [0]"));
+    let items: Vec<&toml::Value> = match v.get_ref() {
+        toml::Value::Array(a) => a.iter().collect(),
+        single @ toml::Value::Integer(_) => vec![single],
+        other => return Err(bad(format!("must be a list of z indices, not {}", value_kind(other)))),
+    };
+    let mut out = Vec::with_capacity(items.len());
+    for item in items {
+        match item {
+            toml::Value::Integer(i) if *i >= 0 => {
+                let i = usize::try_from(*i).map_err(|_| bad(format!("index {i} is too large")))?;
+                if out.contains(&i) {
+                    return Err(bad(format!("lists z[{i}] twice")));
+                }
+                out.push(i);
+            }
+            toml::Value::Integer(i) => return Err(bad(format!("contains the negative index {i}"))),
+            other => return Err(bad(format!("must contain integers, not {}", value_kind(other)))),
+        }
+    }
+    if out.is_empty() {
+        return Err(bad("is empty; a block reads at least one z channel".into()));
+    }
+    Ok(out)
+}
+
+impl ModelFile {
+    /// Reads and validates a model file. Relative truth-table paths are resolved against the
+    /// file's directory.
+    pub fn from_path(path: &Path) -> Result<Self, IoError> {
+        let text = std::fs::read_to_string(path).map_err(|source| IoError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().filter(|p| !p.as_os_str().is_empty());
+        let mut mf = Self::parse(&text, Some(base.unwrap_or(Path::new(".")))).map_err(|e| e.with_path(path))?;
+        mf.path = Some(path.to_path_buf());
+        Ok(mf)
+    }
+
+    /// Parses and validates model-file text. `base_dir` resolves relative truth-table paths
+    /// (the current directory when `None`).
+    ///
+    /// ```
+    /// use structid_io::ModelFile;
+    /// let text = r#"
+    /// [lft]
+    /// A = []
+    /// Dyw = [[1.0]]
+    /// Dye = [[1.0]]
+    /// Dzu = [[1.0]]
+    /// [signals]
+    /// u = ["u"]
+    /// y = ["y"]
+    /// [[nonlinearity]]
+    /// name = "N"
+    /// inputs = [0]
+    /// output = 0
+    /// truth = "tanh(z0)"
+    /// "#;
+    /// let m = ModelFile::parse(text, None).unwrap();
+    /// assert_eq!(m.lft.dims().states, 0);
+    /// let bad = text.replace("Dzu = [[1.0]]", "Dzu = [[1.0, 2.0]]");
+    /// let e = ModelFile::parse(&bad, None).unwrap_err().to_string();
+    /// assert_eq!(e, "model file: matrix Dzu has 2 columns but [signals].u names 1 input (line 6)");
+    /// ```
+    pub fn parse(text: &str, base_dir: Option<&Path>) -> Result<Self, IoError> {
+        let src = Source::new(text);
+        let raw: RawFile = toml::from_str(text).map_err(|e| toml_error(&e, &src))?;
+        let lft_line = src.line(raw.lft.span().start);
+        let signals_line = src.line(raw.signals.span().start);
+        let raw_lft = raw.lft.into_inner();
+        let raw_signals = raw.signals.into_inner();
+
+        // Signals.
+        let u = match &raw_signals.u {
+            Some(list) => check_names(list, "u", &src)?,
+            None => Vec::new(),
+        };
+        let (y, y_line) = match &raw_signals.y {
+            Some(list) => (check_names(list, "y", &src)?, src.line(list.span().start)),
+            None => (Vec::new(), signals_line),
+        };
+        if y.is_empty() {
+            return Err(err_at(
+                y_line,
+                "[signals].y names no measured output; list the CSV column(s) of y, e.g. y = [\"y0\"]",
+            ));
+        }
+        let z_names = match &raw_signals.z {
+            Some(list) => Some((check_names(list, "z", &src)?, src.line(list.span().start))),
+            None => None,
+        };
+
+        // Matrices.
+        let mat = |name, raw| MatIn::new(name, raw, &src, lft_line);
+        let a = mat("A", raw_lft.a)?;
+        let bu = mat("Bu", raw_lft.bu)?;
+        let be = mat("Be", raw_lft.be)?;
+        let bw = mat("Bw", raw_lft.bw)?;
+        let cy = mat("Cy", raw_lft.cy)?;
+        let dyu = mat("Dyu", raw_lft.dyu)?;
+        let dye = mat("Dye", raw_lft.dye)?;
+        let dyw = mat("Dyw", raw_lft.dyw)?;
+        let cz = mat("Cz", raw_lft.cz)?;
+        let dzu = mat("Dzu", raw_lft.dzu)?;
+        let dze = mat("Dze", raw_lft.dze)?;
+        let dzw = mat("Dzw", raw_lft.dzw)?;
+
+        let n = a.known_rows().unwrap_or(0);
+        if let Some(c) = a.known_cols()
+            && c != n
+        {
+            return Err(err_at(
+                a.line,
+                format!(
+                    "matrix A has {} and {}; it must be square (n×n)",
+                    plural(n, "row"),
+                    plural(c, "column")
+                ),
+            ));
+        }
+        let dn = Dim {
+            value: n,
+            source: if n > 0 {
+                format!("A is {n}×{n} (n = {})", plural(n, "state"))
+            } else if a.given {
+                "A is empty (n = 0 states)".into()
+            } else {
+                "A is not given (n = 0 states)".into()
+            },
+            line: Some(a.line),
+        };
+        let du = Dim {
+            value: u.len(),
+            source: format!("[signals].u names {}", plural(u.len(), "input")),
+            line: None,
+        };
+        let dy = Dim {
+            value: y.len(),
+            source: format!("[signals].y names {}", plural(y.len(), "output")),
+            line: None,
+        };
+        let de = infer_cols(&[&be, &dye, &dze], "noise channel", "n_e");
+        let dw = infer_cols(&[&bw, &dyw, &dzw], "map output", "n_w");
+        let dz = {
+            let from_mat = [&cz, &dzu, &dze, &dzw]
+                .into_iter()
+                .find_map(|m| m.known_rows().map(|r| (m, r)));
+            match (from_mat, &z_names) {
+                (Some((m, r)), _) => Dim {
+                    value: r,
+                    source: format!("{} has {} (n_z = {})", m.name, plural(r, "row"), plural(r, "map input")),
+                    line: Some(m.line),
+                },
+                (None, Some((names, _))) => Dim {
+                    value: names.len(),
+                    source: format!("[signals].z names {}", plural(names.len(), "column")),
+                    line: None,
+                },
+                (None, None) => Dim {
+                    value: 0,
+                    source: "none of Cz, Dzu, Dze, Dzw has a row, so n_z = 0".into(),
+                    line: None,
+                },
+            }
+        };
+        let mut m = LftMatrices {
+            a: a.to_matrix(&dn, &dn)?,
+            bu: bu.to_matrix(&dn, &du)?,
+            be: be.to_matrix(&dn, &de)?,
+            bw: bw.to_matrix(&dn, &dw)?,
+            cy: cy.to_matrix(&dy, &dn)?,
+            dyu: dyu.to_matrix(&dy, &du)?,
+            dye: dye.to_matrix(&dy, &de)?,
+            dyw: dyw.to_matrix(&dy, &dw)?,
+            cz: cz.to_matrix(&dz, &dn)?,
+            dzu: dzu.to_matrix(&dz, &du)?,
+            dze: dze.to_matrix(&dz, &de)?,
+            dzw: dzw.to_matrix(&dz, &dw)?,
+        };
+        if let Some((names, line)) = &z_names
+            && names.len() != dz.value
+        {
+            return Err(err_at(
+                *line,
+                format!(
+                    "[signals].z names {} but {}",
+                    plural(names.len(), "column"),
+                    dz.source
+                ),
+            ));
+        }
+
+        // Time base.
+        let sample_time = match &raw_lft.sample_time {
+            Some(ts) => {
+                let v = *ts.get_ref();
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(err_at(
+                        src.line(ts.span().start),
+                        format!("sample_time = {v} is invalid; it must be a finite number of seconds greater than zero"),
+                    ));
+                }
+                Some(v)
+            }
+            None => None,
+        };
+        match raw_lft.time.as_ref().map(|t| (t.get_ref().as_str(), src.line(t.span().start))) {
+            None | Some(("discrete", _)) => {}
+            Some(("continuous", line)) => {
+                let Some(ts) = sample_time else {
+                    return Err(err_at(
+                        line,
+                        "time = \"continuous\" needs a sample_time (seconds) for the zero-order-hold discretisation",
+                    ));
+                };
+                let (ne, nw, nu) = (de.value, dw.value, du.value);
+                let mut b = DMatrix::zeros(n, nu + ne + nw);
+                b.columns_mut(0, nu).copy_from(&m.bu);
+                b.columns_mut(nu, ne).copy_from(&m.be);
+                b.columns_mut(nu + ne, nw).copy_from(&m.bw);
+                let sys = ContinuousStateSpace::new(m.a.clone(), b, DMatrix::zeros(0, n), DMatrix::zeros(0, nu + ne + nw))
+                    .and_then(|s| s.discretize_zoh(ts))
+                    .map_err(|e| err_at(line, format!("cannot discretise the continuous-time block: {e}")))?;
+                m.a = sys.a().clone();
+                m.bu = sys.b().columns(0, nu).into_owned();
+                m.be = sys.b().columns(nu, ne).into_owned();
+                m.bw = sys.b().columns(nu + ne, nw).into_owned();
+            }
+            Some((other, line)) => {
+                return Err(err_at(
+                    line,
+                    format!("time = \"{other}\" is not supported; use \"discrete\" (default) or \"continuous\""),
+                ));
+            }
+        }
+        let mut lft = Lft::new(m).map_err(|e| err_at(lft_line, e.to_string()))?;
+        if let Some(ts) = sample_time {
+            lft = lft.with_sample_time(ts).map_err(|e| err_at(lft_line, e.to_string()))?;
+        }
+
+        // Blocks.
+        let mut blocks: Vec<BlockSpec> = Vec::with_capacity(raw.nonlinearity.len());
+        let mut block_lines: Vec<usize> = Vec::new();
+        let mut owner: Vec<Option<usize>> = vec![None; dw.value];
+        for entry in &raw.nonlinearity {
+            let entry_line = src.line(entry.span().start);
+            let rb = entry.get_ref();
+            let name = rb.name.get_ref().trim().to_string();
+            let name_line = src.line(rb.name.span().start);
+            if name.is_empty() {
+                return Err(err_at(name_line, "a [[nonlinearity]] block has an empty name"));
+            }
+            if let Some(j) = blocks.iter().position(|b| b.name == name) {
+                return Err(err_at(
+                    name_line,
+                    format!(
+                        "two [[nonlinearity]] blocks are named `{name}` (lines {} and {name_line}); names must be unique",
+                        block_lines[j]
+                    ),
+                ));
+            }
+            let inputs = parse_index_list(&rb.inputs, &name, &src)?;
+            if let Some(&bad) = inputs.iter().find(|&&i| i >= dz.value) {
+                return Err(err_at(
+                    src.line(rb.inputs.span().start),
+                    format!(
+                        "block `{name}` reads z[{bad}] but the model has {}: {}",
+                        plural(dz.value, "z signal"),
+                        dz.source
+                    ),
+                ));
+            }
+            let out_line = src.line(rb.output.span().start);
+            let output = *rb.output.get_ref();
+            if output < 0 || output as u64 >= dw.value as u64 {
+                return Err(err_at(
+                    out_line,
+                    format!(
+                        "block `{name}` writes w[{output}] but the model has {} (indices 0…): {}",
+                        plural(dw.value, "w signal"),
+                        dw.source
+                    ),
+                ));
+            }
+            let output = output as usize;
+            if let Some(j) = owner[output] {
+                return Err(err_at(
+                    out_line,
+                    format!(
+                        "blocks `{}` (line {}) and `{name}` both write w[{output}]; each w channel needs exactly one block",
+                        blocks[j].name, block_lines[j]
+                    ),
+                ));
+            }
+            owner[output] = Some(blocks.len());
+            let dispersion = parse_dispersion(rb.dispersion.as_ref(), &name, &src)?;
+            let truth = parse_truth(rb, &name, inputs.len(), base_dir, &src)?;
+            blocks.push(BlockSpec {
+                name,
+                inputs,
+                output,
+                dispersion,
+                truth,
+            });
+            block_lines.push(entry_line);
+        }
+        if let Some(c) = owner.iter().position(Option::is_none) {
+            return Err(err_at(
+                dw.line.unwrap_or(lft_line),
+                format!(
+                    "w[{c}] is not produced by any block ({}); add a [[nonlinearity]] with output = {c}",
+                    dw.source
+                ),
+            ));
+        }
+
+        let signals = SignalNames {
+            u,
+            y,
+            z: z_names.map(|(n, _)| n),
+        };
+        let mf = Self {
+            lft,
+            signals,
+            blocks,
+            path: None,
+        };
+        // Safety net: the core's own validation must agree.
+        mf.to_model(Some(1.0), None)?;
+        Ok(mf)
+    }
+
+    /// Builds the core [`Model`]: each block's dispersion with σ from `sigma_override`, else
+    /// from the file, else [`default_sigma`] of the block's channels of `z_for_defaults` (the
+    /// full z signal, L × n_z), which is then required.
+    pub fn to_model(&self, sigma_override: Option<f64>, z_for_defaults: Option<&Signal>) -> Result<Model, IoError> {
+        if let Some(s) = sigma_override
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(IoError::InvalidArgument(format!(
+                "invalid sigma {s}: it must be a finite number greater than zero"
+            )));
+        }
+        let nz = self.lft.dims().z;
+        if let Some(z) = z_for_defaults
+            && z.channels() != nz
+        {
+            return Err(IoError::InvalidArgument(format!(
+                "the z signal for default kernel widths has {} channel(s) but the model has {nz}",
+                z.channels()
+            )));
+        }
+        let mut blocks = Vec::with_capacity(self.blocks.len());
+        for b in &self.blocks {
+            let bz = z_for_defaults.map(|z| z.select_channels(&b.inputs));
+            let d = b.dispersion.build(sigma_override, bz.as_ref()).map_err(|e| match e {
+                IoError::InvalidArgument(m) => IoError::InvalidArgument(format!("block `{}`: {m}", b.name)),
+                other => other,
+            })?;
+            blocks.push(NonlinearBlock::new(b.name.clone(), b.inputs.clone(), b.output, d));
+        }
+        Ok(Model::new(self.lft.clone(), blocks)?)
+    }
+
+    /// The true maps in block order, when **every** block has a `truth`; `None` otherwise.
+    pub fn truth_maps(&self) -> Result<Option<Vec<Box<dyn Interpolant>>>, IoError> {
+        let mut out = Vec::with_capacity(self.blocks.len());
+        for b in &self.blocks {
+            match b.truth_map()? {
+                Some(m) => out.push(m),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
+
+    /// Names of the z channels: `[signals].z` when z is measured, otherwise `z0, z1, …`.
+    pub fn z_names(&self) -> Vec<String> {
+        match &self.signals.z {
+            Some(z) => z.clone(),
+            None => (0..self.lft.dims().z).map(|i| format!("z{i}")).collect(),
+        }
+    }
+
+    /// The record named by `[signals]`: u, y and, when listed, measured z.
+    pub fn select_data(&self, table: &DataTable) -> Result<Data, IoError> {
+        let u = table.select(&self.signals.u)?;
+        let y = table.select(&self.signals.y)?;
+        let data = Data::new(u, y)?;
+        Ok(match &self.signals.z {
+            Some(z) => data.with_z(table.select(z)?)?,
+            None => data,
+        })
+    }
+
+    /// z for a record: the measured columns when present, otherwise computed from u and y
+    /// (see [`Lft::compute_z`]).
+    pub fn z_signal(&self, data: &Data) -> Result<Signal, IoError> {
+        match data.z() {
+            Some(z) => Ok(z.clone()),
+            None => Ok(self.lft.compute_z(data.u(), data.y())?.0),
+        }
+    }
+
+    /// The model file in canonical form. Parsing the text (with the same base directory for
+    /// truth tables) gives back the same [`Lft`], signals and blocks. A continuous-time file is
+    /// written in its discretised form.
+    pub fn to_toml_string(&self) -> String {
+        let mut s = String::new();
+        let m = self.lft.matrices();
+        let d = self.lft.dims();
+        let _ = writeln!(
+            s,
+            "# structid model file: known linear block (discrete time), signal names, unknown static maps.\n\
+             # n = {} states, n_u = {}, n_e = {}, n_w = {}, n_y = {}, n_z = {}.",
+            d.states, d.u, d.e, d.w, d.y, d.z
+        );
+        s.push_str("[lft]\n");
+        if let Some(ts) = self.lft.sample_time() {
+            let _ = writeln!(s, "sample_time = {}", format_number(ts));
+        }
+        for (name, mat) in [
+            ("A", &m.a),
+            ("Bu", &m.bu),
+            ("Be", &m.be),
+            ("Bw", &m.bw),
+            ("Cy", &m.cy),
+            ("Dyu", &m.dyu),
+            ("Dye", &m.dye),
+            ("Dyw", &m.dyw),
+            ("Cz", &m.cz),
+            ("Dzu", &m.dzu),
+            ("Dze", &m.dze),
+            ("Dzw", &m.dzw),
+        ] {
+            let _ = writeln!(s, "{name} = {}", matrix_toml(mat));
+        }
+        s.push_str("\n[signals]\n");
+        let _ = writeln!(s, "u = {}", string_list(&self.signals.u));
+        let _ = writeln!(s, "y = {}", string_list(&self.signals.y));
+        if let Some(z) = &self.signals.z {
+            let _ = writeln!(s, "z = {}", string_list(z));
+        }
+        for b in &self.blocks {
+            s.push_str("\n[[nonlinearity]]\n");
+            let _ = writeln!(s, "name = {}", toml_string(&b.name));
+            let _ = writeln!(
+                s,
+                "inputs = [{}]",
+                b.inputs.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
+            );
+            let _ = writeln!(s, "output = {}", b.output);
+            match &b.dispersion {
+                DispersionSpec::Gaussian { sigma: Some(sg) } => {
+                    let _ = writeln!(s, "dispersion = {{ kind = \"gaussian\", sigma = {} }}", format_number(*sg));
+                }
+                DispersionSpec::Gaussian { sigma: None } => {
+                    s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
+                }
+            }
+            match &b.truth {
+                Some(TruthSpec::Expression(e)) => {
+                    let _ = writeln!(s, "truth = {}", toml_string(e));
+                }
+                Some(TruthSpec::Table { file, .. }) => {
+                    let _ = writeln!(s, "truth = {{ table = {} }}", toml_string(file));
+                }
+                None => {}
+            }
+        }
+        s
+    }
+}
+
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+fn string_list(v: &[String]) -> String {
+    format!("[{}]", v.iter().map(|s| toml_string(s)).collect::<Vec<_>>().join(", "))
+}
+
+fn matrix_toml(m: &DMatrix<f64>) -> String {
+    if m.nrows() == 0 {
+        return "[]".into();
+    }
+    let row = |i: usize| {
+        format!(
+            "[{}]",
+            (0..m.ncols()).map(|j| format_number(m[(i, j)])).collect::<Vec<_>>().join(", ")
+        )
+    };
+    if m.nrows() == 1 {
+        return format!("[{}]", row(0));
+    }
+    let mut s = String::from("[\n");
+    for i in 0..m.nrows() {
+        let _ = writeln!(s, "  {},", row(i));
+    }
+    s.push(']');
+    s
+}
+
+#[cfg(test)]
+mod tests;

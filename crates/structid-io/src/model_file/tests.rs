@@ -1,0 +1,344 @@
+use super::*;
+
+/// The canonical block of the specification, verbatim.
+const CANONICAL: &str = r#"[lft]                      # discrete-time realisation of the known block, paper eq. (7)
+sample_time = 1.0          # optional
+A = [[0.5]]                # n×n ; an empty list [] when n = 0
+Bu = [[1.0]]
+Be = [[0.0]]
+Bw = [[1.0]]
+Cy = [[1.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[0.0]]
+Cz = [[0.0]]
+Dzu = [[1.0]]
+Dze = [[0.0]]
+Dzw = [[0.0]]
+
+[signals]
+u = ["u0"]                 # CSV column names of the known inputs, in order
+y = ["y0"]                 # CSV column names of the measured outputs, in order
+# z = ["z0"]               # optional: measured z columns; otherwise z is computed from u and y
+
+[[nonlinearity]]
+name = "f"
+inputs = [0]               # indices into z
+output = 0                 # index into w
+dispersion = { kind = "gaussian", sigma = 0.4 }
+truth = "tanh(z0)"         # optional, used by `simulate` and for error reports
+"#;
+
+fn err(text: &str) -> String {
+    ModelFile::parse(text, None).unwrap_err().to_string()
+}
+
+#[test]
+fn canonical_form_parses_exactly_as_written() {
+    let m = ModelFile::parse(CANONICAL, None).unwrap();
+    let d = m.lft.dims();
+    assert_eq!((d.states, d.u, d.e, d.w, d.y, d.z), (1, 1, 1, 1, 1, 1));
+    assert_eq!(m.lft.sample_time(), Some(1.0));
+    let mm = m.lft.matrices();
+    assert_eq!(mm.a[(0, 0)], 0.5);
+    assert_eq!(mm.bw[(0, 0)], 1.0);
+    assert_eq!(mm.dye[(0, 0)], 1.0);
+    assert_eq!(mm.dzu[(0, 0)], 1.0);
+    assert_eq!(m.signals.u, ["u0"]);
+    assert_eq!(m.signals.y, ["y0"]);
+    assert_eq!(m.signals.z, None);
+    assert_eq!(
+        m.blocks,
+        vec![BlockSpec {
+            name: "f".into(),
+            inputs: vec![0],
+            output: 0,
+            dispersion: DispersionSpec::Gaussian { sigma: Some(0.4) },
+            truth: Some(TruthSpec::Expression("tanh(z0)".into())),
+        }]
+    );
+    let truth = m.truth_maps().unwrap().unwrap();
+    assert!((truth[0].eval(&[0.3]) - 0.3f64.tanh()).abs() < 1e-15);
+    let model = m.to_model(None, None).unwrap();
+    assert_eq!(model.blocks()[0].dispersion.describe(), "gaussian(sigma=0.4)");
+}
+
+#[test]
+fn empty_matrices_for_zero_states() {
+    let text = r#"
+[lft]
+A = []
+Bu = []
+Be = []
+Bw = []
+Cy = []
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[1.0, 1.0]]
+Cz = []
+Dzu = [[1.0], [0.5]]
+Dze = [[0.0], [0.0]]
+Dzw = [[0.0, 0.0], [0.0, 0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "a"
+inputs = [0]
+output = 0
+
+[[nonlinearity]]
+name = "b"
+inputs = [1, 0]
+output = 1
+dispersion = { kind = "gaussian" }
+"#;
+    let m = ModelFile::parse(text, None).unwrap();
+    let d = m.lft.dims();
+    assert_eq!((d.states, d.u, d.e, d.w, d.y, d.z), (0, 1, 1, 2, 1, 2));
+    assert_eq!(m.lft.matrices().cy.shape(), (1, 0));
+    assert_eq!(m.lft.matrices().cz.shape(), (2, 0));
+    assert_eq!(m.blocks[0].dispersion, DispersionSpec::Gaussian { sigma: None });
+    // Default sigma needs data.
+    let e = m.to_model(None, None).unwrap_err().to_string();
+    assert!(e.contains("block `a`") && e.contains("sigma"), "{e}");
+    let z = Signal::from_channels(&[vec![0.0, 2.0, 1.0], vec![-5.0, 5.0, 0.0]]).unwrap();
+    let model = m.to_model(None, Some(&z)).unwrap();
+    assert_eq!(model.blocks()[0].dispersion.describe(), "gaussian(sigma=0.2)");
+    assert_eq!(model.blocks()[1].dispersion.describe(), "gaussian(sigma=1)");
+    let model = m.to_model(Some(0.7), None).unwrap();
+    assert_eq!(model.blocks()[1].dispersion.describe(), "gaussian(sigma=0.7)");
+    assert!(m.to_model(Some(-1.0), None).is_err());
+    assert!(m.to_model(Some(f64::NAN), None).is_err());
+    // Omitted matrices are zero.
+    let short = "[lft]\nDye = [[1.0]]\nDyw = [[1.0]]\nDzu = [[1.0]]\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n\
+                 [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n";
+    let m = ModelFile::parse(short, None).unwrap();
+    assert_eq!(m.lft.dims().states, 0);
+}
+
+#[test]
+fn dimension_errors_name_the_matrix_the_reason_and_the_line() {
+    let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = [[1.0, 2.0]]");
+    assert_eq!(
+        err(&bad),
+        "model file: matrix Bu has 2 columns but [signals].u names 1 input (line 5)"
+    );
+    let bad = CANONICAL.replace("Cy = [[1.0]]", "Cy = [[1.0], [2.0]]");
+    let e = err(&bad);
+    assert!(e.contains("matrix Cy has 2 rows but [signals].y names 1 output (line 8)"), "{e}");
+    let bad = CANONICAL.replace("Bw = [[1.0]]", "Bw = [[1.0], [1.0]]");
+    let e = err(&bad);
+    assert!(e.contains("matrix Bw has 2 rows but A is 1×1") && e.contains("(line 7)"), "{e}");
+    let bad = CANONICAL.replace("Dye = [[1.0]]", "Dye = [[1.0, 0.0]]");
+    let e = err(&bad);
+    assert!(e.contains("matrix Dye has 2 columns but Be has 1 column") && e.contains("(line 10)"), "{e}");
+    let bad = CANONICAL.replace("A = [[0.5]]", "A = [[0.5, 0.1]]");
+    let e = err(&bad);
+    assert!(e.contains("square") && e.contains("(line 4)"), "{e}");
+    let bad = CANONICAL.replace("A = [[0.5]]", "A = [[0.5, 0.1], [0.2]]");
+    let e = err(&bad);
+    assert!(e.contains("row 2 has 1 entry but row 1 has 2 entries") && e.contains("line 4"), "{e}");
+    let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = []");
+    let e = err(&bad);
+    assert!(e.contains("matrix Bu is empty but must be 1×1") && e.contains("line 5"), "{e}");
+    let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = [[nan]]");
+    let e = err(&bad);
+    assert!(e.contains("non-finite") && e.contains("line 5"), "{e}");
+    let bad = CANONICAL.replace("u = [\"u0\"]", "u = [\"u0\", \"u1\"]");
+    let e = err(&bad);
+    assert!(e.contains("matrix Bu has 1 column but [signals].u names 2 inputs (line 5)"), "{e}");
+}
+
+#[test]
+fn block_errors_name_the_line() {
+    let bad = CANONICAL.replace("inputs = [0]", "inputs = [1]");
+    let e = err(&bad);
+    assert!(e.contains("block `f` reads z[1]") && e.contains("(line 24)"), "{e}");
+    let bad = CANONICAL.replace("output = 0 ", "output = 3 ");
+    let e = err(&bad);
+    assert!(e.contains("writes w[3]") && e.contains("(line 25)"), "{e}");
+    let bad = format!("{CANONICAL}\n[[nonlinearity]]\nname = \"f\"\ninputs = [0]\noutput = 0\n");
+    let e = err(&bad);
+    assert!(e.contains("two [[nonlinearity]] blocks are named `f`") && e.contains("line 30"), "{e}");
+    let bad = format!("{CANONICAL}\n[[nonlinearity]]\nname = \"g\"\ninputs = [0]\noutput = 0\n");
+    let e = err(&bad);
+    assert!(e.contains("both write w[0]") && e.contains("line 32"), "{e}");
+    let bad = CANONICAL.split("[[nonlinearity]]").next().unwrap().to_string();
+    let e = err(&bad);
+    assert!(e.contains("w[0] is not produced by any block"), "{e}");
+    let bad = CANONICAL.replace("tanh(z0)", "tanh(z1)");
+    let e = err(&bad);
+    assert!(e.contains("truth of block `f`") && e.contains("z1") && e.contains("line 27"), "{e}");
+    let bad = CANONICAL.replace("inputs = [0]", "inputs = []");
+    assert!(err(&bad).contains("empty"));
+    let bad = CANONICAL.replace("inputs = [0]", "inputs = [-1]");
+    assert!(err(&bad).contains("negative"));
+}
+
+#[test]
+fn toml_syntax_errors_give_line_and_column() {
+    let bad = CANONICAL.replace("Dyw = [[0.0]]", "Dyw = [[0.0]");
+    let e = err(&bad);
+    assert!(e.starts_with("model file: invalid TOML"), "{e}");
+    assert!(e.contains("(line 11, column"), "{e}");
+    let bad = CANONICAL.replace("sample_time = 1.0", "sample_time = \"fast\"");
+    let e = err(&bad);
+    assert!(e.contains("line 2"), "{e}");
+    let bad = CANONICAL.replace("Dzw = [[0.0]]", "Dzw = [[0.0]]\nBz = [[1.0]]");
+    let e = err(&bad);
+    assert!(e.contains("Bz") && e.contains("line 15"), "{e}");
+    let e = err("[signals]\nu = [\"u\"]\ny = [\"y\"]\n");
+    assert!(e.contains("missing field `lft`"), "{e}");
+}
+
+#[test]
+fn unknown_dispersion_kind_lists_supported_kinds() {
+    let bad = CANONICAL.replace("kind = \"gaussian\"", "kind = \"laplace\"");
+    let e = err(&bad);
+    assert!(e.contains("unknown dispersion kind `laplace`") && e.contains("supported kinds: gaussian"), "{e}");
+    assert!(e.contains("(line 26)"), "{e}");
+    let bad = CANONICAL.replace("sigma = 0.4", "sigma = -0.4");
+    assert!(err(&bad).contains("greater than zero"));
+    let bad = CANONICAL.replace("sigma = 0.4", "sgima = 0.4");
+    assert!(err(&bad).contains("unknown key `sgima`"));
+    let ok = CANONICAL.replace("sigma = 0.4", "sigma = 1");
+    let m = ModelFile::parse(&ok, None).unwrap();
+    assert_eq!(m.blocks[0].dispersion.sigma(), Some(1.0));
+}
+
+#[test]
+fn signals_are_checked() {
+    let bad = CANONICAL.replace("y = [\"y0\"]", "y = []");
+    assert!(err(&bad).contains("names no measured output"));
+    let bad = CANONICAL.replace("# z = [\"z0\"]", "z = [\"z0\", \"z1\"]");
+    let e = err(&bad);
+    assert!(e.contains("[signals].z names 2 columns") && e.contains("line 20"), "{e}");
+    let ok = CANONICAL.replace("# z = [\"z0\"]", "z = [\"zm\"]");
+    let m = ModelFile::parse(&ok, None).unwrap();
+    assert_eq!(m.z_names(), ["zm"]);
+    let bad = CANONICAL.replace("u = [\"u0\"]", "u = [\"a\", \"a\"]");
+    assert!(err(&bad).contains("twice"));
+}
+
+#[test]
+fn round_trip_through_to_toml_string() {
+    let m = ModelFile::parse(CANONICAL, None).unwrap();
+    let text = m.to_toml_string();
+    let back = ModelFile::parse(&text, None).unwrap();
+    assert_eq!(back.lft, m.lft);
+    assert_eq!(back.blocks, m.blocks);
+    assert_eq!(back.signals, m.signals);
+
+    // A bigger model with awkward numbers, n = 0 matrices and measured z.
+    let text = r#"
+[lft]
+A = []
+Dye = [[1.0], [0.0]]
+Dyw = [[1.0, 0.1], [0.0, 1.0]]
+Dyu = [[0.1, 3.0e-17], [1e300, -0.0]]
+Dzu = [[1.0, 0.0], [0.0, 1.0]]
+[signals]
+u = ["u \"quoted\"", "u2"]
+y = ["y1", "y2"]
+z = ["z a", "z\\b"]
+[[nonlinearity]]
+name = "first map"
+inputs = [1, 0]
+output = 1
+dispersion = { kind = "gaussian" }
+[[nonlinearity]]
+name = "g"
+inputs = [0]
+output = 0
+dispersion = { kind = "gaussian", sigma = 0.123456789012345 }
+truth = "0.5*(sin((3*z0)^2) + (2*z0)^2 - 2)"
+"#;
+    let m = ModelFile::parse(text, None).unwrap();
+    let back = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(back, m);
+    assert_eq!(back.lft.matrices().dyu[(0, 1)], 3.0e-17);
+}
+
+#[test]
+fn continuous_time_is_discretised_by_zoh() {
+    let text = r#"
+[lft]
+time = "continuous"
+sample_time = 0.1
+A = [[-1.0]]
+Bu = [[0.0]]
+Be = [[0.0]]
+Bw = [[1.0]]
+Cy = [[1.0]]
+Dye = [[1.0]]
+Dzu = [[1.0]]
+[signals]
+u = ["u"]
+y = ["y"]
+[[nonlinearity]]
+name = "N"
+inputs = [0]
+output = 0
+"#;
+    let m = ModelFile::parse(text, None).unwrap();
+    let mm = m.lft.matrices();
+    assert!((mm.a[(0, 0)] - (-0.1f64).exp()).abs() < 1e-14);
+    assert!((mm.bw[(0, 0)] - (1.0 - (-0.1f64).exp())).abs() < 1e-14);
+    assert_eq!(mm.cy[(0, 0)], 1.0);
+    assert_eq!(m.lft.sample_time(), Some(0.1));
+    let e = err(&text.replace("sample_time = 0.1\n", ""));
+    assert!(e.contains("needs a sample_time") && e.contains("line 3"), "{e}");
+    let e = err(&text.replace("continuous", "analog"));
+    assert!(e.contains("not supported"), "{e}");
+}
+
+#[test]
+fn truth_tables_are_read_relative_to_the_model_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("f.csv"), "z,value\n-1,1\n0,0\n1,1\n").unwrap();
+    let text = CANONICAL.replace("truth = \"tanh(z0)\"", "truth = { table = \"f.csv\" }");
+    let path = dir.path().join("m.toml");
+    std::fs::write(&path, &text).unwrap();
+    let m = ModelFile::from_path(&path).unwrap();
+    let t = m.truth_maps().unwrap().unwrap();
+    assert_eq!(t[0].eval(&[0.5]), 0.5);
+    // Round trip keeps the table reference.
+    let back = ModelFile::parse(&m.to_toml_string(), Some(dir.path())).unwrap();
+    assert_eq!(back.blocks, m.blocks);
+    // The block-level `table` key is accepted too.
+    let alt = CANONICAL.replace("truth = \"tanh(z0)\"", "table = \"f.csv\"");
+    let m2 = ModelFile::parse(&alt, Some(dir.path())).unwrap();
+    assert_eq!(m2.blocks, m.blocks);
+    // Missing file: line of the key and the file name.
+    let missing = CANONICAL.replace("truth = \"tanh(z0)\"", "truth = { table = \"nope.csv\" }");
+    std::fs::write(&path, &missing).unwrap();
+    let e = ModelFile::from_path(&path).unwrap_err().to_string();
+    assert!(e.contains("nope.csv") && e.contains("line 27") && e.contains("m.toml"), "{e}");
+}
+
+#[test]
+fn no_panics_on_odd_input() {
+    for text in [
+        "",
+        "[lft]",
+        "[lft]\n[signals]\ny=[\"y\"]",
+        "[lft]\nA=[[1]]\n[signals]\ny=[\"y\"]",
+        "[lft]\nA=[[]]\n[signals]\ny=[\"y\"]",
+        "[lft]\nA=[1]\n[signals]\ny=[\"y\"]",
+        "[lft]\nA=[[1e400]]\n[signals]\ny=[\"y\"]",
+        "[lft]\nDzw=[[1]]\nDyw=[[1]]\n[signals]\ny=[\"y\"]\n[[nonlinearity]]\nname=\"n\"\ninputs=[0]\noutput=0\ndispersion=3",
+        "[lft]\nDzw=[[1]]\nDyw=[[1]]\n[signals]\ny=[\"y\"]\n[[nonlinearity]]\nname=\"n\"\ninputs=[0]\noutput=99999999999999",
+        "[lft]\nDzw=[[1]]\nDyw=[[1]]\n[signals]\ny=[\"y\"]\n[[nonlinearity]]\nname=\"n\"\ninputs=[0]\noutput=0\ntruth=3",
+        "[lft]\nDzw=[[1]]\nDyw=[[1]]\n[signals]\ny=[\"y\"]\n[[nonlinearity]]\nname=\"ü\"\ninputs=0\noutput=0\ntruth=\"(\"",
+    ] {
+        let _ = ModelFile::parse(text, None);
+    }
+    // A valid model with an algebraic loop parses (identification does not need D_zw = 0).
+    let text = "[lft]\nDye=[[1]]\nDzw=[[1]]\nDyw=[[1]]\nDzu=[[1]]\n[signals]\nu=[\"u\"]\ny=[\"y\"]\n\
+                [[nonlinearity]]\nname=\"n\"\ninputs=0\noutput=0\n";
+    let m = ModelFile::parse(text, None).unwrap();
+    assert!(m.lft.check_no_algebraic_loop().is_err());
+}

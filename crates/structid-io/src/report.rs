@@ -1,0 +1,217 @@
+//! The `report.json` written by `structid identify`.
+//!
+//! [`Report::new`] collects the settings, the cost terms of eq. (4), the solver diagnostics and,
+//! per block, the dispersion value and (when the model file gives a `truth`) the RMS error of
+//! the estimate at the data points, plain and centred (see
+//! [`structid_core::metrics::centred_rms_difference`]; maps that share an output are identifiable
+//! only up to a constant). The caller adds the names of the files it wrote and serialises
+//! with [`Report::to_json_string`].
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+use structid_core::metrics::{centred_rms_difference, rms_difference};
+use structid_core::{CostTerms, Diagnostics, Identification, IdentifySettings};
+
+use crate::error::IoError;
+use crate::model_file::ModelFile;
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// Program name and version.
+    pub tool: String,
+    /// The model file, when known.
+    pub model_file: Option<String>,
+    /// The data file, when known.
+    pub data_file: Option<String>,
+    /// Number of samples L.
+    pub samples: usize,
+    /// The identification settings.
+    pub settings: SettingsReport,
+    /// Cost terms at the optimum.
+    pub cost: CostTerms,
+    /// Solver diagnostics.
+    pub diagnostics: DiagnosticsReport,
+    /// One entry per block, in model order.
+    pub blocks: Vec<BlockReport>,
+    /// Every file written, relative to the output directory.
+    pub files: Vec<String>,
+}
+
+/// Settings used for the identification.
+#[derive(Clone, Debug, Serialize)]
+pub struct SettingsReport {
+    /// β.
+    pub beta: f64,
+    /// The solver choice (`Auto`, `Exact`, …).
+    pub solver: String,
+    /// Explicit memory limit, if one was set.
+    pub memory_limit_bytes: Option<u64>,
+    /// The σ that replaced every block's, if any.
+    pub sigma_override: Option<f64>,
+    /// Per-block dispersion settings.
+    pub blocks: Vec<BlockSettings>,
+}
+
+/// The dispersion of one block as used.
+#[derive(Clone, Debug, Serialize)]
+pub struct BlockSettings {
+    /// Block name.
+    pub name: String,
+    /// Dispersion kind (`gaussian`).
+    pub kind: String,
+    /// Description, e.g. `gaussian(sigma=0.4)`.
+    pub dispersion: String,
+    /// Numeric parameters (σ, …).
+    pub parameters: BTreeMap<String, f64>,
+    /// Where σ came from: `override`, `model file` or `default`.
+    pub sigma_source: String,
+}
+
+/// Solver diagnostics plus how z was obtained.
+#[derive(Clone, Debug, Serialize)]
+pub struct DiagnosticsReport {
+    /// The core's diagnostics (timings, dropped samples, jitter, feasibility, …).
+    #[serde(flatten)]
+    pub solver: Diagnostics,
+    /// Number of dropped output samples.
+    pub dropped_sample_count: usize,
+    /// How z was obtained (measured, from u, or by output injection).
+    pub z_source: String,
+}
+
+/// The estimate of one block.
+#[derive(Clone, Debug, Serialize)]
+pub struct BlockReport {
+    /// Block name.
+    pub name: String,
+    /// Indices into z of its inputs.
+    pub inputs: Vec<usize>,
+    /// Names of its inputs (measured z columns or `z<i>`).
+    pub input_names: Vec<String>,
+    /// Index into w of its output.
+    pub output: usize,
+    /// Dispersion description.
+    pub dispersion: String,
+    /// D_i(z^[i], ŵ^[i]) at the optimum.
+    pub dispersion_value: f64,
+    /// [min, max] of each input over the data.
+    pub z_range: Vec<[f64; 2]>,
+    /// [min, max] of ŵ over the data.
+    pub w_hat_range: [f64; 2],
+    /// The true map, when the model file gives one.
+    pub truth: Option<String>,
+    /// RMS of ŵ − truth(z) over the data points.
+    pub rms_error_vs_truth: Option<f64>,
+    /// RMS of the same difference after removing each side's mean over the data points.
+    pub centred_rms_error_vs_truth: Option<f64>,
+    /// The grid (or point) evaluation file written for this block.
+    pub grid_file: Option<String>,
+    /// The figure written for this block.
+    pub plot_file: Option<String>,
+}
+
+fn range(x: &[f64]) -> [f64; 2] {
+    x.iter()
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &v| [lo.min(v), hi.max(v)])
+}
+
+impl Report {
+    /// Builds the report of `id`, obtained from `model` with `settings` and the σ override
+    /// `sigma_override`. Truth maps of the model file are evaluated at the data points.
+    pub fn new(
+        model: &ModelFile,
+        id: &Identification,
+        settings: &IdentifySettings,
+        sigma_override: Option<f64>,
+    ) -> Result<Self, IoError> {
+        let z_names = model.z_names();
+        let mut blocks = Vec::with_capacity(id.blocks.len());
+        let mut block_settings = Vec::with_capacity(id.blocks.len());
+        for est in &id.blocks {
+            let spec = model.blocks.iter().find(|b| b.name == est.name).ok_or_else(|| {
+                IoError::InvalidArgument(format!(
+                    "the identification has a block `{}` that the model file does not",
+                    est.name
+                ))
+            })?;
+            let truth = spec.truth_map()?;
+            let (rms, centred) = match &truth {
+                Some(t) => {
+                    let tv = t.eval_many(&est.z);
+                    (
+                        Some(rms_difference(&est.w_hat, &tv)),
+                        Some(centred_rms_difference(&est.w_hat, &tv)),
+                    )
+                }
+                None => (None, None),
+            };
+            block_settings.push(BlockSettings {
+                name: est.name.clone(),
+                kind: spec.dispersion.kind().to_string(),
+                dispersion: est.dispersion.clone(),
+                parameters: est.parameters.iter().cloned().collect(),
+                sigma_source: if sigma_override.is_some() {
+                    "override".into()
+                } else if spec.dispersion.sigma().is_some() {
+                    "model file".into()
+                } else {
+                    "default (0.1 × largest range of the block's z)".into()
+                },
+            });
+            blocks.push(BlockReport {
+                name: est.name.clone(),
+                inputs: spec.inputs.clone(),
+                input_names: spec
+                    .inputs
+                    .iter()
+                    .map(|&i| z_names.get(i).cloned().unwrap_or_else(|| format!("z{i}")))
+                    .collect(),
+                output: est.output,
+                dispersion: est.dispersion.clone(),
+                dispersion_value: est.dispersion_value,
+                z_range: (0..est.z.channels()).map(|c| range(&est.z.channel(c))).collect(),
+                w_hat_range: range(&est.w_hat),
+                truth: spec.truth.as_ref().map(|t| t.describe()),
+                rms_error_vs_truth: rms,
+                centred_rms_error_vs_truth: centred,
+                grid_file: None,
+                plot_file: None,
+            });
+        }
+        Ok(Self {
+            tool: format!("structid {}", env!("CARGO_PKG_VERSION")),
+            model_file: model.path.as_ref().map(|p| p.display().to_string()),
+            data_file: None,
+            samples: id.w_hat.len(),
+            settings: SettingsReport {
+                beta: settings.beta(),
+                solver: format!("{:?}", settings.solver()),
+                memory_limit_bytes: settings.memory_limit_bytes(),
+                sigma_override,
+                blocks: block_settings,
+            },
+            cost: id.cost.clone(),
+            diagnostics: DiagnosticsReport {
+                dropped_sample_count: id.diagnostics.dropped_samples.len(),
+                solver: id.diagnostics.clone(),
+                z_source: id.z_source.describe(),
+            },
+            blocks,
+            files: Vec::new(),
+        })
+    }
+
+    /// The entry of block `name`, for adding file names.
+    pub fn block_mut(&mut self, name: &str) -> Option<&mut BlockReport> {
+        self.blocks.iter_mut().find(|b| b.name == name)
+    }
+
+    /// Pretty-printed JSON (non-finite numbers become `null`).
+    pub fn to_json_string(&self) -> Result<String, IoError> {
+        let mut s = serde_json::to_string_pretty(self)?;
+        s.push('\n');
+        Ok(s)
+    }
+}
