@@ -7,10 +7,13 @@ use crate::signal::Signal;
 use faer::{Accum, Mat, MatMut, MatRef};
 use nalgebra::DMatrix;
 
-/// Time-block length of the blocked many-column operators for a system of order `n`
-/// (the cost per sample and column is about `2 (b p + n)(b m + n) / b` flops).
-fn time_block(n: usize) -> usize {
-    std::env::var("TB").ok().and_then(|v| v.parse().ok()).unwrap_or(16).max(n.min(1))
+/// Time-block length `b` of the blocked many-column operators. The cost per sample and
+/// column is about `2 (b p + n)(b m + n) / b` flops, minimal near `b = n / sqrt(p m)`;
+/// blocks of at least 16 rows keep the matrix products efficient.
+fn time_block(n: usize, m: usize, p: usize) -> usize {
+    let by_width = 16usize.div_ceil(m.max(p).max(1));
+    let by_order = (n as f64 / ((m.max(1) * p.max(1)) as f64).sqrt()).ceil() as usize;
+    by_width.max(by_order).clamp(1, 64)
 }
 
 /// Checks the shapes `a: n x n`, `b: n x m`, `c: p x n`, `d: p x m` and finiteness.
@@ -458,7 +461,7 @@ impl StateSpace {
     /// The blocked recursion (forward or adjoint) for a horizon of `len` samples.
     fn blocked(&self, len: usize, adjoint: bool) -> BlockedRecursion {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        let bsz = time_block(n).min(len.max(1));
+        let bsz = time_block(n, m, p).min(len.max(1));
         // A^i B and C A^i for i < b, and A^b
         let mut aib = Vec::with_capacity(bsz);
         let mut cai = Vec::with_capacity(bsz);

@@ -37,8 +37,9 @@ pub const DEFAULT_SIZE: (u32, u32) = (800, 500);
 
 /// Smallest accepted width or height of a chart or panel in pixels.
 ///
-/// Smaller drawing areas cannot hold the title, axes and tick labels.
-pub const MIN_PANEL_SIZE: u32 = 120;
+/// Smaller drawing areas cannot hold the title, axes, tick labels and
+/// colour bar legibly.
+pub const MIN_PANEL_SIZE: u32 = 200;
 
 /// Largest accepted width or height of a whole figure in pixels.
 pub const MAX_FIGURE_SIZE: u32 = 100_000;
@@ -292,9 +293,8 @@ impl Bounds {
             return None;
         }
         let (lo, hi) = widen(self.lo, self.hi);
-        // Half-differences cannot overflow.
-        let pad = 0.1 * (hi / 2.0 - lo / 2.0);
-        Some(clamp_finite(lo - pad)..clamp_finite(hi + pad))
+        let pad = 0.05 * (hi - lo);
+        Some(lo - pad..hi + pad)
     }
 }
 
@@ -302,15 +302,31 @@ fn clamp_finite(v: f64) -> f64 {
     v.clamp(-f64::MAX, f64::MAX)
 }
 
-/// Makes `lo < hi` with a span that is resolvable in floating point.
+/// Largest magnitude used for an axis or colour-scale limit. Larger finite
+/// data is drawn but the axis stops here (plotters' tick computation needs a
+/// finite span).
+const AXIS_LIMIT: f64 = 1e300;
+
+/// Smallest span of an axis or colour scale; plotters' tick computation
+/// does not terminate on spans that underflow.
+const MIN_SPAN: f64 = 1e-200;
+
+/// Makes `lo < hi` with a finite span that is resolvable in floating point
+/// (clamping to [`AXIS_LIMIT`] and widening degenerate ranges).
 fn widen(lo: f64, hi: f64) -> (f64, f64) {
+    let lo = lo.clamp(-AXIS_LIMIT, AXIS_LIMIT);
+    let hi = hi.clamp(-AXIS_LIMIT, AXIS_LIMIT);
     let scale = lo.abs().max(hi.abs());
-    if hi - lo > scale * 1e-12 {
+    if hi - lo >= (scale * 1e-9).max(MIN_SPAN) {
         return (lo, hi);
     }
     let mid = lo / 2.0 + hi / 2.0;
-    let half = if scale > 1e-300 { scale * 0.1 } else { 1.0 };
-    (clamp_finite(mid - half), clamp_finite(mid + half))
+    let half = if scale < MIN_SPAN {
+        1.0
+    } else {
+        (scale * 0.1).max(MIN_SPAN)
+    };
+    (mid - half, mid + half)
 }
 
 /// Distinct colours (Tableau 10), cycled.
@@ -333,9 +349,9 @@ fn series_colour(i: usize) -> RGBColor {
 }
 
 const FONT: &str = "sans-serif";
-const TITLE_SIZE: u32 = 22;
-const DESC_SIZE: u32 = 16;
-const TICK_SIZE: u32 = 13;
+const TITLE_SIZE: u32 = 24;
+const DESC_SIZE: u32 = 19;
+const TICK_SIZE: u32 = 16;
 const X_LABEL_AREA: u32 = 50;
 const Y_LABEL_AREA: u32 = 70;
 const MARGIN: u32 = 12;
@@ -419,6 +435,15 @@ fn check_size(size: (u32, u32), what: &str) -> Result<(), PlotError> {
     Ok(())
 }
 
+/// Maximum numbers of x and y tick labels that fit in an area without
+/// overlapping.
+fn label_counts(area: &DrawingArea<SVGBackend<'_>, Shift>) -> (usize, usize) {
+    let (w, h) = area.dim_in_pixel();
+    let x = (w.saturating_sub(Y_LABEL_AREA) / 70).clamp(2, 10) as usize;
+    let y = (h.saturating_sub(X_LABEL_AREA + TITLE_SIZE) / 35).clamp(2, 10) as usize;
+    (x, y)
+}
+
 /// Contiguous runs of indices for which `ok(i)` holds.
 fn runs(n: usize, ok: impl Fn(usize) -> bool) -> Vec<Range<usize>> {
     let mut out = Vec::new();
@@ -454,7 +479,10 @@ fn draw_chart(area: &DrawingArea<SVGBackend<'_>, Shift>, chart: &Chart<'_>) -> R
 
     let xf = tick_formatter(xr.start, xr.end);
     let yf = tick_formatter(yr.start, yr.end);
+    let (xn, yn) = label_counts(area);
     cc.configure_mesh()
+        .x_labels(xn)
+        .y_labels(yn)
         .x_desc(chart.x_label.as_str())
         .y_desc(chart.y_label.as_str())
         .axis_desc_style((FONT, DESC_SIZE))
@@ -868,8 +896,11 @@ fn draw_heatmap(
         .map_err(backend_err)?;
     let xf = tick_formatter(xr.start, xr.end);
     let yf = tick_formatter(yr.start, yr.end);
+    let (xn, yn) = label_counts(&plot_area);
     cc.configure_mesh()
         .disable_mesh()
+        .x_labels(xn)
+        .y_labels(yn)
         .x_desc(map.x_label.as_str())
         .y_desc(map.y_label.as_str())
         .axis_desc_style((FONT, DESC_SIZE))
@@ -992,6 +1023,11 @@ mod tests {
         h.matches(n).count()
     }
 
+    /// Whether the SVG has a `<text>` element with exactly this content.
+    fn has_text(svg: &str, t: &str) -> bool {
+        svg.lines().any(|l| l == t)
+    }
+
     #[test]
     fn line_dots_band_chart() {
         let x: Vec<f64> = (0..40).map(|i| i as f64 * 0.25).collect();
@@ -1009,9 +1045,9 @@ mod tests {
             .with(Series::dots("measurements", &x, &noisy));
         let svg = render_chart_svg(&chart).unwrap();
         assert!(svg.starts_with("<svg"));
-        assert!(svg.contains("Estimated map f"));
-        for l in ["confidence band", "estimate", "measurements", ">u<", ">f(u)<"] {
-            assert!(svg.contains(l), "missing {l}");
+        assert!(has_text(&svg, "Estimated map f"));
+        for l in ["confidence band", "estimate", "measurements", "u", "f(u)"] {
+            assert!(has_text(&svg, l), "missing {l}");
         }
         assert!(count(&svg, "<circle") >= x.len());
         assert!(svg.contains("<polygon"));
@@ -1095,17 +1131,28 @@ mod tests {
 
     #[test]
     fn constant_and_extreme_data() {
-        for v in [0.0, 1.0, -3e-12, 7.5e200, f64::MAX, -f64::MAX] {
+        for v in [0.0, 1.0, -3e-12, 1e-250, 1e-310, 7.5e200, f64::MAX, -f64::MAX] {
             let x = [v, v, v];
             let y = [v, v, v];
             let c = Chart::new("const", "x", "y").with(Series::line("s", &x, &y));
             let svg = render_chart_svg(&c).unwrap();
             assert!(svg.starts_with("<svg"), "value {v}");
         }
-        let x = [-f64::MAX, f64::MAX];
-        let y = [1e-300, 2e-300];
-        let c = Chart::new("extreme", "x", "y").with(Series::dots("s", &x, &y));
-        render_chart_svg(&c).unwrap();
+        for (a, b) in [
+            (-f64::MAX, f64::MAX),
+            (1e-300, 2e-300),
+            (1.0, 1.0 + 1e-15),
+            (1e-310, 3e-310),
+            (-1e305, 1e-305),
+        ] {
+            let x = [a, b];
+            let c = Chart::new("extreme", "x", "y").with(Series::dots("s", &x, &x));
+            assert!(render_chart_svg(&c).unwrap().starts_with("<svg"), "{a} {b}");
+            let v = [a, b, b, a];
+            let m = HeatMap::new("extreme", "x", "y", &x, &x, &v);
+            let svg = render_heatmaps_svg(&[m], 1, (300, 300)).unwrap();
+            assert!(count(&svg, "<rect") >= 4);
+        }
     }
 
     #[test]
@@ -1139,8 +1186,8 @@ mod tests {
         for cols in [1, 2, 3, 7] {
             let svg = render_grid_svg(&charts, cols, (400, 300)).unwrap();
             assert!(svg.starts_with("<svg"));
-            for t in ["beta = 0.1", "beta = 1<", "beta = 10"] {
-                assert!(svg.contains(t), "missing {t}");
+            for t in ["beta = 0.1", "beta = 1", "beta = 10"] {
+                assert!(has_text(&svg, t), "missing {t}");
             }
         }
         let svg = render_grid_svg(&charts, 2, (400, 300)).unwrap();
@@ -1166,9 +1213,9 @@ mod tests {
         let map = HeatMap::new("Dispersion field", "u", "v", &xs, &ys, &v);
         let svg = render_heatmaps_svg(&[map], 1, (600, 450)).unwrap();
         assert!(svg.starts_with("<svg"));
-        assert!(svg.contains("Dispersion field"));
+        assert!(has_text(&svg, "Dispersion field"));
         assert!(count(&svg, "<rect") >= nx * ny);
-        assert!(svg.contains(">u<") && svg.contains(">v<"));
+        assert!(has_text(&svg, "u") && has_text(&svg, "v"));
     }
 
     #[test]
@@ -1181,10 +1228,10 @@ mod tests {
             ..a.clone()
         };
         let svg = render_heatmaps_svg(&[a, b], 2, (400, 320)).unwrap();
-        assert!(svg.contains("left") && svg.contains("right"));
+        assert!(has_text(&svg, "left") && has_text(&svg, "right"));
         assert!(count(&svg, "<rect") >= 2 * 30);
         // Colour-bar extremes.
-        assert!(svg.contains(">-1<") && svg.contains(">1<"));
+        assert!(has_text(&svg, "-1") && has_text(&svg, "1"));
     }
 
     #[test]
@@ -1269,5 +1316,38 @@ mod tests {
             write_chart_svg(&bad, &Chart::new("f", "x", "y").with(Series::line("s", &x, &x))),
             Err(PlotError::Io(_))
         ));
+    }
+}
+#[cfg(test)]
+mod demo_tmp {
+    use super::*;
+    #[test]
+    fn demo_write() {
+        let x: Vec<f64> = (0..60).map(|i| -3.0 + i as f64 * 0.1).collect();
+        let f: Vec<f64> = x.iter().map(|v| v.tanh() * 2.0).collect();
+        let lo: Vec<f64> = f.iter().zip(&x).map(|(v, u)| v - 0.2 - 0.1 * u.abs()).collect();
+        let hi: Vec<f64> = f.iter().zip(&x).map(|(v, u)| v + 0.2 + 0.1 * u.abs()).collect();
+        let meas: Vec<f64> = f.iter().enumerate().map(|(i, v)| v + 0.15 * (((i * 37) % 11) as f64 / 5.0 - 1.0)).collect();
+        let tf: Vec<f64> = x.iter().map(|v| v.tanh() * 2.1).collect();
+        let c = Chart::new("Estimated static map f", "input u", "f(u)")
+            .with(Series::band("95% band", &x, &f, &lo, &hi))
+            .with(Series::dots("measured", &x, &meas))
+            .with(Series::line("true f", &x, &tf));
+        std::fs::write("/tmp/plotdemo/chart.svg", render_chart_svg(&c).unwrap()).unwrap();
+        let y2: Vec<f64> = x.iter().map(|v| 1e-6 * v.exp()).collect();
+        let c2 = Chart::new("small numbers", "t [s]", "y").with(Series::line("y", &x, &y2));
+        let big: Vec<f64> = y2.iter().map(|v| v * 1e12).collect();
+        let c3 = Chart::new("big numbers", "t", "y").with(Series::dots("y", &x, &big));
+        std::fs::write("/tmp/plotdemo/grid.svg", render_grid_svg(&[c.clone(), c2, c3], 2, (500, 350)).unwrap()).unwrap();
+        let xs: Vec<f64> = (0..40).map(|i| i as f64 / 39.0 * 4.0 - 2.0).collect();
+        let ys: Vec<f64> = (0..30).map(|i| i as f64 / 29.0 * 3.0).collect();
+        let v: Vec<f64> = ys.iter().flat_map(|y| xs.iter().map(move |x| (x * y).sin() * y)).collect();
+        let mut v2 = v.clone();
+        v2[100] = f64::NAN;
+        let m1 = HeatMap::new("objective, beta = 0.1", "lambda", "sigma", &xs, &ys, &v).with_range(-3.0, 3.0);
+        let m2 = HeatMap::new("objective, beta = 1", "lambda", "sigma", &xs, &ys, &v2).with_range(-3.0, 3.0);
+        std::fs::write("/tmp/plotdemo/heat.svg", render_heatmaps_svg(&[m1.clone(), m2], 2, (550, 420)).unwrap()).unwrap();
+        std::fs::write("/tmp/plotdemo/heatsmall.svg", render_heatmaps_svg(&[m1], 1, (MIN_PANEL_SIZE, MIN_PANEL_SIZE)).unwrap()).unwrap();
+        std::fs::write("/tmp/plotdemo/gridsmall.svg", render_grid_svg(&[c], 1, (MIN_PANEL_SIZE, MIN_PANEL_SIZE)).unwrap()).unwrap();
     }
 }
