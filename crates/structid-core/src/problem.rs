@@ -56,7 +56,19 @@ impl Problem {
                 "the problem has no nonlinear block to identify".into(),
             ));
         }
+        let mut seen = vec![false; blocks.len()];
         for b in &blocks {
+            match seen.get_mut(b.output) {
+                Some(s) if !*s => *s = true,
+                _ => {
+                    return Err(Error::InvalidStructure(format!(
+                        "block outputs must be the distinct channels 0..{}; block `{}` has output {}",
+                        blocks.len(),
+                        b.name,
+                        b.output
+                    )));
+                }
+            }
             if b.path.outputs() != ny || b.path.inputs() != 1 {
                 return Err(Error::DimensionMismatch {
                     what: format!("path T_yw of block `{}`", b.name),

@@ -54,7 +54,11 @@ pub enum LtiError {
 }
 
 impl LtiError {
-    pub(crate) fn dims(what: impl Into<String>, expected: impl ToString, found: impl ToString) -> Self {
+    pub(crate) fn dims(
+        what: impl Into<String>,
+        expected: impl ToString,
+        found: impl ToString,
+    ) -> Self {
         LtiError::DimensionMismatch {
             what: what.into(),
             expected: expected.to_string(),

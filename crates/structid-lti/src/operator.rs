@@ -98,13 +98,13 @@ pub trait LinearSystem: Send + Sync {
 pub(crate) fn horizon(m: usize, p: usize, ulen: usize, ylen: usize) -> usize {
     let len = if m > 0 {
         assert!(
-            ulen % m == 0,
+            ulen.is_multiple_of(m),
             "input length {ulen} is not a multiple of the {m} input channels"
         );
         ulen / m
     } else if p > 0 {
         assert!(
-            ylen % p == 0,
+            ylen.is_multiple_of(p),
             "output length {ylen} is not a multiple of the {p} output channels"
         );
         ylen / p
@@ -128,7 +128,11 @@ fn columns_via(
     out_ch: usize,
     op: impl Fn(&[f64], &mut [f64]),
 ) {
-    assert_eq!(x.ncols(), out.ncols(), "x and out must have the same number of columns");
+    assert_eq!(
+        x.ncols(),
+        out.ncols(),
+        "x and out must have the same number of columns"
+    );
     let _ = horizon(in_ch, out_ch, x.nrows(), out.nrows());
     let mut u = vec![0.0; x.nrows()];
     let mut y = vec![0.0; out.nrows()];
@@ -198,7 +202,14 @@ impl BlockedRecursion {
         });
     }
 
-    fn leaf(&self, len: usize, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>, accum: Accum, alpha: f64) {
+    fn leaf(
+        &self,
+        len: usize,
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
         let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
         let k = b * cin + n;
         let nb = len.div_ceil(b);
@@ -220,7 +231,16 @@ impl BlockedRecursion {
                 let blk = if self.reverse { nb - 1 - step } else { step };
                 let t0 = blk * b;
                 let bk = b.min(len - t0);
-                pack(xc, t0 * cin, bk * cin, b * cin, cur, row_major, step == 0, k);
+                pack(
+                    xc,
+                    t0 * cin,
+                    bk * cin,
+                    b * cin,
+                    cur,
+                    row_major,
+                    step == 0,
+                    k,
+                );
                 let wv = if row_major {
                     MatRef::from_row_major_slice(&cur[..], k, w)
                 } else {
@@ -238,7 +258,12 @@ impl BlockedRecursion {
                     let sv = if row_major {
                         MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)
                     } else {
-                        MatMut::from_column_major_slice_with_stride_mut(&mut nxt[b * cin..], n, w, k)
+                        MatMut::from_column_major_slice_with_stride_mut(
+                            &mut nxt[b * cin..],
+                            n,
+                            w,
+                            k,
+                        )
                     };
                     matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
                     std::mem::swap(&mut cur, &mut nxt);

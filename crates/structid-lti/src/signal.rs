@@ -48,7 +48,7 @@ impl Signal {
                 data,
             });
         }
-        if data.len() % channels != 0 {
+        if !data.len().is_multiple_of(channels) {
             return Err(LtiError::dims(
                 "signal data length",
                 format!("a multiple of the channel count {channels}"),
@@ -148,13 +148,21 @@ impl Signal {
 
     /// The `channels` values at time `k`. Panics if `k >= len`.
     pub fn sample(&self, k: usize) -> &[f64] {
-        assert!(k < self.len, "sample index {k} out of range (len {})", self.len);
+        assert!(
+            k < self.len,
+            "sample index {k} out of range (len {})",
+            self.len
+        );
         &self.data[k * self.channels..(k + 1) * self.channels]
     }
 
     /// Mutable access to the values at time `k`. Panics if `k >= len`.
     pub fn sample_mut(&mut self, k: usize) -> &mut [f64] {
-        assert!(k < self.len, "sample index {k} out of range (len {})", self.len);
+        assert!(
+            k < self.len,
+            "sample index {k} out of range (len {})",
+            self.len
+        );
         &mut self.data[k * self.channels..(k + 1) * self.channels]
     }
 
@@ -165,7 +173,9 @@ impl Signal {
             "channel index {c} out of range ({} channels)",
             self.channels
         );
-        (0..self.len).map(|k| self.data[k * self.channels + c]).collect()
+        (0..self.len)
+            .map(|k| self.data[k * self.channels + c])
+            .collect()
     }
 
     /// The time-major data, length `len * channels`, index `k * channels + c`.

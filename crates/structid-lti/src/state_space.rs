@@ -99,7 +99,7 @@ struct RowMajor {
 /// Order `n = 0` (a static gain `y_k = D u_k`) is allowed, as are zero inputs or outputs.
 /// Implements [`LinearSystem`]: `T` is the block lower-triangular Toeplitz matrix of the
 /// Markov parameters, applied by recursion (never formed densely).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct StateSpace {
     a: DMatrix<f64>,
     b: DMatrix<f64>,
@@ -107,6 +107,19 @@ pub struct StateSpace {
     d: DMatrix<f64>,
     sample_time: Option<f64>,
     rm: RowMajor,
+}
+
+impl std::fmt::Debug for StateSpace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // the row-major cache is derived data: leave it out
+        f.debug_struct("StateSpace")
+            .field("a", &self.a)
+            .field("b", &self.b)
+            .field("c", &self.c)
+            .field("d", &self.d)
+            .field("sample_time", &self.sample_time)
+            .finish()
+    }
 }
 
 impl StateSpace {
@@ -164,7 +177,12 @@ impl StateSpace {
     /// ```
     pub fn static_gain(d: DMatrix<f64>) -> Result<Self, LtiError> {
         let (p, m) = d.shape();
-        Self::new(DMatrix::zeros(0, 0), DMatrix::zeros(0, m), DMatrix::zeros(p, 0), d)
+        Self::new(
+            DMatrix::zeros(0, 0),
+            DMatrix::zeros(0, m),
+            DMatrix::zeros(p, 0),
+            d,
+        )
     }
 
     /// Attaches a sample time (seconds, positive and finite). It is metadata only: the
@@ -370,7 +388,10 @@ impl StateSpace {
         if let Some(&bad) = idx.iter().find(|&&i| i >= self.inputs()) {
             return Err(LtiError::param(
                 "input index",
-                format!("{bad} is out of range for a system with {} inputs", self.inputs()),
+                format!(
+                    "{bad} is out of range for a system with {} inputs",
+                    self.inputs()
+                ),
             ));
         }
         let mut s = StateSpace::new(
@@ -389,7 +410,10 @@ impl StateSpace {
         if let Some(&bad) = idx.iter().find(|&&i| i >= self.outputs()) {
             return Err(LtiError::param(
                 "output index",
-                format!("{bad} is out of range for a system with {} outputs", self.outputs()),
+                format!(
+                    "{bad} is out of range for a system with {} outputs",
+                    self.outputs()
+                ),
             ));
         }
         let mut s = StateSpace::new(
@@ -444,11 +468,13 @@ impl StateSpace {
         let p = self.outputs();
         let mut a = DMatrix::zeros(n, n);
         a.view_mut((0, 0), (n2, n2)).copy_from(&other.a);
-        a.view_mut((n2, 0), (n1, n2)).copy_from(&(&self.b * &other.c));
+        a.view_mut((n2, 0), (n1, n2))
+            .copy_from(&(&self.b * &other.c));
         a.view_mut((n2, n2), (n1, n1)).copy_from(&self.a);
         let mut b = DMatrix::zeros(n, m);
         b.view_mut((0, 0), (n2, m)).copy_from(&other.b);
-        b.view_mut((n2, 0), (n1, m)).copy_from(&(&self.b * &other.d));
+        b.view_mut((n2, 0), (n1, m))
+            .copy_from(&(&self.b * &other.d));
         let mut c = DMatrix::zeros(p, n);
         c.view_mut((0, 0), (p, n2)).copy_from(&(&self.d * &other.c));
         c.view_mut((0, n2), (p, n1)).copy_from(&self.c);
@@ -527,7 +553,13 @@ impl StateSpace {
         let ka = bsz * p + n;
         let t1 = m1.as_ref().transpose(); // (b m + n) x (b p)
         let t2 = m2.as_ref().transpose(); // (b m + n) x n
-        let m1a = Mat::from_fn(bsz * m, ka, |i, j| if j < bsz * p { t1[(i, j)] } else { t2[(i, j - bsz * p)] });
+        let m1a = Mat::from_fn(bsz * m, ka, |i, j| {
+            if j < bsz * p {
+                t1[(i, j)]
+            } else {
+                t2[(i, j - bsz * p)]
+            }
+        });
         let m2a = Mat::from_fn(n, ka, |i, j| {
             if j < bsz * p {
                 t1[(bsz * m + i, j)]
@@ -647,7 +679,11 @@ impl LinearSystem for StateSpace {
         alpha: f64,
     ) {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        assert_eq!(x.ncols(), out.ncols(), "x and out must have the same number of columns");
+        assert_eq!(
+            x.ncols(),
+            out.ncols(),
+            "x and out must have the same number of columns"
+        );
         let len = horizon(m, p, x.nrows(), out.nrows());
         if trivial_columns(m, p, len, &mut out, accum) {
             return;
@@ -668,13 +704,24 @@ impl LinearSystem for StateSpace {
         alpha: f64,
     ) {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        assert_eq!(x.ncols(), out.ncols(), "x and out must have the same number of columns");
+        assert_eq!(
+            x.ncols(),
+            out.ncols(),
+            "x and out must have the same number of columns"
+        );
         let len = horizon(p, m, x.nrows(), out.nrows());
         if trivial_columns(p, m, len, &mut out, accum) {
             return;
         }
         if n == 0 {
-            static_columns(to_faer(&self.d).as_ref().transpose(), len, x, out, accum, alpha);
+            static_columns(
+                to_faer(&self.d).as_ref().transpose(),
+                len,
+                x,
+                out,
+                accum,
+                alpha,
+            );
         } else {
             self.blocked(len, true).run(len, x, out, accum, alpha);
         }

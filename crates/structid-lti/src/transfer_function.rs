@@ -19,18 +19,15 @@ pub struct Siso {
 impl Siso {
     fn validate(&self, i: usize, j: usize) -> Result<(), LtiError> {
         let at = format!("entry (output {i}, input {j})");
-        match self.den.first() {
-            None => {
-                return Err(LtiError::InvalidTransferFunction(format!(
-                    "{at}: the denominator is empty"
-                )));
-            }
-            Some(&a0) if a0 == 0.0 => {
-                return Err(LtiError::InvalidTransferFunction(format!(
-                    "{at}: the leading denominator coefficient is zero (non-causal or ill-posed)"
-                )));
-            }
-            _ => {}
+        let Some(&a0) = self.den.first() else {
+            return Err(LtiError::InvalidTransferFunction(format!(
+                "{at}: the denominator is empty"
+            )));
+        };
+        if a0 == 0.0 {
+            return Err(LtiError::InvalidTransferFunction(format!(
+                "{at}: the leading denominator coefficient is zero (non-causal or ill-posed)"
+            )));
         }
         for (name, v) in [("numerator", &self.num), ("denominator", &self.den)] {
             if let Some(k) = v.iter().position(|x| !x.is_finite()) {

@@ -465,7 +465,10 @@ fn runs(n: usize, ok: impl Fn(usize) -> bool) -> Vec<Range<usize>> {
 }
 
 /// Draws one chart into a drawing area (the chart's own `size` is ignored).
-fn draw_chart(area: &DrawingArea<SVGBackend<'_>, Shift>, chart: &Chart<'_>) -> Result<(), PlotError> {
+fn draw_chart(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &Chart<'_>,
+) -> Result<(), PlotError> {
     let (xr, yr) = chart.ranges()?;
     area.fill(&WHITE).map_err(backend_err)?;
 
@@ -507,7 +510,10 @@ fn draw_chart(area: &DrawingArea<SVGBackend<'_>, Shift>, chart: &Chart<'_>) -> R
         // An empty series carrying the legend entry, so that the legend is
         // right even when no segment of this series can be drawn.
         let anno = cc
-            .draw_series(LineSeries::new(std::iter::empty::<(f64, f64)>(), line_style))
+            .draw_series(LineSeries::new(
+                std::iter::empty::<(f64, f64)>(),
+                line_style,
+            ))
             .map_err(backend_err)?;
         anno.label(s.label.as_str());
         match s.style {
@@ -536,14 +542,16 @@ fn draw_chart(area: &DrawingArea<SVGBackend<'_>, Shift>, chart: &Chart<'_>) -> R
                 cc.draw_series(pts).map_err(backend_err)?;
             }
             SeriesStyle::Band { lower, upper } => {
-                let ok = |k: usize| {
-                    s.x[k].is_finite() && lower[k].is_finite() && upper[k].is_finite()
-                };
+                let ok =
+                    |k: usize| s.x[k].is_finite() && lower[k].is_finite() && upper[k].is_finite();
                 for r in runs(s.x.len(), ok) {
                     let mut poly: Vec<(f64, f64)> = r.clone().map(|k| (s.x[k], upper[k])).collect();
                     poly.extend(r.rev().map(|k| (s.x[k], lower[k])));
-                    cc.draw_series(std::iter::once(Polygon::new(poly, colour.mix(0.25).filled())))
-                        .map_err(backend_err)?;
+                    cc.draw_series(std::iter::once(Polygon::new(
+                        poly,
+                        colour.mix(0.25).filled(),
+                    )))
+                    .map_err(backend_err)?;
                 }
                 if !s.y.is_empty() {
                     for r in runs(s.x.len(), finite_xy) {
@@ -864,11 +872,18 @@ fn viridis(t: f64) -> RGBColor {
     let k = (pos.floor() as usize).min(VIRIDIS.len() - 2);
     let f = pos - k as f64;
     let (a, b) = (VIRIDIS[k], VIRIDIS[k + 1]);
-    let mix = |p: u8, q: u8| (p as f64 + (q as f64 - p as f64) * f).round().clamp(0.0, 255.0) as u8;
+    let mix = |p: u8, q: u8| {
+        (p as f64 + (q as f64 - p as f64) * f)
+            .round()
+            .clamp(0.0, 255.0) as u8
+    };
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
 }
 
-const COLOUR_BAR_WIDTH: u32 = 100;
+/// Width of the colour-bar strip (bar and labels) for a panel `w` pixels wide.
+fn colour_bar_width(w: u32) -> u32 {
+    (w / 5).clamp(80, 100)
+}
 const COLOUR_BAR_STEPS: usize = 64;
 const COLOUR_BAR_THICKNESS: u32 = 22;
 
@@ -882,7 +897,8 @@ fn draw_heatmap(
         .titled(&map.title, (FONT, TITLE_SIZE))
         .map_err(backend_err)?;
     let (w, _) = body.dim_in_pixel();
-    let (plot_area, bar_area) = body.split_horizontally(w.saturating_sub(COLOUR_BAR_WIDTH));
+    let bar_w = colour_bar_width(w);
+    let (plot_area, bar_area) = body.split_horizontally(w.saturating_sub(bar_w));
 
     let ex = cell_edges(map.xs);
     let ey = cell_edges(map.ys);
@@ -930,7 +946,7 @@ fn draw_heatmap(
         .margin_top(MARGIN)
         .margin_bottom(MARGIN)
         .margin_left(8)
-        .margin_right(COLOUR_BAR_WIDTH.saturating_sub(8 + COLOUR_BAR_THICKNESS))
+        .margin_right(bar_w.saturating_sub(8 + COLOUR_BAR_THICKNESS))
         .x_label_area_size(X_LABEL_AREA)
         .build_cartesian_2d(0.0f64..1.0f64, vlo..vhi)
         .map_err(backend_err)?;
@@ -954,7 +970,11 @@ fn draw_heatmap(
         .color(&BLACK)
         .pos(Pos::new(HPos::Left, VPos::Center));
     let ticks = (0..=4).map(|k| {
-        let v = if k == 4 { vhi } else { vlo + span * k as f64 / 4.0 };
+        let v = if k == 4 {
+            vhi
+        } else {
+            vlo + span * k as f64 / 4.0
+        };
         EmptyElement::at((1.0, v))
             + PathElement::new(vec![(0, 0), (5, 0)], BLACK)
             + Text::new(format_value(v), (8, 0), label_style.clone())
@@ -1131,7 +1151,16 @@ mod tests {
 
     #[test]
     fn constant_and_extreme_data() {
-        for v in [0.0, 1.0, -3e-12, 1e-250, 1e-310, 7.5e200, f64::MAX, -f64::MAX] {
+        for v in [
+            0.0,
+            1.0,
+            -3e-12,
+            1e-250,
+            1e-310,
+            7.5e200,
+            f64::MAX,
+            -f64::MAX,
+        ] {
             let x = [v, v, v];
             let y = [v, v, v];
             let c = Chart::new("const", "x", "y").with(Series::line("s", &x, &y));
@@ -1161,11 +1190,14 @@ mod tests {
         let c = Chart::new("t", "x", "y")
             .with(Series::line("s", &x, &x))
             .size((0, 0));
-        assert!(matches!(render_chart_svg(&c), Err(PlotError::InvalidInput(_))));
+        assert!(matches!(
+            render_chart_svg(&c),
+            Err(PlotError::InvalidInput(_))
+        ));
         let c = c.size((MIN_PANEL_SIZE, MIN_PANEL_SIZE));
         render_chart_svg(&c).unwrap();
         assert!(matches!(
-            render_grid_svg(&[c.clone()], 1, (10, 10)),
+            render_grid_svg(std::slice::from_ref(&c), 1, (10, 10)),
             Err(PlotError::InvalidInput(_))
         ));
         assert!(matches!(
@@ -1173,7 +1205,7 @@ mod tests {
             Err(PlotError::InvalidInput(_))
         ));
         // cols = 0 is clamped to 1.
-        render_grid_svg(&[c.clone(), c], 0, (200, 150)).unwrap();
+        render_grid_svg(&[c.clone(), c], 0, (250, 200)).unwrap();
     }
 
     #[test]
@@ -1252,7 +1284,7 @@ mod tests {
         let nan = [f64::NAN; 6];
         let m = HeatMap::new("m", "x", "y", &xs, &ys, &nan);
         assert!(matches!(
-            render_heatmaps_svg(&[m.clone()], 1, (300, 300)),
+            render_heatmaps_svg(std::slice::from_ref(&m), 1, (300, 300)),
             Err(PlotError::EmptyData(_))
         ));
         // With an explicit range an all-missing map still renders.
@@ -1308,46 +1340,20 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("c.svg");
         let x = [0.0, 1.0];
-        write_chart_svg(&p, &Chart::new("file", "x", "y").with(Series::line("s", &x, &x))).unwrap();
+        write_chart_svg(
+            &p,
+            &Chart::new("file", "x", "y").with(Series::line("s", &x, &x)),
+        )
+        .unwrap();
         let s = std::fs::read_to_string(&p).unwrap();
         assert!(s.starts_with("<svg") && s.contains("file"));
         let bad = dir.path().join("missing-dir").join("c.svg");
         assert!(matches!(
-            write_chart_svg(&bad, &Chart::new("f", "x", "y").with(Series::line("s", &x, &x))),
+            write_chart_svg(
+                &bad,
+                &Chart::new("f", "x", "y").with(Series::line("s", &x, &x))
+            ),
             Err(PlotError::Io(_))
         ));
-    }
-}
-#[cfg(test)]
-mod demo_tmp {
-    use super::*;
-    #[test]
-    fn demo_write() {
-        let x: Vec<f64> = (0..60).map(|i| -3.0 + i as f64 * 0.1).collect();
-        let f: Vec<f64> = x.iter().map(|v| v.tanh() * 2.0).collect();
-        let lo: Vec<f64> = f.iter().zip(&x).map(|(v, u)| v - 0.2 - 0.1 * u.abs()).collect();
-        let hi: Vec<f64> = f.iter().zip(&x).map(|(v, u)| v + 0.2 + 0.1 * u.abs()).collect();
-        let meas: Vec<f64> = f.iter().enumerate().map(|(i, v)| v + 0.15 * (((i * 37) % 11) as f64 / 5.0 - 1.0)).collect();
-        let tf: Vec<f64> = x.iter().map(|v| v.tanh() * 2.1).collect();
-        let c = Chart::new("Estimated static map f", "input u", "f(u)")
-            .with(Series::band("95% band", &x, &f, &lo, &hi))
-            .with(Series::dots("measured", &x, &meas))
-            .with(Series::line("true f", &x, &tf));
-        std::fs::write("/tmp/plotdemo/chart.svg", render_chart_svg(&c).unwrap()).unwrap();
-        let y2: Vec<f64> = x.iter().map(|v| 1e-6 * v.exp()).collect();
-        let c2 = Chart::new("small numbers", "t [s]", "y").with(Series::line("y", &x, &y2));
-        let big: Vec<f64> = y2.iter().map(|v| v * 1e12).collect();
-        let c3 = Chart::new("big numbers", "t", "y").with(Series::dots("y", &x, &big));
-        std::fs::write("/tmp/plotdemo/grid.svg", render_grid_svg(&[c.clone(), c2, c3], 2, (500, 350)).unwrap()).unwrap();
-        let xs: Vec<f64> = (0..40).map(|i| i as f64 / 39.0 * 4.0 - 2.0).collect();
-        let ys: Vec<f64> = (0..30).map(|i| i as f64 / 29.0 * 3.0).collect();
-        let v: Vec<f64> = ys.iter().flat_map(|y| xs.iter().map(move |x| (x * y).sin() * y)).collect();
-        let mut v2 = v.clone();
-        v2[100] = f64::NAN;
-        let m1 = HeatMap::new("objective, beta = 0.1", "lambda", "sigma", &xs, &ys, &v).with_range(-3.0, 3.0);
-        let m2 = HeatMap::new("objective, beta = 1", "lambda", "sigma", &xs, &ys, &v2).with_range(-3.0, 3.0);
-        std::fs::write("/tmp/plotdemo/heat.svg", render_heatmaps_svg(&[m1.clone(), m2], 2, (550, 420)).unwrap()).unwrap();
-        std::fs::write("/tmp/plotdemo/heatsmall.svg", render_heatmaps_svg(&[m1], 1, (MIN_PANEL_SIZE, MIN_PANEL_SIZE)).unwrap()).unwrap();
-        std::fs::write("/tmp/plotdemo/gridsmall.svg", render_grid_svg(&[c], 1, (MIN_PANEL_SIZE, MIN_PANEL_SIZE)).unwrap()).unwrap();
     }
 }

@@ -165,7 +165,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     }
 
     let mut blocks = Vec::with_capacity(nblocks);
-    let mut w_all = Signal::zeros(len, nblocks.max(1));
+    let mut w_all = Signal::zeros(len, nblocks);
     let mut dispersions = Vec::with_capacity(nblocks);
     let mut fitted = vec![0.0; n];
     let mut tmp = vec![0.0; n];
@@ -195,11 +195,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             map: pen.interpolant(alpha),
         });
     }
-    for (bi, b) in blocks.iter().enumerate() {
-        // ŵ columns follow the w channel numbering when the blocks cover 0..n_w.
-        let col = if b.output < nblocks { b.output } else { bi };
+    for b in &blocks {
+        // Problem::new guarantees the outputs are exactly 0..n_blocks.
         for k in 0..len {
-            w_all.sample_mut(k)[col] = b.w_hat[k];
+            w_all.sample_mut(k)[b.output] = b.w_hat[k];
         }
     }
     let mut e_hat = vec![0.0; len * ne];
@@ -239,9 +238,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         ));
     }
     let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
-    let w_cols = w_all;
     Ok(Identification {
-        w_hat: w_cols,
+        w_hat: w_all,
         e_hat: Signal::new(ne, e_hat).map_err(Error::from)?,
         blocks,
         cost: CostTerms {
