@@ -59,6 +59,25 @@ pub trait QuadraticPenalty: Send + Sync {
 
     /// The interpolant N̂(z) = Σ_k α_k K(z, z_k) for the dual coefficients α (ŵ = Kα).
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant>;
+
+    /// The finite feature form K = ΨΛΨᵀ with the sample points, when the penalty has one. Solvers
+    /// that work in feature space (cost linear in L) use it.
+    fn features(&self) -> Option<(&dyn FeatureMap, &Signal)> {
+        None
+    }
+}
+
+/// A finite feature map ψ: ℝᵖ → ℝᵐ with weights λ (the diagonal of Λ), defining the kernel
+/// K(z₁, z₂) = Σ_j λ_j·ψ_j(z₁)·ψ_j(z₂) and the dispersion D = aᵀΛ⁻¹a of the map w = ψᵀa.
+pub trait FeatureMap: Send + Sync {
+    /// Number of features m.
+    fn dim(&self) -> usize;
+
+    /// The weights λ_j > 0.
+    fn weights(&self) -> &[f64];
+
+    /// Writes ψ(z) into `out` (length m).
+    fn eval_into(&self, z: &[f64], out: &mut [f64]);
 }
 
 /// Any [`Kernel`] as a quadratic dispersion: D(z, w) = wᵀK⁻¹w with K_ij = k(z_i, z_j).

@@ -57,6 +57,7 @@
 
 pub mod dispersion;
 pub mod error;
+pub mod fourier;
 pub mod identify;
 pub mod interpolant;
 pub mod kernel;
@@ -71,7 +72,8 @@ pub mod scenarios;
 pub mod simulate;
 pub mod solver;
 
-pub use dispersion::{Dispersion, KernelDispersion, Penalty, QuadraticPenalty};
+pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
+pub use fourier::{Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights};
 pub use error::{Error, Result};
 pub use identify::{
     BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, IdentifySettingsBuilder, SolverChoice,

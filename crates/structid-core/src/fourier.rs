@@ -1,0 +1,504 @@
+//! The Fourier-series kernel (paper section 4): a kernel with finitely many features.
+//!
+//! Each input's domain Ω = [a, b] is mapped affinely into [0, 1] with a margin of ¼ on each side,
+//! t = ¼ + ½·(z − a)/(b − a). The data therefore occupy [¼, ¾], and the periodic wrap-around
+//! distance between the ends of the data (½) is never shorter than their direct distance, so
+//! the periodic kernel does not tie N(a) to N(b) more than their separation warrants.
+//!
+//! In one input, K(t₁, t₂) = λ₀ + Σ_{n=1..N} 2λ_n·cos(2πn(t₁ − t₂)), with the real features
+//! φ(t) = [√λ₀, √(2λ_n)·cos(2πnt), √(2λ_n)·sin(2πnt)], i.e. K = φ(t₁)ᵀφ(t₂). Several inputs use
+//! the tensor product of the per-input series (guarded by a feature budget) or, optionally, the
+//! additive kernel K = Σ_j K_j(t_j).
+//!
+//! Weight families:
+//! * Gaussian-like, λ_n = s·exp(−2π²σ_t²n²) with σ_t = s·σ and s = ½/(b − a): the periodised
+//!   Gaussian with the paper's normalisation, so σ and β mean what they mean for
+//!   [`crate::GaussianKernel`] (away from the domain edges);
+//! * Sobolev-like, λ_n = c·(1 + n²)^(−s);
+//! * a user-supplied sequence λ₀, …, λ_N.
+
+use std::f64::consts::PI;
+use std::ops::Range;
+use std::sync::Arc;
+
+use structid_lti::Signal;
+
+use crate::dispersion::{Dispersion, FeatureMap, Penalty, QuadraticPenalty};
+use crate::error::{Error, Result, positive_finite};
+use crate::interpolant::Interpolant;
+use crate::kernel::Kernel;
+
+/// Margin on each side of the data inside the periodic unit interval.
+pub const DOMAIN_MARGIN: f64 = 0.25;
+
+/// Largest number of features a Fourier dispersion may create.
+pub const MAX_FEATURES: usize = 8192;
+
+/// How the weights λ_n are chosen.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FourierWeights {
+    /// The periodised Gaussian of width `sigma` (in units of z), normalised like the paper's
+    /// Gaussian kernel.
+    GaussianLike {
+        /// Width σ in units of z.
+        sigma: f64,
+    },
+    /// λ_n = scale·(1 + n²)^(−order).
+    SobolevLike {
+        /// Smoothness s (> ½).
+        order: f64,
+        /// Overall scale c.
+        scale: f64,
+    },
+    /// λ₀, …, λ_N given directly (all ≥ 0, λ₀ > 0).
+    Custom(Vec<f64>),
+}
+
+/// How several inputs are combined.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Combination {
+    /// Tensor product of the per-input series: all interactions, (2N+1)^p features.
+    #[default]
+    Tensor,
+    /// Additive: N(z) = Σ_j N_j(z_j), p·2N + 1 features.
+    Additive,
+}
+
+/// Settings of a Fourier-series dispersion; the domain and the kernel are fixed when the data
+/// are seen ([`Dispersion::penalty`]).
+///
+/// ```
+/// use structid_core::{Dispersion, FourierDispersion, FourierWeights};
+/// let d = FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 }).unwrap();
+/// assert!(d.describe().starts_with("fourier"));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct FourierDispersion {
+    weights: FourierWeights,
+    harmonics: Option<usize>,
+    domain: Option<Vec<(f64, f64)>>,
+    combination: Combination,
+}
+
+impl FourierDispersion {
+    /// A Fourier dispersion with the given weight family; harmonics chosen from the weights'
+    /// decay (down to 1e-12 of λ₀, at most 512) and the domain from the data range.
+    pub fn new(weights: FourierWeights) -> Result<Self> {
+        match &weights {
+            FourierWeights::GaussianLike { sigma } => {
+                positive_finite("sigma", *sigma)?;
+            }
+            FourierWeights::SobolevLike { order, scale } => {
+                positive_finite("scale", *scale)?;
+                if !(order.is_finite() && *order > 0.5) {
+                    return Err(Error::InvalidParameter {
+                        name: "order".into(),
+                        value: *order,
+                        reason: "the Sobolev order must exceed 1/2 for a continuous kernel".into(),
+                    });
+                }
+            }
+            FourierWeights::Custom(l) => {
+                if l.is_empty() || l.iter().any(|v| !v.is_finite() || *v < 0.0) || l[0] <= 0.0 {
+                    return Err(Error::InvalidParameter {
+                        name: "weights".into(),
+                        value: l.first().copied().unwrap_or(f64::NAN),
+                        reason: "custom weights need λ₀ > 0 and finite λ_n ≥ 0".into(),
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            weights,
+            harmonics: None,
+            domain: None,
+            combination: Combination::Tensor,
+        })
+    }
+
+    /// Uses exactly `n` harmonics per input (ignored for custom weights, whose length rules).
+    pub fn with_harmonics(mut self, n: usize) -> Self {
+        self.harmonics = Some(n);
+        self
+    }
+
+    /// Fixes the domain [a_j, b_j] of each input instead of taking the data range.
+    pub fn with_domain(mut self, domain: Vec<(f64, f64)>) -> Result<Self> {
+        if domain.iter().any(|(a, b)| !(a.is_finite() && b.is_finite() && b > a)) {
+            return Err(Error::InvalidStructure(
+                "a Fourier domain needs finite bounds with lower < upper for every input".into(),
+            ));
+        }
+        self.domain = Some(domain);
+        Ok(self)
+    }
+
+    /// Chooses how several inputs are combined.
+    pub fn with_combination(mut self, c: Combination) -> Self {
+        self.combination = c;
+        self
+    }
+
+    /// Builds the concrete kernel for inputs with the given sample range per input.
+    pub fn kernel_for(&self, z: &Signal) -> Result<FourierKernel> {
+        let p = z.channels();
+        let domain: Vec<(f64, f64)> = match &self.domain {
+            Some(d) if d.len() == p => d.clone(),
+            Some(d) => {
+                return Err(Error::DimensionMismatch {
+                    what: "Fourier domain".into(),
+                    expected: format!("{p} interval(s)"),
+                    found: d.len().to_string(),
+                });
+            }
+            None => (0..p)
+                .map(|c| {
+                    let (lo, hi) = (0..z.len()).fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), k| {
+                        let v = z.get(k, c);
+                        (l.min(v), h.max(v))
+                    });
+                    if hi > lo { (lo, hi) } else { (lo - 0.5, lo + 0.5) }
+                })
+                .collect(),
+        };
+        FourierKernel::new(&self.weights, self.harmonics, domain, self.combination)
+    }
+}
+
+impl Dispersion for FourierDispersion {
+    fn describe(&self) -> String {
+        let w = match &self.weights {
+            FourierWeights::GaussianLike { sigma } => format!("gaussian-like, sigma={sigma}"),
+            FourierWeights::SobolevLike { order, scale } => format!("sobolev-like, order={order}, scale={scale}"),
+            FourierWeights::Custom(l) => format!("custom, {} weights", l.len()),
+        };
+        format!("fourier({w})")
+    }
+
+    fn parameters(&self) -> Vec<(String, f64)> {
+        match &self.weights {
+            FourierWeights::GaussianLike { sigma } => vec![("sigma".into(), *sigma)],
+            FourierWeights::SobolevLike { order, scale } => vec![("order".into(), *order), ("scale".into(), *scale)],
+            FourierWeights::Custom(_) => Vec::new(),
+        }
+    }
+
+    fn penalty(&self, z: &Signal) -> Result<Penalty> {
+        let kernel = Arc::new(self.kernel_for(z)?);
+        Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
+            map: kernel,
+            z: z.clone(),
+        })))
+    }
+}
+
+/// The Fourier-series kernel on a fixed domain: a [`Kernel`] with an explicit [`FeatureMap`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FourierKernel {
+    /// Per input: (offset, scale) with t = offset + scale·z.
+    affine: Vec<(f64, f64)>,
+    /// Per input: λ₀..λ_N.
+    lambda: Vec<Vec<f64>>,
+    combination: Combination,
+    /// Feature weights (diagonal of Λ) in feature order.
+    weights: Vec<f64>,
+    /// For tensor features: the multi-index (harmonic, cos/sin) per input of each feature.
+    index: Vec<Vec<(usize, u8)>>,
+}
+
+fn harmonic_count(weights: &FourierWeights, harmonics: Option<usize>, s: f64) -> usize {
+    match (weights, harmonics) {
+        (FourierWeights::Custom(l), _) => l.len() - 1,
+        (_, Some(n)) => n,
+        (FourierWeights::GaussianLike { sigma }, None) => {
+            let st = s * sigma;
+            // exp(−2π²σ_t²N²) < 1e-12
+            ((27.64 / (2.0 * PI * PI * st * st)).sqrt().ceil() as usize).clamp(1, 512)
+        }
+        (FourierWeights::SobolevLike { order, .. }, None) => {
+            // (1 + N²)^(−s) < 1e-12
+            (1e12f64.powf(1.0 / order).sqrt().ceil() as usize).clamp(1, 512)
+        }
+    }
+}
+
+impl FourierKernel {
+    /// Builds the kernel for the given domain (one interval per input).
+    pub fn new(
+        weights: &FourierWeights,
+        harmonics: Option<usize>,
+        domain: Vec<(f64, f64)>,
+        combination: Combination,
+    ) -> Result<Self> {
+        let p = domain.len();
+        if p == 0 {
+            return Err(Error::InvalidStructure("a Fourier kernel needs at least one input".into()));
+        }
+        let mut affine = Vec::with_capacity(p);
+        let mut lambda = Vec::with_capacity(p);
+        for &(a, b) in &domain {
+            let s = (1.0 - 2.0 * DOMAIN_MARGIN) / (b - a);
+            affine.push((DOMAIN_MARGIN - s * a, s));
+            let n = harmonic_count(weights, harmonics, s);
+            let l: Vec<f64> = match weights {
+                FourierWeights::GaussianLike { sigma } => {
+                    let st = s * sigma;
+                    (0..=n).map(|k| s * (-2.0 * PI * PI * st * st * (k * k) as f64).exp()).collect()
+                }
+                FourierWeights::SobolevLike { order, scale } => {
+                    (0..=n).map(|k| scale * (1.0 + (k * k) as f64).powf(-order)).collect()
+                }
+                FourierWeights::Custom(l) => l.clone(),
+            };
+            lambda.push(l);
+        }
+        let (weights, index) = match combination {
+            Combination::Tensor => {
+                let count: usize = lambda.iter().map(|l| 2 * l.len() - 1).product();
+                if count > MAX_FEATURES {
+                    return Err(Error::InvalidStructure(format!(
+                        "the tensor-product Fourier kernel would need {count} features (more than {MAX_FEATURES}); \
+                         use fewer harmonics, a wider sigma, or the additive combination"
+                    )));
+                }
+                let mut idx: Vec<Vec<(usize, u8)>> = vec![Vec::new()];
+                for l in &lambda {
+                    let mut next = Vec::with_capacity(idx.len() * (2 * l.len() - 1));
+                    for prefix in &idx {
+                        for h in 0..l.len() {
+                            for kind in if h == 0 { 0..1 } else { 0..2 } {
+                                let mut v = prefix.clone();
+                                v.push((h, kind));
+                                next.push(v);
+                            }
+                        }
+                    }
+                    idx = next;
+                }
+                let w = idx
+                    .iter()
+                    .map(|mi| {
+                        mi.iter()
+                            .zip(&lambda)
+                            .map(|(&(h, _), l)| if h == 0 { l[0] } else { 2.0 * l[h] })
+                            .product()
+                    })
+                    .collect();
+                (w, idx)
+            }
+            Combination::Additive => {
+                let mut w = vec![lambda.iter().map(|l| l[0]).sum()];
+                for l in &lambda {
+                    for &lh in &l[1..] {
+                        w.push(2.0 * lh);
+                        w.push(2.0 * lh);
+                    }
+                }
+                if w.len() > MAX_FEATURES {
+                    return Err(Error::InvalidStructure(format!(
+                        "the Fourier kernel would need {} features (more than {MAX_FEATURES})",
+                        w.len()
+                    )));
+                }
+                (w, Vec::new())
+            }
+        };
+        Ok(Self {
+            affine,
+            lambda,
+            combination,
+            weights,
+            index,
+        })
+    }
+
+    /// Number of harmonics N per input.
+    pub fn harmonics(&self) -> Vec<usize> {
+        self.lambda.iter().map(|l| l.len() - 1).collect()
+    }
+
+    fn unit(&self, z: &[f64], j: usize) -> f64 {
+        let (o, s) = self.affine[j];
+        o + s * z[j]
+    }
+}
+
+impl Kernel for FourierKernel {
+    fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
+        let series = |j: usize| -> f64 {
+            let d = self.unit(a, j) - self.unit(b, j);
+            let l = &self.lambda[j];
+            l[0] + (1..l.len()).map(|n| 2.0 * l[n] * (2.0 * PI * n as f64 * d).cos()).sum::<f64>()
+        };
+        match self.combination {
+            Combination::Tensor => (0..self.affine.len()).map(series).product(),
+            Combination::Additive => (0..self.affine.len()).map(series).sum(),
+        }
+    }
+
+    fn describe(&self) -> String {
+        format!("fourier(harmonics={:?}, features={})", self.harmonics(), self.weights.len())
+    }
+}
+
+impl FeatureMap for FourierKernel {
+    fn dim(&self) -> usize {
+        self.weights.len()
+    }
+
+    fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Unscaled features ψ with K = ψᵀΛψ: ψ = 1, cos(2πnt), sin(2πnt) (products for tensors).
+    fn eval_into(&self, z: &[f64], out: &mut [f64]) {
+        let p = self.affine.len();
+        // cos/sin of every harmonic of every input, by the angle-addition recurrence.
+        let mut trig: Vec<Vec<(f64, f64)>> = Vec::with_capacity(p);
+        for j in 0..p {
+            let t = self.unit(z, j);
+            let (s1, c1) = (2.0 * PI * t).sin_cos();
+            let n = self.lambda[j].len();
+            let mut v = Vec::with_capacity(n);
+            let (mut c, mut s) = (1.0, 0.0);
+            for _ in 0..n {
+                v.push((c, s));
+                (c, s) = (c * c1 - s * s1, s * c1 + c * s1);
+            }
+            trig.push(v);
+        }
+        match self.combination {
+            Combination::Tensor => {
+                for (o, mi) in out.iter_mut().zip(&self.index) {
+                    *o = mi
+                        .iter()
+                        .enumerate()
+                        .map(|(j, &(h, kind))| if kind == 0 { trig[j][h].0 } else { trig[j][h].1 })
+                        .product();
+                }
+            }
+            Combination::Additive => {
+                out[0] = 1.0;
+                let mut at = 1;
+                for tj in &trig {
+                    for &(c, s) in &tj[1..] {
+                        out[at] = c;
+                        out[at + 1] = s;
+                        at += 2;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A quadratic penalty given by a feature map at fixed sample points: K = Ψ Λ Ψᵀ.
+pub(crate) struct FeaturePenalty<F: FeatureMap + Kernel> {
+    pub(crate) map: Arc<F>,
+    pub(crate) z: Signal,
+}
+
+impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
+    fn len(&self) -> usize {
+        self.z.len()
+    }
+
+    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]) {
+        self.map.fill_gram_columns(&self.z, cols, out);
+    }
+
+    fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {
+        // N̂(z) = Σ_k α_k K(z, z_k) = ψ(z)ᵀ·(Λ Ψᵀ α): m coefficients instead of L centres.
+        let m = self.map.dim();
+        let mut coef = vec![0.0; m];
+        let mut psi = vec![0.0; m];
+        for (k, a) in alpha.iter().enumerate() {
+            if *a != 0.0 {
+                self.map.eval_into(self.z.sample(k), &mut psi);
+                coef.iter_mut().zip(&psi).for_each(|(c, v)| *c += a * v);
+            }
+        }
+        coef.iter_mut().zip(self.map.weights()).for_each(|(c, l)| *c *= l);
+        Box::new(FeatureExpansion::new(Arc::clone(&self.map) as Arc<dyn FeatureMap>, coef))
+    }
+
+    fn features(&self) -> Option<(&dyn FeatureMap, &Signal)> {
+        Some((self.map.as_ref(), &self.z))
+    }
+}
+
+/// N̂(z) = ψ(z)ᵀc for a feature map ψ and coefficients c.
+pub struct FeatureExpansion {
+    map: Arc<dyn FeatureMap>,
+    coef: Vec<f64>,
+}
+
+impl FeatureExpansion {
+    /// An expansion with the given coefficients (length = number of features).
+    pub fn new(map: Arc<dyn FeatureMap>, coef: Vec<f64>) -> Self {
+        Self { map, coef }
+    }
+
+    /// The coefficients.
+    pub fn coefficients(&self) -> &[f64] {
+        &self.coef
+    }
+}
+
+impl Interpolant for FeatureExpansion {
+    fn eval(&self, z: &[f64]) -> f64 {
+        let mut psi = vec![0.0; self.coef.len()];
+        self.map.eval_into(z, &mut psi);
+        psi.iter().zip(&self.coef).map(|(a, b)| a * b).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn signal(v: &[f64]) -> Signal {
+        Signal::from_channels(&[v.to_vec()]).unwrap()
+    }
+
+    #[test]
+    fn features_reproduce_the_kernel() {
+        for comb in [Combination::Tensor, Combination::Additive] {
+            for p in 1..=2 {
+                let dom = vec![(-1.0, 2.0); p];
+                let k = FourierKernel::new(&FourierWeights::SobolevLike { order: 1.5, scale: 0.7 }, Some(6), dom, comb).unwrap();
+                let (a, b) = (vec![0.3, -0.8][..p].to_vec(), vec![1.7, 0.1][..p].to_vec());
+                let mut pa = vec![0.0; k.dim()];
+                let mut pb = vec![0.0; k.dim()];
+                k.eval_into(&a, &mut pa);
+                k.eval_into(&b, &mut pb);
+                let via: f64 = pa.iter().zip(&pb).zip(k.weights()).map(|((x, y), l)| x * y * l).sum();
+                assert!((via - k.eval(&a, &b)).abs() < 1e-12 * k.eval(&a, &a), "{comb:?} p={p}");
+            }
+        }
+    }
+
+    #[test]
+    fn gaussian_like_matches_the_gaussian_kernel_inside_the_domain() {
+        let sigma = 0.15;
+        let fd = FourierDispersion::new(FourierWeights::GaussianLike { sigma }).unwrap();
+        let k = fd.kernel_for(&signal(&[-1.0, 1.0])).unwrap();
+        let g = crate::GaussianKernel::new(sigma).unwrap();
+        for (a, b) in [(0.0, 0.0), (0.1, -0.2), (-1.0, -0.7), (0.9, 1.0)] {
+            let (x, y) = (k.eval(&[a], &[b]), g.eval(&[a], &[b]));
+            assert!((x - y).abs() < 1e-9 * g.eval(&[0.0], &[0.0]), "({a},{b}): {x} vs {y}");
+        }
+        // The ends of the data are not tied together by the periodic wrap.
+        assert!(k.eval(&[-1.0], &[1.0]) < 1e-9);
+    }
+
+    #[test]
+    fn tensor_feature_guard_and_bad_parameters() {
+        let fd = FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.001 }).unwrap();
+        let z = Signal::from_fn(10, 3, |k, c| (k + c) as f64);
+        assert!(matches!(fd.penalty(&z), Err(Error::InvalidStructure(_))));
+        assert!(FourierDispersion::new(FourierWeights::GaussianLike { sigma: -1.0 }).is_err());
+        assert!(FourierDispersion::new(FourierWeights::SobolevLike { order: 0.3, scale: 1.0 }).is_err());
+        assert!(FourierDispersion::new(FourierWeights::Custom(vec![0.0, 1.0])).is_err());
+    }
+}
