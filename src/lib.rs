@@ -2,13 +2,13 @@
 //!
 //! Structured nonlinear system identification: a system is an interconnection of **known** LTI
 //! blocks and **unknown static** maps, written as one LFT; identification finds the maps by
-//! minimising J = (1/L)·Σ|e_k|² + β·Σ_i D_i(z^[i], w^[i]) over all signals consistent with the
+//! minimising J = (1/L)·Σ|e_k|² + β·Σ_i D_i(z^\[i\], w^\[i\]) over all signals consistent with the
 //! data (Hsu, Vincent, Wemhoff & Poolla, IFAC SYSID 2006).
 //!
 //! This facade re-exports the workspace crates:
 //! * [`lti`] — linear systems: state space, transfer functions, ZOH, recursive Toeplitz operators;
 //! * the core (re-exported at the top level) — the LFT model, measurability, dispersions and
-//!   kernels, [`identify`], simulation with maps in the loop;
+//!   kernels, [`identify()`], simulation with maps in the loop;
 //! * [`io`] — model files (TOML), data files (CSV), reports and atomic output;
 //! * [`plot`] — SVG figures.
 //!

@@ -2,7 +2,7 @@
 //!
 //! A dispersion is turned into a [`Penalty`] once the sample points z are known. The penalty is
 //! what a solver sees; its kind (quadratic today, conic for total variation) decides which
-//! solvers can handle it, so [`crate::identify`] never needs to know the concrete dispersion type.
+//! solvers can handle it, so [`crate::identify()`] never needs to know the concrete dispersion type.
 
 use std::fmt;
 use std::ops::Range;

@@ -22,7 +22,7 @@ pub enum SolverChoice {
     Exact,
 }
 
-/// Settings of [`identify`]; build them with [`IdentifySettings::builder`].
+/// Settings of [`identify()`]; build them with [`IdentifySettings::builder`].
 ///
 /// ```
 /// use structid_core::IdentifySettings;
@@ -129,7 +129,7 @@ impl IdentifySettingsBuilder {
 pub struct CostTerms {
     /// μ = (1/L)·Σ_k |ê_k|².
     pub noise: f64,
-    /// D_i(z^[i], ŵ^[i]) for each block.
+    /// D_i(z^\[i\], ŵ^\[i\]) for each block.
     pub dispersions: Vec<f64>,
     /// β.
     pub beta: f64,
@@ -187,11 +187,11 @@ pub struct BlockEstimate {
     pub dispersion: String,
     /// The dispersion's parameters.
     pub parameters: Vec<(String, f64)>,
-    /// Its input samples z^[i].
+    /// Its input samples z^\[i\].
     pub z: Signal,
-    /// ŵ^[i] at the samples.
+    /// ŵ^\[i\] at the samples.
     pub w_hat: Vec<f64>,
-    /// D_i(z^[i], ŵ^[i]).
+    /// D_i(z^\[i\], ŵ^\[i\]).
     pub dispersion_value: f64,
     /// The interpolant N̂_i.
     pub map: Box<dyn Interpolant>,
@@ -215,7 +215,7 @@ impl std::fmt::Debug for BlockEstimate {
     }
 }
 
-/// The result of [`identify`].
+/// The result of [`identify()`].
 #[derive(Debug)]
 pub struct Identification {
     /// ŵ (L × n_w), channel c from the block with `output == c`.
@@ -246,7 +246,7 @@ impl Identification {
 
 /// Identifies the static maps of `model` from `data`: the minimiser of the paper's eq. (4),
 ///
-/// J(e, w) = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^[i], w^[i]) subject to T_ye·e + T_yw·w = y − T_yu·u,
+/// J(e, w) = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^\[i\], w^\[i\]) subject to T_ye·e + T_yw·w = y − T_yu·u,
 ///
 /// with a zero initial state.
 ///
@@ -279,7 +279,7 @@ pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Resu
     Ok(id)
 }
 
-/// [`identify`] for a problem posed directly in operator form.
+/// [`identify()`] for a problem posed directly in operator form.
 pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     positive_finite("beta", settings.beta)?;
     match settings.solver {

@@ -148,8 +148,9 @@ impl Kernel for GaussianKernel {
 /// that is far below rounding).
 pub(crate) fn exp_in_place(xs: &mut [f64], scale: f64) {
     const LOG2E: f64 = std::f64::consts::LOG2_E;
-    const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    // ln 2 split so that n·LN2_HI is exact for |n| < 2^11 (fdlibm's constants).
+    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
     // Adding 1.5·2^52 rounds to an integer in the low mantissa bits.
     const MAGIC: f64 = 6_755_399_441_055_744.0;
     const INV_FACT: [f64; 13] = [

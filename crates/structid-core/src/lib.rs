@@ -9,11 +9,11 @@
 //!   y = L_yu·u + L_ye·e + L_yw·w,      z = L_zu·u + L_ze·e + L_zw·w,      w = N(z)
 //! ```
 //!
-//! The nonlinear part is a list of blocks N^[i], each reading some z channels and writing one w
+//! The nonlinear part is a list of blocks N^\[i\], each reading some z channels and writing one w
 //! channel ([`NonlinearBlock`], [`Model`]). z must be *measurable*, i.e. computable from u and y
 //! ([`ZSource`], [`Lft::measurability`]).
 //!
-//! Among all (e, w) consistent with the data, [`identify`] returns the minimiser of
+//! Among all (e, w) consistent with the data, [`identify()`] returns the minimiser of
 //!
 //! ```text
 //!   J(e, w) = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^[i], w^[i])            (eq. 4)
@@ -29,7 +29,7 @@
 //!   is built in; a custom kernel is a dozen lines (see `examples/custom_kernel.rs`).
 //!
 //! A dispersion turns into a [`Penalty`] once the sample points are known; solvers only see
-//! penalties, so user-defined dispersions run through the same [`identify`].
+//! penalties, so user-defined dispersions run through the same [`identify()`].
 //!
 //! ## The exact solution without K⁻¹
 //! Gaussian Gram matrices are numerically singular, so the paper's printed route through

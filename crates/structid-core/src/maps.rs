@@ -98,7 +98,7 @@ pub enum LookupTable {
         /// Values at the breakpoints.
         v: Vec<f64>,
     },
-    /// A rectangular grid: values[i + j·nx] at (x[i], y[j]).
+    /// A rectangular grid: `values[i + j·nx]` at `(x[i], y[j])`.
     Grid2D {
         /// First-input breakpoints.
         x: Vec<f64>,

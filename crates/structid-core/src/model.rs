@@ -9,7 +9,7 @@ use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
 use crate::lft::Lft;
 
-/// One unknown static map N^[i]: it reads the z channels `inputs` and produces w channel `output`.
+/// One unknown static map N^\[i\]: it reads the z channels `inputs` and produces w channel `output`.
 #[derive(Clone)]
 pub struct NonlinearBlock {
     /// Name used in reports and output files.

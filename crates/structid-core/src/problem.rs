@@ -1,7 +1,7 @@
 //! The identification problem in operator form, independent of how the operators are realised.
 //!
-//! With r = y − T_yu·u, find (e, w) with T_ye·e + Σ_i T_yw^[i]·w^[i] = r minimising
-//! J = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^[i], w^[i]).
+//! With r = y − T_yu·u, find (e, w) with T_ye·e + Σ_i T_yw^\[i\]·w^\[i\] = r minimising
+//! J = (1/L)·Σ_k e_kᵀe_k + β·Σ_i D_i(z^\[i\], w^\[i\]).
 //! The operators are any [`LinearSystem`], so a user can pose a problem with an FIR or
 //! impulse-response model directly with [`Problem::new`]; [`Problem::from_model`] builds it from
 //! an [`crate::Lft`].
@@ -22,9 +22,9 @@ pub struct ProblemBlock {
     pub name: String,
     /// The w channel this block produces (orders the columns of ŵ).
     pub output: usize,
-    /// T_yw^[i]: the path from this block's output to y (n_y outputs, one input).
+    /// T_yw^\[i\]: the path from this block's output to y (n_y outputs, one input).
     pub path: Arc<dyn LinearSystem>,
-    /// The block's input samples z^[i] (L × p_i).
+    /// The block's input samples z^\[i\] (L × p_i).
     pub z: Signal,
     /// The block's dispersion.
     pub dispersion: Arc<dyn Dispersion>,

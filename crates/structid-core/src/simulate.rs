@@ -7,7 +7,7 @@ use crate::interpolant::Interpolant;
 use crate::lft::Lft;
 use crate::model::Model;
 
-/// One static map placed in the loop: w[output] = map(z[inputs]).
+/// One static map placed in the loop: `w[output] = map(z[inputs])`.
 #[derive(Clone, Copy)]
 pub struct MapBinding<'a> {
     /// z channels read by the map.

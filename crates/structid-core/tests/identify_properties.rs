@@ -25,7 +25,7 @@ struct Case {
 fn spread_points(len: usize, seed: u64, shift: usize) -> Vec<f64> {
     let h = 2.0 / len as f64;
     let step = [7usize, 11, 13, 17, 19][(seed as usize + shift) % 5];
-    let step = if len % step == 0 { 1 } else { step };
+    let step = if len.is_multiple_of(step) { 1 } else { step };
     (0..len).map(|k| -1.0 + h * ((k * step + shift) % len) as f64).collect()
 }
 
@@ -527,7 +527,7 @@ fn singular_system_matrix_is_regularised_and_reported() {
     )
     .unwrap();
     let z: Vec<f64> = (0..40).map(|k| ((k % 10) as f64) / 10.0).collect();
-    let u = Signal::from_channels(&[z.clone()]).unwrap();
+    let u = Signal::from_channels(std::slice::from_ref(&z)).unwrap();
     let y = Signal::from_channels(&[z.iter().map(|v| v.sin()).collect()]).unwrap();
     let id = identify(&model, &Data::new(u, y).unwrap(), &settings(0.01)).unwrap();
     assert!(id.w_hat.as_slice().iter().all(|v| v.is_finite()));
