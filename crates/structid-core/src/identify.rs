@@ -35,6 +35,17 @@ pub struct IdentifySettings {
     beta: f64,
     solver: SolverChoice,
     memory_limit_bytes: Option<u64>,
+    initial_state: InitialState,
+}
+
+/// How the LFT's initial state is treated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub enum InitialState {
+    /// The system starts at rest, x₀ = 0 (the paper's assumption).
+    #[default]
+    Zero,
+    /// x₀ is estimated as unpenalised parameters (real records rarely start at rest).
+    Estimate,
 }
 
 impl Default for IdentifySettings {
@@ -45,6 +56,7 @@ impl Default for IdentifySettings {
             beta: 0.01,
             solver: SolverChoice::Auto,
             memory_limit_bytes: None,
+            initial_state: InitialState::Zero,
         }
     }
 }
@@ -65,6 +77,11 @@ impl IdentifySettings {
     /// The solver choice.
     pub fn solver(&self) -> SolverChoice {
         self.solver
+    }
+
+    /// How the initial state is treated.
+    pub fn initial_state(&self) -> InitialState {
+        self.initial_state
     }
 
     /// The memory budget in bytes (`None`: detect at run time).
@@ -103,6 +120,11 @@ impl IdentifySettingsBuilder {
     /// The solver.
     pub fn solver(mut self, solver: SolverChoice) -> Self {
         self.inner.solver = solver;
+        self
+    }
+    /// Zero or estimated initial state.
+    pub fn initial_state(mut self, initial_state: InitialState) -> Self {
+        self.inner.initial_state = initial_state;
         self
     }
     /// An explicit memory budget in bytes.
@@ -228,6 +250,8 @@ pub struct Identification {
     pub cost: CostTerms,
     /// How z was obtained.
     pub z_source: ZSource,
+    /// The estimated initial state x₀, when it was estimated.
+    pub initial_state: Option<Vec<f64>>,
     /// Diagnostics.
     pub diagnostics: Diagnostics,
 }
@@ -272,7 +296,10 @@ impl Identification {
 /// ```
 pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Result<Identification> {
     let t0 = Instant::now();
-    let problem = Problem::from_model(model, data)?;
+    let problem = match settings.initial_state {
+        InitialState::Zero => Problem::from_model(model, data)?,
+        InitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
+    };
     let mut id = identify_problem(&problem, settings)?;
     id.diagnostics.timings.prepare += t0.elapsed().as_secs_f64() - id.diagnostics.timings.total;
     id.diagnostics.timings.total = t0.elapsed().as_secs_f64();

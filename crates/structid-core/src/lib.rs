@@ -76,7 +76,7 @@ pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, Quadrati
 pub use fourier::{Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights};
 pub use error::{Error, Result};
 pub use identify::{
-    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, IdentifySettingsBuilder, SolverChoice,
+    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, IdentifySettingsBuilder, InitialState, SolverChoice,
     Timings, identify, identify_problem,
 };
 pub use interpolant::Interpolant;

@@ -37,6 +37,9 @@ pub struct Problem {
     noise: Arc<dyn LinearSystem>,
     blocks: Vec<ProblemBlock>,
     z_source: ZSource,
+    /// Columns O·e_j of the free response of y to each unit initial state (L·n_y × n), when the
+    /// initial state is to be estimated.
+    free_response: Option<faer::Mat<f64>>,
 }
 
 impl Problem {
@@ -89,6 +92,7 @@ impl Problem {
             noise,
             blocks,
             z_source: ZSource::Measured,
+            free_response: None,
         })
     }
 
@@ -116,6 +120,76 @@ impl Problem {
         let mut p = Self::new(residual, Arc::new(lft.t_ye()), blocks)?;
         p.z_source = z_source;
         Ok(p)
+    }
+
+    /// Estimates an unknown initial state x₀ as unpenalised parameters: r → r − O·x₀, where the
+    /// columns of `free_response` (L·n_y × n) are O's, the response of y to each unit initial
+    /// state with no input.
+    pub fn with_free_response(mut self, free_response: faer::Mat<f64>) -> Result<Self> {
+        if free_response.nrows() != self.residual.len() * self.outputs() {
+            return Err(Error::DimensionMismatch {
+                what: "rows of the free-response matrix O".into(),
+                expected: (self.residual.len() * self.outputs()).to_string(),
+                found: free_response.nrows().to_string(),
+            });
+        }
+        self.free_response = Some(free_response);
+        Ok(self)
+    }
+
+    /// Like [`Problem::from_model`], and also sets up the estimation of the LFT's unknown initial
+    /// state. z must stay computable with x₀ ≠ 0: measured, or the x₀-part of z must be Ψ times
+    /// that of y ([`Error::NotMeasurable`] otherwise).
+    pub fn from_model_with_initial_state(model: &Model, data: &Data) -> Result<Self> {
+        let problem = Self::from_model(model, data)?;
+        let lft = model.lft();
+        let m = lft.matrices();
+        let n = lft.dims().states;
+        if data.z().is_none() && lft.dims().z > 0 {
+            // The x₀-part of z is C_z·A^k·x₀; it must equal Ψ·C_y·A^k·x₀ (Ψ = 0 for z = L_zu·u).
+            let psi = match problem.z_source() {
+                ZSource::OutputInjection { psi } => psi.clone(),
+                _ => nalgebra::DMatrix::zeros(lft.dims().z, lft.dims().y),
+            };
+            let mut ak = nalgebra::DMatrix::<f64>::identity(n, n);
+            let scale = m.cz.norm().max(1.0);
+            for _ in 0..n.max(1) {
+                let misfit = (&m.cz * &ak - &psi * &m.cy * &ak).norm();
+                if misfit > 1e-9 * scale * ak.norm().max(1.0) {
+                    return Err(Error::NotMeasurable {
+                        explanation: "with an unknown initial state, z is no longer computable from u and y \
+                                      (the initial condition reaches z and y differently); provide z as measured \
+                                      data columns, or identify with a zero initial state"
+                            .into(),
+                    });
+                }
+                ak = &m.a * ak;
+            }
+        }
+        let len = data.len();
+        let ny = lft.dims().y;
+        let free = structid_lti::StateSpace::new(
+            m.a.clone(),
+            nalgebra::DMatrix::zeros(n, 0),
+            m.cy.clone(),
+            nalgebra::DMatrix::zeros(ny, 0),
+        )?;
+        let mut o = faer::Mat::<f64>::zeros(len * ny, n);
+        let none = Signal::zeros(len, 0);
+        for j in 0..n {
+            let mut x0 = vec![0.0; n];
+            x0[j] = 1.0;
+            let (y, _) = free.simulate_from(&x0, &none)?;
+            for (i, v) in y.as_slice().iter().enumerate() {
+                o[(i, j)] = *v;
+            }
+        }
+        problem.with_free_response(o)
+    }
+
+    /// The free-response matrix O, when the initial state is estimated.
+    pub fn free_response(&self) -> Option<&faer::Mat<f64>> {
+        self.free_response.as_ref()
     }
 
     /// Number of samples L.

@@ -9,6 +9,7 @@ use std::sync::Arc;
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
 use structid_core::*;
+use structid_core::scenarios;
 use structid_lti::testing::random_stable_system;
 use structid_lti::{LinearSystem, Signal, StateSpace};
 
@@ -537,4 +538,117 @@ fn singular_system_matrix_is_regularised_and_reported() {
     for (k, zk) in z.iter().enumerate() {
         assert!((id.w_hat.get(k, 0) - zk.sin()).abs() < 1e-4, "sample {k}: {} vs {} ({:?})", id.w_hat.get(k, 0), zk.sin(), id.diagnostics);
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, .. ProptestConfig::default() })]
+
+    /// With an unknown initial state, the estimate equals the dense joint minimiser over
+    /// (e, w, x₀) with x₀ unpenalised, and it is feasible: T_ye·ê + T_yw·ŵ + O·x̂₀ = r.
+    #[test]
+    fn prop_initial_state_estimate_matches_dense_joint_minimiser((seed, n, ne, nw, ny, len, lb) in case_strategy()) {
+        prop_assume!(n > 0);
+        let beta = 10f64.powf(lb);
+        let case = make_case(seed, n, ne, nw, ny, len.max(12));
+        let len = case.len;
+        let s = IdentifySettings::builder().beta(beta).initial_state(InitialState::Estimate).build().unwrap();
+        let id = identify(&case.model, &case.data, &s).unwrap();
+        let x0 = DVector::from_vec(id.initial_state.clone().unwrap());
+        let d = dense(&case);
+        let lft = case.model.lft();
+        let m = lft.matrices();
+        // Dense O: rows k·n_y + i = (C_y A^k)_i.
+        let mut o = DMatrix::zeros(len * ny, n);
+        let mut cak = m.cy.clone();
+        for k in 0..len {
+            o.rows_mut(k * ny, ny).copy_from(&cak);
+            cak = &cak * &m.a;
+        }
+        // Reference: the null-space minimiser with x₀ appended as unpenalised variables.
+        let mut d2 = Dense { t_ye: DMatrix::zeros(0, 0), t_yw: DMatrix::zeros(0, 0), k: d.k.clone(), r: d.r.clone() };
+        let ne_tot = d.t_ye.ncols();
+        let mut t_ye_x = DMatrix::zeros(d.r.len(), ne_tot + n);
+        t_ye_x.columns_mut(0, ne_tot).copy_from(&d.t_ye);
+        t_ye_x.columns_mut(ne_tot, n).copy_from(&o);
+        d2.t_ye = t_ye_x;
+        d2.t_yw = d.t_yw.clone();
+        let (ex_ref, w_ref, _, _) = paper_reference_weighted(&d2, beta, len, ne_tot);
+        let x0_ref = ex_ref.rows(ne_tot, n).into_owned();
+        let w = stack_w(&id);
+        prop_assert!(rel(&w_ref, &w) < 1e-6, "ŵ differs: {}", rel(&w_ref, &w));
+        prop_assert!((&x0_ref - &x0).norm() <= 1e-6 * x0_ref.norm().max(1e-3), "x₀ {x0_ref} vs {x0}");
+        let e = DVector::from_column_slice(id.e_hat.as_slice());
+        let lhs = &d.t_ye * &e + &d.t_yw * &w + &o * &x0;
+        prop_assert!(rel(&lhs, &d.r) < 1e-9);
+    }
+}
+
+/// Like `paper_reference`, but only the first `ne` columns of `t_ye` are noise (weight 1/L);
+/// the remaining ones are unpenalised (weight 0).
+fn paper_reference_weighted(d: &Dense, beta: f64, len: usize, ne: usize) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let (nv, nw) = (d.t_ye.ncols(), d.t_yw.ncols());
+    let mut a = DMatrix::zeros(d.r.len(), nv + nw);
+    a.columns_mut(0, nv).copy_from(&d.t_ye);
+    a.columns_mut(nv, nw).copy_from(&d.t_yw);
+    let q = d.k.clone().try_inverse().expect("well-conditioned K");
+    let mut h = DMatrix::zeros(nv + nw, nv + nw);
+    for i in 0..ne {
+        h[(i, i)] = 1.0 / len as f64;
+    }
+    h.view_mut((nv, nv), (nw, nw)).copy_from(&(q * beta));
+    let aat = &a * a.transpose();
+    let x_p = a.transpose() * aat.cholesky().expect("full row rank").solve(&d.r);
+    let svd = a.clone().svd(true, true);
+    let tol = 1e-14 * svd.singular_values.max();
+    let rank = svd.singular_values.iter().filter(|s| **s > tol).count();
+    let v_t = svd.v_t.unwrap();
+    let dim = nv + nw;
+    let mut basis: Vec<DVector<f64>> = v_t.transpose().column_iter().take(rank).map(|c| c.into_owned()).collect();
+    for i in 0..dim {
+        let mut v = DVector::zeros(dim);
+        v[i] = 1.0;
+        for _ in 0..2 {
+            for b in &basis {
+                let p = b.dot(&v);
+                v -= b * p;
+            }
+        }
+        if v.norm() > 1e-6 {
+            basis.push(v.normalize());
+        }
+        if basis.len() == dim {
+            break;
+        }
+    }
+    let nmat = DMatrix::from_columns(&basis[rank..]);
+    let v = (nmat.transpose() * &h * &nmat).cholesky().expect("PD reduced Hessian").solve(&(-(nmat.transpose() * &h * &x_p)));
+    let x = x_p + &nmat * v;
+    (x.rows(0, nv).into_owned(), x.rows(nv, nw).into_owned(), nmat, h)
+}
+
+/// On noise-free data from a system that does not start at rest, the initial-state option
+/// recovers x₀ and gives a better map than assuming rest.
+#[test]
+fn initial_state_is_recovered_and_improves_the_map() {
+    use structid_core::paper::gaussian_noise;
+    let exp = scenarios::hammerstein(400, 3, 0.0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()), 9).unwrap();
+    let model = &exp.model;
+    let x0_true = vec![3.0, -2.0, 1.5];
+    let u = exp.data.u().clone();
+    let tanh = |z: &[f64]| z[0].tanh();
+    let e = gaussian_noise(u.len(), 1, 0.0, 1);
+    let sim = model.simulate(&[&tanh], &u, Some(&e), Some(&x0_true)).unwrap();
+    let data = Data::new(u, sim.y).unwrap();
+    let truth = sim.w.channel(0);
+    let est = IdentifySettings::builder().beta(1e-6).initial_state(InitialState::Estimate).build().unwrap();
+    let zero = IdentifySettings::builder().beta(1e-6).build().unwrap();
+    let a = identify(model, &data, &est).unwrap();
+    let b = identify(model, &data, &zero).unwrap();
+    let x0 = a.initial_state.clone().unwrap();
+    let err_x0: f64 = x0.iter().zip(&x0_true).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    assert!(err_x0 < 0.05 * 3.9, "x₀ = {x0:?}, true {x0_true:?}");
+    let ea = structid_core::metrics::rms_difference(&a.blocks[0].w_hat, &truth);
+    let eb = structid_core::metrics::rms_difference(&b.blocks[0].w_hat, &truth);
+    assert!(ea < 0.5 * eb, "map error with x₀ estimated {ea}, assuming rest {eb}");
+    assert!(b.initial_state.is_none());
 }

@@ -36,11 +36,11 @@ const PANEL: usize = 256;
 const JITTER_LADDER: [f64; 3] = [1e-13, 1e-10, 1e-7];
 
 /// Estimated peak memory of the exact solver in bytes.
-pub fn peak_memory_bytes(len: usize, outputs: usize, noise_inputs: usize, noise_dynamic: bool) -> u64 {
+pub fn peak_memory_bytes(len: usize, outputs: usize, noise_inputs: usize, noise_dynamic: bool, free_cols: usize) -> u64 {
     let n = (len * outputs) as u64;
     let l = len as u64;
     let p = PANEL.min(len.max(1)) as u64;
-    let mut words = n * n + n * l + l * p + 8 * n;
+    let mut words = n * n + n * l + l * p + 8 * n + 2 * n * free_cols as u64;
     if noise_dynamic {
         words += (n + (len * noise_inputs) as u64) * p;
     }
@@ -62,13 +62,14 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let ne = noise.inputs();
     let noise_dynamic = noise.order() > 0;
 
-    let need = peak_memory_bytes(len, ny, ne, noise_dynamic);
+    let nx_est = problem.free_response().map_or(0, |o| o.ncols());
+    let need = peak_memory_bytes(len, ny, ne, noise_dynamic, nx_est);
     let limit = settings.effective_memory_limit();
     if need > limit {
         let max_len = (1..=len)
             .rev()
             .step_by((len / 64).max(1))
-            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic) <= limit)
+            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic, nx_est) <= limit)
             .unwrap_or(0);
         return Err(Error::TooLarge {
             solver: solver_name().into(),
@@ -107,11 +108,14 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let panel = PANEL.min(len);
     let mut gram = vec![0.0; len * panel];
     let nblocks = problem.blocks().len();
-    let r = problem.residual().as_slice();
+    let r_data = problem.residual().as_slice();
+    let free = problem.free_response();
+    let nx = free.map_or(0, |o| o.ncols());
     let mut t_assembled;
     let par = faer::get_global_parallelism();
     let mut buf = MemBuffer::new(
-        cholesky_in_place_scratch::<f64>(n, par, Default::default()).or(solve_in_place_scratch::<f64>(n, 1, par)),
+        cholesky_in_place_scratch::<f64>(n, par, Default::default())
+            .or(solve_in_place_scratch::<f64>(n, 1 + nx, par)),
     );
     let stack = MemStack::new(&mut buf);
     // A failed factorisation (M numerically singular) is repaired by re-assembling M and adding
@@ -144,16 +148,49 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     };
     let nk = kept.len();
     let mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
-    let dropped_max = dropped.iter().map(|&i| r[i].abs()).fold(0.0, f64::max);
     let t_factored = Instant::now();
 
     // --- solve and recover ------------------------------------------------------------------
-    let mut rhs = Mat::<f64>::from_fn(nk, 1, |i, _| r[kept[i]]);
+    // Right-hand sides [r | O]: the free-response columns give the generalised least-squares
+    // estimate of an unknown initial state, x₀ = (OᵀM⁻¹O)⁻¹OᵀM⁻¹r, then λ = M⁻¹(r − O·x₀).
+    let mut rhs = Mat::<f64>::from_fn(nk, 1 + nx, |i, j| match (j, free) {
+        (0, _) => r_data[kept[i]],
+        (_, Some(o)) => o[(kept[i], j - 1)],
+        _ => 0.0,
+    });
     solve_in_place_with_conj(mk.as_ref(), Conj::No, rhs.as_mut(), par, stack);
     let (dmin, dmax) = (0..nk).fold((f64::INFINITY, 0.0f64), |(lo, hi), i| {
         let d = mk[(i, i)];
         (lo.min(d), hi.max(d))
     });
+    let x0 = match free {
+        Some(o) if nx > 0 => {
+            let h = nalgebra::DMatrix::from_fn(nx, nx, |a, b| (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 1 + b)]).sum());
+            let g = nalgebra::DVector::from_fn(nx, |a, _| (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 0)]).sum());
+            let x0 = h.cholesky().map(|c| c.solve(&g)).ok_or_else(|| {
+                Error::Numerical(
+                    "the initial state is not identifiable from this record (OᵀM⁻¹O is singular): \
+                     the free response of some state does not reach y"
+                        .into(),
+                )
+            })?;
+            for i in 0..nk {
+                let corr: f64 = (0..nx).map(|j| rhs[(i, 1 + j)] * x0[j]).sum();
+                rhs[(i, 0)] -= corr;
+            }
+            Some(x0.iter().copied().collect::<Vec<f64>>())
+        }
+        _ => None,
+    };
+    // The residual the maps and the noise must explain: r − O·x₀.
+    let r_owned: Vec<f64> = match (&x0, free) {
+        (Some(x0), Some(o)) => (0..n)
+            .map(|i| r_data[i] - (0..nx).map(|j| o[(i, j)] * x0[j]).sum::<f64>())
+            .collect(),
+        _ => r_data.to_vec(),
+    };
+    let r = &r_owned[..];
+    let dropped_max = dropped.iter().map(|&i| r[i].abs()).fold(0.0, f64::max);
     let mut lambda = vec![0.0; n];
     for (i, &row) in kept.iter().enumerate() {
         lambda[row] = rhs[(i, 0)];
@@ -249,6 +286,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             total,
         },
         z_source: problem.z_source().clone(),
+        initial_state: x0,
         diagnostics: Diagnostics {
             solver: solver_name().into(),
             system_size: nk,
