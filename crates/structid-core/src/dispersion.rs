@@ -54,8 +54,9 @@ pub trait QuadraticPenalty: Send + Sync {
         self.len() == 0
     }
 
-    /// Writes columns `cols` of K, column-major with leading dimension [`QuadraticPenalty::len`].
-    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]);
+    /// Writes columns `cols` of K into `out` ([`QuadraticPenalty::len`] × `cols.len()`, any
+    /// layout; solvers pass row-major panels).
+    fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>);
 
     /// The interpolant N̂(z) = Σ_k α_k K(z, z_k) for the dual coefficients α (ŵ = Kα).
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant>;
@@ -140,7 +141,7 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
         self.z.len()
     }
 
-    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]) {
+    fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>) {
         self.kernel.fill_gram_columns(&self.z, cols, out);
     }
 

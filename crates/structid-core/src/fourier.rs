@@ -403,7 +403,7 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
         self.z.len()
     }
 
-    fn fill_columns(&self, cols: Range<usize>, out: &mut [f64]) {
+    fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>) {
         self.map.fill_gram_columns(&self.z, cols, out);
     }
 

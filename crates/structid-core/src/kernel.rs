@@ -4,6 +4,8 @@ use std::fmt;
 use std::ops::Range;
 use std::sync::Arc;
 
+use faer::MatMut;
+use faer::reborrow::ReborrowMut;
 use rayon::prelude::*;
 use structid_lti::Signal;
 
@@ -45,21 +47,34 @@ pub trait Kernel: Send + Sync + fmt::Debug {
         Vec::new()
     }
 
-    /// Writes the columns `cols` of the Gram matrix K_ij = k(z_i, z_j) into `out`, column-major
-    /// with leading dimension `z.len()`. Override it when a faster route exists; the default
-    /// evaluates [`Kernel::eval`] entry by entry in parallel over columns.
-    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: &mut [f64]) {
-        let len = z.len();
-        debug_assert_eq!(out.len(), len * cols.len());
-        out.par_chunks_mut(len.max(1))
-            .zip(cols)
-            .for_each(|(col, j)| {
-                let zj = z.sample(j);
-                for (i, v) in col.iter_mut().enumerate() {
-                    *v = self.eval(z.sample(i), zj);
-                }
-            });
+    /// Writes the columns `cols` of the Gram matrix K_ij = k(z_i, z_j) into `out`
+    /// (`z.len()` × `cols.len()`, any layout). Override it when a faster route exists; the
+    /// default evaluates [`Kernel::eval`] entry by entry, in parallel over rows.
+    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: MatMut<'_, f64>) {
+        let start = cols.start;
+        par_rows(out, &|i, mut row| {
+            let zi = z.sample(i);
+            for jj in 0..row.ncols() {
+                row[jj] = self.eval(zi, z.sample(start + jj));
+            }
+        });
     }
+}
+
+/// Runs `f(i, row i)` over the rows of `out`, splitting the rows between rayon threads.
+pub(crate) fn par_rows(out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::RowMut<'_, f64>) + Sync)) {
+    fn go(first: usize, mut out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::RowMut<'_, f64>) + Sync)) {
+        let n = out.nrows();
+        if n <= 64 {
+            for i in 0..n {
+                f(first + i, out.rb_mut().row_mut(i));
+            }
+        } else {
+            let (top, bottom) = out.split_at_row_mut(n / 2);
+            rayon::join(|| go(first, top, f), || go(first + n / 2, bottom, f));
+        }
+    }
+    go(0, out, f);
 }
 
 /// The paper's Gaussian kernel, K(z₁,z₂) = (2πσ²)^(−p/2)·exp(−‖z₁−z₂‖²/(2σ²)).
@@ -111,32 +126,42 @@ impl Kernel for GaussianKernel {
         vec![("sigma".into(), self.sigma)]
     }
 
-    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: &mut [f64]) {
-        // Hoisting the constants and specialising p = 1 matter: this fills L² entries.
-        let len = z.len();
+    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: MatMut<'_, f64>) {
+        // Hoisting the constants, specialising p = 1 and the vectorised exp matter: this fills
+        // L² entries. Rows are contiguous in the row-major panels the exact solver asks for.
         let p = z.channels();
         let c = self.normalisation(p);
         let s = 1.0 / (2.0 * self.sigma * self.sigma);
         let data = z.as_slice();
-        out.par_chunks_mut(len.max(1))
-            .zip(cols)
-            .for_each(|(col, j)| {
+        let zc = &data[cols.start * p..cols.end * p];
+        let w = cols.len();
+        par_rows(out, &|i, mut row| {
+            let zi = &data[i * p..(i + 1) * p];
+            let fill = |v: &mut [f64]| {
                 if p == 1 {
-                    let zj = data[j];
-                    for (v, &zi) in col.iter_mut().zip(data) {
-                        let d = zi - zj;
-                        *v = -(d * d) * s;
+                    for (x, &zj) in v.iter_mut().zip(zc) {
+                        let d = zi[0] - zj;
+                        *x = -(d * d) * s;
                     }
                 } else {
-                    let zj = z.sample(j);
-                    for (i, v) in col.iter_mut().enumerate() {
-                        let zi = &data[i * p..(i + 1) * p];
-                        let d2: f64 = zi.iter().zip(zj).map(|(x, y)| (x - y) * (x - y)).sum();
-                        *v = -d2 * s;
+                    for (x, zj) in v.iter_mut().zip(zc.chunks_exact(p)) {
+                        let d2: f64 = zi.iter().zip(zj).map(|(a, b)| (a - b) * (a - b)).sum();
+                        *x = -d2 * s;
                     }
                 }
-                exp_in_place(col, c);
-            });
+                exp_in_place(v, c);
+            };
+            match row.rb_mut().try_as_row_major_mut() {
+                Some(r) => fill(r.as_slice_mut()),
+                None => {
+                    let mut v = vec![0.0; w];
+                    fill(&mut v);
+                    for (jj, x) in v.into_iter().enumerate() {
+                        row[jj] = x;
+                    }
+                }
+            }
+        });
     }
 }
 
@@ -248,14 +273,48 @@ mod tests {
         let k = GaussianKernel::new(0.3).unwrap();
         for p in 1..=3 {
             let z = Signal::from_fn(17, p, |i, c| ((i * 7 + c * 3) % 11) as f64 / 5.0 - 1.0);
-            let mut fast = vec![0.0; 17 * 5];
-            k.fill_gram_columns(&z, 4..9, &mut fast);
-            for (jj, j) in (4..9).enumerate() {
-                for i in 0..17 {
-                    let direct = k.eval(z.sample(i), z.sample(j));
-                    assert!((fast[jj * 17 + i] - direct).abs() <= 1e-14 * direct.abs().max(1e-300));
+            for row_major in [true, false] {
+                let mut buf = vec![0.0; 17 * 5];
+                let out = if row_major {
+                    MatMut::from_row_major_slice_mut(&mut buf, 17, 5)
+                } else {
+                    MatMut::from_column_major_slice_mut(&mut buf, 17, 5)
+                };
+                k.fill_gram_columns(&z, 4..9, out);
+                let fast = if row_major {
+                    faer::MatRef::from_row_major_slice(&buf, 17, 5)
+                } else {
+                    faer::MatRef::from_column_major_slice(&buf, 17, 5)
+                };
+                for (jj, j) in (4..9).enumerate() {
+                    for i in 0..17 {
+                        let direct = k.eval(z.sample(i), z.sample(j));
+                        assert!((fast[(i, jj)] - direct).abs() <= 1e-14 * direct.abs().max(1e-300));
+                    }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn default_gram_fill_matches_the_fast_gaussian_fill() {
+        #[derive(Debug)]
+        struct Plain(GaussianKernel);
+        impl Kernel for Plain {
+            fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
+                self.0.eval(a, b)
+            }
+            fn describe(&self) -> String {
+                "plain".into()
+            }
+        }
+        let g = GaussianKernel::new(0.4).unwrap();
+        let z = Signal::from_fn(300, 2, |i, c| ((i * 13 + c * 7) % 29) as f64 / 9.0);
+        let (mut a, mut b) = (vec![0.0; 300 * 40], vec![0.0; 300 * 40]);
+        Plain(g).fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut a, 300, 40));
+        g.fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut b, 300, 40));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-14 * y.abs().max(1e-300));
         }
     }
 

@@ -52,7 +52,12 @@ pub struct DataTable {
 /// The name the specification uses for the reader: `DataFile::read(path)`.
 pub type DataFile = DataTable;
 
-fn data_err(path: Option<&Path>, line: Option<u64>, column: Option<&str>, message: impl Into<String>) -> IoError {
+fn data_err(
+    path: Option<&Path>,
+    line: Option<u64>,
+    column: Option<&str>,
+    message: impl Into<String>,
+) -> IoError {
     IoError::Data {
         path: path.map(Path::to_path_buf),
         line,
@@ -115,15 +120,51 @@ impl DataTable {
 
     fn parse_bytes(bytes: &[u8], path: Option<&Path>) -> Result<Self, IoError> {
         let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+        // Comment lines are blanked rather than left to the csv crate, which does not count
+        // them in its line numbers.
+        let is_comment = |l: &[u8]| l.trim_ascii_start().first() == Some(&b'#');
+        let uncommented: Vec<u8>;
+        let bytes = if bytes.split(|&b| b == b'\n').any(is_comment) {
+            let mut out = Vec::with_capacity(bytes.len());
+            for (i, l) in bytes.split(|&b| b == b'\n').enumerate() {
+                if i > 0 {
+                    out.push(b'\n');
+                }
+                if !is_comment(l) {
+                    out.extend_from_slice(l);
+                }
+            }
+            uncommented = out;
+            &uncommented[..]
+        } else {
+            bytes
+        };
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
             .flexible(true)
             .trim(csv::Trim::All)
-            .comment(Some(b'#'))
             .from_reader(bytes);
+        // The csv crate does not count blank lines in `Position::line`, so lines are derived
+        // from byte offsets: the first non-blank byte at or after the record's start.
+        let line_starts: Vec<usize> = std::iter::once(0)
+            .chain(
+                bytes
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| **b == b'\n')
+                    .map(|(i, _)| i + 1),
+            )
+            .collect();
+        let line_at = |pos: &csv::Position| -> u64 {
+            let mut b = (pos.byte() as usize).min(bytes.len());
+            while b < bytes.len() && bytes[b].is_ascii_whitespace() {
+                b += 1;
+            }
+            line_starts.partition_point(|&s| s <= b) as u64
+        };
         let mut records = reader.records();
         let csv_err = |e: csv::Error| {
-            let line = e.position().map(|p| p.line());
+            let line = e.position().map(line_at);
             let msg = match e.kind() {
                 csv::ErrorKind::Utf8 { .. } => "the file is not valid UTF-8 text".to_string(),
                 _ => format!("malformed CSV: {e}"),
@@ -149,7 +190,7 @@ impl DataTable {
                 }
             }
         };
-        let header_line = header.position().map(|p| p.line());
+        let header_line = header.position().map(line_at);
         let mut names: Vec<String> = header.iter().map(|s| s.trim().to_string()).collect();
         if names.len() > 1 && names.last().is_some_and(String::is_empty) {
             names.pop();
@@ -175,7 +216,7 @@ impl DataTable {
             if is_blank(&r) {
                 continue;
             }
-            let line = r.position().map_or(0, |p| p.line());
+            let line = r.position().map_or(0, line_at);
             let mut fields: Vec<&str> = r.iter().collect();
             if fields.len() == ncols + 1 && fields.last().is_some_and(|f| f.is_empty()) {
                 fields.pop();
@@ -351,7 +392,8 @@ pub fn csv_bytes<S: AsRef<str>>(names: &[S], columns: &[Vec<f64>]) -> Result<Vec
         )));
     }
     let owned: Vec<String> = names.iter().map(|n| n.as_ref().to_string()).collect();
-    check_names(&owned, None, None).map_err(|e| IoError::InvalidArgument(format!("cannot write CSV: {e}")))?;
+    check_names(&owned, None, None)
+        .map_err(|e| IoError::InvalidArgument(format!("cannot write CSV: {e}")))?;
     let len = columns.first().map_or(0, Vec::len);
     if let Some(c) = columns.iter().position(|c| c.len() != len) {
         return Err(IoError::InvalidArgument(format!(
@@ -361,7 +403,8 @@ pub fn csv_bytes<S: AsRef<str>>(names: &[S], columns: &[Vec<f64>]) -> Result<Vec
             owned[0]
         )));
     }
-    let mut w = csv::WriterBuilder::new().from_writer(Vec::with_capacity(len * columns.len() * 12 + 64));
+    let mut w =
+        csv::WriterBuilder::new().from_writer(Vec::with_capacity(len * columns.len() * 12 + 64));
     let to_io = |e: csv::Error| IoError::InvalidArgument(format!("cannot format CSV: {e}"));
     w.write_record(&owned).map_err(to_io)?;
     let mut row = Vec::with_capacity(columns.len());
@@ -375,13 +418,22 @@ pub fn csv_bytes<S: AsRef<str>>(names: &[S], columns: &[Vec<f64>]) -> Result<Vec
 }
 
 /// Writes a CSV file atomically (see [`write_atomic`]).
-pub fn write_csv<S: AsRef<str>>(path: &Path, names: &[S], columns: &[Vec<f64>]) -> Result<(), IoError> {
+pub fn write_csv<S: AsRef<str>>(
+    path: &Path,
+    names: &[S],
+    columns: &[Vec<f64>],
+) -> Result<(), IoError> {
     write_atomic(path, &csv_bytes(names, columns)?, &[])
 }
 
 impl OutputGuard {
     /// Writes a CSV file atomically unless `path` is a protected input.
-    pub fn write_csv<S: AsRef<str>>(&self, path: &Path, names: &[S], columns: &[Vec<f64>]) -> Result<(), IoError> {
+    pub fn write_csv<S: AsRef<str>>(
+        &self,
+        path: &Path,
+        names: &[S],
+        columns: &[Vec<f64>],
+    ) -> Result<(), IoError> {
         self.write(path, &csv_bytes(names, columns)?)
     }
 }
@@ -405,7 +457,12 @@ mod tests {
         let t = DataTable::parse(text, None).unwrap();
         assert_eq!(t.names, ["u0", "y0"]);
         assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![2.0, 4.0]]);
+        assert_eq!(t.line_of_row(0), Some(4));
         assert_eq!(t.line_of_row(1), Some(6));
+        let e = DataTable::parse("a,b\n\n\n1,2\r\n\r\n# c,\"\n3,x\n", None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 7"), "{e}");
     }
 
     #[test]
@@ -415,10 +472,17 @@ mod tests {
             text.push_str(&format!("{k},{k}\n"));
         }
         text.push_str("1,NaN\n");
-        let e = DataTable::parse(&text, Some(Path::new("d.csv"))).unwrap_err().to_string();
+        let e = DataTable::parse(&text, Some(Path::new("d.csv")))
+            .unwrap_err()
+            .to_string();
         assert_eq!(e, "data file `d.csv`, line 17, column `y0`: value is NaN");
-        let e = DataTable::parse("u0,y0\n1,2\n-inf,3\n", None).unwrap_err().to_string();
-        assert!(e.contains("line 3") && e.contains("`u0`") && e.contains("infinite"), "{e}");
+        let e = DataTable::parse("u0,y0\n1,2\n-inf,3\n", None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 3") && e.contains("`u0`") && e.contains("infinite"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -426,20 +490,32 @@ mod tests {
         let e = DataTable::parse("u0,y0\n1,2\n3,abc\n", Some(Path::new("x.csv")))
             .unwrap_err()
             .to_string();
-        assert_eq!(e, "data file `x.csv`, line 3, column `y0`: cannot parse `abc` as a number");
+        assert_eq!(
+            e,
+            "data file `x.csv`, line 3, column `y0`: cannot parse `abc` as a number"
+        );
     }
 
     #[test]
     fn wrong_field_count_empty_file_and_duplicates() {
-        let e = DataTable::parse("a,b\n1,2\n1,2,3\n", None).unwrap_err().to_string();
-        assert!(e.contains("line 3") && e.contains("expected 2 field(s)") && e.contains("found 3"), "{e}");
+        let e = DataTable::parse("a,b\n1,2\n1,2,3\n", None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 3") && e.contains("expected 2 field(s)") && e.contains("found 3"),
+            "{e}"
+        );
         let e = DataTable::parse("", None).unwrap_err().to_string();
         assert!(e.contains("empty"), "{e}");
         let e = DataTable::parse("a,b\n", None).unwrap_err().to_string();
         assert!(e.contains("no data rows"), "{e}");
-        let e = DataTable::parse("a,b,a\n1,2,3\n", None).unwrap_err().to_string();
+        let e = DataTable::parse("a,b,a\n1,2,3\n", None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("duplicate column name `a`"), "{e}");
-        let e = DataTable::parse("1,2\n3,4\n", None).unwrap_err().to_string();
+        let e = DataTable::parse("1,2\n3,4\n", None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("header"), "{e}");
     }
 
@@ -447,7 +523,10 @@ mod tests {
     fn missing_column_lists_available_ones() {
         let t = DataTable::parse("u0,y0\n1,2\n", Some(Path::new("d.csv"))).unwrap();
         let e = t.select(&["u0", "y1"]).unwrap_err().to_string();
-        assert_eq!(e, "data file `d.csv` has no column `y1`; available columns: `u0`, `y0`");
+        assert_eq!(
+            e,
+            "data file `d.csv` has no column `y1`; available columns: `u0`, `y0`"
+        );
     }
 
     #[test]
@@ -457,7 +536,10 @@ mod tests {
         let t = DataTable::parse(text, None).unwrap();
         assert_eq!(t.select(&["uEst", "yEst"]).unwrap().len(), 2);
         let e = t.select(&["Ts"]).unwrap_err().to_string();
-        assert!(e.contains("line 3") && e.contains("`Ts`") && e.contains("empty"), "{e}");
+        assert!(
+            e.contains("line 3") && e.contains("`Ts`") && e.contains("empty"),
+            "{e}"
+        );
     }
 
     #[test]

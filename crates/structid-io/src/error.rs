@@ -128,10 +128,12 @@ impl IoError {
 
     pub(crate) fn with_path(mut self, p: &Path) -> Self {
         match &mut self {
-            IoError::Model { path, .. } | IoError::Data { path, .. } | IoError::MissingColumn { path, .. } => {
-                if path.is_none() {
-                    *path = Some(p.to_path_buf());
-                }
+            IoError::Model { path, .. }
+            | IoError::Data { path, .. }
+            | IoError::MissingColumn { path, .. }
+                if path.is_none() =>
+            {
+                *path = Some(p.to_path_buf());
             }
             _ => {}
         }
@@ -156,10 +158,19 @@ fn list(names: &[String]) -> String {
     if names.is_empty() {
         return "(none)".into();
     }
-    names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+    names
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
-fn model_message(path: Option<&Path>, line: Option<usize>, column: Option<usize>, message: &str) -> String {
+fn model_message(
+    path: Option<&Path>,
+    line: Option<usize>,
+    column: Option<usize>,
+    message: &str,
+) -> String {
     let mut s = match path {
         Some(p) => format!("model file `{}`: {message}", p.display()),
         None => format!("model file: {message}"),
@@ -172,7 +183,12 @@ fn model_message(path: Option<&Path>, line: Option<usize>, column: Option<usize>
     s
 }
 
-fn data_message(path: Option<&Path>, line: Option<u64>, column: Option<&str>, message: &str) -> String {
+fn data_message(
+    path: Option<&Path>,
+    line: Option<u64>,
+    column: Option<&str>,
+    message: &str,
+) -> String {
     let mut s = match path {
         Some(p) => format!("data file `{}`", p.display()),
         None => "data".to_string(),

@@ -33,8 +33,9 @@
 //!     csv.push_str(&format!("{u},{}\n", u * u));
 //! }
 //! let data = model.select_data(&DataTable::parse(&csv, None).unwrap()).unwrap();
-//! let id = identify(&model.to_model(None, None).unwrap(), &data, &IdentifySettings::default()).unwrap();
-//! assert!((id.blocks[0].predict(&[1.0]) - 1.0).abs() < 0.05);
+//! let settings = IdentifySettings::builder().beta(1e-4).build().unwrap();
+//! let id = identify(&model.to_model(None, None).unwrap(), &data, &settings).unwrap();
+//! assert!((id.blocks[0].predict(&[1.0]) - 1.0).abs() < 0.05, "{}", id.blocks[0].predict(&[1.0]));
 //! ```
 
 pub mod data_file;
@@ -46,7 +47,8 @@ pub mod report;
 pub use data_file::{DataFile, DataTable, csv_bytes, format_number, write_csv};
 pub use error::{ErrorChain, IoError, core_is_input_error};
 pub use model_file::{
-    BlockSpec, DispersionSpec, ModelFile, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec, default_sigma,
+    BlockSpec, DispersionSpec, ModelFile, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec,
+    default_sigma,
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{BlockReport, BlockSettings, DiagnosticsReport, Report, SettingsReport};

@@ -120,12 +120,18 @@ pub fn default_sigma(z: &Signal) -> f64 {
         let (lo, hi) = z
             .channel(c)
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
         if hi > lo {
             widest = widest.max(hi - lo);
         }
     }
-    if widest.is_finite() && widest > 0.0 { 0.1 * widest } else { 0.1 }
+    if widest.is_finite() && widest > 0.0 {
+        0.1 * widest
+    } else {
+        0.1
+    }
 }
 
 impl DispersionSpec {
@@ -145,7 +151,11 @@ impl DispersionSpec {
 
     /// Builds the dispersion. `sigma_override` replaces the file's σ; without either, σ is
     /// [`default_sigma`] of `block_z` (the block's input samples), which is then required.
-    pub fn build(&self, sigma_override: Option<f64>, block_z: Option<&Signal>) -> Result<Arc<dyn Dispersion>, IoError> {
+    pub fn build(
+        &self,
+        sigma_override: Option<f64>,
+        block_z: Option<&Signal>,
+    ) -> Result<Arc<dyn Dispersion>, IoError> {
         match self {
             DispersionSpec::Gaussian { sigma } => {
                 let s = match (sigma_override, *sigma, block_z) {
@@ -339,9 +349,20 @@ impl<'a> Source<'a> {
     }
 
     fn line_text(&self, line: usize) -> &str {
-        let start = self.line_starts.get(line - 1).copied().unwrap_or(self.text.len());
-        let end = self.line_starts.get(line).copied().unwrap_or(self.text.len());
-        self.text.get(start..end).unwrap_or("").trim_end_matches(['\n', '\r'])
+        let start = self
+            .line_starts
+            .get(line - 1)
+            .copied()
+            .unwrap_or(self.text.len());
+        let end = self
+            .line_starts
+            .get(line)
+            .copied()
+            .unwrap_or(self.text.len());
+        self.text
+            .get(start..end)
+            .unwrap_or("")
+            .trim_end_matches(['\n', '\r'])
     }
 }
 
@@ -355,7 +376,19 @@ fn err_at(line: usize, message: impl Into<String>) -> IoError {
 }
 
 fn plural(n: usize, word: &str) -> String {
-    if n == 1 { format!("{n} {word}") } else { format!("{n} {word}s") }
+    if n == 1 {
+        format!("{n} {word}")
+    } else {
+        format!("{n} {word}s")
+    }
+}
+
+fn entries(n: usize) -> String {
+    if n == 1 {
+        "1 entry".into()
+    } else {
+        format!("{n} entries")
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -370,7 +403,12 @@ struct MatIn {
 }
 
 impl MatIn {
-    fn new(name: &'static str, raw: Option<RawMatrix>, src: &Source<'_>, fallback_line: usize) -> Result<Self, IoError> {
+    fn new(
+        name: &'static str,
+        raw: Option<RawMatrix>,
+        src: &Source<'_>,
+        fallback_line: usize,
+    ) -> Result<Self, IoError> {
         let Some(raw) = raw else {
             return Ok(Self {
                 name,
@@ -402,8 +440,8 @@ impl MatIn {
                         format!(
                             "matrix {name}: row {} has {} but row 1 has {}; all rows need the same length",
                             i + 1,
-                            plural(r.len(), "entry").replace("entrys", "entries"),
-                            plural(first.len(), "entry").replace("entrys", "entries"),
+                            entries(r.len()),
+                            entries(first.len()),
                         ),
                     ));
                 }
@@ -489,7 +527,12 @@ fn infer_cols(mats: &[&MatIn], what: &str, sym: &str) -> Dim {
         if let Some(c) = m.known_cols() {
             return Dim {
                 value: c,
-                source: format!("{} has {} ({sym} = {})", m.name, plural(c, "column"), plural(c, what)),
+                source: format!(
+                    "{} has {} ({sym} = {})",
+                    m.name,
+                    plural(c, "column"),
+                    plural(c, what)
+                ),
                 line: Some(m.line),
             };
         }
@@ -512,8 +555,18 @@ fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
             let (line, column) = src.line_col(span.start);
             let text = src.line_text(line).trim();
             let mut message = format!("invalid TOML: {message}");
-            if !text.is_empty() {
-                let _ = write!(message, " in `{text}`");
+            if column > 1 || line == 1 {
+                if !text.is_empty() {
+                    let _ = write!(message, " in `{text}`");
+                }
+            } else if let Some(prev) = (1..line)
+                .rev()
+                .map(|l| src.line_text(l).trim())
+                .find(|t| !t.is_empty())
+            {
+                // The parser noticed the problem at the start of a line: the cause is usually at
+                // the end of the previous one (an unclosed bracket or string).
+                let _ = write!(message, " after `{prev}`");
             }
             IoError::Model {
                 path: None,
@@ -526,12 +579,19 @@ fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
     }
 }
 
-fn check_names(list: &Spanned<Vec<String>>, key: &str, src: &Source<'_>) -> Result<Vec<String>, IoError> {
+fn check_names(
+    list: &Spanned<Vec<String>>,
+    key: &str,
+    src: &Source<'_>,
+) -> Result<Vec<String>, IoError> {
     let line = src.line(list.span().start);
     let names = list.get_ref().clone();
     for (i, n) in names.iter().enumerate() {
         if n.trim().is_empty() {
-            return Err(err_at(line, format!("[signals].{key} contains an empty column name")));
+            return Err(err_at(
+                line,
+                format!("[signals].{key} contains an empty column name"),
+            ));
         }
         if names[..i].contains(n) {
             return Err(err_at(
@@ -555,7 +615,11 @@ fn value_kind(v: &toml::Value) -> &'static str {
     }
 }
 
-fn parse_dispersion(v: Option<&Spanned<toml::Value>>, block: &str, src: &Source<'_>) -> Result<DispersionSpec, IoError> {
+fn parse_dispersion(
+    v: Option<&Spanned<toml::Value>>,
+    block: &str,
+    src: &Source<'_>,
+) -> Result<DispersionSpec, IoError> {
     let Some(v) = v else {
         return Ok(DispersionSpec::Gaussian { sigma: None });
     };
@@ -643,7 +707,13 @@ fn parse_dispersion(v: Option<&Spanned<toml::Value>>, block: &str, src: &Source<
     }
 }
 
-fn load_table_truth(file: &str, dim: usize, block: &str, base_dir: Option<&Path>, line: usize) -> Result<TruthSpec, IoError> {
+fn load_table_truth(
+    file: &str,
+    dim: usize,
+    block: &str,
+    base_dir: Option<&Path>,
+    line: usize,
+) -> Result<TruthSpec, IoError> {
     let path = match base_dir {
         Some(d) => d.join(file),
         None => PathBuf::from(file),
@@ -666,7 +736,12 @@ fn load_table_truth(file: &str, dim: usize, block: &str, base_dir: Option<&Path>
             ),
         ));
     }
-    if let Some((c, _)) = table.columns.iter().enumerate().find(|(_, col)| col.iter().any(|v| v.is_nan())) {
+    if let Some((c, _)) = table
+        .columns
+        .iter()
+        .enumerate()
+        .find(|(_, col)| col.iter().any(|v| v.is_nan()))
+    {
         return Err(err_at(
             line,
             format!(
@@ -691,7 +766,13 @@ fn load_table_truth(file: &str, dim: usize, block: &str, base_dir: Option<&Path>
     })
 }
 
-fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>, src: &Source<'_>) -> Result<Option<TruthSpec>, IoError> {
+fn parse_truth(
+    raw: &RawBlock,
+    block: &str,
+    dim: usize,
+    base_dir: Option<&Path>,
+    src: &Source<'_>,
+) -> Result<Option<TruthSpec>, IoError> {
     let table = raw.table.as_ref();
     let truth = raw.truth.as_ref();
     if let (Some(_), Some(t)) = (truth, table) {
@@ -701,7 +782,8 @@ fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>,
         ));
     }
     if let Some(t) = table {
-        return load_table_truth(t.get_ref(), dim, block, base_dir, src.line(t.span().start)).map(Some);
+        return load_table_truth(t.get_ref(), dim, block, base_dir, src.line(t.span().start))
+            .map(Some);
     }
     let Some(truth) = truth else {
         return Ok(None);
@@ -709,7 +791,8 @@ fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>,
     let line = src.line(truth.span().start);
     match truth.get_ref() {
         toml::Value::String(expr) => {
-            ExprMap::parse(expr, dim).map_err(|e| err_at(line, format!("truth of block `{block}`: {e}")))?;
+            ExprMap::parse(expr, dim)
+                .map_err(|e| err_at(line, format!("truth of block `{block}`: {e}")))?;
             Ok(Some(TruthSpec::Expression(expr.clone())))
         }
         toml::Value::Table(t) => {
@@ -722,10 +805,14 @@ fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>,
                 ));
             }
             match t.get("table") {
-                Some(toml::Value::String(file)) => load_table_truth(file, dim, block, base_dir, line).map(Some),
+                Some(toml::Value::String(file)) => {
+                    load_table_truth(file, dim, block, base_dir, line).map(Some)
+                }
                 _ => Err(err_at(
                     line,
-                    format!("block `{block}`: truth = {{ table = \"file.csv\" }} needs a file name string"),
+                    format!(
+                        "block `{block}`: truth = {{ table = \"file.csv\" }} needs a file name string"
+                    ),
                 )),
             }
         }
@@ -739,13 +826,27 @@ fn parse_truth(raw: &RawBlock, block: &str, dim: usize, base_dir: Option<&Path>,
     }
 }
 
-fn parse_index_list(v: &Spanned<toml::Value>, block: &str, src: &Source<'_>) -> Result<Vec<usize>, IoError> {
+fn parse_index_list(
+    v: &Spanned<toml::Value>,
+    block: &str,
+    src: &Source<'_>,
+) -> Result<Vec<usize>, IoError> {
     let line = src.line(v.span().start);
-    let bad = |what: String| err_at(line, format!("block `{block}`: inputs {what}; write e.g. inputs = [0]"));
+    let bad = |what: String| {
+        err_at(
+            line,
+            format!("block `{block}`: inputs {what}; write e.g. inputs = [0]"),
+        )
+    };
     let items: Vec<&toml::Value> = match v.get_ref() {
         toml::Value::Array(a) => a.iter().collect(),
         single @ toml::Value::Integer(_) => vec![single],
-        other => return Err(bad(format!("must be a list of z indices, not {}", value_kind(other)))),
+        other => {
+            return Err(bad(format!(
+                "must be a list of z indices, not {}",
+                value_kind(other)
+            )));
+        }
     };
     let mut out = Vec::with_capacity(items.len());
     for item in items {
@@ -758,7 +859,12 @@ fn parse_index_list(v: &Spanned<toml::Value>, block: &str, src: &Source<'_>) -> 
                 out.push(i);
             }
             toml::Value::Integer(i) => return Err(bad(format!("contains the negative index {i}"))),
-            other => return Err(bad(format!("must contain integers, not {}", value_kind(other)))),
+            other => {
+                return Err(bad(format!(
+                    "must contain integers, not {}",
+                    value_kind(other)
+                )));
+            }
         }
     }
     if out.is_empty() {
@@ -776,7 +882,8 @@ impl ModelFile {
             source,
         })?;
         let base = path.parent().filter(|p| !p.as_os_str().is_empty());
-        let mut mf = Self::parse(&text, Some(base.unwrap_or(Path::new(".")))).map_err(|e| e.with_path(path))?;
+        let mut mf = Self::parse(&text, Some(base.unwrap_or(Path::new("."))))
+            .map_err(|e| e.with_path(path))?;
         mf.path = Some(path.to_path_buf());
         Ok(mf)
     }
@@ -893,7 +1000,12 @@ impl ModelFile {
             match (from_mat, &z_names) {
                 (Some((m, r)), _) => Dim {
                     value: r,
-                    source: format!("{} has {} (n_z = {})", m.name, plural(r, "row"), plural(r, "map input")),
+                    source: format!(
+                        "{} has {} (n_z = {})",
+                        m.name,
+                        plural(r, "row"),
+                        plural(r, "map input")
+                    ),
                     line: Some(m.line),
                 },
                 (None, Some((names, _))) => Dim {
@@ -942,14 +1054,20 @@ impl ModelFile {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(err_at(
                         src.line(ts.span().start),
-                        format!("sample_time = {v} is invalid; it must be a finite number of seconds greater than zero"),
+                        format!(
+                            "sample_time = {v} is invalid; it must be a finite number of seconds greater than zero"
+                        ),
                     ));
                 }
                 Some(v)
             }
             None => None,
         };
-        match raw_lft.time.as_ref().map(|t| (t.get_ref().as_str(), src.line(t.span().start))) {
+        match raw_lft
+            .time
+            .as_ref()
+            .map(|t| (t.get_ref().as_str(), src.line(t.span().start)))
+        {
             None | Some(("discrete", _)) => {}
             Some(("continuous", line)) => {
                 let Some(ts) = sample_time else {
@@ -963,9 +1081,19 @@ impl ModelFile {
                 b.columns_mut(0, nu).copy_from(&m.bu);
                 b.columns_mut(nu, ne).copy_from(&m.be);
                 b.columns_mut(nu + ne, nw).copy_from(&m.bw);
-                let sys = ContinuousStateSpace::new(m.a.clone(), b, DMatrix::zeros(0, n), DMatrix::zeros(0, nu + ne + nw))
-                    .and_then(|s| s.discretize_zoh(ts))
-                    .map_err(|e| err_at(line, format!("cannot discretise the continuous-time block: {e}")))?;
+                let sys = ContinuousStateSpace::new(
+                    m.a.clone(),
+                    b,
+                    DMatrix::zeros(0, n),
+                    DMatrix::zeros(0, nu + ne + nw),
+                )
+                .and_then(|s| s.discretize_zoh(ts))
+                .map_err(|e| {
+                    err_at(
+                        line,
+                        format!("cannot discretise the continuous-time block: {e}"),
+                    )
+                })?;
                 m.a = sys.a().clone();
                 m.bu = sys.b().columns(0, nu).into_owned();
                 m.be = sys.b().columns(nu, ne).into_owned();
@@ -974,13 +1102,17 @@ impl ModelFile {
             Some((other, line)) => {
                 return Err(err_at(
                     line,
-                    format!("time = \"{other}\" is not supported; use \"discrete\" (default) or \"continuous\""),
+                    format!(
+                        "time = \"{other}\" is not supported; use \"discrete\" (default) or \"continuous\""
+                    ),
                 ));
             }
         }
         let mut lft = Lft::new(m).map_err(|e| err_at(lft_line, e.to_string()))?;
         if let Some(ts) = sample_time {
-            lft = lft.with_sample_time(ts).map_err(|e| err_at(lft_line, e.to_string()))?;
+            lft = lft
+                .with_sample_time(ts)
+                .map_err(|e| err_at(lft_line, e.to_string()))?;
         }
 
         // Blocks.
@@ -993,7 +1125,10 @@ impl ModelFile {
             let name = rb.name.get_ref().trim().to_string();
             let name_line = src.line(rb.name.span().start);
             if name.is_empty() {
-                return Err(err_at(name_line, "a [[nonlinearity]] block has an empty name"));
+                return Err(err_at(
+                    name_line,
+                    "a [[nonlinearity]] block has an empty name",
+                ));
             }
             if let Some(j) = blocks.iter().position(|b| b.name == name) {
                 return Err(err_at(
@@ -1078,7 +1213,11 @@ impl ModelFile {
     /// Builds the core [`Model`]: each block's dispersion with σ from `sigma_override`, else
     /// from the file, else [`default_sigma`] of the block's channels of `z_for_defaults` (the
     /// full z signal, L × n_z), which is then required.
-    pub fn to_model(&self, sigma_override: Option<f64>, z_for_defaults: Option<&Signal>) -> Result<Model, IoError> {
+    pub fn to_model(
+        &self,
+        sigma_override: Option<f64>,
+        z_for_defaults: Option<&Signal>,
+    ) -> Result<Model, IoError> {
         if let Some(s) = sigma_override
             && !(s.is_finite() && s > 0.0)
         {
@@ -1098,11 +1237,21 @@ impl ModelFile {
         let mut blocks = Vec::with_capacity(self.blocks.len());
         for b in &self.blocks {
             let bz = z_for_defaults.map(|z| z.select_channels(&b.inputs));
-            let d = b.dispersion.build(sigma_override, bz.as_ref()).map_err(|e| match e {
-                IoError::InvalidArgument(m) => IoError::InvalidArgument(format!("block `{}`: {m}", b.name)),
-                other => other,
-            })?;
-            blocks.push(NonlinearBlock::new(b.name.clone(), b.inputs.clone(), b.output, d));
+            let d = b
+                .dispersion
+                .build(sigma_override, bz.as_ref())
+                .map_err(|e| match e {
+                    IoError::InvalidArgument(m) => {
+                        IoError::InvalidArgument(format!("block `{}`: {m}", b.name))
+                    }
+                    other => other,
+                })?;
+            blocks.push(NonlinearBlock::new(
+                b.name.clone(),
+                b.inputs.clone(),
+                b.output,
+                d,
+            ));
         }
         Ok(Model::new(self.lft.clone(), blocks)?)
     }
@@ -1192,12 +1341,20 @@ impl ModelFile {
             let _ = writeln!(
                 s,
                 "inputs = [{}]",
-                b.inputs.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
+                b.inputs
+                    .iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             let _ = writeln!(s, "output = {}", b.output);
             match &b.dispersion {
                 DispersionSpec::Gaussian { sigma: Some(sg) } => {
-                    let _ = writeln!(s, "dispersion = {{ kind = \"gaussian\", sigma = {} }}", format_number(*sg));
+                    let _ = writeln!(
+                        s,
+                        "dispersion = {{ kind = \"gaussian\", sigma = {} }}",
+                        format_number(*sg)
+                    );
                 }
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
@@ -1222,7 +1379,13 @@ fn toml_string(s: &str) -> String {
 }
 
 fn string_list(v: &[String]) -> String {
-    format!("[{}]", v.iter().map(|s| toml_string(s)).collect::<Vec<_>>().join(", "))
+    format!(
+        "[{}]",
+        v.iter()
+            .map(|s| toml_string(s))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
 }
 
 fn matrix_toml(m: &DMatrix<f64>) -> String {
@@ -1232,7 +1395,10 @@ fn matrix_toml(m: &DMatrix<f64>) -> String {
     let row = |i: usize| {
         format!(
             "[{}]",
-            (0..m.ncols()).map(|j| format_number(m[(i, j)])).collect::<Vec<_>>().join(", ")
+            (0..m.ncols())
+                .map(|j| format_number(m[(i, j)]))
+                .collect::<Vec<_>>()
+                .join(", ")
         )
     };
     if m.nrows() == 1 {

@@ -166,7 +166,9 @@ fn resolve(p: &Path) -> PathBuf {
     let abs = if p.is_absolute() {
         p.to_path_buf()
     } else {
-        std::env::current_dir().map(|d| d.join(p)).unwrap_or_else(|_| p.to_path_buf())
+        std::env::current_dir()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|_| p.to_path_buf())
     };
     // Find the longest existing ancestor and canonicalise it.
     let mut existing = abs.clone();
@@ -185,7 +187,10 @@ fn resolve(p: &Path) -> PathBuf {
             }
             return out;
         }
-        match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
+        match (
+            existing.file_name().map(|n| n.to_os_string()),
+            existing.parent(),
+        ) {
             (Some(name), Some(parent)) => {
                 rest.push(name);
                 existing = parent.to_path_buf();
@@ -233,7 +238,11 @@ mod tests {
         fs::write(&input, "keep").unwrap();
         let sub = dir.path().join("sub");
         fs::create_dir(&sub).unwrap();
-        for spelling in [input.clone(), sub.join("../in.csv"), dir.path().join("./in.csv")] {
+        for spelling in [
+            input.clone(),
+            sub.join("../in.csv"),
+            dir.path().join("./in.csv"),
+        ] {
             let e = write_atomic(&spelling, b"x", &[&input]).unwrap_err();
             assert!(matches!(e, IoError::WouldOverwriteInput { .. }), "{e}");
         }
@@ -257,7 +266,10 @@ mod tests {
         write_atomic(&out, b"two", &[]).unwrap();
         assert_eq!(fs::read_to_string(&out).unwrap(), "two");
         // No temporary files are left behind.
-        let names: Vec<_> = fs::read_dir(dir.path().join("a/b")).unwrap().map(|e| e.unwrap().file_name()).collect();
+        let names: Vec<_> = fs::read_dir(dir.path().join("a/b"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
         assert_eq!(names.len(), 1);
         // A directory cannot be overwritten.
         assert!(write_atomic(&dir.path().join("a"), b"x", &[]).is_err());

@@ -94,7 +94,7 @@ pub struct BlockReport {
     pub output: usize,
     /// Dispersion description.
     pub dispersion: String,
-    /// D_i(z^[i], ŵ^[i]) at the optimum.
+    /// D_i(z⁽ⁱ⁾, ŵ⁽ⁱ⁾) at the optimum.
     pub dispersion_value: f64,
     /// [min, max] of each input over the data.
     pub z_range: Vec<[f64; 2]>,
@@ -114,7 +114,9 @@ pub struct BlockReport {
 
 fn range(x: &[f64]) -> [f64; 2] {
     x.iter()
-        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &v| [lo.min(v), hi.max(v)])
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &v| {
+            [lo.min(v), hi.max(v)]
+        })
 }
 
 impl Report {
@@ -130,12 +132,16 @@ impl Report {
         let mut blocks = Vec::with_capacity(id.blocks.len());
         let mut block_settings = Vec::with_capacity(id.blocks.len());
         for est in &id.blocks {
-            let spec = model.blocks.iter().find(|b| b.name == est.name).ok_or_else(|| {
-                IoError::InvalidArgument(format!(
-                    "the identification has a block `{}` that the model file does not",
-                    est.name
-                ))
-            })?;
+            let spec = model
+                .blocks
+                .iter()
+                .find(|b| b.name == est.name)
+                .ok_or_else(|| {
+                    IoError::InvalidArgument(format!(
+                        "the identification has a block `{}` that the model file does not",
+                        est.name
+                    ))
+                })?;
             let truth = spec.truth_map()?;
             let (rms, centred) = match &truth {
                 Some(t) => {
@@ -171,7 +177,9 @@ impl Report {
                 output: est.output,
                 dispersion: est.dispersion.clone(),
                 dispersion_value: est.dispersion_value,
-                z_range: (0..est.z.channels()).map(|c| range(&est.z.channel(c))).collect(),
+                z_range: (0..est.z.channels())
+                    .map(|c| range(&est.z.channel(c)))
+                    .collect(),
                 w_hat_range: range(&est.w_hat),
                 truth: spec.truth.as_ref().map(|t| t.describe()),
                 rms_error_vs_truth: rms,

@@ -34,10 +34,13 @@
 //! - [`StateSpace`], [`ContinuousStateSpace`] (with zero-order-hold discretisation);
 //! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1` and their realisation;
 //! - [`LinearSystem`]: the operator trait used by the solvers;
+//! - [`KalmanWhitener`] (module [`kalman`]): the whitening operator `W` of a noise path,
+//!   `W^T W = (T T^T)^{-1}`, applied by a time-varying Kalman filter;
 //! - [`LtiError`]: the error type;
 //! - [`testing`]: deterministic random systems and signals for tests and benchmarks.
 
 pub mod error;
+pub mod kalman;
 pub mod operator;
 pub mod signal;
 pub mod state_space;
@@ -45,6 +48,7 @@ pub mod testing;
 pub mod transfer_function;
 
 pub use error::LtiError;
+pub use kalman::{KalmanWhitener, WhiteningOptions, steady_state_whitening_filter};
 pub use operator::LinearSystem;
 pub use signal::Signal;
 pub use state_space::{ContinuousStateSpace, StateSpace};

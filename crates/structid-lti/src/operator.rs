@@ -198,17 +198,23 @@ impl BlockedRecursion {
         alpha: f64,
     ) {
         par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
-            self.leaf(len, x, out, accum, alpha)
+            self.leaf(len, x, out, accum, alpha, None)
         });
     }
 
-    fn leaf(
+    /// One sequential pass over the columns of `x`/`out` (no thread splitting).
+    ///
+    /// `init` is the state before the first processed block (`n x ncols`, the state of a
+    /// forward run at time 0, or the costate after the last sample of an adjoint run);
+    /// `None` means zero.
+    pub(crate) fn leaf(
         &self,
         len: usize,
         x: MatRef<'_, f64>,
         mut out: MatMut<'_, f64>,
         accum: Accum,
         alpha: f64,
+        init: Option<MatRef<'_, f64>>,
     ) {
         let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
         let k = b * cin + n;
@@ -241,6 +247,11 @@ impl BlockedRecursion {
                     step == 0,
                     k,
                 );
+                if step == 0
+                    && let Some(s0) = init
+                {
+                    load_state(s0.subcols(j0, w), b * cin, cur, row_major, k);
+                }
                 let wv = if row_major {
                     MatRef::from_row_major_slice(&cur[..], k, w)
                 } else {
@@ -325,6 +336,23 @@ fn pack(
     }
 }
 
+/// Writes the state `s0` (`n x ncols`) into the state rows `pad..k` of the packed buffer
+/// `w` (a `k x ncols` matrix, row- or column-major).
+fn load_state(s0: MatRef<'_, f64>, pad: usize, w: &mut [f64], row_major: bool, k: usize) {
+    let (n, nc) = (s0.nrows(), s0.ncols());
+    debug_assert_eq!(pad + n, k);
+    for j in 0..nc {
+        for i in 0..n {
+            let idx = if row_major {
+                (pad + i) * nc + j
+            } else {
+                j * k + pad + i
+            };
+            w[idx] = s0[(i, j)];
+        }
+    }
+}
+
 /// Static operator (no state): `out_k = alpha * g x_k (+ out_k)` for every sample `k`,
 /// where `g` is `cout x cin` (`D` or `D^T`).
 pub(crate) fn static_columns(
@@ -351,7 +379,7 @@ pub(crate) fn static_columns(
 }
 
 /// Splits the columns of `x`/`out` across the threads of `par` and runs `leaf` on each part.
-fn par_columns(
+pub(crate) fn par_columns(
     x: MatRef<'_, f64>,
     out: MatMut<'_, f64>,
     par: Par,

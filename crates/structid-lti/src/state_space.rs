@@ -293,7 +293,7 @@ impl StateSpace {
 
     /// Scalar recursion from `x0`; writes `y` (and the states `x_0 .. x_{L-1}` when asked),
     /// returns the final state `x_L`.
-    fn run(
+    pub(crate) fn run(
         &self,
         x0: &[f64],
         u: &[f64],
@@ -485,7 +485,7 @@ impl StateSpace {
     }
 
     /// The blocked recursion (forward or adjoint) for a horizon of `len` samples.
-    fn blocked(&self, len: usize, adjoint: bool) -> BlockedRecursion {
+    pub(crate) fn blocked(&self, len: usize, adjoint: bool) -> BlockedRecursion {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
         let bsz = time_block(n, m, p).min(len.max(1));
         // A^i B and C A^i for i < b, and A^b

@@ -21,7 +21,7 @@ use std::time::Instant;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
-use faer::{Accum, Conj, Mat, MatRef};
+use faer::{Accum, Conj, Mat, MatMut, MatRef};
 use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
@@ -323,9 +323,11 @@ fn assemble(
     for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
         for j0 in (0..len).step_by(panel) {
             let w = panel.min(len - j0);
+            // Row-major panels: each time sample's w values are contiguous, the layout the
+            // blocked Toeplitz recursion streams fastest.
             let g = &mut gram[..len * w];
-            pen.fill_columns(j0..j0 + w, g);
-            let g = MatRef::from_column_major_slice(g, len, w);
+            pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
+            let g = MatRef::from_row_major_slice(g, len, w);
             block.path.apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
         }
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
@@ -410,14 +412,10 @@ fn gram_times(pen: &dyn QuadraticPenalty, alpha: &[f64], scratch: &mut [f64], pa
     for j0 in (0..len).step_by(panel.max(1)) {
         let w = panel.min(len - j0);
         let g = &mut scratch[..len * w];
-        pen.fill_columns(j0..j0 + w, g);
-        for jj in 0..w {
-            let a = alpha[j0 + jj];
-            if a != 0.0 {
-                out.iter_mut()
-                    .zip(&g[jj * len..(jj + 1) * len])
-                    .for_each(|(o, v)| *o += a * v);
-            }
+        pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
+        let a = &alpha[j0..j0 + w];
+        for (o, row) in out.iter_mut().zip(g.chunks_exact(w)) {
+            *o += row.iter().zip(a).map(|(x, y)| x * y).sum::<f64>();
         }
     }
     out

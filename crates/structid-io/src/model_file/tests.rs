@@ -60,7 +60,10 @@ fn canonical_form_parses_exactly_as_written() {
     let truth = m.truth_maps().unwrap().unwrap();
     assert!((truth[0].eval(&[0.3]) - 0.3f64.tanh()).abs() < 1e-15);
     let model = m.to_model(None, None).unwrap();
-    assert_eq!(model.blocks()[0].dispersion.describe(), "gaussian(sigma=0.4)");
+    assert_eq!(
+        model.blocks()[0].dispersion.describe(),
+        "gaussian(sigma=0.4)"
+    );
 }
 
 #[test]
@@ -100,16 +103,25 @@ dispersion = { kind = "gaussian" }
     assert_eq!((d.states, d.u, d.e, d.w, d.y, d.z), (0, 1, 1, 2, 1, 2));
     assert_eq!(m.lft.matrices().cy.shape(), (1, 0));
     assert_eq!(m.lft.matrices().cz.shape(), (2, 0));
-    assert_eq!(m.blocks[0].dispersion, DispersionSpec::Gaussian { sigma: None });
+    assert_eq!(
+        m.blocks[0].dispersion,
+        DispersionSpec::Gaussian { sigma: None }
+    );
     // Default sigma needs data.
     let e = m.to_model(None, None).unwrap_err().to_string();
     assert!(e.contains("block `a`") && e.contains("sigma"), "{e}");
     let z = Signal::from_channels(&[vec![0.0, 2.0, 1.0], vec![-5.0, 5.0, 0.0]]).unwrap();
     let model = m.to_model(None, Some(&z)).unwrap();
-    assert_eq!(model.blocks()[0].dispersion.describe(), "gaussian(sigma=0.2)");
+    assert_eq!(
+        model.blocks()[0].dispersion.describe(),
+        "gaussian(sigma=0.2)"
+    );
     assert_eq!(model.blocks()[1].dispersion.describe(), "gaussian(sigma=1)");
     let model = m.to_model(Some(0.7), None).unwrap();
-    assert_eq!(model.blocks()[1].dispersion.describe(), "gaussian(sigma=0.7)");
+    assert_eq!(
+        model.blocks()[1].dispersion.describe(),
+        "gaussian(sigma=0.7)"
+    );
     assert!(m.to_model(Some(-1.0), None).is_err());
     assert!(m.to_model(Some(f64::NAN), None).is_err());
     // Omitted matrices are zero.
@@ -124,54 +136,88 @@ fn dimension_errors_name_the_matrix_the_reason_and_the_line() {
     let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = [[1.0, 2.0]]");
     assert_eq!(
         err(&bad),
-        "model file: matrix Bu has 2 columns but [signals].u names 1 input (line 5)"
+        "model file: matrix Bu has 2 columns but [signals].u names 1 input (line 4)"
     );
     let bad = CANONICAL.replace("Cy = [[1.0]]", "Cy = [[1.0], [2.0]]");
     let e = err(&bad);
-    assert!(e.contains("matrix Cy has 2 rows but [signals].y names 1 output (line 8)"), "{e}");
+    assert!(
+        e.contains("matrix Cy has 2 rows but [signals].y names 1 output (line 7)"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("Bw = [[1.0]]", "Bw = [[1.0], [1.0]]");
     let e = err(&bad);
-    assert!(e.contains("matrix Bw has 2 rows but A is 1×1") && e.contains("(line 7)"), "{e}");
+    assert!(
+        e.contains("matrix Bw has 2 rows but A is 1×1") && e.contains("(line 6)"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("Dye = [[1.0]]", "Dye = [[1.0, 0.0]]");
     let e = err(&bad);
-    assert!(e.contains("matrix Dye has 2 columns but Be has 1 column") && e.contains("(line 10)"), "{e}");
+    assert!(
+        e.contains("matrix Dye has 2 columns but Be has 1 column") && e.contains("(line 9)"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("A = [[0.5]]", "A = [[0.5, 0.1]]");
     let e = err(&bad);
-    assert!(e.contains("square") && e.contains("(line 4)"), "{e}");
+    assert!(e.contains("square") && e.contains("(line 3)"), "{e}");
     let bad = CANONICAL.replace("A = [[0.5]]", "A = [[0.5, 0.1], [0.2]]");
     let e = err(&bad);
-    assert!(e.contains("row 2 has 1 entry but row 1 has 2 entries") && e.contains("line 4"), "{e}");
+    assert!(
+        e.contains("row 2 has 1 entry but row 1 has 2 entries") && e.contains("line 3"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = []");
     let e = err(&bad);
-    assert!(e.contains("matrix Bu is empty but must be 1×1") && e.contains("line 5"), "{e}");
+    assert!(
+        e.contains("matrix Bu is empty but must be 1×1") && e.contains("line 4"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("Bu = [[1.0]]", "Bu = [[nan]]");
     let e = err(&bad);
-    assert!(e.contains("non-finite") && e.contains("line 5"), "{e}");
+    assert!(e.contains("non-finite") && e.contains("line 4"), "{e}");
     let bad = CANONICAL.replace("u = [\"u0\"]", "u = [\"u0\", \"u1\"]");
     let e = err(&bad);
-    assert!(e.contains("matrix Bu has 1 column but [signals].u names 2 inputs (line 5)"), "{e}");
+    assert!(
+        e.contains("matrix Bu has 1 column but [signals].u names 2 inputs (line 4)"),
+        "{e}"
+    );
 }
 
 #[test]
 fn block_errors_name_the_line() {
     let bad = CANONICAL.replace("inputs = [0]", "inputs = [1]");
     let e = err(&bad);
-    assert!(e.contains("block `f` reads z[1]") && e.contains("(line 24)"), "{e}");
+    assert!(
+        e.contains("block `f` reads z[1]") && e.contains("(line 23)"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("output = 0 ", "output = 3 ");
     let e = err(&bad);
-    assert!(e.contains("writes w[3]") && e.contains("(line 25)"), "{e}");
+    assert!(e.contains("writes w[3]") && e.contains("(line 24)"), "{e}");
     let bad = format!("{CANONICAL}\n[[nonlinearity]]\nname = \"f\"\ninputs = [0]\noutput = 0\n");
     let e = err(&bad);
-    assert!(e.contains("two [[nonlinearity]] blocks are named `f`") && e.contains("line 30"), "{e}");
+    assert!(
+        e.contains("two [[nonlinearity]] blocks are named `f`") && e.contains("line 29"),
+        "{e}"
+    );
     let bad = format!("{CANONICAL}\n[[nonlinearity]]\nname = \"g\"\ninputs = [0]\noutput = 0\n");
     let e = err(&bad);
-    assert!(e.contains("both write w[0]") && e.contains("line 32"), "{e}");
-    let bad = CANONICAL.split("[[nonlinearity]]").next().unwrap().to_string();
+    assert!(
+        e.contains("both write w[0]") && e.contains("line 31"),
+        "{e}"
+    );
+    let bad = CANONICAL
+        .split("[[nonlinearity]]")
+        .next()
+        .unwrap()
+        .to_string();
     let e = err(&bad);
     assert!(e.contains("w[0] is not produced by any block"), "{e}");
     let bad = CANONICAL.replace("tanh(z0)", "tanh(z1)");
     let e = err(&bad);
-    assert!(e.contains("truth of block `f`") && e.contains("z1") && e.contains("line 27"), "{e}");
+    assert!(
+        e.contains("truth of block `f`") && e.contains("z1") && e.contains("line 26"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("inputs = [0]", "inputs = []");
     assert!(err(&bad).contains("empty"));
     let bad = CANONICAL.replace("inputs = [0]", "inputs = [-1]");
@@ -183,7 +229,8 @@ fn toml_syntax_errors_give_line_and_column() {
     let bad = CANONICAL.replace("Dyw = [[0.0]]", "Dyw = [[0.0]");
     let e = err(&bad);
     assert!(e.starts_with("model file: invalid TOML"), "{e}");
-    assert!(e.contains("(line 11, column"), "{e}");
+    assert!(e.contains("(line 11, column 1)"), "{e}");
+    assert!(e.contains("after `Dyw = [[0.0]`"), "{e}");
     let bad = CANONICAL.replace("sample_time = 1.0", "sample_time = \"fast\"");
     let e = err(&bad);
     assert!(e.contains("line 2"), "{e}");
@@ -198,8 +245,11 @@ fn toml_syntax_errors_give_line_and_column() {
 fn unknown_dispersion_kind_lists_supported_kinds() {
     let bad = CANONICAL.replace("kind = \"gaussian\"", "kind = \"laplace\"");
     let e = err(&bad);
-    assert!(e.contains("unknown dispersion kind `laplace`") && e.contains("supported kinds: gaussian"), "{e}");
-    assert!(e.contains("(line 26)"), "{e}");
+    assert!(
+        e.contains("unknown dispersion kind `laplace`") && e.contains("supported kinds: gaussian"),
+        "{e}"
+    );
+    assert!(e.contains("(line 25)"), "{e}");
     let bad = CANONICAL.replace("sigma = 0.4", "sigma = -0.4");
     assert!(err(&bad).contains("greater than zero"));
     let bad = CANONICAL.replace("sigma = 0.4", "sgima = 0.4");
@@ -215,7 +265,10 @@ fn signals_are_checked() {
     assert!(err(&bad).contains("names no measured output"));
     let bad = CANONICAL.replace("# z = [\"z0\"]", "z = [\"z0\", \"z1\"]");
     let e = err(&bad);
-    assert!(e.contains("[signals].z names 2 columns") && e.contains("line 20"), "{e}");
+    assert!(
+        e.contains("[signals].z names 2 columns") && e.contains("line 19"),
+        "{e}"
+    );
     let ok = CANONICAL.replace("# z = [\"z0\"]", "z = [\"zm\"]");
     let m = ModelFile::parse(&ok, None).unwrap();
     assert_eq!(m.z_names(), ["zm"]);
@@ -290,7 +343,10 @@ output = 0
     assert_eq!(mm.cy[(0, 0)], 1.0);
     assert_eq!(m.lft.sample_time(), Some(0.1));
     let e = err(&text.replace("sample_time = 0.1\n", ""));
-    assert!(e.contains("needs a sample_time") && e.contains("line 3"), "{e}");
+    assert!(
+        e.contains("needs a sample_time") && e.contains("line 3"),
+        "{e}"
+    );
     let e = err(&text.replace("continuous", "analog"));
     assert!(e.contains("not supported"), "{e}");
 }
@@ -316,7 +372,10 @@ fn truth_tables_are_read_relative_to_the_model_file() {
     let missing = CANONICAL.replace("truth = \"tanh(z0)\"", "truth = { table = \"nope.csv\" }");
     std::fs::write(&path, &missing).unwrap();
     let e = ModelFile::from_path(&path).unwrap_err().to_string();
-    assert!(e.contains("nope.csv") && e.contains("line 27") && e.contains("m.toml"), "{e}");
+    assert!(
+        e.contains("nope.csv") && e.contains("line 26") && e.contains("m.toml"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -1,0 +1,309 @@
+//! `structid identify`.
+
+use std::collections::HashSet;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use structid_core::{Identification, IdentifySettings, identify};
+use structid_io::{DataTable, ModelFile, OutputGuard, Report, TruthSpec};
+
+use crate::IdentifyArgs;
+use crate::error::{CliError, positive};
+use crate::figures::{MapGrid, map_svg};
+
+/// A file-name-safe form of a block name: letters, digits, `_`, `-` and `.` are kept, anything
+/// else becomes `_`; names that collide get a numeric suffix.
+pub fn file_stems<'a>(names: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let mut seen = HashSet::new();
+    let mut out = Vec::new();
+    for name in names {
+        let mut s: String = name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        if s.starts_with('.') {
+            s.insert(0, '_');
+        }
+        let mut candidate = s.clone();
+        let mut i = 2;
+        while !seen.insert(candidate.to_lowercase()) {
+            candidate = format!("{s}_{i}");
+            i += 1;
+        }
+        out.push(candidate);
+    }
+    out
+}
+
+/// Protects the model file, the data file and the model's truth tables.
+pub fn protect_inputs(
+    guard: &mut OutputGuard,
+    model: &ModelFile,
+    model_path: &Path,
+    others: &[&Path],
+) {
+    guard.protect(model_path);
+    for p in others {
+        guard.protect(p);
+    }
+    let base = model_path
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    for b in &model.blocks {
+        if let Some(TruthSpec::Table { file, .. }) = &b.truth {
+            guard.protect(&base.join(file));
+        }
+    }
+}
+
+/// Builds the settings from the command line.
+fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
+    let beta = positive("--beta", a.beta)?;
+    let mut b = IdentifySettings::builder().beta(beta);
+    if let Some(mib) = a.memory_limit_mib {
+        if mib == 0 {
+            return Err(CliError::input(
+                "invalid value 0 for --memory-limit-mib: it must be at least 1",
+            ));
+        }
+        let bytes = mib
+            .checked_mul(1 << 20)
+            .ok_or_else(|| CliError::input(format!("--memory-limit-mib {mib} is too large")))?;
+        b = b.memory_limit_bytes(bytes);
+    }
+    Ok(b.build()?)
+}
+
+fn fmt_num(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// Runs `structid identify`.
+pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
+    let t0 = Instant::now();
+    let settings = settings(&a)?;
+    let sigma = a.sigma.map(|s| positive("--sigma", s)).transpose()?;
+    let mf = ModelFile::from_path(&a.model)?;
+    let mut guard = OutputGuard::new();
+    protect_inputs(&mut guard, &mf, &a.model, &[&a.data]);
+    // Refuse a bad output directory before the (possibly long) identification.
+    guard.check(&a.out)?;
+    let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
+    for f in ["estimate.csv", "report.json"]
+        .into_iter()
+        .map(String::from)
+        .chain(
+            stems
+                .iter()
+                .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
+        )
+    {
+        guard.check(&a.out.join(f))?;
+    }
+    if a.out.exists() && !a.out.is_dir() {
+        return Err(CliError::input(format!(
+            "--out `{}` exists and is not a directory",
+            a.out.display()
+        )));
+    }
+    let table = DataTable::read(&a.data)?;
+    let data = mf.select_data(&table)?;
+    let needs_z = sigma.is_none() && mf.blocks.iter().any(|b| b.dispersion.sigma().is_none());
+    let z = if needs_z {
+        Some(mf.z_signal(&data)?)
+    } else {
+        None
+    };
+    let model = mf.to_model(sigma, z.as_ref())?;
+    let id = identify(&model, &data, &settings)?;
+
+    guard.create_dir(&a.out)?;
+    let mut report = Report::new(&mf, &id, &settings, sigma)?;
+    report.data_file = Some(a.data.display().to_string());
+    let mut written: Vec<PathBuf> = Vec::new();
+
+    // estimate.csv: ŵ by block name (in w order), then ê.
+    let (names, columns) = estimate_columns(&mf, &id);
+    let path = a.out.join("estimate.csv");
+    guard.write_csv(&path, &names, &columns)?;
+    written.push(path);
+
+    // Per-block grids and figures.
+    let z_names = mf.z_names();
+    for est in &id.blocks {
+        let i = mf
+            .blocks
+            .iter()
+            .position(|b| b.name == est.name)
+            .ok_or_else(|| {
+                CliError::runtime(format!(
+                    "block `{}` is missing from the model file",
+                    est.name
+                ))
+            })?;
+        let (spec, stem) = (&mf.blocks[i], &stems[i]);
+        let input_names = grid_input_names(&z_names, &spec.inputs, mf.signals.z.is_some());
+        let grid = MapGrid::new(est.map.as_ref(), &est.z);
+        let mut header = input_names.clone();
+        header.push("value".into());
+        let grid_path = a.out.join(format!("map_{stem}.csv"));
+        guard.write_csv(&grid_path, &header, &grid.columns(est))?;
+        let truth = spec.truth_map()?;
+        let svg = map_svg(est, &grid, truth.as_deref(), &input_names)?;
+        let svg_path = a.out.join(format!("map_{stem}.svg"));
+        guard.write(&svg_path, svg.as_bytes())?;
+        if let Some(b) = report.block_mut(&est.name) {
+            b.grid_file = Some(format!("map_{stem}.csv"));
+            b.plot_file = Some(format!("map_{stem}.svg"));
+        }
+        written.push(grid_path);
+        written.push(svg_path);
+    }
+    let report_path = a.out.join("report.json");
+    report.files = written
+        .iter()
+        .chain(std::iter::once(&report_path))
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    guard.write(&report_path, report.to_json_string()?.as_bytes())?;
+    written.push(report_path);
+
+    print!(
+        "{}",
+        summary(&report, &id, &written, t0.elapsed().as_secs_f64())
+    );
+    Ok(())
+}
+
+/// Names for the inputs of a block in its grid file: the measured z column names, or the
+/// block-local `z0, z1, …` of truth expressions.
+fn grid_input_names(z_names: &[String], inputs: &[usize], measured: bool) -> Vec<String> {
+    let local = || {
+        (0..inputs.len())
+            .map(|i| format!("z{i}"))
+            .collect::<Vec<_>>()
+    };
+    if !measured {
+        return local();
+    }
+    let names: Vec<String> = inputs
+        .iter()
+        .map(|&i| z_names.get(i).cloned().unwrap_or_default())
+        .collect();
+    if names.iter().any(|n| n.is_empty() || n == "value") {
+        local()
+    } else {
+        names
+    }
+}
+
+/// Columns of estimate.csv: one ŵ column per w channel named after its block, then the
+/// estimated noise `e0, e1, …` (`e_hat0, …` if a block is called `e0`, …).
+fn estimate_columns(mf: &ModelFile, id: &Identification) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut names = Vec::new();
+    let mut columns = Vec::new();
+    for c in 0..id.w_hat.channels() {
+        let name = mf
+            .blocks
+            .iter()
+            .find(|b| b.output == c)
+            .map_or_else(|| format!("w{c}"), |b| b.name.clone());
+        names.push(name);
+        columns.push(id.w_hat.channel(c));
+    }
+    let ne = id.e_hat.channels();
+    let prefix = if (0..ne).any(|i| names.contains(&format!("e{i}"))) {
+        "e_hat"
+    } else {
+        "e"
+    };
+    for i in 0..ne {
+        names.push(format!("{prefix}{i}"));
+        columns.push(id.e_hat.channel(i));
+    }
+    (names, columns)
+}
+
+fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f64) -> String {
+    let mut s = String::new();
+    let d = &id.diagnostics;
+    let _ = writeln!(
+        s,
+        "identified {} block(s) from {} samples with β = {} ({} solver, {:.2} s)",
+        id.blocks.len(),
+        report.samples,
+        report.settings.beta,
+        d.solver,
+        seconds
+    );
+    let disp: Vec<String> = id
+        .blocks
+        .iter()
+        .zip(&id.cost.dispersions)
+        .map(|(b, v)| format!("D_{} = {}", b.name, fmt_num(*v)))
+        .collect();
+    let _ = writeln!(
+        s,
+        "cost: J = {} = noise (1/L)·Σ|ê|² {} + β·ΣD ({})",
+        fmt_num(id.cost.total),
+        fmt_num(id.cost.noise),
+        disp.join(", ")
+    );
+    let _ = writeln!(s, "z: {}", id.z_source.describe());
+    for b in &report.blocks {
+        let _ = write!(s, "  {}: {}", b.name, b.dispersion);
+        if let (Some(r), Some(c)) = (b.rms_error_vs_truth, b.centred_rms_error_vs_truth) {
+            let _ = write!(
+                s,
+                ", RMS error vs truth {} (centred {})",
+                fmt_num(r),
+                fmt_num(c)
+            );
+        }
+        s.push('\n');
+    }
+    if !id.cost.total.is_finite() {
+        let _ = writeln!(
+            s,
+            "warning: the cost is not finite; the data are probably badly scaled (rescale u and y)"
+        );
+    }
+    if d.feasibility_residual > 1e-6 {
+        let _ = writeln!(
+            s,
+            "warning: relative feasibility residual {:.2e}",
+            d.feasibility_residual
+        );
+    }
+    for w in &d.warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
+    let _ = writeln!(s, "wrote:");
+    for p in written {
+        let _ = writeln!(s, "  {}", p.display());
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_stems_are_safe_and_unique() {
+        let s = file_stems(["f", "a/b", "a b", ".hidden", "F"]);
+        assert_eq!(s, ["f", "a_b", "a_b_2", "_.hidden", "F_2"]);
+    }
+}

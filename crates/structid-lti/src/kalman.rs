@@ -1,0 +1,801 @@
+//! Kalman whitening of a coloured-noise path.
+//!
+//! # Problem
+//! The identification cost contains the noise term `r^T (T T^T)^{-1} r`, where `T` is the
+//! block lower-triangular Toeplitz operator of the *noise path*
+//!
+//! ```text
+//! x_{t+1} = A x_t + B e_t,      y_t = C x_t + D e_t,      x_0 = 0 (known),
+//! ```
+//!
+//! driven by white noise `e` of unit covariance (`ne` channels, `p` outputs). A *whitening
+//! operator* `W` satisfies `W^T W = (T T^T)^{-1}`; then `r^T (T T^T)^{-1} r = |W r|^2`.
+//! [`KalmanWhitener`] applies the lower-triangular `W` (with positive diagonal, i.e. the
+//! inverse of the Cholesky factor of `T T^T`) by recursion, in `O(L (n^2 + n p + p^2))`
+//! operations per signal and without forming `T`.
+//!
+//! # Recursion (time-varying Kalman filter, `P_0 = 0`)
+//! Process and measurement noise are correlated (both come from `e`): `Q = B B^T`,
+//! `R = D D^T`, `N = B D^T`. With `x^_0 = 0`, `P_0 = 0` and, for `t = 0 .. L-1`,
+//!
+//! ```text
+//! S_t = C P_t C^T + R = L_t L_t^T          (innovation covariance and its Cholesky factor)
+//! K_t = (A P_t C^T + N) S_t^{-1}
+//! nu_t = y_t - C x^_t,   w_t = L_t^{-1} nu_t  (innovation, whitened output)
+//! x^_{t+1} = A x^_t + K_t nu_t
+//! P_{t+1} = (A - K_t C) P_t (A - K_t C)^T + (B - K_t D)(B - K_t D)^T
+//! ```
+//!
+//! (the covariance update is the Joseph form of `A P A^T + Q - K S K^T`: a sum of two
+//! positive semi-definite terms, so `P_t` stays symmetric positive semi-definite under
+//! rounding). The innovations are white with covariances `S_t`, hence
+//! `sum_t |w_t|^2 = sum_t nu_t^T S_t^{-1} nu_t = y^T (T T^T)^{-1} y` and
+//! `log det (T T^T) = sum_t log det S_t`.
+//!
+//! # Steady state
+//! The Riccati recursion converges (for the usual detectability conditions); once
+//! `|P_t - P_{t-1}|_F <= tol (|P_{t-1}|_F + |B B^T|_F)` the gains are frozen and the filter
+//! becomes the LTI system ([`steady_state_whitening_filter`])
+//!
+//! ```text
+//! x^+ = (A - K C) x^ + K y,      w = -L^{-1} C x^ + L^{-1} y,
+//! ```
+//!
+//! which [`KalmanWhitener::whiten_columns`] applies with the blocked many-column engine of
+//! [`LinearSystem::apply_columns`](crate::LinearSystem::apply_columns), started from the
+//! state reached at the end of the time-varying part.
+//!
+//! When `D` is square (as many noise channels as outputs) and invertible, the noise `e_t`
+//! is recovered exactly from `y_0 .. y_t` (the initial state is known), so `P_t = 0` for
+//! all `t`, the gains are constant from the start and `W = T^{-1}`. If the noise model then
+//! has zeros outside the unit circle (non-minimum phase), `W` is an *unstable* filter: this
+//! is the exact `(T T^T)^{-1}` of the model, whose entries grow exponentially with the
+//! record length, not a defect of the recursion.
+
+use crate::error::LtiError;
+use crate::operator::par_columns;
+use crate::state_space::StateSpace;
+use faer::prelude::ReborrowMut;
+use faer::{Accum, MatMut, MatRef};
+use nalgebra::DMatrix;
+
+/// Relative tolerance on the Cholesky pivots of `S_t`: pivot `c` (the variance of output
+/// channel `c` given channels `0 .. c-1`) must exceed `PIVOT_TOL * S_t[c, c]`. This is
+/// invariant to the scaling of each output channel.
+const PIVOT_TOL: f64 = 1e-12;
+
+/// Doubling iterations before the fall-back to the plain Riccati iteration.
+const MAX_DOUBLING: usize = 100;
+
+/// Riccati iterations of the fall-back DARE solver.
+const MAX_RICCATI: usize = 1_000_000;
+
+/// Settings of [`KalmanWhitener::new`] (a plain struct; start from `Default::default()`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct WhiteningOptions {
+    /// Relative tolerance of the steady-state test
+    /// `|P_t - P_{t-1}|_F <= tol (|P_{t-1}|_F + |B B^T|_F)` (default `1e-13`). Also the
+    /// convergence tolerance of the algebraic Riccati equation solver.
+    pub steady_state_tol: f64,
+    /// `false` (default): the exact time-varying filter until the gains converge.
+    /// `true`: use the steady-state (algebraic Riccati) gains from the first sample on;
+    /// cheaper to set up, but only *approximately* `W` over the first samples (the
+    /// difference decays like the transient of the Riccati recursion).
+    pub steady_state_only: bool,
+    /// Cap on the number of stored time-varying gains (default `100_000`). If the Riccati
+    /// recursion has not converged after this many samples, the gains at that sample are
+    /// frozen for the rest of the record (then [`KalmanWhitener::is_exact`] is `false`).
+    pub max_transient: usize,
+}
+
+impl Default for WhiteningOptions {
+    fn default() -> Self {
+        WhiteningOptions {
+            steady_state_tol: 1e-13,
+            steady_state_only: false,
+            max_transient: 100_000,
+        }
+    }
+}
+
+/// The whitening operator `W` (`W^T W = (T T^T)^{-1}`, `W` lower triangular with positive
+/// diagonal) of a noise path over a fixed record length, applied by a time-varying Kalman
+/// filter that turns into an LTI filter once the Riccati recursion has converged.
+///
+/// See the [module documentation](self) for the recursion.
+#[derive(Clone)]
+pub struct KalmanWhitener {
+    /// record length `L`
+    len: usize,
+    /// noise state dimension
+    n: usize,
+    /// outputs
+    p: usize,
+    /// samples handled by the stored time-varying gains
+    transient: usize,
+    /// `G_t = K_t L_t` (`n x p`, row-major) for `t < transient`, concatenated
+    gains: Vec<f64>,
+    /// `L_t^{-1}` (lower triangle packed by rows, `p (p + 1) / 2` values) for `t < transient`
+    linv: Vec<f64>,
+    /// row-major `A` (`n x n`)
+    a: Vec<f64>,
+    /// row-major `C` (`p x n`)
+    c: Vec<f64>,
+    /// the LTI filter used from sample `transient` on
+    steady: StateSpace,
+    /// `sum_t log det S_t`
+    log_det: f64,
+    /// the Riccati recursion converged (or the record ended) before the gains were frozen
+    exact: bool,
+}
+
+impl std::fmt::Debug for KalmanWhitener {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // the stored gains can be long: summarise
+        f.debug_struct("KalmanWhitener")
+            .field("len", &self.len)
+            .field("order", &self.n)
+            .field("outputs", &self.p)
+            .field("transient_len", &self.transient)
+            .field("exact", &self.exact)
+            .field("log_det", &self.log_det)
+            .field("steady_state_filter", &self.steady)
+            .finish()
+    }
+}
+
+/// A failed Cholesky pivot of an innovation covariance.
+#[derive(Debug)]
+struct Singular {
+    channel: usize,
+    pivot: f64,
+    variance: f64,
+}
+
+impl Singular {
+    fn into_error(self, when: &str) -> LtiError {
+        let Singular {
+            channel: c,
+            pivot,
+            variance,
+        } = self;
+        let what = if c == 0 || variance.is_nan() || variance <= 0.0 {
+            format!("output channel {c} {when} does not depend on the noise")
+        } else {
+            format!(
+                "output channel {c} {when} does not depend on the noise beyond what output \
+                 channels 0..{c} already carry (its noise is a combination of theirs)"
+            )
+        };
+        LtiError::param(
+            "noise",
+            format!(
+                "{what}; the innovation covariance S = C P C^T + D D^T is singular (conditional \
+                 variance {pivot:.3e} vs variance {variance:.3e}), so the noise covariance T T^T \
+                 is not invertible. Every output needs noise of its own: D D^T must be positive \
+                 definite (D of full row rank)"
+            ),
+        )
+    }
+}
+
+/// Lower Cholesky factor of the symmetric `s`, with the relative pivot test of
+/// [`PIVOT_TOL`]; never produces NaN.
+fn cholesky_checked(s: &DMatrix<f64>) -> Result<DMatrix<f64>, Singular> {
+    let p = s.nrows();
+    let mut l = DMatrix::<f64>::zeros(p, p);
+    for j in 0..p {
+        let variance = s[(j, j)];
+        let mut pivot = variance;
+        for k in 0..j {
+            pivot -= l[(j, k)] * l[(j, k)];
+        }
+        // written so that NaN fails too
+        if !(variance > 0.0 && variance.is_finite() && pivot > PIVOT_TOL * variance) {
+            return Err(Singular {
+                channel: j,
+                pivot,
+                variance,
+            });
+        }
+        let d = pivot.sqrt();
+        l[(j, j)] = d;
+        for i in j + 1..p {
+            let mut v = s[(i, j)];
+            for k in 0..j {
+                v -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = v / d;
+        }
+    }
+    Ok(l)
+}
+
+/// Inverse of a lower-triangular matrix with nonzero diagonal.
+fn lower_inverse(l: &DMatrix<f64>) -> DMatrix<f64> {
+    let p = l.nrows();
+    let mut inv = DMatrix::<f64>::zeros(p, p);
+    for j in 0..p {
+        inv[(j, j)] = 1.0 / l[(j, j)];
+        for i in j + 1..p {
+            let mut v = 0.0;
+            for k in j..i {
+                v -= l[(i, k)] * inv[(k, j)];
+            }
+            inv[(i, j)] = v / l[(i, i)];
+        }
+    }
+    inv
+}
+
+fn symmetrise(m: &mut DMatrix<f64>) {
+    let n = m.nrows();
+    for j in 0..n {
+        for i in j + 1..n {
+            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+}
+
+fn all_finite(m: &DMatrix<f64>) -> bool {
+    m.iter().all(|v| v.is_finite())
+}
+
+/// The filter quantities of one time step.
+struct Gains {
+    /// `K = (A P C^T + N) S^{-1}` (`n x p`)
+    k: DMatrix<f64>,
+    /// `G = K L` (`n x p`)
+    g: DMatrix<f64>,
+    /// `L^{-1}` (`p x p`, lower)
+    linv: DMatrix<f64>,
+    /// `log det S`
+    log_det: f64,
+}
+
+/// The noise path and the derived covariances.
+struct Noise<'a> {
+    sys: &'a StateSpace,
+    /// `N = B D^T`
+    nmat: DMatrix<f64>,
+    /// `R = D D^T`
+    r: DMatrix<f64>,
+    /// `|B B^T|_F`, the scale of the steady-state test
+    q_norm: f64,
+}
+
+impl<'a> Noise<'a> {
+    fn new(sys: &'a StateSpace) -> Self {
+        let (b, d) = (sys.b(), sys.d());
+        let mut r = d * d.transpose();
+        symmetrise(&mut r);
+        Noise {
+            sys,
+            nmat: b * d.transpose(),
+            r,
+            q_norm: (b * b.transpose()).norm(),
+        }
+    }
+
+    /// Gains at a time step with error covariance `p`.
+    fn gains(&self, p: &DMatrix<f64>) -> Result<Gains, Singular> {
+        let (a, c) = (self.sys.a(), self.sys.c());
+        let pct = p * c.transpose();
+        let mut s = c * &pct + &self.r;
+        symmetrise(&mut s);
+        let l = cholesky_checked(&s)?;
+        let linv = lower_inverse(&l);
+        let m = a * &pct + &self.nmat;
+        let g = &m * linv.transpose();
+        let k = &g * &linv;
+        let log_det = 2.0 * (0..l.nrows()).map(|i| l[(i, i)].ln()).sum::<f64>();
+        Ok(Gains {
+            k,
+            g,
+            linv,
+            log_det,
+        })
+    }
+
+    /// Joseph-form covariance update `P+ = (A - K C) P (A - K C)^T + (B - K D)(B - K D)^T`.
+    fn next(&self, p: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
+        let sys = self.sys;
+        let phi = sys.a() - k * sys.c();
+        let e = sys.b() - k * sys.d();
+        let mut pn = &phi * p * phi.transpose() + &e * e.transpose();
+        symmetrise(&mut pn);
+        pn
+    }
+
+    fn converged(&self, prev: &DMatrix<f64>, next: &DMatrix<f64>, tol: f64) -> bool {
+        (next - prev).norm() <= tol * (prev.norm() + self.q_norm)
+    }
+
+    /// The LTI filter `y -> w` with the gains `g`.
+    fn filter(&self, g: &Gains) -> Result<StateSpace, LtiError> {
+        let (a, c) = (self.sys.a(), self.sys.c());
+        let lc = &g.linv * c;
+        StateSpace::new(a - &g.k * c, g.k.clone(), -lc, g.linv.clone())
+    }
+
+    /// Solution of the filter DARE reached by the Riccati recursion from `P_0 = 0`.
+    ///
+    /// Structure-preserving doubling (Chu, Fan, Lin 2005) on the equivalent equation
+    /// without cross term, `P = Ab P (I + G P)^{-1} Ab^T + Qb` with `Ab = A - N R^{-1} C`,
+    /// `Qb = E E^T`, `E = B - N R^{-1} D`, `G = C^T R^{-1} C`: its iterate `H_k` equals
+    /// the Riccati iterate `P_{2^k}` from `P_0 = 0`, so it converges to the same limit
+    /// as the time-varying filter, quadratically in general. If doubling overflows
+    /// (unstable modes of `Ab` that the noise does not excite) or stalls, the plain
+    /// recursion is iterated instead.
+    fn dare(&self, tol: f64) -> Result<DMatrix<f64>, LtiError> {
+        let sys = self.sys;
+        let n = sys.order();
+        let l0 = cholesky_checked(&self.r).map_err(|s| s.into_error("(steady state)"))?;
+        let l0inv = lower_inverse(&l0);
+        let nl = &self.nmat * l0inv.transpose(); // N L^{-T}
+        let lc = &l0inv * sys.c(); // L^{-1} C
+        let ld = &l0inv * sys.d(); // L^{-1} D
+        let abar = sys.a() - &nl * &lc;
+        let e = sys.b() - &nl * &ld;
+        let mut h = &e * e.transpose();
+        symmetrise(&mut h);
+        let mut g = lc.transpose() * &lc;
+        symmetrise(&mut g);
+        // control form: A_0 = Ab^T
+        let mut ak = abar.transpose();
+        let eye = DMatrix::<f64>::identity(n, n);
+        for _ in 0..MAX_DOUBLING {
+            let w = &eye + &g * &h;
+            let lu = w.lu();
+            let (Some(x1), Some(x2)) = (lu.solve(&ak), lu.solve(&g)) else {
+                break;
+            };
+            let mut g1 = &g + &ak * x2 * ak.transpose();
+            let mut h1 = &h + ak.transpose() * &h * &x1;
+            symmetrise(&mut g1);
+            symmetrise(&mut h1);
+            let a1 = &ak * &x1;
+            if !(all_finite(&a1) && all_finite(&g1) && all_finite(&h1)) {
+                break;
+            }
+            let done = (&h1 - &h).norm() <= tol * (h.norm() + self.q_norm);
+            h = h1;
+            if done {
+                return Ok(h);
+            }
+            ak = a1;
+            g = g1;
+        }
+        // fall-back: the plain recursion from P_0 = 0
+        let mut p = DMatrix::<f64>::zeros(n, n);
+        for t in 0..MAX_RICCATI {
+            let gains = self
+                .gains(&p)
+                .map_err(|s| s.into_error(&format!("at Riccati iteration {t}")))?;
+            let pn = self.next(&p, &gains.k);
+            if !all_finite(&pn) {
+                return Err(LtiError::param(
+                    "noise",
+                    "the Riccati recursion overflowed: the noise model is unstable in a \
+                     direction the outputs do not observe",
+                ));
+            }
+            if self.converged(&p, &pn, tol) {
+                return Ok(pn);
+            }
+            p = pn;
+        }
+        Err(LtiError::param(
+            "noise",
+            format!(
+                "the Riccati equation did not converge in {MAX_RICCATI} iterations (the noise \
+                 spectrum probably vanishes on the unit circle); use the time-varying filter"
+            ),
+        ))
+    }
+}
+
+fn check_tol(tol: f64) -> Result<(), LtiError> {
+    if tol.is_finite() && tol >= 0.0 {
+        Ok(())
+    } else {
+        Err(LtiError::param(
+            "steady_state_tol",
+            format!("must be finite and non-negative, got {tol}"),
+        ))
+    }
+}
+
+/// The steady-state whitening filter `y -> w` of a noise path: the LTI system
+/// `x^+ = (A - K C) x^ + K y`, `w = -L^{-1} C x^ + L^{-1} y` with the gains of the
+/// algebraic Riccati equation (the limit of the time-varying Kalman filter started from
+/// `P_0 = 0`; see the [module documentation](self)). It has the noise path's order and
+/// `p` inputs and outputs.
+///
+/// Applied to a whole record from zero state it is only an approximation of the exact
+/// whitening operator (see [`KalmanWhitener`]) over the first samples.
+///
+/// Errors: [`LtiError::InvalidParameter`] when `D D^T` is singular (some output without
+/// noise of its own) or when the Riccati equation cannot be solved (see the message).
+///
+/// ```
+/// use nalgebra::DMatrix;
+/// use structid_lti::kalman::steady_state_whitening_filter;
+/// // white noise with standard deviation 2: the whitening filter is the gain 1/2
+/// let noise = structid_lti::StateSpace::static_gain(DMatrix::from_element(1, 1, 2.0)).unwrap();
+/// let f = steady_state_whitening_filter(&noise).unwrap();
+/// assert_eq!(f.order(), 0);
+/// assert!((f.d()[(0, 0)] - 0.5).abs() < 1e-15);
+/// ```
+pub fn steady_state_whitening_filter(noise: &StateSpace) -> Result<StateSpace, LtiError> {
+    let tol = WhiteningOptions::default().steady_state_tol;
+    let nz = Noise::new(noise);
+    let p = nz.dare(tol)?;
+    let g = nz.gains(&p).map_err(|s| s.into_error("(steady state)"))?;
+    nz.filter(&g)
+}
+
+impl KalmanWhitener {
+    /// Builds the whitener of the noise path `noise` (`e -> y`, `ne` noise inputs, `p`
+    /// outputs, `n` states) for records of `len` samples: runs the Riccati recursion,
+    /// stores the time-varying gains until they converge (or until
+    /// `opts.max_transient` samples), then the steady-state filter.
+    ///
+    /// Cost: `O(t_conv (n^3 + n^2 ne + p^3))` time and `O(t_conv (n p + p^2))` memory,
+    /// where `t_conv <= min(len, max_transient)` is [`transient_len`](Self::transient_len).
+    ///
+    /// Errors:
+    /// - [`LtiError::InvalidParameter`] (`noise`) when an innovation covariance `S_t` is
+    ///   singular, i.e. `T T^T` is not invertible; in practice when `D D^T` is singular
+    ///   (the message names the output channel and sample), or when the recursion
+    ///   overflows;
+    /// - [`LtiError::InvalidParameter`] (`steady_state_tol`) for a negative or non-finite
+    ///   tolerance;
+    /// - [`LtiError::DimensionMismatch`] when `len * p` overflows `usize`.
+    ///
+    /// ```
+    /// use nalgebra::{DMatrix, DVector};
+    /// use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
+    /// use structid_lti::StateSpace;
+    /// // AR(1) noise plus white measurement noise:
+    /// // x+ = 0.9 x + e1,  y = x + 0.5 e2
+    /// let noise = StateSpace::new(
+    ///     DMatrix::from_element(1, 1, 0.9),
+    ///     DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::from_row_slice(1, 2, &[0.0, 0.5]),
+    /// )
+    /// .unwrap();
+    /// let len = 200;
+    /// let w = KalmanWhitener::new(&noise, len, &WhiteningOptions::default()).unwrap();
+    /// assert!(w.transient_len() < len); // the gains converged
+    ///
+    /// let r: Vec<f64> = (0..len).map(|k| (0.1 * k as f64).sin()).collect();
+    /// let mut omega = vec![0.0; len];
+    /// w.whiten(&r, &mut omega);
+    ///
+    /// // dense reference: r^T (T T^T)^{-1} r and log det (T T^T)
+    /// let t = noise.toeplitz_dense(len);
+    /// let chol = (&t * t.transpose()).cholesky().unwrap();
+    /// let z = chol.l().solve_lower_triangular(&DVector::from_vec(r)).unwrap();
+    /// let quad: f64 = omega.iter().map(|v| v * v).sum();
+    /// assert!((quad - z.norm_squared()).abs() <= 1e-9 * quad);
+    /// let log_det = 2.0 * chol.l().diagonal().map(f64::ln).sum();
+    /// assert!((w.log_det() - log_det).abs() <= 1e-9 * log_det.abs());
+    /// ```
+    pub fn new(noise: &StateSpace, len: usize, opts: &WhiteningOptions) -> Result<Self, LtiError> {
+        check_tol(opts.steady_state_tol)?;
+        let (n, p) = (noise.order(), noise.outputs());
+        if len.checked_mul(p).is_none() {
+            return Err(LtiError::dims(
+                "whitening record length",
+                format!("len * outputs to fit in usize ({p} outputs)"),
+                format!("{len} samples"),
+            ));
+        }
+        let nz = Noise::new(noise);
+        let pp = p * (p + 1) / 2;
+        let mut gains_v = Vec::new();
+        let mut linv_v = Vec::new();
+        let mut log_det = 0.0;
+        let (transient, steady_gains, exact) = if opts.steady_state_only {
+            let pinf = nz.dare(opts.steady_state_tol)?;
+            let g = nz
+                .gains(&pinf)
+                .map_err(|s| s.into_error("(steady state)"))?;
+            (0, g, false)
+        } else {
+            let cap = len.min(opts.max_transient);
+            let mut pcur = DMatrix::<f64>::zeros(n, n);
+            let mut pprev: Option<DMatrix<f64>> = None;
+            let mut last_log_det = 0.0;
+            let mut t = 0;
+            let (transient, exact) = loop {
+                if let Some(prev) = &pprev
+                    && nz.converged(prev, &pcur, opts.steady_state_tol)
+                {
+                    // the gains of step t - 1 equal those of P_t to within the tolerance:
+                    // the steady state starts at t - 1
+                    gains_v.truncate((t - 1) * n * p);
+                    linv_v.truncate((t - 1) * pp);
+                    log_det -= last_log_det;
+                    break (t - 1, true);
+                }
+                if t == cap {
+                    break (t, cap == len);
+                }
+                let g = nz
+                    .gains(&pcur)
+                    .map_err(|s| s.into_error(&format!("at sample {t}")))?;
+                for i in 0..n {
+                    for r in 0..p {
+                        gains_v.push(g.g[(i, r)]);
+                    }
+                }
+                for i in 0..p {
+                    for j in 0..=i {
+                        linv_v.push(g.linv[(i, j)]);
+                    }
+                }
+                log_det += g.log_det;
+                last_log_det = g.log_det;
+                let pn = nz.next(&pcur, &g.k);
+                if !all_finite(&pn) {
+                    return Err(LtiError::param(
+                        "noise",
+                        format!(
+                            "the Riccati recursion overflowed at sample {t}: the noise model is \
+                             unstable in a direction the outputs do not observe"
+                        ),
+                    ));
+                }
+                pprev = Some(std::mem::replace(&mut pcur, pn));
+                t += 1;
+            };
+            let g = nz
+                .gains(&pcur)
+                .map_err(|s| s.into_error(&format!("at sample {transient}")))?;
+            (transient, g, exact)
+        };
+        log_det += (len - transient) as f64 * steady_gains.log_det;
+        let steady = nz.filter(&steady_gains)?;
+        Ok(KalmanWhitener {
+            len,
+            n,
+            p,
+            transient,
+            gains: gains_v,
+            linv: linv_v,
+            a: noise.a().transpose().as_slice().to_vec(),
+            c: noise.c().transpose().as_slice().to_vec(),
+            steady,
+            log_det,
+            exact,
+        })
+    }
+
+    /// Number of output channels `p` (channels of the signals to whiten).
+    pub fn outputs(&self) -> usize {
+        self.p
+    }
+
+    /// Order `n` of the noise path (and of the whitening filter).
+    pub fn order(&self) -> usize {
+        self.n
+    }
+
+    /// The record length `L` the whitener was built for.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// `true` for a whitener of empty records.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Number of samples before the gains were declared steady (`len` if never; 0 in
+    /// `steady_state_only` mode, and whenever the gains are constant from the start, e.g.
+    /// for a static noise path or a square invertible `D`).
+    pub fn transient_len(&self) -> usize {
+        self.transient
+    }
+
+    /// `true` when `W` is the exact whitening operator (to within the steady-state
+    /// tolerance); `false` in `steady_state_only` mode and when the gains were frozen at
+    /// `max_transient` before the Riccati recursion converged.
+    pub fn is_exact(&self) -> bool {
+        self.exact
+    }
+
+    /// The LTI filter `y -> w` used from sample [`transient_len`](Self::transient_len) on
+    /// (`p` inputs and outputs, order `n`), started from the filter state reached there.
+    pub fn steady_state_filter(&self) -> &StateSpace {
+        &self.steady
+    }
+
+    /// `sum_t log det S_t = log det (T T^T)` (for marginal likelihoods).
+    pub fn log_det(&self) -> f64 {
+        self.log_det
+    }
+
+    fn check_rows(&self, rows: usize, what: &str) {
+        assert!(
+            rows == self.len * self.p,
+            "{what} has {rows} values, expected len * outputs = {} * {}",
+            self.len,
+            self.p
+        );
+    }
+
+    /// `w = W y` for one signal in time-major layout (`y.len() = out.len() = len * p`).
+    /// Overwrites `out`. Panics on inconsistent lengths; non-finite values propagate.
+    pub fn whiten(&self, y: &[f64], out: &mut [f64]) {
+        self.check_rows(y.len(), "y");
+        self.check_rows(out.len(), "out");
+        let (n, p, tl) = (self.n, self.p, self.transient);
+        let pp = p * (p + 1) / 2;
+        let mut xs = vec![0.0; n];
+        let mut xn = vec![0.0; n];
+        let mut nu = vec![0.0; p];
+        for t in 0..tl {
+            let g = &self.gains[t * n * p..(t + 1) * n * p];
+            let li = &self.linv[t * pp..(t + 1) * pp];
+            for c in 0..p {
+                let crow = &self.c[c * n..(c + 1) * n];
+                let mut acc = y[t * p + c];
+                for i in 0..n {
+                    acc -= crow[i] * xs[i];
+                }
+                nu[c] = acc;
+            }
+            let om = &mut out[t * p..(t + 1) * p];
+            for r in 0..p {
+                let row = &li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1];
+                om[r] = row.iter().zip(&nu).map(|(a, b)| a * b).sum();
+            }
+            for i in 0..n {
+                let arow = &self.a[i * n..(i + 1) * n];
+                let grow = &g[i * p..(i + 1) * p];
+                let mut acc = 0.0;
+                for k in 0..n {
+                    acc += arow[k] * xs[k];
+                }
+                for r in 0..p {
+                    acc += grow[r] * om[r];
+                }
+                xn[i] = acc;
+            }
+            std::mem::swap(&mut xs, &mut xn);
+        }
+        self.steady
+            .run(&xs, &y[tl * p..], &mut out[tl * p..], self.len - tl, None);
+    }
+
+    /// `out = W x` for many signals at once: each column of `x` (`len * p` rows, any
+    /// strides, e.g. a transposed matrix) is one time-major signal. Overwrites `out`.
+    ///
+    /// The columns are split across faer's global thread pool. Within a part, the first
+    /// [`transient_len`](Self::transient_len) samples run the time-varying recursion on
+    /// the `n x ncols` filter state (vectorised over the columns); the rest runs the
+    /// steady-state filter with the blocked engine of
+    /// [`LinearSystem::apply_columns`](crate::LinearSystem::apply_columns), started from
+    /// that state. Panics on inconsistent shapes.
+    pub fn whiten_columns(&self, x: MatRef<'_, f64>, out: MatMut<'_, f64>) {
+        self.check_rows(x.nrows(), "x");
+        self.check_rows(out.nrows(), "out");
+        assert_eq!(
+            x.ncols(),
+            out.ncols(),
+            "x and out must have the same number of columns"
+        );
+        if self.p == 0 || self.len == 0 || x.ncols() == 0 {
+            return;
+        }
+        let (n, p, tl) = (self.n, self.p, self.transient);
+        let rest = self.len - tl;
+        let blocked = (n > 0 && rest > 0).then(|| self.steady.blocked(rest, false));
+        let dinv = self.steady.d();
+        par_columns(x, out, faer::get_global_parallelism(), &|x, mut out| {
+            let w = x.ncols();
+            let xs = self.transient_columns(x, out.rb_mut());
+            if rest == 0 {
+                return;
+            }
+            let xr = x.subrows(tl * p, rest * p);
+            let mut or = out.subrows_mut(tl * p, rest * p);
+            match &blocked {
+                Some(b) => {
+                    let s0 = MatRef::from_row_major_slice(&xs, n, w);
+                    b.leaf(rest, xr, or, Accum::Replace, 1.0, Some(s0));
+                }
+                None => {
+                    // static filter: w_t = L^{-1} y_t
+                    for j in 0..w {
+                        for t in 0..rest {
+                            for r in 0..p {
+                                let mut acc = 0.0;
+                                for k in 0..=r {
+                                    acc += dinv[(r, k)] * xr[(t * p + k, j)];
+                                }
+                                or[(t * p + r, j)] = acc;
+                            }
+                        }
+                    }
+                }
+            }
+        });
+    }
+
+    /// The time-varying part of [`whiten_columns`](Self::whiten_columns) on a column part;
+    /// returns the filter state at `transient_len` (`n x ncols`, row-major).
+    fn transient_columns(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Vec<f64> {
+        let (n, p, tl) = (self.n, self.p, self.transient);
+        let w = x.ncols();
+        let pp = p * (p + 1) / 2;
+        let mut xs = vec![0.0; n * w];
+        if tl == 0 {
+            return xs;
+        }
+        let mut xn = vec![0.0; n * w];
+        let mut nu = vec![0.0; p * w];
+        let mut om = vec![0.0; p * w];
+        for t in 0..tl {
+            let g = &self.gains[t * n * p..(t + 1) * n * p];
+            let li = &self.linv[t * pp..(t + 1) * pp];
+            // nu = y_t - C x^
+            for c in 0..p {
+                let nc = &mut nu[c * w..(c + 1) * w];
+                for (j, v) in nc.iter_mut().enumerate() {
+                    *v = x[(t * p + c, j)];
+                }
+                for i in 0..n {
+                    let cc = self.c[c * n + i];
+                    for (v, s) in nc.iter_mut().zip(&xs[i * w..(i + 1) * w]) {
+                        *v -= cc * s;
+                    }
+                }
+            }
+            // w_t = L^{-1} nu
+            for r in 0..p {
+                let row = &li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1];
+                let orow = &mut om[r * w..(r + 1) * w];
+                orow.fill(0.0);
+                for (k, &l) in row.iter().enumerate() {
+                    for (o, v) in orow.iter_mut().zip(&nu[k * w..(k + 1) * w]) {
+                        *o += l * v;
+                    }
+                }
+                for (j, &v) in orow.iter().enumerate() {
+                    out[(t * p + r, j)] = v;
+                }
+            }
+            // x^+ = A x^ + G w_t
+            for i in 0..n {
+                let xi = &mut xn[i * w..(i + 1) * w];
+                xi.fill(0.0);
+                for k in 0..n {
+                    let a = self.a[i * n + k];
+                    if a != 0.0 {
+                        for (o, v) in xi.iter_mut().zip(&xs[k * w..(k + 1) * w]) {
+                            *o += a * v;
+                        }
+                    }
+                }
+                for r in 0..p {
+                    let gv = g[i * p + r];
+                    for (o, v) in xi.iter_mut().zip(&om[r * w..(r + 1) * w]) {
+                        *o += gv * v;
+                    }
+                }
+            }
+            std::mem::swap(&mut xs, &mut xn);
+        }
+        xs
+    }
+}
+
+#[cfg(test)]
+mod tests;
