@@ -58,6 +58,11 @@ pub trait QuadraticPenalty: Send + Sync {
     /// layout; solvers pass row-major panels).
     fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>);
 
+    /// Writes the whole K (L × L) into `out`; override to exploit symmetry.
+    fn fill(&self, out: faer::MatMut<'_, f64>) {
+        self.fill_columns(0..self.len(), out);
+    }
+
     /// The interpolant N̂(z) = Σ_k α_k K(z, z_k) for the dual coefficients α (ŵ = Kα).
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant>;
 
@@ -143,6 +148,10 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
 
     fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>) {
         self.kernel.fill_gram_columns(&self.z, cols, out);
+    }
+
+    fn fill(&self, out: faer::MatMut<'_, f64>) {
+        self.kernel.fill_gram(&self.z, out);
     }
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {

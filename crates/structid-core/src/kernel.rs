@@ -5,7 +5,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use faer::MatMut;
-use faer::reborrow::ReborrowMut;
+use faer::reborrow::{Reborrow, ReborrowMut};
 use rayon::prelude::*;
 use structid_lti::Signal;
 
@@ -47,6 +47,12 @@ pub trait Kernel: Send + Sync + fmt::Debug {
         Vec::new()
     }
 
+    /// Writes the whole Gram matrix (`z.len()` × `z.len()`) into `out`. Override it to exploit
+    /// symmetry; the default fills every column.
+    fn fill_gram(&self, z: &Signal, out: MatMut<'_, f64>) {
+        self.fill_gram_columns(z, 0..z.len(), out);
+    }
+
     /// Writes the columns `cols` of the Gram matrix K_ij = k(z_i, z_j) into `out`
     /// (`z.len()` × `cols.len()`, any layout). Override it when a faster route exists; the
     /// default evaluates [`Kernel::eval`] entry by entry, in parallel over rows.
@@ -59,6 +65,46 @@ pub trait Kernel: Send + Sync + fmt::Debug {
             }
         });
     }
+}
+
+/// Copies the upper triangle of the square matrix `m` into its lower triangle, one block of
+/// columns at a time (the split keeps the reads and writes in disjoint borrows).
+pub(crate) fn mirror_upper_to_lower(mut m: MatMut<'_, f64>) {
+    const TILE: usize = 64;
+    let n = m.nrows();
+    for j0 in (0..n).step_by(TILE) {
+        let j1 = (j0 + TILE).min(n);
+        for j in j0..j1 {
+            for i in j + 1..j1 {
+                m[(i, j)] = m[(j, i)];
+            }
+        }
+        if j1 < n {
+            let (left, right) = m.rb_mut().split_at_col_mut(j1);
+            let src = right.rb().submatrix(j0, 0, j1 - j0, n - j1);
+            let mut dst = left.submatrix_mut(j1, j0, n - j1, j1 - j0);
+            dst.copy_from(src.transpose());
+        }
+    }
+}
+
+/// Runs `f(j, column j)` over the columns of `out`, splitting them between rayon threads.
+pub(crate) fn par_cols(out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::ColMut<'_, f64>) + Sync)) {
+    fn go(first: usize, mut out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::ColMut<'_, f64>) + Sync)) {
+        let n = out.ncols();
+        if n <= 16 {
+            for j in 0..n {
+                f(first + j, out.rb_mut().col_mut(j));
+            }
+        } else {
+            // Split so both halves of an upper-triangular fill get similar work.
+            let cut = ((first + n) as f64 * std::f64::consts::FRAC_1_SQRT_2) as usize;
+            let cut = cut.clamp(first + 1, first + n - 1) - first;
+            let (l, r) = out.split_at_col_mut(cut);
+            rayon::join(|| go(first, l, f), || go(first + cut, r, f));
+        }
+    }
+    go(0, out, f);
 }
 
 /// Runs `f(i, row i)` over the rows of `out`, splitting the rows between rayon threads.
@@ -124,6 +170,39 @@ impl Kernel for GaussianKernel {
 
     fn parameters(&self) -> Vec<(String, f64)> {
         vec![("sigma".into(), self.sigma)]
+    }
+
+    fn fill_gram(&self, z: &Signal, mut out: MatMut<'_, f64>) {
+        // Half the exponentials: the upper triangle column by column (contiguous when `out` is
+        // column-major), then a mirror copy.
+        let len = z.len();
+        let p = z.channels();
+        let c = self.normalisation(p);
+        let s = 1.0 / (2.0 * self.sigma * self.sigma);
+        let data = z.as_slice();
+        par_cols(out.rb_mut(), &|j, mut col| {
+            let zj = &data[j * p..(j + 1) * p];
+            let fill = |v: &mut [f64]| {
+                for (i, x) in v.iter_mut().enumerate() {
+                    let zi = &data[i * p..(i + 1) * p];
+                    let d2: f64 = zi.iter().zip(zj).map(|(a, b)| (a - b) * (a - b)).sum();
+                    *x = -d2 * s;
+                }
+                exp_in_place(v, c);
+            };
+            match col.rb_mut().subrows_mut(0, j + 1).try_as_col_major_mut() {
+                Some(cm) => fill(cm.as_slice_mut()),
+                None => {
+                    let mut v = vec![0.0; j + 1];
+                    fill(&mut v);
+                    for (i, x) in v.into_iter().enumerate() {
+                        col[i] = x;
+                    }
+                }
+            }
+        });
+        debug_assert_eq!(out.nrows(), len);
+        mirror_upper_to_lower(out);
     }
 
     fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: MatMut<'_, f64>) {
@@ -310,6 +389,19 @@ mod tests {
         }
         let g = GaussianKernel::new(0.4).unwrap();
         let z = Signal::from_fn(300, 2, |i, c| ((i * 13 + c * 7) % 29) as f64 / 9.0);
+        // The symmetric whole-matrix fill equals the column fill.
+        for p in [1, 2] {
+            let zp = Signal::from_fn(203, p, |i, c| ((i * 13 + c * 7) % 29) as f64 / 9.0);
+            let mut full = faer::Mat::<f64>::zeros(203, 203);
+            g.fill_gram(&zp, full.as_mut());
+            let mut cols = faer::Mat::<f64>::zeros(203, 203);
+            g.fill_gram_columns(&zp, 0..203, cols.as_mut());
+            for j in 0..203 {
+                for i in 0..203 {
+                    assert!((full[(i, j)] - cols[(i, j)]).abs() <= 1e-14 * cols[(i, j)].abs().max(1e-300), "({i},{j})");
+                }
+            }
+        }
         let (mut a, mut b) = (vec![0.0; 300 * 40], vec![0.0; 300 * 40]);
         Plain(g).fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut a, 300, 40));
         g.fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut b, 300, 40));

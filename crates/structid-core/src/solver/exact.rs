@@ -21,6 +21,7 @@ use std::time::Instant;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Conj, Mat, MatMut, MatRef};
 use structid_lti::{LinearSystem, Signal};
 
@@ -321,14 +322,22 @@ fn assemble(
     let len = problem.len();
     let panel = PANEL.min(len);
     for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
-        for j0 in (0..len).step_by(panel) {
-            let w = panel.min(len - j0);
-            // Row-major panels: each time sample's w values are contiguous, the layout the
-            // blocked Toeplitz recursion streams fastest.
-            let g = &mut gram[..len * w];
-            pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
-            let g = MatRef::from_row_major_slice(g, len, w);
-            block.path.apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+        if bi == 0 && m.nrows() >= len {
+            // M's buffer is free before the first block: hold the whole K there (filled using
+            // its symmetry), so Q = T·K is one pass; K's transpose view is row-major, the
+            // layout the blocked recursion streams fastest, and equals K.
+            let mut k = m.as_mut().submatrix_mut(0, 0, len, len);
+            pen.fill(k.rb_mut());
+            block.path.apply_columns(k.rb().transpose(), q.as_mut(), Accum::Replace, 1.0);
+        } else {
+            for j0 in (0..len).step_by(panel) {
+                let w = panel.min(len - j0);
+                // Row-major panels: each time sample's w values are contiguous.
+                let g = &mut gram[..len * w];
+                pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
+                let g = MatRef::from_row_major_slice(g, len, w);
+                block.path.apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+            }
         }
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
         block.path.apply_columns(q.transpose(), m.as_mut(), accum, 1.0);
