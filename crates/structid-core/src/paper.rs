@@ -39,6 +39,19 @@ pub struct Experiment {
     pub noise: Signal,
 }
 
+impl Experiment {
+    /// Simulates `model` with the true `maps` in the loop, input `u` and noise `noise`.
+    pub fn simulate(model: Model, maps: &[&dyn crate::Interpolant], u: Signal, noise: Signal) -> Result<Self> {
+        let sim = model.simulate(maps, &u, Some(&noise), None)?;
+        Ok(Self {
+            data: Data::new(u, sim.y)?,
+            w_true: sim.w,
+            noise,
+            model,
+        })
+    }
+}
+
 /// The LFT of the spray example (section 6.1): y_k = f(u_k) + g(u_{k−2}) + e_k, z = u,
 /// L_yw = [1, q⁻²].
 pub fn spray_lft() -> Lft {
@@ -74,13 +87,7 @@ pub fn spray(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, seed: 
     let noise = gaussian_noise(len, 1, noise_std, seed);
     let f = |z: &[f64]| spray_f(z[0]);
     let g = |z: &[f64]| spray_g(z[0]);
-    let sim = model.simulate(&[&f, &g], &u, Some(&noise), None)?;
-    Ok(Experiment {
-        data: Data::new(u, sim.y)?,
-        w_true: sim.w,
-        noise,
-        model,
-    })
+    Experiment::simulate(model, &[&f, &g], u, noise)
 }
 
 /// The smooth two-input map used for the multi-input example (the paper does not give one):
@@ -125,13 +132,7 @@ pub fn multi_input(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, 
     let u = Signal::from_fn(len, 2, |_, _| rng.random_range(-half_width..half_width));
     let noise = gaussian_noise(len, 1, noise_std, seed.wrapping_add(17));
     let map = |z: &[f64]| multi_input_map(z);
-    let sim = model.simulate(&[&map], &u, Some(&noise), None)?;
-    Ok(Experiment {
-        data: Data::new(u, sim.y)?,
-        w_true: sim.w,
-        noise,
-        model,
-    })
+    Experiment::simulate(model, &[&map], u, noise)
 }
 
 /// Gaussian white noise N(0, std²), reproducible from `seed`.

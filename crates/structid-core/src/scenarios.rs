@@ -8,7 +8,7 @@ use structid_lti::Signal;
 use crate::dispersion::Dispersion;
 use crate::error::Result;
 use crate::lft::{Lft, LftMatrices};
-use crate::model::{Data, Model, NonlinearBlock};
+use crate::model::{Model, NonlinearBlock};
 use crate::paper::{Experiment, gaussian_noise};
 
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
@@ -38,11 +38,5 @@ pub fn hammerstein(len: usize, order: usize, noise_std: f64, dispersion: Arc<dyn
         Signal::from_fn(len, 1, |k, _| 2.0 * (white.get(k, 0) * 0.8).tanh())
     };
     let map = |z: &[f64]| z[0].tanh();
-    let sim = model.simulate(&[&map], &u, Some(&noise), None)?;
-    Ok(Experiment {
-        data: Data::new(u, sim.y)?,
-        w_true: sim.w,
-        noise,
-        model,
-    })
+    Experiment::simulate(model, &[&map], u, noise)
 }
