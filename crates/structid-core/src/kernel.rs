@@ -83,7 +83,17 @@ pub(crate) fn mirror_upper_to_lower(mut m: MatMut<'_, f64>) {
             let (left, right) = m.rb_mut().split_at_col_mut(j1);
             let src = right.rb().submatrix(j0, 0, j1 - j0, n - j1);
             let mut dst = left.submatrix_mut(j1, j0, n - j1, j1 - j0);
-            dst.copy_from(src.transpose());
+            // TILE×TILE tiles: the source tile's TILE columns stay in L1 while the destination
+            // columns are written contiguously.
+            for c0 in (0..n - j1).step_by(TILE) {
+                let c1 = (c0 + TILE).min(n - j1);
+                for jj in 0..j1 - j0 {
+                    let mut col = dst.rb_mut().col_mut(jj);
+                    for c in c0..c1 {
+                        col[c] = src[(jj, c)];
+                    }
+                }
+            }
         }
     }
 }
