@@ -104,8 +104,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     // --- assemble M, leave out samples that depend on neither e nor w, factor -------------
     let lb = len as f64 * beta;
+    // M is factorised in place, so it gets faer's aligned allocation. Q is only streamed
+    // through the Toeplitz recursion: a calloc'd Vec costs nothing until it is written.
     let mut m = Mat::<f64>::zeros(n, n);
-    let mut q = Mat::<f64>::zeros(n, len);
+    let mut q_buf = vec![0.0f64; n * len];
+    let mut q = MatMut::from_column_major_slice_mut(&mut q_buf, n, len);
     let panel = PANEL.min(len);
     let mut gram = vec![0.0; len * panel];
     let nblocks = problem.blocks().len();
@@ -124,7 +127,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut jitter = 0.0;
     let mut attempt = 0;
     let (kept, dropped, max_diag) = loop {
-        assemble(problem, &penalties, lb, &mut m, &mut q, &mut gram);
+        assemble(problem, &penalties, lb, &mut m, q.rb_mut(), &mut gram);
         let (kept, dropped, max_diag) = compact_live_rows(&mut m)?;
         let nk = kept.len();
         let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
@@ -213,7 +216,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         let w_hat = if bi + 1 == nblocks {
             // Q = T·K of the last block is still in memory: ŵ = K·α = Qᵀ·λ.
             let lam = faer::Col::<f64>::from_fn(n, |i| lambda[i]);
-            let w = q.transpose() * &lam;
+            let w = q.rb().transpose() * &lam;
             (0..len).map(|k| w[k]).collect::<Vec<_>>()
         } else {
             gram_times(pen.as_ref(), &alpha, &mut gram, panel)
@@ -316,7 +319,7 @@ fn assemble(
     penalties: &[Box<dyn QuadraticPenalty>],
     lb: f64,
     m: &mut Mat<f64>,
-    q: &mut Mat<f64>,
+    mut q: MatMut<'_, f64>,
     gram: &mut [f64],
 ) {
     let len = problem.len();
@@ -328,7 +331,7 @@ fn assemble(
             // layout the blocked recursion streams fastest, and equals K.
             let mut k = m.as_mut().submatrix_mut(0, 0, len, len);
             pen.fill(k.rb_mut());
-            block.path.apply_columns(k.rb().transpose(), q.as_mut(), Accum::Replace, 1.0);
+            block.path.apply_columns(k.rb().transpose(), q.rb_mut(), Accum::Replace, 1.0);
         } else {
             for j0 in (0..len).step_by(panel) {
                 let w = panel.min(len - j0);
@@ -336,11 +339,11 @@ fn assemble(
                 let g = &mut gram[..len * w];
                 pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
                 let g = MatRef::from_row_major_slice(g, len, w);
-                block.path.apply_columns(g, q.as_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+                block.path.apply_columns(g, q.rb_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
             }
         }
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
-        block.path.apply_columns(q.transpose(), m.as_mut(), accum, 1.0);
+        block.path.apply_columns(q.rb().transpose(), m.as_mut(), accum, 1.0);
     }
     add_noise_term(problem.noise(), len, lb, m);
 }
