@@ -24,12 +24,29 @@ fn random_spd(n: usize) -> faer::Mat<f64> {
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("exact_gaussian");
-    group.sample_size(10).measurement_time(Duration::from_secs(8)).warm_up_time(Duration::from_secs(1));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(8))
+        .warm_up_time(Duration::from_secs(1));
     let settings = IdentifySettings::builder().beta(1e-3).build().unwrap();
     for len in [500usize, 1000, 2000, 4000] {
-        let exp = scenarios::hammerstein(len, 4, 0.1, Arc::new(KernelDispersion::gaussian(0.2).unwrap()), 42).unwrap();
+        let exp = scenarios::hammerstein(
+            len,
+            4,
+            0.1,
+            Arc::new(KernelDispersion::gaussian(0.2).unwrap()),
+            42,
+        )
+        .unwrap();
         group.bench_with_input(BenchmarkId::new("identify", len), &len, |b, _| {
-            b.iter(|| black_box(identify(&exp.model, &exp.data, &settings).unwrap().cost.total))
+            b.iter(|| {
+                black_box(
+                    identify(&exp.model, &exp.data, &settings)
+                        .unwrap()
+                        .cost
+                        .total,
+                )
+            })
         });
         let spd = random_spd(len);
         group.bench_with_input(BenchmarkId::new("faer_llt", len), &len, |b, _| {

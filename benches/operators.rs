@@ -17,14 +17,24 @@ use structid::lti::{KalmanWhitener, LinearSystem, WhiteningOptions};
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("operators");
-    group.sample_size(10).measurement_time(Duration::from_secs(6)).warm_up_time(Duration::from_secs(1));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(6))
+        .warm_up_time(Duration::from_secs(1));
 
     let len = 4000;
     let sys = random_stable_system(1, 4, 1, 1, 0.95);
     let q = Mat::<f64>::from_fn(len, len, |i, j| ((i * 7 + j * 13) % 17) as f64 - 8.0);
     let mut out = Mat::<f64>::zeros(len, len);
     group.bench_function("apply_columns/4000x4000_transposed", |b| {
-        b.iter(|| sys.apply_columns(black_box(q.as_ref().transpose()), out.as_mut(), Accum::Replace, 1.0))
+        b.iter(|| {
+            sys.apply_columns(
+                black_box(q.as_ref().transpose()),
+                out.as_mut(),
+                Accum::Replace,
+                1.0,
+            )
+        })
     });
     drop((q, out));
 

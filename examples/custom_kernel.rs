@@ -16,7 +16,12 @@ struct Matern32 {
 
 impl Kernel for Matern32 {
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
-        let d = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt();
+        let d = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y) * (x - y))
+            .sum::<f64>()
+            .sqrt();
         let s = 3f64.sqrt() * d / self.length_scale;
         (1.0 + s) * (-s).exp()
     }
@@ -39,7 +44,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         id.cost.total
     );
     for z in [-1.5, -0.5, 0.0, 0.5, 1.5] {
-        println!("  N̂({z:+.1}) = {:+.4}   tanh = {:+.4}", block.predict(&[z]), f64::tanh(z));
+        println!(
+            "  N̂({z:+.1}) = {:+.4}   tanh = {:+.4}",
+            block.predict(&[z]),
+            f64::tanh(z)
+        );
     }
     Ok(())
 }

@@ -10,9 +10,19 @@ use std::time::Instant;
 use structid::{IdentifySettings, KernelDispersion, identify, scenarios};
 
 fn main() {
-    let len: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(2000);
+    let len: usize = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2000);
     let only_identify = std::env::args().any(|a| a == "--identify-only");
-    let exp = scenarios::hammerstein(len, 4, 0.1, Arc::new(KernelDispersion::gaussian(0.2).unwrap()), 42).unwrap();
+    let exp = scenarios::hammerstein(
+        len,
+        4,
+        0.1,
+        Arc::new(KernelDispersion::gaussian(0.2).unwrap()),
+        42,
+    )
+    .unwrap();
     let settings = IdentifySettings::builder().beta(1e-3).build().unwrap();
     for _ in 0..3 {
         let t = Instant::now();
@@ -21,7 +31,13 @@ fn main() {
         let d = &id.diagnostics;
         println!(
             "L={len} identify {:.3}s (prepare {:.3} assemble {:.3} factor {:.3} solve {:.3}) feas {:.1e} J {:.5}",
-            total, d.timings.prepare, d.timings.assemble, d.timings.factor, d.timings.solve, d.feasibility_residual, id.cost.total
+            total,
+            d.timings.prepare,
+            d.timings.assemble,
+            d.timings.factor,
+            d.timings.solve,
+            d.feasibility_residual,
+            id.cost.total
         );
     }
     if only_identify {

@@ -17,13 +17,19 @@ use structid::{IdentifySettings, KernelDispersion, identify};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let len: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(1500);
-    let out = std::path::PathBuf::from(args.get(2).cloned().unwrap_or_else(|| "target/examples/multi_input".into()));
+    let out = std::path::PathBuf::from(
+        args.get(2)
+            .cloned()
+            .unwrap_or_else(|| "target/examples/multi_input".into()),
+    );
     std::fs::create_dir_all(&out)?;
     let exp = multi_input(len, 1.0, Arc::new(KernelDispersion::gaussian(0.5)?), 62)?;
     let settings = IdentifySettings::builder().beta(0.01).build()?;
     let id = identify(&exp.model, &exp.data, &settings)?;
     let block = &id.blocks[0];
-    let truth: Vec<f64> = (0..len).map(|k| multi_input_map(block.z.sample(k))).collect();
+    let truth: Vec<f64> = (0..len)
+        .map(|k| multi_input_map(block.z.sample(k)))
+        .collect();
     println!(
         "multi-input example, L = {len}: RMS map error at the data {:.4} (map RMS {:.4}), J = {:.4}, {:.2} s",
         rms_difference(&block.w_hat, &truth),
@@ -33,7 +39,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let h = 2.0f64 * 1.5f64.sqrt() * 3.0f64.sqrt() / 2.0; // half-width of the uniform inputs
     let n = 41;
-    let axis: Vec<f64> = (0..n).map(|i| -h + 2.0 * h * i as f64 / (n - 1) as f64).collect();
+    let axis: Vec<f64> = (0..n)
+        .map(|i| -h + 2.0 * h * i as f64 / (n - 1) as f64)
+        .collect();
     let mut est = Vec::with_capacity(n * n);
     let mut tru = Vec::with_capacity(n * n);
     for &b in &axis {
@@ -42,7 +50,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             tru.push(multi_input_map(&[a, b]));
         }
     }
-    let (lo, hi) = tru.iter().chain(&est).fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| (l.min(*v), u.max(*v)));
+    let (lo, hi) = tru
+        .iter()
+        .chain(&est)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| {
+            (l.min(*v), u.max(*v))
+        });
     let maps = [
         HeatMap::new("true N(z1, z2)", "z1", "z2", &axis, &axis, &tru).with_range(lo, hi),
         HeatMap::new("estimated N(z1, z2)", "z1", "z2", &axis, &axis, &est).with_range(lo, hi),

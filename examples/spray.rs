@@ -22,7 +22,11 @@ fn centred(v: &[f64]) -> Vec<f64> {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let len: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2000);
-    let out = std::path::PathBuf::from(args.get(2).cloned().unwrap_or_else(|| "target/examples/spray".into()));
+    let out = std::path::PathBuf::from(
+        args.get(2)
+            .cloned()
+            .unwrap_or_else(|| "target/examples/spray".into()),
+    );
     std::fs::create_dir_all(&out)?;
     let sigma = 0.1;
     let exp = spray(len, 1.0, Arc::new(KernelDispersion::gaussian(sigma)?), 2006)?;
@@ -37,12 +41,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let betas = [0.001, 0.01, 0.1];
     let mut estimates = Vec::new();
     println!("spray example, L = {len}, σ = {sigma}");
-    println!("{:>8} {:>12} {:>12} {:>10} {:>9}", "beta", "rms(f)", "rms(g)", "J", "time[s]");
+    println!(
+        "{:>8} {:>12} {:>12} {:>10} {:>9}",
+        "beta", "rms(f)", "rms(g)", "J", "time[s]"
+    );
     for beta in betas {
         let settings = IdentifySettings::builder().beta(beta).build()?;
         let id = identify(&exp.model, &exp.data, &settings)?;
-        let f_hat = centred(&order.iter().map(|&k| id.blocks[0].w_hat[k]).collect::<Vec<_>>());
-        let g_hat = centred(&order.iter().map(|&k| id.blocks[1].w_hat[k]).collect::<Vec<_>>());
+        let f_hat = centred(
+            &order
+                .iter()
+                .map(|&k| id.blocks[0].w_hat[k])
+                .collect::<Vec<_>>(),
+        );
+        let g_hat = centred(
+            &order
+                .iter()
+                .map(|&k| id.blocks[1].w_hat[k])
+                .collect::<Vec<_>>(),
+        );
         let ef = centred_rms_difference(&f_hat, &f_true);
         let eg = centred_rms_difference(&g_hat, &g_true);
         println!(
@@ -55,8 +72,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let step = (len / 500).max(1);
     let thin = |v: &[f64]| v.iter().step_by(step).copied().collect::<Vec<_>>();
     let zs_thin = thin(&zs);
-    let estimates: Vec<(f64, Vec<f64>, Vec<f64>)> =
-        estimates.iter().map(|(b, f, g)| (*b, thin(f), thin(g))).collect();
+    let estimates: Vec<(f64, Vec<f64>, Vec<f64>)> = estimates
+        .iter()
+        .map(|(b, f, g)| (*b, thin(f), thin(g)))
+        .collect();
     let mut charts = Vec::new();
     for (beta, f_hat, g_hat) in &estimates {
         charts.push(

@@ -49,7 +49,7 @@ enum Command {
     Identify(IdentifyArgs),
     /// Simulate a model with the `truth` map of every block in the loop.
     ///
-    /// Reads the input columns named in [signals].u from the input CSV and writes the u, y and
+    /// Reads the input columns named in `[signals].u` from the input CSV and writes the u, y and
     /// z columns plus one `w_<block>` column per block. Needs D_zw = 0 (no algebraic loop).
     Simulate(SimulateArgs),
     /// Run the examples of the paper end to end, with no files to prepare.
@@ -63,7 +63,7 @@ struct IdentifyArgs {
     /// The model file (TOML).
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
-    /// The data file (CSV with a header row naming the columns of [signals] in the model file).
+    /// The data file (CSV with a header row naming the columns of `[signals]` in the model file).
     #[arg(long, short = 'd', value_name = "DATA.csv")]
     data: PathBuf,
     /// Output directory (created if needed).

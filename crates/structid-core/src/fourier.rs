@@ -124,7 +124,10 @@ impl FourierDispersion {
 
     /// Fixes the domain [a_j, b_j] of each input instead of taking the data range.
     pub fn with_domain(mut self, domain: Vec<(f64, f64)>) -> Result<Self> {
-        if domain.iter().any(|(a, b)| !(a.is_finite() && b.is_finite() && b > a)) {
+        if domain
+            .iter()
+            .any(|(a, b)| !(a.is_finite() && b.is_finite() && b > a))
+        {
             return Err(Error::InvalidStructure(
                 "a Fourier domain needs finite bounds with lower < upper for every input".into(),
             ));
@@ -153,11 +156,16 @@ impl FourierDispersion {
             }
             None => (0..p)
                 .map(|c| {
-                    let (lo, hi) = (0..z.len()).fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), k| {
-                        let v = z.get(k, c);
-                        (l.min(v), h.max(v))
-                    });
-                    if hi > lo { (lo, hi) } else { (lo - 0.5, lo + 0.5) }
+                    let (lo, hi) =
+                        (0..z.len()).fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), k| {
+                            let v = z.get(k, c);
+                            (l.min(v), h.max(v))
+                        });
+                    if hi > lo {
+                        (lo, hi)
+                    } else {
+                        (lo - 0.5, lo + 0.5)
+                    }
                 })
                 .collect(),
         };
@@ -169,7 +177,9 @@ impl Dispersion for FourierDispersion {
     fn describe(&self) -> String {
         let w = match &self.weights {
             FourierWeights::GaussianLike { sigma } => format!("gaussian-like, sigma={sigma}"),
-            FourierWeights::SobolevLike { order, scale } => format!("sobolev-like, order={order}, scale={scale}"),
+            FourierWeights::SobolevLike { order, scale } => {
+                format!("sobolev-like, order={order}, scale={scale}")
+            }
             FourierWeights::Custom(l) => format!("custom, {} weights", l.len()),
         };
         format!("fourier({w})")
@@ -178,7 +188,9 @@ impl Dispersion for FourierDispersion {
     fn parameters(&self) -> Vec<(String, f64)> {
         match &self.weights {
             FourierWeights::GaussianLike { sigma } => vec![("sigma".into(), *sigma)],
-            FourierWeights::SobolevLike { order, scale } => vec![("order".into(), *order), ("scale".into(), *scale)],
+            FourierWeights::SobolevLike { order, scale } => {
+                vec![("order".into(), *order), ("scale".into(), *scale)]
+            }
             FourierWeights::Custom(_) => Vec::new(),
         }
     }
@@ -232,7 +244,9 @@ impl FourierKernel {
     ) -> Result<Self> {
         let p = domain.len();
         if p == 0 {
-            return Err(Error::InvalidStructure("a Fourier kernel needs at least one input".into()));
+            return Err(Error::InvalidStructure(
+                "a Fourier kernel needs at least one input".into(),
+            ));
         }
         let mut affine = Vec::with_capacity(p);
         let mut lambda = Vec::with_capacity(p);
@@ -243,11 +257,13 @@ impl FourierKernel {
             let l: Vec<f64> = match weights {
                 FourierWeights::GaussianLike { sigma } => {
                     let st = s * sigma;
-                    (0..=n).map(|k| s * (-2.0 * PI * PI * st * st * (k * k) as f64).exp()).collect()
+                    (0..=n)
+                        .map(|k| s * (-2.0 * PI * PI * st * st * (k * k) as f64).exp())
+                        .collect()
                 }
-                FourierWeights::SobolevLike { order, scale } => {
-                    (0..=n).map(|k| scale * (1.0 + (k * k) as f64).powf(-order)).collect()
-                }
+                FourierWeights::SobolevLike { order, scale } => (0..=n)
+                    .map(|k| scale * (1.0 + (k * k) as f64).powf(-order))
+                    .collect(),
                 FourierWeights::Custom(l) => l.clone(),
             };
             lambda.push(l);
@@ -328,7 +344,9 @@ impl Kernel for FourierKernel {
         let series = |j: usize| -> f64 {
             let d = self.unit(a, j) - self.unit(b, j);
             let l = &self.lambda[j];
-            l[0] + (1..l.len()).map(|n| 2.0 * l[n] * (2.0 * PI * n as f64 * d).cos()).sum::<f64>()
+            l[0] + (1..l.len())
+                .map(|n| 2.0 * l[n] * (2.0 * PI * n as f64 * d).cos())
+                .sum::<f64>()
         };
         match self.combination {
             Combination::Tensor => (0..self.affine.len()).map(series).product(),
@@ -337,7 +355,11 @@ impl Kernel for FourierKernel {
     }
 
     fn describe(&self) -> String {
-        format!("fourier(harmonics={:?}, features={})", self.harmonics(), self.weights.len())
+        format!(
+            "fourier(harmonics={:?}, features={})",
+            self.harmonics(),
+            self.weights.len()
+        )
     }
 }
 
@@ -373,7 +395,13 @@ impl FeatureMap for FourierKernel {
                     *o = mi
                         .iter()
                         .enumerate()
-                        .map(|(j, &(h, kind))| if kind == 0 { trig[j][h].0 } else { trig[j][h].1 })
+                        .map(|(j, &(h, kind))| {
+                            if kind == 0 {
+                                trig[j][h].0
+                            } else {
+                                trig[j][h].1
+                            }
+                        })
                         .product();
                 }
             }
@@ -418,8 +446,13 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
                 coef.iter_mut().zip(&psi).for_each(|(c, v)| *c += a * v);
             }
         }
-        coef.iter_mut().zip(self.map.weights()).for_each(|(c, l)| *c *= l);
-        Box::new(FeatureExpansion::new(Arc::clone(&self.map) as Arc<dyn FeatureMap>, coef))
+        coef.iter_mut()
+            .zip(self.map.weights())
+            .for_each(|(c, l)| *c *= l);
+        Box::new(FeatureExpansion::new(
+            Arc::clone(&self.map) as Arc<dyn FeatureMap>,
+            coef,
+        ))
     }
 
     fn features(&self) -> Option<(&dyn FeatureMap, &Signal)> {
@@ -466,14 +499,31 @@ mod tests {
         for comb in [Combination::Tensor, Combination::Additive] {
             for p in 1..=2 {
                 let dom = vec![(-1.0, 2.0); p];
-                let k = FourierKernel::new(&FourierWeights::SobolevLike { order: 1.5, scale: 0.7 }, Some(6), dom, comb).unwrap();
+                let k = FourierKernel::new(
+                    &FourierWeights::SobolevLike {
+                        order: 1.5,
+                        scale: 0.7,
+                    },
+                    Some(6),
+                    dom,
+                    comb,
+                )
+                .unwrap();
                 let (a, b) = (vec![0.3, -0.8][..p].to_vec(), vec![1.7, 0.1][..p].to_vec());
                 let mut pa = vec![0.0; k.dim()];
                 let mut pb = vec![0.0; k.dim()];
                 k.eval_into(&a, &mut pa);
                 k.eval_into(&b, &mut pb);
-                let via: f64 = pa.iter().zip(&pb).zip(k.weights()).map(|((x, y), l)| x * y * l).sum();
-                assert!((via - k.eval(&a, &b)).abs() < 1e-12 * k.eval(&a, &a), "{comb:?} p={p}");
+                let via: f64 = pa
+                    .iter()
+                    .zip(&pb)
+                    .zip(k.weights())
+                    .map(|((x, y), l)| x * y * l)
+                    .sum();
+                assert!(
+                    (via - k.eval(&a, &b)).abs() < 1e-12 * k.eval(&a, &a),
+                    "{comb:?} p={p}"
+                );
             }
         }
     }
@@ -486,7 +536,10 @@ mod tests {
         let g = crate::GaussianKernel::new(sigma).unwrap();
         for (a, b) in [(0.0, 0.0), (0.1, -0.2), (-1.0, -0.7), (0.9, 1.0)] {
             let (x, y) = (k.eval(&[a], &[b]), g.eval(&[a], &[b]));
-            assert!((x - y).abs() < 1e-9 * g.eval(&[0.0], &[0.0]), "({a},{b}): {x} vs {y}");
+            assert!(
+                (x - y).abs() < 1e-9 * g.eval(&[0.0], &[0.0]),
+                "({a},{b}): {x} vs {y}"
+            );
         }
         // The ends of the data are not tied together by the periodic wrap.
         assert!(k.eval(&[-1.0], &[1.0]) < 1e-9);
@@ -498,7 +551,13 @@ mod tests {
         let z = Signal::from_fn(10, 3, |k, c| (k + c) as f64);
         assert!(matches!(fd.penalty(&z), Err(Error::InvalidStructure(_))));
         assert!(FourierDispersion::new(FourierWeights::GaussianLike { sigma: -1.0 }).is_err());
-        assert!(FourierDispersion::new(FourierWeights::SobolevLike { order: 0.3, scale: 1.0 }).is_err());
+        assert!(
+            FourierDispersion::new(FourierWeights::SobolevLike {
+                order: 0.3,
+                scale: 1.0
+            })
+            .is_err()
+        );
         assert!(FourierDispersion::new(FourierWeights::Custom(vec![0.0, 1.0])).is_err());
     }
 }

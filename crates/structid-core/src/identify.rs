@@ -92,9 +92,8 @@ impl IdentifySettings {
     /// The budget that applies now: the explicit limit, or ¾ of `MemAvailable`
     /// (4 GiB when it cannot be read).
     pub fn effective_memory_limit(&self) -> u64 {
-        self.memory_limit_bytes.unwrap_or_else(|| {
-            available_memory_bytes().map_or(4 << 30, |b| b / 4 * 3)
-        })
+        self.memory_limit_bytes
+            .unwrap_or_else(|| available_memory_bytes().map_or(4 << 30, |b| b / 4 * 3))
     }
 }
 

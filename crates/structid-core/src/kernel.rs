@@ -100,7 +100,11 @@ pub(crate) fn mirror_upper_to_lower(mut m: MatMut<'_, f64>) {
 
 /// Runs `f(j, column j)` over the columns of `out`, splitting them between rayon threads.
 pub(crate) fn par_cols(out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::ColMut<'_, f64>) + Sync)) {
-    fn go(first: usize, mut out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::ColMut<'_, f64>) + Sync)) {
+    fn go(
+        first: usize,
+        mut out: MatMut<'_, f64>,
+        f: &(dyn Fn(usize, faer::ColMut<'_, f64>) + Sync),
+    ) {
         let n = out.ncols();
         if n <= 16 {
             for j in 0..n {
@@ -119,7 +123,11 @@ pub(crate) fn par_cols(out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::ColMut<'_,
 
 /// Runs `f(i, row i)` over the rows of `out`, splitting the rows between rayon threads.
 pub(crate) fn par_rows(out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::RowMut<'_, f64>) + Sync)) {
-    fn go(first: usize, mut out: MatMut<'_, f64>, f: &(dyn Fn(usize, faer::RowMut<'_, f64>) + Sync)) {
+    fn go(
+        first: usize,
+        mut out: MatMut<'_, f64>,
+        f: &(dyn Fn(usize, faer::RowMut<'_, f64>) + Sync),
+    ) {
         let n = out.nrows();
         if n <= 64 {
             for i in 0..n {
@@ -408,13 +416,25 @@ mod tests {
             g.fill_gram_columns(&zp, 0..203, cols.as_mut());
             for j in 0..203 {
                 for i in 0..203 {
-                    assert!((full[(i, j)] - cols[(i, j)]).abs() <= 1e-14 * cols[(i, j)].abs().max(1e-300), "({i},{j})");
+                    assert!(
+                        (full[(i, j)] - cols[(i, j)]).abs()
+                            <= 1e-14 * cols[(i, j)].abs().max(1e-300),
+                        "({i},{j})"
+                    );
                 }
             }
         }
         let (mut a, mut b) = (vec![0.0; 300 * 40], vec![0.0; 300 * 40]);
-        Plain(g).fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut a, 300, 40));
-        g.fill_gram_columns(&z, 100..140, MatMut::from_column_major_slice_mut(&mut b, 300, 40));
+        Plain(g).fill_gram_columns(
+            &z,
+            100..140,
+            MatMut::from_column_major_slice_mut(&mut a, 300, 40),
+        );
+        g.fill_gram_columns(
+            &z,
+            100..140,
+            MatMut::from_column_major_slice_mut(&mut b, 300, 40),
+        );
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() <= 1e-14 * y.abs().max(1e-300));
         }
@@ -422,13 +442,18 @@ mod tests {
 
     #[test]
     fn vectorised_exp_matches_libm_to_a_few_ulp() {
-        let mut xs: Vec<f64> = (0..200_001).map(|i| -(i as f64) * 708.0 / 200_000.0).collect();
+        let mut xs: Vec<f64> = (0..200_001)
+            .map(|i| -(i as f64) * 708.0 / 200_000.0)
+            .collect();
         xs.extend([0.0, -1e-300, -0.5, -0.346_573_590_279_972_6, -700.123]);
         let mut ys = xs.clone();
         exp_in_place(&mut ys, 1.0);
         for (x, y) in xs.iter().zip(&ys) {
             let e = x.exp();
-            assert!((y - e).abs() <= 4.0 * f64::EPSILON * e, "exp({x}) = {e}, got {y}");
+            assert!(
+                (y - e).abs() <= 4.0 * f64::EPSILON * e,
+                "exp({x}) = {e}, got {y}"
+            );
         }
         let mut far = vec![-1e4, -750.0];
         exp_in_place(&mut far, 1.0);
@@ -439,7 +464,9 @@ mod tests {
     fn gaussian_normalisation_integrates_to_one_in_1d() {
         let k = GaussianKernel::new(0.7).unwrap();
         let h = 1e-3;
-        let total: f64 = (-10_000..=10_000).map(|i| k.eval(&[i as f64 * h], &[0.0]) * h).sum();
+        let total: f64 = (-10_000..=10_000)
+            .map(|i| k.eval(&[i as f64 * h], &[0.0]) * h)
+            .sum();
         assert!((total - 1.0).abs() < 1e-9, "{total}");
     }
 

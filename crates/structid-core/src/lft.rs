@@ -128,7 +128,12 @@ impl Lft {
     }
 
     /// Builds an LFT from one state-space system with inputs `[u; e; w]` and outputs `[y; z]`.
-    pub fn from_state_space(sys: &StateSpace, dims_u: usize, dims_e: usize, dims_y: usize) -> Result<Self> {
+    pub fn from_state_space(
+        sys: &StateSpace,
+        dims_u: usize,
+        dims_e: usize,
+        dims_y: usize,
+    ) -> Result<Self> {
         let (n_in, n_out) = (sys.inputs(), sys.outputs());
         if dims_u + dims_e > n_in || dims_y > n_out {
             return Err(Error::DimensionMismatch {

@@ -73,11 +73,13 @@ pub mod simulate;
 pub mod solver;
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
-pub use fourier::{Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights};
 pub use error::{Error, Result};
+pub use fourier::{
+    Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights,
+};
 pub use identify::{
-    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, IdentifySettingsBuilder, InitialState, SolverChoice,
-    Timings, identify, identify_problem,
+    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings,
+    IdentifySettingsBuilder, InitialState, SolverChoice, Timings, identify, identify_problem,
 };
 pub use interpolant::Interpolant;
 pub use kernel::{GaussianKernel, Kernel, KernelExpansion};

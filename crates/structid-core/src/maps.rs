@@ -75,7 +75,11 @@ impl ExprMap {
 
 impl Interpolant for ExprMap {
     fn eval(&self, z: &[f64]) -> f64 {
-        let vars: Vec<f64> = self.slots.iter().map(|&i| z.get(i).copied().unwrap_or(f64::NAN)).collect();
+        let vars: Vec<f64> = self
+            .slots
+            .iter()
+            .map(|&i| z.get(i).copied().unwrap_or(f64::NAN))
+            .collect();
         self.expr.eval(&vars).unwrap_or(f64::NAN)
     }
 }
@@ -111,7 +115,9 @@ pub enum LookupTable {
 
 fn check_axis(name: &str, x: &[f64]) -> Result<()> {
     if x.is_empty() {
-        return Err(Error::InvalidStructure(format!("lookup table axis {name} is empty")));
+        return Err(Error::InvalidStructure(format!(
+            "lookup table axis {name} is empty"
+        )));
     }
     if x.iter().any(|v| !v.is_finite()) || x.windows(2).any(|w| w[1] <= w[0]) {
         return Err(Error::InvalidStructure(format!(
@@ -168,13 +174,18 @@ impl LookupTable {
     pub fn from_rows(rows: &[Vec<f64>]) -> Result<Self> {
         let p = rows.first().map_or(0, |r| r.len().saturating_sub(1));
         if rows.iter().any(|r| r.len() != p + 1) {
-            return Err(Error::InvalidStructure("lookup table rows have different lengths".into()));
+            return Err(Error::InvalidStructure(
+                "lookup table rows have different lengths".into(),
+            ));
         }
         match p {
             1 => {
                 let mut pts: Vec<(f64, f64)> = rows.iter().map(|r| (r[0], r[1])).collect();
                 pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                Self::one_d(pts.iter().map(|p| p.0).collect(), pts.iter().map(|p| p.1).collect())
+                Self::one_d(
+                    pts.iter().map(|p| p.0).collect(),
+                    pts.iter().map(|p| p.1).collect(),
+                )
             }
             2 => {
                 let axis = |c: usize| {
@@ -220,7 +231,11 @@ impl Interpolant for LookupTable {
         match self {
             Self::OneD { x, v } => {
                 let (i, t) = locate(x, z[0]);
-                if x.len() == 1 { v[0] } else { (1.0 - t) * v[i] + t * v[i + 1] }
+                if x.len() == 1 {
+                    v[0]
+                } else {
+                    (1.0 - t) * v[i] + t * v[i + 1]
+                }
             }
             Self::Grid2D { x, y, values } => {
                 let nx = x.len();

@@ -26,7 +26,11 @@ pub fn centred_rms_difference(a: &[f64], b: &[f64]) -> f64 {
 /// MATLAB-style fit in percent: 100·(1 − ‖y − ŷ‖ / ‖y − mean y‖).
 pub fn fit_percent(measured: &[f64], simulated: &[f64]) -> f64 {
     let mean = measured.iter().sum::<f64>() / measured.len().max(1) as f64;
-    let num: f64 = measured.iter().zip(simulated).map(|(a, b)| (a - b) * (a - b)).sum();
+    let num: f64 = measured
+        .iter()
+        .zip(simulated)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum();
     let den: f64 = measured.iter().map(|a| (a - mean) * (a - mean)).sum();
     100.0 * (1.0 - (num / den).sqrt())
 }

@@ -79,7 +79,9 @@ impl Model {
         let mut owner: Vec<Option<&str>> = vec![None; dims.w];
         for (i, b) in blocks.iter().enumerate() {
             if b.name.is_empty() {
-                return Err(Error::InvalidStructure(format!("block {i} has an empty name")));
+                return Err(Error::InvalidStructure(format!(
+                    "block {i} has an empty name"
+                )));
             }
             if blocks[..i].iter().any(|o| o.name == b.name) {
                 return Err(Error::InvalidStructure(format!(
@@ -132,7 +134,10 @@ impl Model {
     }
 
     /// A copy with every block's dispersion replaced by `f(block)`.
-    pub fn with_dispersions(&self, mut f: impl FnMut(&NonlinearBlock) -> Arc<dyn Dispersion>) -> Self {
+    pub fn with_dispersions(
+        &self,
+        mut f: impl FnMut(&NonlinearBlock) -> Arc<dyn Dispersion>,
+    ) -> Self {
         let blocks = self
             .blocks
             .iter()
@@ -191,7 +196,9 @@ impl Data {
             });
         }
         if y.is_empty() {
-            return Err(Error::InvalidStructure("the data record has no samples".into()));
+            return Err(Error::InvalidStructure(
+                "the data record has no samples".into(),
+            ));
         }
         check_finite("u", &u)?;
         check_finite("y", &y)?;

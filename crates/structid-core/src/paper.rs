@@ -41,7 +41,12 @@ pub struct Experiment {
 
 impl Experiment {
     /// Simulates `model` with the true `maps` in the loop, input `u` and noise `noise`.
-    pub fn simulate(model: Model, maps: &[&dyn crate::Interpolant], u: Signal, noise: Signal) -> Result<Self> {
+    pub fn simulate(
+        model: Model,
+        maps: &[&dyn crate::Interpolant],
+        u: Signal,
+        noise: Signal,
+    ) -> Result<Self> {
         let sim = model.simulate(maps, &u, Some(&noise), None)?;
         Ok(Self {
             data: Data::new(u, sim.y)?,
@@ -74,7 +79,12 @@ pub fn spray_lft() -> Lft {
 
 /// The spray-deposition experiment: u_k = sin(0.1k), e ~ N(0, noise_std²), blocks `f` and `g`
 /// with the given dispersion.
-pub fn spray(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, seed: u64) -> Result<Experiment> {
+pub fn spray(
+    len: usize,
+    noise_std: f64,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
     let lft = spray_lft();
     let model = Model::new(
         lft,
@@ -99,7 +109,12 @@ pub fn multi_input_map(z: &[f64]) -> f64 {
 /// The multi-input experiment of section 6.2: a random stable L_yu with three states and two
 /// inputs, i.i.d. uniform inputs with mean 0 and variance 1.5, a two-input static map of z = u
 /// feeding y through L_yw = 1 + 0.5q⁻¹/(1 − 0.5q⁻¹), and e ~ N(0, noise_std²).
-pub fn multi_input(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, seed: u64) -> Result<Experiment> {
+pub fn multi_input(
+    len: usize,
+    noise_std: f64,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
     let g = structid_lti::testing::random_stable_system(seed, 3, 2, 1, 0.8);
     let n = g.order() + 1;
     let mut a = DMatrix::zeros(n, n);
@@ -126,7 +141,10 @@ pub fn multi_input(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, 
         dze: DMatrix::zeros(2, 1),
         dzw: DMatrix::zeros(2, 1),
     })?;
-    let model = Model::new(lft, vec![NonlinearBlock::new("N", vec![0, 1], 0, dispersion)])?;
+    let model = Model::new(
+        lft,
+        vec![NonlinearBlock::new("N", vec![0, 1], 0, dispersion)],
+    )?;
     let half_width = (3.0f64 * 1.5).sqrt();
     let mut rng = StdRng::seed_from_u64(seed ^ 0x5eed_1234);
     let u = Signal::from_fn(len, 2, |_, _| rng.random_range(-half_width..half_width));
@@ -138,7 +156,8 @@ pub fn multi_input(len: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, 
 /// Gaussian white noise N(0, std²), reproducible from `seed`.
 pub fn gaussian_noise(len: usize, channels: usize, std: f64, seed: u64) -> Signal {
     let mut rng = StdRng::seed_from_u64(seed);
-    let normal = Normal::new(0.0, std.max(0.0)).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("valid"));
+    let normal =
+        Normal::new(0.0, std.max(0.0)).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("valid"));
     Signal::from_fn(len, channels, |_, _| normal.sample(&mut rng))
 }
 

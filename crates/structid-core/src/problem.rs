@@ -45,7 +45,11 @@ pub struct Problem {
 impl Problem {
     /// A problem from explicit operators. `residual` is r = y − T_yu·u (L × n_y); `noise` is T_ye
     /// (n_e inputs, n_y outputs); each block's `path` has n_y outputs and one input.
-    pub fn new(residual: Signal, noise: Arc<dyn LinearSystem>, blocks: Vec<ProblemBlock>) -> Result<Self> {
+    pub fn new(
+        residual: Signal,
+        noise: Arc<dyn LinearSystem>,
+        blocks: Vec<ProblemBlock>,
+    ) -> Result<Self> {
         let (len, ny) = (residual.len(), residual.channels());
         if noise.outputs() != ny {
             return Err(Error::DimensionMismatch {

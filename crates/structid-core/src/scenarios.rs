@@ -14,7 +14,13 @@ use crate::paper::{Experiment, gaussian_noise};
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
 /// (spectral radius 0.9, reproducible from `seed`), N = tanh, u uniform on [−2, 2] and white
 /// noise of standard deviation `noise_std`.
-pub fn hammerstein(len: usize, order: usize, noise_std: f64, dispersion: Arc<dyn Dispersion>, seed: u64) -> Result<Experiment> {
+pub fn hammerstein(
+    len: usize,
+    order: usize,
+    noise_std: f64,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
     let g = structid_lti::testing::random_stable_system(seed, order, 1, 1, 0.9);
     let n = g.order();
     let lft = Lft::new(LftMatrices {

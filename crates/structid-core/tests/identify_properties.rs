@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
-use structid_core::*;
 use structid_core::scenarios;
+use structid_core::*;
 use structid_lti::testing::random_stable_system;
 use structid_lti::{LinearSystem, Signal, StateSpace};
 
@@ -27,7 +27,9 @@ fn spread_points(len: usize, seed: u64, shift: usize) -> Vec<f64> {
     let h = 2.0 / len as f64;
     let step = [7usize, 11, 13, 17, 19][(seed as usize + shift) % 5];
     let step = if len.is_multiple_of(step) { 1 } else { step };
-    (0..len).map(|k| -1.0 + h * ((k * step + shift) % len) as f64).collect()
+    (0..len)
+        .map(|k| -1.0 + h * ((k * step + shift) % len) as f64)
+        .collect()
 }
 
 fn make_case(seed: u64, n: usize, ne: usize, nw: usize, ny: usize, len: usize) -> Case {
@@ -58,9 +60,13 @@ fn make_case(seed: u64, n: usize, ne: usize, nw: usize, ny: usize, len: usize) -
         })
         .collect();
     let model = Model::new(lft, blocks).unwrap();
-    let mut rng = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut rng = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     let mut next = || {
-        rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((rng >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     };
     let u = Signal::from_fn(len, nu, |_, _| next());
@@ -110,7 +116,11 @@ fn dense(case: &Case) -> Dense {
 
 /// The paper's formulation: minimise (1/L)|e|² + β wᵀQw over {T_ye e + T_yw w = r}, Q = K⁻¹.
 /// Returns (e, w, null-space basis, Hessian-half H).
-fn paper_reference(d: &Dense, beta: f64, len: usize) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
+fn paper_reference(
+    d: &Dense,
+    beta: f64,
+    len: usize,
+) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
     let (ne, nw) = (d.t_ye.ncols(), d.t_yw.ncols());
     let a = {
         let mut a = DMatrix::zeros(d.r.len(), ne + nw);
@@ -118,7 +128,10 @@ fn paper_reference(d: &Dense, beta: f64, len: usize) -> (DVector<f64>, DVector<f
         a.columns_mut(ne, nw).copy_from(&d.t_yw);
         a
     };
-    let q = d.k.clone().try_inverse().expect("well-conditioned K in the reference");
+    let q =
+        d.k.clone()
+            .try_inverse()
+            .expect("well-conditioned K in the reference");
     let mut h = DMatrix::zeros(ne + nw, ne + nw);
     h.view_mut((0, 0), (ne, ne)).fill_with_identity();
     h.view_mut((0, 0), (ne, ne)).scale_mut(1.0 / len as f64);
@@ -135,7 +148,11 @@ fn paper_reference(d: &Dense, beta: f64, len: usize) -> (DVector<f64>, DVector<f
     // Null space: right singular vectors beyond the rank (complete them if v_t is thin).
     let full_v = {
         let thin = v_t.transpose();
-        let mut basis: Vec<DVector<f64>> = thin.column_iter().take(rank).map(|c| c.into_owned()).collect();
+        let mut basis: Vec<DVector<f64>> = thin
+            .column_iter()
+            .take(rank)
+            .map(|c| c.into_owned())
+            .collect();
         let dim = ne + nw;
         for i in 0..dim {
             let mut v = DVector::zeros(dim);
@@ -160,9 +177,17 @@ fn paper_reference(d: &Dense, beta: f64, len: usize) -> (DVector<f64>, DVector<f
     let nmat = full_v;
     let lhs = nmat.transpose() * &h * &nmat;
     let rhs = -(nmat.transpose() * &h * &x_p);
-    let v = lhs.cholesky().expect("reduced Hessian is positive definite").solve(&rhs);
+    let v = lhs
+        .cholesky()
+        .expect("reduced Hessian is positive definite")
+        .solve(&rhs);
     let x = x_p + &nmat * v;
-    (x.rows(0, ne).into_owned(), x.rows(ne, nw).into_owned(), nmat, h)
+    (
+        x.rows(0, ne).into_owned(),
+        x.rows(ne, nw).into_owned(),
+        nmat,
+        h,
+    )
 }
 
 fn settings(beta: f64) -> IdentifySettings {
@@ -178,7 +203,15 @@ fn stack_w(id: &Identification) -> DVector<f64> {
 }
 
 fn case_strategy() -> impl Strategy<Value = (u64, usize, usize, usize, usize, usize, f64)> {
-    (any::<u64>(), 0usize..4, 1usize..3, 1usize..3, 1usize..3, 6usize..22, -3.0f64..1.0)
+    (
+        any::<u64>(),
+        0usize..4,
+        1usize..3,
+        1usize..3,
+        1usize..3,
+        6usize..22,
+        -3.0f64..1.0,
+    )
 }
 
 proptest! {
@@ -263,7 +296,11 @@ fn limits_in_beta() {
         let case = make_case(seed, 2, 1, 1, 1, 16);
         let r = dense(&case).r.norm();
         let big = identify(&case.model, &case.data, &settings(1e9)).unwrap();
-        assert!(stack_w(&big).norm() < 1e-6 * r, "ŵ at β = 1e9: {}", stack_w(&big).norm());
+        assert!(
+            stack_w(&big).norm() < 1e-6 * r,
+            "ŵ at β = 1e9: {}",
+            stack_w(&big).norm()
+        );
         let small = identify(&case.model, &case.data, &settings(1e-12)).unwrap();
         let e = DVector::from_column_slice(small.e_hat.as_slice());
         assert!(e.norm() < 1e-6 * r, "ê at β = 1e-12: {}", e.norm());
@@ -300,7 +337,12 @@ fn strictly_proper_paths_drop_unreachable_samples() {
     let kernel = GaussianKernel::new(0.1).unwrap();
     let model = Model::new(
         lft,
-        vec![NonlinearBlock::new("f", vec![0], 0, Arc::new(KernelDispersion::new(kernel)))],
+        vec![NonlinearBlock::new(
+            "f",
+            vec![0],
+            0,
+            Arc::new(KernelDispersion::new(kernel)),
+        )],
     )
     .unwrap();
     let len = 20;
@@ -313,15 +355,30 @@ fn strictly_proper_paths_drop_unreachable_samples() {
     assert!(id.diagnostics.dropped_max_abs_residual < 1e-14);
     assert_eq!(id.diagnostics.system_size, len - 1);
     assert!(id.diagnostics.feasibility_residual < 1e-9);
-    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("left out")));
-    assert!(!id.diagnostics.warnings.iter().any(|w| w.contains("NOT consistent")));
+    assert!(
+        id.diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("left out"))
+    );
+    assert!(
+        !id.diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("NOT consistent"))
+    );
     // Inconsistent data at the dropped sample is reported, not hidden.
     let mut y = data.y().clone();
     y.sample_mut(0)[0] += 1.0;
     let bad = Data::new(data.u().clone(), y).unwrap();
     let id = identify(&model, &bad, &settings(1e-3)).unwrap();
     assert!((id.diagnostics.dropped_max_abs_residual - 1.0).abs() < 1e-12);
-    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("NOT consistent")));
+    assert!(
+        id.diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("NOT consistent"))
+    );
 }
 
 /// Property 7: z computed through Ψ equals the simulated z, and the three measurability cases
@@ -354,16 +411,33 @@ fn measurability_psi_reproduces_simulated_z() {
         };
         let lft = Lft::new(m).unwrap();
         let source = lft.measurability().unwrap();
-        assert!(matches!(source, ZSource::OutputInjection { .. }), "seed {seed}: {source:?}");
+        assert!(
+            matches!(source, ZSource::OutputInjection { .. }),
+            "seed {seed}: {source:?}"
+        );
         let len = 60;
         let u = Signal::from_fn(len, nu, |k, c| ((k * (c + 3)) as f64 * 0.37).sin());
         let e = Signal::from_fn(len, ne, |k, c| ((k * (c + 5)) as f64 * 0.91).cos() * 0.3);
         let map = |z: &[f64]| (z[0] - 0.5 * z[1]).tanh();
         let sim = lft
-            .simulate(&[MapBinding { inputs: &[0, 1], output: 0, map: &map }], &u, Some(&e), None)
+            .simulate(
+                &[MapBinding {
+                    inputs: &[0, 1],
+                    output: 0,
+                    map: &map,
+                }],
+                &u,
+                Some(&e),
+                None,
+            )
             .unwrap();
         let (z, _) = lft.compute_z(&u, &sim.y).unwrap();
-        let err = z.as_slice().iter().zip(sim.z.as_slice()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err = z
+            .as_slice()
+            .iter()
+            .zip(sim.z.as_slice())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         let scale = sim.z.as_slice().iter().fold(1.0f64, |a, b| a.max(b.abs()));
         assert!(err < 1e-10 * scale, "seed {seed}: max |z − z_sim| = {err}");
     }
@@ -405,18 +479,36 @@ fn bad_input_gives_typed_errors() {
     assert!(matches!(e, Error::NonFiniteData { sample: 3, .. }), "{e}");
     let mut u = case.data.u().clone();
     u.sample_mut(2)[0] = f64::INFINITY;
-    assert!(matches!(Data::new(u, case.data.y().clone()), Err(Error::NonFiniteData { .. })));
+    assert!(matches!(
+        Data::new(u, case.data.y().clone()),
+        Err(Error::NonFiniteData { .. })
+    ));
     // Mismatched lengths and channel counts.
     let short = case.data.y().slice(0..5);
-    assert!(matches!(Data::new(case.data.u().clone(), short), Err(Error::DimensionMismatch { .. })));
+    assert!(matches!(
+        Data::new(case.data.u().clone(), short),
+        Err(Error::DimensionMismatch { .. })
+    ));
     let two = Signal::zeros(12, 2);
     let d = Data::new(two, case.data.y().clone()).unwrap();
-    assert!(matches!(identify(&case.model, &d, &settings(1.0)), Err(Error::DimensionMismatch { .. })));
+    assert!(matches!(
+        identify(&case.model, &d, &settings(1.0)),
+        Err(Error::DimensionMismatch { .. })
+    ));
     // σ ≤ 0 and β ≤ 0.
-    assert!(matches!(KernelDispersion::gaussian(0.0), Err(Error::InvalidParameter { .. })));
-    assert!(matches!(KernelDispersion::gaussian(-1.0), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        KernelDispersion::gaussian(0.0),
+        Err(Error::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        KernelDispersion::gaussian(-1.0),
+        Err(Error::InvalidParameter { .. })
+    ));
     for b in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-        assert!(matches!(IdentifySettings::builder().beta(b).build(), Err(Error::InvalidParameter { .. })));
+        assert!(matches!(
+            IdentifySettings::builder().beta(b).build(),
+            Err(Error::InvalidParameter { .. })
+        ));
     }
     // Algebraic loop in simulation.
     let mut m = case.model.lft().matrices().clone();
@@ -424,9 +516,21 @@ fn bad_input_gives_typed_errors() {
     let lft = Lft::new(m).unwrap();
     let f = |z: &[f64]| z[0];
     let e = lft
-        .simulate(&[MapBinding { inputs: &[0], output: 0, map: &f }], case.data.u(), None, None)
+        .simulate(
+            &[MapBinding {
+                inputs: &[0],
+                output: 0,
+                map: &f,
+            }],
+            case.data.u(),
+            None,
+            None,
+        )
         .unwrap_err();
-    assert!(matches!(e, Error::AlgebraicLoop { row: 0, col: 0, .. }), "{e}");
+    assert!(
+        matches!(e, Error::AlgebraicLoop { row: 0, col: 0, .. }),
+        "{e}"
+    );
     // Structural errors.
     let bad_lft = Lft::new(LftMatrices {
         a: dmatrix![0.5],
@@ -446,12 +550,22 @@ fn bad_input_gives_typed_errors() {
     let disp: Arc<dyn Dispersion> = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
     let lft = case.model.lft().clone();
     assert!(matches!(
-        Model::new(lft.clone(), vec![NonlinearBlock::new("f", vec![3], 0, disp.clone())]),
+        Model::new(
+            lft.clone(),
+            vec![NonlinearBlock::new("f", vec![3], 0, disp.clone())]
+        ),
         Err(Error::InvalidStructure(_))
     ));
-    assert!(matches!(Model::new(lft, vec![]), Err(Error::InvalidStructure(_))));
+    assert!(matches!(
+        Model::new(lft, vec![]),
+        Err(Error::InvalidStructure(_))
+    ));
     // Too large for memory: refused up front with a size estimate and advice.
-    let tiny = IdentifySettings::builder().beta(1.0).memory_limit_bytes(1000).build().unwrap();
+    let tiny = IdentifySettings::builder()
+        .beta(1.0)
+        .memory_limit_bytes(1000)
+        .build()
+        .unwrap();
     let e = identify(&case.model, &case.data, &tiny).unwrap_err();
     assert!(matches!(e, Error::TooLarge { .. }), "{e}");
     assert!(e.to_string().contains("window of at most"));
@@ -463,17 +577,29 @@ fn bad_input_gives_typed_errors() {
 fn user_linear_system_plugs_into_identify() {
     struct Fir(Vec<f64>);
     impl LinearSystem for Fir {
-        fn inputs(&self) -> usize { 1 }
-        fn outputs(&self) -> usize { 1 }
-        fn order(&self) -> usize { self.0.len() - 1 }
+        fn inputs(&self) -> usize {
+            1
+        }
+        fn outputs(&self) -> usize {
+            1
+        }
+        fn order(&self) -> usize {
+            self.0.len() - 1
+        }
         fn apply(&self, u: &[f64], y: &mut [f64]) {
             for k in 0..y.len() {
-                y[k] = (0..self.0.len()).filter(|&j| j <= k).map(|j| self.0[j] * u[k - j]).sum();
+                y[k] = (0..self.0.len())
+                    .filter(|&j| j <= k)
+                    .map(|j| self.0[j] * u[k - j])
+                    .sum();
             }
         }
         fn apply_adjoint(&self, y: &[f64], u: &mut [f64]) {
             for k in 0..u.len() {
-                u[k] = (0..self.0.len()).filter(|&j| k + j < y.len()).map(|j| self.0[j] * y[k + j]).sum();
+                u[k] = (0..self.0.len())
+                    .filter(|&j| k + j < y.len())
+                    .map(|j| self.0[j] * y[k + j])
+                    .sum();
             }
         }
     }
@@ -485,14 +611,28 @@ fn user_linear_system_plugs_into_identify() {
     let fir_problem = Problem::new(
         r.clone(),
         Arc::new(StateSpace::static_gain(DMatrix::from_element(1, 1, 1.0)).unwrap()),
-        vec![ProblemBlock { name: "f".into(), output: 0, path: Arc::new(Fir(taps.clone())), z: z.clone(), dispersion: disp.clone() }],
+        vec![ProblemBlock {
+            name: "f".into(),
+            output: 0,
+            path: Arc::new(Fir(taps.clone())),
+            z: z.clone(),
+            dispersion: disp.clone(),
+        }],
     )
     .unwrap();
-    let ss = structid_lti::TransferFunction::siso(taps, vec![1.0]).unwrap().to_state_space();
+    let ss = structid_lti::TransferFunction::siso(taps, vec![1.0])
+        .unwrap()
+        .to_state_space();
     let ss_problem = Problem::new(
         r,
         Arc::new(StateSpace::static_gain(DMatrix::from_element(1, 1, 1.0)).unwrap()),
-        vec![ProblemBlock { name: "f".into(), output: 0, path: Arc::new(ss), z, dispersion: disp }],
+        vec![ProblemBlock {
+            name: "f".into(),
+            output: 0,
+            path: Arc::new(ss),
+            z,
+            dispersion: disp,
+        }],
     )
     .unwrap();
     let a = identify_problem(&fir_problem, &settings(0.05)).unwrap();
@@ -500,7 +640,6 @@ fn user_linear_system_plugs_into_identify() {
     let (wa, wb) = (stack_w(&a), stack_w(&b));
     assert!(rel(&wa, &wb) < 1e-10, "{}", rel(&wa, &wb));
 }
-
 
 /// A singular M (no noise path and repeated z, so K has equal columns) is regularised and
 /// reported; the estimate stays finite and still fits the data.
@@ -524,7 +663,12 @@ fn singular_system_matrix_is_regularised_and_reported() {
     .unwrap();
     let model = Model::new(
         lft,
-        vec![NonlinearBlock::new("f", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))],
+        vec![NonlinearBlock::new(
+            "f",
+            vec![0],
+            0,
+            Arc::new(KernelDispersion::gaussian(0.3).unwrap()),
+        )],
     )
     .unwrap();
     let z: Vec<f64> = (0..40).map(|k| ((k % 10) as f64) / 10.0).collect();
@@ -533,10 +677,25 @@ fn singular_system_matrix_is_regularised_and_reported() {
     let id = identify(&model, &Data::new(u, y).unwrap(), &settings(0.01)).unwrap();
     assert!(id.w_hat.as_slice().iter().all(|v| v.is_finite()));
     assert!(id.diagnostics.diagonal_jitter > 0.0);
-    assert!(id.diagnostics.feasibility_residual < 1e-6, "{:?}", id.diagnostics);
-    assert!(id.diagnostics.warnings.iter().any(|w| w.contains("numerically singular")));
+    assert!(
+        id.diagnostics.feasibility_residual < 1e-6,
+        "{:?}",
+        id.diagnostics
+    );
+    assert!(
+        id.diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("numerically singular"))
+    );
     for (k, zk) in z.iter().enumerate() {
-        assert!((id.w_hat.get(k, 0) - zk.sin()).abs() < 1e-4, "sample {k}: {} vs {} ({:?})", id.w_hat.get(k, 0), zk.sin(), id.diagnostics);
+        assert!(
+            (id.w_hat.get(k, 0) - zk.sin()).abs() < 1e-4,
+            "sample {k}: {} vs {} ({:?})",
+            id.w_hat.get(k, 0),
+            zk.sin(),
+            id.diagnostics
+        );
     }
 }
 
@@ -585,7 +744,12 @@ proptest! {
 
 /// Like `paper_reference`, but only the first `ne` columns of `t_ye` are noise (weight 1/L);
 /// the remaining ones are unpenalised (weight 0).
-fn paper_reference_weighted(d: &Dense, beta: f64, len: usize, ne: usize) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
+fn paper_reference_weighted(
+    d: &Dense,
+    beta: f64,
+    len: usize,
+    ne: usize,
+) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
     let (nv, nw) = (d.t_ye.ncols(), d.t_yw.ncols());
     let mut a = DMatrix::zeros(d.r.len(), nv + nw);
     a.columns_mut(0, nv).copy_from(&d.t_ye);
@@ -603,7 +767,12 @@ fn paper_reference_weighted(d: &Dense, beta: f64, len: usize, ne: usize) -> (DVe
     let rank = svd.singular_values.iter().filter(|s| **s > tol).count();
     let v_t = svd.v_t.unwrap();
     let dim = nv + nw;
-    let mut basis: Vec<DVector<f64>> = v_t.transpose().column_iter().take(rank).map(|c| c.into_owned()).collect();
+    let mut basis: Vec<DVector<f64>> = v_t
+        .transpose()
+        .column_iter()
+        .take(rank)
+        .map(|c| c.into_owned())
+        .collect();
     for i in 0..dim {
         let mut v = DVector::zeros(dim);
         v[i] = 1.0;
@@ -621,9 +790,17 @@ fn paper_reference_weighted(d: &Dense, beta: f64, len: usize, ne: usize) -> (DVe
         }
     }
     let nmat = DMatrix::from_columns(&basis[rank..]);
-    let v = (nmat.transpose() * &h * &nmat).cholesky().expect("PD reduced Hessian").solve(&(-(nmat.transpose() * &h * &x_p)));
+    let v = (nmat.transpose() * &h * &nmat)
+        .cholesky()
+        .expect("PD reduced Hessian")
+        .solve(&(-(nmat.transpose() * &h * &x_p)));
     let x = x_p + &nmat * v;
-    (x.rows(0, nv).into_owned(), x.rows(nv, nw).into_owned(), nmat, h)
+    (
+        x.rows(0, nv).into_owned(),
+        x.rows(nv, nw).into_owned(),
+        nmat,
+        h,
+    )
 }
 
 /// On noise-free data from a system that does not start at rest, the initial-state option
@@ -631,24 +808,45 @@ fn paper_reference_weighted(d: &Dense, beta: f64, len: usize, ne: usize) -> (DVe
 #[test]
 fn initial_state_is_recovered_and_improves_the_map() {
     use structid_core::paper::gaussian_noise;
-    let exp = scenarios::hammerstein(400, 3, 0.0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()), 9).unwrap();
+    let exp = scenarios::hammerstein(
+        400,
+        3,
+        0.0,
+        Arc::new(KernelDispersion::gaussian(0.3).unwrap()),
+        9,
+    )
+    .unwrap();
     let model = &exp.model;
     let x0_true = vec![3.0, -2.0, 1.5];
     let u = exp.data.u().clone();
     let tanh = |z: &[f64]| z[0].tanh();
     let e = gaussian_noise(u.len(), 1, 0.0, 1);
-    let sim = model.simulate(&[&tanh], &u, Some(&e), Some(&x0_true)).unwrap();
+    let sim = model
+        .simulate(&[&tanh], &u, Some(&e), Some(&x0_true))
+        .unwrap();
     let data = Data::new(u, sim.y).unwrap();
     let truth = sim.w.channel(0);
-    let est = IdentifySettings::builder().beta(1e-6).initial_state(InitialState::Estimate).build().unwrap();
+    let est = IdentifySettings::builder()
+        .beta(1e-6)
+        .initial_state(InitialState::Estimate)
+        .build()
+        .unwrap();
     let zero = IdentifySettings::builder().beta(1e-6).build().unwrap();
     let a = identify(model, &data, &est).unwrap();
     let b = identify(model, &data, &zero).unwrap();
     let x0 = a.initial_state.clone().unwrap();
-    let err_x0: f64 = x0.iter().zip(&x0_true).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    let err_x0: f64 = x0
+        .iter()
+        .zip(&x0_true)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
     assert!(err_x0 < 0.05 * 3.9, "x₀ = {x0:?}, true {x0_true:?}");
     let ea = structid_core::metrics::rms_difference(&a.blocks[0].w_hat, &truth);
     let eb = structid_core::metrics::rms_difference(&b.blocks[0].w_hat, &truth);
-    assert!(ea < 0.5 * eb, "map error with x₀ estimated {ea}, assuming rest {eb}");
+    assert!(
+        ea < 0.5 * eb,
+        "map error with x₀ estimated {ea}, assuming rest {eb}"
+    );
     assert!(b.initial_state.is_none());
 }

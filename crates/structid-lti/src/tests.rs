@@ -542,5 +542,3 @@ fn tf_mimo_and_validation() {
         Err(LtiError::InvalidTransferFunction(_))
     ));
 }
-
-

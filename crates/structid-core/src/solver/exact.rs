@@ -19,7 +19,9 @@
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::cholesky::llt::factor::{
+    LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
+};
 use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Conj, Mat, MatMut, MatRef};
@@ -27,7 +29,9 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::identify::{BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings};
+use crate::identify::{
+    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings,
+};
 use crate::problem::Problem;
 
 /// Gram columns are generated and pushed through T_i in panels of this many columns.
@@ -37,7 +41,13 @@ const PANEL: usize = 256;
 const JITTER_LADDER: [f64; 3] = [1e-13, 1e-10, 1e-7];
 
 /// Estimated peak memory of the exact solver in bytes.
-pub fn peak_memory_bytes(len: usize, outputs: usize, noise_inputs: usize, noise_dynamic: bool, free_cols: usize) -> u64 {
+pub fn peak_memory_bytes(
+    len: usize,
+    outputs: usize,
+    noise_inputs: usize,
+    noise_dynamic: bool,
+    free_cols: usize,
+) -> u64 {
     let n = (len * outputs) as u64;
     let l = len as u64;
     let p = PANEL.min(len.max(1)) as u64;
@@ -137,11 +147,21 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             }
         }
         t_assembled = Instant::now();
-        match cholesky_in_place(mk, LltRegularization::default(), par, stack, Default::default()) {
+        match cholesky_in_place(
+            mk,
+            LltRegularization::default(),
+            par,
+            stack,
+            Default::default(),
+        ) {
             Ok(_) => break (kept, dropped, max_diag),
             Err(e) => {
                 attempt += 1;
-                jitter = JITTER_LADDER.get(attempt - 1).copied().unwrap_or(f64::INFINITY) * max_diag;
+                jitter = JITTER_LADDER
+                    .get(attempt - 1)
+                    .copied()
+                    .unwrap_or(f64::INFINITY)
+                    * max_diag;
                 if !jitter.is_finite() {
                     return Err(Error::Numerical(format!(
                         "Cholesky factorisation of M failed even with a diagonal jitter of 1e-7·max(diag M): {e}"
@@ -169,8 +189,12 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     });
     let x0 = match free {
         Some(o) if nx > 0 => {
-            let h = nalgebra::DMatrix::from_fn(nx, nx, |a, b| (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 1 + b)]).sum());
-            let g = nalgebra::DVector::from_fn(nx, |a, _| (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 0)]).sum());
+            let h = nalgebra::DMatrix::from_fn(nx, nx, |a, b| {
+                (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 1 + b)]).sum()
+            });
+            let g = nalgebra::DVector::from_fn(nx, |a, _| {
+                (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 0)]).sum()
+            });
             let x0 = h.cholesky().map(|c| c.solve(&g)).ok_or_else(|| {
                 Error::Numerical(
                     "the initial state is not identifiable from this record (OᵀM⁻¹O is singular): \
@@ -259,7 +283,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     let mut warnings = Vec::new();
     if !dropped.is_empty() {
-        let scale = r.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(f64::MIN_POSITIVE);
+        let scale = r
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.abs()))
+            .max(f64::MIN_POSITIVE);
         warnings.push(format!(
             "{} output sample(s) depend on neither e nor w (strictly proper paths from a zero initial state) \
              and were left out; max |r| there = {dropped_max:.3e}{}",
@@ -297,8 +324,16 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             dropped_samples: dropped,
             dropped_max_abs_residual: dropped_max,
             diagonal_jitter: jitter,
-            condition_lower_bound: if dmin > 0.0 { (dmax / dmin).powi(2) } else { f64::INFINITY },
-            feasibility_residual: if r2 > 0.0 { (res2 / r2).sqrt() } else { res2.sqrt() },
+            condition_lower_bound: if dmin > 0.0 {
+                (dmax / dmin).powi(2)
+            } else {
+                f64::INFINITY
+            },
+            feasibility_residual: if r2 > 0.0 {
+                (res2 / r2).sqrt()
+            } else {
+                res2.sqrt()
+            },
             peak_memory_bytes: need,
             timings: Timings {
                 prepare: secs(t_start, t_prepared),
@@ -331,7 +366,9 @@ fn assemble(
             // layout the blocked recursion streams fastest, and equals K.
             let mut k = m.as_mut().submatrix_mut(0, 0, len, len);
             pen.fill(k.rb_mut());
-            block.path.apply_columns(k.rb().transpose(), q.rb_mut(), Accum::Replace, 1.0);
+            block
+                .path
+                .apply_columns(k.rb().transpose(), q.rb_mut(), Accum::Replace, 1.0);
         } else {
             for j0 in (0..len).step_by(panel) {
                 let w = panel.min(len - j0);
@@ -339,11 +376,15 @@ fn assemble(
                 let g = &mut gram[..len * w];
                 pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
                 let g = MatRef::from_row_major_slice(g, len, w);
-                block.path.apply_columns(g, q.rb_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
+                block
+                    .path
+                    .apply_columns(g, q.rb_mut().subcols_mut(j0, w), Accum::Replace, 1.0);
             }
         }
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
-        block.path.apply_columns(q.rb().transpose(), m.as_mut(), accum, 1.0);
+        block
+            .path
+            .apply_columns(q.rb().transpose(), m.as_mut(), accum, 1.0);
     }
     add_noise_term(problem.noise(), len, lb, m);
 }
@@ -413,12 +454,22 @@ fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &mut Mat<f64
             Accum::Replace,
             1.0,
         );
-        noise.apply_columns(x.as_ref().subcols(0, w), m.as_mut().subcols_mut(j0, w), Accum::Add, lb);
+        noise.apply_columns(
+            x.as_ref().subcols(0, w),
+            m.as_mut().subcols_mut(j0, w),
+            Accum::Add,
+            lb,
+        );
     }
 }
 
 /// K·α computed panel by panel from the Gram columns (no L×L storage).
-fn gram_times(pen: &dyn QuadraticPenalty, alpha: &[f64], scratch: &mut [f64], panel: usize) -> Vec<f64> {
+fn gram_times(
+    pen: &dyn QuadraticPenalty,
+    alpha: &[f64],
+    scratch: &mut [f64],
+    panel: usize,
+) -> Vec<f64> {
     let len = alpha.len();
     let mut out = vec![0.0; len];
     for j0 in (0..len).step_by(panel.max(1)) {

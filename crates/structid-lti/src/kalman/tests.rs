@@ -489,8 +489,6 @@ fn steady_filter_is_the_lti_tail() {
     assert!(max_abs_diff(&a[len / 2..], &b[len / 2..]) < 1e-10);
 }
 
-
-
 #[test]
 fn dare_fallback_and_non_minimum_phase() {
     // an unstable mode that the noise does not excite but the output observes: with
@@ -563,4 +561,3 @@ fn dare_fallback_and_non_minimum_phase() {
         .unwrap();
     assert!(max_abs_diff(&whiten_vec(&w, &r.as_slice()[..len]), z.as_slice()) < 1e-9 * z.amax());
 }
-
