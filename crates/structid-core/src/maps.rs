@@ -230,7 +230,8 @@ impl Interpolant for LookupTable {
     fn eval(&self, z: &[f64]) -> f64 {
         match self {
             Self::OneD { x, v } => {
-                let (i, t) = locate(x, z[0]);
+                let Some(&z0) = z.first() else { return f64::NAN };
+                let (i, t) = locate(x, z0);
                 if x.len() == 1 {
                     v[0]
                 } else {
@@ -239,8 +240,9 @@ impl Interpolant for LookupTable {
             }
             Self::Grid2D { x, y, values } => {
                 let nx = x.len();
-                let (i, s) = locate(x, z[0]);
-                let (j, t) = locate(y, z[1]);
+                let (Some(&z0), Some(&z1)) = (z.first(), z.get(1)) else { return f64::NAN };
+                let (i, s) = locate(x, z0);
+                let (j, t) = locate(y, z1);
                 let at = |a: usize, b: usize| values[a.min(nx - 1) + b.min(y.len() - 1) * nx];
                 (1.0 - s) * (1.0 - t) * at(i, j)
                     + s * (1.0 - t) * at(i + 1, j)
@@ -289,5 +291,7 @@ mod tests {
             assert!((t.eval(&[a, b]) - f(a, b)).abs() < 1e-12);
         }
         assert!(LookupTable::from_rows(&rows[1..]).is_err());
+        // Too few inputs give NaN (which simulation reports), not a panic.
+        assert!(t.eval(&[0.5]).is_nan());
     }
 }
