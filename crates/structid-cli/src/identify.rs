@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use structid_core::{Identification, IdentifySettings, identify};
+use structid_core::{Identification, IdentifySettings, InitialState, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, Report, TruthSpec};
 
 use crate::IdentifyArgs;
@@ -67,7 +67,12 @@ pub fn protect_inputs(
 /// Builds the settings from the command line.
 fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
     let beta = positive("--beta", a.beta)?;
-    let mut b = IdentifySettings::builder().beta(beta);
+    let mut b = IdentifySettings::builder()
+        .beta(beta)
+        .initial_state(match a.initial_state {
+            crate::InitialStateArg::Zero => InitialState::Zero,
+            crate::InitialStateArg::Estimate => InitialState::Estimate,
+        });
     if let Some(mib) = a.memory_limit_mib {
         if mib == 0 {
             return Err(CliError::input(

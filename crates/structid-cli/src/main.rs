@@ -82,6 +82,20 @@ struct IdentifyArgs {
     /// Memory budget of the solver in MiB [default: 3/4 of the available memory].
     #[arg(long, value_name = "N")]
     memory_limit_mib: Option<u64>,
+    /// How the initial state of the linear block is treated: `zero` (the system starts at
+    /// rest, the paper's assumption) or `estimate` (x₀ is estimated as unpenalised parameters;
+    /// use it for records that do not start at rest).
+    #[arg(long, value_name = "zero|estimate", default_value = "zero")]
+    initial_state: InitialStateArg,
+}
+
+/// Values of `--initial-state`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum InitialStateArg {
+    /// x₀ = 0.
+    Zero,
+    /// x₀ estimated.
+    Estimate,
 }
 
 /// Arguments of `structid simulate`.

@@ -662,3 +662,80 @@ fn bad_inputs_give_readable_errors() {
     assert!(!out.exists());
     assert!(!dir.path().join("s.csv").exists());
 }
+
+/// The Fourier-series dispersion and the initial-state option work from the command line: a
+/// record that does not start at rest is identified with `--initial-state estimate`.
+#[test]
+fn fourier_dispersion_and_initial_state_from_the_cli() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(example_model("hammerstein.toml"))
+        .unwrap()
+        .replace(
+            r#"dispersion = { kind = "gaussian", sigma = 0.3 }"#,
+            r#"dispersion = { kind = "fourier", sigma = 0.3 }"#,
+        );
+    assert!(text.contains("fourier"));
+    let model = dir.path().join("fourier.toml");
+    std::fs::write(&model, text).unwrap();
+    let u = dir.path().join("u.csv");
+    let data = dir.path().join("data.csv");
+    write_input(&u, 600, &["u"]);
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.05",
+    ]);
+    // Drop the first 40 rows: the record now starts in motion (the simulation did not).
+    let content = std::fs::read_to_string(&data).unwrap();
+    let mut lines: Vec<&str> = content.lines().collect();
+    lines.drain(1..41);
+    let cut = dir.path().join("cut.csv");
+    std::fs::write(&cut, lines.join("\n") + "\n").unwrap();
+    let rms = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "identify",
+            "--model",
+            p(&model),
+            "--data",
+            p(&cut),
+            "--out",
+            p(&out),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let r = read_json(&out.join("report.json"));
+        assert!(
+            r["settings"]["blocks"][0]["dispersion"]
+                .as_str()
+                .unwrap()
+                .starts_with("fourier")
+        );
+        (r["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap(), r)
+    };
+    let (rest, r0) = rms(&[], "rest");
+    let (est, r1) = rms(&["--initial-state", "estimate"], "est");
+    assert!(r0.get("initial_state").is_none());
+    assert_eq!(r1["initial_state"].as_array().unwrap().len(), 2);
+    assert_eq!(r1["settings"]["initial_state"], "Estimate");
+    assert!(est < 0.08, "RMS with x₀ estimated: {est}");
+    assert!(est < rest, "estimating x₀ should help: {est} vs {rest}");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&cut),
+        "--out",
+        p(&dir.path().join("x")),
+        "--initial-state",
+        "guess",
+    ]);
+    assert!(e.contains("guess"), "{e}");
+}

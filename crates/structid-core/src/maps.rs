@@ -230,7 +230,9 @@ impl Interpolant for LookupTable {
     fn eval(&self, z: &[f64]) -> f64 {
         match self {
             Self::OneD { x, v } => {
-                let Some(&z0) = z.first() else { return f64::NAN };
+                let Some(&z0) = z.first() else {
+                    return f64::NAN;
+                };
                 let (i, t) = locate(x, z0);
                 if x.len() == 1 {
                     v[0]
@@ -240,7 +242,9 @@ impl Interpolant for LookupTable {
             }
             Self::Grid2D { x, y, values } => {
                 let nx = x.len();
-                let (Some(&z0), Some(&z1)) = (z.first(), z.get(1)) else { return f64::NAN };
+                let (Some(&z0), Some(&z1)) = (z.first(), z.get(1)) else {
+                    return f64::NAN;
+                };
                 let (i, s) = locate(x, z0);
                 let (j, t) = locate(y, z1);
                 let at = |a: usize, b: usize| values[a.min(nx - 1) + b.min(y.len() - 1) * nx];

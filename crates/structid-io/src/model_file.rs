@@ -68,8 +68,8 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::{
-    Data, Dispersion, ExprMap, Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, Model,
-    NonlinearBlock,
+    Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, Interpolant,
+    KernelDispersion, Lft, LftMatrices, LookupTable, Model, NonlinearBlock,
 };
 use structid_lti::{ContinuousStateSpace, Signal};
 use toml::Spanned;
@@ -99,10 +99,20 @@ pub enum DispersionSpec {
         /// Kernel width σ (> 0), if given.
         sigma: Option<f64>,
     },
+    /// The Fourier-series kernel with Gaussian-like weights (the periodised Gaussian of width σ),
+    /// see [`structid_core::FourierDispersion`].
+    Fourier {
+        /// Width σ (> 0) in units of z, if given (otherwise as for the Gaussian).
+        sigma: Option<f64>,
+        /// Harmonics per input, if given (otherwise chosen from σ).
+        harmonics: Option<usize>,
+        /// Additive instead of tensor-product combination of several inputs.
+        additive: bool,
+    },
 }
 
 /// The dispersion kinds a model file may name.
-pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian"];
+pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "fourier"];
 
 /// The default kernel width for a block whose inputs are `z` (one point per sample):
 /// 0.1 × the largest range (max − min) over its channels, or 0.1 when every channel is
@@ -139,13 +149,14 @@ impl DispersionSpec {
     pub fn kind(&self) -> &'static str {
         match self {
             DispersionSpec::Gaussian { .. } => "gaussian",
+            DispersionSpec::Fourier { .. } => "fourier",
         }
     }
 
     /// The kernel width given in the file, if any.
     pub fn sigma(&self) -> Option<f64> {
         match self {
-            DispersionSpec::Gaussian { sigma } => *sigma,
+            DispersionSpec::Gaussian { sigma } | DispersionSpec::Fourier { sigma, .. } => *sigma,
         }
     }
 
@@ -156,18 +167,31 @@ impl DispersionSpec {
         sigma_override: Option<f64>,
         block_z: Option<&Signal>,
     ) -> Result<Arc<dyn Dispersion>, IoError> {
+        let s = match (sigma_override, self.sigma(), block_z) {
+            (Some(s), _, _) | (None, Some(s), _) => s,
+            (None, None, Some(z)) => default_sigma(z),
+            (None, None, None) => {
+                return Err(IoError::InvalidArgument(format!(
+                    "the {} dispersion has no sigma and no data were given to choose one",
+                    self.kind()
+                )));
+            }
+        };
         match self {
-            DispersionSpec::Gaussian { sigma } => {
-                let s = match (sigma_override, *sigma, block_z) {
-                    (Some(s), _, _) | (None, Some(s), _) => s,
-                    (None, None, Some(z)) => default_sigma(z),
-                    (None, None, None) => {
-                        return Err(IoError::InvalidArgument(
-                            "the gaussian dispersion has no sigma and no data were given to choose one".into(),
-                        ));
-                    }
-                };
-                Ok(Arc::new(KernelDispersion::gaussian(s)?))
+            DispersionSpec::Gaussian { .. } => Ok(Arc::new(KernelDispersion::gaussian(s)?)),
+            DispersionSpec::Fourier {
+                harmonics,
+                additive,
+                ..
+            } => {
+                let mut d = FourierDispersion::new(FourierWeights::GaussianLike { sigma: s })?;
+                if let Some(n) = harmonics {
+                    d = d.with_harmonics(*n);
+                }
+                if *additive {
+                    d = d.with_combination(Combination::Additive);
+                }
+                Ok(Arc::new(d))
             }
         }
     }
@@ -634,6 +658,11 @@ fn parse_dispersion(
     match v.get_ref() {
         toml::Value::String(k) => match k.as_str() {
             "gaussian" => Ok(DispersionSpec::Gaussian { sigma: None }),
+            "fourier" => Ok(DispersionSpec::Fourier {
+                sigma: None,
+                harmonics: None,
+                additive: false,
+            }),
             other => Err(unknown_kind(other)),
         },
         toml::Value::Table(t) => {
@@ -658,43 +687,82 @@ fn parse_dispersion(
                     ));
                 }
             };
+            let allowed: &[&str] = match kind {
+                "gaussian" => &["kind", "sigma"],
+                "fourier" => &["kind", "sigma", "harmonics", "combine"],
+                other => return Err(unknown_kind(other)),
+            };
+            if let Some(key) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
+                return Err(err_at(
+                    line,
+                    format!(
+                        "block `{block}`: unknown key `{key}` in the {kind} dispersion; it takes {}",
+                        allowed[1..]
+                            .iter()
+                            .map(|k| format!("`{k}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
+            }
+            let sigma = match t.get("sigma") {
+                None => None,
+                Some(toml::Value::Float(s)) => Some(*s),
+                Some(toml::Value::Integer(s)) => Some(*s as f64),
+                Some(other) => {
+                    return Err(err_at(
+                        line,
+                        format!(
+                            "block `{block}`: sigma must be a number, not {}",
+                            value_kind(other)
+                        ),
+                    ));
+                }
+            };
+            if let Some(s) = sigma
+                && !(s.is_finite() && s > 0.0)
+            {
+                return Err(err_at(
+                    line,
+                    format!(
+                        "block `{block}`: sigma = {s} is invalid; it must be a finite number greater than zero"
+                    ),
+                ));
+            }
             match kind {
-                "gaussian" => {
-                    if let Some(key) = t.keys().find(|k| !["kind", "sigma"].contains(&k.as_str())) {
-                        return Err(err_at(
-                            line,
-                            format!(
-                                "block `{block}`: unknown key `{key}` in the gaussian dispersion; it takes `sigma` only"
-                            ),
-                        ));
-                    }
-                    let sigma = match t.get("sigma") {
+                "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
+                _ => {
+                    let harmonics = match t.get("harmonics") {
                         None => None,
-                        Some(toml::Value::Float(s)) => Some(*s),
-                        Some(toml::Value::Integer(s)) => Some(*s as f64),
+                        Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 4096 => Some(*n as usize),
                         Some(other) => {
                             return Err(err_at(
                                 line,
                                 format!(
-                                    "block `{block}`: sigma must be a number, not {}",
-                                    value_kind(other)
+                                    "block `{block}`: harmonics must be a whole number from 1 to 4096, not {other}"
                                 ),
                             ));
                         }
                     };
-                    if let Some(s) = sigma
-                        && !(s.is_finite() && s > 0.0)
-                    {
-                        return Err(err_at(
-                            line,
-                            format!(
-                                "block `{block}`: sigma = {s} is invalid; it must be a finite number greater than zero"
-                            ),
-                        ));
-                    }
-                    Ok(DispersionSpec::Gaussian { sigma })
+                    let additive = match t.get("combine") {
+                        None => false,
+                        Some(toml::Value::String(c)) if c == "tensor" => false,
+                        Some(toml::Value::String(c)) if c == "additive" => true,
+                        Some(other) => {
+                            return Err(err_at(
+                                line,
+                                format!(
+                                    "block `{block}`: combine must be \"tensor\" or \"additive\", not {other}"
+                                ),
+                            ));
+                        }
+                    };
+                    Ok(DispersionSpec::Fourier {
+                        sigma,
+                        harmonics,
+                        additive,
+                    })
                 }
-                other => Err(unknown_kind(other)),
             }
         }
         other => Err(err_at(
@@ -1358,6 +1426,23 @@ impl ModelFile {
                 }
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
+                }
+                DispersionSpec::Fourier {
+                    sigma,
+                    harmonics,
+                    additive,
+                } => {
+                    let mut parts = vec!["kind = \"fourier\"".to_string()];
+                    if let Some(sg) = sigma {
+                        parts.push(format!("sigma = {}", format_number(*sg)));
+                    }
+                    if let Some(n) = harmonics {
+                        parts.push(format!("harmonics = {n}"));
+                    }
+                    if *additive {
+                        parts.push("combine = \"additive\"".into());
+                    }
+                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
                 }
             }
             match &b.truth {

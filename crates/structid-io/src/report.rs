@@ -33,6 +33,9 @@ pub struct Report {
     pub cost: CostTerms,
     /// Solver diagnostics.
     pub diagnostics: DiagnosticsReport,
+    /// The estimated initial state x₀ (`--initial-state estimate`), otherwise absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub initial_state: Option<Vec<f64>>,
     /// One entry per block, in model order.
     pub blocks: Vec<BlockReport>,
     /// Every file written, relative to the output directory.
@@ -48,6 +51,8 @@ pub struct SettingsReport {
     pub solver: String,
     /// Explicit memory limit, if one was set.
     pub memory_limit_bytes: Option<u64>,
+    /// `Zero` or `Estimate`.
+    pub initial_state: String,
     /// The σ that replaced every block's, if any.
     pub sigma_override: Option<f64>,
     /// Per-block dispersion settings.
@@ -197,6 +202,7 @@ impl Report {
                 beta: settings.beta(),
                 solver: format!("{:?}", settings.solver()),
                 memory_limit_bytes: settings.memory_limit_bytes(),
+                initial_state: format!("{:?}", settings.initial_state()),
                 sigma_override,
                 blocks: block_settings,
             },
@@ -206,6 +212,7 @@ impl Report {
                 solver: id.diagnostics.clone(),
                 z_source: id.z_source.describe(),
             },
+            initial_state: id.initial_state.clone(),
             blocks,
             files: Vec::new(),
         })

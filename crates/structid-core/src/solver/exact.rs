@@ -279,7 +279,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     }
     let mu = e_hat.iter().map(|v| v * v).sum::<f64>() / len as f64;
     let total = mu + beta * dispersions.iter().sum::<f64>();
-    if !total.is_finite() || blocks.iter().any(|b| b.w_hat.iter().any(|v| !v.is_finite())) {
+    if !total.is_finite()
+        || blocks
+            .iter()
+            .any(|b| b.w_hat.iter().any(|v| !v.is_finite()))
+    {
         return Err(Error::Numerical(format!(
             "the estimate is not finite (J = {total}); the data are probably too large in magnitude for the \
              kernel scaling — rescale y (and u) to order one"

@@ -401,3 +401,39 @@ fn no_panics_on_odd_input() {
     let m = ModelFile::parse(text, None).unwrap();
     assert!(m.lft.check_no_algebraic_loop().is_err());
 }
+
+#[test]
+fn fourier_dispersion_parses_builds_and_round_trips() {
+    let text = CANONICAL.replace(
+        r#"dispersion = { kind = "gaussian", sigma = 0.4 }"#,
+        r#"dispersion = { kind = "fourier", sigma = 0.3, harmonics = 24, combine = "additive" }"#,
+    );
+    let m = ModelFile::parse(&text, None).unwrap();
+    assert_eq!(
+        m.blocks[0].dispersion,
+        DispersionSpec::Fourier {
+            sigma: Some(0.3),
+            harmonics: Some(24),
+            additive: true
+        }
+    );
+    assert_eq!(m.blocks[0].dispersion.kind(), "fourier");
+    let d = m.blocks[0].dispersion.build(None, None).unwrap();
+    assert!(d.describe().starts_with("fourier"), "{}", d.describe());
+    let back = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(back.blocks, m.blocks);
+    // Bad keys and values name the block and the line.
+    for (bad, needle) in [
+        (r#"{ kind = "fourier", harmonics = 0 }"#, "harmonics"),
+        (r#"{ kind = "fourier", combine = "product" }"#, "combine"),
+        (
+            r#"{ kind = "fourier", width = 1.0 }"#,
+            "unknown key `width`",
+        ),
+        (r#"{ kind = "fourier", sigma = -1.0 }"#, "sigma"),
+    ] {
+        let t = CANONICAL.replace(r#"{ kind = "gaussian", sigma = 0.4 }"#, bad);
+        let e = err(&t);
+        assert!(e.contains(needle) && e.contains("line"), "{bad}: {e}");
+    }
+}
