@@ -121,73 +121,7 @@ fn paper_reference(
     beta: f64,
     len: usize,
 ) -> (DVector<f64>, DVector<f64>, DMatrix<f64>, DMatrix<f64>) {
-    let (ne, nw) = (d.t_ye.ncols(), d.t_yw.ncols());
-    let a = {
-        let mut a = DMatrix::zeros(d.r.len(), ne + nw);
-        a.columns_mut(0, ne).copy_from(&d.t_ye);
-        a.columns_mut(ne, nw).copy_from(&d.t_yw);
-        a
-    };
-    let q =
-        d.k.clone()
-            .try_inverse()
-            .expect("well-conditioned K in the reference");
-    let mut h = DMatrix::zeros(ne + nw, ne + nw);
-    h.view_mut((0, 0), (ne, ne)).fill_with_identity();
-    h.view_mut((0, 0), (ne, ne)).scale_mut(1.0 / len as f64);
-    h.view_mut((ne, ne), (nw, nw)).copy_from(&(q * beta));
-    let svd = a.clone().svd(true, true);
-    // A small tolerance: a genuinely small singular value of [T_ye T_yw] must not be treated as
-    // zero, or the reference itself becomes infeasible.
-    let tol = 1e-14 * svd.singular_values.max();
-    // Minimum-norm particular solution Aᵀ(AAᵀ)⁻¹r (nalgebra's SVD::solve loses ~1e-6 here).
-    let aat = &a * a.transpose();
-    let x_p = a.transpose() * aat.cholesky().expect("A has full row rank").solve(&d.r);
-    let v_t = svd.v_t.unwrap();
-    let rank = svd.singular_values.iter().filter(|s| **s > tol).count();
-    // Null space: right singular vectors beyond the rank (complete them if v_t is thin).
-    let full_v = {
-        let thin = v_t.transpose();
-        let mut basis: Vec<DVector<f64>> = thin
-            .column_iter()
-            .take(rank)
-            .map(|c| c.into_owned())
-            .collect();
-        let dim = ne + nw;
-        for i in 0..dim {
-            let mut v = DVector::zeros(dim);
-            v[i] = 1.0;
-            for b in &basis {
-                let p = b.dot(&v);
-                v -= b * p;
-            }
-            for b in &basis {
-                let p = b.dot(&v);
-                v -= b * p;
-            }
-            if v.norm() > 1e-6 {
-                basis.push(v.normalize());
-            }
-            if basis.len() == dim {
-                break;
-            }
-        }
-        DMatrix::from_columns(&basis[rank..])
-    };
-    let nmat = full_v;
-    let lhs = nmat.transpose() * &h * &nmat;
-    let rhs = -(nmat.transpose() * &h * &x_p);
-    let v = lhs
-        .cholesky()
-        .expect("reduced Hessian is positive definite")
-        .solve(&rhs);
-    let x = x_p + &nmat * v;
-    (
-        x.rows(0, ne).into_owned(),
-        x.rows(ne, nw).into_owned(),
-        nmat,
-        h,
-    )
+    paper_reference_weighted(d, beta, len, d.t_ye.ncols())
 }
 
 fn settings(beta: f64) -> IdentifySettings {
@@ -742,8 +676,11 @@ proptest! {
     }
 }
 
-/// Like `paper_reference`, but only the first `ne` columns of `t_ye` are noise (weight 1/L);
-/// the remaining ones are unpenalised (weight 0).
+/// The dense null-space minimiser: the first `ne` columns of `t_ye` are noise (weight 1/L), the
+/// remaining ones unpenalised (weight 0), and w is weighted by β·K⁻¹ (formed explicitly; the
+/// cases keep K well conditioned). The particular solution is Aᵀ(AAᵀ)⁻¹r: nalgebra's
+/// `SVD::solve` lost about 1e-6 of feasibility on well-conditioned cases here. A small rank
+/// tolerance keeps genuinely small singular values of A.
 fn paper_reference_weighted(
     d: &Dense,
     beta: f64,
