@@ -73,14 +73,15 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let ne = noise.inputs();
     let noise_dynamic = noise.order() > 0;
 
-    let nx_est = problem.free_response().map_or(0, |o| o.ncols());
-    let need = peak_memory_bytes(len, ny, ne, noise_dynamic, nx_est);
+    let free = problem.free_response();
+    let nx = free.map_or(0, |o| o.ncols());
+    let need = peak_memory_bytes(len, ny, ne, noise_dynamic, nx);
     let limit = settings.effective_memory_limit();
     if need > limit {
         let max_len = (1..=len)
             .rev()
             .step_by((len / 64).max(1))
-            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic, nx_est) <= limit)
+            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic, nx) <= limit)
             .unwrap_or(0);
         return Err(Error::TooLarge {
             solver: solver_name().into(),
@@ -120,11 +121,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut q_buf = vec![0.0f64; n * len];
     let mut q = MatMut::from_column_major_slice_mut(&mut q_buf, n, len);
     let panel = PANEL.min(len);
-    let mut gram = vec![0.0; len * panel];
     let nblocks = problem.blocks().len();
+    // Gram panels are needed only from the second block on (the first fills M's buffer).
+    let mut gram = if nblocks > 1 { vec![0.0; len * panel] } else { Vec::new() };
     let r_data = problem.residual().as_slice();
-    let free = problem.free_response();
-    let nx = free.map_or(0, |o| o.ncols());
     let mut t_assembled;
     let par = faer::get_global_parallelism();
     let mut buf = MemBuffer::new(
