@@ -709,7 +709,7 @@ impl KalmanWhitener {
             match &blocked {
                 Some(b) => {
                     let s0 = MatRef::from_row_major_slice(&xs, n, w);
-                    b.leaf(rest, xr, or, Accum::Replace, 1.0, Some(s0));
+                    b.leaf(rest, xr, or, Accum::Replace, 1.0, Some(s0), None);
                 }
                 None => {
                     // static filter: w_t = L^{-1} y_t

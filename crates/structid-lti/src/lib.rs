@@ -44,6 +44,7 @@ pub mod kalman;
 pub mod operator;
 pub mod signal;
 pub mod state_space;
+pub mod stream;
 pub mod testing;
 pub mod transfer_function;
 
@@ -52,6 +53,7 @@ pub use kalman::{KalmanWhitener, WhiteningOptions, steady_state_whitening_filter
 pub use operator::LinearSystem;
 pub use signal::Signal;
 pub use state_space::{ContinuousStateSpace, StateSpace};
+pub use stream::ColumnStream;
 pub use transfer_function::{Siso, TransferFunction};
 
 #[cfg(test)]

@@ -198,7 +198,7 @@ impl BlockedRecursion {
         alpha: f64,
     ) {
         par_columns(x, out, faer::get_global_parallelism(), &|x, out| {
-            self.leaf(len, x, out, accum, alpha, None)
+            self.leaf(len, x, out, accum, alpha, None, None)
         });
     }
 
@@ -206,7 +206,10 @@ impl BlockedRecursion {
     ///
     /// `init` is the state before the first processed block (`n x ncols`, the state of a
     /// forward run at time 0, or the costate after the last sample of an adjoint run);
-    /// `None` means zero.
+    /// `None` means zero. `fin`, when given, receives the state after the last block; it is
+    /// exact only when `len` is a multiple of the block length (a partial block is padded with
+    /// zero input, which would keep the state moving).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn leaf(
         &self,
         len: usize,
@@ -215,6 +218,7 @@ impl BlockedRecursion {
         accum: Accum,
         alpha: f64,
         init: Option<MatRef<'_, f64>>,
+        mut fin: Option<MatMut<'_, f64>>,
     ) {
         let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
         let k = b * cin + n;
@@ -265,6 +269,19 @@ impl BlockedRecursion {
                     alpha,
                     Par::Seq,
                 );
+                if n > 0
+                    && step + 1 == nb
+                    && let Some(f) = fin.as_mut()
+                {
+                    matmul(
+                        f.rb_mut().subcols_mut(j0, w),
+                        Accum::Replace,
+                        self.m2.as_ref(),
+                        wv,
+                        1.0,
+                        Par::Seq,
+                    );
+                }
                 if n > 0 && step + 1 < nb {
                     let sv = if row_major {
                         MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)

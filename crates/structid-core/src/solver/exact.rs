@@ -123,7 +123,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let panel = PANEL.min(len);
     let nblocks = problem.blocks().len();
     // Gram panels are needed only from the second block on (the first fills M's buffer).
-    let mut gram = if nblocks > 1 { vec![0.0; len * panel] } else { Vec::new() };
+    let mut gram = if nblocks > 1 {
+        vec![0.0; len * panel]
+    } else {
+        Vec::new()
+    };
     let r_data = problem.residual().as_slice();
     let mut t_assembled;
     let par = faer::get_global_parallelism();
