@@ -68,7 +68,7 @@ pub trait QuadraticPenalty: Send + Sync {
 
     /// The finite feature form K = ΨΛΨᵀ with the sample points, when the penalty has one. Solvers
     /// that work in feature space (cost linear in L) use it.
-    fn features(&self) -> Option<(&dyn FeatureMap, &Signal)> {
+    fn features(&self) -> Option<(Arc<dyn FeatureMap>, &Signal)> {
         None
     }
 }

@@ -455,8 +455,8 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
         ))
     }
 
-    fn features(&self) -> Option<(&dyn FeatureMap, &Signal)> {
-        Some((self.map.as_ref(), &self.z))
+    fn features(&self) -> Option<(Arc<dyn FeatureMap>, &Signal)> {
+        Some((Arc::clone(&self.map) as Arc<dyn FeatureMap>, &self.z))
     }
 }
 

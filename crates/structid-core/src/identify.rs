@@ -20,6 +20,9 @@ pub enum SolverChoice {
     Auto,
     /// The exact dual (representer) solve with the dense L·n_y × L·n_y matrix M.
     Exact,
+    /// The feature-space solve, linear in L, for dispersions with finitely many features
+    /// (e.g. [`crate::FourierDispersion`]).
+    Features,
 }
 
 /// Settings of [`identify()`]; build them with [`IdentifySettings::builder`].
@@ -309,6 +312,34 @@ pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Resu
 pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     positive_finite("beta", settings.beta)?;
     match settings.solver {
-        SolverChoice::Auto | SolverChoice::Exact => solver::exact::solve(problem, settings),
+        SolverChoice::Exact => solver::exact::solve(problem, settings),
+        SolverChoice::Features => solver::features::solve(problem, settings),
+        SolverChoice::Auto => {
+            // The exact solve unless its M would not fit the memory budget and every block has
+            // finitely many features.
+            let noise = problem.noise();
+            let nx = problem.free_response().map_or(0, |o| o.ncols());
+            let need = solver::exact::peak_memory_bytes(
+                problem.len(),
+                problem.outputs(),
+                noise.inputs(),
+                noise.order() > 0,
+                nx,
+            );
+            let featured = solver::features::unsupported_reason(problem).is_none()
+                && problem.blocks().iter().all(|b| {
+                    matches!(b.dispersion.penalty(&b.z), Ok(crate::Penalty::Quadratic(q)) if q.features().is_some())
+                });
+            if need > settings.effective_memory_limit() && featured {
+                let mut id = solver::features::solve(problem, settings)?;
+                id.diagnostics.warnings.push(format!(
+                    "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
+                    need >> 20
+                ));
+                Ok(id)
+            } else {
+                solver::exact::solve(problem, settings)
+            }
+        }
     }
 }

@@ -787,3 +787,91 @@ fn initial_state_is_recovered_and_improves_the_map() {
     );
     assert!(b.initial_state.is_none());
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, .. ProptestConfig::default() })]
+
+    /// The feature-space solver equals the exact dense solver for the same finite (Fourier)
+    /// kernel: several blocks with one and two inputs, MIMO static noise, with and without an
+    /// estimated initial state.
+    #[test]
+    fn prop_feature_solver_equals_exact_solver(seed in any::<u64>(), n in 1usize..4, ny in 1usize..3,
+                                               len in 30usize..160, lb in -3.0f64..0.0, two_inputs in any::<bool>(),
+                                               estimate_x0 in any::<bool>()) {
+        use nalgebra::DMatrix;
+        let (nu, nw) = (1, 2);
+        let ne = ny;
+        let nz = 3;
+        let sys = random_stable_system(seed, n, nu + ne + nw, ny, 0.9);
+        let b = sys.b();
+        let mut dye = DMatrix::identity(ny, ne);
+        dye += sys.d().columns(nu, ne) * 0.3;
+        let lft = Lft::new(LftMatrices {
+            a: sys.a().clone(),
+            bu: b.columns(0, nu).into_owned(),
+            be: DMatrix::zeros(n, ne),
+            bw: b.columns(nu + ne, nw).into_owned(),
+            cy: sys.c().clone(),
+            dyu: sys.d().columns(0, nu).into_owned(),
+            dye,
+            dyw: sys.d().columns(nu + ne, nw).into_owned(),
+            cz: DMatrix::zeros(nz, n),
+            dzu: DMatrix::zeros(nz, nu),
+            dze: DMatrix::zeros(nz, ne),
+            dzw: DMatrix::zeros(nz, nw),
+        }).unwrap();
+        let f1: Arc<dyn Dispersion> = Arc::new(FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.3 }).unwrap());
+        let f2: Arc<dyn Dispersion> = Arc::new(
+            FourierDispersion::new(FourierWeights::SobolevLike { order: 1.5, scale: 0.5 }).unwrap().with_harmonics(4),
+        );
+        let second_inputs = if two_inputs { vec![1, 2] } else { vec![1] };
+        let model = Model::new(lft, vec![
+            NonlinearBlock::new("a", vec![0], 0, f1),
+            NonlinearBlock::new("b", second_inputs, 1, f2),
+        ]).unwrap();
+        let u = structid_lti::testing::random_signal(seed ^ 1, len, nu);
+        let y = structid_lti::testing::random_signal(seed ^ 2, len, ny);
+        let z = structid_lti::testing::random_signal(seed ^ 3, len, nz);
+        let data = Data::new(u, y).unwrap().with_z(z).unwrap();
+        let beta = 10f64.powf(lb);
+        let init = if estimate_x0 { InitialState::Estimate } else { InitialState::Zero };
+        let exact = identify(&model, &data, &IdentifySettings::builder().beta(beta).initial_state(init)
+            .solver(SolverChoice::Exact).build().unwrap()).unwrap();
+        let feat = identify(&model, &data, &IdentifySettings::builder().beta(beta).initial_state(init)
+            .solver(SolverChoice::Features).build().unwrap()).unwrap();
+        let (we, wf) = (stack_w(&exact), stack_w(&feat));
+        prop_assert!(rel(&we, &wf) < 1e-8, "ŵ: {}", rel(&we, &wf));
+        let (ee, ef) = (DVector::from_column_slice(exact.e_hat.as_slice()), DVector::from_column_slice(feat.e_hat.as_slice()));
+        prop_assert!(rel(&ee, &ef) < 1e-8, "ê: {}", rel(&ee, &ef));
+        prop_assert!((exact.cost.total - feat.cost.total).abs() <= 1e-8 * exact.cost.total.abs());
+        for (a, b) in exact.cost.dispersions.iter().zip(&feat.cost.dispersions) {
+            prop_assert!((a - b).abs() <= 1e-7 * a.abs().max(1e-12), "D: {a} vs {b}");
+        }
+        if estimate_x0 {
+            let (xa, xb) = (DVector::from_vec(exact.initial_state.clone().unwrap()), DVector::from_vec(feat.initial_state.clone().unwrap()));
+            prop_assert!(rel(&xa, &xb) < 1e-7, "x₀: {xa} vs {xb}");
+        }
+        prop_assert!(feat.diagnostics.feasibility_residual < 1e-9);
+        // Both interpolants agree off the data as well.
+        for (be, bf) in exact.blocks.iter().zip(&feat.blocks) {
+            let p = be.z.channels();
+            let pt = vec![0.123; p];
+            let (a, b) = (be.predict(&pt), bf.predict(&pt));
+            prop_assert!((a - b).abs() <= 1e-7 * (1.0 + a.abs()), "{}: {a} vs {b}", be.name);
+        }
+    }
+}
+
+/// Features are refused clearly where they do not apply.
+#[test]
+fn feature_solver_refuses_what_it_cannot_do() {
+    let case = make_case(3, 2, 1, 1, 1, 20);
+    let s = IdentifySettings::builder()
+        .beta(0.1)
+        .solver(SolverChoice::Features)
+        .build()
+        .unwrap();
+    let e = identify(&case.model, &case.data, &s).unwrap_err();
+    assert!(matches!(e, Error::Unsupported(_)), "{e}");
+    assert!(e.to_string().contains("feature"), "{e}");
+}

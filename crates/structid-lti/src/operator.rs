@@ -75,6 +75,13 @@ pub trait LinearSystem: Send + Sync {
         );
     }
 
+    /// The state-space realisation behind this operator, when it is one. Solvers that stream
+    /// a record chunk by chunk ([`crate::ColumnStream`]) need it; others work through the
+    /// methods above.
+    fn as_state_space(&self) -> Option<&crate::StateSpace> {
+        None
+    }
+
     /// Checked simulation from zero initial state: verifies that `u` has
     /// [`inputs`](LinearSystem::inputs) channels and only finite values, then returns the
     /// output signal (same length, [`outputs`](LinearSystem::outputs) channels).

@@ -601,6 +601,10 @@ fn trivial_columns(
 }
 
 impl LinearSystem for StateSpace {
+    fn as_state_space(&self) -> Option<&StateSpace> {
+        Some(self)
+    }
+
     fn inputs(&self) -> usize {
         self.b.ncols()
     }

@@ -2,3 +2,4 @@
 //! returns an [`crate::Identification`]; [`crate::identify()`] chooses between them.
 
 pub mod exact;
+pub mod features;

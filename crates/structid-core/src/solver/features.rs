@@ -1,0 +1,345 @@
+//! The feature-space solver: cost linear in L for penalties with finitely many features.
+//!
+//! When each block's map is w_i = Ψ_i·a_i with D_i = a_iᵀΛ_i⁻¹a_i, write a_i = Λ_i^½·b_i and
+//! Φ_i = Ψ_iΛ_i^½. With F = [T_1Φ_1 … T_BΦ_B] and the whitening W (WᵀW = (T_ye·T_yeᵀ)⁻¹),
+//! eq. (4) becomes the ridge regression
+//!
+//! ```text
+//! min_b (1/L)·‖W(r − F b − O x₀)‖² + β·‖b‖²
+//! ```
+//!
+//! whose normal equations need only G = [F O r]ᵀWᵀW[F O r], an (m+n_x+1)² matrix. One pass over
+//! time accumulates G chunk by chunk: the features of a chunk go through the block paths as a
+//! [`ColumnStream`] (state carried between chunks), are whitened, and G += XᵀX is one matrix
+//! product; the L×m matrix F is never stored. A second pass recovers ŵ and ê.
+//!
+//! The scaling by Λ^½ keeps the system well conditioned (its matrix is ≥ L·β·I on b) even when
+//! λ_n decays to 1e-300.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use faer::reborrow::{Reborrow, ReborrowMut};
+use faer::{Accum, Mat, MatMut};
+use structid_lti::{ColumnStream, LinearSystem, Signal, StateSpace};
+
+use crate::dispersion::{FeatureMap, Penalty, QuadraticPenalty};
+use crate::error::{Error, Result};
+use crate::fourier::FeatureExpansion;
+use crate::identify::{
+    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings,
+};
+use crate::problem::Problem;
+
+/// Samples per chunk of the time pass (rounded to the streams' block length).
+const CHUNK: usize = 4096;
+
+/// Whether every block of `problem` can use the feature solver, and if not, why.
+pub fn unsupported_reason(problem: &Problem) -> Option<String> {
+    if problem.noise().order() > 0 {
+        return Some(
+            "the feature solver does not yet handle a dynamic noise path (B_e ≠ 0); use the exact solver".into(),
+        );
+    }
+    for b in problem.blocks() {
+        if b.path.as_state_space().is_none() {
+            return Some(format!(
+                "block `{}`: the feature solver streams its path as a state-space system",
+                b.name
+            ));
+        }
+    }
+    None
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
+}
+
+/// Solves the problem in feature space; see the module documentation.
+pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
+    let t_start = Instant::now();
+    if let Some(reason) = unsupported_reason(problem) {
+        return Err(Error::Unsupported(reason));
+    }
+    let beta = settings.beta();
+    let len = problem.len();
+    let ny = problem.outputs();
+    let noise = problem.noise();
+    let ne = noise.inputs();
+    let penalties: Vec<Box<dyn QuadraticPenalty>> = problem
+        .blocks()
+        .iter()
+        .map(|b| {
+            let Penalty::Quadratic(q) = b.dispersion.penalty(&b.z)?;
+            Ok(q)
+        })
+        .collect::<Result<_>>()?;
+    let mut maps: Vec<(Arc<dyn FeatureMap>, &Signal)> = Vec::new();
+    for (b, p) in problem.blocks().iter().zip(&penalties) {
+        maps.push(p.features().ok_or_else(|| {
+            Error::Unsupported(format!(
+                "block `{}` ({}) has no finite feature map; use the exact solver or a Fourier dispersion",
+                b.name,
+                b.dispersion.describe()
+            ))
+        })?);
+    }
+    let dims: Vec<usize> = maps.iter().map(|(f, _)| f.dim()).collect();
+    let offsets: Vec<usize> = dims
+        .iter()
+        .scan(0, |acc, d| {
+            let o = *acc;
+            *acc += d;
+            Some(o)
+        })
+        .collect();
+    let m: usize = dims.iter().sum();
+    let free = problem.free_response();
+    let nx = free.map_or(0, |o| o.ncols());
+    let cols = m + nx + 1;
+
+    // Static whitening: ω_t = L_S⁻¹·ν_t with S = D_ye·D_yeᵀ = L_S·L_Sᵀ.
+    let d = static_gain(noise, ny, ne);
+    let s = &d * d.transpose();
+    let ls = s.clone().cholesky().ok_or_else(|| {
+        Error::Numerical(
+            "D_ye·D_yeᵀ is singular: some output carries no noise, so the noise-weighted fit is undefined; \
+             add noise to every output or use the exact solver"
+                .into(),
+        )
+    })?;
+    let l_s = ls.l();
+
+    let streams: Vec<StateSpace> = problem
+        .blocks()
+        .iter()
+        .map(|b| b.path.as_state_space().expect("checked above").clone())
+        .collect();
+    let mut streamers: Vec<ColumnStream> = streams
+        .iter()
+        .zip(&dims)
+        .map(|(s, &d)| s.column_stream(d))
+        .collect();
+    let unit = streamers
+        .iter()
+        .fold(1, |a, s| a / gcd(a, s.block_len()) * s.block_len());
+    let chunk = CHUNK.div_ceil(unit) * unit;
+    let t_prepared = Instant::now();
+
+    // --- one pass over time: G = XᵀX with X = W·[F O r] ----------------------------------------
+    let r = problem.residual().as_slice();
+    let mut g = Mat::<f64>::zeros(cols, cols);
+    let mut x = Mat::<f64>::zeros(chunk * ny, cols);
+    let mut psi_rows = vec![0.0; chunk * dims.iter().copied().max().unwrap_or(0)];
+    let mut psi = vec![0.0; dims.iter().copied().max().unwrap_or(0)];
+    let par = faer::get_global_parallelism();
+    let mut t0 = 0;
+    while t0 < len {
+        let c = chunk.min(len - t0);
+        let mut xc = x.as_mut().subrows_mut(0, c * ny);
+        for (bi, ((map, z), stream)) in maps.iter().zip(streamers.iter_mut()).enumerate() {
+            let mi = dims[bi];
+            let w = map.weights();
+            let rows = &mut psi_rows[..c * mi];
+            for k in 0..c {
+                map.eval_into(z.sample(t0 + k), &mut psi[..mi]);
+                for j in 0..mi {
+                    rows[k * mi + j] = psi[j] * w[j].sqrt();
+                }
+            }
+            let phi = faer::MatRef::from_row_major_slice(rows, c, mi);
+            stream.push(phi, xc.rb_mut().subcols_mut(offsets[bi], mi))?;
+        }
+        for i in 0..c * ny {
+            if let Some(o) = free {
+                for j in 0..nx {
+                    xc[(i, m + j)] = o[(t0 * ny + i, j)];
+                }
+            }
+            xc[(i, m + nx)] = r[t0 * ny + i];
+        }
+        whiten_static(xc.rb_mut(), &l_s, ny);
+        faer::linalg::matmul::matmul(
+            g.as_mut(),
+            Accum::Add,
+            xc.rb().transpose(),
+            xc.rb(),
+            1.0,
+            par,
+        );
+        t0 += c;
+    }
+    let t_assembled = Instant::now();
+
+    // --- normal equations in (b, x₀) -----------------------------------------------------------
+    let lb = len as f64 * beta;
+    let k = m + nx;
+    let mut h = nalgebra::DMatrix::<f64>::from_fn(k, k, |i, j| g[(i, j)]);
+    for i in 0..m {
+        h[(i, i)] += lb;
+    }
+    let rhs = nalgebra::DVector::<f64>::from_fn(k, |i, _| g[(i, k)]);
+    let chol = h.clone().cholesky().ok_or_else(|| {
+        Error::Numerical(
+            "the feature-space normal equations are singular: the initial state is not identifiable from this record"
+                .into(),
+        )
+    })?;
+    let v = chol.solve(&rhs);
+    let t_factored = Instant::now();
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for i in 0..k {
+        let dii = chol.l()[(i, i)];
+        lo = lo.min(dii);
+        hi = hi.max(dii);
+    }
+
+    // --- recover ŵ, ê, the maps and the cost terms -----------------------------------------
+    let gv = &h * &v; // (G + LβI_b)·v
+    let g_rr = g[(k, k)];
+    // ‖W(r − Xv)‖² = r'r − 2 vᵀg + vᵀ G v, with G without the ridge.
+    let vgv: f64 = v.dot(&gv) - lb * (0..m).map(|i| v[i] * v[i]).sum::<f64>();
+    let weighted_sse = (g_rr - 2.0 * v.dot(&rhs) + vgv).max(0.0);
+    let mu = weighted_sse / len as f64;
+    let x0: Option<Vec<f64>> = (nx > 0).then(|| (0..nx).map(|j| v[m + j]).collect());
+
+    let mut blocks = Vec::with_capacity(maps.len());
+    let mut w_all = Signal::zeros(len, maps.len());
+    let mut dispersions = Vec::with_capacity(maps.len());
+    let mut fitted = vec![0.0; len * ny];
+    let mut tmp = vec![0.0; len * ny];
+    for (bi, (map, z)) in maps.iter().enumerate() {
+        let mi = dims[bi];
+        let b_i: Vec<f64> = (0..mi).map(|j| v[offsets[bi] + j]).collect();
+        let coef: Vec<f64> = b_i
+            .iter()
+            .zip(map.weights())
+            .map(|(b, l)| b * l.sqrt())
+            .collect();
+        let mut w_hat = vec![0.0; len];
+        for (kk, wk) in w_hat.iter_mut().enumerate() {
+            map.eval_into(z.sample(kk), &mut psi[..mi]);
+            *wk = psi[..mi].iter().zip(&coef).map(|(p, c)| p * c).sum();
+        }
+        let block = &problem.blocks()[bi];
+        block.path.apply(&w_hat, &mut tmp);
+        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
+        let d_i: f64 = b_i.iter().map(|b| b * b).sum();
+        dispersions.push(d_i);
+        for (kk, wk) in w_hat.iter().enumerate() {
+            w_all.sample_mut(kk)[block.output] = *wk;
+        }
+        blocks.push(BlockEstimate {
+            name: block.name.clone(),
+            output: block.output,
+            dispersion: block.dispersion.describe(),
+            parameters: block.dispersion.parameters(),
+            z: block.z.clone(),
+            w_hat,
+            dispersion_value: d_i,
+            map: Box::new(FeatureExpansion::new(Arc::clone(map), coef)),
+        });
+    }
+    // ρ = r − T_yw·ŵ − O·x₀ and ê_t = D_yeᵀ·S⁻¹·ρ_t (the least-norm noise explaining ρ).
+    let mut e_hat = vec![0.0; len * ne];
+    let mut res2 = 0.0;
+    for t in 0..len {
+        let mut rho = nalgebra::DVector::<f64>::from_fn(ny, |i, _| {
+            let idx = t * ny + i;
+            let ox: f64 = match (&x0, free) {
+                (Some(x0), Some(o)) => (0..nx).map(|j| o[(idx, j)] * x0[j]).sum(),
+                _ => 0.0,
+            };
+            r[idx] - fitted[idx] - ox
+        });
+        let sol = ls.solve(&rho);
+        let e_t = d.transpose() * sol;
+        for c in 0..ne {
+            e_hat[t * ne + c] = e_t[c];
+        }
+        rho -= &d * &e_t;
+        res2 += rho.norm_squared();
+    }
+    let r2: f64 = r.iter().map(|v| v * v).sum();
+    let total = mu + beta * dispersions.iter().sum::<f64>();
+    if !total.is_finite() {
+        return Err(Error::Numerical(format!(
+            "the feature-space estimate is not finite (J = {total})"
+        )));
+    }
+    let t_end = Instant::now();
+    let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
+    Ok(Identification {
+        w_hat: w_all,
+        e_hat: Signal::new(ne, e_hat)?,
+        blocks,
+        cost: CostTerms {
+            noise: mu,
+            dispersions,
+            beta,
+            total,
+        },
+        z_source: problem.z_source().clone(),
+        initial_state: x0,
+        diagnostics: Diagnostics {
+            solver: format!("features (m = {m})"),
+            system_size: k,
+            dropped_samples: Vec::new(),
+            dropped_max_abs_residual: 0.0,
+            diagonal_jitter: 0.0,
+            condition_lower_bound: if lo > 0.0 {
+                (hi / lo).powi(2)
+            } else {
+                f64::INFINITY
+            },
+            feasibility_residual: if r2 > 0.0 {
+                (res2 / r2).sqrt()
+            } else {
+                res2.sqrt()
+            },
+            peak_memory_bytes: 8 * (cols * cols + chunk * ny * cols + chunk * m) as u64,
+            timings: Timings {
+                prepare: secs(t_start, t_prepared),
+                assemble: secs(t_prepared, t_assembled),
+                factor: secs(t_assembled, t_factored),
+                solve: secs(t_factored, t_end),
+                total: secs(t_start, t_end),
+            },
+            warnings: Vec::new(),
+        },
+    })
+}
+
+/// D of a static noise path, found by applying it to unit impulses.
+fn static_gain(noise: &dyn LinearSystem, ny: usize, ne: usize) -> nalgebra::DMatrix<f64> {
+    let mut d = nalgebra::DMatrix::zeros(ny, ne);
+    let mut unit = vec![0.0; ne];
+    let mut col = vec![0.0; ny];
+    for c in 0..ne {
+        unit.iter_mut().for_each(|v| *v = 0.0);
+        unit[c] = 1.0;
+        noise.apply(&unit, &mut col);
+        for i in 0..ny {
+            d[(i, c)] = col[i];
+        }
+    }
+    d
+}
+
+/// X_t ← L_S⁻¹·X_t for every sample t (rows t·ny..(t+1)·ny), all columns.
+fn whiten_static(mut x: MatMut<'_, f64>, l: &nalgebra::DMatrix<f64>, ny: usize) {
+    let rows = x.nrows();
+    let cols = x.ncols();
+    for j in 0..cols {
+        for t in (0..rows).step_by(ny) {
+            for i in 0..ny {
+                let mut acc = x[(t + i, j)];
+                for kk in 0..i {
+                    acc -= l[(i, kk)] * x[(t + kk, j)];
+                }
+                x[(t + i, j)] = acc / l[(i, i)];
+            }
+        }
+    }
+}
