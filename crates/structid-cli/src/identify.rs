@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use structid_core::{Identification, IdentifySettings, InitialState, identify};
+use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, Report, TruthSpec};
 
 use crate::IdentifyArgs;
@@ -72,6 +72,11 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
         .initial_state(match a.initial_state {
             crate::InitialStateArg::Zero => InitialState::Zero,
             crate::InitialStateArg::Estimate => InitialState::Estimate,
+        })
+        .solver(match a.solver {
+            crate::SolverArg::Auto => SolverChoice::Auto,
+            crate::SolverArg::Exact => SolverChoice::Exact,
+            crate::SolverArg::Features => SolverChoice::Features,
         });
     if let Some(mib) = a.memory_limit_mib {
         if mib == 0 {

@@ -87,6 +87,22 @@ struct IdentifyArgs {
     /// use it for records that do not start at rest).
     #[arg(long, value_name = "zero|estimate", default_value = "zero")]
     initial_state: InitialStateArg,
+    /// Solver: `auto` (the exact solve unless its L·n_y × L·n_y matrix would not fit in
+    /// memory, then the feature solver when every dispersion has finitely many features),
+    /// `exact`, or `features` (linear in L; Fourier dispersions, static noise path).
+    #[arg(long, value_name = "auto|exact|features", default_value = "auto")]
+    solver: SolverArg,
+}
+
+/// Values of `--solver`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum SolverArg {
+    /// Choose by size.
+    Auto,
+    /// The exact dense solve.
+    Exact,
+    /// The feature-space solve.
+    Features,
 }
 
 /// Values of `--initial-state`.

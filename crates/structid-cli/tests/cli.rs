@@ -726,6 +726,20 @@ fn fourier_dispersion_and_initial_state_from_the_cli() {
     assert_eq!(r1["settings"]["initial_state"], "Estimate");
     assert!(est < 0.08, "RMS with x₀ estimated: {est}");
     assert!(est < rest, "estimating x₀ should help: {est} vs {rest}");
+    // The feature solver gives the same estimate, and says so in the report.
+    let (feat, r2) = rms(
+        &["--initial-state", "estimate", "--solver", "features"],
+        "feat",
+    );
+    assert!(
+        r2["diagnostics"]["solver"]
+            .as_str()
+            .unwrap()
+            .starts_with("features"),
+        "{}",
+        r2["diagnostics"]["solver"]
+    );
+    assert!((feat - est).abs() < 1e-6, "features {feat} vs exact {est}");
     let e = input_error(&[
         "identify",
         "--model",
