@@ -375,6 +375,19 @@ impl FeatureMap for FourierKernel {
     /// Unscaled features ψ with K = ψᵀΛψ: ψ = 1, cos(2πnt), sin(2πnt) (products for tensors).
     fn eval_into(&self, z: &[f64], out: &mut [f64]) {
         let p = self.affine.len();
+        if p == 1 {
+            // [1, cos 2πt, sin 2πt, cos 4πt, …] by the angle-addition recurrence; the tensor
+            // and additive orders coincide for one input.
+            let (s1, c1) = (2.0 * PI * self.unit(z, 0)).sin_cos();
+            out[0] = 1.0;
+            let (mut c, mut s) = (1.0, 0.0);
+            for pair in out[1..].chunks_exact_mut(2) {
+                (c, s) = (c * c1 - s * s1, s * c1 + c * s1);
+                pair[0] = c;
+                pair[1] = s;
+            }
+            return;
+        }
         // cos/sin of every harmonic of every input, by the angle-addition recurrence.
         let mut trig: Vec<Vec<(f64, f64)>> = Vec::with_capacity(p);
         for j in 0..p {

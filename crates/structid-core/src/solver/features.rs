@@ -21,6 +21,7 @@ use std::time::Instant;
 
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut};
+use rayon::prelude::*;
 use structid_lti::{ColumnStream, LinearSystem, Signal, StateSpace};
 
 use crate::dispersion::{FeatureMap, Penalty, QuadraticPenalty};
@@ -132,7 +133,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut g = Mat::<f64>::zeros(cols, cols);
     let mut x = Mat::<f64>::zeros(chunk * ny, cols);
     let mut psi_rows = vec![0.0; chunk * dims.iter().copied().max().unwrap_or(0)];
-    let mut psi = vec![0.0; dims.iter().copied().max().unwrap_or(0)];
+    let sqrt_w: Vec<Vec<f64>> = maps
+        .iter()
+        .map(|(f, _)| f.weights().iter().map(|l| l.sqrt()).collect())
+        .collect();
     let par = faer::get_global_parallelism();
     let mut t0 = 0;
     while t0 < len {
@@ -140,14 +144,12 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         let mut xc = x.as_mut().subrows_mut(0, c * ny);
         for (bi, ((map, z), stream)) in maps.iter().zip(streamers.iter_mut()).enumerate() {
             let mi = dims[bi];
-            let w = map.weights();
+            let sw = &sqrt_w[bi];
             let rows = &mut psi_rows[..c * mi];
-            for k in 0..c {
-                map.eval_into(z.sample(t0 + k), &mut psi[..mi]);
-                for j in 0..mi {
-                    rows[k * mi + j] = psi[j] * w[j].sqrt();
-                }
-            }
+            rows.par_chunks_mut(mi).enumerate().for_each(|(k, row)| {
+                map.eval_into(z.sample(t0 + k), row);
+                row.iter_mut().zip(sw).for_each(|(v, s)| *v *= s);
+            });
             let phi = faer::MatRef::from_row_major_slice(rows, c, mi);
             stream.push(phi, xc.rb_mut().subcols_mut(offsets[bi], mi))?;
         }
@@ -218,10 +220,16 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             .map(|(b, l)| b * l.sqrt())
             .collect();
         let mut w_hat = vec![0.0; len];
-        for (kk, wk) in w_hat.iter_mut().enumerate() {
-            map.eval_into(z.sample(kk), &mut psi[..mi]);
-            *wk = psi[..mi].iter().zip(&coef).map(|(p, c)| p * c).sum();
-        }
+        w_hat
+            .par_chunks_mut(4096)
+            .enumerate()
+            .for_each(|(ci, out)| {
+                let mut psi = vec![0.0; mi];
+                for (kk, wk) in out.iter_mut().enumerate() {
+                    map.eval_into(z.sample(ci * 4096 + kk), &mut psi);
+                    *wk = psi.iter().zip(&coef).map(|(p, c)| p * c).sum();
+                }
+            });
         let block = &problem.blocks()[bi];
         block.path.apply(&w_hat, &mut tmp);
         fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
@@ -241,25 +249,28 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             map: Box::new(FeatureExpansion::new(Arc::clone(map), coef)),
         });
     }
-    // ρ = r − T_yw·ŵ − O·x₀ and ê_t = D_yeᵀ·S⁻¹·ρ_t (the least-norm noise explaining ρ).
+    // ρ = r − T_yw·ŵ − O·x₀ and ê_t = P·ρ_t with P = D_yeᵀ·S⁻¹ (the least-norm noise explaining ρ).
+    let p_mat = d.transpose() * ls.inverse();
     let mut e_hat = vec![0.0; len * ne];
     let mut res2 = 0.0;
+    let mut rho = vec![0.0; ny];
     for t in 0..len {
-        let mut rho = nalgebra::DVector::<f64>::from_fn(ny, |i, _| {
+        for (i, rh) in rho.iter_mut().enumerate() {
             let idx = t * ny + i;
             let ox: f64 = match (&x0, free) {
                 (Some(x0), Some(o)) => (0..nx).map(|j| o[(idx, j)] * x0[j]).sum(),
                 _ => 0.0,
             };
-            r[idx] - fitted[idx] - ox
-        });
-        let sol = ls.solve(&rho);
-        let e_t = d.transpose() * sol;
-        for c in 0..ne {
-            e_hat[t * ne + c] = e_t[c];
+            *rh = r[idx] - fitted[idx] - ox;
         }
-        rho -= &d * &e_t;
-        res2 += rho.norm_squared();
+        let e_t = &mut e_hat[t * ne..(t + 1) * ne];
+        for (c, ec) in e_t.iter_mut().enumerate() {
+            *ec = (0..ny).map(|i| p_mat[(c, i)] * rho[i]).sum();
+        }
+        for (i, rh) in rho.iter().enumerate() {
+            let de: f64 = (0..ne).map(|c| d[(i, c)] * e_t[c]).sum();
+            res2 += (rh - de) * (rh - de);
+        }
     }
     let r2: f64 = r.iter().map(|v| v * v).sum();
     let total = mu + beta * dispersions.iter().sum::<f64>();
@@ -331,6 +342,13 @@ fn static_gain(noise: &dyn LinearSystem, ny: usize, ne: usize) -> nalgebra::DMat
 fn whiten_static(mut x: MatMut<'_, f64>, l: &nalgebra::DMatrix<f64>, ny: usize) {
     let rows = x.nrows();
     let cols = x.ncols();
+    if ny == 1 {
+        let inv = 1.0 / l[(0, 0)];
+        for j in 0..cols {
+            x.rb_mut().col_mut(j).iter_mut().for_each(|v| *v *= inv);
+        }
+        return;
+    }
     for j in 0..cols {
         for t in (0..rows).step_by(ny) {
             for i in 0..ny {
