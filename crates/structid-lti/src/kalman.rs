@@ -729,6 +729,84 @@ impl KalmanWhitener {
         });
     }
 
+    /// Gains `(G, L⁻¹)` (row-major `n × p` and packed lower `p(p+1)/2`) at sample `t`: the stored
+    /// time-varying ones during the transient, the steady-state ones after it.
+    fn gains_at<'s>(&'s self, t: usize, steady: &'s (Vec<f64>, Vec<f64>)) -> (&'s [f64], &'s [f64]) {
+        let (n, p) = (self.n, self.p);
+        let pp = p * (p + 1) / 2;
+        if t < self.transient {
+            (&self.gains[t * n * p..(t + 1) * n * p], &self.linv[t * pp..(t + 1) * pp])
+        } else {
+            (&steady.0, &steady.1)
+        }
+    }
+
+    /// The steady-state gains in the recursion's form: `L⁻¹ = D_f` and `G = K·L = B_f·D_f⁻¹`
+    /// of the steady filter x̂⁺ = (A − KC)x̂ + K·y, ω = L⁻¹(y − C·x̂).
+    fn steady_gains(&self) -> (Vec<f64>, Vec<f64>) {
+        let (n, p) = (self.n, self.p);
+        let dinv = self.steady.d();
+        let l = dinv.clone().try_inverse().unwrap_or_else(|| DMatrix::identity(p, p));
+        let g = self.steady.b() * l;
+        let mut gr = Vec::with_capacity(n * p);
+        for i in 0..n {
+            for r in 0..p {
+                gr.push(g[(i, r)]);
+            }
+        }
+        let mut li = Vec::with_capacity(p * (p + 1) / 2);
+        for r in 0..p {
+            for k in 0..=r {
+                li.push(dinv[(r, k)]);
+            }
+        }
+        (gr, li)
+    }
+
+    /// `u = Wᵀ g` for one signal (time-major, `len · p` values): the adjoint of
+    /// [`whiten`](Self::whiten), by the backward recursion h_t = g_t + G_tᵀλ_{t+1},
+    /// u_t = L_t⁻ᵀh_t, λ_t = Aᵀλ_{t+1} − Cᵀu_t. With it, `Wᵀ(W r) = (T·Tᵀ)⁻¹ r`.
+    pub fn whiten_adjoint(&self, g: &[f64], out: &mut [f64]) {
+        self.check_rows(g.len(), "g");
+        self.check_rows(out.len(), "out");
+        let (n, p) = (self.n, self.p);
+        let steady = self.steady_gains();
+        let mut lam = vec![0.0; n];
+        let mut lam_next = vec![0.0; n];
+        let mut h = vec![0.0; p];
+        for t in (0..self.len).rev() {
+            let (gt, li) = self.gains_at(t, &steady);
+            for r in 0..p {
+                h[r] = g[t * p + r] + (0..n).map(|i| gt[i * p + r] * lam[i]).sum::<f64>();
+            }
+            let u = &mut out[t * p..(t + 1) * p];
+            for k in 0..p {
+                // (L⁻¹)ᵀ: row r of L⁻¹ holds entries (r, 0..=r).
+                u[k] = (k..p).map(|r| li[r * (r + 1) / 2 + k] * h[r]).sum();
+            }
+            for i in 0..n {
+                let at: f64 = (0..n).map(|kk| self.a[kk * n + i] * lam[kk]).sum();
+                let ct: f64 = (0..p).map(|c| self.c[c * n + i] * u[c]).sum();
+                lam_next[i] = at - ct;
+            }
+            std::mem::swap(&mut lam, &mut lam_next);
+        }
+    }
+
+    /// A stream that whitens `ncols` signals delivered in consecutive time chunks (see
+    /// [`WhiteningStream`]).
+    pub fn column_stream(&self, ncols: usize) -> WhiteningStream<'_> {
+        let n = self.n;
+        WhiteningStream {
+            whitener: self,
+            engine: (n > 0).then(|| self.steady.blocked(usize::MAX / 2, false)),
+            steady: self.steady_gains(),
+            t: 0,
+            state: faer::Mat::zeros(n, ncols),
+            next: faer::Mat::zeros(n, ncols),
+        }
+    }
+
     /// The time-varying part of [`whiten_columns`](Self::whiten_columns) on a column part;
     /// returns the filter state at `transient_len` (`n x ncols`, row-major).
     fn transient_columns(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Vec<f64> {
@@ -799,3 +877,83 @@ impl KalmanWhitener {
 
 #[cfg(test)]
 mod tests;
+
+/// Whitens many signals chunk by chunk with the filter state carried between chunks, so a
+/// long record never has to be in memory at once. The result equals
+/// [`KalmanWhitener::whiten_columns`] on the whole record.
+///
+/// Chunks may have any length; the steady part of each chunk runs the blocked engine on a
+/// whole number of blocks, and the few samples before it (the transient, and any remainder)
+/// run the per-sample recursion vectorised over the columns.
+pub struct WhiteningStream<'a> {
+    whitener: &'a KalmanWhitener,
+    engine: Option<crate::operator::BlockedRecursion>,
+    steady: (Vec<f64>, Vec<f64>),
+    t: usize,
+    state: faer::Mat<f64>,
+    next: faer::Mat<f64>,
+}
+
+impl WhiteningStream<'_> {
+    /// Whitens the next chunk: `x` and `out` have `samples · p` rows and the stream's columns.
+    pub fn push(&mut self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Result<(), LtiError> {
+        let w = self.whitener;
+        let (n, p) = (w.n, w.p);
+        let ncols = self.state.ncols();
+        if x.ncols() != ncols || out.ncols() != ncols || x.nrows() != out.nrows() || p == 0 || x.nrows() % p != 0 {
+            return Err(LtiError::DimensionMismatch {
+                what: "whitening stream chunk".into(),
+                expected: format!("samples × {p} rows and {ncols} columns, equal for x and out"),
+                found: format!("{}×{} and {}×{}", x.nrows(), x.ncols(), out.nrows(), out.ncols()),
+            });
+        }
+        let c = x.nrows() / p;
+        if self.t + c > w.len {
+            return Err(LtiError::InvalidParameter {
+                name: "chunk".into(),
+                reason: format!("the chunks exceed the whitener's record length {}", w.len),
+            });
+        }
+        let b = self.engine.as_ref().map_or(1, |e| e.b);
+        let mut k = 0;
+        // Per-sample steps: through the transient, then until a whole number of blocks is left.
+        while k < c && (self.t < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none()) {
+            let (g, li) = w.gains_at(self.t, &self.steady);
+            let mut nu = vec![0.0; p];
+            let mut om = vec![0.0; p];
+            for j in 0..ncols {
+                for cc in 0..p {
+                    nu[cc] = x[(k * p + cc, j)] - (0..n).map(|i| w.c[cc * n + i] * self.state[(i, j)]).sum::<f64>();
+                }
+                for r in 0..p {
+                    om[r] = (0..=r).map(|kk| li[r * (r + 1) / 2 + kk] * nu[kk]).sum();
+                    out[(k * p + r, j)] = om[r];
+                }
+                for i in 0..n {
+                    let v: f64 = (0..n).map(|kk| w.a[i * n + kk] * self.state[(kk, j)]).sum::<f64>()
+                        + (0..p).map(|r| g[i * p + r] * om[r]).sum::<f64>();
+                    self.next[(i, j)] = v;
+                }
+            }
+            std::mem::swap(&mut self.state, &mut self.next);
+            self.t += 1;
+            k += 1;
+        }
+        if k < c {
+            let e = self.engine.as_ref().expect("per-sample steps cover n = 0");
+            let rows = (c - k) * p;
+            e.leaf(
+                c - k,
+                x.subrows(k * p, rows),
+                out.rb_mut().subrows_mut(k * p, rows),
+                Accum::Replace,
+                1.0,
+                Some(self.state.as_ref()),
+                Some(self.next.as_mut()),
+            );
+            std::mem::swap(&mut self.state, &mut self.next);
+            self.t += c - k;
+        }
+        Ok(())
+    }
+}

@@ -561,3 +561,63 @@ fn dare_fallback_and_non_minimum_phase() {
         .unwrap();
     assert!(max_abs_diff(&whiten_vec(&w, &r.as_slice()[..len]), z.as_slice()) < 1e-9 * z.amax());
 }
+
+/// A full-rank coloured noise path (D with ne ≥ p and a dominant diagonal).
+fn coloured_full_rank(seed: u64, n: usize, p: usize) -> StateSpace {
+    let ne = p + 1;
+    let s = random_stable_system(seed, n, ne, p, 0.9);
+    let mut d = s.d().clone();
+    for i in 0..p {
+        d[(i, i)] += 2.0;
+    }
+    StateSpace::new(s.a().clone(), s.b().clone(), s.c().clone(), d).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 40, .. ProptestConfig::default() })]
+
+    /// Whitening chunk by chunk, with arbitrary chunk lengths, equals whitening the whole record.
+    #[test]
+    fn prop_whitening_stream_equals_whole_record(seed in any::<u64>(), n in 0usize..4, p in 1usize..3,
+                                                 len in 1usize..400, ncols in 1usize..6, chunk in 1usize..90) {
+        let noise = coloured_full_rank(seed, n, p);
+        let w = KalmanWhitener::new(&noise, len, &opts()).unwrap();
+        let x = Mat::<f64>::from_fn(len * p, ncols, |i, j| (((i * 13 + j * 7) as u64 ^ seed) % 19) as f64 - 9.0);
+        let mut whole = Mat::<f64>::zeros(len * p, ncols);
+        w.whiten_columns(x.as_ref(), whole.as_mut());
+        let mut stream = w.column_stream(ncols);
+        let mut got = Mat::<f64>::zeros(len * p, ncols);
+        let mut t = 0;
+        while t < len {
+            let c = chunk.min(len - t);
+            stream.push(x.as_ref().subrows(t * p, c * p), got.as_mut().subrows_mut(t * p, c * p)).unwrap();
+            t += c;
+        }
+        let scale = whole.norm_max().max(1.0);
+        prop_assert!((&whole - &got).norm_max() <= 1e-10 * scale, "{}", (&whole - &got).norm_max());
+    }
+
+    /// The adjoint satisfies ⟨W y, g⟩ = ⟨y, Wᵀ g⟩, and Wᵀ W r = (T·Tᵀ)⁻¹ r.
+    #[test]
+    fn prop_whitening_adjoint_gives_the_inverse_covariance(seed in any::<u64>(), n in 0usize..4, p in 1usize..3,
+                                                           len in 1usize..40) {
+        let noise = coloured_full_rank(seed, n, p);
+        let w = KalmanWhitener::new(&noise, len, &opts()).unwrap();
+        let y = random_signal(seed ^ 5, len, p);
+        let g = random_signal(seed ^ 9, len, p);
+        let mut wy = vec![0.0; len * p];
+        w.whiten(y.as_slice(), &mut wy);
+        let mut wtg = vec![0.0; len * p];
+        w.whiten_adjoint(g.as_slice(), &mut wtg);
+        let lhs: f64 = wy.iter().zip(g.as_slice()).map(|(a, b)| a * b).sum();
+        let rhs: f64 = y.as_slice().iter().zip(&wtg).map(|(a, b)| a * b).sum();
+        prop_assert!((lhs - rhs).abs() <= 1e-9 * (lhs.abs() + rhs.abs()).max(1.0), "{lhs} vs {rhs}");
+        let mut back = vec![0.0; len * p];
+        w.whiten_adjoint(&wy, &mut back);
+        let t = noise.toeplitz_dense(len);
+        let sigma = &t * t.transpose();
+        let direct = sigma.lu().solve(&DVector::from_column_slice(y.as_slice())).unwrap();
+        let got = DVector::from_vec(back);
+        prop_assert!((&direct - &got).norm() <= 1e-8 * direct.norm().max(1e-12), "{}", (&direct - &got).norm());
+    }
+}
