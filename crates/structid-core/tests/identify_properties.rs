@@ -792,12 +792,12 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 24, .. ProptestConfig::default() })]
 
     /// The feature-space solver equals the exact dense solver for the same finite (Fourier)
-    /// kernel: several blocks with one and two inputs, MIMO static noise, with and without an
-    /// estimated initial state.
+    /// kernel: several blocks with one and two inputs, MIMO static or coloured noise, with and
+    /// without an estimated initial state.
     #[test]
     fn prop_feature_solver_equals_exact_solver(seed in any::<u64>(), n in 1usize..4, ny in 1usize..3,
                                                len in 30usize..160, lb in -3.0f64..0.0, two_inputs in any::<bool>(),
-                                               estimate_x0 in any::<bool>()) {
+                                               estimate_x0 in any::<bool>(), coloured in any::<bool>()) {
         use nalgebra::DMatrix;
         let (nu, nw) = (1, 2);
         let ne = ny;
@@ -809,7 +809,8 @@ proptest! {
         let lft = Lft::new(LftMatrices {
             a: sys.a().clone(),
             bu: b.columns(0, nu).into_owned(),
-            be: DMatrix::zeros(n, ne),
+            // Coloured noise: e reaches y through the dynamics too (Kalman whitening).
+            be: if coloured { b.columns(nu, ne) * 0.7 } else { DMatrix::zeros(n, ne) },
             bw: b.columns(nu + ne, nw).into_owned(),
             cy: sys.c().clone(),
             dyu: sys.d().columns(0, nu).into_owned(),
@@ -820,12 +821,20 @@ proptest! {
             dze: DMatrix::zeros(nz, ne),
             dzw: DMatrix::zeros(nz, nw),
         }).unwrap();
+        // Whitening needs a minimum-phase noise model (the solver refuses others; see the test
+        // below): zeros of T_ye = eig(A − B_e·D_ye⁻¹·C_y) inside the unit circle.
+        if coloured {
+            let m = lft.matrices();
+            let zeros = &m.a - &m.be * m.dye.clone().try_inverse().unwrap() * &m.cy;
+            let radius = zeros.complex_eigenvalues().iter().map(|c| c.norm()).fold(0.0, f64::max);
+            prop_assume!(radius < 0.95);
+        }
         let f1: Arc<dyn Dispersion> = Arc::new(FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.3 }).unwrap());
         let f2: Arc<dyn Dispersion> = Arc::new(
             FourierDispersion::new(FourierWeights::SobolevLike { order: 1.5, scale: 0.5 }).unwrap().with_harmonics(4),
         );
         let second_inputs = if two_inputs { vec![1, 2] } else { vec![1] };
-        let model = Model::new(lft, vec![
+        let model = Model::new(lft.clone(), vec![
             NonlinearBlock::new("a", vec![0], 0, f1),
             NonlinearBlock::new("b", second_inputs, 1, f2),
         ]).unwrap();
@@ -840,7 +849,9 @@ proptest! {
         let feat = identify(&model, &data, &IdentifySettings::builder().beta(beta).initial_state(init)
             .solver(SolverChoice::Features).build().unwrap()).unwrap();
         let (we, wf) = (stack_w(&exact), stack_w(&feat));
-        prop_assert!(rel(&we, &wf) < 1e-8, "ŵ: {}", rel(&we, &wf));
+        prop_assert!(rel(&we, &wf) < 1e-8, "ŵ: {} (cond exact {:.2e}, features {:.2e}, feas {:.1e} {:.1e})", rel(&we, &wf),
+            exact.diagnostics.condition_lower_bound, feat.diagnostics.condition_lower_bound,
+            exact.diagnostics.feasibility_residual, feat.diagnostics.feasibility_residual);
         let (ee, ef) = (DVector::from_column_slice(exact.e_hat.as_slice()), DVector::from_column_slice(feat.e_hat.as_slice()));
         prop_assert!(rel(&ee, &ef) < 1e-8, "ê: {}", rel(&ee, &ef));
         prop_assert!((exact.cost.total - feat.cost.total).abs() <= 1e-8 * exact.cost.total.abs());
@@ -862,9 +873,48 @@ proptest! {
     }
 }
 
-/// Features are refused clearly where they do not apply.
+/// Features are refused clearly where they do not apply: kernels without finite features, and
+/// non-minimum-phase noise models (whose whitening filter is unstable).
 #[test]
 fn feature_solver_refuses_what_it_cannot_do() {
+    use nalgebra::dmatrix;
+    // T_ye = 1 + 2q⁻¹ has its zero at −2: W = T_ye⁻¹ would grow like 2^t.
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![0.0],
+        bu: dmatrix![0.0],
+        be: dmatrix![1.0],
+        bw: dmatrix![0.0],
+        cy: dmatrix![2.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![1.0],
+        cz: dmatrix![0.0],
+        dzu: dmatrix![1.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    })
+    .unwrap();
+    let fourier: Arc<dyn Dispersion> =
+        Arc::new(FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.3 }).unwrap());
+    let model = Model::new(lft, vec![NonlinearBlock::new("f", vec![0], 0, fourier)]).unwrap();
+    let u = structid_lti::testing::random_signal(1, 50, 1);
+    let y = structid_lti::testing::random_signal(2, 50, 1);
+    let data = Data::new(u, y).unwrap();
+    let s = IdentifySettings::builder()
+        .beta(0.1)
+        .solver(SolverChoice::Features)
+        .build()
+        .unwrap();
+    let e = identify(&model, &data, &s).unwrap_err();
+    assert!(e.to_string().contains("minimum phase"), "{e}");
+    // The exact solver handles the same model.
+    let s = IdentifySettings::builder()
+        .beta(0.1)
+        .solver(SolverChoice::Exact)
+        .build()
+        .unwrap();
+    assert!(identify(&model, &data, &s).is_ok());
+
     let case = make_case(3, 2, 1, 1, 1, 20);
     let s = IdentifySettings::builder()
         .beta(0.1)

@@ -731,11 +731,18 @@ impl KalmanWhitener {
 
     /// Gains `(G, L⁻¹)` (row-major `n × p` and packed lower `p(p+1)/2`) at sample `t`: the stored
     /// time-varying ones during the transient, the steady-state ones after it.
-    fn gains_at<'s>(&'s self, t: usize, steady: &'s (Vec<f64>, Vec<f64>)) -> (&'s [f64], &'s [f64]) {
+    fn gains_at<'s>(
+        &'s self,
+        t: usize,
+        steady: &'s (Vec<f64>, Vec<f64>),
+    ) -> (&'s [f64], &'s [f64]) {
         let (n, p) = (self.n, self.p);
         let pp = p * (p + 1) / 2;
         if t < self.transient {
-            (&self.gains[t * n * p..(t + 1) * n * p], &self.linv[t * pp..(t + 1) * pp])
+            (
+                &self.gains[t * n * p..(t + 1) * n * p],
+                &self.linv[t * pp..(t + 1) * pp],
+            )
         } else {
             (&steady.0, &steady.1)
         }
@@ -746,7 +753,10 @@ impl KalmanWhitener {
     fn steady_gains(&self) -> (Vec<f64>, Vec<f64>) {
         let (n, p) = (self.n, self.p);
         let dinv = self.steady.d();
-        let l = dinv.clone().try_inverse().unwrap_or_else(|| DMatrix::identity(p, p));
+        let l = dinv
+            .clone()
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::identity(p, p));
         let g = self.steady.b() * l;
         let mut gr = Vec::with_capacity(n * p);
         for i in 0..n {
@@ -900,11 +910,22 @@ impl WhiteningStream<'_> {
         let w = self.whitener;
         let (n, p) = (w.n, w.p);
         let ncols = self.state.ncols();
-        if x.ncols() != ncols || out.ncols() != ncols || x.nrows() != out.nrows() || p == 0 || x.nrows() % p != 0 {
+        if x.ncols() != ncols
+            || out.ncols() != ncols
+            || x.nrows() != out.nrows()
+            || p == 0
+            || x.nrows() % p != 0
+        {
             return Err(LtiError::DimensionMismatch {
                 what: "whitening stream chunk".into(),
                 expected: format!("samples × {p} rows and {ncols} columns, equal for x and out"),
-                found: format!("{}×{} and {}×{}", x.nrows(), x.ncols(), out.nrows(), out.ncols()),
+                found: format!(
+                    "{}×{} and {}×{}",
+                    x.nrows(),
+                    x.ncols(),
+                    out.nrows(),
+                    out.ncols()
+                ),
             });
         }
         let c = x.nrows() / p;
@@ -917,20 +938,26 @@ impl WhiteningStream<'_> {
         let b = self.engine.as_ref().map_or(1, |e| e.b);
         let mut k = 0;
         // Per-sample steps: through the transient, then until a whole number of blocks is left.
-        while k < c && (self.t < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none()) {
+        while k < c && (self.t < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none())
+        {
             let (g, li) = w.gains_at(self.t, &self.steady);
             let mut nu = vec![0.0; p];
             let mut om = vec![0.0; p];
             for j in 0..ncols {
                 for cc in 0..p {
-                    nu[cc] = x[(k * p + cc, j)] - (0..n).map(|i| w.c[cc * n + i] * self.state[(i, j)]).sum::<f64>();
+                    nu[cc] = x[(k * p + cc, j)]
+                        - (0..n)
+                            .map(|i| w.c[cc * n + i] * self.state[(i, j)])
+                            .sum::<f64>();
                 }
                 for r in 0..p {
                     om[r] = (0..=r).map(|kk| li[r * (r + 1) / 2 + kk] * nu[kk]).sum();
                     out[(k * p + r, j)] = om[r];
                 }
                 for i in 0..n {
-                    let v: f64 = (0..n).map(|kk| w.a[i * n + kk] * self.state[(kk, j)]).sum::<f64>()
+                    let v: f64 = (0..n)
+                        .map(|kk| w.a[i * n + kk] * self.state[(kk, j)])
+                        .sum::<f64>()
                         + (0..p).map(|r| g[i * p + r] * om[r]).sum::<f64>();
                     self.next[(i, j)] = v;
                 }

@@ -49,7 +49,9 @@ pub mod testing;
 pub mod transfer_function;
 
 pub use error::LtiError;
-pub use kalman::{KalmanWhitener, WhiteningOptions, WhiteningStream, steady_state_whitening_filter};
+pub use kalman::{
+    KalmanWhitener, WhiteningOptions, WhiteningStream, steady_state_whitening_filter,
+};
 pub use operator::LinearSystem;
 pub use signal::Signal;
 pub use state_space::{ContinuousStateSpace, StateSpace};

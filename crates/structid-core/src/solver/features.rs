@@ -20,9 +20,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use faer::reborrow::{Reborrow, ReborrowMut};
-use faer::{Accum, Mat, MatMut};
+use faer::{Mat, MatMut};
 use rayon::prelude::*;
-use structid_lti::{ColumnStream, LinearSystem, Signal, StateSpace};
+use structid_lti::{
+    ColumnStream, KalmanWhitener, LinearSystem, Signal, StateSpace, WhiteningOptions,
+};
 
 use crate::dispersion::{FeatureMap, Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
@@ -37,9 +39,9 @@ const CHUNK: usize = 4096;
 
 /// Whether every block of `problem` can use the feature solver, and if not, why.
 pub fn unsupported_reason(problem: &Problem) -> Option<String> {
-    if problem.noise().order() > 0 {
+    if problem.noise().order() > 0 && problem.noise().as_state_space().is_none() {
         return Some(
-            "the feature solver does not yet handle a dynamic noise path (B_e ≠ 0); use the exact solver".into(),
+            "the feature solver whitens a dynamic noise path as a state-space system".into(),
         );
     }
     for b in problem.blocks() {
@@ -100,17 +102,36 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let nx = free.map_or(0, |o| o.ncols());
     let cols = m + nx + 1;
 
-    // Static whitening: ω_t = L_S⁻¹·ν_t with S = D_ye·D_yeᵀ = L_S·L_Sᵀ.
-    let d = static_gain(noise, ny, ne);
-    let s = &d * d.transpose();
-    let ls = s.clone().cholesky().ok_or_else(|| {
-        Error::Numerical(
-            "D_ye·D_yeᵀ is singular: some output carries no noise, so the noise-weighted fit is undefined; \
-             add noise to every output or use the exact solver"
-                .into(),
-        )
-    })?;
-    let l_s = ls.l();
+    // Whitening: ω_t = L_S⁻¹·ν_t with S = D_ye·D_yeᵀ for a static noise path, the Kalman
+    // filter of the noise path otherwise (paper Fig. 3).
+    let whitening = match noise.as_state_space().filter(|_| noise.order() > 0) {
+        Some(ss) => {
+            let k = KalmanWhitener::new(ss, len, &WhiteningOptions::default())?;
+            // A noise model whose zeros lie on or outside the unit circle has an unstable
+            // whitening filter (e.g. W = T_ye⁻¹ for square D_ye): the whitened record grows
+            // geometrically. The exact (dual) solver does not whiten and is unaffected.
+            let radius = k.steady_state_filter().spectral_radius();
+            if radius >= 1.0 - 1e-9 {
+                return Err(Error::Unsupported(format!(
+                    "the noise model is not minimum phase: its whitening filter has spectral radius {radius:.4} ≥ 1, \
+                     so the feature solver would whiten with an unstable recursion; use the exact solver, or a \
+                     minimum-phase noise model with the same spectrum"
+                )));
+            }
+            Whitening::Kalman(k)
+        }
+        None => {
+            let d = static_gain(noise, ny, ne);
+            let ls = (&d * d.transpose()).cholesky().ok_or_else(|| {
+                Error::Numerical(
+                    "D_ye·D_yeᵀ is singular: some output carries no noise, so the noise-weighted fit is undefined; \
+                     add noise to every output or use the exact solver"
+                        .into(),
+                )
+            })?;
+            Whitening::Static { d, ls }
+        }
+    };
 
     let streams: Vec<StateSpace> = problem
         .blocks()
@@ -130,14 +151,27 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     // --- one pass over time: G = XᵀX with X = W·[F O r] ----------------------------------------
     let r = problem.residual().as_slice();
-    let mut g = Mat::<f64>::zeros(cols, cols);
+    // Triangular factor of W·[F O r], updated chunk by chunk (TSQR): the normal equations would
+    // square the condition number, which coloured noise can make large.
+    let mut rfac = Mat::<f64>::zeros(0, cols);
     let mut x = Mat::<f64>::zeros(chunk * ny, cols);
+    let mut wx = Mat::<f64>::zeros(
+        if matches!(whitening, Whitening::Kalman(_)) {
+            chunk * ny
+        } else {
+            0
+        },
+        cols,
+    );
+    let mut wstream = match &whitening {
+        Whitening::Kalman(k) => Some(k.column_stream(cols)),
+        Whitening::Static { .. } => None,
+    };
     let mut psi_rows = vec![0.0; chunk * dims.iter().copied().max().unwrap_or(0)];
     let sqrt_w: Vec<Vec<f64>> = maps
         .iter()
         .map(|(f, _)| f.weights().iter().map(|l| l.sqrt()).collect())
         .collect();
-    let par = faer::get_global_parallelism();
     let mut t0 = 0;
     while t0 < len {
         let c = chunk.min(len - t0);
@@ -161,48 +195,70 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             }
             xc[(i, m + nx)] = r[t0 * ny + i];
         }
-        whiten_static(xc.rb_mut(), &l_s, ny);
-        faer::linalg::matmul::matmul(
-            g.as_mut(),
-            Accum::Add,
-            xc.rb().transpose(),
-            xc.rb(),
-            1.0,
-            par,
+        let white = match (&whitening, wstream.as_mut()) {
+            (Whitening::Static { ls, .. }, _) => {
+                whiten_static(xc.rb_mut(), &ls.l(), ny);
+                xc.rb()
+            }
+            (Whitening::Kalman(_), Some(ws)) => {
+                ws.push(xc.rb(), wx.as_mut().subrows_mut(0, c * ny))?;
+                wx.as_ref().subrows(0, c * ny)
+            }
+            (Whitening::Kalman(_), None) => unreachable!("a Kalman whitening has a stream"),
+        };
+        let rr = rfac.nrows();
+        let mut stacked = Mat::<f64>::zeros(rr + c * ny, cols);
+        stacked.as_mut().subrows_mut(0, rr).copy_from(&rfac);
+        stacked.as_mut().subrows_mut(rr, c * ny).copy_from(white);
+        let qr = stacked.qr();
+        let thin = qr.thin_R();
+        rfac = Mat::from_fn(
+            thin.nrows(),
+            cols,
+            |i, j| if j >= i { thin[(i, j)] } else { 0.0 },
         );
         t0 += c;
     }
     let t_assembled = Instant::now();
 
-    // --- normal equations in (b, x₀) -----------------------------------------------------------
+    // --- ridge least squares in (b, x₀) ------------------------------------------------------
+    // ‖W(r − X v)‖² = ‖R₁₁v − R₁r‖² + R_rr² with R = qr(W·[X r]); the penalty L·β·‖b‖² adds the
+    // rows √(Lβ)·[I 0]. Solved by a second QR: the condition number is never squared.
     let lb = len as f64 * beta;
     let k = m + nx;
-    let mut h = nalgebra::DMatrix::<f64>::from_fn(k, k, |i, j| g[(i, j)]);
-    for i in 0..m {
-        h[(i, i)] += lb;
+    let rk = rfac.nrows().min(k);
+    let mut a_aug = nalgebra::DMatrix::<f64>::zeros(rk + m, k);
+    let mut b_aug = nalgebra::DVector::<f64>::zeros(rk + m);
+    for i in 0..rk {
+        for j in i..k {
+            a_aug[(i, j)] = rfac[(i, j)];
+        }
+        b_aug[i] = rfac[(i, k)];
     }
-    let rhs = nalgebra::DVector::<f64>::from_fn(k, |i, _| g[(i, k)]);
-    let chol = h.clone().cholesky().ok_or_else(|| {
+    for i in 0..m {
+        a_aug[(rk + i, i)] = lb.sqrt();
+    }
+    let qr = a_aug.clone().qr();
+    let r_aug = qr.r();
+    let qtb = qr.q().transpose() * &b_aug;
+    let v = r_aug.solve_upper_triangular(&qtb).ok_or_else(|| {
         Error::Numerical(
-            "the feature-space normal equations are singular: the initial state is not identifiable from this record"
+            "the feature-space least-squares problem is singular: the initial state is not identifiable from this record"
                 .into(),
         )
     })?;
-    let v = chol.solve(&rhs);
     let t_factored = Instant::now();
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for i in 0..k {
-        let dii = chol.l()[(i, i)];
+        let dii = r_aug[(i, i)].abs();
         lo = lo.min(dii);
         hi = hi.max(dii);
     }
 
     // --- recover ŵ, ê, the maps and the cost terms -----------------------------------------
-    let gv = &h * &v; // (G + LβI_b)·v
-    let g_rr = g[(k, k)];
-    // ‖W(r − Xv)‖² = r'r − 2 vᵀg + vᵀ G v, with G without the ridge.
-    let vgv: f64 = v.dot(&gv) - lb * (0..m).map(|i| v[i] * v[i]).sum::<f64>();
-    let weighted_sse = (g_rr - 2.0 * v.dot(&rhs) + vgv).max(0.0);
+    let resid = a_aug.rows(0, rk) * &v - b_aug.rows(0, rk);
+    let r_rr = if rfac.nrows() > k { rfac[(k, k)] } else { 0.0 };
+    let weighted_sse = resid.norm_squared() + r_rr * r_rr;
     let mu = weighted_sse / len as f64;
     let x0: Option<Vec<f64>> = (nx > 0).then(|| (0..nx).map(|j| v[m + j]).collect());
 
@@ -249,29 +305,38 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             map: Box::new(FeatureExpansion::new(Arc::clone(map), coef)),
         });
     }
-    // ρ = r − T_yw·ŵ − O·x₀ and ê_t = P·ρ_t with P = D_yeᵀ·S⁻¹ (the least-norm noise explaining ρ).
-    let p_mat = d.transpose() * ls.inverse();
-    let mut e_hat = vec![0.0; len * ne];
-    let mut res2 = 0.0;
-    let mut rho = vec![0.0; ny];
-    for t in 0..len {
-        for (i, rh) in rho.iter_mut().enumerate() {
-            let idx = t * ny + i;
+    // ρ = r − T_yw·ŵ − O·x₀; ê is the least-norm noise explaining it, ê = T_yeᵀ(T_ye·T_yeᵀ)⁻¹ρ.
+    let rho: Vec<f64> = (0..len * ny)
+        .map(|idx| {
             let ox: f64 = match (&x0, free) {
                 (Some(x0), Some(o)) => (0..nx).map(|j| o[(idx, j)] * x0[j]).sum(),
                 _ => 0.0,
             };
-            *rh = r[idx] - fitted[idx] - ox;
+            r[idx] - fitted[idx] - ox
+        })
+        .collect();
+    let mut e_hat = vec![0.0; len * ne];
+    match &whitening {
+        Whitening::Static { d, ls } => {
+            let p_mat = d.transpose() * ls.inverse();
+            for t in 0..len {
+                let rt = &rho[t * ny..(t + 1) * ny];
+                for c in 0..ne {
+                    e_hat[t * ne + c] = (0..ny).map(|i| p_mat[(c, i)] * rt[i]).sum();
+                }
+            }
         }
-        let e_t = &mut e_hat[t * ne..(t + 1) * ne];
-        for (c, ec) in e_t.iter_mut().enumerate() {
-            *ec = (0..ny).map(|i| p_mat[(c, i)] * rho[i]).sum();
-        }
-        for (i, rh) in rho.iter().enumerate() {
-            let de: f64 = (0..ne).map(|c| d[(i, c)] * e_t[c]).sum();
-            res2 += (rh - de) * (rh - de);
+        Whitening::Kalman(k) => {
+            let mut w1 = vec![0.0; len * ny];
+            let mut w2 = vec![0.0; len * ny];
+            k.whiten(&rho, &mut w1);
+            k.whiten_adjoint(&w1, &mut w2);
+            noise.apply_adjoint(&w2, &mut e_hat);
         }
     }
+    let mut te = vec![0.0; len * ny];
+    noise.apply(&e_hat, &mut te);
+    let res2: f64 = rho.iter().zip(&te).map(|(a, b)| (a - b) * (a - b)).sum();
     let r2: f64 = r.iter().map(|v| v * v).sum();
     let total = mu + beta * dispersions.iter().sum::<f64>();
     if !total.is_finite() {
@@ -309,7 +374,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             } else {
                 res2.sqrt()
             },
-            peak_memory_bytes: 8 * (cols * cols + chunk * ny * cols + chunk * m) as u64,
+            peak_memory_bytes: 8 * (cols * cols + 3 * chunk * ny * cols + chunk * m) as u64,
             timings: Timings {
                 prepare: secs(t_start, t_prepared),
                 assemble: secs(t_prepared, t_assembled),
@@ -320,6 +385,17 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             warnings: Vec::new(),
         },
     })
+}
+
+/// How the solver whitens the noise.
+enum Whitening {
+    /// Static noise path: ω_t = L_S⁻¹·ν_t with S = D·Dᵀ = L_S·L_Sᵀ.
+    Static {
+        d: nalgebra::DMatrix<f64>,
+        ls: nalgebra::Cholesky<f64, nalgebra::Dyn>,
+    },
+    /// Dynamic noise path: the Kalman filter of the noise system.
+    Kalman(KalmanWhitener),
 }
 
 /// D of a static noise path, found by applying it to unit impulses.
