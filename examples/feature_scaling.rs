@@ -1,5 +1,6 @@
-//! The feature-space solver at scale: SISO Hammerstein, 4th-order IIR L_yw, white output noise,
-//! a Fourier dispersion with 32 harmonics (m = 65 features), L = 10⁴, 10⁵, 10⁶.
+//! The feature-space solver at scale: SISO Hammerstein, 4th-order IIR L_yw, coloured noise
+//! (H = (1 + 0.5q⁻¹)/(1 − 0.8q⁻¹), Kalman-whitened),
+//! a Fourier dispersion with 31 harmonics (m = 63 features), L = 10⁴, 10⁵, 10⁶.
 //!
 //! `cargo run --release --example feature_scaling -- [L ...]`
 //! Peak memory: `/usr/bin/time -v target/release/examples/feature_scaling 1000000`.
@@ -25,7 +26,7 @@ fn main() {
     let disp = Arc::new(
         FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 })
             .unwrap()
-            .with_harmonics(32),
+            .with_harmonics(31),
     );
     let settings = IdentifySettings::builder()
         .beta(1e-4)
@@ -33,7 +34,7 @@ fn main() {
         .build()
         .unwrap();
     for len in sizes {
-        let exp = scenarios::hammerstein(len, 4, 0.3, disp.clone(), 11).unwrap();
+        let exp = scenarios::hammerstein_coloured(len, 4, 0.3, disp.clone(), 11).unwrap();
         let t = Instant::now();
         let id = identify(&exp.model, &exp.data, &settings).unwrap();
         let total = t.elapsed().as_secs_f64();

@@ -21,14 +21,51 @@ pub fn hammerstein(
     dispersion: Arc<dyn Dispersion>,
     seed: u64,
 ) -> Result<Experiment> {
+    hammerstein_with_noise(len, order, noise_std, false, dispersion, seed)
+}
+
+/// [`hammerstein`] with coloured noise: e reaches y through the minimum-phase filter
+/// H(q) = (1 + 0.5q⁻¹)/(1 − 0.8q⁻¹), one more state in the LFT (B_e ≠ 0).
+pub fn hammerstein_coloured(
+    len: usize,
+    order: usize,
+    noise_std: f64,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
+    hammerstein_with_noise(len, order, noise_std, true, dispersion, seed)
+}
+
+fn hammerstein_with_noise(
+    len: usize,
+    order: usize,
+    noise_std: f64,
+    coloured: bool,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
     let g = structid_lti::testing::random_stable_system(seed, order, 1, 1, 0.9);
-    let n = g.order();
+    let ng = g.order();
+    let n = ng + usize::from(coloured);
+    let mut a = DMatrix::zeros(n, n);
+    a.view_mut((0, 0), (ng, ng)).copy_from(g.a());
+    let mut be = DMatrix::zeros(n, 1);
+    let mut bw = DMatrix::zeros(n, 1);
+    bw.view_mut((0, 0), (ng, 1)).copy_from(g.b());
+    let mut cy = DMatrix::zeros(1, n);
+    cy.view_mut((0, 0), (1, ng)).copy_from(g.c());
+    if coloured {
+        // x_e⁺ = 0.8·x_e + e, y += 1.3·x_e + e: H = 1 + 1.3q⁻¹/(1 − 0.8q⁻¹).
+        a[(ng, ng)] = 0.8;
+        be[(ng, 0)] = 1.0;
+        cy[(0, ng)] = 1.3;
+    }
     let lft = Lft::new(LftMatrices {
-        a: g.a().clone(),
+        a,
         bu: DMatrix::zeros(n, 1),
-        be: DMatrix::zeros(n, 1),
-        bw: g.b().clone(),
-        cy: g.c().clone(),
+        be,
+        bw,
+        cy,
         dyu: DMatrix::zeros(1, 1),
         dye: DMatrix::from_element(1, 1, 1.0),
         dyw: g.d().clone(),
