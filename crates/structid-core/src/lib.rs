@@ -62,6 +62,7 @@ pub mod identify;
 pub mod interpolant;
 pub mod kernel;
 pub mod lft;
+pub mod low_rank;
 pub mod maps;
 pub mod measurability;
 pub mod metrics;
@@ -84,6 +85,7 @@ pub use identify::{
 pub use interpolant::Interpolant;
 pub use kernel::{GaussianKernel, Kernel, KernelExpansion};
 pub use lft::{Lft, LftDims, LftMatrices};
+pub use low_rank::{LowRankGaussian, NystromFeatures};
 pub use maps::{ExprMap, LookupTable};
 pub use measurability::ZSource;
 pub use model::{Data, Model, NonlinearBlock};

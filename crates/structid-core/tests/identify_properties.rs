@@ -925,3 +925,56 @@ fn feature_solver_refuses_what_it_cannot_do() {
     assert!(matches!(e, Error::Unsupported(_)), "{e}");
     assert!(e.to_string().contains("feature"), "{e}");
 }
+
+/// The low-rank (Nyström) Gaussian agrees with the exact Gaussian within a bound derived from
+/// its trace tolerance. With white output noise, ŵ = K·Tᵀ(LβI + T·K·Tᵀ)⁻¹r and E = K − K̃ ⪰ 0:
+/// ‖ŵ − ŵ̃‖ ≤ ‖E‖·‖T‖·‖r‖/(Lβ)·(1 + ‖K‖·‖T‖/(Lβ)), with ‖E‖ ≤ tol·trace(K) and 2-norms bounded by
+/// Frobenius norms (and ‖K‖ ≤ trace K).
+#[test]
+fn low_rank_gaussian_is_within_its_tolerance_bound_of_the_exact_gaussian() {
+    let (len, sigma, beta) = (300, 0.4, 1e-3);
+    let exact_d: Arc<dyn Dispersion> = Arc::new(KernelDispersion::gaussian(sigma).unwrap());
+    let exp = scenarios::hammerstein(len, 2, 0.1, exact_d, 5).unwrap();
+    let exact = identify(&exp.model, &exp.data, &settings(beta)).unwrap();
+    let t = exp.model.lft().t_yw().toeplitz_dense(len);
+    let t_norm = t.norm();
+    let r = exp
+        .model
+        .lft()
+        .residual(exp.data.u(), exp.data.y())
+        .unwrap();
+    let r_norm = DVector::from_column_slice(r.as_slice()).norm();
+    let trace_k = GaussianKernel::new(sigma).unwrap().normalisation(1) * len as f64;
+    let lb = len as f64 * beta;
+    let mut last = f64::INFINITY;
+    for tol in [1e-3, 1e-6, 1e-10] {
+        let lr: Arc<dyn Dispersion> = Arc::new(LowRankGaussian::new(sigma, tol).unwrap());
+        let model = exp.model.with_dispersions(|_| lr.clone());
+        for solver in [SolverChoice::Features, SolverChoice::Exact] {
+            let s = IdentifySettings::builder()
+                .beta(beta)
+                .solver(solver)
+                .build()
+                .unwrap();
+            let id = identify(&model, &exp.data, &s).unwrap();
+            let diff = (stack_w(&exact) - stack_w(&id)).norm();
+            let bound = tol * trace_k * t_norm * r_norm / lb * (1.0 + trace_k * t_norm / lb);
+            eprintln!("tol {tol:e} {solver:?}: ‖Δŵ‖ = {diff:.3e}, bound {bound:.3e}");
+            assert!(
+                diff <= bound,
+                "tol {tol} ({solver:?}): ‖Δŵ‖ = {diff:.3e} > bound {bound:.3e}"
+            );
+            if solver == SolverChoice::Features {
+                assert!(
+                    diff <= last,
+                    "the error must shrink with the tolerance: {diff} after {last}"
+                );
+                last = diff;
+            }
+        }
+    }
+    assert!(
+        last < 1e-6 * stack_w(&exact).norm(),
+        "tol 1e-10 leaves {last}"
+    );
+}
