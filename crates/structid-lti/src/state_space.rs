@@ -487,7 +487,14 @@ impl StateSpace {
     /// The blocked recursion (forward or adjoint) for a horizon of `len` samples.
     pub(crate) fn blocked(&self, len: usize, adjoint: bool) -> BlockedRecursion {
         let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        let bsz = time_block(n, m, p).min(len.max(1));
+        self.blocked_with(time_block(n, m, p).min(len.max(1)), adjoint)
+    }
+
+    /// The blocked recursion with an explicit block length (streams over narrow operands use
+    /// long blocks: fewer, larger matrix products).
+    pub(crate) fn blocked_with(&self, bsz: usize, adjoint: bool) -> BlockedRecursion {
+        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
+        let bsz = bsz.max(1);
         // A^i B and C A^i for i < b, and A^b
         let mut aib = Vec::with_capacity(bsz);
         let mut cai = Vec::with_capacity(bsz);

@@ -10,6 +10,10 @@ use crate::error::LtiError;
 use crate::operator::{BlockedRecursion, static_columns};
 use crate::state_space::StateSpace;
 
+/// Block length of streamed operators: streams carry few columns, so long blocks (fewer, larger
+/// matrix products) beat the short ones tuned for thousands of columns.
+pub(crate) const STREAM_BLOCK: usize = 64;
+
 /// Applies T (zero initial state) to `ncols` signals delivered in consecutive time chunks.
 ///
 /// Every chunk but the last must hold a multiple of [`ColumnStream::block_len`] samples; a
@@ -49,7 +53,7 @@ impl StateSpace {
     pub fn column_stream(&self, ncols: usize) -> ColumnStream {
         let n = self.order();
         ColumnStream {
-            engine: (n > 0).then(|| self.blocked(usize::MAX / 2, false)),
+            engine: (n > 0).then(|| self.blocked_with(STREAM_BLOCK, false)),
             d: Mat::from_fn(self.outputs(), self.inputs(), |i, j| self.d()[(i, j)]),
             inputs: self.inputs(),
             outputs: self.outputs(),
