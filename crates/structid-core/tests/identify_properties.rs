@@ -800,7 +800,8 @@ proptest! {
                                                estimate_x0 in any::<bool>(), coloured in any::<bool>()) {
         use nalgebra::DMatrix;
         let (nu, nw) = (1, 2);
-        let ne = ny;
+        // Coloured noise with one channel more than outputs: D_ye is not square.
+        let ne = if coloured { ny + 1 } else { ny };
         let nz = 3;
         let sys = random_stable_system(seed, n, nu + ne + nw, ny, 0.9);
         let b = sys.b();
@@ -821,14 +822,6 @@ proptest! {
             dze: DMatrix::zeros(nz, ne),
             dzw: DMatrix::zeros(nz, nw),
         }).unwrap();
-        // Whitening needs a minimum-phase noise model (the solver refuses others; see the test
-        // below): zeros of T_ye = eig(A − B_e·D_ye⁻¹·C_y) inside the unit circle.
-        if coloured {
-            let m = lft.matrices();
-            let zeros = &m.a - &m.be * m.dye.clone().try_inverse().unwrap() * &m.cy;
-            let radius = zeros.complex_eigenvalues().iter().map(|c| c.norm()).fold(0.0, f64::max);
-            prop_assume!(radius < 0.95);
-        }
         let f1: Arc<dyn Dispersion> = Arc::new(FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.3 }).unwrap());
         let f2: Arc<dyn Dispersion> = Arc::new(
             FourierDispersion::new(FourierWeights::SobolevLike { order: 1.5, scale: 0.5 }).unwrap().with_harmonics(4),
@@ -847,7 +840,12 @@ proptest! {
         let exact = identify(&model, &data, &IdentifySettings::builder().beta(beta).initial_state(init)
             .solver(SolverChoice::Exact).build().unwrap()).unwrap();
         let feat = identify(&model, &data, &IdentifySettings::builder().beta(beta).initial_state(init)
-            .solver(SolverChoice::Features).build().unwrap()).unwrap();
+            .solver(SolverChoice::Features).build().unwrap());
+        // Whitening needs a minimum-phase noise model; the solver refuses others (tested below).
+        if let Err(Error::Unsupported(msg)) = &feat {
+            prop_assume!(!msg.contains("minimum phase"));
+        }
+        let feat = feat.unwrap();
         let (we, wf) = (stack_w(&exact), stack_w(&feat));
         prop_assert!(rel(&we, &wf) < 1e-8, "ŵ: {} (cond exact {:.2e}, features {:.2e}, feas {:.1e} {:.1e})", rel(&we, &wf),
             exact.diagnostics.condition_lower_bound, feat.diagnostics.condition_lower_bound,
