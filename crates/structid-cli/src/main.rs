@@ -89,7 +89,8 @@ struct IdentifyArgs {
     initial_state: InitialStateArg,
     /// Solver: `auto` (the exact solve unless its L·n_y × L·n_y matrix would not fit in
     /// memory, then the feature solver when every dispersion has finitely many features),
-    /// `exact`, or `features` (linear in L; Fourier dispersions, static noise path).
+    /// `exact`, or `features` (linear in L; fourier and gaussian-lowrank dispersions,
+    /// minimum-phase noise models).
     #[arg(long, value_name = "auto|exact|features", default_value = "auto")]
     solver: SolverArg,
 }

@@ -69,7 +69,7 @@ use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, Interpolant,
-    KernelDispersion, Lft, LftMatrices, LookupTable, Model, NonlinearBlock,
+    KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model, NonlinearBlock,
 };
 use structid_lti::{ContinuousStateSpace, Signal};
 use toml::Spanned;
@@ -99,6 +99,13 @@ pub enum DispersionSpec {
         /// Kernel width σ (> 0), if given.
         sigma: Option<f64>,
     },
+    /// The Gaussian with k ≪ L Nyström features ([`structid_core::LowRankGaussian`]).
+    LowRankGaussian {
+        /// Kernel width σ (> 0), if given.
+        sigma: Option<f64>,
+        /// Relative trace tolerance of the pivoted Cholesky factorisation (default 1e-8).
+        tolerance: Option<f64>,
+    },
     /// The Fourier-series kernel with Gaussian-like weights (the periodised Gaussian of width σ),
     /// see [`structid_core::FourierDispersion`].
     Fourier {
@@ -112,7 +119,7 @@ pub enum DispersionSpec {
 }
 
 /// The dispersion kinds a model file may name.
-pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "fourier"];
+pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "gaussian-lowrank", "fourier"];
 
 /// The default kernel width for a block whose inputs are `z` (one point per sample):
 /// 0.1 × the largest range (max − min) over its channels, or 0.1 when every channel is
@@ -150,13 +157,16 @@ impl DispersionSpec {
         match self {
             DispersionSpec::Gaussian { .. } => "gaussian",
             DispersionSpec::Fourier { .. } => "fourier",
+            DispersionSpec::LowRankGaussian { .. } => "gaussian-lowrank",
         }
     }
 
     /// The kernel width given in the file, if any.
     pub fn sigma(&self) -> Option<f64> {
         match self {
-            DispersionSpec::Gaussian { sigma } | DispersionSpec::Fourier { sigma, .. } => *sigma,
+            DispersionSpec::Gaussian { sigma }
+            | DispersionSpec::Fourier { sigma, .. }
+            | DispersionSpec::LowRankGaussian { sigma, .. } => *sigma,
         }
     }
 
@@ -179,6 +189,9 @@ impl DispersionSpec {
         };
         match self {
             DispersionSpec::Gaussian { .. } => Ok(Arc::new(KernelDispersion::gaussian(s)?)),
+            DispersionSpec::LowRankGaussian { tolerance, .. } => Ok(Arc::new(
+                LowRankGaussian::new(s, tolerance.unwrap_or(1e-8))?,
+            )),
             DispersionSpec::Fourier {
                 harmonics,
                 additive,
@@ -690,6 +703,7 @@ fn parse_dispersion(
             let allowed: &[&str] = match kind {
                 "gaussian" => &["kind", "sigma"],
                 "fourier" => &["kind", "sigma", "harmonics", "combine"],
+                "gaussian-lowrank" => &["kind", "sigma", "tolerance"],
                 other => return Err(unknown_kind(other)),
             };
             if let Some(key) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
@@ -731,6 +745,21 @@ fn parse_dispersion(
             }
             match kind {
                 "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
+                "gaussian-lowrank" => {
+                    let tolerance = match t.get("tolerance") {
+                        None => None,
+                        Some(toml::Value::Float(v)) if *v > 0.0 && *v < 1.0 => Some(*v),
+                        Some(other) => {
+                            return Err(err_at(
+                                line,
+                                format!(
+                                    "block `{block}`: tolerance must be a number in (0, 1), not {other}"
+                                ),
+                            ));
+                        }
+                    };
+                    Ok(DispersionSpec::LowRankGaussian { sigma, tolerance })
+                }
                 _ => {
                     let harmonics = match t.get("harmonics") {
                         None => None,
@@ -1426,6 +1455,16 @@ impl ModelFile {
                 }
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
+                }
+                DispersionSpec::LowRankGaussian { sigma, tolerance } => {
+                    let mut parts = vec!["kind = \"gaussian-lowrank\"".to_string()];
+                    if let Some(sg) = sigma {
+                        parts.push(format!("sigma = {}", format_number(*sg)));
+                    }
+                    if let Some(t) = tolerance {
+                        parts.push(format!("tolerance = {}", format_number(*t)));
+                    }
+                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
                 }
                 DispersionSpec::Fourier {
                     sigma,

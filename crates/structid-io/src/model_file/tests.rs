@@ -437,3 +437,33 @@ fn fourier_dispersion_parses_builds_and_round_trips() {
         assert!(e.contains(needle) && e.contains("line"), "{bad}: {e}");
     }
 }
+
+#[test]
+fn low_rank_gaussian_dispersion_parses_builds_and_round_trips() {
+    let text = CANONICAL.replace(
+        r#"dispersion = { kind = "gaussian", sigma = 0.4 }"#,
+        r#"dispersion = { kind = "gaussian-lowrank", sigma = 0.4, tolerance = 1e-6 }"#,
+    );
+    let m = ModelFile::parse(&text, None).unwrap();
+    assert_eq!(
+        m.blocks[0].dispersion,
+        DispersionSpec::LowRankGaussian {
+            sigma: Some(0.4),
+            tolerance: Some(1e-6)
+        }
+    );
+    let d = m.blocks[0].dispersion.build(None, None).unwrap();
+    assert!(
+        d.describe().starts_with("low-rank gaussian"),
+        "{}",
+        d.describe()
+    );
+    let back = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(back.blocks, m.blocks);
+    let bad = CANONICAL.replace(
+        r#"{ kind = "gaussian", sigma = 0.4 }"#,
+        r#"{ kind = "gaussian-lowrank", tolerance = 2.0 }"#,
+    );
+    let e = err(&bad);
+    assert!(e.contains("tolerance") && e.contains("line"), "{e}");
+}
