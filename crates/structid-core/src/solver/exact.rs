@@ -29,10 +29,9 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::identify::{
-    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings,
-};
+use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
+use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 
 /// Gram columns are generated and pushed through T_i in panels of this many columns.
 const PANEL: usize = 256;
@@ -233,11 +232,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         ));
     }
 
-    let mut blocks = Vec::with_capacity(nblocks);
-    let mut w_all = Signal::zeros(len, nblocks);
-    let mut dispersions = Vec::with_capacity(nblocks);
-    let mut fitted = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
+    let mut parts = Vec::with_capacity(nblocks);
     for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
         let mut alpha = vec![0.0; len];
         block.path.apply_adjoint(&lambda, &mut alpha);
@@ -249,27 +244,16 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         } else {
             gram_times(pen.as_ref(), &alpha, &mut gram, panel)
         };
-        block.path.apply(&w_hat, &mut tmp);
-        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
-        let d_i: f64 = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
-        dispersions.push(d_i);
-        blocks.push(BlockEstimate {
-            name: block.name.clone(),
-            output: block.output,
-            dispersion: block.dispersion.describe(),
-            parameters: block.dispersion.parameters(),
-            z: block.z.clone(),
+        // D_i = ŵᵀK⁻¹ŵ = αᵀKα = αᵀŵ.
+        let dispersion_value: f64 = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
+        parts.push(BlockPart {
             w_hat,
-            dispersion_value: d_i,
+            dispersion_value,
             map: pen.interpolant(alpha),
         });
     }
-    for b in &blocks {
-        // Problem::new guarantees the outputs are exactly 0..n_blocks.
-        for k in 0..len {
-            w_all.sample_mut(k)[b.output] = b.w_hat[k];
-        }
-    }
+    let assembled = assemble_blocks(problem, parts);
+    let fitted = &assembled.fitted;
     let mut e_hat = vec![0.0; len * ne];
     noise.apply_adjoint(&lambda, &mut e_hat);
     e_hat.iter_mut().for_each(|v| *v *= lb);
@@ -282,17 +266,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         r2 += r[i] * r[i];
     }
     let mu = e_hat.iter().map(|v| v * v).sum::<f64>() / len as f64;
-    let total = mu + beta * dispersions.iter().sum::<f64>();
-    if !total.is_finite()
-        || blocks
-            .iter()
-            .any(|b| b.w_hat.iter().any(|v| !v.is_finite()))
-    {
-        return Err(Error::Numerical(format!(
-            "the estimate is not finite (J = {total}); the data are probably too large in magnitude for the \
-             kernel scaling — rescale y (and u) to order one"
-        )));
-    }
+    let cost = cost_terms(mu, beta, &assembled)?;
     let t_end = Instant::now();
 
     let mut warnings = Vec::new();
@@ -319,17 +293,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             jitter / max_diag
         ));
     }
-    let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
     Ok(Identification {
-        w_hat: w_all,
+        w_hat: assembled.w_hat,
         e_hat: Signal::new(ne, e_hat).map_err(Error::from)?,
-        blocks,
-        cost: CostTerms {
-            noise: mu,
-            dispersions,
-            beta,
-            total,
-        },
+        blocks: assembled.blocks,
+        cost,
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
@@ -349,13 +317,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
                 res2.sqrt()
             },
             peak_memory_bytes: need,
-            timings: Timings {
-                prepare: secs(t_start, t_prepared),
-                assemble: secs(t_prepared, t_assembled),
-                factor: secs(t_assembled, t_factored),
-                solve: secs(t_factored, t_end),
-                total: secs(t_start, t_end),
-            },
+            timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings,
         },
     })

@@ -33,10 +33,9 @@ use structid_lti::{
 use crate::dispersion::{FeatureMap, Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
-use crate::identify::{
-    BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings, Timings,
-};
+use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
+use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 
 /// Samples per chunk of the time pass (rounded to the streams' block length).
 const CHUNK: usize = 4096;
@@ -253,11 +252,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mu = weighted_sse / len as f64;
     let x0: Option<Vec<f64>> = (nx > 0).then(|| (0..nx).map(|j| v[m + j]).collect());
 
-    let mut blocks = Vec::with_capacity(maps.len());
-    let mut w_all = Signal::zeros(len, maps.len());
-    let mut dispersions = Vec::with_capacity(maps.len());
-    let mut fitted = vec![0.0; len * ny];
-    let mut tmp = vec![0.0; len * ny];
+    let mut parts = Vec::with_capacity(maps.len());
     for (bi, (map, z)) in maps.iter().enumerate() {
         let mi = dims[bi];
         let b_i: Vec<f64> = (0..mi).map(|j| v[offsets[bi] + j]).collect();
@@ -277,25 +272,15 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
                     *wk = psi.iter().zip(&coef).map(|(p, c)| p * c).sum();
                 }
             });
-        let block = &problem.blocks()[bi];
-        block.path.apply(&w_hat, &mut tmp);
-        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
-        let d_i: f64 = b_i.iter().map(|b| b * b).sum();
-        dispersions.push(d_i);
-        for (kk, wk) in w_hat.iter().enumerate() {
-            w_all.sample_mut(kk)[block.output] = *wk;
-        }
-        blocks.push(BlockEstimate {
-            name: block.name.clone(),
-            output: block.output,
-            dispersion: block.dispersion.describe(),
-            parameters: block.dispersion.parameters(),
-            z: block.z.clone(),
+        parts.push(BlockPart {
             w_hat,
-            dispersion_value: d_i,
+            // D_i = a_iᵀΛ⁻¹a_i = ‖b_i‖².
+            dispersion_value: b_i.iter().map(|b| b * b).sum(),
             map: Box::new(FeatureExpansion::new(Arc::clone(map), coef)),
         });
     }
+    let assembled = assemble_blocks(problem, parts);
+    let fitted = &assembled.fitted;
     // ρ = r − T_yw·ŵ − O·x₀; ê is the least-norm noise explaining it, ê = T_yeᵀ(T_ye·T_yeᵀ)⁻¹ρ.
     let rho: Vec<f64> = (0..len * ny)
         .map(|idx| {
@@ -329,24 +314,13 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     noise.apply(&e_hat, &mut te);
     let res2: f64 = rho.iter().zip(&te).map(|(a, b)| (a - b) * (a - b)).sum();
     let r2: f64 = r.iter().map(|v| v * v).sum();
-    let total = mu + beta * dispersions.iter().sum::<f64>();
-    if !total.is_finite() {
-        return Err(Error::Numerical(format!(
-            "the feature-space estimate is not finite (J = {total})"
-        )));
-    }
+    let cost = cost_terms(mu, beta, &assembled)?;
     let t_end = Instant::now();
-    let secs = |a: Instant, b: Instant| (b - a).as_secs_f64();
     Ok(Identification {
-        w_hat: w_all,
+        w_hat: assembled.w_hat,
         e_hat: Signal::new(ne, e_hat)?,
-        blocks,
-        cost: CostTerms {
-            noise: mu,
-            dispersions,
-            beta,
-            total,
-        },
+        blocks: assembled.blocks,
+        cost,
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
@@ -366,13 +340,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
                 res2.sqrt()
             },
             peak_memory_bytes: 8 * (cols * cols + 3 * chunk * ny * cols + chunk * m) as u64,
-            timings: Timings {
-                prepare: secs(t_start, t_prepared),
-                assemble: secs(t_prepared, t_assembled),
-                factor: secs(t_assembled, t_factored),
-                solve: secs(t_factored, t_end),
-                total: secs(t_start, t_end),
-            },
+            timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings: Vec::new(),
         },
     })
