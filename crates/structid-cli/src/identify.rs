@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
-use structid_io::{DataTable, ModelFile, OutputGuard, Report, TruthSpec};
+use structid_core::solver::admm::AdmmSettings;
+use structid_core::solver::conic::ConicSettings;
+use structid_io::{DataTable, DispersionSpec, ModelFile, OutputGuard, Report, TruthSpec};
 
 use crate::IdentifyArgs;
 use crate::error::{CliError, positive};
@@ -77,7 +79,31 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
             crate::SolverArg::Auto => SolverChoice::Auto,
             crate::SolverArg::Exact => SolverChoice::Exact,
             crate::SolverArg::Features => SolverChoice::Features,
+            crate::SolverArg::Clarabel => SolverChoice::Clarabel,
+            crate::SolverArg::Admm => SolverChoice::Admm,
         });
+    if let Some(tol) = a.tolerance {
+        let tol = positive("--tolerance", tol)?;
+        b = b
+            .conic(ConicSettings::builder().tolerance(tol).build()?)
+            .admm(AdmmSettings::builder().tolerance(tol).build()?);
+    }
+    if let Some(n) = a.max_iterations {
+        if n == 0 {
+            return Err(CliError::input(
+                "invalid value 0 for --max-iterations: it must be at least 1",
+            ));
+        }
+        let conic = ConicSettings::builder()
+            .tolerance(a.tolerance.unwrap_or(ConicSettings::default().tolerance()))
+            .max_iterations(u32::try_from(n).unwrap_or(u32::MAX))
+            .build()?;
+        let admm = AdmmSettings::builder()
+            .tolerance(a.tolerance.unwrap_or(AdmmSettings::default().tolerance()))
+            .max_iterations(n)
+            .build()?;
+        b = b.conic(conic).admm(admm);
+    }
     if let Some(mib) = a.memory_limit_mib {
         if mib == 0 {
             return Err(CliError::input(
@@ -90,6 +116,60 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
         b = b.memory_limit_bytes(bytes);
     }
     Ok(b.build()?)
+}
+
+/// Applies `--dispersion` and `--neighbours` to every block.
+fn override_dispersions(mf: &mut ModelFile, a: &IdentifyArgs) -> Result<(), CliError> {
+    if a.neighbours == Some(0) {
+        return Err(CliError::input(
+            "invalid value 0 for --neighbours: the nearest-neighbour graph needs k ≥ 1",
+        ));
+    }
+    let Some(kind) = a.dispersion else {
+        if a.neighbours.is_some()
+            && !mf
+                .blocks
+                .iter()
+                .any(|b| matches!(b.dispersion, DispersionSpec::TotalVariation { .. }))
+        {
+            return Err(CliError::input(
+                "--neighbours applies to total-variation blocks; add --dispersion tv or use kind = \"tv\" in the model file",
+            ));
+        }
+        for b in &mut mf.blocks {
+            if let DispersionSpec::TotalVariation { neighbours, .. } = &mut b.dispersion
+                && a.neighbours.is_some()
+            {
+                *neighbours = a.neighbours;
+            }
+        }
+        return Ok(());
+    };
+    if a.neighbours.is_some() && !matches!(kind, crate::DispersionArg::Tv) {
+        return Err(CliError::input(
+            "--neighbours applies to --dispersion tv only",
+        ));
+    }
+    for b in &mut mf.blocks {
+        let sigma = b.dispersion.sigma();
+        b.dispersion = match kind {
+            crate::DispersionArg::Gaussian => DispersionSpec::Gaussian { sigma },
+            crate::DispersionArg::GaussianLowrank => DispersionSpec::LowRankGaussian {
+                sigma,
+                tolerance: None,
+            },
+            crate::DispersionArg::Fourier => DispersionSpec::Fourier {
+                sigma,
+                harmonics: None,
+                additive: false,
+            },
+            crate::DispersionArg::Tv => DispersionSpec::TotalVariation {
+                neighbours: a.neighbours,
+                interpolation: None,
+            },
+        };
+    }
+    Ok(())
 }
 
 fn fmt_num(v: f64) -> String {
@@ -105,7 +185,8 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let settings = settings(&a)?;
     let sigma = a.sigma.map(|s| positive("--sigma", s)).transpose()?;
-    let mf = ModelFile::from_path(&a.model)?;
+    let mut mf = ModelFile::from_path(&a.model)?;
+    override_dispersions(&mut mf, &a)?;
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, &mf, &a.model, &[&a.data]);
     // Refuse a bad output directory before the (possibly long) identification.
@@ -271,6 +352,14 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
         fmt_num(id.cost.noise),
         disp.join(", ")
     );
+    let _ = writeln!(s, "solver: {} ({})", d.solver, d.solver_reason);
+    if let (Some(p), Some(q)) = (d.primal_residual, d.dual_residual) {
+        let _ = writeln!(
+            s,
+            "  {} iterations, primal residual {:.2e}, dual residual {:.2e}",
+            d.iterations, p, q
+        );
+    }
     let _ = writeln!(s, "z: {}", id.z_source.describe());
     for b in &report.blocks {
         let _ = write!(s, "  {}: {}", b.name, b.dispersion);

@@ -87,12 +87,42 @@ struct IdentifyArgs {
     /// use it for records that do not start at rest).
     #[arg(long, value_name = "zero|estimate", default_value = "zero")]
     initial_state: InitialStateArg,
-    /// Solver: `auto` (the exact solve unless its L·n_y × L·n_y matrix would not fit in
-    /// memory, then the feature solver when every dispersion has finitely many features),
-    /// `exact`, or `features` (linear in L; fourier and gaussian-lowrank dispersions,
-    /// minimum-phase noise models).
-    #[arg(long, value_name = "auto|exact|features", default_value = "auto")]
+    /// Solver: `auto` chooses by dispersion and size — for quadratic dispersions the exact
+    /// solve unless its L·n_y × L·n_y matrix would not fit in memory, then the feature solver
+    /// when every dispersion has finitely many features; for total variation `clarabel` up to
+    /// L·n_y = 2000 samples, `admm` beyond. `exact`, `features` (linear in L; fourier and
+    /// gaussian-lowrank dispersions, minimum-phase noise models), `clarabel` (exact conic
+    /// program for tv) and `admm` (linear in L, for tv) force a solver.
+    #[arg(long, value_name = "auto|exact|features|clarabel|admm", default_value = "auto")]
     solver: SolverArg,
+    /// Use this dispersion for every block, overriding the model file: `gaussian`,
+    /// `gaussian-lowrank`, `fourier` or `tv` (total variation; see --neighbours).
+    #[arg(long, value_name = "KIND")]
+    dispersion: Option<DispersionArg>,
+    /// k of the nearest-neighbour graph of total variation for blocks with several inputs
+    /// (with --dispersion tv; default 8).
+    #[arg(long, value_name = "K")]
+    neighbours: Option<usize>,
+    /// Tolerance of the iterative solvers (clarabel: duality gap and feasibility, default 1e-8;
+    /// admm: relative primal and dual residuals, default 1e-7).
+    #[arg(long, value_name = "TOL")]
+    tolerance: Option<f64>,
+    /// Iteration limit of the iterative solvers (clarabel default 200, admm default 20000).
+    #[arg(long, value_name = "N")]
+    max_iterations: Option<usize>,
+}
+
+/// Values of `--dispersion`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum DispersionArg {
+    /// The Gaussian RKHS norm.
+    Gaussian,
+    /// The Gaussian through Nyström features.
+    GaussianLowrank,
+    /// The Fourier-series kernel.
+    Fourier,
+    /// Total variation.
+    Tv,
 }
 
 /// Values of `--solver`.
@@ -104,6 +134,10 @@ enum SolverArg {
     Exact,
     /// The feature-space solve.
     Features,
+    /// The conic program (total variation).
+    Clarabel,
+    /// ADMM (total variation).
+    Admm,
 }
 
 /// Values of `--initial-state`.

@@ -1,7 +1,7 @@
 //! Dispersion functions D(z, w): how complex it is to interpolate the points (z_k, w_k).
 //!
 //! A dispersion is turned into a [`Penalty`] once the sample points z are known. The penalty is
-//! what a solver sees; its kind (quadratic today, conic for total variation) decides which
+//! what a solver sees; its kind (quadratic, or graph total variation) decides which
 //! solvers can handle it, so [`crate::identify()`] never needs to know the concrete dispersion type.
 
 use std::fmt;
@@ -13,6 +13,7 @@ use structid_lti::Signal;
 use crate::error::Result;
 use crate::interpolant::Interpolant;
 use crate::kernel::{GaussianKernel, Kernel, KernelExpansion};
+use crate::total_variation::TvPenalty;
 
 /// A dispersion function D(z, w) for one nonlinear block.
 pub trait Dispersion: Send + Sync + fmt::Debug {
@@ -34,12 +35,16 @@ pub enum Penalty {
     /// D(w) = wᵀK⁻¹w for a positive semi-definite Gram matrix K (an RKHS norm). Solvers use K
     /// only through its columns and never invert it.
     Quadratic(Box<dyn QuadraticPenalty>),
+    /// D(w) = Σ_(a,b)∈E c_ab·|v_a − v_b|, a graph total variation on node values (a conic,
+    /// non-smooth penalty): see [`crate::total_variation`].
+    TotalVariation(TvPenalty),
 }
 
 impl fmt::Debug for Penalty {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Penalty::Quadratic(q) => write!(f, "Quadratic(len = {})", q.len()),
+            Penalty::TotalVariation(p) => write!(f, "TotalVariation({p:?})"),
         }
     }
 }

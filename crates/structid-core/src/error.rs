@@ -98,6 +98,26 @@ pub enum Error {
     #[error("numerical failure: {0}")]
     Numerical(String),
 
+    /// The optimisation problem has no solution: the data cannot be explained by the model.
+    #[error("the {solver} solver found the problem infeasible: {detail}")]
+    Infeasible {
+        /// Solver that reported it.
+        solver: String,
+        /// What it means and what to check.
+        detail: String,
+    },
+
+    /// An iterative solver stopped before meeting its tolerances.
+    #[error("the {solver} solver did not converge after {iterations} iterations: {detail}")]
+    NotConverged {
+        /// Solver that stopped.
+        solver: String,
+        /// Iterations run.
+        iterations: usize,
+        /// Status, residuals and what to try.
+        detail: String,
+    },
+
     /// An expression for a static map could not be parsed or uses unknown variables.
     #[error("invalid map expression `{expression}`: {reason}")]
     Expression {

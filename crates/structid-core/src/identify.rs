@@ -10,6 +10,8 @@ use crate::measurability::ZSource;
 use crate::model::{Data, Model};
 use crate::problem::Problem;
 use crate::solver;
+use crate::solver::admm::AdmmSettings;
+use crate::solver::conic::ConicSettings;
 
 /// Which solver `identify` uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -23,6 +25,25 @@ pub enum SolverChoice {
     /// The feature-space solve, linear in L, for dispersions with finitely many features
     /// (e.g. [`crate::FourierDispersion`]).
     Features,
+    /// The conic program for total-variation dispersions, solved by the interior-point solver
+    /// Clarabel ([`crate::solver::conic`]): exact, super-linear in L.
+    Clarabel,
+    /// ADMM for total-variation dispersions ([`crate::solver::admm`]): a Kalman smoother and an
+    /// exact proximal step per iteration, linear in L.
+    Admm,
+}
+
+impl SolverChoice {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::Auto => "auto",
+            SolverChoice::Exact => "exact",
+            SolverChoice::Features => "features",
+            SolverChoice::Clarabel => "clarabel",
+            SolverChoice::Admm => "admm",
+        }
+    }
 }
 
 /// Settings of [`identify()`]; build them with [`IdentifySettings::builder`].
@@ -39,6 +60,8 @@ pub struct IdentifySettings {
     solver: SolverChoice,
     memory_limit_bytes: Option<u64>,
     initial_state: InitialState,
+    conic: ConicSettings,
+    admm: AdmmSettings,
 }
 
 /// How the LFT's initial state is treated.
@@ -60,6 +83,8 @@ impl Default for IdentifySettings {
             solver: SolverChoice::Auto,
             memory_limit_bytes: None,
             initial_state: InitialState::Zero,
+            conic: ConicSettings::default(),
+            admm: AdmmSettings::default(),
         }
     }
 }
@@ -85,6 +110,16 @@ impl IdentifySettings {
     /// How the initial state is treated.
     pub fn initial_state(&self) -> InitialState {
         self.initial_state
+    }
+
+    /// Settings of the conic (Clarabel) solver.
+    pub fn conic(&self) -> &ConicSettings {
+        &self.conic
+    }
+
+    /// Settings of the ADMM solver.
+    pub fn admm(&self) -> &AdmmSettings {
+        &self.admm
     }
 
     /// The memory budget in bytes (`None`: detect at run time).
@@ -127,6 +162,16 @@ impl IdentifySettingsBuilder {
     /// Zero or estimated initial state.
     pub fn initial_state(mut self, initial_state: InitialState) -> Self {
         self.inner.initial_state = initial_state;
+        self
+    }
+    /// Settings of the conic (Clarabel) solver.
+    pub fn conic(mut self, conic: ConicSettings) -> Self {
+        self.inner.conic = conic;
+        self
+    }
+    /// Settings of the ADMM solver.
+    pub fn admm(mut self, admm: AdmmSettings) -> Self {
+        self.inner.admm = admm;
         self
     }
     /// An explicit memory budget in bytes.
@@ -181,6 +226,14 @@ pub struct Timings {
 pub struct Diagnostics {
     /// Which solver ran.
     pub solver: String,
+    /// Why it was chosen (the automatic choice's rule, or "requested").
+    pub solver_reason: String,
+    /// Iterations of an iterative solver (0 for the direct ones).
+    pub iterations: usize,
+    /// Final primal residual of an iterative solver.
+    pub primal_residual: Option<f64>,
+    /// Final dual residual of an iterative solver.
+    pub dual_residual: Option<f64>,
     /// Dimension of the system matrix M (L·n_y, less dropped samples).
     pub system_size: usize,
     /// Output samples (index k·n_y + channel) that depend on neither e nor w and were left out.
@@ -311,9 +364,25 @@ pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Resu
 /// [`identify()`] for a problem posed directly in operator form.
 pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     positive_finite("beta", settings.beta)?;
-    match settings.solver {
-        SolverChoice::Exact => solver::exact::solve(problem, settings),
-        SolverChoice::Features => solver::features::solve(problem, settings),
+    let (mut id, reason) = match settings.solver {
+        SolverChoice::Exact => (solver::exact::solve(problem, settings)?, None),
+        SolverChoice::Features => (solver::features::solve(problem, settings)?, None),
+        SolverChoice::Clarabel => (solver::conic::solve(problem, settings)?, None),
+        SolverChoice::Admm => (solver::admm::solve(problem, settings)?, None),
+        SolverChoice::Auto if solver::has_total_variation(problem) => {
+            let size = problem.len() * problem.outputs();
+            if size <= CONIC_AUTO_LIMIT {
+                let reason = format!(
+                    "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
+                );
+                (solver::conic::solve(problem, settings)?, Some(reason))
+            } else {
+                let reason = format!(
+                    "automatic: total variation with L·n_y = {size} > {CONIC_AUTO_LIMIT}, ADMM (linear in L)"
+                );
+                (solver::admm::solve(problem, settings)?, Some(reason))
+            }
+        }
         SolverChoice::Auto => {
             // The exact solve unless its M would not fit the memory budget and every block has
             // finitely many features.
@@ -336,10 +405,18 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
                     "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
                     need >> 20
                 ));
-                Ok(id)
+                let reason = "automatic: the exact solver's memory exceeds the budget and every block has finite features".to_string();
+                (id, Some(reason))
             } else {
-                solver::exact::solve(problem, settings)
+                let reason = "automatic: quadratic dispersions within the memory budget, the exact solver".to_string();
+                (solver::exact::solve(problem, settings)?, Some(reason))
             }
         }
-    }
+    };
+    id.diagnostics.solver_reason = reason.unwrap_or_else(|| "requested".into());
+    Ok(id)
 }
+
+/// Largest L·n_y for which the automatic choice uses the conic solver for total variation
+/// (measured crossover with ADMM, see `BENCHMARKS.md`).
+pub const CONIC_AUTO_LIMIT: usize = 2000;

@@ -28,6 +28,14 @@
 //!   the interpolant. The paper's [`GaussianKernel`] K(z₁,z₂) = (2πσ²)^(−p/2)·exp(−‖z₁−z₂‖²/2σ²)
 //!   is built in; a custom kernel is a dozen lines (see `examples/custom_kernel.rs`).
 //!
+//! * [`FourierDispersion`]: a Fourier-series kernel with finitely many features on a domain
+//!   mapped to [0, 1]; [`LowRankGaussian`]: the Gaussian through Nyström features.
+//! * [`TotalVariation`]: D = Σ_g |v_(g+1) − v_g| over the z-sorted distinct sample values (the
+//!   total variation of the piecewise-linear interpolant) for scalar z, and the graph total
+//!   variation over a k-nearest-neighbour graph for several inputs. It keeps jumps and corners
+//!   (relays, Coulomb friction, quantisers) that kernel norms round off; see
+//!   [`total_variation`].
+//!
 //! A dispersion turns into a [`Penalty`] once the sample points are known; solvers only see
 //! penalties, so user-defined dispersions run through the same [`identify()`].
 //!
@@ -42,6 +50,17 @@
 //! ```
 //!
 //! See [`solver::exact`] for how M is assembled and factorised.
+//!
+//! ## Solvers
+//! | dispersion | solver | cost |
+//! |---|---|---|
+//! | any quadratic | [`solver::exact`] (dual solve above) | O((L·n_y)³), memory (L·n_y)² |
+//! | finite features (Fourier, low-rank) | [`solver::features`] | O(L·m²) |
+//! | total variation | [`solver::conic`]: sparse conic program in state-space form, Clarabel | super-linear in L |
+//! | total variation | [`solver::admm`]: Kalman smoother + exact TV prox per iteration | O(L·n²) per iteration |
+//!
+//! [`SolverChoice::Auto`] picks by dispersion kind and size and records why in
+//! [`Diagnostics::solver_reason`].
 //!
 //! ## Example
 //! ```
@@ -67,11 +86,14 @@ pub mod maps;
 pub mod measurability;
 pub mod metrics;
 pub mod model;
+pub mod neighbours;
 pub mod paper;
 pub mod problem;
+pub mod prox;
 pub mod scenarios;
 pub mod simulate;
 pub mod solver;
+pub mod total_variation;
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};
@@ -92,3 +114,4 @@ pub use model::{Data, Model, NonlinearBlock};
 pub use problem::{Problem, ProblemBlock};
 pub use simulate::{MapBinding, Simulation};
 pub use structid_lti::Signal;
+pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};

@@ -40,6 +40,11 @@ pub struct Problem {
     /// Columns O·e_j of the free response of y to each unit initial state (L·n_y × n), when the
     /// initial state is to be estimated.
     free_response: Option<faer::Mat<f64>>,
+    /// One realisation of [T_ye, T_yw] sharing the LFT's states (inputs e, then w by channel),
+    /// when the problem was built from a model; state-space solvers use it.
+    realisation: Option<structid_lti::StateSpace>,
+    /// Whether `free_response` is the free response of `realisation`'s initial state.
+    free_response_is_state: bool,
 }
 
 impl Problem {
@@ -97,6 +102,8 @@ impl Problem {
             blocks,
             z_source: ZSource::Measured,
             free_response: None,
+            realisation: None,
+            free_response_is_state: false,
         })
     }
 
@@ -123,6 +130,20 @@ impl Problem {
             .collect();
         let mut p = Self::new(residual, Arc::new(lft.t_ye()), blocks)?;
         p.z_source = z_source;
+        let m = lft.matrices();
+        let (n, ny) = (lft.dims().states, lft.dims().y);
+        let hcat = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>, rows: usize| {
+            let mut out = nalgebra::DMatrix::zeros(rows, a.ncols() + b.ncols());
+            out.columns_mut(0, a.ncols()).copy_from(a);
+            out.columns_mut(a.ncols(), b.ncols()).copy_from(b);
+            out
+        };
+        p.realisation = Some(structid_lti::StateSpace::new(
+            m.a.clone(),
+            hcat(&m.be, &m.bw, n),
+            m.cy.clone(),
+            hcat(&m.dye, &m.dyw, ny),
+        )?);
         Ok(p)
     }
 
@@ -138,6 +159,7 @@ impl Problem {
             });
         }
         self.free_response = Some(free_response);
+        self.free_response_is_state = false;
         Ok(self)
     }
 
@@ -188,7 +210,18 @@ impl Problem {
                 o[(i, j)] = *v;
             }
         }
-        problem.with_free_response(o)
+        let mut problem = problem.with_free_response(o)?;
+        problem.free_response_is_state = true;
+        Ok(problem)
+    }
+
+    /// The realisation of [T_ye, T_yw] (inputs e, then w by channel) shared with the LFT, and
+    /// whether the free response (if any) is that of its initial state. `None` for problems
+    /// posed with [`Problem::new`].
+    pub(crate) fn shared_realisation(&self) -> Option<(&structid_lti::StateSpace, bool)> {
+        self.realisation
+            .as_ref()
+            .map(|ss| (ss, self.free_response_is_state))
     }
 
     /// The free-response matrix O, when the initial state is estimated.

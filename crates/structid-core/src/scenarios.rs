@@ -24,6 +24,33 @@ pub fn hammerstein(
     hammerstein_with_noise(len, order, noise_std, false, dispersion, seed)
 }
 
+/// The input of a synthetic Hammerstein experiment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Excitation {
+    /// White noise squashed to (−2, 2): u_k = 2·tanh(0.8·n_k), n_k ~ N(0, 1) independent.
+    White,
+    /// A sinusoid 2·sin(2π·periods·k/L): z sweeps its range slowly and in order.
+    Sine {
+        /// Periods over the record.
+        periods: f64,
+    },
+}
+
+/// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
+/// (reproducible from `seed`), any static map N, white noise of standard deviation
+/// `noise_std`, and the chosen excitation. The test problem of the total-variation issue.
+pub fn hammerstein_map(
+    len: usize,
+    order: usize,
+    noise_std: f64,
+    map: &(dyn Fn(f64) -> f64 + Sync),
+    excitation: Excitation,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
+    build_hammerstein(len, order, noise_std, false, map, excitation, dispersion, seed)
+}
+
 /// [`hammerstein`] with coloured noise: e reaches y through the minimum-phase filter
 /// H(q) = (1 + 0.5q⁻¹)/(1 − 0.8q⁻¹), one more state in the LFT (B_e ≠ 0).
 pub fn hammerstein_coloured(
@@ -41,6 +68,28 @@ fn hammerstein_with_noise(
     order: usize,
     noise_std: f64,
     coloured: bool,
+    dispersion: Arc<dyn Dispersion>,
+    seed: u64,
+) -> Result<Experiment> {
+    build_hammerstein(
+        len,
+        order,
+        noise_std,
+        coloured,
+        &f64::tanh,
+        Excitation::White,
+        dispersion,
+        seed,
+    )
+}
+
+fn build_hammerstein(
+    len: usize,
+    order: usize,
+    noise_std: f64,
+    coloured: bool,
+    nonlinearity: &(dyn Fn(f64) -> f64 + Sync),
+    excitation: Excitation,
     dispersion: Arc<dyn Dispersion>,
     seed: u64,
 ) -> Result<Experiment> {
@@ -76,10 +125,15 @@ fn hammerstein_with_noise(
     })?;
     let model = Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, dispersion)])?;
     let noise = gaussian_noise(len, 1, noise_std, seed.wrapping_add(1));
-    let u = {
-        let white = gaussian_noise(len, 1, 1.0, seed.wrapping_add(2));
-        Signal::from_fn(len, 1, |k, _| 2.0 * (white.get(k, 0) * 0.8).tanh())
+    let u = match excitation {
+        Excitation::White => {
+            let white = gaussian_noise(len, 1, 1.0, seed.wrapping_add(2));
+            Signal::from_fn(len, 1, |k, _| 2.0 * (white.get(k, 0) * 0.8).tanh())
+        }
+        Excitation::Sine { periods } => Signal::from_fn(len, 1, |k, _| {
+            2.0 * (2.0 * std::f64::consts::PI * periods * k as f64 / len as f64).sin()
+        }),
     };
-    let map = |z: &[f64]| z[0].tanh();
+    let map = |z: &[f64]| nonlinearity(z[0]);
     Experiment::simulate(model, &[&map], u, noise)
 }

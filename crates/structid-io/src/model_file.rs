@@ -69,7 +69,8 @@ use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, Interpolant,
-    KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model, NonlinearBlock,
+    GraphInterpolation, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
+    NonlinearBlock, TotalVariation,
 };
 use structid_lti::{ContinuousStateSpace, Signal};
 use toml::Spanned;
@@ -116,10 +117,18 @@ pub enum DispersionSpec {
         /// Additive instead of tensor-product combination of several inputs.
         additive: bool,
     },
+    /// The total-variation dispersion ([`structid_core::TotalVariation`]); needs the clarabel or
+    /// admm solver (chosen automatically).
+    TotalVariation {
+        /// k of the k-nearest-neighbour graph for blocks with several inputs (default 8).
+        neighbours: Option<usize>,
+        /// Interpolation between nodes for several inputs (default inverse distance).
+        interpolation: Option<GraphInterpolation>,
+    },
 }
 
 /// The dispersion kinds a model file may name.
-pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "gaussian-lowrank", "fourier"];
+pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "gaussian-lowrank", "fourier", "tv"];
 
 /// The default kernel width for a block whose inputs are `z` (one point per sample):
 /// 0.1 × the largest range (max − min) over its channels, or 0.1 when every channel is
@@ -158,6 +167,7 @@ impl DispersionSpec {
             DispersionSpec::Gaussian { .. } => "gaussian",
             DispersionSpec::Fourier { .. } => "fourier",
             DispersionSpec::LowRankGaussian { .. } => "gaussian-lowrank",
+            DispersionSpec::TotalVariation { .. } => "tv",
         }
     }
 
@@ -167,6 +177,7 @@ impl DispersionSpec {
             DispersionSpec::Gaussian { sigma }
             | DispersionSpec::Fourier { sigma, .. }
             | DispersionSpec::LowRankGaussian { sigma, .. } => *sigma,
+            DispersionSpec::TotalVariation { .. } => None,
         }
     }
 
@@ -177,6 +188,20 @@ impl DispersionSpec {
         sigma_override: Option<f64>,
         block_z: Option<&Signal>,
     ) -> Result<Arc<dyn Dispersion>, IoError> {
+        if let DispersionSpec::TotalVariation {
+            neighbours,
+            interpolation,
+        } = self
+        {
+            let mut tv = TotalVariation::new();
+            if let Some(k) = neighbours {
+                tv = tv.with_neighbours(*k)?;
+            }
+            if let Some(i) = interpolation {
+                tv = tv.with_interpolation(*i);
+            }
+            return Ok(Arc::new(tv));
+        }
         let s = match (sigma_override, self.sigma(), block_z) {
             (Some(s), _, _) | (None, Some(s), _) => s,
             (None, None, Some(z)) => default_sigma(z),
@@ -192,6 +217,7 @@ impl DispersionSpec {
             DispersionSpec::LowRankGaussian { tolerance, .. } => Ok(Arc::new(
                 LowRankGaussian::new(s, tolerance.unwrap_or(1e-8))?,
             )),
+            DispersionSpec::TotalVariation { .. } => unreachable!("handled above"),
             DispersionSpec::Fourier {
                 harmonics,
                 additive,
@@ -671,6 +697,10 @@ fn parse_dispersion(
     match v.get_ref() {
         toml::Value::String(k) => match k.as_str() {
             "gaussian" => Ok(DispersionSpec::Gaussian { sigma: None }),
+            "tv" => Ok(DispersionSpec::TotalVariation {
+                neighbours: None,
+                interpolation: None,
+            }),
             "fourier" => Ok(DispersionSpec::Fourier {
                 sigma: None,
                 harmonics: None,
@@ -704,6 +734,7 @@ fn parse_dispersion(
                 "gaussian" => &["kind", "sigma"],
                 "fourier" => &["kind", "sigma", "harmonics", "combine"],
                 "gaussian-lowrank" => &["kind", "sigma", "tolerance"],
+                "tv" => &["kind", "neighbours", "interpolation"],
                 other => return Err(unknown_kind(other)),
             };
             if let Some(key) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
@@ -745,6 +776,39 @@ fn parse_dispersion(
             }
             match kind {
                 "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
+                "tv" => {
+                    let neighbours = match t.get("neighbours") {
+                        None => None,
+                        Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 1024 => Some(*n as usize),
+                        Some(other) => {
+                            return Err(err_at(
+                                line,
+                                format!(
+                                    "block `{block}`: neighbours must be a whole number from 1 to 1024, not {other}"
+                                ),
+                            ));
+                        }
+                    };
+                    let interpolation = match t.get("interpolation") {
+                        None => None,
+                        Some(toml::Value::String(c)) if c == "inverse-distance" => {
+                            Some(GraphInterpolation::InverseDistance)
+                        }
+                        Some(toml::Value::String(c)) if c == "nearest" => Some(GraphInterpolation::Nearest),
+                        Some(other) => {
+                            return Err(err_at(
+                                line,
+                                format!(
+                                    "block `{block}`: interpolation must be \"inverse-distance\" or \"nearest\", not {other}"
+                                ),
+                            ));
+                        }
+                    };
+                    Ok(DispersionSpec::TotalVariation {
+                        neighbours,
+                        interpolation,
+                    })
+                }
                 "gaussian-lowrank" => {
                     let tolerance = match t.get("tolerance") {
                         None => None,
@@ -1455,6 +1519,23 @@ impl ModelFile {
                 }
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
+                }
+                DispersionSpec::TotalVariation {
+                    neighbours,
+                    interpolation,
+                } => {
+                    let mut parts = vec!["kind = \"tv\"".to_string()];
+                    if let Some(k) = neighbours {
+                        parts.push(format!("neighbours = {k}"));
+                    }
+                    match interpolation {
+                        Some(GraphInterpolation::Nearest) => parts.push("interpolation = \"nearest\"".into()),
+                        Some(GraphInterpolation::InverseDistance) => {
+                            parts.push("interpolation = \"inverse-distance\"".into())
+                        }
+                        None => {}
+                    }
+                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
                 }
                 DispersionSpec::LowRankGaussian { sigma, tolerance } => {
                     let mut parts = vec!["kind = \"gaussian-lowrank\"".to_string()];

@@ -34,6 +34,8 @@
 //! - [`StateSpace`], [`ContinuousStateSpace`] (with zero-order-hold discretisation);
 //! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1` and their realisation;
 //! - [`LinearSystem`]: the operator trait used by the solvers;
+//! - [`DisturbanceSmoother`] (module [`smoother`]): the posterior mean of the inputs of a
+//!   system given exact outputs (disturbance smoother, zero or free initial state);
 //! - [`KalmanWhitener`] (module [`kalman`]): the whitening operator `W` of a noise path,
 //!   `W^T W = (T T^T)^{-1}`, applied by a time-varying Kalman filter;
 //! - [`LtiError`]: the error type;
@@ -43,6 +45,7 @@ pub mod error;
 pub mod kalman;
 pub mod operator;
 pub mod signal;
+pub mod smoother;
 pub mod state_space;
 pub mod stream;
 pub mod testing;
@@ -54,6 +57,7 @@ pub use kalman::{
 };
 pub use operator::LinearSystem;
 pub use signal::Signal;
+pub use smoother::{DisturbanceSmoother, SmoothReport, SmootherInitial};
 pub use state_space::{ContinuousStateSpace, StateSpace};
 pub use stream::ColumnStream;
 pub use transfer_function::{Siso, TransferFunction};

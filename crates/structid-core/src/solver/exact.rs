@@ -27,7 +27,7 @@ use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Conj, Mat, MatMut, MatRef};
 use structid_lti::{LinearSystem, Signal};
 
-use crate::dispersion::{Penalty, QuadraticPenalty};
+use crate::dispersion::QuadraticPenalty;
 use crate::error::{Error, Result};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
@@ -98,8 +98,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         .blocks()
         .iter()
         .map(|b| {
-            let p = b.dispersion.penalty(&b.z)?;
-            let Penalty::Quadratic(q) = p;
+            let q = super::quadratic_penalty(b, "exact")?;
             if q.len() != len {
                 return Err(Error::DimensionMismatch {
                     what: format!("Gram matrix of block `{}`", b.name),
@@ -319,6 +318,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             peak_memory_bytes: need,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings,
+            ..Diagnostics::default()
         },
     })
 }

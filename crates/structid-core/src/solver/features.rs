@@ -30,7 +30,7 @@ use structid_lti::{
     ColumnStream, KalmanWhitener, LinearSystem, Signal, StateSpace, WhiteningOptions,
 };
 
-use crate::dispersion::{FeatureMap, Penalty, QuadraticPenalty};
+use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
@@ -76,10 +76,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let penalties: Vec<Box<dyn QuadraticPenalty>> = problem
         .blocks()
         .iter()
-        .map(|b| {
-            let Penalty::Quadratic(q) = b.dispersion.penalty(&b.z)?;
-            Ok(q)
-        })
+        .map(|b| super::quadratic_penalty(b, "feature"))
         .collect::<Result<_>>()?;
     let mut maps: Vec<(Arc<dyn FeatureMap>, &Signal)> = Vec::new();
     for (b, p) in problem.blocks().iter().zip(&penalties) {
@@ -342,6 +339,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             peak_memory_bytes: 8 * (cols * cols + 3 * chunk * ny * cols + chunk * m) as u64,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings: Vec::new(),
+            ..Diagnostics::default()
         },
     })
 }

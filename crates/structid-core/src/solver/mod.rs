@@ -1,8 +1,11 @@
 //! Solvers for the identification problem. Each takes a [`crate::Problem`] and settings and
 //! returns an [`crate::Identification`]; [`crate::identify()`] chooses between them.
 
+pub mod admm;
+pub mod conic;
 pub mod exact;
 pub mod features;
+mod realisation;
 
 use std::time::Instant;
 
@@ -11,7 +14,9 @@ use structid_lti::Signal;
 use crate::error::{Error, Result};
 use crate::identify::{BlockEstimate, CostTerms, Timings};
 use crate::interpolant::Interpolant;
-use crate::problem::Problem;
+use crate::dispersion::{Penalty, QuadraticPenalty};
+use crate::problem::{Problem, ProblemBlock};
+use crate::total_variation::TvPenalty;
 
 /// One block's solution before assembly: ŵ at the samples, D_i and the interpolant.
 pub(crate) struct BlockPart {
@@ -100,4 +105,141 @@ impl Timings {
             total: secs(start, end),
         }
     }
+}
+
+/// The quadratic penalty of a block, or an error naming the solvers that handle its kind.
+pub(crate) fn quadratic_penalty(
+    block: &ProblemBlock,
+    solver: &str,
+) -> Result<Box<dyn QuadraticPenalty>> {
+    match block.dispersion.penalty(&block.z)? {
+        Penalty::Quadratic(q) => Ok(q),
+        Penalty::TotalVariation(_) => Err(Error::Unsupported(format!(
+            "block `{}` has a total-variation dispersion ({}), which the {solver} solver cannot handle; \
+             use the clarabel or admm solver (or solver = auto)",
+            block.name,
+            block.dispersion.describe()
+        ))),
+    }
+}
+
+/// The total-variation penalties of every block, or an error when a block is quadratic (mixing
+/// kinds in one model is not supported by the conic and ADMM solvers).
+pub(crate) fn tv_penalties(problem: &Problem, solver: &str) -> Result<Vec<TvPenalty>> {
+    problem
+        .blocks()
+        .iter()
+        .map(|b| match b.dispersion.penalty(&b.z)? {
+            Penalty::TotalVariation(p) if p.len() == problem.len() => Ok(p),
+            Penalty::TotalVariation(p) => Err(Error::DimensionMismatch {
+                what: format!("samples of the total-variation penalty of block `{}`", b.name),
+                expected: problem.len().to_string(),
+                found: p.len().to_string(),
+            }),
+            Penalty::Quadratic(_) => Err(Error::Unsupported(format!(
+                "the {solver} solver handles total-variation dispersions only, but block `{}` has the quadratic \
+                 dispersion {}; use total variation for every block, or a quadratic dispersion for every block \
+                 (mixing the two kinds in one model is not supported yet)",
+                b.name,
+                b.dispersion.describe()
+            ))),
+        })
+        .collect()
+}
+
+/// Which kind of penalty the problem's blocks have, for the automatic solver choice.
+pub(crate) fn has_total_variation(problem: &Problem) -> bool {
+    problem
+        .blocks()
+        .iter()
+        .any(|b| matches!(b.dispersion.penalty(&b.z), Ok(Penalty::TotalVariation(_))))
+}
+
+/// What the total-variation solvers derive the same way from node values, ê and x̂₀.
+pub(crate) struct TvOutcome {
+    pub(crate) assembled: Assembled,
+    pub(crate) cost: CostTerms,
+    pub(crate) e_hat: Signal,
+    /// ‖T_ye·ê + T_yw·ŵ + O·x̂₀ − r‖ / ‖r‖ over the samples kept.
+    pub(crate) feasibility: f64,
+    /// Dropped sample indices (k·n_y + channel) and the largest |r| there.
+    pub(crate) dropped: Vec<usize>,
+    pub(crate) dropped_max: f64,
+    pub(crate) warnings: Vec<String>,
+}
+
+/// Builds the estimate from each block's node values, checking feasibility with the problem's
+/// own operators (independently of the realisation the solver used).
+pub(crate) fn finish_tv(
+    problem: &Problem,
+    penalties: &[TvPenalty],
+    node_values: Vec<Vec<f64>>,
+    e_hat: Vec<f64>,
+    x0: Option<&[f64]>,
+    dropped: &[(usize, usize)],
+    beta: f64,
+) -> Result<TvOutcome> {
+    let (len, ny) = (problem.len(), problem.outputs());
+    let ne = problem.noise().inputs();
+    let parts = penalties
+        .iter()
+        .zip(node_values)
+        .map(|(p, v)| BlockPart {
+            w_hat: p.sample_values(&v),
+            dispersion_value: p.value(&v),
+            map: p.interpolant(v),
+        })
+        .collect();
+    let assembled = assemble_blocks(problem, parts);
+    let mu = e_hat.iter().map(|v| v * v).sum::<f64>() / len.max(1) as f64;
+    let cost = cost_terms(mu, beta, &assembled)?;
+    let mut fitted = assembled.fitted.clone();
+    let mut tmp = vec![0.0; len * ny];
+    if ne > 0 {
+        problem.noise().apply(&e_hat, &mut tmp);
+        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
+    }
+    if let (Some(o), Some(x0)) = (problem.free_response(), x0) {
+        for (i, f) in fitted.iter_mut().enumerate() {
+            *f += (0..o.ncols()).map(|j| o[(i, j)] * x0[j]).sum::<f64>();
+        }
+    }
+    let r = problem.residual().as_slice();
+    let mut is_dropped = vec![false; len * ny];
+    let mut dropped_idx = Vec::with_capacity(dropped.len());
+    for &(k, ch) in dropped {
+        is_dropped[k * ny + ch] = true;
+        dropped_idx.push(k * ny + ch);
+    }
+    let (mut res2, mut r2, mut dropped_max) = (0.0, 0.0, 0.0f64);
+    for i in 0..len * ny {
+        if is_dropped[i] {
+            dropped_max = dropped_max.max(r[i].abs());
+        } else {
+            res2 += (fitted[i] - r[i]).powi(2);
+            r2 += r[i] * r[i];
+        }
+    }
+    let mut warnings = Vec::new();
+    if !dropped_idx.is_empty() {
+        let scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
+        warnings.push(format!(
+            "{} output samples depend on neither e nor w and were left out (max |r| there {dropped_max:.3e}){}",
+            dropped_idx.len(),
+            if dropped_max > 1e-8 * scale {
+                " — the data are NOT consistent with the model at those samples"
+            } else {
+                ""
+            }
+        ));
+    }
+    Ok(TvOutcome {
+        assembled,
+        cost,
+        e_hat: Signal::new(ne, e_hat)?,
+        feasibility: if r2 > 0.0 { (res2 / r2).sqrt() } else { res2.sqrt() },
+        dropped: dropped_idx,
+        dropped_max,
+        warnings,
+    })
 }

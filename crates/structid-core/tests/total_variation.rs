@@ -1,0 +1,442 @@
+//! Total-variation identification: the conic (Clarabel) and ADMM solvers against independent
+//! optimality certificates and against each other, and their errors on bad input.
+
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector};
+use proptest::prelude::*;
+use structid_core::paper::Experiment;
+use structid_core::scenarios::{Excitation, hammerstein_map};
+use structid_core::solver::admm::AdmmSettings;
+use structid_core::solver::conic::ConicSettings;
+use structid_core::{
+    Data, Error, Identification, IdentifySettings, InitialState, Lft, LftMatrices, Model,
+    NonlinearBlock, Penalty, Signal, SolverChoice, TotalVariation, identify,
+};
+use structid_lti::LinearSystem;
+
+fn tv() -> Arc<TotalVariation> {
+    Arc::new(TotalVariation::new())
+}
+
+fn relay(z: f64) -> f64 {
+    if z >= 0.3 { 1.0 } else { -0.5 }
+}
+
+fn experiment(len: usize, seed: u64, excitation: Excitation) -> Experiment {
+    hammerstein_map(len, 2, 0.1, &relay, excitation, tv(), seed).unwrap()
+}
+
+fn settings(beta: f64, solver: SolverChoice) -> IdentifySettings {
+    IdentifySettings::builder()
+        .beta(beta)
+        .solver(solver)
+        .admm(
+            AdmmSettings::builder()
+                .tolerance(1e-9)
+                .max_iterations(200_000)
+                .build()
+                .unwrap(),
+        )
+        .build()
+        .unwrap()
+}
+
+fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| y * y).sum();
+    (num / den.max(1e-300)).sqrt()
+}
+
+/// Dense pieces of a SISO problem with an invertible T_ye (D_ye ≠ 0): e = T_ye⁻¹(r − T_yw·S·v).
+struct Dense {
+    ti: DMatrix<f64>,
+    tw: DMatrix<f64>,
+    r: DVector<f64>,
+    s: DMatrix<f64>,
+    len: usize,
+}
+
+impl Dense {
+    fn new(exp: &Experiment) -> (Self, structid_core::TvPenalty) {
+        let lft = exp.model.lft();
+        let len = exp.data.len();
+        let te = lft.t_ye().toeplitz_dense(len);
+        let tw = lft.t_yw().toeplitz_dense(len);
+        let r = lft.residual(exp.data.u(), exp.data.y()).unwrap();
+        let z = exp.data.u().clone();
+        let Penalty::TotalVariation(p) = TotalVariation::new().penalty_for(&z) else {
+            unreachable!()
+        };
+        let mut s = DMatrix::zeros(len, p.nodes());
+        for (k, &g) in p.node_of_sample().iter().enumerate() {
+            s[(k, g)] = 1.0;
+        }
+        let ti = te.try_inverse().unwrap();
+        (
+            Self {
+                ti,
+                tw,
+                r: DVector::from_column_slice(r.as_slice()),
+                s,
+                len,
+            },
+            p,
+        )
+    }
+
+    fn noise(&self, v: &DVector<f64>) -> DVector<f64> {
+        &self.ti * (&self.r - &self.tw * (&self.s * v))
+    }
+
+    fn cost(&self, v: &DVector<f64>, beta: f64, p: &structid_core::TvPenalty) -> f64 {
+        self.noise(v).norm_squared() / self.len as f64 + beta * p.value(v.as_slice())
+    }
+
+    /// ∇ of the smooth part (1/L)·‖e(v)‖² with respect to the node values.
+    fn gradient(&self, v: &DVector<f64>) -> DVector<f64> {
+        let e = self.noise(v);
+        -(2.0 / self.len as f64) * self.s.transpose() * (self.tw.transpose() * (self.ti.transpose() * e))
+    }
+}
+
+trait PenaltyFor {
+    fn penalty_for(&self, z: &Signal) -> Penalty;
+}
+impl PenaltyFor for TotalVariation {
+    fn penalty_for(&self, z: &Signal) -> Penalty {
+        structid_core::Dispersion::penalty(self, z).unwrap()
+    }
+}
+
+fn node_values(id: &Identification, p: &structid_core::TvPenalty) -> DVector<f64> {
+    let mut v = DVector::zeros(p.nodes());
+    for (k, &g) in p.node_of_sample().iter().enumerate() {
+        v[g] = id.blocks[0].w_hat[k];
+    }
+    v
+}
+
+/// The chain's optimality certificate: 0 ∈ ∇f(v) + β·Dᵀs with s_e ∈ sign(v_(e+1) − v_e).
+/// s is determined by cumulative sums of the gradient; check its range, its signs on the
+/// jumps, and that the gradient sums to zero.
+fn assert_kkt(dense: &Dense, v: &DVector<f64>, beta: f64) {
+    let g = dense.gradient(v);
+    let gmax = g.amax().max(beta);
+    let mut s = 0.0;
+    let jump_scale = (1..v.len()).map(|i| (v[i] - v[i - 1]).abs()).fold(0.0, f64::max);
+    for i in 0..v.len() - 1 {
+        s += g[i] / beta;
+        assert!(s.abs() <= 1.0 + 1e-3, "|s_{i}| = {} > 1", s.abs());
+        let jump = v[i + 1] - v[i];
+        if jump.abs() > 1e-4 * jump_scale {
+            assert!(
+                (s - jump.signum()).abs() < 1e-3,
+                "edge {i}: jump {jump:.3e} but s = {s:.6}"
+            );
+        }
+    }
+    let total: f64 = g.iter().sum();
+    assert!(total.abs() < 1e-6 * gmax * v.len() as f64, "Σ∇f = {total:.3e}");
+}
+
+#[test]
+fn clarabel_estimate_satisfies_the_optimality_conditions() {
+    for (seed, beta) in [(1, 0.01), (2, 0.1), (3, 0.001)] {
+        let exp = experiment(120, seed, Excitation::White);
+        let id = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Clarabel)).unwrap();
+        assert_eq!(id.diagnostics.solver, "clarabel");
+        assert!(id.diagnostics.feasibility_residual < 1e-7);
+        let (dense, p) = Dense::new(&exp);
+        let v = node_values(&id, &p);
+        assert_kkt(&dense, &v, beta);
+        // The reported cost is J at the estimate.
+        let j = dense.cost(&v, beta, &p);
+        assert!((j - id.cost.total).abs() < 1e-7 * j, "{j} vs {}", id.cost.total);
+    }
+}
+
+#[test]
+fn admm_estimate_satisfies_the_optimality_conditions() {
+    let beta = 0.01;
+    let exp = experiment(150, 11, Excitation::White);
+    let id = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Admm)).unwrap();
+    assert_eq!(id.diagnostics.solver, "admm");
+    assert!(id.diagnostics.iterations > 0);
+    let (dense, p) = Dense::new(&exp);
+    assert_kkt(&dense, &node_values(&id, &p), beta);
+}
+
+#[test]
+fn perturbing_the_estimate_along_feasible_directions_never_lowers_j() {
+    let beta = 0.02;
+    let exp = experiment(100, 5, Excitation::White);
+    let (dense, p) = Dense::new(&exp);
+    for solver in [SolverChoice::Clarabel, SolverChoice::Admm] {
+        let id = identify(&exp.model, &exp.data, &settings(beta, solver)).unwrap();
+        let v = node_values(&id, &p);
+        let j0 = dense.cost(&v, beta, &p);
+        let mut rng = structid_lti::testing::SplitMix64::new(9);
+        for _ in 0..200 {
+            // Any δv with δe = −T_ye⁻¹·T_yw·S·δv keeps the data constraint.
+            let dv = DVector::from_fn(p.nodes(), |_, _| rng.uniform() - 0.5);
+            for eps in [1e-4, 1e-3, 1e-2] {
+                for sign in [1.0, -1.0] {
+                    let j = dense.cost(&(&v + sign * eps * &dv), beta, &p);
+                    assert!(j >= j0 - 1e-9 * j0, "{solver:?}: J dropped by {:.3e}", j0 - j);
+                }
+            }
+        }
+    }
+}
+
+fn assert_agree(a: &Identification, b: &Identification) {
+    let dw = rel_diff(a.w_hat.as_slice(), b.w_hat.as_slice());
+    let dj = (a.cost.total - b.cost.total).abs() / b.cost.total.abs();
+    assert!(dw < 1e-4, "relative ŵ difference {dw:.3e}");
+    assert!(dj < 1e-6, "relative J difference {dj:.3e}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 6, ..ProptestConfig::default() })]
+
+    #[test]
+    fn admm_and_clarabel_agree_on_small_problems(seed in 0u64..1000, log_beta in -3.0f64..-1.0, sine in any::<bool>()) {
+        let excitation = if sine { Excitation::Sine { periods: 3.0 } } else { Excitation::White };
+        let exp = experiment(200, seed, excitation);
+        let beta = 10f64.powf(log_beta);
+        let a = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Admm)).unwrap();
+        let c = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Clarabel)).unwrap();
+        assert_agree(&a, &c);
+    }
+}
+
+#[test]
+fn solvers_agree_with_coloured_noise_and_estimated_initial_state() {
+    let exp = structid_core::scenarios::hammerstein_coloured(200, 2, 0.1, tv(), 4).unwrap();
+    // Start away from rest: add the free response of a non-zero x₀ to y.
+    let lft = exp.model.lft();
+    let n = lft.dims().states;
+    let x0: Vec<f64> = (0..n).map(|i| 0.5 - 0.3 * i as f64).collect();
+    let free = structid_lti::StateSpace::new(
+        lft.matrices().a.clone(),
+        DMatrix::zeros(n, 0),
+        lft.matrices().cy.clone(),
+        DMatrix::zeros(1, 0),
+    )
+    .unwrap();
+    let (yfree, _) = free.simulate_from(&x0, &Signal::zeros(200, 0)).unwrap();
+    let y = Signal::from_fn(200, 1, |k, _| exp.data.y().get(k, 0) + yfree.get(k, 0));
+    let data = Data::new(exp.data.u().clone(), y).unwrap();
+    let mk = |solver| {
+        IdentifySettings::builder()
+            .beta(0.01)
+            .solver(solver)
+            .initial_state(InitialState::Estimate)
+            .admm(AdmmSettings::builder().tolerance(1e-9).max_iterations(200_000).build().unwrap())
+            .build()
+            .unwrap()
+    };
+    let a = identify(&exp.model, &data, &mk(SolverChoice::Admm)).unwrap();
+    let c = identify(&exp.model, &data, &mk(SolverChoice::Clarabel)).unwrap();
+    assert_agree(&a, &c);
+    let (xa, xc) = (a.initial_state.unwrap(), c.initial_state.unwrap());
+    assert!(rel_diff(&xa, &xc) < 1e-3, "{xa:?} vs {xc:?}");
+    assert!(a.diagnostics.feasibility_residual < 1e-6);
+    assert!(c.diagnostics.feasibility_residual < 1e-7);
+}
+
+/// Two outputs, two blocks: a scalar relay on u₁ and a two-input map on (u₁, u₂) through a
+/// graph total variation.
+fn two_block_experiment(len: usize, seed: u64) -> Experiment {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 2, 0.8);
+    let lft = Lft::new(LftMatrices {
+        a: g.a().clone(),
+        bu: DMatrix::zeros(2, 2),
+        be: DMatrix::zeros(2, 2),
+        bw: g.b().clone(),
+        cy: g.c().clone(),
+        dyu: DMatrix::zeros(2, 2),
+        dye: DMatrix::identity(2, 2),
+        dyw: g.d().clone(),
+        cz: DMatrix::zeros(3, 2),
+        dzu: DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 1.0, 0.0, 0.0, 1.0]),
+        dze: DMatrix::zeros(3, 2),
+        dzw: DMatrix::zeros(3, 2),
+    })
+    .unwrap();
+    let blocks = vec![
+        NonlinearBlock::new("relay", vec![0], 0, tv()),
+        NonlinearBlock::new(
+            "surface",
+            vec![1, 2],
+            1,
+            Arc::new(TotalVariation::new().with_neighbours(5).unwrap()),
+        ),
+    ];
+    let model = Model::new(lft, blocks).unwrap();
+    let u = structid_core::paper::gaussian_noise(len, 2, 1.0, seed + 7);
+    let noise = structid_core::paper::gaussian_noise(len, 2, 0.05, seed + 8);
+    let f = |z: &[f64]| relay(z[0]);
+    let h = |z: &[f64]| if z[0] + z[1] > 0.0 { 1.0 } else { 0.0 };
+    Experiment::simulate(model, &[&f, &h], u, noise).unwrap()
+}
+
+#[test]
+fn solvers_agree_on_two_outputs_with_a_graph_block() {
+    let exp = two_block_experiment(150, 3);
+    let a = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Admm)).unwrap();
+    let c = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Clarabel)).unwrap();
+    assert_agree(&a, &c);
+}
+
+#[test]
+fn automatic_choice_is_by_size_and_reported() {
+    let small = experiment(300, 1, Excitation::White);
+    let id = identify(&small.model, &small.data, &settings(0.01, SolverChoice::Auto)).unwrap();
+    assert_eq!(id.diagnostics.solver, "clarabel");
+    assert!(id.diagnostics.solver_reason.contains("automatic"));
+    let large = experiment(structid_core::identify::CONIC_AUTO_LIMIT + 1, 1, Excitation::White);
+    let id = identify(&large.model, &large.data, &settings(0.01, SolverChoice::Auto)).unwrap();
+    assert_eq!(id.diagnostics.solver, "admm");
+}
+
+#[test]
+fn ties_share_one_value() {
+    // u repeats every value three times, so each node has three samples.
+    let exp = {
+        let base = experiment(90, 8, Excitation::White);
+        let u = Signal::from_fn(90, 1, |k, _| base.data.u().get(k / 3, 0));
+        let noise = structid_core::paper::gaussian_noise(90, 1, 0.1, 3);
+        let f = |z: &[f64]| relay(z[0]);
+        Experiment::simulate(base.model, &[&f], u, noise).unwrap()
+    };
+    for solver in [SolverChoice::Clarabel, SolverChoice::Admm] {
+        let id = identify(&exp.model, &exp.data, &settings(0.01, solver)).unwrap();
+        let w = &id.blocks[0].w_hat;
+        for k in (0..90).step_by(3) {
+            assert_eq!(w[k], w[k + 1]);
+            assert_eq!(w[k], w[k + 2]);
+        }
+    }
+}
+
+#[test]
+fn the_interpolant_is_piecewise_linear_through_the_estimate() {
+    let exp = experiment(100, 2, Excitation::White);
+    let id = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Clarabel)).unwrap();
+    let b = &id.blocks[0];
+    let z = b.z.as_slice();
+    for (k, w) in b.w_hat.iter().enumerate() {
+        assert!((b.predict(&[z[k]]) - w).abs() < 1e-12);
+    }
+    let (lo, hi) = z.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let at = |x: f64| b.predict(&[x]);
+    assert_eq!(at(lo - 10.0), at(lo));
+    assert_eq!(at(hi + 10.0), at(hi));
+}
+
+fn conflicting_noise_free_data() -> (Model, Data) {
+    // y = w = N(u) with no noise path, and the same u twice with different y: no static map
+    // explains it.
+    let lft = Lft::new(LftMatrices {
+        a: DMatrix::zeros(0, 0),
+        bu: DMatrix::zeros(0, 1),
+        be: DMatrix::zeros(0, 0),
+        bw: DMatrix::zeros(0, 1),
+        cy: DMatrix::zeros(1, 0),
+        dyu: DMatrix::zeros(1, 1),
+        dye: DMatrix::zeros(1, 0),
+        dyw: DMatrix::from_element(1, 1, 1.0),
+        cz: DMatrix::zeros(1, 0),
+        dzu: DMatrix::from_element(1, 1, 1.0),
+        dze: DMatrix::zeros(1, 0),
+        dzw: DMatrix::zeros(1, 1),
+    })
+    .unwrap();
+    let model = Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, tv())]).unwrap();
+    let u = Signal::new(1, vec![0.0, 1.0, 0.0, 2.0]).unwrap();
+    let y = Signal::new(1, vec![1.0, 2.0, 3.0, 4.0]).unwrap();
+    (model, Data::new(u, y).unwrap())
+}
+
+#[test]
+fn infeasible_data_is_a_clear_error() {
+    let (model, data) = conflicting_noise_free_data();
+    let err = identify(&model, &data, &settings(0.01, SolverChoice::Clarabel)).unwrap_err();
+    assert!(matches!(err, Error::Infeasible { .. }), "{err}");
+    assert!(err.to_string().contains("equal z"));
+    let quick = IdentifySettings::builder()
+        .beta(0.01)
+        .solver(SolverChoice::Admm)
+        .admm(AdmmSettings::builder().max_iterations(500).build().unwrap())
+        .build()
+        .unwrap();
+    let err = identify(&model, &data, &quick).unwrap_err();
+    assert!(matches!(err, Error::NotConverged { .. }), "{err}");
+}
+
+#[test]
+fn iteration_limits_give_not_converged_errors() {
+    let exp = experiment(200, 1, Excitation::White);
+    let conic = IdentifySettings::builder()
+        .solver(SolverChoice::Clarabel)
+        .conic(ConicSettings::builder().max_iterations(2).build().unwrap())
+        .build()
+        .unwrap();
+    let err = identify(&exp.model, &exp.data, &conic).unwrap_err();
+    assert!(matches!(err, Error::NotConverged { ref solver, .. } if solver == "clarabel"), "{err}");
+    let admm = IdentifySettings::builder()
+        .solver(SolverChoice::Admm)
+        .admm(AdmmSettings::builder().max_iterations(3).build().unwrap())
+        .build()
+        .unwrap();
+    let err = identify(&exp.model, &exp.data, &admm).unwrap_err();
+    assert!(matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"), "{err}");
+}
+
+#[test]
+fn bad_parameters_and_mismatched_solvers_are_errors() {
+    assert!(IdentifySettings::builder().beta(0.0).build().is_err());
+    assert!(IdentifySettings::builder().beta(-1.0).build().is_err());
+    assert!(TotalVariation::new().with_neighbours(0).is_err());
+    assert!(AdmmSettings::builder().tolerance(0.0).build().is_err());
+    assert!(AdmmSettings::builder().max_iterations(0).build().is_err());
+    assert!(ConicSettings::builder().max_iterations(0).build().is_err());
+    let exp = experiment(50, 1, Excitation::White);
+    for solver in [SolverChoice::Exact, SolverChoice::Features] {
+        let err = identify(&exp.model, &exp.data, &settings(0.01, solver)).unwrap_err();
+        assert!(matches!(err, Error::Unsupported(_)), "{err}");
+        assert!(err.to_string().contains("clarabel or admm"), "{err}");
+    }
+    // A quadratic block cannot go through the total-variation solvers.
+    let gauss = hammerstein_map(
+        50,
+        2,
+        0.1,
+        &relay,
+        Excitation::White,
+        Arc::new(structid_core::KernelDispersion::gaussian(0.3).unwrap()),
+        1,
+    )
+    .unwrap();
+    let err = identify(&gauss.model, &gauss.data, &settings(0.01, SolverChoice::Clarabel)).unwrap_err();
+    assert!(matches!(err, Error::Unsupported(_)), "{err}");
+}
+
+#[test]
+fn feasibility_holds_with_the_problem_operators() {
+    // The solvers use the LFT's state-space form; check ŵ, ê against the Toeplitz operators.
+    let exp = experiment(80, 6, Excitation::White);
+    for solver in [SolverChoice::Clarabel, SolverChoice::Admm] {
+        let id = identify(&exp.model, &exp.data, &settings(0.01, solver)).unwrap();
+        let lft = exp.model.lft();
+        let mut fit = vec![0.0; 80];
+        lft.t_yw().apply(id.w_hat.as_slice(), &mut fit);
+        let mut fe = vec![0.0; 80];
+        lft.t_ye().apply(id.e_hat.as_slice(), &mut fe);
+        let r = lft.residual(exp.data.u(), exp.data.y()).unwrap();
+        let res: Vec<f64> = (0..80).map(|k| fit[k] + fe[k] - r.get(k, 0)).collect();
+        assert!(structid_core::metrics::rms(&res) < 1e-6 * structid_core::metrics::rms(r.as_slice()));
+    }
+}
