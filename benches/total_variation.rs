@@ -57,7 +57,12 @@ fn run(c: &mut Criterion, group_name: &str, solver: SolverChoice, lens: &[usize]
 }
 
 fn bench(c: &mut Criterion) {
-    run(c, "tv_clarabel", SolverChoice::Clarabel, &[1000, 2000, 4000, 8000]);
+    run(
+        c,
+        "tv_clarabel",
+        SolverChoice::Clarabel,
+        &[1000, 2000, 4000, 8000],
+    );
     run(c, "tv_admm", SolverChoice::Admm, &[2000, 10_000, 100_000]);
 }
 

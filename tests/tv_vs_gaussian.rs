@@ -16,8 +16,10 @@ use structid::{
 
 const LEN: usize = 400;
 const SEEDS: [u64; 2] = [21, 22];
-const BETAS: [f64; 9] = [1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0];
-const SIGMAS: [f64; 3] = [0.1, 0.2, 0.4];
+const BETAS: [f64; 11] = [
+    1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0,
+];
+const SIGMAS: [f64; 4] = [0.05, 0.1, 0.2, 0.4];
 
 struct Case {
     name: &'static str,
@@ -81,7 +83,9 @@ fn best_error(case: &Case, dispersions: &[Arc<dyn Dispersion>]) -> (f64, String)
                 let mut u = exp.data.u().channel(0);
                 u.sort_by(f64::total_cmp);
                 let (lo, hi) = (u[LEN / 20], u[LEN - 1 - LEN / 20]);
-                let grid: Vec<f64> = (0..201).map(|i| lo + (hi - lo) * i as f64 / 200.0).collect();
+                let grid: Vec<f64> = (0..201)
+                    .map(|i| lo + (hi - lo) * i as f64 / 200.0)
+                    .collect();
                 let err: f64 = grid
                     .iter()
                     .map(|&z| (id.blocks[0].predict(&[z]) - (case.map)(z)).powi(2))
@@ -90,7 +94,7 @@ fn best_error(case: &Case, dispersions: &[Arc<dyn Dispersion>]) -> (f64, String)
                 total += err.sqrt() / SEEDS.len() as f64;
             }
             if total < best.0 {
-                best = (total, format!("{} β={beta:g}", d.describe()));
+                best = (total, format!("{} β={beta}", d.describe()));
             }
         }
     }
@@ -116,7 +120,11 @@ fn total_variation_wins_on_jumps_and_the_gaussian_on_smooth_maps() {
             t / g
         );
         // Margins: the winner is at least 15 % better.
-        let ok = if case.jumps { t < 0.85 * g } else { g < 0.85 * t };
+        let ok = if case.jumps {
+            t < 0.85 * g
+        } else {
+            g < 0.85 * t
+        };
         if !ok {
             failures.push(format!("{}: TV {t:.4}, Gaussian {g:.4}", case.name));
         }

@@ -5,9 +5,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
+use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
 use structid_io::{DataTable, DispersionSpec, ModelFile, OutputGuard, Report, TruthSpec};
 
 use crate::IdentifyArgs;

@@ -93,7 +93,11 @@ struct IdentifyArgs {
     /// L·n_y = 2000 samples, `admm` beyond. `exact`, `features` (linear in L; fourier and
     /// gaussian-lowrank dispersions, minimum-phase noise models), `clarabel` (exact conic
     /// program for tv) and `admm` (linear in L, for tv) force a solver.
-    #[arg(long, value_name = "auto|exact|features|clarabel|admm", default_value = "auto")]
+    #[arg(
+        long,
+        value_name = "auto|exact|features|clarabel|admm",
+        default_value = "auto"
+    )]
     solver: SolverArg,
     /// Use this dispersion for every block, overriding the model file: `gaussian`,
     /// `gaussian-lowrank`, `fourier` or `tv` (total variation; see --neighbours).

@@ -408,7 +408,9 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
                 let reason = "automatic: the exact solver's memory exceeds the budget and every block has finite features".to_string();
                 (id, Some(reason))
             } else {
-                let reason = "automatic: quadratic dispersions within the memory budget, the exact solver".to_string();
+                let reason =
+                    "automatic: quadratic dispersions within the memory budget, the exact solver"
+                        .to_string();
                 (solver::exact::solve(problem, settings)?, Some(reason))
             }
         }

@@ -48,7 +48,9 @@ pub fn hammerstein_map(
     dispersion: Arc<dyn Dispersion>,
     seed: u64,
 ) -> Result<Experiment> {
-    build_hammerstein(len, order, noise_std, false, map, excitation, dispersion, seed)
+    build_hammerstein(
+        len, order, noise_std, false, map, excitation, dispersion, seed,
+    )
 }
 
 /// [`hammerstein`] with coloured noise: e reaches y through the minimum-phase filter

@@ -164,7 +164,10 @@ fn check_points(z: &Signal) -> Result<()> {
 
 /// Groups equal points (by `key`) into nodes numbered in sorted order; returns the node of each
 /// sample and the first sample of each node.
-fn group_equal(len: usize, cmp: impl Fn(usize, usize) -> std::cmp::Ordering) -> (Vec<usize>, Vec<usize>) {
+fn group_equal(
+    len: usize,
+    cmp: impl Fn(usize, usize) -> std::cmp::Ordering,
+) -> (Vec<usize>, Vec<usize>) {
     let mut order: Vec<usize> = (0..len).collect();
     order.sort_by(|&a, &b| cmp(a, b));
     let mut node_of_sample = vec![0; len];
@@ -414,7 +417,10 @@ impl TvPenalty {
         }
         edges.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
         let chain = edges.len() + 1 == nodes
-            && edges.iter().enumerate().all(|(i, e)| e.0 == i && e.1 == i + 1);
+            && edges
+                .iter()
+                .enumerate()
+                .all(|(i, e)| e.0 == i && e.1 == i + 1);
         Ok(Self {
             node_of_sample,
             nodes,

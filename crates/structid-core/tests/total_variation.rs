@@ -96,7 +96,9 @@ impl Dense {
     /// ∇ of the smooth part (1/L)·‖e(v)‖² with respect to the node values.
     fn gradient(&self, v: &DVector<f64>) -> DVector<f64> {
         let e = self.noise(v);
-        -(2.0 / self.len as f64) * self.s.transpose() * (self.tw.transpose() * (self.ti.transpose() * e))
+        -(2.0 / self.len as f64)
+            * self.s.transpose()
+            * (self.tw.transpose() * (self.ti.transpose() * e))
     }
 }
 
@@ -124,7 +126,9 @@ fn assert_kkt(dense: &Dense, v: &DVector<f64>, beta: f64) {
     let g = dense.gradient(v);
     let gmax = g.amax().max(beta);
     let mut s = 0.0;
-    let jump_scale = (1..v.len()).map(|i| (v[i] - v[i - 1]).abs()).fold(0.0, f64::max);
+    let jump_scale = (1..v.len())
+        .map(|i| (v[i] - v[i - 1]).abs())
+        .fold(0.0, f64::max);
     for i in 0..v.len() - 1 {
         s += g[i] / beta;
         assert!(s.abs() <= 1.0 + 1e-3, "|s_{i}| = {} > 1", s.abs());
@@ -137,14 +141,22 @@ fn assert_kkt(dense: &Dense, v: &DVector<f64>, beta: f64) {
         }
     }
     let total: f64 = g.iter().sum();
-    assert!(total.abs() < 1e-6 * gmax * v.len() as f64, "Σ∇f = {total:.3e}");
+    assert!(
+        total.abs() < 1e-6 * gmax * v.len() as f64,
+        "Σ∇f = {total:.3e}"
+    );
 }
 
 #[test]
 fn clarabel_estimate_satisfies_the_optimality_conditions() {
     for (seed, beta) in [(1, 0.01), (2, 0.1), (3, 0.001)] {
         let exp = experiment(120, seed, Excitation::White);
-        let id = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Clarabel)).unwrap();
+        let id = identify(
+            &exp.model,
+            &exp.data,
+            &settings(beta, SolverChoice::Clarabel),
+        )
+        .unwrap();
         assert_eq!(id.diagnostics.solver, "clarabel");
         assert!(id.diagnostics.feasibility_residual < 1e-7);
         let (dense, p) = Dense::new(&exp);
@@ -152,7 +164,11 @@ fn clarabel_estimate_satisfies_the_optimality_conditions() {
         assert_kkt(&dense, &v, beta);
         // The reported cost is J at the estimate.
         let j = dense.cost(&v, beta, &p);
-        assert!((j - id.cost.total).abs() < 1e-7 * j, "{j} vs {}", id.cost.total);
+        assert!(
+            (j - id.cost.total).abs() < 1e-7 * j,
+            "{j} vs {}",
+            id.cost.total
+        );
     }
 }
 
@@ -183,7 +199,11 @@ fn perturbing_the_estimate_along_feasible_directions_never_lowers_j() {
             for eps in [1e-4, 1e-3, 1e-2] {
                 for sign in [1.0, -1.0] {
                     let j = dense.cost(&(&v + sign * eps * &dv), beta, &p);
-                    assert!(j >= j0 - 1e-9 * j0, "{solver:?}: J dropped by {:.3e}", j0 - j);
+                    assert!(
+                        j >= j0 - 1e-9 * j0,
+                        "{solver:?}: J dropped by {:.3e}",
+                        j0 - j
+                    );
                 }
             }
         }
@@ -233,7 +253,13 @@ fn solvers_agree_with_coloured_noise_and_estimated_initial_state() {
             .beta(0.01)
             .solver(solver)
             .initial_state(InitialState::Estimate)
-            .admm(AdmmSettings::builder().tolerance(1e-9).max_iterations(200_000).build().unwrap())
+            .admm(
+                AdmmSettings::builder()
+                    .tolerance(1e-9)
+                    .max_iterations(200_000)
+                    .build()
+                    .unwrap(),
+            )
             .build()
             .unwrap()
     };
@@ -286,18 +312,37 @@ fn two_block_experiment(len: usize, seed: u64) -> Experiment {
 fn solvers_agree_on_two_outputs_with_a_graph_block() {
     let exp = two_block_experiment(150, 3);
     let a = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Admm)).unwrap();
-    let c = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Clarabel)).unwrap();
+    let c = identify(
+        &exp.model,
+        &exp.data,
+        &settings(0.01, SolverChoice::Clarabel),
+    )
+    .unwrap();
     assert_agree(&a, &c);
 }
 
 #[test]
 fn automatic_choice_is_by_size_and_reported() {
     let small = experiment(300, 1, Excitation::White);
-    let id = identify(&small.model, &small.data, &settings(0.01, SolverChoice::Auto)).unwrap();
+    let id = identify(
+        &small.model,
+        &small.data,
+        &settings(0.01, SolverChoice::Auto),
+    )
+    .unwrap();
     assert_eq!(id.diagnostics.solver, "clarabel");
     assert!(id.diagnostics.solver_reason.contains("automatic"));
-    let large = experiment(structid_core::identify::CONIC_AUTO_LIMIT + 1, 1, Excitation::White);
-    let id = identify(&large.model, &large.data, &settings(0.01, SolverChoice::Auto)).unwrap();
+    let large = experiment(
+        structid_core::identify::CONIC_AUTO_LIMIT + 1,
+        1,
+        Excitation::White,
+    );
+    let id = identify(
+        &large.model,
+        &large.data,
+        &settings(0.01, SolverChoice::Auto),
+    )
+    .unwrap();
     assert_eq!(id.diagnostics.solver, "admm");
 }
 
@@ -324,13 +369,22 @@ fn ties_share_one_value() {
 #[test]
 fn the_interpolant_is_piecewise_linear_through_the_estimate() {
     let exp = experiment(100, 2, Excitation::White);
-    let id = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Clarabel)).unwrap();
+    let id = identify(
+        &exp.model,
+        &exp.data,
+        &settings(0.01, SolverChoice::Clarabel),
+    )
+    .unwrap();
     let b = &id.blocks[0];
     let z = b.z.as_slice();
     for (k, w) in b.w_hat.iter().enumerate() {
         assert!((b.predict(&[z[k]]) - w).abs() < 1e-12);
     }
-    let (lo, hi) = z.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let (lo, hi) = z
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(*v), h.max(*v))
+        });
     let at = |x: f64| b.predict(&[x]);
     assert_eq!(at(lo - 10.0), at(lo));
     assert_eq!(at(hi + 10.0), at(hi));
@@ -385,14 +439,20 @@ fn iteration_limits_give_not_converged_errors() {
         .build()
         .unwrap();
     let err = identify(&exp.model, &exp.data, &conic).unwrap_err();
-    assert!(matches!(err, Error::NotConverged { ref solver, .. } if solver == "clarabel"), "{err}");
+    assert!(
+        matches!(err, Error::NotConverged { ref solver, .. } if solver == "clarabel"),
+        "{err}"
+    );
     let admm = IdentifySettings::builder()
         .solver(SolverChoice::Admm)
         .admm(AdmmSettings::builder().max_iterations(3).build().unwrap())
         .build()
         .unwrap();
     let err = identify(&exp.model, &exp.data, &admm).unwrap_err();
-    assert!(matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"), "{err}");
+    assert!(
+        matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -420,7 +480,12 @@ fn bad_parameters_and_mismatched_solvers_are_errors() {
         1,
     )
     .unwrap();
-    let err = identify(&gauss.model, &gauss.data, &settings(0.01, SolverChoice::Clarabel)).unwrap_err();
+    let err = identify(
+        &gauss.model,
+        &gauss.data,
+        &settings(0.01, SolverChoice::Clarabel),
+    )
+    .unwrap_err();
     assert!(matches!(err, Error::Unsupported(_)), "{err}");
 }
 
@@ -437,6 +502,25 @@ fn feasibility_holds_with_the_problem_operators() {
         lft.t_ye().apply(id.e_hat.as_slice(), &mut fe);
         let r = lft.residual(exp.data.u(), exp.data.y()).unwrap();
         let res: Vec<f64> = (0..80).map(|k| fit[k] + fe[k] - r.get(k, 0)).collect();
-        assert!(structid_core::metrics::rms(&res) < 1e-6 * structid_core::metrics::rms(r.as_slice()));
+        assert!(
+            structid_core::metrics::rms(&res) < 1e-6 * structid_core::metrics::rms(r.as_slice())
+        );
+    }
+}
+
+#[test]
+fn admm_with_default_settings_agrees_with_clarabel_at_two_thousand_samples() {
+    for excitation in [Excitation::White, Excitation::Sine { periods: 3.0 }] {
+        let exp = experiment(2000, 7, excitation);
+        let mk = |solver| {
+            IdentifySettings::builder()
+                .beta(0.01)
+                .solver(solver)
+                .build()
+                .unwrap()
+        };
+        let a = identify(&exp.model, &exp.data, &mk(SolverChoice::Admm)).unwrap();
+        let c = identify(&exp.model, &exp.data, &mk(SolverChoice::Clarabel)).unwrap();
+        assert_agree(&a, &c);
     }
 }

@@ -68,8 +68,8 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::{
-    Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, Interpolant,
-    GraphInterpolation, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
+    Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
+    Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
     NonlinearBlock, TotalVariation,
 };
 use structid_lti::{ContinuousStateSpace, Signal};
@@ -794,7 +794,9 @@ fn parse_dispersion(
                         Some(toml::Value::String(c)) if c == "inverse-distance" => {
                             Some(GraphInterpolation::InverseDistance)
                         }
-                        Some(toml::Value::String(c)) if c == "nearest" => Some(GraphInterpolation::Nearest),
+                        Some(toml::Value::String(c)) if c == "nearest" => {
+                            Some(GraphInterpolation::Nearest)
+                        }
                         Some(other) => {
                             return Err(err_at(
                                 line,
@@ -1529,7 +1531,9 @@ impl ModelFile {
                         parts.push(format!("neighbours = {k}"));
                     }
                     match interpolation {
-                        Some(GraphInterpolation::Nearest) => parts.push("interpolation = \"nearest\"".into()),
+                        Some(GraphInterpolation::Nearest) => {
+                            parts.push("interpolation = \"nearest\"".into())
+                        }
                         Some(GraphInterpolation::InverseDistance) => {
                             parts.push("interpolation = \"inverse-distance\"".into())
                         }

@@ -20,9 +20,16 @@
 //!
 //! Stopping follows Boyd et al. (2011, §3.3): primal residual ‖w − d‖ ≤ √N·ε_abs + ε_rel·max(‖w‖, ‖d‖)
 //! and dual residual ρ·‖d − d_prev‖ ≤ √N·ε_abs + ε_rel·ρ·‖u‖, with ε_rel = tolerance and ε_abs =
-//! tolerance × RMS(r), so the tolerance is unit-free. ρ starts from the ratio of the H₂ gains of the
-//! map and noise paths and is balanced (×2 or ÷2 when one residual exceeds ten times the other)
-//! during the first iterations. The returned ŵ is d (tied samples share their value exactly)
+//! tolerance × RMS(r), so the tolerance is unit-free.
+//!
+//! The penalty is ρ = √(λ_min·λ_max) of the w-step's curvature, read off the frequency
+//! responses: per frequency the curvature is (2/L)·eig(Gᴴ(H·Hᴴ)⁻¹G), with G the map paths and H
+//! the noise path. This is Giselsson and Boyd's optimal ρ for a strongly convex quadratic plus
+//! any convex term (IEEE TAC 2017), and with it the iteration count does not grow with L (14
+//! iterations from L = 2000 to 30 000 on the benchmark problem, against 240–2300 with residual
+//! balancing from a gain-ratio ρ). When H·Hᴴ is singular the gain ratio is used instead and ρ is
+//! balanced (×2 or ÷2 when one residual exceeds ten times the other) during the first
+//! iterations. The returned ŵ is d (tied samples share their value exactly)
 //! and ê is the least-squares noise that explains r − T_yw·ŵ; the diagnostics report the
 //! iterations and both residuals. Non-convergence is an error, never a silent result.
 
@@ -58,14 +65,15 @@ pub struct AdmmSettings {
 }
 
 impl Default for AdmmSettings {
-    /// Tolerance 1e-7, 20 000 iterations, automatic and adaptive ρ, over-relaxation 1.6.
+    /// Tolerance 1e-7, 20 000 iterations, ρ from the frequency responses without balancing
+    /// (see the module documentation), over-relaxation 1.6.
     fn default() -> Self {
         Self {
             tolerance: 1e-7,
             max_iterations: 20_000,
             rho: None,
             relaxation: 1.6,
-            adaptive: true,
+            adaptive: false,
         }
     }
 }
@@ -91,7 +99,9 @@ impl AdmmSettings {
     pub fn relaxation(&self) -> f64 {
         self.relaxation
     }
-    /// Whether ρ is balanced against the residuals.
+    /// Whether ρ is balanced against the residuals (off by default: the frequency-response ρ₀
+    /// is optimal for the quadratic part, and balancing was measured to multiply the iterations
+    /// by 20–150; it is switched on automatically when ρ₀ falls back to the gain heuristic).
     pub fn adaptive(&self) -> bool {
         self.adaptive
     }
@@ -188,7 +198,9 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let eps_abs = eps_rel * r_rms;
     let t_prepared = Instant::now();
 
-    let mut rho = opts.rho().unwrap_or_else(|| default_rho(&real, &w_cols, len));
+    let (rho0, optimal) = default_rho(&real, &w_cols, len);
+    let mut rho = opts.rho().unwrap_or(rho0);
+    let adaptive = opts.adaptive() || (opts.rho().is_none() && !optimal);
     let variances = |rho: f64| -> Vec<f64> {
         let mut v = vec![len as f64 / 2.0; nin];
         for &c in &w_cols {
@@ -240,7 +252,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         }
         smoother.smooth(r, &mean, &mut vhat)?;
         // d-step on the relaxed iterate, through node means.
-        let (mut w_norm2, mut d_norm2, mut u_norm2, mut pri2, mut dual2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut w_norm2, mut d_norm2, mut u_norm2, mut pri2, mut dual2) =
+            (0.0, 0.0, 0.0, 0.0, 0.0);
         for (i, p) in penalties.iter().enumerate() {
             let nodes = p.node_of_sample();
             target[i].iter_mut().for_each(|t| *t = 0.0);
@@ -291,7 +304,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             converged = true;
             break;
         }
-        if opts.adaptive() && iterations <= ADAPT_ITERATIONS {
+        if adaptive && iterations <= ADAPT_ITERATIONS {
             // Residual balancing on residuals relative to their tolerances.
             let (rp, rd) = (r_pri / eps_pri, r_dual / eps_dual);
             let factor = if rp > 10.0 * rd {
@@ -378,20 +391,66 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     })
 }
 
-/// ρ₀ = (2/L)·(‖T_yw‖₂/‖T_ye‖₂)², the curvature the noise term puts on w when the noise path
-/// has to explain a change in w (H₂ norms over the first 200 Markov parameters).
-fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> f64 {
-    let markov = real.ss.markov_parameters(200.min(len.max(1)));
-    let h2 = |cols: &mut dyn Iterator<Item = usize>| -> f64 {
-        let cols: Vec<usize> = cols.collect();
+/// ρ₀ = √(λ_min·λ_max) of the w-step's curvature (Giselsson & Boyd's optimal penalty for a
+/// strongly convex quadratic): per frequency the curvature is (2/L)·eig(Gᴴ(H·Hᴴ)⁻¹G) with G the
+/// map paths and H the noise path. Falls back to the H₂-gain ratio when H·Hᴴ is singular.
+fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) {
+    use nalgebra::{Complex, DMatrix as M};
+    let ss = &real.ss;
+    let (n, ne, ny) = (ss.order(), real.noise_inputs, ss.outputs());
+    let to_c = |m: &M<f64>| m.map(|v| Complex::new(v, 0.0));
+    let (a, b, c, d) = (to_c(ss.a()), to_c(ss.b()), to_c(ss.c()), to_c(ss.d()));
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut ok = ne > 0;
+    for i in 0..=256 {
+        if !ok {
+            break;
+        }
+        let om = std::f64::consts::PI * i as f64 / 256.0;
+        let z = Complex::new(om.cos(), om.sin());
+        let resp = if n > 0 {
+            let zi_a = M::<Complex<f64>>::identity(n, n) * z - &a;
+            match zi_a.lu().solve(&b) {
+                Some(x) => &d + &c * x,
+                None => {
+                    ok = false;
+                    break;
+                }
+            }
+        } else {
+            d.clone()
+        };
+        let h = resp.columns(0, ne).into_owned();
+        let g = M::from_fn(ny, w_cols.len(), |r, j| resp[(r, w_cols[j])]);
+        let hh = &h * h.adjoint();
+        let Some(hh_inv) = hh.try_inverse() else {
+            ok = false;
+            break;
+        };
+        let phi = g.adjoint() * hh_inv * &g;
+        let herm = (&phi + phi.adjoint()).map(|v| v.re * 0.5);
+        let eig = herm.symmetric_eigenvalues();
+        lo = lo.min(eig.min());
+        hi = hi.max(eig.max());
+    }
+    let scale = 2.0 / len.max(1) as f64;
+    if ok && lo > 0.0 && hi.is_finite() {
+        return (scale * (lo * hi).sqrt(), true);
+    }
+    let markov = ss.markov_parameters(200.min(len.max(1)));
+    let h2 = |cols: &[usize]| -> f64 {
         markov
             .iter()
-            .map(|h| cols.iter().map(|&c| h.column(c).norm_squared()).sum::<f64>())
+            .map(|h| {
+                cols.iter()
+                    .map(|&c| h.column(c).norm_squared())
+                    .sum::<f64>()
+            })
             .sum::<f64>()
     };
-    let gw = h2(&mut w_cols.iter().copied()) / w_cols.len().max(1) as f64;
-    let ge = h2(&mut (0..real.noise_inputs)) / real.noise_inputs.max(1) as f64;
+    let e_cols: Vec<usize> = (0..ne).collect();
+    let gw = h2(w_cols) / w_cols.len().max(1) as f64;
+    let ge = h2(&e_cols) / ne.max(1) as f64;
     let ratio = if ge > 0.0 && gw > 0.0 { gw / ge } else { 1.0 };
-    2.0 * ratio / len.max(1) as f64
+    (scale * ratio, false)
 }
-

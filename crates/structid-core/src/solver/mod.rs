@@ -11,10 +11,10 @@ use std::time::Instant;
 
 use structid_lti::Signal;
 
+use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::identify::{BlockEstimate, CostTerms, Timings};
 use crate::interpolant::Interpolant;
-use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::problem::{Problem, ProblemBlock};
 use crate::total_variation::TvPenalty;
 
@@ -237,7 +237,11 @@ pub(crate) fn finish_tv(
         assembled,
         cost,
         e_hat: Signal::new(ne, e_hat)?,
-        feasibility: if r2 > 0.0 { (res2 / r2).sqrt() } else { res2.sqrt() },
+        feasibility: if r2 > 0.0 {
+            (res2 / r2).sqrt()
+        } else {
+            res2.sqrt()
+        },
         dropped: dropped_idx,
         dropped_max,
         warnings,

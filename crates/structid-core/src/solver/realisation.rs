@@ -41,7 +41,12 @@ pub(crate) fn joint_realisation(problem: &Problem, solver: &str) -> Result<Reali
              with StateSpace operators"
         ))
     };
-    parts.push(problem.noise().as_state_space().ok_or_else(|| missing("T_ye"))?);
+    parts.push(
+        problem
+            .noise()
+            .as_state_space()
+            .ok_or_else(|| missing("T_ye"))?,
+    );
     let mut blocks: Vec<_> = problem.blocks().iter().collect();
     blocks.sort_by_key(|b| b.output);
     for b in blocks {
