@@ -211,7 +211,11 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     }
     let table = DataTable::read(&a.data)?;
     let data = mf.select_data(&table)?;
-    let needs_z = sigma.is_none() && mf.blocks.iter().any(|b| b.dispersion.sigma().is_none());
+    let needs_z = sigma.is_none()
+        && mf.blocks.iter().any(|b| {
+            b.dispersion.sigma().is_none()
+                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
+        });
     let z = if needs_z {
         Some(mf.z_signal(&data)?)
     } else {

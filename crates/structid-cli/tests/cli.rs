@@ -753,3 +753,162 @@ fn fourier_dispersion_and_initial_state_from_the_cli() {
     ]);
     assert!(e.contains("guess"), "{e}");
 }
+
+#[test]
+fn total_variation_from_the_model_file_and_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = example_model("friction.toml");
+    let u = dir.path().join("u.csv");
+    let data = dir.path().join("data.csv");
+    write_input(&u, 500, &["u"]);
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.1",
+        "--seed",
+        "3",
+    ]);
+    let identify = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "identify",
+            "--model",
+            p(&model),
+            "--data",
+            p(&data),
+            "--out",
+            p(&out),
+        ];
+        args.extend_from_slice(extra);
+        let o = ok(&args);
+        (read_json(&out.join("report.json")), o.stdout, out)
+    };
+    // kind = "tv" in the file: the automatic choice is the conic solver at this size, and the
+    // summary says so.
+    let (r, stdout, out) = identify(&["--beta", "0.003"], "tv");
+    assert_eq!(
+        r["diagnostics"]["solver"], "clarabel",
+        "{}",
+        r["diagnostics"]
+    );
+    assert!(stdout.contains("solver: clarabel (automatic"), "{stdout}");
+    assert!(
+        r["settings"]["blocks"][0]["dispersion"]
+            .as_str()
+            .unwrap()
+            .starts_with("tv")
+    );
+    assert_svg(&out.join("map_friction.svg"));
+    let tv_err = r["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap();
+    // --solver admm overrides the choice and agrees.
+    let (ra, stdout, _) = identify(&["--beta", "0.003", "--solver", "admm"], "admm");
+    assert_eq!(ra["diagnostics"]["solver"], "admm");
+    assert!(stdout.contains("iterations"), "{stdout}");
+    let admm_err = ra["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap();
+    assert!(
+        (admm_err - tv_err).abs() < 1e-4 * tv_err.max(1e-3),
+        "{admm_err} vs {tv_err}"
+    );
+    // --dispersion gaussian overrides the file; on this jump the error is larger.
+    let (rg, _, _) = identify(&["--dispersion", "gaussian", "--beta", "0.0003"], "gauss");
+    assert!(
+        rg["settings"]["blocks"][0]["dispersion"]
+            .as_str()
+            .unwrap()
+            .starts_with("gaussian")
+    );
+    let g_err = rg["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap();
+    assert!(tv_err < g_err, "tv {tv_err} vs gaussian {g_err}");
+    // And back: --dispersion tv on the Gaussian Hammerstein example.
+    let hdata = dir.path().join("h.csv");
+    let hmodel = example_model("hammerstein.toml");
+    ok(&[
+        "simulate",
+        "--model",
+        p(&hmodel),
+        "--input",
+        p(&u),
+        "--out",
+        p(&hdata),
+        "--noise-std",
+        "0.05",
+    ]);
+    let hout = dir.path().join("h");
+    ok(&[
+        "identify",
+        "--model",
+        p(&hmodel),
+        "--data",
+        p(&hdata),
+        "--out",
+        p(&hout),
+        "--dispersion",
+        "tv",
+        "--tolerance",
+        "1e-9",
+    ]);
+    assert_eq!(
+        read_json(&hout.join("report.json"))["diagnostics"]["solver"],
+        "clarabel"
+    );
+    // Bad combinations are input errors; an iteration limit that is too small is a runtime error.
+    let x = dir.path().join("x");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--out",
+        p(&x),
+        "--neighbours",
+        "0",
+    ]);
+    assert!(e.contains("--neighbours"), "{e}");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--out",
+        p(&x),
+        "--solver",
+        "exact",
+    ]);
+    assert!(e.contains("clarabel or admm"), "{e}");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&hmodel),
+        "--data",
+        p(&hdata),
+        "--out",
+        p(&x),
+        "--neighbours",
+        "4",
+    ]);
+    assert!(e.contains("total-variation"), "{e}");
+    let o = run(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--out",
+        p(&x),
+        "--solver",
+        "admm",
+        "--max-iterations",
+        "2",
+    ]);
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    assert!(o.stderr.contains("did not converge"), "{}", o.stderr);
+    assert!(!o.stderr.contains("panicked"));
+}

@@ -144,7 +144,10 @@ impl IoError {
 /// Whether a `structid-core` error is caused by the user's input (see [`IoError::is_input_error`]).
 pub fn core_is_input_error(e: &structid_core::Error) -> bool {
     use structid_core::Error as E;
-    !matches!(e, E::TooLarge { .. } | E::Numerical(_))
+    !matches!(
+        e,
+        E::TooLarge { .. } | E::Numerical(_) | E::NotConverged { .. }
+    )
 }
 
 fn source_name(path: Option<&Path>) -> String {

@@ -467,3 +467,49 @@ fn low_rank_gaussian_dispersion_parses_builds_and_round_trips() {
     let e = err(&bad);
     assert!(e.contains("tolerance") && e.contains("line"), "{e}");
 }
+
+#[test]
+fn total_variation_dispersion_parses_builds_and_round_trips() {
+    for (written, expected) in [
+        (
+            r#"dispersion = { kind = "tv", neighbours = 5, interpolation = "nearest" }"#,
+            DispersionSpec::TotalVariation {
+                neighbours: Some(5),
+                interpolation: Some(GraphInterpolation::Nearest),
+            },
+        ),
+        (
+            r#"dispersion = "tv""#,
+            DispersionSpec::TotalVariation {
+                neighbours: None,
+                interpolation: None,
+            },
+        ),
+    ] {
+        let text = CANONICAL.replace(
+            r#"dispersion = { kind = "gaussian", sigma = 0.4 }"#,
+            written,
+        );
+        let m = ModelFile::parse(&text, None).unwrap();
+        assert_eq!(m.blocks[0].dispersion, expected);
+        assert_eq!(m.blocks[0].dispersion.kind(), "tv");
+        assert_eq!(m.blocks[0].dispersion.sigma(), None);
+        // No σ and no data are needed to build it.
+        let d = m.blocks[0].dispersion.build(None, None).unwrap();
+        assert!(d.describe().starts_with("tv"), "{}", d.describe());
+        let back = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+        assert_eq!(back.blocks, m.blocks);
+    }
+    for (bad, needle) in [
+        (r#"{ kind = "tv", neighbours = 0 }"#, "neighbours"),
+        (
+            r#"{ kind = "tv", interpolation = "cubic" }"#,
+            "interpolation",
+        ),
+        (r#"{ kind = "tv", sigma = 0.3 }"#, "unknown key `sigma`"),
+    ] {
+        let t = CANONICAL.replace(r#"{ kind = "gaussian", sigma = 0.4 }"#, bad);
+        let e = err(&t);
+        assert!(e.contains(needle) && e.contains("line"), "{bad}: {e}");
+    }
+}
