@@ -415,7 +415,7 @@ impl TvPenalty {
                 *e = (e.1, e.0, e.2);
             }
         }
-        edges.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+        edges.sort_by_key(|e| (e.0, e.1));
         let chain = edges.len() + 1 == nodes
             && edges
                 .iter()
