@@ -859,56 +859,32 @@ fn total_variation_from_the_model_file_and_the_command_line() {
     );
     // Bad combinations are input errors; an iteration limit that is too small is a runtime error.
     let x = dir.path().join("x");
-    let e = input_error(&[
-        "identify",
-        "--model",
-        p(&model),
-        "--data",
-        p(&data),
-        "--out",
-        p(&x),
-        "--neighbours",
-        "0",
-    ]);
-    assert!(e.contains("--neighbours"), "{e}");
-    let e = input_error(&[
-        "identify",
-        "--model",
-        p(&model),
-        "--data",
-        p(&data),
-        "--out",
-        p(&x),
-        "--solver",
-        "exact",
-    ]);
-    assert!(e.contains("clarabel or admm"), "{e}");
-    let e = input_error(&[
-        "identify",
-        "--model",
-        p(&hmodel),
-        "--data",
-        p(&hdata),
-        "--out",
-        p(&x),
-        "--neighbours",
-        "4",
-    ]);
-    assert!(e.contains("total-variation"), "{e}");
-    let o = run(&[
-        "identify",
-        "--model",
-        p(&model),
-        "--data",
-        p(&data),
-        "--out",
-        p(&x),
-        "--solver",
-        "admm",
-        "--max-iterations",
-        "2",
-    ]);
+    let args = |m: &Path, d: &Path, extra: &[&'static str]| -> Vec<String> {
+        let mut a: Vec<String> = ["identify", "--model", p(m), "--data", p(d), "--out", p(&x)]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    for (m, d, extra, needle) in [
+        (&model, &data, ["--neighbours", "0"], "--neighbours"),
+        (&model, &data, ["--solver", "exact"], "clarabel or admm"),
+        (&hmodel, &hdata, ["--neighbours", "4"], "total-variation"),
+    ] {
+        let e = input_error(&refs(&args(m, d, &extra)));
+        assert!(e.contains(needle), "{extra:?}: {e}");
+    }
+    let o = run(&refs(&args(
+        &model,
+        &data,
+        &["--solver", "admm", "--max-iterations", "2"],
+    )));
     assert_eq!(o.code, 1, "{}", o.stderr);
     assert!(o.stderr.contains("did not converge"), "{}", o.stderr);
     assert!(!o.stderr.contains("panicked"));
+}
+
+fn refs(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
 }

@@ -28,9 +28,14 @@ fn experiment(len: usize, seed: u64, excitation: Excitation) -> Experiment {
 }
 
 fn settings(beta: f64, solver: SolverChoice) -> IdentifySettings {
+    settings_with(beta, solver, InitialState::Zero)
+}
+
+fn settings_with(beta: f64, solver: SolverChoice, initial: InitialState) -> IdentifySettings {
     IdentifySettings::builder()
         .beta(beta)
         .solver(solver)
+        .initial_state(initial)
         .admm(
             AdmmSettings::builder()
                 .tolerance(1e-9)
@@ -248,21 +253,7 @@ fn solvers_agree_with_coloured_noise_and_estimated_initial_state() {
     let (yfree, _) = free.simulate_from(&x0, &Signal::zeros(200, 0)).unwrap();
     let y = Signal::from_fn(200, 1, |k, _| exp.data.y().get(k, 0) + yfree.get(k, 0));
     let data = Data::new(exp.data.u().clone(), y).unwrap();
-    let mk = |solver| {
-        IdentifySettings::builder()
-            .beta(0.01)
-            .solver(solver)
-            .initial_state(InitialState::Estimate)
-            .admm(
-                AdmmSettings::builder()
-                    .tolerance(1e-9)
-                    .max_iterations(200_000)
-                    .build()
-                    .unwrap(),
-            )
-            .build()
-            .unwrap()
-    };
+    let mk = |solver| settings_with(0.01, solver, InitialState::Estimate);
     let a = identify(&exp.model, &data, &mk(SolverChoice::Admm)).unwrap();
     let c = identify(&exp.model, &data, &mk(SolverChoice::Clarabel)).unwrap();
     assert_agree(&a, &c);

@@ -139,14 +139,7 @@ impl AdmmSettingsBuilder {
     }
     /// Validates.
     pub fn build(self) -> Result<AdmmSettings> {
-        positive_finite("admm tolerance", self.0.tolerance)?;
-        if self.0.max_iterations == 0 {
-            return Err(Error::InvalidParameter {
-                name: "admm max_iterations".into(),
-                value: 0.0,
-                reason: "must be at least 1".into(),
-            });
-        }
+        super::check_iterative(NAME, self.0.tolerance, self.0.max_iterations)?;
         if let Some(rho) = self.0.rho {
             positive_finite("admm rho", rho)?;
         }

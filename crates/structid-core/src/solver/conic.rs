@@ -99,14 +99,7 @@ impl ConicSettingsBuilder {
     }
     /// Validates.
     pub fn build(self) -> Result<ConicSettings> {
-        positive_finite("conic tolerance", self.0.tolerance)?;
-        if self.0.max_iterations == 0 {
-            return Err(Error::InvalidParameter {
-                name: "conic max_iterations".into(),
-                value: 0.0,
-                reason: "must be at least 1".into(),
-            });
-        }
+        super::check_iterative(NAME, self.0.tolerance, self.0.max_iterations as usize)?;
         if let Some(t) = self.0.time_limit {
             positive_finite("conic time_limit", t)?;
         }

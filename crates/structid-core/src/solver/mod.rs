@@ -247,3 +247,16 @@ pub(crate) fn finish_tv(
         warnings,
     })
 }
+
+/// Validates the tolerance and iteration limit shared by the iterative solvers' settings.
+pub(crate) fn check_iterative(solver: &str, tolerance: f64, max_iterations: usize) -> Result<()> {
+    crate::error::positive_finite(&format!("{solver} tolerance"), tolerance)?;
+    if max_iterations == 0 {
+        return Err(Error::InvalidParameter {
+            name: format!("{solver} max_iterations"),
+            value: 0.0,
+            reason: "must be at least 1".into(),
+        });
+    }
+    Ok(())
+}
