@@ -369,54 +369,76 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
         SolverChoice::Features => (solver::features::solve(problem, settings)?, None),
         SolverChoice::Clarabel => (solver::conic::solve(problem, settings)?, None),
         SolverChoice::Admm => (solver::admm::solve(problem, settings)?, None),
-        SolverChoice::Auto if solver::has_total_variation(problem) => {
-            let size = problem.len() * problem.outputs();
-            if size <= CONIC_AUTO_LIMIT {
-                let reason = format!(
-                    "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
-                );
-                (solver::conic::solve(problem, settings)?, Some(reason))
-            } else {
-                let reason = format!(
-                    "automatic: total variation with L·n_y = {size} > {CONIC_AUTO_LIMIT}, ADMM (linear in L)"
-                );
-                (solver::admm::solve(problem, settings)?, Some(reason))
-            }
-        }
         SolverChoice::Auto => {
-            // The exact solve unless its M would not fit the memory budget and every block has
-            // finitely many features.
-            let noise = problem.noise();
-            let nx = problem.free_response().map_or(0, |o| o.ncols());
-            let need = solver::exact::peak_memory_bytes(
-                problem.len(),
-                problem.outputs(),
-                noise.inputs(),
-                noise.order() > 0,
-                nx,
-            );
-            let featured = solver::features::unsupported_reason(problem).is_none()
-                && problem.blocks().iter().all(|b| {
-                    matches!(b.dispersion.penalty(&b.z), Ok(crate::Penalty::Quadratic(q)) if q.features().is_some())
-                });
-            if need > settings.effective_memory_limit() && featured {
-                let mut id = solver::features::solve(problem, settings)?;
-                id.diagnostics.warnings.push(format!(
-                    "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
-                    need >> 20
-                ));
-                let reason = "automatic: the exact solver's memory exceeds the budget and every block has finite features".to_string();
-                (id, Some(reason))
+            // Build the penalties once: the kind decides the family of solvers.
+            let t_start = std::time::Instant::now();
+            let penalties = solver::penalties(problem)?;
+            if penalties
+                .iter()
+                .any(|p| matches!(p, crate::Penalty::TotalVariation(_)))
+            {
+                let tv = solver::tv_from_penalties(problem, penalties, "automatically chosen")?;
+                let size = problem.len() * problem.outputs();
+                if size <= CONIC_AUTO_LIMIT {
+                    let reason = format!(
+                        "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
+                    );
+                    (
+                        solver::conic::solve_with(problem, settings, tv, t_start)?,
+                        Some(reason),
+                    )
+                } else {
+                    let reason = format!(
+                        "automatic: total variation with L·n_y = {size} > {CONIC_AUTO_LIMIT}, ADMM (linear in L)"
+                    );
+                    (
+                        solver::admm::solve_with(problem, settings, tv, t_start)?,
+                        Some(reason),
+                    )
+                }
             } else {
-                let reason =
-                    "automatic: quadratic dispersions within the memory budget, the exact solver"
-                        .to_string();
-                (solver::exact::solve(problem, settings)?, Some(reason))
+                auto_quadratic(problem, settings, &penalties)?
             }
         }
     };
     id.diagnostics.solver_reason = reason.unwrap_or_else(|| "requested".into());
     Ok(id)
+}
+
+/// The automatic choice among the quadratic solvers.
+fn auto_quadratic(
+    problem: &Problem,
+    settings: &IdentifySettings,
+    penalties: &[crate::Penalty],
+) -> Result<(Identification, Option<String>)> {
+    // The exact solve unless its M would not fit the memory budget and every block has
+    // finitely many features.
+    let noise = problem.noise();
+    let nx = problem.free_response().map_or(0, |o| o.ncols());
+    let need = solver::exact::peak_memory_bytes(
+        problem.len(),
+        problem.outputs(),
+        noise.inputs(),
+        noise.order() > 0,
+        nx,
+    );
+    let featured = solver::features::unsupported_reason(problem).is_none()
+        && penalties
+            .iter()
+            .all(|p| matches!(p, crate::Penalty::Quadratic(q) if q.features().is_some()));
+    if need > settings.effective_memory_limit() && featured {
+        let mut id = solver::features::solve(problem, settings)?;
+        id.diagnostics.warnings.push(format!(
+            "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
+            need >> 20
+        ));
+        let reason = "automatic: the exact solver's memory exceeds the budget and every block has finite features".to_string();
+        Ok((id, Some(reason)))
+    } else {
+        let reason = "automatic: quadratic dispersions within the memory budget, the exact solver"
+            .to_string();
+        Ok((solver::exact::solve(problem, settings)?, Some(reason)))
+    }
 }
 
 /// Largest L·n_y for which the automatic choice uses the conic solver for total variation.

@@ -43,6 +43,7 @@ use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples};
 use crate::solver::{finish_tv, tv_penalties};
+use crate::total_variation::TvPenalty;
 
 /// The solver's name in reports.
 pub const NAME: &str = "admm";
@@ -168,9 +169,19 @@ enum Prox {
 /// Solves a problem whose blocks all have total-variation dispersions; see the module docs.
 pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     let t_start = Instant::now();
+    let penalties = tv_penalties(problem, NAME)?;
+    solve_with(problem, settings, penalties, t_start)
+}
+
+/// [`solve`] with the blocks' penalties already built.
+pub(crate) fn solve_with(
+    problem: &Problem,
+    settings: &IdentifySettings,
+    penalties: Vec<TvPenalty>,
+    t_start: Instant,
+) -> Result<Identification> {
     let beta = settings.beta();
     let opts = settings.admm();
-    let penalties = tv_penalties(problem, NAME)?;
     let real = joint_realisation(problem, NAME)?;
     let dropped = unreachable_samples(&real, problem.len());
     let (len, ny) = (problem.len(), problem.outputs());

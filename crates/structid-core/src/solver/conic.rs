@@ -30,6 +30,7 @@ use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
 use crate::solver::realisation::{joint_realisation, unreachable_samples};
 use crate::solver::{finish_tv, tv_penalties};
+use crate::total_variation::TvPenalty;
 
 /// Settings of the conic (Clarabel) solver.
 ///
@@ -132,9 +133,19 @@ impl Layout {
 /// Solves a problem whose blocks all have total-variation dispersions; see the module docs.
 pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     let t_start = Instant::now();
+    let penalties = tv_penalties(problem, NAME)?;
+    solve_with(problem, settings, penalties, t_start)
+}
+
+/// [`solve`] with the blocks' penalties already built.
+pub(crate) fn solve_with(
+    problem: &Problem,
+    settings: &IdentifySettings,
+    penalties: Vec<TvPenalty>,
+    t_start: Instant,
+) -> Result<Identification> {
     let beta = settings.beta();
     let conic = settings.conic();
-    let penalties = tv_penalties(problem, NAME)?;
     let real = joint_realisation(problem, NAME)?;
     let (len, ny) = (problem.len(), problem.outputs());
     let ss = &real.ss;

@@ -126,10 +126,29 @@ pub(crate) fn quadratic_penalty(
 /// The total-variation penalties of every block, or an error when a block is quadratic (mixing
 /// kinds in one model is not supported by the conic and ADMM solvers).
 pub(crate) fn tv_penalties(problem: &Problem, solver: &str) -> Result<Vec<TvPenalty>> {
+    tv_from_penalties(problem, penalties(problem)?, solver)
+}
+
+/// Every block's penalty, in block order.
+pub(crate) fn penalties(problem: &Problem) -> Result<Vec<Penalty>> {
     problem
         .blocks()
         .iter()
-        .map(|b| match b.dispersion.penalty(&b.z)? {
+        .map(|b| b.dispersion.penalty(&b.z))
+        .collect()
+}
+
+/// [`tv_penalties`] from penalties already built (so the automatic choice builds them once).
+pub(crate) fn tv_from_penalties(
+    problem: &Problem,
+    penalties: Vec<Penalty>,
+    solver: &str,
+) -> Result<Vec<TvPenalty>> {
+    problem
+        .blocks()
+        .iter()
+        .zip(penalties)
+        .map(|(b, pen)| match pen {
             Penalty::TotalVariation(p) if p.len() == problem.len() => Ok(p),
             Penalty::TotalVariation(p) => Err(Error::DimensionMismatch {
                 what: format!("samples of the total-variation penalty of block `{}`", b.name),
@@ -145,14 +164,6 @@ pub(crate) fn tv_penalties(problem: &Problem, solver: &str) -> Result<Vec<TvPena
             ))),
         })
         .collect()
-}
-
-/// Which kind of penalty the problem's blocks have, for the automatic solver choice.
-pub(crate) fn has_total_variation(problem: &Problem) -> bool {
-    problem
-        .blocks()
-        .iter()
-        .any(|b| matches!(b.dispersion.penalty(&b.z), Ok(Penalty::TotalVariation(_))))
 }
 
 /// What the total-variation solvers derive the same way from node values, ê and x̂₀.
