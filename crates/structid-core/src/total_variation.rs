@@ -32,6 +32,22 @@
 //! sample → node map, the weighted edges and the interpolation rule. Any other graph (weights by
 //! distance, a user's own neighbourhoods) is a [`TvPenalty`] too, and runs through the same
 //! solvers: the conic solver (Clarabel) and ADMM, see [`crate::solver`].
+//!
+//! # Example
+//! ```
+//! use std::sync::Arc;
+//! use structid_core::scenarios::{hammerstein_map, Excitation};
+//! use structid_core::{identify, IdentifySettings, TotalVariation};
+//! // A relay behind a 2nd-order block, 300 samples, noise std 0.1.
+//! let relay = |z: f64| if z >= 0.3 { 1.0 } else { -0.5 };
+//! let exp = hammerstein_map(300, 2, 0.1, &relay, Excitation::White, Arc::new(TotalVariation::new()), 1)
+//!     .unwrap();
+//! let settings = IdentifySettings::builder().beta(0.003).build().unwrap();
+//! let id = identify(&exp.model, &exp.data, &settings).unwrap();
+//! assert_eq!(id.diagnostics.solver, "clarabel"); // chosen automatically at this size
+//! let n = &id.blocks[0];
+//! assert!((n.predict(&[-1.0]) + 0.5).abs() < 0.1 && (n.predict(&[1.0]) - 1.0).abs() < 0.1);
+//! ```
 
 use std::fmt;
 use std::sync::Arc;
