@@ -25,8 +25,9 @@ pub enum SolverChoice {
     /// The feature-space solve, linear in L, for dispersions with finitely many features
     /// (e.g. [`crate::FourierDispersion`]).
     Features,
-    /// The conic program for total-variation dispersions, solved by the interior-point solver
-    /// Clarabel ([`crate::solver::conic`]): exact, super-linear in L.
+    /// The conic program, solved by the interior-point solver Clarabel
+    /// ([`crate::solver::conic`]): exact; sparse for total variation, dense in L for quadratic
+    /// blocks, so the one solver for models that mix the two.
     Clarabel,
     /// ADMM for total-variation dispersions ([`crate::solver::admm`]): a Kalman smoother and an
     /// exact proximal step per iteration, linear in L.
@@ -373,21 +374,30 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
             // Build the penalties once: the kind decides the family of solvers.
             let t_start = std::time::Instant::now();
             let penalties = solver::penalties(problem)?;
-            if penalties
+            let tv_blocks = penalties
                 .iter()
-                .any(|p| matches!(p, crate::Penalty::TotalVariation(_)))
-            {
-                let tv = solver::tv_from_penalties(problem, penalties, "automatically chosen")?;
-                let size = problem.len() * problem.outputs();
+                .filter(|p| matches!(p, crate::Penalty::TotalVariation(_)))
+                .count();
+            let size = problem.len() * problem.outputs();
+            if tv_blocks > 0 && tv_blocks < penalties.len() {
+                let reason = "automatic: quadratic and total-variation dispersions together, which only the \
+                              conic solver handles"
+                    .to_string();
+                (
+                    solver::conic::solve_with(problem, settings, penalties, t_start)?,
+                    Some(reason),
+                )
+            } else if tv_blocks > 0 {
                 if size <= CONIC_AUTO_LIMIT {
                     let reason = format!(
                         "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
                     );
                     (
-                        solver::conic::solve_with(problem, settings, tv, t_start)?,
+                        solver::conic::solve_with(problem, settings, penalties, t_start)?,
                         Some(reason),
                     )
                 } else {
+                    let tv = solver::tv_from_penalties(problem, penalties, "admm")?;
                     let reason = format!(
                         "automatic: total variation with L·n_y = {size} > {CONIC_AUTO_LIMIT}, ADMM (linear in L)"
                     );

@@ -460,7 +460,7 @@ fn bad_parameters_and_mismatched_solvers_are_errors() {
         assert!(matches!(err, Error::Unsupported(_)), "{err}");
         assert!(err.to_string().contains("clarabel or admm"), "{err}");
     }
-    // A quadratic block cannot go through the total-variation solvers.
+    // A quadratic block cannot go through ADMM; the error points to clarabel.
     let gauss = hammerstein_map(
         50,
         2,
@@ -474,10 +474,145 @@ fn bad_parameters_and_mismatched_solvers_are_errors() {
     let err = identify(
         &gauss.model,
         &gauss.data,
-        &settings(0.01, SolverChoice::Clarabel),
+        &settings(0.01, SolverChoice::Admm),
     )
     .unwrap_err();
     assert!(matches!(err, Error::Unsupported(_)), "{err}");
+    assert!(err.to_string().contains("clarabel"), "{err}");
+}
+
+#[test]
+fn clarabel_equals_the_exact_solver_on_a_gaussian_model() {
+    // Two independent routes to the same minimiser: the dual solve with M and the conic
+    // program with w = Kα.
+    let gauss = hammerstein_map(
+        150,
+        2,
+        0.1,
+        &f64::tanh,
+        Excitation::White,
+        Arc::new(structid_core::KernelDispersion::gaussian(0.4).unwrap()),
+        3,
+    )
+    .unwrap();
+    let c = identify(
+        &gauss.model,
+        &gauss.data,
+        &settings(0.01, SolverChoice::Clarabel),
+    )
+    .unwrap();
+    let x = identify(
+        &gauss.model,
+        &gauss.data,
+        &settings(0.01, SolverChoice::Exact),
+    )
+    .unwrap();
+    let dw = rel_diff(c.w_hat.as_slice(), x.w_hat.as_slice());
+    let dj = (c.cost.total - x.cost.total).abs() / x.cost.total;
+    assert!(dw < 1e-5, "relative ŵ difference {dw:.3e}");
+    assert!(dj < 1e-6, "relative J difference {dj:.3e}");
+    // The interpolants agree between the samples too.
+    for z in [-1.5, -0.3, 0.2, 1.1] {
+        let (a, b) = (c.blocks[0].predict(&[z]), x.blocks[0].predict(&[z]));
+        assert!((a - b).abs() < 1e-4, "at {z}: {a} vs {b}");
+    }
+}
+
+/// y = G₁·tanh(u₁) + G₂·relay(u₂) + e: a Gaussian block and a total-variation block.
+fn mixed_experiment(len: usize, seed: u64) -> Experiment {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, 0.8);
+    let lft = Lft::new(LftMatrices {
+        a: g.a().clone(),
+        bu: DMatrix::zeros(2, 2),
+        be: DMatrix::zeros(2, 1),
+        bw: g.b().clone(),
+        cy: g.c().clone(),
+        dyu: DMatrix::zeros(1, 2),
+        dye: DMatrix::identity(1, 1),
+        dyw: g.d().clone(),
+        cz: DMatrix::zeros(2, 2),
+        dzu: DMatrix::identity(2, 2),
+        dze: DMatrix::zeros(2, 1),
+        dzw: DMatrix::zeros(2, 2),
+    })
+    .unwrap();
+    let blocks = vec![
+        NonlinearBlock::new(
+            "smooth",
+            vec![0],
+            0,
+            Arc::new(structid_core::KernelDispersion::gaussian(0.4).unwrap()),
+        ),
+        NonlinearBlock::new("relay", vec![1], 1, tv()),
+    ];
+    let model = Model::new(lft, blocks).unwrap();
+    let u = structid_core::paper::gaussian_noise(len, 2, 1.0, seed + 1);
+    let noise = structid_core::paper::gaussian_noise(len, 1, 0.05, seed + 2);
+    let f = |z: &[f64]| z[0].tanh();
+    let h = |z: &[f64]| relay(z[0]);
+    Experiment::simulate(model, &[&f, &h], u, noise).unwrap()
+}
+
+#[test]
+fn mixed_gaussian_and_total_variation_blocks_are_optimal() {
+    let (len, beta) = (80, 0.01);
+    let exp = mixed_experiment(len, 5);
+    let id = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Auto)).unwrap();
+    assert_eq!(id.diagnostics.solver, "clarabel");
+    assert!(
+        id.diagnostics.solver_reason.contains("together"),
+        "{}",
+        id.diagnostics.solver_reason
+    );
+    assert!(id.diagnostics.feasibility_residual < 1e-7);
+    // Dense pieces: e = T_ye⁻¹(r − T_yw·w), with w₁ = ŵ₁ + K·δα (the range of K, where
+    // D₁(ŵ₁ + Kδα) = D₁(ŵ₁) + 2δαᵀŵ₁ + δαᵀKδα) and w₂ = S·(v + δv).
+    let lft = exp.model.lft();
+    let ti = lft.t_ye().toeplitz_dense(len).try_inverse().unwrap();
+    // Time-major columns: w₁ and w₂ of sample k are columns 2k and 2k + 1.
+    let tw = lft.t_yw().toeplitz_dense(len);
+    assert_eq!(tw.ncols(), 2 * len);
+    let r =
+        DVector::from_column_slice(lft.residual(exp.data.u(), exp.data.y()).unwrap().as_slice());
+    let z1 = exp.data.u().channel(0);
+    let kern = structid_core::GaussianKernel::new(0.4).unwrap();
+    let k = DMatrix::from_fn(len, len, |i, j| {
+        structid_core::Kernel::eval(&kern, &[z1[i]], &[z1[j]])
+    });
+    let Penalty::TotalVariation(p) =
+        TotalVariation::new().penalty_for(&exp.data.u().select_channels(&[1]))
+    else {
+        unreachable!()
+    };
+    let w1 = DVector::from_vec(id.blocks[0].w_hat.clone());
+    let mut v = DVector::zeros(p.nodes());
+    for (kk, &g) in p.node_of_sample().iter().enumerate() {
+        v[g] = id.blocks[1].w_hat[kk];
+    }
+    let noise_cost = |w1: &DVector<f64>, v: &DVector<f64>| {
+        let mut w = DVector::zeros(2 * len);
+        for kk in 0..len {
+            w[2 * kk] = w1[kk];
+            w[2 * kk + 1] = v[p.node_of_sample()[kk]];
+        }
+        (&ti * (&r - &tw * w)).norm_squared() / len as f64
+    };
+    let j0 = noise_cost(&w1, &v);
+    let mut rng = structid_lti::testing::SplitMix64::new(4);
+    for _ in 0..100 {
+        let da = DVector::from_fn(len, |_, _| rng.uniform() - 0.5);
+        let dv = DVector::from_fn(p.nodes(), |_, _| rng.uniform() - 0.5);
+        for eps in [1e-3, 1e-2, 1e-1] {
+            for sign in [1.0, -1.0] {
+                let e = sign * eps;
+                let kd = &k * &da;
+                let dj = noise_cost(&(&w1 + e * &kd), &(&v + e * &dv)) - j0
+                    + beta * (2.0 * e * da.dot(&w1) + e * e * da.dot(&kd))
+                    + beta * (p.value((&v + e * &dv).as_slice()) - p.value(v.as_slice()));
+                assert!(dj >= -1e-8 * j0.max(1e-3), "J dropped by {:.3e}", -dj);
+            }
+        }
+    }
 }
 
 #[test]

@@ -42,7 +42,7 @@ use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples};
-use crate::solver::{finish_tv, tv_penalties};
+use crate::solver::{finish_tv, tv_parts, tv_penalties};
 use crate::total_variation::TvPenalty;
 
 /// The solver's name in reports.
@@ -356,7 +356,8 @@ pub(crate) fn solve_with(
         .flat_map(|k| vhat.sample(k)[..ne].to_vec())
         .collect();
     let x0 = report.initial_state;
-    let out = finish_tv(problem, &penalties, d, e_hat, x0.as_deref(), &dropped, beta)?;
+    let parts = tv_parts(&penalties, d);
+    let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
     let mut warnings = out.warnings;
     if rho_changes > 0 {
         warnings.push(format!(

@@ -1,5 +1,5 @@
-//! The exact solver for total-variation dispersions: a sparse conic (linear–quadratic) program
-//! solved by the interior-point solver Clarabel.
+//! The exact solver for total-variation dispersions, and for models that mix them with quadratic
+//! ones: a conic (linear–quadratic) program solved by the interior-point solver Clarabel.
 //!
 //! With the states x_k of the realisation of [T_ye, T_yw] as variables, the node values v_i of
 //! each block (w_k^\[i\] = v_i,node(k)) and one epigraph variable t per graph edge:
@@ -15,6 +15,12 @@
 //! Every constraint row touches O(n + n_e + n_w) variables, so the program has O(L·n) non-zeros
 //! and no dense Toeplitz rows. Clarabel's objective is ½·xᵀPx + qᵀx, so P = (2/L)·I on e.
 //!
+//! A quadratic block (any kernel) enters with its sample values w and dual coefficients α:
+//! the rows w = K·α and the term β·αᵀKα (P = 2β·K on α), which is wᵀK⁻¹w without K⁻¹. These are
+//! dense (L² entries), so mixed models are for records up to a few thousand samples; the memory
+//! is estimated first and a problem that would not fit is refused. A purely quadratic model
+//! solved this way equals the exact solver's estimate (tested), which cross-checks both.
+//!
 //! The interior-point method's sparse LDLᵀ factorisation couples the time chain (the dynamics)
 //! with the z-sorted chain (the edges); with a white-noise input the z order is a random
 //! permutation of time and fill-in grows super-linearly (see `BENCHMARKS.md`). Long records use
@@ -25,11 +31,12 @@ use std::time::Instant;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result, positive_finite};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
 use crate::solver::realisation::{joint_realisation, unreachable_samples};
-use crate::solver::{finish_tv, tv_penalties};
+use crate::solver::{BlockPart, finish_tv, penalties};
 use crate::total_variation::TvPenalty;
 
 /// Settings of the conic (Clarabel) solver.
@@ -116,8 +123,6 @@ struct Layout {
     n: usize,
     ne: usize,
     e0: usize,
-    v0: Vec<usize>,
-    t0: Vec<usize>,
     total: usize,
 }
 
@@ -130,10 +135,47 @@ impl Layout {
     }
 }
 
-/// Solves a problem whose blocks all have total-variation dispersions; see the module docs.
+/// A block's unknowns in the conic program.
+enum BlockVars {
+    /// Node values v (G of them) from column `v0` and one epigraph t per edge from `t0`.
+    Tv {
+        pen: TvPenalty,
+        v0: usize,
+        t0: usize,
+    },
+    /// Sample values w (L) from column `w0` and dual coefficients α (L) from `a0`, with w = K·α
+    /// and D = αᵀKα = wᵀK⁻¹w without K⁻¹. Dense in L: for small records only.
+    Quadratic {
+        pen: Box<dyn QuadraticPenalty>,
+        w0: usize,
+        a0: usize,
+    },
+}
+
+impl BlockVars {
+    /// The column of w at sample k.
+    fn column(&self, k: usize) -> usize {
+        match self {
+            BlockVars::Tv { pen, v0, .. } => v0 + pen.node_of_sample()[k],
+            BlockVars::Quadratic { w0, .. } => w0 + k,
+        }
+    }
+}
+
+/// Estimated memory of the conic program with `quadratic` dense blocks over `len` samples:
+/// their L² entries in A and P and in the KKT factor, with working copies.
+pub fn quadratic_memory_bytes(len: usize, quadratic: usize) -> u64 {
+    let l2 = (len as u64) * (len as u64);
+    // A: L² (w = Kα rows), P: L²/2, CSC indices and values, triplets, and the factor (≥ L²).
+    quadratic as u64 * l2 * (12 + 12 + 8 + 24 + 16)
+}
+
+/// Solves the problem as a conic program; see the module docs. Total-variation blocks are
+/// sparse; quadratic blocks (any kernel) are dense in L, so a model that mixes a Gaussian block
+/// with a total-variation block can be solved for records up to a few thousand samples.
 pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     let t_start = Instant::now();
-    let penalties = tv_penalties(problem, NAME)?;
+    let penalties = penalties(problem)?;
     solve_with(problem, settings, penalties, t_start)
 }
 
@@ -141,7 +183,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 pub(crate) fn solve_with(
     problem: &Problem,
     settings: &IdentifySettings,
-    penalties: Vec<TvPenalty>,
+    penalties: Vec<Penalty>,
     t_start: Instant,
 ) -> Result<Identification> {
     let beta = settings.beta();
@@ -152,27 +194,68 @@ pub(crate) fn solve_with(
     let (n, ne) = (ss.order(), real.noise_inputs);
     let (a, b, c, d) = (ss.a(), ss.b(), ss.c(), ss.d());
     let dropped = unreachable_samples(&real, len);
+    let quadratic = penalties
+        .iter()
+        .filter(|p| matches!(p, Penalty::Quadratic(_)))
+        .count();
+    if quadratic > 0 {
+        let need = quadratic_memory_bytes(len, quadratic);
+        let limit = settings.effective_memory_limit();
+        if need > limit {
+            return Err(Error::TooLarge {
+                solver: NAME.into(),
+                needed_mib: need >> 20,
+                limit_mib: limit >> 20,
+                size: len * ny,
+                suggestion: format!(
+                    "the conic program is dense in the {quadratic} quadratic block(s); use the exact or feature \
+                     solver when every block is quadratic, or a shorter record to mix quadratic and \
+                     total-variation blocks"
+                ),
+            });
+        }
+    }
     let t_prepared = Instant::now();
 
     // Block i drives input column ne + output_i of the realisation.
     let blocks = problem.blocks();
-    let mut v0 = Vec::with_capacity(blocks.len());
-    let mut t0 = Vec::with_capacity(blocks.len());
     let mut next = len * (n + ne);
-    for p in &penalties {
-        v0.push(next);
-        next += p.nodes();
-    }
-    for p in &penalties {
-        t0.push(next);
-        next += p.edges().len();
+    let mut vars = Vec::with_capacity(blocks.len());
+    for (bl, pen) in blocks.iter().zip(penalties) {
+        match pen {
+            Penalty::TotalVariation(p) => {
+                if p.len() != len {
+                    return Err(Error::DimensionMismatch {
+                        what: format!(
+                            "samples of the total-variation penalty of block `{}`",
+                            bl.name
+                        ),
+                        expected: len.to_string(),
+                        found: p.len().to_string(),
+                    });
+                }
+                let (v0, t0) = (next, next + p.nodes());
+                next = t0 + p.edges().len();
+                vars.push(BlockVars::Tv { pen: p, v0, t0 });
+            }
+            Penalty::Quadratic(q) => {
+                if q.len() != len {
+                    return Err(Error::DimensionMismatch {
+                        what: format!("Gram matrix of block `{}`", bl.name),
+                        expected: len.to_string(),
+                        found: q.len().to_string(),
+                    });
+                }
+                let (w0, a0) = (next, next + len);
+                next = a0 + len;
+                vars.push(BlockVars::Quadratic { pen: q, w0, a0 });
+            }
+        }
     }
     let lay = Layout {
         n,
         ne,
         e0: len * n,
-        v0,
-        t0,
         total: next,
     };
     let w_cols: Vec<usize> = blocks.iter().map(|bl| ne + bl.output).collect();
@@ -187,7 +270,7 @@ pub(crate) fn solve_with(
             vals.push(v);
         }
     };
-    // Equalities: the initial state, the dynamics and the outputs.
+    // Equalities: the initial state, the dynamics, the outputs and w = K·α.
     if !real.free_initial_state {
         for j in 0..n {
             push(row, lay.x(0, j), 1.0, &mut ri, &mut ci);
@@ -204,9 +287,8 @@ pub(crate) fn solve_with(
             for q in 0..ne {
                 push(row, lay.e(k, q), -b[(j, q)], &mut ri, &mut ci);
             }
-            for (i, p) in penalties.iter().enumerate() {
-                let col = lay.v0[i] + p.node_of_sample()[k];
-                push(row, col, -b[(j, w_cols[i])], &mut ri, &mut ci);
+            for (i, v) in vars.iter().enumerate() {
+                push(row, v.column(k), -b[(j, w_cols[i])], &mut ri, &mut ci);
             }
             rhs.push(0.0);
             row += 1;
@@ -228,44 +310,65 @@ pub(crate) fn solve_with(
             for q in 0..ne {
                 push(row, lay.e(k, q), d[(ch, q)], &mut ri, &mut ci);
             }
-            for (i, p) in penalties.iter().enumerate() {
-                let col = lay.v0[i] + p.node_of_sample()[k];
-                push(row, col, d[(ch, w_cols[i])], &mut ri, &mut ci);
+            for (i, v) in vars.iter().enumerate() {
+                push(row, v.column(k), d[(ch, w_cols[i])], &mut ri, &mut ci);
             }
             rhs.push(r[k * ny + ch]);
             row += 1;
         }
     }
-    let equalities = row;
-    // −t ≤ v_a − v_b ≤ t as two rows of A·x ≤ b.
-    for (i, p) in penalties.iter().enumerate() {
-        for (j, &(va, vb, _)) in p.edges().iter().enumerate() {
-            let (ca, cb, ct) = (lay.v0[i] + va, lay.v0[i] + vb, lay.t0[i] + j);
-            for sign in [1.0, -1.0] {
-                push(row, ca, sign, &mut ri, &mut ci);
-                push(row, cb, -sign, &mut ri, &mut ci);
-                push(row, ct, -1.0, &mut ri, &mut ci);
+    // P: (2/L)·I on e and 2β·K on each quadratic block's α (upper triangle).
+    let (mut pi, mut pj, mut pv) = (Vec::new(), Vec::new(), Vec::new());
+    for idx in lay.e0..lay.e0 + len * ne {
+        pi.push(idx);
+        pj.push(idx);
+        pv.push(2.0 / len as f64);
+    }
+    let mut gram = faer::Mat::<f64>::zeros(0, 0);
+    for v in &vars {
+        if let BlockVars::Quadratic { pen, w0, a0 } = v {
+            gram.resize_with(len, len, |_, _| 0.0);
+            pen.fill(gram.as_mut());
+            for k in 0..len {
+                push(row, w0 + k, 1.0, &mut ri, &mut ci);
+                for l in 0..len {
+                    push(row, a0 + l, -gram[(k, l)], &mut ri, &mut ci);
+                }
                 rhs.push(0.0);
                 row += 1;
+                for l in k..len {
+                    let g = gram[(k, l)];
+                    if g != 0.0 {
+                        pi.push(a0 + k);
+                        pj.push(a0 + l);
+                        pv.push(2.0 * beta * g);
+                    }
+                }
+            }
+        }
+    }
+    drop(gram);
+    let equalities = row;
+    // −t ≤ v_a − v_b ≤ t as two rows of A·x ≤ b.
+    let mut q = vec![0.0; lay.total];
+    for v in &vars {
+        if let BlockVars::Tv { pen, v0, t0 } = v {
+            for (j, &(va, vb, w)) in pen.edges().iter().enumerate() {
+                let (ca, cb, ct) = (v0 + va, v0 + vb, t0 + j);
+                q[ct] = beta * w;
+                for sign in [1.0, -1.0] {
+                    push(row, ca, sign, &mut ri, &mut ci);
+                    push(row, cb, -sign, &mut ri, &mut ci);
+                    push(row, ct, -1.0, &mut ri, &mut ci);
+                    rhs.push(0.0);
+                    row += 1;
+                }
             }
         }
     }
     let rows = row;
     let a_mat = CscMatrix::new_from_triplets(rows, lay.total, ri, ci, vals);
-    let e_idx: Vec<usize> = (lay.e0..lay.e0 + len * ne).collect();
-    let p_mat = CscMatrix::new_from_triplets(
-        lay.total,
-        lay.total,
-        e_idx.clone(),
-        e_idx,
-        vec![2.0 / len as f64; len * ne],
-    );
-    let mut q = vec![0.0; lay.total];
-    for (i, p) in penalties.iter().enumerate() {
-        for (j, &(_, _, w)) in p.edges().iter().enumerate() {
-            q[lay.t0[i] + j] = beta * w;
-        }
-    }
+    let p_mat = CscMatrix::new_from_triplets(lay.total, lay.total, pi, pj, pv);
     let mut cones = vec![SupportedConeT::ZeroConeT(equalities)];
     if rows > equalities {
         cones.push(SupportedConeT::NonnegativeConeT(rows - equalities));
@@ -317,24 +420,35 @@ pub(crate) fn solve_with(
         }
     }
     let x = &sol.x;
-    let node_values: Vec<Vec<f64>> = penalties
+    let parts: Vec<BlockPart> = vars
         .iter()
-        .enumerate()
-        .map(|(i, p)| x[lay.v0[i]..lay.v0[i] + p.nodes()].to_vec())
+        .map(|v| match v {
+            BlockVars::Tv { pen, v0, .. } => {
+                let nodes = x[*v0..v0 + pen.nodes()].to_vec();
+                BlockPart {
+                    w_hat: pen.sample_values(&nodes),
+                    dispersion_value: pen.value(&nodes),
+                    map: pen.interpolant(nodes),
+                }
+            }
+            BlockVars::Quadratic { pen, w0, a0 } => {
+                let w_hat = x[*w0..w0 + len].to_vec();
+                let alpha = x[*a0..a0 + len].to_vec();
+                // D = αᵀKα = αᵀw at the constraint w = Kα.
+                let value = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
+                BlockPart {
+                    w_hat,
+                    dispersion_value: value,
+                    map: pen.interpolant(alpha),
+                }
+            }
+        })
         .collect();
     let e_hat = x[lay.e0..lay.e0 + len * ne].to_vec();
     let x0: Option<Vec<f64>> = real
         .free_initial_state
         .then(|| (0..n).map(|j| x[lay.x(0, j)]).collect());
-    let out = finish_tv(
-        problem,
-        &penalties,
-        node_values,
-        e_hat,
-        x0.as_deref(),
-        &dropped,
-        beta,
-    )?;
+    let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
     warnings.extend(out.warnings);
     let t_end = Instant::now();
     let nnz = a_mat.nnz() + p_mat.nnz();

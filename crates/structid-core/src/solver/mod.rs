@@ -123,8 +123,8 @@ pub(crate) fn quadratic_penalty(
     }
 }
 
-/// The total-variation penalties of every block, or an error when a block is quadratic (mixing
-/// kinds in one model is not supported by the conic and ADMM solvers).
+/// The total-variation penalties of every block, or an error when a block is quadratic (ADMM
+/// handles total variation only).
 pub(crate) fn tv_penalties(problem: &Problem, solver: &str) -> Result<Vec<TvPenalty>> {
     tv_from_penalties(problem, penalties(problem)?, solver)
 }
@@ -157,8 +157,8 @@ pub(crate) fn tv_from_penalties(
             }),
             Penalty::Quadratic(_) => Err(Error::Unsupported(format!(
                 "the {solver} solver handles total-variation dispersions only, but block `{}` has the quadratic \
-                 dispersion {}; use total variation for every block, or a quadratic dispersion for every block \
-                 (mixing the two kinds in one model is not supported yet)",
+                 dispersion {}; models that mix quadratic and total-variation blocks need the clarabel solver \
+                 (dense in the quadratic blocks: records up to a few thousand samples)",
                 b.name,
                 b.dispersion.describe()
             ))),
@@ -166,7 +166,20 @@ pub(crate) fn tv_from_penalties(
         .collect()
 }
 
-/// What the total-variation solvers derive the same way from node values, ê and x̂₀.
+/// The block parts of total-variation blocks from their node values.
+pub(crate) fn tv_parts(penalties: &[TvPenalty], node_values: Vec<Vec<f64>>) -> Vec<BlockPart> {
+    penalties
+        .iter()
+        .zip(node_values)
+        .map(|(p, v)| BlockPart {
+            w_hat: p.sample_values(&v),
+            dispersion_value: p.value(&v),
+            map: p.interpolant(v),
+        })
+        .collect()
+}
+
+/// What the conic and ADMM solvers derive the same way from the block parts, ê and x̂₀.
 pub(crate) struct TvOutcome {
     pub(crate) assembled: Assembled,
     pub(crate) cost: CostTerms,
@@ -179,12 +192,11 @@ pub(crate) struct TvOutcome {
     pub(crate) warnings: Vec<String>,
 }
 
-/// Builds the estimate from each block's node values, checking feasibility with the problem's
-/// own operators (independently of the realisation the solver used).
+/// Builds the estimate from the block parts, checking feasibility with the problem's own
+/// operators (independently of the realisation the solver used).
 pub(crate) fn finish_tv(
     problem: &Problem,
-    penalties: &[TvPenalty],
-    node_values: Vec<Vec<f64>>,
+    parts: Vec<BlockPart>,
     e_hat: Vec<f64>,
     x0: Option<&[f64]>,
     dropped: &[(usize, usize)],
@@ -192,15 +204,6 @@ pub(crate) fn finish_tv(
 ) -> Result<TvOutcome> {
     let (len, ny) = (problem.len(), problem.outputs());
     let ne = problem.noise().inputs();
-    let parts = penalties
-        .iter()
-        .zip(node_values)
-        .map(|(p, v)| BlockPart {
-            w_hat: p.sample_values(&v),
-            dispersion_value: p.value(&v),
-            map: p.interpolant(v),
-        })
-        .collect();
     let assembled = assemble_blocks(problem, parts);
     let mu = e_hat.iter().map(|v| v * v).sum::<f64>() / len.max(1) as f64;
     let cost = cost_terms(mu, beta, &assembled)?;
