@@ -77,6 +77,7 @@
 pub mod dispersion;
 pub mod error;
 pub mod fourier;
+pub mod hyperparameters;
 pub mod identify;
 pub mod interpolant;
 pub mod kernel;

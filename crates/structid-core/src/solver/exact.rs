@@ -325,7 +325,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
 /// M = Σ_i T_i·K_i·T_iᵀ + L·β·T_ye·T_yeᵀ, through Q_i = T_i·K_i built from panels of Gram columns.
 /// On return `q` holds Q of the last block.
-fn assemble(
+pub(crate) fn assemble(
     problem: &Problem,
     penalties: &[Box<dyn QuadraticPenalty>],
     lb: f64,
@@ -390,7 +390,10 @@ fn compact_live_rows(m: &mut Mat<f64>) -> Result<(Vec<usize>, Vec<usize>, f64)> 
 
 /// M += L·β·T_ye·T_yeᵀ: a block-diagonal D_ye·D_yeᵀ for a static noise path, otherwise built
 /// panel by panel from T_yeᵀ applied to identity columns.
-fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &mut Mat<f64>) {
+pub(crate) fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &mut Mat<f64>) {
+    if lb == 0.0 {
+        return;
+    }
     let ny = noise.outputs();
     let ne = noise.inputs();
     let n = len * ny;
