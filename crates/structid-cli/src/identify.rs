@@ -82,27 +82,27 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
             crate::SolverArg::Clarabel => SolverChoice::Clarabel,
             crate::SolverArg::Admm => SolverChoice::Admm,
         });
-    if let Some(tol) = a.tolerance {
-        let tol = positive("--tolerance", tol)?;
-        b = b
-            .conic(ConicSettings::builder().tolerance(tol).build()?)
-            .admm(AdmmSettings::builder().tolerance(tol).build()?);
-    }
-    if let Some(n) = a.max_iterations {
-        if n == 0 {
+    if a.tolerance.is_some() || a.max_iterations.is_some() {
+        let tol = a
+            .tolerance
+            .map(|t| positive("--tolerance", t))
+            .transpose()?;
+        if a.max_iterations == Some(0) {
             return Err(CliError::input(
                 "invalid value 0 for --max-iterations: it must be at least 1",
             ));
         }
-        let conic = ConicSettings::builder()
-            .tolerance(a.tolerance.unwrap_or(ConicSettings::default().tolerance()))
-            .max_iterations(u32::try_from(n).unwrap_or(u32::MAX))
-            .build()?;
-        let admm = AdmmSettings::builder()
-            .tolerance(a.tolerance.unwrap_or(AdmmSettings::default().tolerance()))
-            .max_iterations(n)
-            .build()?;
-        b = b.conic(conic).admm(admm);
+        let mut conic = ConicSettings::builder();
+        let mut admm = AdmmSettings::builder();
+        if let Some(t) = tol {
+            conic = conic.tolerance(t);
+            admm = admm.tolerance(t);
+        }
+        if let Some(n) = a.max_iterations {
+            conic = conic.max_iterations(u32::try_from(n).unwrap_or(u32::MAX));
+            admm = admm.max_iterations(n);
+        }
+        b = b.conic(conic.build()?).admm(admm.build()?);
     }
     if let Some(mib) = a.memory_limit_mib {
         if mib == 0 {
@@ -120,10 +120,13 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
 
 /// Applies `--dispersion` and `--neighbours` to every block.
 fn override_dispersions(mf: &mut ModelFile, a: &IdentifyArgs) -> Result<(), CliError> {
-    if a.neighbours == Some(0) {
-        return Err(CliError::input(
-            "invalid value 0 for --neighbours: the nearest-neighbour graph needs k ≥ 1",
-        ));
+    if let Some(k) = a.neighbours
+        && !(1..=structid_core::TotalVariation::MAX_NEIGHBOURS).contains(&k)
+    {
+        return Err(CliError::input(format!(
+            "invalid value {k} for --neighbours: the nearest-neighbour graph needs 1 ≤ k ≤ {}",
+            structid_core::TotalVariation::MAX_NEIGHBOURS
+        )));
     }
     let Some(kind) = a.dispersion else {
         if a.neighbours.is_some()

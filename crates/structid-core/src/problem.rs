@@ -56,6 +56,11 @@ impl Problem {
         blocks: Vec<ProblemBlock>,
     ) -> Result<Self> {
         let (len, ny) = (residual.len(), residual.channels());
+        if len == 0 {
+            return Err(Error::InvalidStructure(
+                "the record is empty: identification needs at least one sample".into(),
+            ));
+        }
         if noise.outputs() != ny {
             return Err(Error::DimensionMismatch {
                 what: "outputs of the noise path T_ye".into(),

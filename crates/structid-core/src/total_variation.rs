@@ -107,13 +107,19 @@ impl TotalVariation {
         }
     }
 
-    /// Sets k, the number of nearest neighbours of the graph for p > 1 (k ≥ 1).
+    /// Largest k accepted (the graph has up to k·G edges).
+    pub const MAX_NEIGHBOURS: usize = 1024;
+
+    /// Sets k, the number of nearest neighbours of the graph for p > 1 (1 ≤ k ≤ 1024).
     pub fn with_neighbours(mut self, k: usize) -> Result<Self> {
-        if k < 1 {
+        if !(1..=Self::MAX_NEIGHBOURS).contains(&k) {
             return Err(Error::InvalidParameter {
                 name: "neighbours".into(),
                 value: k as f64,
-                reason: "the k-nearest-neighbour graph needs k ≥ 1".into(),
+                reason: format!(
+                    "the k-nearest-neighbour graph needs 1 ≤ k ≤ {}",
+                    Self::MAX_NEIGHBOURS
+                ),
             });
         }
         self.neighbours = k;
@@ -198,7 +204,8 @@ fn group_equal(
 }
 
 fn chain_penalty(z: &Signal) -> Result<TvPenalty> {
-    let zs = z.as_slice();
+    // `+ 0.0` turns −0.0 into +0.0, so that the two zeros are one node.
+    let zs: Vec<f64> = z.as_slice().iter().map(|v| v + 0.0).collect();
     let (node_of_sample, reps) = group_equal(zs.len(), |a, b| zs[a].total_cmp(&zs[b]));
     let knots: Vec<f64> = reps.iter().map(|&k| zs[k]).collect();
     let edges = (1..knots.len()).map(|g| (g - 1, g, 1.0)).collect();
@@ -251,7 +258,7 @@ fn graph_penalty(z: &Signal, k: usize, interpolation: GraphInterpolation) -> Res
         .zip(&hi)
         .map(|(l, h)| if h > l { 1.0 / (h - l) } else { 0.0 })
         .collect();
-    let scaled = Signal::from_fn(z.len(), p, |s, c| (z.get(s, c) - lo[c]) * scale[c]);
+    let scaled = Signal::from_fn(z.len(), p, |s, c| (z.get(s, c) - lo[c]) * scale[c] + 0.0);
     let (node_of_sample, reps) = group_equal(z.len(), |a, b| {
         let (x, y) = (scaled.sample(a), scaled.sample(b));
         x.iter()
@@ -534,6 +541,17 @@ mod tests {
     }
 
     #[test]
+    fn signed_zeros_are_one_node() {
+        let z = Signal::new(1, vec![0.0, -0.0, 1.0]).unwrap();
+        let p = penalty(&z, &TotalVariation::new());
+        assert_eq!(p.nodes(), 2);
+        assert_eq!(p.node_of_sample(), &[0, 0, 1]);
+        let z2 = Signal::from_fn(3, 2, |s, c| if c == 0 { [0.0, -0.0, 1.0][s] } else { 0.0 });
+        let p2 = penalty(&z2, &TotalVariation::new());
+        assert_eq!(p2.nodes(), 2);
+    }
+
+    #[test]
     fn single_value_has_no_edges() {
         let z = Signal::new(1, vec![1.0; 4]).unwrap();
         let p = penalty(&z, &TotalVariation::new());
@@ -544,6 +562,7 @@ mod tests {
     #[test]
     fn bad_inputs_are_errors() {
         assert!(TotalVariation::new().with_neighbours(0).is_err());
+        assert!(TotalVariation::new().with_neighbours(1025).is_err());
         let z = Signal::new(1, vec![1.0, f64::NAN]).unwrap();
         assert!(matches!(
             TotalVariation::new().penalty(&z),

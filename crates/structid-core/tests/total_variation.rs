@@ -265,7 +265,7 @@ fn solvers_agree_with_coloured_noise_and_estimated_initial_state() {
 
 /// Two outputs, two blocks: a scalar relay on u₁ and a two-input map on (u₁, u₂) through a
 /// graph total variation.
-fn two_block_experiment(len: usize, seed: u64) -> Experiment {
+fn two_block_experiment(len: usize, seed: u64, reversed: bool) -> Experiment {
     let g = structid_lti::testing::random_stable_system(seed, 2, 2, 2, 0.8);
     let lft = Lft::new(LftMatrices {
         a: g.a().clone(),
@@ -282,7 +282,7 @@ fn two_block_experiment(len: usize, seed: u64) -> Experiment {
         dzw: DMatrix::zeros(3, 2),
     })
     .unwrap();
-    let blocks = vec![
+    let mut blocks = vec![
         NonlinearBlock::new("relay", vec![0], 0, tv()),
         NonlinearBlock::new(
             "surface",
@@ -291,17 +291,22 @@ fn two_block_experiment(len: usize, seed: u64) -> Experiment {
             Arc::new(TotalVariation::new().with_neighbours(5).unwrap()),
         ),
     ];
+    if reversed {
+        // The block list need not follow the w channels.
+        blocks.reverse();
+    }
     let model = Model::new(lft, blocks).unwrap();
     let u = structid_core::paper::gaussian_noise(len, 2, 1.0, seed + 7);
     let noise = structid_core::paper::gaussian_noise(len, 2, 0.05, seed + 8);
     let f = |z: &[f64]| relay(z[0]);
     let h = |z: &[f64]| if z[0] + z[1] > 0.0 { 1.0 } else { 0.0 };
-    Experiment::simulate(model, &[&f, &h], u, noise).unwrap()
+    let maps: [&dyn structid_core::Interpolant; 2] = if reversed { [&h, &f] } else { [&f, &h] };
+    Experiment::simulate(model, &maps, u, noise).unwrap()
 }
 
 #[test]
 fn solvers_agree_on_two_outputs_with_a_graph_block() {
-    let exp = two_block_experiment(150, 3);
+    let exp = two_block_experiment(150, 3, false);
     let a = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Admm)).unwrap();
     let c = identify(
         &exp.model,
@@ -310,6 +315,22 @@ fn solvers_agree_on_two_outputs_with_a_graph_block() {
     )
     .unwrap();
     assert_agree(&a, &c);
+    // The same system with the blocks listed in the other order: the same estimate per block.
+    let rev = two_block_experiment(150, 3, true);
+    assert_eq!(rev.data.y().as_slice(), exp.data.y().as_slice());
+    for solver in [SolverChoice::Admm, SolverChoice::Clarabel] {
+        let r = identify(&rev.model, &rev.data, &settings(0.01, solver)).unwrap();
+        assert_eq!(r.blocks[0].name, "surface");
+        for name in ["relay", "surface"] {
+            let (x, y) = (&r.block(name).unwrap().w_hat, &c.block(name).unwrap().w_hat);
+            assert!(
+                rel_diff(x, y) < 1e-4,
+                "{solver:?} {name}: {:.3e}",
+                rel_diff(x, y)
+            );
+        }
+        assert!(rel_diff(r.w_hat.as_slice(), c.w_hat.as_slice()) < 1e-4);
+    }
 }
 
 #[test]

@@ -162,7 +162,9 @@ const ADAPT_ITERATIONS: usize = 2000;
 
 /// The proximal step of one block.
 enum Prox {
-    Chain(Tv1dWorkspace, Vec<f64>),
+    /// Workspace, edge weights c, and λ = c·β/ρ for the β/ρ it was built at (rebuilt when ρ
+    /// changes).
+    Chain(Tv1dWorkspace, Vec<f64>, Vec<f64>, f64),
     Graph(Box<GraphTv>),
 }
 
@@ -199,10 +201,12 @@ pub(crate) fn solve_with(
         .sqrt()
         .max(1e-300);
     let eps_rel = opts.tolerance();
-    let eps_abs = eps_rel * r_rms;
+    let (rho0, optimal) = default_rho(&real, &w_cols, len);
+    // The residuals are in the units of w: r scaled by the typical gain |G/H| = (L·ρ₀/2)^½.
+    let gain = (len as f64 * rho0 / 2.0).sqrt().max(1e-300);
+    let eps_abs = eps_rel * r_rms / gain;
     let t_prepared = Instant::now();
 
-    let (rho0, optimal) = default_rho(&real, &w_cols, len);
     let mut rho = opts.rho().unwrap_or(rho0);
     let adaptive = opts.adaptive() || (opts.rho().is_none() && !optimal);
     let variances = |rho: f64| -> Vec<f64> {
@@ -220,6 +224,8 @@ pub(crate) fn solve_with(
                 Prox::Chain(
                     Tv1dWorkspace::new(),
                     p.edges().iter().map(|e| e.2).collect(),
+                    Vec::new(),
+                    f64::NAN,
                 )
             } else {
                 Prox::Graph(Box::new(GraphTv::new(p.nodes(), p.edges().to_vec())))
@@ -242,6 +248,7 @@ pub(crate) fn solve_with(
     let alpha = opts.relaxation();
     let sqrt_n = ((len * nb) as f64).sqrt();
     let mut prox_inner = 0usize;
+    let mut prox_unconverged = 0usize;
     let mut rho_changes = 0usize;
     let (mut iterations, mut r_pri, mut r_dual) = (0, f64::INFINITY, f64::INFINITY);
     let mut converged = false;
@@ -272,20 +279,32 @@ pub(crate) fn solve_with(
             std::mem::swap(&mut d[i], &mut d_prev[i]);
             let scale = beta / rho;
             match &mut prox[i] {
-                Prox::Chain(ws, lambdas) => {
-                    let lam: Vec<f64> = lambdas.iter().map(|l| l * scale).collect();
-                    ws.solve(&target[i], &counts[i], &lam, &mut d[i]);
+                Prox::Chain(ws, weights, lam, at) => {
+                    if *at != scale {
+                        *lam = weights.iter().map(|c| c * scale).collect();
+                        *at = scale;
+                    }
+                    ws.solve(&target[i], &counts[i], lam, &mut d[i]);
                 }
                 Prox::Graph(g) => {
+                    // The prox is positively homogeneous: solve it on targets scaled to unit
+                    // RMS, so that its duality-gap test (relative to 1 + |objective|) is relative.
+                    let s = (target[i].iter().map(|t| t * t).sum::<f64>()
+                        / target[i].len().max(1) as f64)
+                        .sqrt()
+                        .max(1e-300);
+                    let scaled: Vec<f64> = target[i].iter().map(|t| t / s).collect();
                     let rep = g.solve(
-                        &target[i],
+                        &scaled,
                         &counts[i],
-                        scale,
+                        scale / s,
                         0.1 * eps_rel,
                         100_000,
                         &mut d[i],
                     );
+                    d[i].iter_mut().for_each(|v| *v *= s);
                     prox_inner += rep.iterations;
+                    prox_unconverged += usize::from(!rep.converged);
                 }
             }
             for k in 0..len {
@@ -364,9 +383,10 @@ pub(crate) fn solve_with(
             "ρ was rebalanced {rho_changes} times (final ρ = {rho:.3e})"
         ));
     }
-    if prox_inner > 0 {
+    if prox_unconverged > 0 {
         warnings.push(format!(
-            "the graph proximal steps took {prox_inner} inner iterations in total"
+            "{prox_unconverged} graph proximal steps stopped at their iteration limit before their duality-gap \
+             test ({prox_inner} inner iterations in total); the estimate may be less accurate than the tolerance"
         ));
     }
     let t_end = Instant::now();
@@ -433,7 +453,8 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
             break;
         };
         let phi = g.adjoint() * hh_inv * &g;
-        let herm = (&phi + phi.adjoint()).map(|v| v.re * 0.5);
+        // Φ is Hermitian: its eigenvalues are real (those of Re Φ alone would lie strictly inside).
+        let herm = (&phi + phi.adjoint()) * Complex::new(0.5, 0.0);
         let eig = herm.symmetric_eigenvalues();
         lo = lo.min(eig.min());
         hi = hi.max(eig.max());

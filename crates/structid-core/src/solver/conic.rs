@@ -36,7 +36,7 @@ use crate::error::{Error, Result, positive_finite};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
 use crate::solver::realisation::{joint_realisation, unreachable_samples};
-use crate::solver::{BlockPart, finish_tv, penalties};
+use crate::solver::{BlockPart, finish_tv, penalties, tv_part};
 use crate::total_variation::TvPenalty;
 
 /// Settings of the conic (Clarabel) solver.
@@ -423,14 +423,7 @@ pub(crate) fn solve_with(
     let parts: Vec<BlockPart> = vars
         .iter()
         .map(|v| match v {
-            BlockVars::Tv { pen, v0, .. } => {
-                let nodes = x[*v0..v0 + pen.nodes()].to_vec();
-                BlockPart {
-                    w_hat: pen.sample_values(&nodes),
-                    dispersion_value: pen.value(&nodes),
-                    map: pen.interpolant(nodes),
-                }
-            }
+            BlockVars::Tv { pen, v0, .. } => tv_part(pen, x[*v0..v0 + pen.nodes()].to_vec()),
             BlockVars::Quadratic { pen, w0, a0 } => {
                 let w_hat = x[*w0..w0 + len].to_vec();
                 let alpha = x[*a0..a0 + len].to_vec();

@@ -171,12 +171,17 @@ pub(crate) fn tv_parts(penalties: &[TvPenalty], node_values: Vec<Vec<f64>>) -> V
     penalties
         .iter()
         .zip(node_values)
-        .map(|(p, v)| BlockPart {
-            w_hat: p.sample_values(&v),
-            dispersion_value: p.value(&v),
-            map: p.interpolant(v),
-        })
+        .map(|(p, v)| tv_part(p, v))
         .collect()
+}
+
+/// One total-variation block's part from its node values.
+pub(crate) fn tv_part(penalty: &TvPenalty, nodes: Vec<f64>) -> BlockPart {
+    BlockPart {
+        w_hat: penalty.sample_values(&nodes),
+        dispersion_value: penalty.value(&nodes),
+        map: penalty.interpolant(nodes),
+    }
 }
 
 /// What the conic and ADMM solvers derive the same way from the block parts, ê and x̂₀.
