@@ -91,6 +91,7 @@ pub mod neighbours;
 pub mod paper;
 pub mod problem;
 pub mod prox;
+pub mod residual_tests;
 pub mod scenarios;
 pub mod simulate;
 pub mod solver;

@@ -1,0 +1,192 @@
+//! Residual analysis: is what the model leaves unexplained white, and independent of the input?
+//!
+//! As in MATLAB's `resid` and the usual system-identification practice (Ljung, *System
+//! Identification*, §16.6), with ε the residual and u an input over N samples:
+//!
+//! ```text
+//! R_ε(τ)  = (1/N)·Σ_t ε(t)·ε(t−τ) / R_ε(0)                          (whiteness)
+//! R_εu(τ) = (1/N)·Σ_t ε(t)·u(t−τ) / √(R_ε(0)·R_u(0))                  (independence of u)
+//! ```
+//!
+//! with means removed first. Under the null hypothesis (ε white and independent of u) each
+//! normalised correlation at a non-zero lag is approximately N(0, 1/N), so the 99 % band is
+//! ±2.576/√N. A positive lag τ in R_εu pairs ε with *past* inputs; correlation at negative lags
+//! points to feedback from ε to u.
+
+/// Two-sided 99 % quantile of the standard normal distribution.
+pub const Z_99: f64 = 2.575_829_303_548_901;
+
+/// Normalised correlations over a range of lags with their 99 % band.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CorrelationTest {
+    /// The lags τ, ascending.
+    pub lags: Vec<isize>,
+    /// The normalised correlation at each lag.
+    pub values: Vec<f64>,
+    /// The half-width of the 99 % band, 2.576/√N.
+    pub bound: f64,
+    /// Whether this is an autocorrelation (whose lag 0 is 1 by definition and not a test).
+    pub autocorrelation: bool,
+}
+
+impl CorrelationTest {
+    /// The lags whose correlation lies outside the band (lag 0 of an autocorrelation, which is
+    /// 1 by definition, is never counted).
+    pub fn outside(&self) -> Vec<isize> {
+        self.lags
+            .iter()
+            .zip(&self.values)
+            .filter(|(l, v)| !(self.autocorrelation && **l == 0) && v.abs() > self.bound)
+            .map(|(l, _)| *l)
+            .collect()
+    }
+
+    /// Whether every lag (except an autocorrelation's lag 0) lies inside the band.
+    pub fn passes(&self) -> bool {
+        self.outside().is_empty()
+    }
+}
+
+fn centred(x: &[f64]) -> Vec<f64> {
+    let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
+    x.iter().map(|v| v - mean).collect()
+}
+
+/// (1/N)·Σ_t a(t)·b(t−τ) over the overlap, for centred a and b.
+fn covariance(a: &[f64], b: &[f64], tau: isize) -> f64 {
+    let n = a.len();
+    let s: f64 = if tau >= 0 {
+        let t0 = tau as usize;
+        (t0..n).map(|t| a[t] * b[t - t0]).sum()
+    } else {
+        let t0 = (-tau) as usize;
+        (0..n.saturating_sub(t0)).map(|t| a[t] * b[t + t0]).sum()
+    };
+    s / n as f64
+}
+
+/// The autocorrelation test of `residual` at lags −max_lag…max_lag.
+///
+/// ```
+/// use structid_core::residual_tests::autocorrelation;
+/// let e: Vec<f64> = (0..400).map(|k| if k % 2 == 0 { 1.0 } else { -1.0 }).collect();
+/// let t = autocorrelation(&e, 3);
+/// assert!((t.values[4] + 1.0).abs() < 0.01); // lag 1 of an alternating sign: about −1
+/// assert!(!t.passes());
+/// ```
+pub fn autocorrelation(residual: &[f64], max_lag: usize) -> CorrelationTest {
+    let e = centred(residual);
+    let r0 = covariance(&e, &e, 0);
+    let lags: Vec<isize> = (-(max_lag as isize)..=max_lag as isize).collect();
+    let values = lags
+        .iter()
+        .map(|&l| {
+            if l == 0 {
+                1.0
+            } else if r0 > 0.0 {
+                covariance(&e, &e, l) / r0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    CorrelationTest {
+        lags,
+        values,
+        bound: Z_99 / (e.len().max(1) as f64).sqrt(),
+        autocorrelation: true,
+    }
+}
+
+/// The cross-correlation test of `residual` with `input` at lags −max_lag…max_lag
+/// (`residual` and `input` of equal length).
+pub fn cross_correlation(residual: &[f64], input: &[f64], max_lag: usize) -> CorrelationTest {
+    let n = residual.len().min(input.len());
+    let (e, u) = (centred(&residual[..n]), centred(&input[..n]));
+    let scale = (covariance(&e, &e, 0) * covariance(&u, &u, 0)).sqrt();
+    let lags: Vec<isize> = (-(max_lag as isize)..=max_lag as isize).collect();
+    let values = lags
+        .iter()
+        .map(|&l| {
+            if scale > 0.0 {
+                covariance(&e, &u, l) / scale
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    CorrelationTest {
+        lags,
+        values,
+        bound: Z_99 / (n.max(1) as f64).sqrt(),
+        autocorrelation: false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use structid_lti::testing::SplitMix64;
+
+    fn white(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = SplitMix64::new(seed);
+        (0..n)
+            .map(|_| {
+                let (a, b) = (rng.uniform().max(1e-300), rng.uniform());
+                (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn white_noise_stays_inside_the_band_about_99_percent_of_the_time() {
+        // 40 records × 50 non-zero lags = 2000 tests at the 1 % level: expect about 20 outside.
+        let mut outside = 0;
+        for seed in 0..40 {
+            outside += autocorrelation(&white(2000, seed), 25).outside().len();
+        }
+        assert!(
+            outside <= 50,
+            "{outside} of 2000 lags outside the 99 % band"
+        );
+    }
+
+    #[test]
+    fn an_ar1_residual_is_detected_with_its_coefficient() {
+        let v = white(5000, 3);
+        let mut e = vec![0.0; 5000];
+        for k in 1..5000 {
+            e[k] = 0.6 * e[k - 1] + v[k];
+        }
+        let t = autocorrelation(&e, 5);
+        let lag1 = t.values[t.lags.iter().position(|&l| l == 1).unwrap()];
+        assert!((lag1 - 0.6).abs() < 0.05, "{lag1}");
+        // Symmetric in the lag.
+        assert_eq!(
+            lag1,
+            t.values[t.lags.iter().position(|&l| l == -1).unwrap()]
+        );
+        assert!(!t.passes());
+    }
+
+    #[test]
+    fn cross_correlation_finds_the_delay_of_an_input_leak() {
+        // ε(t) = 0.5·u(t − 3) + noise: correlated with the input three samples back.
+        let u = white(4000, 5);
+        let v = white(4000, 6);
+        let e: Vec<f64> = (0..4000)
+            .map(|t| v[t] + if t >= 3 { 0.5 * u[t - 3] } else { 0.0 })
+            .collect();
+        let t = cross_correlation(&e, &u, 10);
+        assert_eq!(t.outside(), vec![3]);
+        let independent = cross_correlation(&v, &u, 10);
+        assert!(independent.outside().len() <= 1);
+    }
+
+    #[test]
+    fn degenerate_inputs_do_not_panic() {
+        assert!(autocorrelation(&[], 3).values.iter().all(|v| v.is_finite()));
+        assert!(autocorrelation(&[1.0; 10], 3).passes());
+        assert!(cross_correlation(&[1.0, 2.0], &[0.0, 0.0], 5).passes());
+    }
+}
