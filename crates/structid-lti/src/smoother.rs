@@ -56,8 +56,9 @@
 //! *base prior*: the sum is still free, so the problem is unchanged (at the optimum
 //! `eta^ = 0`, `xi` absorbs everything), and the filter above runs from this `P_0`. This
 //! is exact, not a large-`P_0` approximation; `P_0 = s I`, `s` the mean eigenvalue of the
-//! `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (0 when the inputs move no
-//! state). A positive `P_0` makes the Riccati recursion converge to the *stabilizing*
+//! `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` plus
+//! `trace(D Q D^T) / |C|_F^2` (0 when the inputs move no state); the second term keeps
+//! `C P_0 C^T` comparable with `D Q D^T`, so `F_0` is no worse conditioned than the problem. A positive `P_0` makes the Riccati recursion converge to the *stabilizing*
 //! gains; from `P_0 = 0` it stays on the non-stabilizing solution when the system has
 //! transmission zeros outside the unit circle (with as many effective inputs as outputs),
 //! and then the recursions below blow up although the free-state problem is
@@ -498,7 +499,8 @@ impl<'a> Model<'a> {
 
     /// The base prior covariance of a free initial state: `s I` with `s` the mean
     /// eigenvalue of the `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (the
-    /// state's scale under the input prior); 0 when the inputs move no state.
+    /// state's scale under the input prior) plus `trace(D Q D^T) / |C|_F^2`; 0 when the
+    /// inputs move no state.
     fn free_base_prior(&self) -> DMatrix<f64> {
         let a = self.sys.a();
         let n = a.nrows();
@@ -508,7 +510,15 @@ impl<'a> Model<'a> {
             trace += term.trace();
             term = a * term * a.transpose();
         }
-        let s = if n > 0 { trace / n as f64 } else { 0.0 };
+        let mut s = if n > 0 { trace / n as f64 } else { 0.0 };
+        // When the direct feedthrough dominates, a prior scaled by the Gramian alone makes
+        // `C P_0 C^T` tiny next to `D Q D^T`, so `F_0` is needlessly ill-conditioned when
+        // the columns of `C` and `D` are nearly parallel; scaling `x_0` to move the
+        // outputs as much as the inputs do keeps both parts of `F_0` comparable.
+        let c2 = self.sys.c().norm_squared();
+        if c2 > 0.0 && s > 0.0 {
+            s += self.dqdt.trace() / c2;
+        }
         DMatrix::<f64>::identity(n, n) * s
     }
 
@@ -1226,6 +1236,21 @@ mod tests {
         if smin.is_finite() { smax / smin } else { 1.0 }
     }
 
+    /// Smallest singular value of `a` above `1e-14 scale` (`scale` when there is none).
+    fn smallest_singular(a: &DMatrix<f64>, scale: f64) -> f64 {
+        if a.is_empty() {
+            return scale;
+        }
+        let fa = faer::Mat::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]);
+        let sv = fa.singular_values().expect("SVD converges");
+        let smin = sv
+            .iter()
+            .copied()
+            .filter(|&v| v > 1e-14 * scale)
+            .fold(f64::INFINITY, f64::min);
+        if smin.is_finite() { smin } else { scale }
+    }
+
     /// Free response matrix `O` (`L p x n`, rows `C A^k`).
     fn free_response(sys: &StateSpace, len: usize) -> DMatrix<f64> {
         let (n, p) = (sys.order(), sys.outputs());
@@ -1271,7 +1296,11 @@ mod tests {
             let ps = &proj * &s;
             let w = pinv(&ps, Some(s_norm)) * (&proj * &yp);
             let x0 = &opinv * (&yp - &s * &w);
-            let kappa = cond(&ps, Some(s_norm)).max(cond(&o, None));
+            // sensitivity of w to y: |S| / sigma_min(Pi S) (Pi S can be much smaller
+            // than S when range(S) nearly lies in range(O))
+            let kappa = cond(&ps, Some(s_norm))
+                .max(s_norm / smallest_singular(&ps, s_norm))
+                .max(cond(&o, None));
             (w, x0.as_slice().to_vec(), kappa)
         } else {
             let x0 = vec![0.0; if free { n } else { 0 }];
