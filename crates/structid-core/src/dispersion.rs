@@ -27,6 +27,18 @@ pub trait Dispersion: Send + Sync + fmt::Debug {
 
     /// The penalty on w once the block's inputs `z` (one point per sample) are fixed.
     fn penalty(&self, z: &Signal) -> Result<Penalty>;
+
+    /// The width σ of a dispersion that has one (a length scale in units of z), for
+    /// automatic selection ([`crate::hyperparameters`]); `None` (the default) when it has none.
+    fn width(&self) -> Option<f64> {
+        None
+    }
+
+    /// The same dispersion with width `width` (> 0); `None` (the default) when it has no width.
+    fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
+        let _ = width;
+        None
+    }
 }
 
 /// What a dispersion looks like to a solver once its sample points are fixed.
@@ -131,6 +143,16 @@ impl<K: Kernel + 'static> Dispersion for KernelDispersion<K> {
 
     fn parameters(&self) -> Vec<(String, f64)> {
         self.kernel.parameters()
+    }
+
+    fn width(&self) -> Option<f64> {
+        self.kernel.width()
+    }
+
+    fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
+        self.kernel.with_width(width).map(|k| {
+            k.map(|k| Arc::new(KernelDispersion { kernel: Arc::new(k) }) as Arc<dyn Dispersion>)
+        })
     }
 
     fn penalty(&self, z: &Signal) -> Result<Penalty> {

@@ -195,6 +195,27 @@ impl Dispersion for FourierDispersion {
         }
     }
 
+    fn width(&self) -> Option<f64> {
+        match self.weights {
+            FourierWeights::GaussianLike { sigma } => Some(sigma),
+            _ => None,
+        }
+    }
+
+    fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
+        match self.weights {
+            FourierWeights::GaussianLike { .. } => Some(
+                positive_finite("sigma", width).map(|sigma| {
+                    Arc::new(Self {
+                        weights: FourierWeights::GaussianLike { sigma },
+                        ..self.clone()
+                    }) as Arc<dyn Dispersion>
+                }),
+            ),
+            _ => None,
+        }
+    }
+
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
         let kernel = Arc::new(self.kernel_for(z)?);
         Ok(Penalty::Quadratic(Box::new(FeaturePenalty {

@@ -47,6 +47,20 @@ pub trait Kernel: Send + Sync + fmt::Debug {
         Vec::new()
     }
 
+    /// The kernel's width (length scale), if it has one: what `--sigma auto` tunes.
+    fn width(&self) -> Option<f64> {
+        None
+    }
+
+    /// The same kernel with another width; `None` (the default) when it has none.
+    fn with_width(&self, width: f64) -> Option<Result<Self>>
+    where
+        Self: Sized,
+    {
+        let _ = width;
+        None
+    }
+
     /// Writes the whole Gram matrix (`z.len()` × `z.len()`) into `out`. Override it to exploit
     /// symmetry; the default fills every column.
     fn fill_gram(&self, z: &Signal, out: MatMut<'_, f64>) {
@@ -188,6 +202,14 @@ impl Kernel for GaussianKernel {
 
     fn parameters(&self) -> Vec<(String, f64)> {
         vec![("sigma".into(), self.sigma)]
+    }
+
+    fn width(&self) -> Option<f64> {
+        Some(self.sigma)
+    }
+
+    fn with_width(&self, width: f64) -> Option<Result<Self>> {
+        Some(GaussianKernel::new(width))
     }
 
     fn fill_gram(&self, z: &Signal, mut out: MatMut<'_, f64>) {

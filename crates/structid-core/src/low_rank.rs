@@ -139,6 +139,19 @@ impl Dispersion for LowRankGaussian {
         ]
     }
 
+    fn width(&self) -> Option<f64> {
+        Some(self.kernel.sigma())
+    }
+
+    fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
+        Some(GaussianKernel::new(width).map(|kernel| {
+            Arc::new(Self {
+                kernel,
+                ..self.clone()
+            }) as Arc<dyn Dispersion>
+        }))
+    }
+
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
         Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
             map: Arc::new(self.features_for(z)?),

@@ -62,13 +62,36 @@ fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
-/// Solves the problem in feature space; see the module documentation.
-pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
-    let t_start = Instant::now();
+/// The one pass over time: the feature maps of the blocks and the Gram matrix
+/// G = [F O r]ᵀWᵀW[F O r] (see the module documentation).
+pub(crate) struct FeatureGram {
+    pub maps: Vec<(Arc<dyn FeatureMap>, Signal)>,
+    pub dims: Vec<usize>,
+    pub offsets: Vec<usize>,
+    /// Total number of features m.
+    pub m: usize,
+    /// Number of free initial-state columns.
+    pub nx: usize,
+    /// (m + n_x + 1)², columns in the order [features, x₀, r].
+    pub g: Mat<f64>,
+    whitening: Whitening,
+    chunk: usize,
+    t_prepared: Instant,
+    t_assembled: Instant,
+}
+
+/// Accumulates [`FeatureGram`]. With `scaled`, the features are Φ = ΨΛ^½ (what the solver
+/// needs); without, the bare Ψ (what hyperparameter selection needs, as it varies Λ).
+/// Output rows with `held_out[row]` set contribute nothing (cross-validation; static noise only,
+/// whose whitening acts sample by sample).
+pub(crate) fn gram(
+    problem: &Problem,
+    scaled: bool,
+    held_out: Option<&[bool]>,
+) -> Result<FeatureGram> {
     if let Some(reason) = unsupported_reason(problem) {
         return Err(Error::Unsupported(reason));
     }
-    let beta = settings.beta();
     let len = problem.len();
     let ny = problem.outputs();
     let noise = problem.noise();
@@ -78,9 +101,9 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         .iter()
         .map(|b| super::quadratic_penalty(b, "feature"))
         .collect::<Result<_>>()?;
-    let mut maps: Vec<(Arc<dyn FeatureMap>, &Signal)> = Vec::new();
+    let mut maps: Vec<(Arc<dyn FeatureMap>, Signal)> = Vec::new();
     for (b, p) in problem.blocks().iter().zip(&penalties) {
-        maps.push(p.features().ok_or_else(|| {
+        maps.push(p.features().map(|(f, z)| (f, z.clone())).ok_or_else(|| {
             Error::Unsupported(format!(
                 "block `{}` ({}) has no finite feature map; use the exact solver or a Fourier dispersion",
                 b.name,
@@ -133,6 +156,19 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         }
     };
 
+    if let Some(mask) = held_out {
+        if matches!(whitening, Whitening::Kalman(_)) {
+            return Err(Error::Unsupported(
+                "held-out samples with a dynamic noise path in the feature solver (its whitening runs across samples); use the exact solver"
+                    .into(),
+            ));
+        }
+        if mask.len() != len * ny || mask.chunks(ny).any(|s| s.iter().any(|&v| v != s[0])) {
+            return Err(Error::InvalidStructure(
+                "held-out rows must cover whole samples (all outputs of a sample)".into(),
+            ));
+        }
+    }
     let streams: Vec<StateSpace> = problem
         .blocks()
         .iter()
@@ -170,7 +206,13 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut psi_rows = vec![0.0; chunk * dims.iter().copied().max().unwrap_or(0)];
     let sqrt_w: Vec<Vec<f64>> = maps
         .iter()
-        .map(|(f, _)| f.weights().iter().map(|l| l.sqrt()).collect())
+        .map(|(f, _)| {
+            if scaled {
+                f.weights().iter().map(|l| l.sqrt()).collect()
+            } else {
+                vec![1.0; f.dim()]
+            }
+        })
         .collect();
     let mut t0 = 0;
     while t0 < len {
@@ -195,6 +237,15 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             }
             xc[(i, m + nx)] = r[t0 * ny + i];
         }
+        if let Some(mask) = held_out {
+            // whole samples only (checked below), so zeroing before the per-sample static
+            // whitening equals leaving the samples out
+            for i in 0..c * ny {
+                if mask[t0 * ny + i] {
+                    xc.rb_mut().row_mut(i).fill(0.0);
+                }
+            }
+        }
         let white = match (&whitening, wstream.as_mut()) {
             (Whitening::Static { ls, .. }, _) => {
                 whiten_static(xc.rb_mut(), &ls.l(), ny);
@@ -217,6 +268,43 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         t0 += c;
     }
     let t_assembled = Instant::now();
+    Ok(FeatureGram {
+        maps,
+        dims,
+        offsets,
+        m,
+        nx,
+        g,
+        whitening,
+        chunk,
+        t_prepared,
+        t_assembled,
+    })
+}
+
+/// Solves the problem in feature space; see the module documentation.
+pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
+    let t_start = Instant::now();
+    let beta = settings.beta();
+    let len = problem.len();
+    let ny = problem.outputs();
+    let noise = problem.noise();
+    let ne = noise.inputs();
+    let r = problem.residual().as_slice();
+    let free = problem.free_response();
+    let FeatureGram {
+        maps,
+        dims,
+        offsets,
+        m,
+        nx,
+        g,
+        whitening,
+        chunk,
+        t_prepared,
+        t_assembled,
+    } = gram(problem, true, None)?;
+    let cols = m + nx + 1;
 
     // --- ridge least squares in (b, x₀): (G_XX + L·β·[I 0; 0 0])·v = G_Xr --------------------
     let lb = len as f64 * beta;
