@@ -101,6 +101,14 @@ pub trait FeatureMap: Send + Sync {
 
     /// Writes ψ(z) into `out` (length m).
     fn eval_into(&self, z: &[f64], out: &mut [f64]);
+
+    /// The weights λ of the same features at another kernel width, when only the weights
+    /// depend on the width (as for the Gaussian-like Fourier family); `None` (the default)
+    /// otherwise. Width selection then reuses one pass over the data for every width tried.
+    fn weights_at_width(&self, width: f64) -> Option<Vec<f64>> {
+        let _ = width;
+        None
+    }
 }
 
 /// Any [`Kernel`] as a quadratic dispersion: D(z, w) = wᵀK⁻¹w with K_ij = k(z_i, z_j).

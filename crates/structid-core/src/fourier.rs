@@ -237,6 +237,45 @@ pub struct FourierKernel {
     weights: Vec<f64>,
     /// For tensor features: the multi-index (harmonic, cos/sin) per input of each feature.
     index: Vec<Vec<(usize, u8)>>,
+    /// Whether λ is the Gaussian-like family (so another width only changes the weights).
+    gaussian_like: bool,
+}
+
+/// The Gaussian-like weights λ_n = s·exp(−2π²(s·σ)²n²), n = 0..=harmonics.
+fn gaussian_like_lambda(s: f64, sigma: f64, harmonics: usize) -> Vec<f64> {
+    let st = s * sigma;
+    (0..=harmonics)
+        .map(|k| s * (-2.0 * PI * PI * st * st * (k * k) as f64).exp())
+        .collect()
+}
+
+/// The diagonal of Λ in feature order from the per-input weights.
+fn feature_weights(
+    lambda: &[Vec<f64>],
+    combination: Combination,
+    index: &[Vec<(usize, u8)>],
+) -> Vec<f64> {
+    match combination {
+        Combination::Tensor => index
+            .iter()
+            .map(|mi| {
+                mi.iter()
+                    .zip(lambda)
+                    .map(|(&(h, _), l)| if h == 0 { l[0] } else { 2.0 * l[h] })
+                    .product()
+            })
+            .collect(),
+        Combination::Additive => {
+            let mut w = vec![lambda.iter().map(|l| l[0]).sum()];
+            for l in lambda {
+                for &lh in &l[1..] {
+                    w.push(2.0 * lh);
+                    w.push(2.0 * lh);
+                }
+            }
+            w
+        }
+    }
 }
 
 fn harmonic_count(weights: &FourierWeights, harmonics: Option<usize>, s: f64) -> usize {
@@ -263,6 +302,7 @@ impl FourierKernel {
         domain: Vec<(f64, f64)>,
         combination: Combination,
     ) -> Result<Self> {
+        let weights_family = weights;
         let p = domain.len();
         if p == 0 {
             return Err(Error::InvalidStructure(
@@ -276,12 +316,7 @@ impl FourierKernel {
             affine.push((DOMAIN_MARGIN - s * a, s));
             let n = harmonic_count(weights, harmonics, s);
             let l: Vec<f64> = match weights {
-                FourierWeights::GaussianLike { sigma } => {
-                    let st = s * sigma;
-                    (0..=n)
-                        .map(|k| s * (-2.0 * PI * PI * st * st * (k * k) as f64).exp())
-                        .collect()
-                }
+                FourierWeights::GaussianLike { sigma } => gaussian_like_lambda(s, *sigma, n),
                 FourierWeights::SobolevLike { order, scale } => (0..=n)
                     .map(|k| scale * (1.0 + (k * k) as f64).powf(-order))
                     .collect(),
@@ -289,7 +324,7 @@ impl FourierKernel {
             };
             lambda.push(l);
         }
-        let (weights, index) = match combination {
+        let index = match combination {
             Combination::Tensor => {
                 let count: usize = lambda.iter().map(|l| 2 * l.len() - 1).product();
                 if count > MAX_FEATURES {
@@ -312,40 +347,26 @@ impl FourierKernel {
                     }
                     idx = next;
                 }
-                let w = idx
-                    .iter()
-                    .map(|mi| {
-                        mi.iter()
-                            .zip(&lambda)
-                            .map(|(&(h, _), l)| if h == 0 { l[0] } else { 2.0 * l[h] })
-                            .product()
-                    })
-                    .collect();
-                (w, idx)
+                idx
             }
             Combination::Additive => {
-                let mut w = vec![lambda.iter().map(|l| l[0]).sum()];
-                for l in &lambda {
-                    for &lh in &l[1..] {
-                        w.push(2.0 * lh);
-                        w.push(2.0 * lh);
-                    }
-                }
-                if w.len() > MAX_FEATURES {
+                let count = 1 + lambda.iter().map(|l| 2 * (l.len() - 1)).sum::<usize>();
+                if count > MAX_FEATURES {
                     return Err(Error::InvalidStructure(format!(
-                        "the Fourier kernel would need {} features (more than {MAX_FEATURES})",
-                        w.len()
+                        "the Fourier kernel would need {count} features (more than {MAX_FEATURES})"
                     )));
                 }
-                (w, Vec::new())
+                Vec::new()
             }
         };
+        let weights = feature_weights(&lambda, combination, &index);
         Ok(Self {
             affine,
             lambda,
             combination,
             weights,
             index,
+            gaussian_like: matches!(weights_family, FourierWeights::GaussianLike { .. }),
         })
     }
 
@@ -391,6 +412,20 @@ impl FeatureMap for FourierKernel {
 
     fn weights(&self) -> &[f64] {
         &self.weights
+    }
+
+    /// Gaussian-like weights at another σ on the same harmonics: the features do not change.
+    fn weights_at_width(&self, width: f64) -> Option<Vec<f64>> {
+        if !self.gaussian_like || !(width.is_finite() && width > 0.0) {
+            return None;
+        }
+        let lambda: Vec<Vec<f64>> = self
+            .affine
+            .iter()
+            .zip(&self.lambda)
+            .map(|(&(_, s), l)| gaussian_like_lambda(s, width, l.len() - 1))
+            .collect();
+        Some(feature_weights(&lambda, self.combination, &self.index))
     }
 
     /// Unscaled features ψ with K = ψᵀΛψ: ψ = 1, cos(2πnt), sin(2πnt) (products for tensors).

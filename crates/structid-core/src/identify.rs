@@ -98,6 +98,22 @@ impl IdentifySettings {
         }
     }
 
+    /// The same settings with another β (> 0), e.g. for a sweep.
+    ///
+    /// ```
+    /// use structid_core::IdentifySettings;
+    /// let s = IdentifySettings::default().with_beta(0.1).unwrap();
+    /// assert_eq!(s.beta(), 0.1);
+    /// assert!(IdentifySettings::default().with_beta(0.0).is_err());
+    /// ```
+    pub fn with_beta(&self, beta: f64) -> Result<Self> {
+        positive_finite("beta", beta)?;
+        Ok(Self {
+            beta,
+            ..self.clone()
+        })
+    }
+
     /// The weight β of the dispersion against the noise energy.
     pub fn beta(&self) -> f64 {
         self.beta
@@ -388,7 +404,15 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
                     Some(reason),
                 )
             } else if tv_blocks > 0 {
-                if size <= CONIC_AUTO_LIMIT {
+                if problem.held_out().is_some() {
+                    let reason =
+                        "automatic: total variation with held-out samples (cross-validation), which only the conic solver handles"
+                            .to_string();
+                    (
+                        solver::conic::solve_with(problem, settings, penalties, t_start)?,
+                        Some(reason),
+                    )
+                } else if size <= CONIC_AUTO_LIMIT {
                     let reason = format!(
                         "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
                     );

@@ -45,6 +45,8 @@ pub struct Problem {
     realisation: Option<structid_lti::StateSpace>,
     /// Whether `free_response` is the free response of `realisation`'s initial state.
     free_response_is_state: bool,
+    /// Output rows (sample-major, L·n_y) left out of the fit: cross-validation folds.
+    held_out: Option<Arc<[bool]>>,
 }
 
 impl Problem {
@@ -109,6 +111,7 @@ impl Problem {
             free_response: None,
             realisation: None,
             free_response_is_state: false,
+            held_out: None,
         })
     }
 
@@ -227,6 +230,46 @@ impl Problem {
         self.realisation
             .as_ref()
             .map(|ss| (ss, self.free_response_is_state))
+    }
+
+    /// Leaves out of the fit the output rows marked in `held_out` (length L·n_y, sample-major:
+    /// row `k·n_y + i` is output `i` at sample `k`): their equations y_k = … are dropped, so
+    /// the estimate does not see them, while ŵ and ê are still defined at every sample. This
+    /// is what cross-validation needs ([`crate::hyperparameters`]). The exact and conic
+    /// solvers support it, the feature solver for a static noise path and whole samples; ADMM
+    /// does not.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{paper, KernelDispersion, Problem};
+    /// let exp = paper::spray(50, 1.0, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 1).unwrap();
+    /// let p = Problem::from_model(&exp.model, &exp.data).unwrap();
+    /// let mut mask = vec![false; 50];
+    /// mask[10..20].iter_mut().for_each(|v| *v = true);
+    /// let p = p.with_held_out(mask).unwrap();
+    /// assert_eq!(p.held_out().unwrap().iter().filter(|&&h| h).count(), 10);
+    /// ```
+    pub fn with_held_out(mut self, held_out: Vec<bool>) -> Result<Self> {
+        let rows = self.residual.len() * self.outputs();
+        if held_out.len() != rows {
+            return Err(Error::DimensionMismatch {
+                what: "held-out mask".into(),
+                expected: format!("{rows} entries (L·n_y)"),
+                found: held_out.len().to_string(),
+            });
+        }
+        if held_out.iter().all(|&h| h) {
+            return Err(Error::InvalidStructure(
+                "every output row is held out: nothing is left to fit".into(),
+            ));
+        }
+        self.held_out = held_out.iter().any(|&h| h).then(|| held_out.into());
+        Ok(self)
+    }
+
+    /// The held-out output rows, if any ([`Problem::with_held_out`]).
+    pub fn held_out(&self) -> Option<&[bool]> {
+        self.held_out.as_deref()
     }
 
     /// The free-response matrix O, when the initial state is estimated.

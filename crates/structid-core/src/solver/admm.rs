@@ -182,6 +182,12 @@ pub(crate) fn solve_with(
     penalties: Vec<TvPenalty>,
     t_start: Instant,
 ) -> Result<Identification> {
+    if problem.held_out().is_some() {
+        return Err(Error::Unsupported(
+            "ADMM needs every output sample (its smoother is time-invariant): cross-validation folds use the conic solver (clarabel)"
+                .into(),
+        ));
+    }
     let beta = settings.beta();
     let opts = settings.admm();
     let real = joint_realisation(problem, NAME)?;

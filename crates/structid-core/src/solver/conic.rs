@@ -294,7 +294,9 @@ pub(crate) fn solve_with(
             row += 1;
         }
     }
-    let mut skip = vec![false; len * ny];
+    let mut skip = problem
+        .held_out()
+        .map_or_else(|| vec![false; len * ny], <[bool]>::to_vec);
     for &(k, ch) in &dropped {
         skip[k * ny + ch] = true;
     }

@@ -140,7 +140,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut attempt = 0;
     let (kept, dropped, max_diag) = loop {
         assemble(problem, &penalties, lb, &mut m, q.rb_mut(), &mut gram);
-        let (kept, dropped, max_diag) = compact_live_rows(&mut m)?;
+        let (kept, dropped, max_diag) = compact_live_rows(&mut m, problem.held_out())?;
         let nk = kept.len();
         let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
         if jitter > 0.0 {
@@ -366,8 +366,12 @@ pub(crate) fn assemble(
 }
 
 /// Finds the rows of M that are (numerically) zero — samples that depend on neither e nor w —
-/// and compacts the others into the leading block. Returns (kept, dropped, max diag).
-fn compact_live_rows(m: &mut Mat<f64>) -> Result<(Vec<usize>, Vec<usize>, f64)> {
+/// and compacts the others, except held-out rows (cross-validation), into the leading block.
+/// Returns (kept, dropped, max diag); held-out rows are in neither list.
+fn compact_live_rows(
+    m: &mut Mat<f64>,
+    held_out: Option<&[bool]>,
+) -> Result<(Vec<usize>, Vec<usize>, f64)> {
     let n = m.nrows();
     let max_diag = (0..n).map(|i| m[(i, i)]).fold(0.0f64, f64::max);
     if max_diag <= 0.0 || !max_diag.is_finite() {
@@ -376,8 +380,11 @@ fn compact_live_rows(m: &mut Mat<f64>) -> Result<(Vec<usize>, Vec<usize>, f64)> 
         )));
     }
     let dead_tol = 1e-14 * max_diag;
-    let (kept, dropped): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| m[(i, i)] > dead_tol);
-    if !dropped.is_empty() {
+    let held = |i: usize| held_out.is_some_and(|h| h[i]);
+    let (kept, dropped): (Vec<usize>, Vec<usize>) = (0..n)
+        .filter(|&i| !held(i))
+        .partition(|&i| m[(i, i)] > dead_tol);
+    if kept.len() < n {
         // In place: destinations never overtake their sources in column-major order.
         for (jj, &j) in kept.iter().enumerate() {
             for (ii, &i) in kept.iter().enumerate() {

@@ -84,6 +84,18 @@ pub(crate) struct FeatureGram {
 /// needs); without, the bare Ψ (what hyperparameter selection needs, as it varies Λ).
 /// Output rows with `held_out[row]` set contribute nothing (cross-validation; static noise only,
 /// whose whitening acts sample by sample).
+impl FeatureGram {
+    /// ln det(T_ye·T_yeᵀ) of the whitening (for marginal likelihoods).
+    pub fn noise_log_det(&self, len: usize) -> f64 {
+        match &self.whitening {
+            Whitening::Static { ls, .. } => {
+                len as f64 * 2.0 * ls.l().diagonal().iter().map(|v| v.ln()).sum::<f64>()
+            }
+            Whitening::Kalman(k) => k.log_det(),
+        }
+    }
+}
+
 pub(crate) fn gram(
     problem: &Problem,
     scaled: bool,
@@ -303,7 +315,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         chunk,
         t_prepared,
         t_assembled,
-    } = gram(problem, true, None)?;
+    } = gram(problem, true, problem.held_out())?;
     let cols = m + nx + 1;
 
     // --- ridge least squares in (b, x₀): (G_XX + L·β·[I 0; 0 0])·v = G_Xr --------------------
