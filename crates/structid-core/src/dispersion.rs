@@ -159,7 +159,11 @@ impl<K: Kernel + 'static> Dispersion for KernelDispersion<K> {
 
     fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
         self.kernel.with_width(width).map(|k| {
-            k.map(|k| Arc::new(KernelDispersion { kernel: Arc::new(k) }) as Arc<dyn Dispersion>)
+            k.map(|k| {
+                Arc::new(KernelDispersion {
+                    kernel: Arc::new(k),
+                }) as Arc<dyn Dispersion>
+            })
         })
     }
 

@@ -204,14 +204,14 @@ impl Dispersion for FourierDispersion {
 
     fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
         match self.weights {
-            FourierWeights::GaussianLike { .. } => Some(
-                positive_finite("sigma", width).map(|sigma| {
+            FourierWeights::GaussianLike { .. } => {
+                Some(positive_finite("sigma", width).map(|sigma| {
                     Arc::new(Self {
                         weights: FourierWeights::GaussianLike { sigma },
                         ..self.clone()
                     }) as Arc<dyn Dispersion>
-                }),
-            ),
+                }))
+            }
             _ => None,
         }
     }

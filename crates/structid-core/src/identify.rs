@@ -98,6 +98,20 @@ impl IdentifySettings {
         }
     }
 
+    /// The same settings with another solver choice.
+    ///
+    /// ```
+    /// use structid_core::{IdentifySettings, SolverChoice};
+    /// let s = IdentifySettings::default().with_solver(SolverChoice::Exact);
+    /// assert_eq!(s.solver(), SolverChoice::Exact);
+    /// ```
+    pub fn with_solver(&self, solver: SolverChoice) -> Self {
+        Self {
+            solver,
+            ..self.clone()
+        }
+    }
+
     /// The same settings with another β (> 0), e.g. for a sweep.
     ///
     /// ```
