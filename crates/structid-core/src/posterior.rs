@@ -25,6 +25,10 @@
 //! zero initial state). Since L·β·rᵀP·r = Σ|ê_k|² + L·β·Σ_i D_i = L·Ĵ at the optimum,
 //! ŝ² = L·Ĵ/(n − n_x).
 //!
+//! When the exact solver had to add a diagonal jitter to M (reported in the diagnostics), the
+//! kept factor includes it, i.e. the band treats the jitter as a little extra white noise,
+//! consistently with the estimate.
+//!
 //! **Unknown initial state.** x₀ gets a flat prior, i.e. P becomes the projected
 //! P = M⁻¹ − M⁻¹O(OᵀM⁻¹O)⁻¹OᵀM⁻¹: with U an orthonormal basis of L_M⁻¹O,
 //! vᵀPv = |L_M⁻¹v|² − |Uᵀ·L_M⁻¹v|². Integrating x₀ out leaves n − n_x degrees of freedom for s².
