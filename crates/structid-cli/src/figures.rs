@@ -10,6 +10,8 @@ pub const GRID_1D: usize = 201;
 pub const GRID_2D: usize = 41;
 /// Most data points drawn as dots in one series.
 pub const MAX_DOTS: usize = 2000;
+/// Half-width of the 95 % band in standard deviations.
+pub const BAND_Z: f64 = 1.96;
 
 /// `n` equally spaced points from `lo` to `hi` inclusive.
 pub fn linspace(lo: f64, hi: f64, n: usize) -> Vec<f64> {
@@ -106,8 +108,33 @@ impl MapGrid {
         }
     }
 
-    /// CSV columns: the inputs then `value` (points: the data points and ŵ).
-    pub fn columns(&self, est: &BlockEstimate) -> Vec<Vec<f64>> {
+    /// The evaluation points, one per sample, in the order of [`MapGrid::columns`]: the 1-D
+    /// grid, the 2-D grid with the first input fastest, or the data points `z`.
+    pub fn points(&self, z: &Signal) -> Signal {
+        match self {
+            MapGrid::One { xs, .. } => Signal::from_fn(xs.len(), 1, |k, _| xs[k]),
+            MapGrid::Two { xs, ys, .. } => Signal::from_fn(xs.len() * ys.len(), 2, |k, c| {
+                if c == 0 {
+                    xs[k % xs.len()]
+                } else {
+                    ys[k / xs.len()]
+                }
+            }),
+            MapGrid::Points => z.clone(),
+        }
+    }
+
+    /// CSV columns: the inputs then `value` (points: the data points and ŵ), then the
+    /// posterior standard deviation `std` when given (at [`MapGrid::points`]).
+    pub fn columns(&self, est: &BlockEstimate, std: Option<&[f64]>) -> Vec<Vec<f64>> {
+        let mut cols = self.value_columns(est);
+        if let Some(s) = std {
+            cols.push(s.to_vec());
+        }
+        cols
+    }
+
+    fn value_columns(&self, est: &BlockEstimate) -> Vec<Vec<f64>> {
         match self {
             MapGrid::One { xs, values } => vec![xs.clone(), values.clone()],
             MapGrid::Two { xs, ys, values } => {
@@ -143,13 +170,16 @@ pub fn grid_values(map: &dyn Interpolant, xs: &[f64], ys: &[f64]) -> Vec<f64> {
 }
 
 /// The SVG figure of one block's estimate: for one input, the estimate over the grid, the
-/// points (z_k, ŵ_k) and the truth; for two inputs, heat maps of the estimate and the truth;
-/// for more, ŵ against the truth at the data points (or ŵ over time without a truth).
+/// points (z_k, ŵ_k), the truth and, with the posterior standard deviation `std` (at
+/// [`MapGrid::points`]), the shaded 95 % band N̂ ± 1.96·std; for two inputs, heat maps of the
+/// estimate, the truth and the standard deviation; for more, ŵ against the truth at the data
+/// points (or ŵ over time without a truth).
 pub fn map_svg(
     est: &BlockEstimate,
     grid: &MapGrid,
     truth: Option<&dyn Interpolant>,
     input_names: &[String],
+    std: Option<&[f64]>,
 ) -> Result<String, PlotError> {
     let name = &est.name;
     let idx = subsample(est.w_hat.len(), MAX_DOTS);
@@ -161,13 +191,26 @@ pub fn map_svg(
             let tv: Vec<f64> = truth
                 .map(|t| xs.iter().map(|&x| t.eval(&[x])).collect())
                 .unwrap_or_default();
+            let (lower, upper): (Vec<f64>, Vec<f64>) = std
+                .map(|s| {
+                    values
+                        .iter()
+                        .zip(s)
+                        .map(|(v, s)| (v - BAND_Z * s, v + BAND_Z * s))
+                        .unzip()
+                })
+                .unwrap_or_default();
             let mut chart = Chart::new(
                 format!("{name}: estimated map"),
                 input_names.first().cloned().unwrap_or_else(|| "z0".into()),
                 format!("w = {name}(z)"),
-            )
-            .with(Series::dots("ŵ at the data points", &dz, &dw))
-            .with(Series::line("estimate", xs, values));
+            );
+            if std.is_some() {
+                chart = chart.with(Series::band("95 % band", xs, &[], &lower, &upper));
+            }
+            chart = chart
+                .with(Series::dots("ŵ at the data points", &dz, &dw))
+                .with(Series::line("estimate", xs, values));
             if truth.is_some() {
                 chart = chart.with(Series::line("truth", xs, &tv));
             }
@@ -194,6 +237,16 @@ pub fn map_svg(
                     HeatMap::new(format!("{name}: truth"), &xl, &yl, xs, ys, &tv)
                         .with_range(lo, hi),
                 );
+            }
+            if let Some(s) = std {
+                maps.push(HeatMap::new(
+                    format!("{name}: posterior std"),
+                    &xl,
+                    &yl,
+                    xs,
+                    ys,
+                    s,
+                ));
             }
             let n = maps.len();
             render_heatmaps_svg(&maps, n, (560, 480))

@@ -71,6 +71,8 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
     let beta = positive("--beta", a.beta)?;
     let mut b = IdentifySettings::builder()
         .beta(beta)
+        // Bands for quadratic dispersions (the exact and feature solvers keep their factor).
+        .posterior(!a.no_bands)
         .initial_state(match a.initial_state {
             crate::InitialStateArg::Zero => InitialState::Zero,
             crate::InitialStateArg::Estimate => InitialState::Estimate,
@@ -240,7 +242,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
 
     // Per-block grids and figures.
     let z_names = mf.z_names();
-    for est in &id.blocks {
+    for (bi, est) in id.blocks.iter().enumerate() {
         let i = mf
             .blocks
             .iter()
@@ -254,17 +256,27 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         let (spec, stem) = (&mf.blocks[i], &stems[i]);
         let input_names = grid_input_names(&z_names, &spec.inputs, mf.signals.z.is_some());
         let grid = MapGrid::new(est.map.as_ref(), &est.z);
+        // Posterior standard deviation at the grid (or data) points, when a posterior was kept.
+        let std = if a.no_bands {
+            None
+        } else {
+            id.posterior_std(bi, &grid.points(&est.z))?
+        };
         let mut header = input_names.clone();
         header.push("value".into());
+        if std.is_some() {
+            header.push("std".into());
+        }
         let grid_path = a.out.join(format!("map_{stem}.csv"));
-        guard.write_csv(&grid_path, &header, &grid.columns(est))?;
+        guard.write_csv(&grid_path, &header, &grid.columns(est, std.as_deref()))?;
         let truth = spec.truth_map()?;
-        let svg = map_svg(est, &grid, truth.as_deref(), &input_names)?;
+        let svg = map_svg(est, &grid, truth.as_deref(), &input_names, std.as_deref())?;
         let svg_path = a.out.join(format!("map_{stem}.svg"));
         guard.write(&svg_path, svg.as_bytes())?;
         if let Some(b) = report.block_mut(&est.name) {
             b.grid_file = Some(format!("map_{stem}.csv"));
             b.plot_file = Some(format!("map_{stem}.svg"));
+            b.band = std.is_some();
         }
         written.push(grid_path);
         written.push(svg_path);
@@ -368,6 +380,23 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
         );
     }
     let _ = writeln!(s, "z: {}", id.z_source.describe());
+    if let Some(p) = &id.posterior {
+        let with: Vec<&str> = report
+            .blocks
+            .iter()
+            .filter(|b| b.band)
+            .map(|b| b.name.as_str())
+            .collect();
+        if !with.is_empty() {
+            let _ = writeln!(
+                s,
+                "uncertainty: noise variance ŝ² = {} (profiled marginal likelihood); 95 % bands N̂ ± 1.96·std for {} \
+                 (column `std` of the map files)",
+                fmt_num(p.noise_variance()),
+                with.join(", ")
+            );
+        }
+    }
     for b in &report.blocks {
         let _ = write!(s, "  {}: {}", b.name, b.dispersion);
         if let (Some(r), Some(c)) = (b.rms_error_vs_truth, b.centred_rms_error_vs_truth) {

@@ -114,6 +114,10 @@ struct IdentifyArgs {
     /// Iteration limit of the iterative solvers (clarabel default 200, admm default 20000).
     #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
+    /// Skip the posterior uncertainty bands of quadratic dispersions (the `std` column of
+    /// map_<block>.csv, the shaded 95 % band of 1-D map figures, `noise_variance` in report.json).
+    #[arg(long)]
+    no_bands: bool,
 }
 
 /// Values of `--dispersion`.

@@ -152,11 +152,45 @@ fn simulate_then_identify_the_hammerstein_example() {
     assert_eq!(header, ["N", "e0"]);
     assert_eq!(rows.len(), len);
     let (header, rows) = read_csv(&out.join("map_N.csv"));
-    assert_eq!(header, ["z0", "value"]);
+    assert_eq!(header, ["z0", "value", "std"]);
     assert_eq!(rows.len(), 201);
     assert!(rows.windows(2).all(|w| w[1][0] > w[0][0]));
+    // The posterior standard deviation: positive, and well below the map's range here.
+    assert!(rows.iter().all(|r| r[2] > 0.0 && r[2] < 0.2), "{rows:?}");
     assert_svg(&out.join("map_N.svg"));
+    let svg = std::fs::read_to_string(out.join("map_N.svg")).unwrap();
+    assert!(svg.contains("95 % band"));
+    assert!(
+        o.stdout.contains("uncertainty: noise variance"),
+        "{}",
+        o.stdout
+    );
     let report = read_json(&out.join("report.json"));
+    assert_eq!(report["blocks"][0]["band"], true);
+    let s2 = report["blocks"][0]["noise_variance"].as_f64().unwrap();
+    // ŝ² = L·Ĵ/n with n = L live samples: the profiled marginal likelihood at the β used (here
+    // larger than the β that fits a noise std of 0.05, so ŝ² exceeds 0.05²).
+    let j = report["cost"]["total"].as_f64().unwrap();
+    assert!((s2 - j).abs() < 1e-9 * j, "ŝ² = {s2}, J = {j}");
+    // The map file, std column included, is a valid lookup table for `truth = { table = … }`.
+    let table_model = dir.path().join("table.toml");
+    let text = std::fs::read_to_string(&model).unwrap();
+    let text = text
+        .lines()
+        .map(|l| {
+            if l.trim_start().starts_with("truth") {
+                format!(
+                    "truth = {{ table = \"{}\" }}",
+                    out.join("map_N.csv").display()
+                )
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(&table_model, text).unwrap();
+    structid_io::ModelFile::from_path(&table_model).unwrap();
     assert_eq!(report["samples"], len);
     assert_eq!(report["settings"]["beta"], 0.01);
     assert_eq!(report["settings"]["blocks"][0]["parameters"]["sigma"], 0.3);
@@ -348,8 +382,9 @@ fn demo_multi_input_and_two_input_grids() {
         p(&out),
     ]);
     let (header, rows) = read_csv(&out.join("map_N.csv"));
-    assert_eq!(header, ["z0", "z1", "value"]);
+    assert_eq!(header, ["z0", "z1", "value", "std"]);
     assert_eq!(rows.len(), 41 * 41);
+    assert!(rows.iter().all(|r| r[3] > 0.0));
     assert_svg(&out.join("map_N.svg"));
     let report = read_json(&out.join("report.json"));
     let rms = report["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap();
@@ -409,9 +444,29 @@ truth = "z0 + z1*z2"
         "0.0001",
     ]);
     let (header, rows) = read_csv(&out.join("map_N.csv"));
-    assert_eq!(header, ["z0", "z1", "z2", "value"]);
+    assert_eq!(header, ["z0", "z1", "z2", "value", "std"]);
     assert_eq!(rows.len(), 300);
+    assert!(rows.iter().all(|r| r[4] > 0.0));
     assert_svg(&out.join("map_N.svg"));
+    // --no-bands skips them.
+    let out2 = dir.path().join("out2");
+    ok(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--out",
+        p(&out2),
+        "--beta",
+        "0.0001",
+        "--no-bands",
+    ]);
+    let (header, _) = read_csv(&out2.join("map_N.csv"));
+    assert_eq!(header, ["z0", "z1", "z2", "value"]);
+    let report = read_json(&out2.join("report.json"));
+    assert_eq!(report["blocks"][0]["band"], false);
+    assert!(report["blocks"][0]["noise_variance"].is_null());
 }
 
 #[test]
@@ -805,6 +860,11 @@ fn total_variation_from_the_model_file_and_the_command_line() {
             .starts_with("tv")
     );
     assert_svg(&out.join("map_friction.svg"));
+    // No posterior for total variation: no band, no std column.
+    assert_eq!(r["blocks"][0]["band"], false);
+    assert!(r["blocks"][0]["noise_variance"].is_null());
+    let (header, _) = read_csv(&out.join("map_friction.csv"));
+    assert_eq!(header, ["z0", "value"]);
     let tv_err = r["blocks"][0]["rms_error_vs_truth"].as_f64().unwrap();
     // --solver admm overrides the choice and agrees.
     let (ra, stdout, _) = identify(&["--beta", "0.003", "--solver", "admm"], "admm");

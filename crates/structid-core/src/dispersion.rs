@@ -88,6 +88,47 @@ pub trait QuadraticPenalty: Send + Sync {
     fn features(&self) -> Option<(Arc<dyn FeatureMap>, &Signal)> {
         None
     }
+
+    /// Writes the cross-Gram matrix K(z_k, p_j) between the sample points z_k (rows, L of
+    /// them) and new points p_j (columns, one per sample of `points`) into `out`
+    /// ([`QuadraticPenalty::len`] × `points.len()`, any layout). Returns `false`, leaving `out`
+    /// unspecified, when the penalty cannot evaluate its kernel away from the samples (the
+    /// default) or when `points` has the wrong number of channels or `out` the wrong shape.
+    ///
+    /// The posterior band of the exact solver ([`crate::posterior`]) needs it; every penalty of
+    /// this crate's quadratic dispersions implements it.
+    ///
+    /// ```
+    /// use structid_core::{Dispersion, KernelDispersion, Penalty, Signal};
+    /// let z = Signal::from_fn(5, 1, |k, _| k as f64 / 4.0);
+    /// let Penalty::Quadratic(pen) = KernelDispersion::gaussian(0.3).unwrap().penalty(&z).unwrap()
+    /// else { unreachable!() };
+    /// let points = Signal::from_fn(2, 1, |k, _| 0.1 + k as f64);
+    /// let mut out = faer::Mat::<f64>::zeros(5, 2);
+    /// assert!(pen.cross_columns(&points, out.as_mut()));
+    /// assert!(out[(0, 0)] > out[(4, 0)]);
+    /// ```
+    fn cross_columns(&self, points: &Signal, out: faer::MatMut<'_, f64>) -> bool {
+        let _ = (points, out);
+        false
+    }
+
+    /// The kernel's diagonal k(p, p) at every sample of `points`, or `None` when the penalty
+    /// cannot evaluate its kernel away from the samples (the default) or `points` has the
+    /// wrong number of channels.
+    ///
+    /// ```
+    /// use structid_core::{Dispersion, KernelDispersion, Penalty, Signal};
+    /// let z = Signal::from_fn(5, 1, |k, _| k as f64);
+    /// let Penalty::Quadratic(pen) = KernelDispersion::gaussian(0.5).unwrap().penalty(&z).unwrap()
+    /// else { unreachable!() };
+    /// let d = pen.diagonal_at(&Signal::from_fn(3, 1, |k, _| k as f64)).unwrap();
+    /// assert!((d[2] - 1.0 / (2.0 * std::f64::consts::PI * 0.25).sqrt()).abs() < 1e-14);
+    /// ```
+    fn diagonal_at(&self, points: &Signal) -> Option<Vec<f64>> {
+        let _ = points;
+        None
+    }
 }
 
 /// A finite feature map ψ: ℝᵖ → ℝᵐ with weights λ (the diagonal of Λ), defining the kernel
@@ -199,5 +240,29 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
             self.z.clone(),
             alpha,
         ))
+    }
+
+    fn cross_columns(&self, points: &Signal, out: faer::MatMut<'_, f64>) -> bool {
+        if points.channels() != self.z.channels()
+            || out.nrows() != self.z.len()
+            || out.ncols() != points.len()
+        {
+            return false;
+        }
+        crate::kernel::par_rows(out, &|i, mut row| {
+            let zi = self.z.sample(i);
+            for j in 0..row.ncols() {
+                row[j] = self.kernel.eval(zi, points.sample(j));
+            }
+        });
+        true
+    }
+
+    fn diagonal_at(&self, points: &Signal) -> Option<Vec<f64>> {
+        (points.channels() == self.z.channels()).then(|| {
+            (0..points.len())
+                .map(|j| self.kernel.eval(points.sample(j), points.sample(j)))
+                .collect()
+        })
     }
 }

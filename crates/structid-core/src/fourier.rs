@@ -21,6 +21,7 @@ use std::f64::consts::PI;
 use std::ops::Range;
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use structid_lti::Signal;
 
 use crate::dispersion::{Dispersion, FeatureMap, Penalty, QuadraticPenalty};
@@ -526,6 +527,54 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
 
     fn features(&self) -> Option<(Arc<dyn FeatureMap>, &Signal)> {
         Some((Arc::clone(&self.map) as Arc<dyn FeatureMap>, &self.z))
+    }
+
+    /// K(z_k, p_j) = ψ(z_k)ᵀΛψ(p_j) as one L×m by m×G matrix product (the features of the
+    /// samples are recomputed per call: O(L·m) evaluations, no L×m storage between calls).
+    fn cross_columns(&self, points: &Signal, out: faer::MatMut<'_, f64>) -> bool {
+        let (len, g, m) = (self.z.len(), points.len(), self.map.dim());
+        if points.channels() != self.z.channels() || out.nrows() != len || out.ncols() != g {
+            return false;
+        }
+        let mut psi_z = vec![0.0; len * m];
+        psi_z
+            .par_chunks_mut(m.max(1))
+            .enumerate()
+            .for_each(|(k, row)| self.map.eval_into(self.z.sample(k), row));
+        let mut psi_p = vec![0.0; g * m];
+        for (j, row) in psi_p.chunks_mut(m.max(1)).enumerate() {
+            self.map.eval_into(points.sample(j), row);
+            row.iter_mut()
+                .zip(self.map.weights())
+                .for_each(|(v, l)| *v *= l);
+        }
+        faer::linalg::matmul::matmul(
+            out,
+            faer::Accum::Replace,
+            faer::MatRef::from_row_major_slice(&psi_z, len, m),
+            faer::MatRef::from_row_major_slice(&psi_p, g, m).transpose(),
+            1.0,
+            faer::get_global_parallelism(),
+        );
+        true
+    }
+
+    fn diagonal_at(&self, points: &Signal) -> Option<Vec<f64>> {
+        if points.channels() != self.z.channels() {
+            return None;
+        }
+        let mut psi = vec![0.0; self.map.dim()];
+        Some(
+            (0..points.len())
+                .map(|j| {
+                    self.map.eval_into(points.sample(j), &mut psi);
+                    psi.iter()
+                        .zip(self.map.weights())
+                        .map(|(v, l)| v * v * l)
+                        .sum()
+                })
+                .collect(),
+        )
     }
 }
 

@@ -8,6 +8,7 @@ use crate::error::{Error, Result, positive_finite};
 use crate::interpolant::Interpolant;
 use crate::measurability::ZSource;
 use crate::model::{Data, Model};
+use crate::posterior::Posterior;
 use crate::problem::Problem;
 use crate::solver;
 use crate::solver::admm::AdmmSettings;
@@ -63,6 +64,7 @@ pub struct IdentifySettings {
     initial_state: InitialState,
     conic: ConicSettings,
     admm: AdmmSettings,
+    posterior: bool,
 }
 
 /// How the LFT's initial state is treated.
@@ -86,6 +88,7 @@ impl Default for IdentifySettings {
             initial_state: InitialState::Zero,
             conic: ConicSettings::default(),
             admm: AdmmSettings::default(),
+            posterior: false,
         }
     }
 }
@@ -153,6 +156,12 @@ impl IdentifySettings {
         &self.admm
     }
 
+    /// Whether the exact and feature solvers keep what the posterior bands need
+    /// ([`Identification::posterior`]).
+    pub fn posterior(&self) -> bool {
+        self.posterior
+    }
+
     /// The memory budget in bytes (`None`: detect at run time).
     pub fn memory_limit_bytes(&self) -> Option<u64> {
         self.memory_limit_bytes
@@ -203,6 +212,21 @@ impl IdentifySettingsBuilder {
     /// Settings of the ADMM solver.
     pub fn admm(mut self, admm: AdmmSettings) -> Self {
         self.inner.admm = admm;
+        self
+    }
+    /// Keep the posterior of the maps (default `false`): the exact and feature solvers then
+    /// store their Cholesky factor and the noise level in [`Identification::posterior`], and
+    /// [`Identification::posterior_std`] gives pointwise standard deviations (uncertainty
+    /// bands; see [`crate::posterior`]). The exact solver's factor is n×n f64 (n = L·n_y),
+    /// kept as long as the identification; its memory estimate includes it.
+    ///
+    /// ```
+    /// use structid_core::IdentifySettings;
+    /// assert!(!IdentifySettings::default().posterior());
+    /// assert!(IdentifySettings::builder().posterior(true).build().unwrap().posterior());
+    /// ```
+    pub fn posterior(mut self, keep: bool) -> Self {
+        self.inner.posterior = keep;
         self
     }
     /// An explicit memory budget in bytes.
@@ -340,6 +364,10 @@ pub struct Identification {
     pub initial_state: Option<Vec<f64>>,
     /// Diagnostics.
     pub diagnostics: Diagnostics,
+    /// The posterior of the maps, kept by the exact and feature solvers when
+    /// [`IdentifySettingsBuilder::posterior`] is on (`None` otherwise, and always for the
+    /// iterative solvers); see [`Identification::posterior_std`].
+    pub posterior: Option<Posterior>,
 }
 
 impl Identification {
@@ -351,6 +379,47 @@ impl Identification {
     /// The estimated maps, in block order, ready for [`Model::simulate`].
     pub fn maps(&self) -> Vec<&dyn Interpolant> {
         self.blocks.iter().map(|b| b.map.as_ref()).collect()
+    }
+
+    /// The pointwise posterior standard deviation of block `block`'s map (index into
+    /// [`Identification::blocks`]) at every sample of `points` (one point per sample, as many
+    /// channels as the block has inputs): N̂ ± 1.96·std is the 95 % band. See
+    /// [`crate::posterior`] for the formula, the noise level ŝ² it uses and the cost.
+    ///
+    /// `Ok(None)` when no posterior was kept: [`IdentifySettingsBuilder::posterior`] off, an
+    /// iterative solver (total variation, Clarabel, ADMM), or a user-defined penalty that
+    /// cannot evaluate its kernel at new points.
+    ///
+    /// # Errors
+    /// [`Error::InvalidParameter`] when `block` is out of range, [`Error::DimensionMismatch`]
+    /// when `points` has the wrong number of channels, [`Error::NonFiniteData`] for NaN or
+    /// infinite coordinates (checked whether or not a posterior was kept).
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{identify, paper, IdentifySettings, KernelDispersion, Signal};
+    /// let exp = paper::spray(300, 0.5, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 2).unwrap();
+    /// let on = IdentifySettings::builder().beta(0.01).posterior(true).build().unwrap();
+    /// let id = identify(&exp.model, &exp.data, &on).unwrap();
+    /// let z = Signal::from_fn(3, 1, |k, _| -0.5 + 0.5 * k as f64);
+    /// let std = id.posterior_std(1, &z).unwrap().unwrap();
+    /// let g = id.blocks[1].map.eval_many(&z);
+    /// println!("g(0) in [{:.3}, {:.3}]", g[1] - 1.96 * std[1], g[1] + 1.96 * std[1]);
+    /// assert!(id.posterior_std(2, &z).is_err());
+    /// // Off by default: no posterior.
+    /// let off = identify(&exp.model, &exp.data, &IdentifySettings::default()).unwrap();
+    /// assert!(off.posterior_std(1, &z).unwrap().is_none());
+    /// ```
+    pub fn posterior_std(&self, block: usize, points: &Signal) -> Result<Option<Vec<f64>>> {
+        let est = self
+            .blocks
+            .get(block)
+            .ok_or_else(|| crate::posterior::block_out_of_range(block, self.blocks.len()))?;
+        crate::posterior::check_points(points, est.z.channels())?;
+        match &self.posterior {
+            Some(p) => p.std(block, points),
+            None => Ok(None),
+        }
     }
 }
 
@@ -463,13 +532,14 @@ fn auto_quadratic(
     // finitely many features.
     let noise = problem.noise();
     let nx = problem.free_response().map_or(0, |o| o.ncols());
-    let need = solver::exact::peak_memory_bytes(
-        problem.len(),
-        problem.outputs(),
-        noise.inputs(),
-        noise.order() > 0,
-        nx,
-    );
+    let need =
+        solver::exact::peak_memory_bytes(
+            problem.len(),
+            problem.outputs(),
+            noise.inputs(),
+            noise.order() > 0,
+            nx,
+        ) + solver::exact::posterior_memory_bytes(settings, problem.len(), problem.outputs(), nx);
     let featured = solver::features::unsupported_reason(problem).is_none()
         && penalties
             .iter()

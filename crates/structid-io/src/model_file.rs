@@ -57,7 +57,9 @@
 //!   order, or `z` for a single input); see [`structid_core::ExprMap`].
 //! * `truth = { table = "file.csv" }` (or `table = "file.csv"` in the block): a lookup table, a
 //!   CSV file with a header and columns `z…, value` (piecewise linear in one input, bilinear on
-//!   a complete grid in two), the path relative to the model file's directory.
+//!   a complete grid in two), the path relative to the model file's directory. A trailing
+//!   column `std` (the posterior standard deviation in the map files of `structid identify`)
+//!   is ignored.
 //!
 //! Every error names the line of the offending key.
 
@@ -888,6 +890,12 @@ fn load_table_truth(
         };
         err_at(line, format!("truth table of block `{block}`: {cause}"))
     })?;
+    let mut table = table;
+    // The map files of `structid identify` may end with the posterior standard deviation.
+    if table.names.len() == dim + 2 && table.names.last().is_some_and(|n| n == "std") {
+        table.names.pop();
+        table.columns.pop();
+    }
     if table.names.len() != dim + 1 {
         return Err(err_at(
             line,

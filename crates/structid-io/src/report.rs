@@ -115,6 +115,12 @@ pub struct BlockReport {
     pub grid_file: Option<String>,
     /// The figure written for this block.
     pub plot_file: Option<String>,
+    /// ŝ², the noise variance estimated by the profiled marginal likelihood, when the solver
+    /// kept a posterior (quadratic dispersions; shared by all blocks).
+    pub noise_variance: Option<f64>,
+    /// Whether posterior uncertainty bands were computed for this block (the `std` column of
+    /// its grid file and the shaded band of its figure).
+    pub band: bool,
 }
 
 fn range(x: &[f64]) -> [f64; 2] {
@@ -191,6 +197,8 @@ impl Report {
                 centred_rms_error_vs_truth: centred,
                 grid_file: None,
                 plot_file: None,
+                noise_variance: id.posterior.as_ref().map(|p| p.noise_variance()),
+                band: false,
             });
         }
         Ok(Self {

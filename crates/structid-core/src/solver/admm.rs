@@ -398,6 +398,7 @@ pub(crate) fn solve_with(
     let t_end = Instant::now();
     let peak = 8 * (len * (4 * nin + 3 * nb) + smoother.transient_len() * 32) as u64;
     Ok(Identification {
+        posterior: None,
         w_hat: out.assembled.w_hat,
         e_hat: out.e_hat,
         blocks: out.assembled.blocks,

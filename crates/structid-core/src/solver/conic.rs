@@ -448,6 +448,7 @@ pub(crate) fn solve_with(
     let t_end = Instant::now();
     let nnz = a_mat.nnz() + p_mat.nnz();
     Ok(Identification {
+        posterior: None,
         w_hat: out.assembled.w_hat,
         e_hat: out.e_hat,
         blocks: out.assembled.blocks,

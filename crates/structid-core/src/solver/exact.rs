@@ -16,6 +16,7 @@
 //! state) make M singular: their rows of M are zero. They are detected on M's diagonal,
 //! checked for consistency (r ≈ 0 there) and left out.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -30,6 +31,7 @@ use structid_lti::{LinearSystem, Signal};
 use crate::dispersion::QuadraticPenalty;
 use crate::error::{Error, Result};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::posterior::{DenseBlock as DensePosteriorBlock, Posterior};
 use crate::problem::Problem;
 use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 
@@ -57,6 +59,26 @@ pub fn peak_memory_bytes(
     8 * words
 }
 
+/// Extra memory of the exact solver when it keeps the posterior
+/// ([`IdentifySettings::posterior`]), 0 otherwise. The n×n Cholesky factor itself is M's buffer,
+/// already counted in [`peak_memory_bytes`], but it then stays allocated inside
+/// [`crate::Posterior`] for as long as the [`Identification`] lives (8·n² bytes, n = L·n_y);
+/// this adds the basis of the initial-state directions (n·n_x) and the workspace of one batch
+/// of [`crate::posterior::BATCH`] points (BATCH·(L + 2n)).
+pub fn posterior_memory_bytes(
+    settings: &IdentifySettings,
+    len: usize,
+    outputs: usize,
+    free_cols: usize,
+) -> u64 {
+    if !settings.posterior() {
+        return 0;
+    }
+    let n = (len * outputs) as u64;
+    let batch = crate::posterior::BATCH.min(len.max(1)) as u64;
+    8 * (n * free_cols as u64 + batch * (len as u64 + 2 * n) + n)
+}
+
 fn solver_name() -> &'static str {
     "exact"
 }
@@ -74,13 +96,18 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     let free = problem.free_response();
     let nx = free.map_or(0, |o| o.ncols());
-    let need = peak_memory_bytes(len, ny, ne, noise_dynamic, nx);
+    let need = peak_memory_bytes(len, ny, ne, noise_dynamic, nx)
+        + posterior_memory_bytes(settings, len, ny, nx);
     let limit = settings.effective_memory_limit();
     if need > limit {
         let max_len = (1..=len)
             .rev()
             .step_by((len / 64).max(1))
-            .find(|&l| peak_memory_bytes(l, ny, ne, noise_dynamic, nx) <= limit)
+            .find(|&l| {
+                peak_memory_bytes(l, ny, ne, noise_dynamic, nx)
+                    + posterior_memory_bytes(settings, l, ny, nx)
+                    <= limit
+            })
             .unwrap_or(0);
         return Err(Error::TooLarge {
             solver: solver_name().into(),
@@ -232,6 +259,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     }
 
     let mut parts = Vec::with_capacity(nblocks);
+    let mut kept_penalties = Vec::with_capacity(nblocks);
     for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
         let mut alpha = vec![0.0; len];
         block.path.apply_adjoint(&lambda, &mut alpha);
@@ -250,6 +278,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             dispersion_value,
             map: pen.interpolant(alpha),
         });
+        kept_penalties.push(Arc::<dyn QuadraticPenalty>::from(pen));
     }
     let assembled = assemble_blocks(problem, parts);
     let fitted = &assembled.fitted;
@@ -292,7 +321,27 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             jitter / max_diag
         ));
     }
+    // The posterior keeps M's buffer (the factor) and the blocks' paths and penalties.
+    let posterior = if settings.posterior() {
+        let quad: f64 = kept.iter().map(|&i| r[i] * lambda[i]).sum();
+        let blocks = problem
+            .blocks()
+            .iter()
+            .zip(kept_penalties)
+            .map(|(b, penalty)| DensePosteriorBlock {
+                path: Arc::clone(&b.path),
+                penalty,
+                inputs: b.z.channels(),
+            })
+            .collect();
+        Posterior::dense(m, kept, len, blocks, free, quad, lb)
+            .map_err(|why| warnings.push(format!("no uncertainty bands: {why}")))
+            .ok()
+    } else {
+        None
+    };
     Ok(Identification {
+        posterior,
         w_hat: assembled.w_hat,
         e_hat: Signal::new(ne, e_hat).map_err(Error::from)?,
         blocks: assembled.blocks,

@@ -34,6 +34,7 @@ use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
 use crate::problem::Problem;
 use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 
@@ -412,8 +413,30 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let res2: f64 = rho.iter().zip(&te).map(|(a, b)| (a - b) * (a - b)).sum();
     let r2: f64 = r.iter().map(|v| v * v).sum();
     let cost = cost_terms(mu, beta, &assembled)?;
+    let mut warnings = Vec::new();
+    let posterior = settings
+        .posterior()
+        .then(|| {
+            feature_posterior(
+                &chol,
+                &maps,
+                &offsets,
+                &sqrt_w,
+                weighted_sse,
+                lb,
+                &v,
+                m,
+                len * ny,
+                nx,
+            )
+        })
+        .and_then(|p| {
+            p.map_err(|why| warnings.push(format!("no uncertainty bands: {why}")))
+                .ok()
+        });
     let t_end = Instant::now();
     Ok(Identification {
+        posterior,
         w_hat: assembled.w_hat,
         e_hat: Signal::new(ne, e_hat)?,
         blocks: assembled.blocks,
@@ -438,10 +461,41 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             },
             peak_memory_bytes: 8 * (cols * cols + 3 * chunk * ny * cols + chunk * m) as u64,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
-            warnings: Vec::new(),
+            warnings,
             ..Diagnostics::default()
         },
     })
+}
+
+/// The posterior of the maps from the m-space factor the solve computed: s² from
+/// min L·J = weighted SSE + L·β·|b|² (see [`crate::posterior`]).
+fn feature_posterior(
+    chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+    maps: &[(Arc<dyn FeatureMap>, &Signal)],
+    offsets: &[usize],
+    sqrt_w: &[Vec<f64>],
+    weighted_sse: f64,
+    lb: f64,
+    v: &nalgebra::DVector<f64>,
+    m: usize,
+    observations: usize,
+    nx: usize,
+) -> std::result::Result<Posterior, String> {
+    let l = chol.l();
+    let factor = Mat::<f64>::from_fn(l.nrows(), l.ncols(), |i, j| l[(i, j)]);
+    let blocks = maps
+        .iter()
+        .zip(offsets)
+        .zip(sqrt_w)
+        .map(|(((map, z), &offset), sw)| FeaturePosteriorBlock {
+            map: Arc::clone(map),
+            offset,
+            sqrt_weights: sw.clone(),
+            inputs: z.channels(),
+        })
+        .collect();
+    let b2: f64 = (0..m).map(|i| v[i] * v[i]).sum();
+    Posterior::features(factor, blocks, weighted_sse + lb * b2, observations, nx)
 }
 
 /// How the solver whitens the noise.
