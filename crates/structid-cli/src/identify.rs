@@ -5,10 +5,13 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
 use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
-use structid_io::{DataTable, DispersionSpec, ModelFile, OutputGuard, Report, TruthSpec};
+use structid_io::{
+    DataTable, DispersionSpec, ModelFile, OutputGuard, Report, SelectionReport, TruthSpec,
+};
 
 use crate::IdentifyArgs;
 use crate::error::{CliError, positive};
@@ -68,7 +71,10 @@ pub fn protect_inputs(
 
 /// Builds the settings from the command line.
 fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
-    let beta = positive("--beta", a.beta)?;
+    let beta = match a.beta {
+        crate::AutoOr::Value(b) => positive("--beta", b)?,
+        crate::AutoOr::Auto => IdentifySettings::default().beta(),
+    };
     let mut b = IdentifySettings::builder()
         .beta(beta)
         // Bands for quadratic dispersions (the exact and feature solvers keep their factor).
@@ -189,11 +195,33 @@ fn fmt_num(v: f64) -> String {
 pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let settings = settings(&a)?;
-    let sigma = a.sigma.map(|s| positive("--sigma", s)).transpose()?;
+    let sigma = match a.sigma {
+        Some(crate::AutoOr::Value(s)) => Some(positive("--sigma", s)?),
+        _ => None,
+    };
+    let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
+    let auto_beta = a.beta == crate::AutoOr::Auto;
+    if a.folds < 2 && a.selection == Some(crate::SelectionArg::Cv) {
+        return Err(CliError::input("--folds must be at least 2"));
+    }
+    if a.validation_data.is_some() != (a.selection == Some(crate::SelectionArg::Validation)) {
+        return Err(CliError::input(
+            "--selection validation and --validation-data V.csv go together",
+        ));
+    }
+    if a.selection.is_some() && !(auto_beta || auto_sigma) {
+        return Err(CliError::input(
+            "--selection needs --beta auto and/or --sigma auto",
+        ));
+    }
     let mut mf = ModelFile::from_path(&a.model)?;
     override_dispersions(&mut mf, &a)?;
     let mut guard = OutputGuard::new();
-    protect_inputs(&mut guard, &mf, &a.model, &[&a.data]);
+    let mut inputs: Vec<&Path> = vec![&a.data];
+    if let Some(v) = &a.validation_data {
+        inputs.push(v);
+    }
+    protect_inputs(&mut guard, &mf, &a.model, &inputs);
     // Refuse a bad output directory before the (possibly long) identification.
     guard.check(&a.out)?;
     let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
@@ -227,11 +255,40 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         None
     };
     let model = mf.to_model(sigma, z.as_ref())?;
-    let id = identify(&model, &data, &settings)?;
+    let (id, settings, selection) = if auto_beta || auto_sigma {
+        let quadratic = !mf
+            .blocks
+            .iter()
+            .any(|b| matches!(b.dispersion, DispersionSpec::TotalVariation { .. }));
+        let criterion = match a.selection {
+            Some(crate::SelectionArg::Ml) => Criterion::MarginalLikelihood,
+            Some(crate::SelectionArg::Gcv) => Criterion::Gcv,
+            Some(crate::SelectionArg::Cv) => Criterion::CrossValidation { folds: a.folds },
+            Some(crate::SelectionArg::Validation) => Criterion::Validation,
+            None if quadratic => Criterion::MarginalLikelihood,
+            None => Criterion::CrossValidation { folds: a.folds },
+        };
+        let validation = match &a.validation_data {
+            Some(v) => Some(mf.select_data(&DataTable::read(v)?)?),
+            None => None,
+        };
+        let how = SelectionSettings::builder()
+            .criterion(criterion)
+            .tune_beta(auto_beta)
+            .tune_sigma(auto_sigma)
+            .build()?;
+        let sel = select(&model, &data, validation.as_ref(), &settings, &how)?;
+        let chosen = settings.with_beta(sel.beta)?;
+        let report = SelectionReport::new(&sel);
+        (sel.identification, chosen, Some(report))
+    } else {
+        (identify(&model, &data, &settings)?, settings, None)
+    };
 
     guard.create_dir(&a.out)?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
     report.data_file = Some(a.data.display().to_string());
+    report.selection = selection;
     let mut written: Vec<PathBuf> = Vec::new();
 
     // estimate.csv: ŵ by block name (in w order), then ê.

@@ -57,6 +57,40 @@ enum Command {
     Demo(DemoCommand),
 }
 
+/// A number, or `auto`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum AutoOr {
+    /// A given value.
+    Value(f64),
+    /// Chosen from the data.
+    Auto,
+}
+
+impl std::str::FromStr for AutoOr {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(AutoOr::Auto);
+        }
+        s.parse::<f64>()
+            .map(AutoOr::Value)
+            .map_err(|_| format!("expected a number or `auto`, found `{s}`"))
+    }
+}
+
+/// Criterion of automatic hyperparameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum SelectionArg {
+    /// Maximum marginal likelihood.
+    Ml,
+    /// Generalised cross-validation.
+    Gcv,
+    /// Blocked K-fold cross-validation.
+    Cv,
+    /// Simulation error on a validation record.
+    Validation,
+}
+
 /// Arguments of `structid identify`.
 #[derive(Debug, Args)]
 struct IdentifyArgs {
@@ -70,15 +104,33 @@ struct IdentifyArgs {
     #[arg(long, short = 'o', value_name = "DIR")]
     out: PathBuf,
     /// Weight β > 0 of the dispersion against the noise energy in J = (1/L)·Σ|e_k|² + β·Σ D_i.
-    /// Larger β gives smoother maps and larger residuals.
-    #[arg(long, value_name = "B", allow_negative_numbers = true,
-          default_value_t = structid_core::IdentifySettings::default().beta())]
-    beta: f64,
+    /// Larger β gives smoother maps and larger residuals. `auto` selects β from the data by
+    /// the criterion of --selection.
+    #[arg(
+        long,
+        value_name = "B|auto",
+        allow_negative_numbers = true,
+        default_value = "0.01"
+    )]
+    beta: AutoOr,
     /// Kernel width σ > 0 for every block, overriding the model file. Without it each block
     /// uses its own `sigma`, or, when the model file gives none, 0.1 × the largest range of
-    /// the block's inputs z over the data.
-    #[arg(long, value_name = "S", allow_negative_numbers = true)]
-    sigma: Option<f64>,
+    /// the block's inputs z over the data. `auto` scales every block's width by one common
+    /// factor chosen from the data (within two decades), with β optimised for each.
+    #[arg(long, value_name = "S|auto", allow_negative_numbers = true)]
+    sigma: Option<AutoOr>,
+    /// Criterion of automatic β/σ: `ml` (maximum marginal likelihood) or `gcv` (generalised
+    /// cross-validation) for quadratic dispersions, `cv` (blocked K-fold cross-validation) for
+    /// any dispersion, `validation` (simulation error on --validation-data) for any
+    /// [default: ml for quadratic dispersions, cv otherwise].
+    #[arg(long, value_name = "ml|gcv|cv|validation")]
+    selection: Option<SelectionArg>,
+    /// Number of contiguous folds of `--selection cv`.
+    #[arg(long, value_name = "K", default_value_t = 5)]
+    folds: usize,
+    /// Validation record (CSV like --data) for `--selection validation`.
+    #[arg(long, value_name = "V.csv")]
+    validation_data: Option<PathBuf>,
     /// Memory budget of the solver in MiB [default: 3/4 of the available memory].
     #[arg(long, value_name = "N")]
     memory_limit_mib: Option<u64>,

@@ -51,4 +51,6 @@ pub use model_file::{
     default_sigma,
 };
 pub use output::{OutputGuard, write_atomic};
-pub use report::{BlockReport, BlockSettings, DiagnosticsReport, Report, SettingsReport};
+pub use report::{
+    BlockReport, BlockSettings, DiagnosticsReport, Report, SelectionReport, SettingsReport,
+};

@@ -38,8 +38,51 @@ pub struct Report {
     pub initial_state: Option<Vec<f64>>,
     /// One entry per block, in model order.
     pub blocks: Vec<BlockReport>,
+    /// How β (and σ) were chosen, when `auto` (absent for given values).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub selection: Option<SelectionReport>,
     /// Every file written, relative to the output directory.
     pub files: Vec<String>,
+}
+
+/// The automatic choice of hyperparameters: values, criterion, method and curve.
+#[derive(Clone, Debug, Serialize)]
+pub struct SelectionReport {
+    /// `ml`, `gcv`, `cv` or `validation`.
+    pub criterion: String,
+    /// The criterion in words.
+    pub criterion_description: String,
+    /// How it was evaluated (path, ranks, search).
+    pub method: String,
+    /// The chosen β.
+    pub beta: f64,
+    /// The chosen σ of the first block with a width, when σ was tuned.
+    pub sigma: Option<f64>,
+    /// The chosen width of every block (null without one).
+    pub widths: Vec<Option<f64>>,
+    /// ŝ² at the choice (likelihood-based criteria).
+    pub noise_variance: Option<f64>,
+    /// Every trial (β, σ, value) in the order evaluated.
+    pub curve: Vec<structid_core::hyperparameters::Trial>,
+    /// Seconds for the selection and the final fit.
+    pub seconds: f64,
+}
+
+impl SelectionReport {
+    /// The report of a selection.
+    pub fn new(sel: &structid_core::hyperparameters::Selection) -> Self {
+        Self {
+            criterion: sel.criterion.name().into(),
+            criterion_description: sel.criterion.describe(),
+            method: sel.method.clone(),
+            beta: sel.beta,
+            sigma: sel.sigma,
+            widths: sel.widths.clone(),
+            noise_variance: sel.noise_variance,
+            curve: sel.curve.clone(),
+            seconds: sel.seconds,
+        }
+    }
 }
 
 /// Settings used for the identification.
@@ -222,6 +265,7 @@ impl Report {
             },
             initial_state: id.initial_state.clone(),
             blocks,
+            selection: None,
             files: Vec::new(),
         })
     }

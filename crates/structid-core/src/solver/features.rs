@@ -414,6 +414,13 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let r2: f64 = r.iter().map(|v| v * v).sum();
     let cost = cost_terms(mu, beta, &assembled)?;
     let mut warnings = Vec::new();
+    let sqrt_w: Vec<Vec<f64>> = maps
+        .iter()
+        .map(|(f, _)| f.weights().iter().map(|l| l.sqrt()).collect())
+        .collect();
+    let observations = problem
+        .held_out()
+        .map_or(len * ny, |h| h.iter().filter(|&&x| !x).count());
     let posterior = settings
         .posterior()
         .then(|| {
@@ -426,7 +433,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
                 lb,
                 &v,
                 m,
-                len * ny,
+                observations,
                 nx,
             )
         })
@@ -471,7 +478,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 /// min L·J = weighted SSE + L·β·|b|² (see [`crate::posterior`]).
 fn feature_posterior(
     chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
-    maps: &[(Arc<dyn FeatureMap>, &Signal)],
+    maps: &[(Arc<dyn FeatureMap>, Signal)],
     offsets: &[usize],
     sqrt_w: &[Vec<f64>],
     weighted_sse: f64,
