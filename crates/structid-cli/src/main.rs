@@ -59,7 +59,7 @@ enum Command {
     /// Compare dispersions and β values over experiments and noise seeds (research sweeps).
     ///
     /// `structid compare --config SWEEP.toml --out DIR` runs every case of the sweep (experiment ×
-    /// dispersion × β × seed) in parallel and writes DIR/cases/<case>.json, DIR/results.csv,
+    /// dispersion × β × seed) in parallel and writes one JSON file per case, DIR/results.csv,
     /// DIR/results.md and figures. `structid compare merge DIR... --out DIR` combines shard
     /// directories (see --shard).
     Compare(compare::CompareArgs),

@@ -197,7 +197,15 @@ fn case_contents(dir: &Path) -> BTreeMap<String, Vec<u8>> {
 }
 
 fn sweep(config: &Path, out: &Path, extra: &[&str]) -> Out {
-    let mut args = vec!["compare", "--config", p(config), "--out", p(out), "--jobs", "2"];
+    let mut args = vec![
+        "compare",
+        "--config",
+        p(config),
+        "--out",
+        p(out),
+        "--jobs",
+        "2",
+    ];
     args.extend_from_slice(extra);
     ok(&args)
 }
@@ -214,9 +222,23 @@ fn compare_writes_every_file_with_one_row_per_case() {
     let col = |name: &str| header.iter().position(|h| h == name).unwrap();
     assert_eq!(
         header[..7],
-        ["case", "experiment", "dispersion", "seed", "beta", "sigma", "selection"]
+        [
+            "case",
+            "experiment",
+            "dispersion",
+            "seed",
+            "beta",
+            "sigma",
+            "selection"
+        ]
     );
-    for c in ["map_rms_N", "val_rms_y", "val_fit_y", "cost_noise", "cost_dispersion"] {
+    for c in [
+        "map_rms_N",
+        "val_rms_y",
+        "val_fit_y",
+        "cost_noise",
+        "cost_dispersion",
+    ] {
         col(c);
     }
     let ids: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
@@ -344,7 +366,13 @@ fn shards_merged_equal_an_unsharded_run() {
         p(&runs.join("merged")),
     ]);
     assert!(e.contains("already holds case files"), "{e}");
-    let e = input_error(&["compare", "merge", p(dir.path()), "--out", p(&runs.join("m4"))]);
+    let e = input_error(&[
+        "compare",
+        "merge",
+        p(dir.path()),
+        "--out",
+        p(&runs.join("m4")),
+    ]);
     assert!(e.contains("has no case files"), "{e}");
 }
 
@@ -368,7 +396,11 @@ fn resume_does_not_redo_finished_cases() {
     assert!(e.contains("--resume"), "{e}");
 
     let o = sweep(&config, &out, &["--resume"]);
-    assert!(o.stdout.contains("ran 2 case(s) (10 skipped"), "{}", o.stdout);
+    assert!(
+        o.stdout.contains("ran 2 case(s) (10 skipped"),
+        "{}",
+        o.stdout
+    );
     let after = case_contents(&out);
     assert_eq!(after.len(), before.len());
     for (name, bytes) in &before {
@@ -384,9 +416,23 @@ fn resume_does_not_redo_finished_cases() {
     assert_eq!(rows.len(), IDS.len());
 
     // A changed configuration is not mixed with old results.
-    std::fs::write(&config, CONFIG.replace("noise_std = 0.1", "noise_std = 0.2")).unwrap();
-    let e = input_error(&["compare", "--config", p(&config), "--out", p(&out), "--resume"]);
-    assert!(e.contains("cannot resume") && e.contains("sim/gauss"), "{e}");
+    std::fs::write(
+        &config,
+        CONFIG.replace("noise_std = 0.1", "noise_std = 0.2"),
+    )
+    .unwrap();
+    let e = input_error(&[
+        "compare",
+        "--config",
+        p(&config),
+        "--out",
+        p(&out),
+        "--resume",
+    ]);
+    assert!(
+        e.contains("cannot resume") && e.contains("sim/gauss"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -395,10 +441,25 @@ fn malformed_configs_name_the_line() {
     let config = setup(dir.path());
     let out = dir.path().join("out");
     for (from, to, line, needle) in [
-        ("beta = 0.001", "beta = -0.001", 24, "beta = -0.001 is invalid"),
-        ("kind = \"tv\"", "kind = \"tvv\"", 23, "unknown dispersion kind `tvv`"),
+        (
+            "beta = 0.001",
+            "beta = -0.001",
+            24,
+            "beta = -0.001 is invalid",
+        ),
+        (
+            "kind = \"tv\"",
+            "kind = \"tvv\"",
+            23,
+            "unknown dispersion kind `tvv`",
+        ),
         ("seeds = [4, 9]", "seeds = [4, 9", 11, "invalid TOML"),
-        ("name = \"meas\"", "name = \"sim\"", 12, "two experiments are named `sim`"),
+        (
+            "name = \"meas\"",
+            "name = \"sim\"",
+            12,
+            "two experiments are named `sim`",
+        ),
     ] {
         std::fs::write(&config, CONFIG.replace(from, to)).unwrap();
         let e = input_error(&["compare", "--config", p(&config), "--out", p(&out)]);
@@ -406,7 +467,10 @@ fn malformed_configs_name_the_line() {
             e.contains(&format!("sweep config `{}`", config.display())) && e.contains(needle),
             "{to}: {e}"
         );
-        assert!(e.contains(&format!("(line {line}")), "{to}: expected line {line}: {e}");
+        assert!(
+            e.contains(&format!("(line {line}")),
+            "{to}: expected line {line}: {e}"
+        );
     }
     // Files named by the configuration are checked before any case runs.
     std::fs::write(&config, CONFIG.replace("\"data.csv\"", "\"missing.csv\"")).unwrap();
@@ -424,7 +488,10 @@ fn bad_shards_and_jobs_are_clear_errors() {
     let config = setup(dir.path());
     let out = dir.path().join("out");
     for (shard, needle) in [
-        ("2/2", "shard index 2 is not less than the number of shards 2"),
+        (
+            "2/2",
+            "shard index 2 is not less than the number of shards 2",
+        ),
         ("0/0", "at least 1"),
         ("1", "not of the form i/n"),
         ("x/3", "not a whole number"),
@@ -440,7 +507,15 @@ fn bad_shards_and_jobs_are_clear_errors() {
         ]);
         assert!(e.contains("--shard") && e.contains(needle), "{shard}: {e}");
     }
-    let e = input_error(&["compare", "--config", p(&config), "--out", p(&out), "--jobs", "0"]);
+    let e = input_error(&[
+        "compare",
+        "--config",
+        p(&config),
+        "--out",
+        p(&out),
+        "--jobs",
+        "0",
+    ]);
     assert!(e.contains("--jobs"), "{e}");
     assert!(!out.exists());
 }

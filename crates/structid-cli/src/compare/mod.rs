@@ -8,7 +8,7 @@
 //! The configuration ([`structid_io::sweep_file`]) lists experiments (a model file with
 //! measured or simulated data) and dispersions (a kind, its parameters and β values); every
 //! combination, with every seed of a simulated experiment, is a case ([`cases`]). Cases run in
-//! parallel ([`run`]); each writes `DIR/cases/<id>.json` as soon as it finishes, and the tables
+//! parallel ([`mod@run`]); each writes `DIR/cases/<id>.json` as soon as it finishes, and the tables
 //! `results.csv`/`results.md` ([`results`]) are rebuilt from the case files after each case.
 //! The figures ([`figures`]) follow at the end. `merge` combines the case files of shard
 //! directories and rebuilds the same tables and figures.
@@ -34,7 +34,7 @@ pub struct CompareArgs {
     /// `merge`: combine shard directories.
     #[command(subcommand)]
     command: Option<CompareCommand>,
-    /// The sweep configuration (TOML): [[experiment]] and [[dispersion]] tables.
+    /// The sweep configuration (TOML): `[[experiment]]` and `[[dispersion]]` tables.
     #[arg(long, short = 'c', value_name = "SWEEP.toml", required = true)]
     config: Option<PathBuf>,
     /// Output directory: cases/*.json, results.csv, results.md and the figures.

@@ -248,17 +248,11 @@ fn run_case(ctx: &Context<'_>, case: &Case) -> CaseRecord {
     let t0 = Instant::now();
     let mut rec = skeleton(ctx, case);
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        let mut r = rec.clone();
-        execute(ctx, case, &mut r)
-            .map(|()| r.clone())
-            .map_err(|e| (r, e))
+        execute(ctx, case, &mut rec)
     }));
-    rec = match outcome {
-        Ok(Ok(r)) => r,
-        Ok(Err((mut r, e))) => {
-            r.status = format!("error: {}", one_line(&e));
-            r
-        }
+    match outcome {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => rec.status = format!("error: {}", one_line(&e)),
         Err(payload) => {
             let msg = payload
                 .downcast_ref::<&str>()
@@ -269,9 +263,8 @@ fn run_case(ctx: &Context<'_>, case: &Case) -> CaseRecord {
                 "error: internal error (a bug in structid): {}",
                 one_line(&msg)
             );
-            rec
         }
-    };
+    }
     rec.seconds = t0.elapsed().as_secs_f64();
     rec
 }
