@@ -178,8 +178,24 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
     let mut inputs = vec![path.to_path_buf()];
     let mut experiments = Vec::with_capacity(file.experiments.len());
     for exp in &file.experiments {
+        // The fingerprint covers what the results depend on: the kind of data, the noise levels
+        // and the bytes of every file (in a fixed order), not paths or line numbers, so that
+        // moving files or editing comments does not invalidate finished cases.
         let mut fp = Fnv::new();
-        fp.write(format!("{:?}", exp.data).as_bytes());
+        match &exp.data {
+            ExperimentData::Measured { validation, .. } => {
+                fp.write(format!("measured|{}", validation.is_some()).as_bytes());
+            }
+            ExperimentData::Simulated(sim) => fp.write(
+                format!(
+                    "simulated|{:?}|{:?}|{}",
+                    sim.noise_std,
+                    sim.validation_noise_std,
+                    sim.validation_input.is_some()
+                )
+                .as_bytes(),
+            ),
+        }
         let model_path = file.resolve(&exp.model);
         let mf = ModelFile::from_path(&model_path)
             .map_err(|e| CliError::from(e).context(context(exp, "model", &exp.model)))?;
