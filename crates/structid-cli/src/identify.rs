@@ -161,25 +161,24 @@ fn override_dispersions(mf: &mut ModelFile, a: &IdentifyArgs) -> Result<(), CliE
             "--neighbours applies to --dispersion tv only",
         ));
     }
-    for b in &mut mf.blocks {
-        let sigma = b.dispersion.sigma();
-        b.dispersion = match kind {
-            crate::DispersionArg::Gaussian => DispersionSpec::Gaussian { sigma },
-            crate::DispersionArg::GaussianLowrank => DispersionSpec::LowRankGaussian {
-                sigma,
-                tolerance: None,
-            },
-            crate::DispersionArg::Fourier => DispersionSpec::Fourier {
-                sigma,
-                harmonics: None,
-                additive: false,
-            },
-            crate::DispersionArg::Tv => DispersionSpec::TotalVariation {
-                neighbours: a.neighbours,
-                interpolation: None,
-            },
-        };
-    }
+    let spec = match kind {
+        crate::DispersionArg::Gaussian => DispersionSpec::Gaussian { sigma: None },
+        crate::DispersionArg::GaussianLowrank => DispersionSpec::LowRankGaussian {
+            sigma: None,
+            tolerance: None,
+        },
+        crate::DispersionArg::Fourier => DispersionSpec::Fourier {
+            sigma: None,
+            harmonics: None,
+            additive: false,
+        },
+        crate::DispersionArg::Tv => DispersionSpec::TotalVariation {
+            neighbours: a.neighbours,
+            interpolation: None,
+        },
+    };
+    // The file's σ is kept: shared with `structid compare`, which swaps dispersions the same way.
+    mf.replace_dispersions(&spec);
     Ok(())
 }
 

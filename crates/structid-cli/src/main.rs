@@ -11,6 +11,7 @@
 //! files, a model that cannot be identified as posed), 1 failure while running (writing files,
 //! numerical breakdown, not enough memory).
 
+mod compare;
 mod demo;
 mod error;
 mod figures;
@@ -55,6 +56,13 @@ enum Command {
     /// Run the examples of the paper end to end, with no files to prepare.
     #[command(subcommand)]
     Demo(DemoCommand),
+    /// Compare dispersions and β values over experiments and noise seeds (research sweeps).
+    ///
+    /// `structid compare --config SWEEP.toml --out DIR` runs every case of the sweep (experiment ×
+    /// dispersion × β × seed) in parallel and writes one JSON file per case, DIR/results.csv,
+    /// DIR/results.md and figures. `structid compare merge DIR... --out DIR` combines shard
+    /// directories (see --shard).
+    Compare(compare::CompareArgs),
 }
 
 /// A number, or `auto`.
@@ -302,6 +310,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Simulate(a) => simulate::run(a),
         Command::Demo(DemoCommand::Spray(a)) => demo::spray(a),
         Command::Demo(DemoCommand::MultiInput(a)) => demo::multi_input(a),
+        Command::Compare(a) => compare::run(a),
     }
 }
 

@@ -290,7 +290,7 @@ impl SelectionSettingsBuilder {
 }
 
 /// One evaluation of the criterion.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Trial {
     /// β tried.
     pub beta: f64,

@@ -24,6 +24,19 @@ pub enum IoError {
         message: String,
     },
 
+    /// A sweep configuration file (`structid compare --config`) is malformed.
+    #[error("{}", sweep_message(path.as_deref(), *line, *column, message))]
+    Sweep {
+        /// The configuration file, when it was read from disk.
+        path: Option<PathBuf>,
+        /// One-based line of the offending text, when known.
+        line: Option<usize>,
+        /// One-based column of the offending text, when known.
+        column: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
+
     /// A data (CSV) file is malformed.
     #[error("{}", data_message(path.as_deref(), *line, column.as_deref(), message))]
     Data {
@@ -116,6 +129,7 @@ impl IoError {
     pub fn is_input_error(&self) -> bool {
         match self {
             IoError::Model { .. }
+            | IoError::Sweep { .. }
             | IoError::Data { .. }
             | IoError::MissingColumn { .. }
             | IoError::Read { .. }
@@ -129,6 +143,7 @@ impl IoError {
     pub(crate) fn with_path(mut self, p: &Path) -> Self {
         match &mut self {
             IoError::Model { path, .. }
+            | IoError::Sweep { path, .. }
             | IoError::Data { path, .. }
             | IoError::MissingColumn { path, .. }
                 if path.is_none() =>
@@ -177,6 +192,24 @@ fn model_message(
     let mut s = match path {
         Some(p) => format!("model file `{}`: {message}", p.display()),
         None => format!("model file: {message}"),
+    };
+    match (line, column) {
+        (Some(l), Some(c)) => s.push_str(&format!(" (line {l}, column {c})")),
+        (Some(l), None) => s.push_str(&format!(" (line {l})")),
+        _ => {}
+    }
+    s
+}
+
+fn sweep_message(
+    path: Option<&Path>,
+    line: Option<usize>,
+    column: Option<usize>,
+    message: &str,
+) -> String {
+    let mut s = match path {
+        Some(p) => format!("sweep config `{}`: {message}", p.display()),
+        None => format!("sweep config: {message}"),
     };
     match (line, column) {
         (Some(l), Some(c)) => s.push_str(&format!(" (line {l}, column {c})")),

@@ -7,6 +7,8 @@
 //! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
 //! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
 //! * [`Report`]: the `report.json` of an identification.
+//! * [`SweepFile`]: the sweep configuration of `structid compare` (experiments × dispersions ×
+//!   β values × seeds); errors name the line. See [`sweep_file`] for the format.
 //!
 //! ```
 //! use structid_core::{identify, IdentifySettings};
@@ -43,6 +45,7 @@ pub mod error;
 pub mod model_file;
 pub mod output;
 pub mod report;
+pub mod sweep_file;
 
 pub use data_file::{DataFile, DataTable, csv_bytes, format_number, write_csv};
 pub use error::{ErrorChain, IoError, core_is_input_error};
@@ -54,3 +57,4 @@ pub use output::{OutputGuard, write_atomic};
 pub use report::{
     BlockReport, BlockSettings, DiagnosticsReport, Report, SelectionReport, SettingsReport,
 };
+pub use sweep_file::SweepFile;

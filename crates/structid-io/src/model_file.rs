@@ -183,6 +183,24 @@ impl DispersionSpec {
         }
     }
 
+    /// The same dispersion with σ set to `sigma` (kinds without σ are returned unchanged).
+    ///
+    /// ```
+    /// use structid_io::DispersionSpec;
+    /// let d = DispersionSpec::Gaussian { sigma: None }.with_sigma(Some(0.3));
+    /// assert_eq!(d.sigma(), Some(0.3));
+    /// ```
+    pub fn with_sigma(&self, sigma: Option<f64>) -> Self {
+        let mut out = self.clone();
+        match &mut out {
+            DispersionSpec::Gaussian { sigma: s }
+            | DispersionSpec::Fourier { sigma: s, .. }
+            | DispersionSpec::LowRankGaussian { sigma: s, .. } => *s = sigma,
+            DispersionSpec::TotalVariation { .. } => {}
+        }
+        out
+    }
+
     /// Builds the dispersion. `sigma_override` replaces the file's σ; without either, σ is
     /// [`default_sigma`] of `block_z` (the block's input samples), which is then required.
     pub fn build(
@@ -384,20 +402,20 @@ struct RawBlock {
 // ---------------------------------------------------------------------------------------------
 // Locations
 
-struct Source<'a> {
+pub(crate) struct Source<'a> {
     text: &'a str,
     line_starts: Vec<usize>,
 }
 
 impl<'a> Source<'a> {
-    fn new(text: &'a str) -> Self {
+    pub(crate) fn new(text: &'a str) -> Self {
         let mut line_starts = vec![0];
         line_starts.extend(text.match_indices('\n').map(|(i, _)| i + 1));
         Self { text, line_starts }
     }
 
     /// One-based (line, column) of a byte offset; the column counts characters.
-    fn line_col(&self, offset: usize) -> (usize, usize) {
+    pub(crate) fn line_col(&self, offset: usize) -> (usize, usize) {
         let offset = offset.min(self.text.len());
         let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
         let start = self.line_starts[line - 1];
@@ -409,7 +427,7 @@ impl<'a> Source<'a> {
         (line, col)
     }
 
-    fn line(&self, offset: usize) -> usize {
+    pub(crate) fn line(&self, offset: usize) -> usize {
         self.line_col(offset).0
     }
 
@@ -431,7 +449,7 @@ impl<'a> Source<'a> {
     }
 }
 
-fn err_at(line: usize, message: impl Into<String>) -> IoError {
+pub(crate) fn err_at(line: usize, message: impl Into<String>) -> IoError {
     IoError::Model {
         path: None,
         line: Some(line),
@@ -613,7 +631,7 @@ fn infer_cols(mats: &[&MatIn], what: &str, sym: &str) -> Dim {
 // ---------------------------------------------------------------------------------------------
 // Parsing
 
-fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
+pub(crate) fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
     let message = e.message().trim().to_string();
     match e.span() {
         Some(span) => {
@@ -668,7 +686,7 @@ fn check_names(
     Ok(names)
 }
 
-fn value_kind(v: &toml::Value) -> &'static str {
+pub(crate) fn value_kind(v: &toml::Value) -> &'static str {
     match v {
         toml::Value::String(_) => "a string",
         toml::Value::Integer(_) => "an integer",
@@ -689,13 +707,7 @@ fn parse_dispersion(
         return Ok(DispersionSpec::Gaussian { sigma: None });
     };
     let line = src.line(v.span().start);
-    let supported = SUPPORTED_DISPERSIONS.join(", ");
-    let unknown_kind = |k: &str| {
-        err_at(
-            line,
-            format!("block `{block}`: unknown dispersion kind `{k}`; supported kinds: {supported}"),
-        )
-    };
+    let owner = format!("block `{block}`");
     match v.get_ref() {
         toml::Value::String(k) => match k.as_str() {
             "gaussian" => Ok(DispersionSpec::Gaussian { sigma: None }),
@@ -708,167 +720,189 @@ fn parse_dispersion(
                 harmonics: None,
                 additive: false,
             }),
-            other => Err(unknown_kind(other)),
+            other => Err(unknown_dispersion_kind(&owner, other, line)),
         },
-        toml::Value::Table(t) => {
-            let kind = match t.get("kind") {
-                Some(toml::Value::String(k)) => k.as_str(),
-                Some(other) => {
-                    return Err(err_at(
-                        line,
-                        format!(
-                            "block `{block}`: dispersion `kind` must be a string (one of: {supported}), not {}",
-                            value_kind(other)
-                        ),
-                    ));
-                }
-                None => {
-                    return Err(err_at(
-                        line,
-                        format!(
-                            "block `{block}`: the dispersion needs a `kind` (one of: {supported}), \
-                             e.g. dispersion = {{ kind = \"gaussian\", sigma = 0.4 }}"
-                        ),
-                    ));
-                }
-            };
-            let allowed: &[&str] = match kind {
-                "gaussian" => &["kind", "sigma"],
-                "fourier" => &["kind", "sigma", "harmonics", "combine"],
-                "gaussian-lowrank" => &["kind", "sigma", "tolerance"],
-                "tv" => &["kind", "neighbours", "interpolation"],
-                other => return Err(unknown_kind(other)),
-            };
-            if let Some(key) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
-                return Err(err_at(
-                    line,
-                    format!(
-                        "block `{block}`: unknown key `{key}` in the {kind} dispersion; it takes {}",
-                        allowed[1..]
-                            .iter()
-                            .map(|k| format!("`{k}`"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                ));
-            }
-            let sigma = match t.get("sigma") {
-                None => None,
-                Some(toml::Value::Float(s)) => Some(*s),
-                Some(toml::Value::Integer(s)) => Some(*s as f64),
-                Some(other) => {
-                    return Err(err_at(
-                        line,
-                        format!(
-                            "block `{block}`: sigma must be a number, not {}",
-                            value_kind(other)
-                        ),
-                    ));
-                }
-            };
-            if let Some(s) = sigma
-                && !(s.is_finite() && s > 0.0)
-            {
-                return Err(err_at(
-                    line,
-                    format!(
-                        "block `{block}`: sigma = {s} is invalid; it must be a finite number greater than zero"
-                    ),
-                ));
-            }
-            match kind {
-                "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
-                "tv" => {
-                    let neighbours = match t.get("neighbours") {
-                        None => None,
-                        Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 1024 => Some(*n as usize),
-                        Some(other) => {
-                            return Err(err_at(
-                                line,
-                                format!(
-                                    "block `{block}`: neighbours must be a whole number from 1 to 1024, not {other}"
-                                ),
-                            ));
-                        }
-                    };
-                    let interpolation = match t.get("interpolation") {
-                        None => None,
-                        Some(toml::Value::String(c)) if c == "inverse-distance" => {
-                            Some(GraphInterpolation::InverseDistance)
-                        }
-                        Some(toml::Value::String(c)) if c == "nearest" => {
-                            Some(GraphInterpolation::Nearest)
-                        }
-                        Some(other) => {
-                            return Err(err_at(
-                                line,
-                                format!(
-                                    "block `{block}`: interpolation must be \"inverse-distance\" or \"nearest\", not {other}"
-                                ),
-                            ));
-                        }
-                    };
-                    Ok(DispersionSpec::TotalVariation {
-                        neighbours,
-                        interpolation,
-                    })
-                }
-                "gaussian-lowrank" => {
-                    let tolerance = match t.get("tolerance") {
-                        None => None,
-                        Some(toml::Value::Float(v)) if *v > 0.0 && *v < 1.0 => Some(*v),
-                        Some(other) => {
-                            return Err(err_at(
-                                line,
-                                format!(
-                                    "block `{block}`: tolerance must be a number in (0, 1), not {other}"
-                                ),
-                            ));
-                        }
-                    };
-                    Ok(DispersionSpec::LowRankGaussian { sigma, tolerance })
-                }
-                _ => {
-                    let harmonics = match t.get("harmonics") {
-                        None => None,
-                        Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 4096 => Some(*n as usize),
-                        Some(other) => {
-                            return Err(err_at(
-                                line,
-                                format!(
-                                    "block `{block}`: harmonics must be a whole number from 1 to 4096, not {other}"
-                                ),
-                            ));
-                        }
-                    };
-                    let additive = match t.get("combine") {
-                        None => false,
-                        Some(toml::Value::String(c)) if c == "tensor" => false,
-                        Some(toml::Value::String(c)) if c == "additive" => true,
-                        Some(other) => {
-                            return Err(err_at(
-                                line,
-                                format!(
-                                    "block `{block}`: combine must be \"tensor\" or \"additive\", not {other}"
-                                ),
-                            ));
-                        }
-                    };
-                    Ok(DispersionSpec::Fourier {
-                        sigma,
-                        harmonics,
-                        additive,
-                    })
-                }
-            }
-        }
+        toml::Value::Table(t) => dispersion_from_table(t, &owner, &|_| line),
         other => Err(err_at(
             line,
             format!(
-                "block `{block}`: dispersion must be a table such as {{ kind = \"gaussian\", sigma = 0.4 }}, not {}",
+                "{owner}: dispersion must be a table such as {{ kind = \"gaussian\", sigma = 0.4 }}, not {}",
                 value_kind(other)
             ),
         )),
+    }
+}
+
+fn unknown_dispersion_kind(owner: &str, kind: &str, line: usize) -> IoError {
+    err_at(
+        line,
+        format!(
+            "{owner}: unknown dispersion kind `{kind}`; supported kinds: {}",
+            SUPPORTED_DISPERSIONS.join(", ")
+        ),
+    )
+}
+
+/// The keys a dispersion kind takes besides `kind`, or `None` for an unknown kind.
+pub(crate) fn dispersion_keys(kind: &str) -> Option<&'static [&'static str]> {
+    match kind {
+        "gaussian" => Some(&["sigma"]),
+        "fourier" => Some(&["sigma", "harmonics", "combine"]),
+        "gaussian-lowrank" => Some(&["sigma", "tolerance"]),
+        "tv" => Some(&["neighbours", "interpolation"]),
+        _ => None,
+    }
+}
+
+/// A dispersion from the keys of a table (`kind` and the kind's parameters). `owner` starts
+/// every message (e.g. "block `f`"); `line_of(key)` gives the line to report for a key
+/// (`"kind"` for problems with the table as a whole).
+pub(crate) fn dispersion_from_table(
+    t: &toml::Table,
+    owner: &str,
+    line_of: &dyn Fn(&str) -> usize,
+) -> Result<DispersionSpec, IoError> {
+    let supported = SUPPORTED_DISPERSIONS.join(", ");
+    let line = line_of("kind");
+    let kind = match t.get("kind") {
+        Some(toml::Value::String(k)) => k.as_str(),
+        Some(other) => {
+            return Err(err_at(
+                line,
+                format!(
+                    "{owner}: dispersion `kind` must be a string (one of: {supported}), not {}",
+                    value_kind(other)
+                ),
+            ));
+        }
+        None => {
+            return Err(err_at(
+                line,
+                format!(
+                    "{owner}: the dispersion needs a `kind` (one of: {supported}), \
+                     e.g. dispersion = {{ kind = \"gaussian\", sigma = 0.4 }}"
+                ),
+            ));
+        }
+    };
+    let Some(allowed) = dispersion_keys(kind) else {
+        return Err(unknown_dispersion_kind(owner, kind, line));
+    };
+    if let Some(key) = t
+        .keys()
+        .find(|k| k.as_str() != "kind" && !allowed.contains(&k.as_str()))
+    {
+        return Err(err_at(
+            line_of(key),
+            format!(
+                "{owner}: unknown key `{key}` in the {kind} dispersion; it takes {}",
+                allowed
+                    .iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    }
+    let sigma = match t.get("sigma") {
+        None => None,
+        Some(toml::Value::Float(s)) => Some(*s),
+        Some(toml::Value::Integer(s)) => Some(*s as f64),
+        Some(other) => {
+            return Err(err_at(
+                line_of("sigma"),
+                format!("{owner}: sigma must be a number, not {}", value_kind(other)),
+            ));
+        }
+    };
+    if let Some(s) = sigma
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(err_at(
+            line_of("sigma"),
+            format!(
+                "{owner}: sigma = {s} is invalid; it must be a finite number greater than zero"
+            ),
+        ));
+    }
+    match kind {
+        "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
+        "tv" => {
+            let neighbours = match t.get("neighbours") {
+                None => None,
+                Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 1024 => Some(*n as usize),
+                Some(other) => {
+                    return Err(err_at(
+                        line_of("neighbours"),
+                        format!(
+                            "{owner}: neighbours must be a whole number from 1 to 1024, not {other}"
+                        ),
+                    ));
+                }
+            };
+            let interpolation = match t.get("interpolation") {
+                None => None,
+                Some(toml::Value::String(c)) if c == "inverse-distance" => {
+                    Some(GraphInterpolation::InverseDistance)
+                }
+                Some(toml::Value::String(c)) if c == "nearest" => Some(GraphInterpolation::Nearest),
+                Some(other) => {
+                    return Err(err_at(
+                        line_of("interpolation"),
+                        format!(
+                            "{owner}: interpolation must be \"inverse-distance\" or \"nearest\", not {other}"
+                        ),
+                    ));
+                }
+            };
+            Ok(DispersionSpec::TotalVariation {
+                neighbours,
+                interpolation,
+            })
+        }
+        "gaussian-lowrank" => {
+            let tolerance = match t.get("tolerance") {
+                None => None,
+                Some(toml::Value::Float(v)) if *v > 0.0 && *v < 1.0 => Some(*v),
+                Some(other) => {
+                    return Err(err_at(
+                        line_of("tolerance"),
+                        format!("{owner}: tolerance must be a number in (0, 1), not {other}"),
+                    ));
+                }
+            };
+            Ok(DispersionSpec::LowRankGaussian { sigma, tolerance })
+        }
+        _ => {
+            let harmonics = match t.get("harmonics") {
+                None => None,
+                Some(toml::Value::Integer(n)) if *n >= 1 && *n <= 4096 => Some(*n as usize),
+                Some(other) => {
+                    return Err(err_at(
+                        line_of("harmonics"),
+                        format!(
+                            "{owner}: harmonics must be a whole number from 1 to 4096, not {other}"
+                        ),
+                    ));
+                }
+            };
+            let additive = match t.get("combine") {
+                None => false,
+                Some(toml::Value::String(c)) if c == "tensor" => false,
+                Some(toml::Value::String(c)) if c == "additive" => true,
+                Some(other) => {
+                    return Err(err_at(
+                        line_of("combine"),
+                        format!("{owner}: combine must be \"tensor\" or \"additive\", not {other}"),
+                    ));
+                }
+            };
+            Ok(DispersionSpec::Fourier {
+                sigma,
+                harmonics,
+                additive,
+            })
+        }
     }
 }
 
@@ -1425,6 +1459,39 @@ impl ModelFile {
             ));
         }
         Ok(Model::new(self.lft.clone(), blocks)?)
+    }
+
+    /// Gives every block the dispersion `spec` (as `structid identify --dispersion` does). When
+    /// `spec` has no σ, each block keeps the σ of its own dispersion, if it had one.
+    ///
+    /// ```
+    /// use structid_io::{DispersionSpec, ModelFile};
+    /// let mut m = ModelFile::parse(r#"
+    ///     [lft]
+    ///     A = []
+    ///     Dye = [[1.0]]
+    ///     Dyw = [[1.0]]
+    ///     Dzu = [[1.0]]
+    ///     [signals]
+    ///     u = ["u"]
+    ///     y = ["y"]
+    ///     [[nonlinearity]]
+    ///     name = "N"
+    ///     inputs = [0]
+    ///     output = 0
+    ///     dispersion = { kind = "gaussian", sigma = 0.5 }
+    /// "#, None).unwrap();
+    /// m.replace_dispersions(&DispersionSpec::Fourier { sigma: None, harmonics: None, additive: false });
+    /// assert_eq!(m.blocks[0].dispersion.kind(), "fourier");
+    /// assert_eq!(m.blocks[0].dispersion.sigma(), Some(0.5));
+    /// ```
+    pub fn replace_dispersions(&mut self, spec: &DispersionSpec) {
+        for b in &mut self.blocks {
+            b.dispersion = match spec.sigma() {
+                Some(_) => spec.clone(),
+                None => spec.with_sigma(b.dispersion.sigma()),
+            };
+        }
     }
 
     /// The true maps in block order, when **every** block has a `truth`; `None` otherwise.
