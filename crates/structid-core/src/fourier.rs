@@ -417,7 +417,7 @@ impl FeatureMap for FourierKernel {
 
     /// Gaussian-like weights at another σ on the same harmonics: the features do not change.
     fn weights_at_width(&self, width: f64) -> Option<Vec<f64>> {
-        if !self.gaussian_like || !(width.is_finite() && width > 0.0) {
+        if !(self.gaussian_like && width.is_finite() && width > 0.0) {
             return None;
         }
         let lambda: Vec<Vec<f64>> = self
