@@ -96,6 +96,7 @@ pub mod scenarios;
 pub mod simulate;
 pub mod solver;
 pub mod total_variation;
+pub mod validation;
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};
@@ -117,3 +118,4 @@ pub use problem::{Problem, ProblemBlock};
 pub use simulate::{MapBinding, Simulation};
 pub use structid_lti::Signal;
 pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
+pub use validation::{ValidationInitialState, ValidationReport, ValidationSettings, validate};
