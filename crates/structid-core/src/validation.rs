@@ -47,7 +47,7 @@
 use faer::Mat;
 use nalgebra::{DMatrix, DVector};
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
-use structid_lti::{LinearSystem, Signal};
+use structid_lti::Signal;
 
 use crate::error::{Error, Result};
 use crate::interpolant::Interpolant;

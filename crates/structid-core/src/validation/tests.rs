@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
-use structid_lti::Signal;
+use structid_lti::{LinearSystem, Signal};
 
 use super::*;
 use crate::paper::{Experiment, gaussian, gaussian_noise};
