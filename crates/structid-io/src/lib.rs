@@ -6,7 +6,7 @@
 //!   the format.
 //! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
 //! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
-//! * [`Report`]: the `report.json` of an identification.
+//! * [`Report`]: the `report.json` of an identification; [`ReportRecord`] reads one back.
 //!
 //! ```
 //! use structid_core::{identify, IdentifySettings};
@@ -51,4 +51,7 @@ pub use model_file::{
     default_sigma,
 };
 pub use output::{OutputGuard, write_atomic};
-pub use report::{BlockReport, BlockSettings, DiagnosticsReport, Report, SettingsReport};
+pub use report::{
+    BlockReport, BlockSettings, DiagnosticsReport, RecordBlock, Report, ReportRecord, Reproduction,
+    SettingsReport,
+};
