@@ -144,7 +144,7 @@ fn check_estimate(dir: &Path, mf: &ModelFile, id: &Identification) -> Result<f64
             worst = worst.max(diff / scale);
         }
     }
-    if !(worst <= W_TOLERANCE) {
+    if worst.is_nan() || worst > W_TOLERANCE {
         return Err(mismatch(format!(
             "re-running the identification gives ŵ with a relative difference of {worst:.2e} from estimate.csv \
              (tolerance {W_TOLERANCE:e})"

@@ -46,8 +46,8 @@
 
 use faer::Mat;
 use nalgebra::{DMatrix, DVector};
-use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 use structid_lti::Signal;
+use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 
 use crate::error::{Error, Result};
 use crate::interpolant::Interpolant;
