@@ -62,6 +62,11 @@
 //! [`SolverChoice::Auto`] picks by dispersion kind and size and records why in
 //! [`Diagnostics::solver_reason`].
 //!
+//! ## Validation
+//! [`validate()`] checks estimated maps on a record: simulation with the maps in the loop (RMS and
+//! fit), one-step-ahead prediction errors (the innovations of the noise path's Kalman
+//! predictor) and their whiteness and input cross-correlation tests; see [`validation`].
+//!
 //! ## Example
 //! ```
 //! use std::sync::Arc;
