@@ -8,7 +8,9 @@
 //!    maps in the loop ([`Model::simulate`], e = 0): z is computed from the *simulated* signals,
 //!    so errors of the maps propagate through the dynamics. Per output: RMS(y − y_sim) and the
 //!    fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) of MATLAB's `compare`
-//!    ([`crate::metrics::fit_percent`]).
+//!    ([`crate::metrics::fit_percent`]). When the data carry measured z columns, the
+//!    simulation still computes z from the LFT's z-equations (C_z, D_zu), which must then
+//!    describe how z arises; the measured z serve the prediction only.
 //! 2. **One-step prediction.** What does the model leave unexplained? z is measurable (computed
 //!    from the measured u and y, see [`crate::Lft::measurability`]), so ŵ_k = N̂(z_k) is known
 //!    and
