@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use clap::Parser;
 use serde_json::{Value, json};
 use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::{
@@ -15,7 +16,7 @@ use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, ren
 
 use crate::error::CliError;
 use crate::identify::{absolute, estimate_columns, load, model_and_data, protect_inputs};
-use crate::{IdentifyArgs, InitialStateArg, ValidateArgs};
+use crate::{Cli, Command, IdentifyArgs, InitialStateArg, ValidateArgs};
 
 /// Largest relative difference (max |Δŵ| / max |ŵ| per block) between the recomputed estimate
 /// and DIR/estimate.csv for the directory to count as reproduced.
@@ -40,36 +41,59 @@ fn list<S: AsRef<str>>(names: &[S]) -> String {
         .join(", ")
 }
 
-fn parse_value<T: clap::ValueEnum>(what: &str, v: &str, report: &Path) -> Result<T, CliError> {
-    T::from_str(v, false).map_err(|_| {
+/// The arguments of the identification recorded in a report, parsed like a command line so
+/// that options added later take their defaults.
+fn identify_args(rep: &Reproduction, dir: &Path, report: &Path) -> Result<IdentifyArgs, CliError> {
+    // `flag=value`, so that no value is taken for a flag; `{:?}` is the shortest form that
+    // parses back to the same f64.
+    let mut argv: Vec<String> = vec![
+        "structid".into(),
+        "identify".into(),
+        format!("--model={}", rep.model_file_absolute),
+        format!("--data={}", rep.data_file_absolute),
+        format!("--out={}", dir.display()),
+        format!("--beta={:?}", rep.beta),
+        // The solver that ran, not `auto`: the automatic choice depends on the free memory.
+        format!("--solver={}", rep.solver),
+        format!("--initial-state={}", rep.initial_state),
+    ];
+    let mut opt = |flag: &str, v: Option<String>| {
+        if let Some(v) = v {
+            argv.push(format!("{flag}={v}"));
+        }
+    };
+    opt("--sigma", rep.sigma.map(|v| format!("{v:?}")));
+    opt(
+        "--memory-limit-mib",
+        rep.memory_limit_mib.map(|v| v.to_string()),
+    );
+    opt("--dispersion", rep.dispersion.clone());
+    opt("--neighbours", rep.neighbours.map(|v| v.to_string()));
+    opt("--tolerance", rep.tolerance.map(|v| format!("{v:?}")));
+    opt(
+        "--max-iterations",
+        rep.max_iterations.map(|v| v.to_string()),
+    );
+    let invalid = |detail: String| {
         CliError::input(format!(
-            "`{}` records the {what} `{v}`, which this version of structid does not know",
+            "`{}` records identification settings that this version of structid does not accept: {detail}",
             report.display()
         ))
-    })
-}
-
-/// The arguments of the identification recorded in a report.
-fn identify_args(rep: &Reproduction, dir: &Path, report: &Path) -> Result<IdentifyArgs, CliError> {
-    Ok(IdentifyArgs {
-        model: PathBuf::from(&rep.model_file_absolute),
-        data: PathBuf::from(&rep.data_file_absolute),
-        out: dir.to_path_buf(),
-        beta: rep.beta,
-        sigma: rep.sigma,
-        memory_limit_mib: rep.memory_limit_mib,
-        initial_state: parse_value("initial state", &rep.initial_state, report)?,
-        // The solver that ran, not `auto`: the automatic choice depends on the free memory.
-        solver: parse_value("solver", &rep.solver, report)?,
-        dispersion: rep
-            .dispersion
-            .as_deref()
-            .map(|d| parse_value("dispersion", d, report))
-            .transpose()?,
-        neighbours: rep.neighbours,
-        tolerance: rep.tolerance,
-        max_iterations: rep.max_iterations,
-    })
+    };
+    match Cli::try_parse_from(&argv) {
+        Ok(Cli {
+            command: Command::Identify(a),
+        }) => Ok(a),
+        Ok(_) => Err(invalid("not an identify command".into())),
+        Err(e) => Err(invalid(
+            e.to_string()
+                .lines()
+                .next()
+                .unwrap_or_default()
+                .trim_start_matches("error: ")
+                .to_string(),
+        )),
+    }
 }
 
 /// Checks that `--model` has the blocks of the estimate (same names, same number of inputs).
@@ -628,5 +652,54 @@ mod tests {
         assert!(idx.len() <= MAX_PLOT_POINTS + 1);
         assert_eq!((idx[0], *idx.last().unwrap()), (0, 12_344));
         assert!(plot_indices(0).is_empty());
+    }
+
+    fn reproduction() -> Reproduction {
+        Reproduction {
+            model_file_absolute: "/m.toml".into(),
+            data_file_absolute: "/d.csv".into(),
+            beta: 0.1 + 0.2,
+            sigma: Some(1e-7),
+            solver_requested: "auto".into(),
+            solver: "admm".into(),
+            initial_state: "estimate".into(),
+            memory_limit_mib: Some(64),
+            dispersion: Some("tv".into()),
+            neighbours: Some(5),
+            tolerance: Some(1e-9),
+            max_iterations: Some(300),
+        }
+    }
+
+    #[test]
+    fn recorded_settings_parse_back_exactly() {
+        let rep = reproduction();
+        let a = identify_args(&rep, Path::new("-odd dir"), Path::new("r.json")).unwrap();
+        assert_eq!(a.beta, 0.1 + 0.2);
+        assert_eq!(a.sigma, Some(1e-7));
+        assert_eq!(a.out, Path::new("-odd dir"));
+        assert_eq!(a.model, Path::new("/m.toml"));
+        assert!(matches!(a.solver, crate::SolverArg::Admm));
+        assert!(matches!(a.initial_state, InitialStateArg::Estimate));
+        assert!(matches!(a.dispersion, Some(crate::DispersionArg::Tv)));
+        assert_eq!(
+            (
+                a.memory_limit_mib,
+                a.neighbours,
+                a.tolerance,
+                a.max_iterations
+            ),
+            (Some(64), Some(5), Some(1e-9), Some(300))
+        );
+        let bad = Reproduction {
+            solver: "magic".into(),
+            ..rep
+        };
+        let e = identify_args(&bad, Path::new("d"), Path::new("r.json"))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("r.json") && e.contains("magic"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
     }
 }
