@@ -8,9 +8,12 @@ use std::time::Instant;
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
-use structid_core::{Identification, IdentifySettings, InitialState, SolverChoice, identify};
+use structid_core::{
+    Data, Identification, IdentifySettings, InitialState, Model, SolverChoice, identify,
+};
 use structid_io::{
-    DataTable, DispersionSpec, ModelFile, OutputGuard, Report, SelectionReport, TruthSpec,
+    DataTable, DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, SelectionReport,
+    TruthSpec,
 };
 
 use crate::IdentifyArgs;
@@ -190,14 +193,95 @@ fn fmt_num(v: f64) -> String {
     }
 }
 
-/// Runs `structid identify`.
-pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
-    let t0 = Instant::now();
-    let settings = settings(&a)?;
+/// The settings, the σ override and the model file (with `--dispersion` and `--neighbours`
+/// applied) of an identification, from its arguments.
+pub(crate) fn load(
+    a: &IdentifyArgs,
+) -> Result<(IdentifySettings, Option<f64>, ModelFile), CliError> {
+    let settings = settings(a)?;
     let sigma = match a.sigma {
         Some(crate::AutoOr::Value(s)) => Some(positive("--sigma", s)?),
         _ => None,
     };
+    let mut mf = ModelFile::from_path(&a.model)?;
+    override_dispersions(&mut mf, a)?;
+    Ok((settings, sigma, mf))
+}
+
+/// The record named by the model file's `[signals]` and the core model, with default kernel
+/// widths chosen from the record's z.
+pub(crate) fn model_and_data(
+    mf: &ModelFile,
+    data_path: &Path,
+    sigma: Option<f64>,
+) -> Result<(Data, Model), CliError> {
+    let table = DataTable::read(data_path)?;
+    let data = mf.select_data(&table)?;
+    let needs_z = sigma.is_none()
+        && mf.blocks.iter().any(|b| {
+            b.dispersion.sigma().is_none()
+                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
+        });
+    let z = if needs_z {
+        Some(mf.z_signal(&data)?)
+    } else {
+        None
+    };
+    let model = mf.to_model(sigma, z.as_ref())?;
+    Ok((data, model))
+}
+
+/// An absolute, canonical form of an existing path (absolute but not canonical when it cannot
+/// be resolved), for reports that must not depend on the working directory.
+pub(crate) fn absolute(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p)
+        .or_else(|_| std::path::absolute(p))
+        .unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// The name of a command-line value, as `clap` parses it back.
+pub(crate) fn value_name(v: impl clap::ValueEnum) -> String {
+    v.to_possible_value()
+        .map(|p| p.get_name().to_string())
+        .unwrap_or_default()
+}
+
+/// What `structid validate` needs to re-run this identification exactly.
+/// `beta` and `sigma` are the values used (chosen ones after `auto`), so that the rerun is a
+/// fixed-value identification.
+fn reproduction(
+    a: &IdentifyArgs,
+    id: &Identification,
+    beta: f64,
+    sigma: Option<f64>,
+) -> Reproduction {
+    Reproduction {
+        model_file_absolute: absolute(&a.model).display().to_string(),
+        data_file_absolute: absolute(&a.data).display().to_string(),
+        beta,
+        sigma,
+        solver_requested: value_name(a.solver),
+        // `features (m = 63)` → `features`
+        solver: id
+            .diagnostics
+            .solver
+            .split_whitespace()
+            .next()
+            .unwrap_or_default()
+            .to_string(),
+        initial_state: value_name(a.initial_state),
+        memory_limit_mib: a.memory_limit_mib,
+        dispersion: a.dispersion.map(value_name),
+        neighbours: a.neighbours,
+        tolerance: a.tolerance,
+        max_iterations: a.max_iterations,
+    }
+}
+
+/// Runs `structid identify`.
+pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
+    let t0 = Instant::now();
+    let (settings, sigma, mf) = load(&a)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
     let auto_beta = a.beta == crate::AutoOr::Auto;
     if a.folds < 2 && a.selection == Some(crate::SelectionArg::Cv) {
@@ -213,8 +297,6 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
             "--selection needs --beta auto and/or --sigma auto",
         ));
     }
-    let mut mf = ModelFile::from_path(&a.model)?;
-    override_dispersions(&mut mf, &a)?;
     let mut guard = OutputGuard::new();
     let mut inputs: Vec<&Path> = vec![&a.data];
     if let Some(v) = &a.validation_data {
@@ -241,19 +323,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
             a.out.display()
         )));
     }
-    let table = DataTable::read(&a.data)?;
-    let data = mf.select_data(&table)?;
-    let needs_z = sigma.is_none()
-        && mf.blocks.iter().any(|b| {
-            b.dispersion.sigma().is_none()
-                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
-        });
-    let z = if needs_z {
-        Some(mf.z_signal(&data)?)
-    } else {
-        None
-    };
-    let model = mf.to_model(sigma, z.as_ref())?;
+    let (data, model) = model_and_data(&mf, &a.data, sigma)?;
     let (id, settings, selection) = if auto_beta || auto_sigma {
         let quadratic = !mf
             .blocks
@@ -279,7 +349,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         let sel = select(&model, &data, validation.as_ref(), &settings, &how)?;
         let chosen = settings.with_beta(sel.beta)?;
         let report = SelectionReport::new(&sel);
-        (sel.identification, chosen, Some(report))
+        (sel.identification, chosen, Some((report, sel.sigma)))
     } else {
         (identify(&model, &data, &settings)?, settings, None)
     };
@@ -287,7 +357,12 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     guard.create_dir(&a.out)?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
     report.data_file = Some(a.data.display().to_string());
-    report.selection = selection;
+    let chosen_sigma = match &selection {
+        Some((_, Some(s))) => Some(*s),
+        _ => sigma,
+    };
+    report.reproduction = Some(reproduction(&a, &id, settings.beta(), chosen_sigma));
+    report.selection = selection.map(|(r, _)| r);
     let mut written: Vec<PathBuf> = Vec::new();
 
     // estimate.csv: ŵ by block name (in w order), then ê.
@@ -377,7 +452,10 @@ fn grid_input_names(z_names: &[String], inputs: &[usize], measured: bool) -> Vec
 
 /// Columns of estimate.csv: one ŵ column per w channel named after its block, then the
 /// estimated noise `e0, e1, …` (`e_hat0, …` if a block is called `e0`, …).
-fn estimate_columns(mf: &ModelFile, id: &Identification) -> (Vec<String>, Vec<Vec<f64>>) {
+pub(crate) fn estimate_columns(
+    mf: &ModelFile,
+    id: &Identification,
+) -> (Vec<String>, Vec<Vec<f64>>) {
     let mut names = Vec::new();
     let mut columns = Vec::new();
     for c in 0..id.w_hat.channels() {
@@ -414,6 +492,19 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
         d.solver,
         seconds
     );
+    if let Some(sel) = &report.selection {
+        let _ = writeln!(
+            s,
+            "selected β = {:.4e}{} by {} ({} trials): {}",
+            sel.beta,
+            sel.sigma
+                .map(|v| format!(", σ = {v:.4}"))
+                .unwrap_or_default(),
+            sel.criterion_description,
+            sel.curve.len(),
+            sel.method
+        );
+    }
     let disp: Vec<String> = id
         .blocks
         .iter()

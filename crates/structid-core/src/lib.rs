@@ -62,6 +62,11 @@
 //! [`SolverChoice::Auto`] picks by dispersion kind and size and records why in
 //! [`Diagnostics::solver_reason`].
 //!
+//! ## Validation
+//! [`validate()`] checks estimated maps on a record: simulation with the maps in the loop (RMS and
+//! fit), one-step-ahead prediction errors (the innovations of the noise path's Kalman
+//! predictor) and their whiteness and input cross-correlation tests; see [`validation`].
+//!
 //! ## Example
 //! ```
 //! use std::sync::Arc;
@@ -97,6 +102,7 @@ pub mod scenarios;
 pub mod simulate;
 pub mod solver;
 pub mod total_variation;
+pub mod validation;
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};
@@ -119,3 +125,4 @@ pub use problem::{Problem, ProblemBlock};
 pub use simulate::{MapBinding, Simulation};
 pub use structid_lti::Signal;
 pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
+pub use validation::{ValidationInitialState, ValidationReport, ValidationSettings, validate};

@@ -6,7 +6,7 @@
 //!   the format.
 //! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
 //! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
-//! * [`Report`]: the `report.json` of an identification.
+//! * [`Report`]: the `report.json` of an identification; [`ReportRecord`] reads one back.
 //! * [`SweepFile`]: the sweep configuration of `structid compare` (experiments × dispersions ×
 //!   β values × seeds); errors name the line. See [`sweep_file`] for the format.
 //!
@@ -55,6 +55,7 @@ pub use model_file::{
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{
-    BlockReport, BlockSettings, DiagnosticsReport, Report, SelectionReport, SettingsReport,
+    BlockReport, BlockSettings, DiagnosticsReport, RecordBlock, Report, ReportRecord, Reproduction,
+    SelectionReport, SettingsReport,
 };
 pub use sweep_file::SweepFile;

@@ -4,12 +4,16 @@
 //! per block, the dispersion value and (when the model file gives a `truth`) the RMS error of
 //! the estimate at the data points, plain and centred (see
 //! [`structid_core::metrics::centred_rms_difference`]; maps that share an output are identifiable
-//! only up to a constant). The caller adds the names of the files it wrote and serialises
-//! with [`Report::to_json_string`].
+//! only up to a constant). The caller adds the names of the files it wrote and a
+//! [`Reproduction`] record, and serialises with [`Report::to_json_string`].
+//!
+//! [`ReportRecord`] reads back what `structid validate` needs from a `report.json`.
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
 use structid_core::metrics::{centred_rms_difference, rms_difference};
 use structid_core::{CostTerms, Diagnostics, Identification, IdentifySettings};
 
@@ -43,6 +47,114 @@ pub struct Report {
     pub selection: Option<SelectionReport>,
     /// Every file written, relative to the output directory.
     pub files: Vec<String>,
+    /// How to re-run this identification exactly (absent in reports of older versions).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reproduction: Option<Reproduction>,
+}
+
+/// Everything needed to re-run an identification exactly: the files with absolute
+/// (canonical) paths, so that the report does not depend on the working directory it was
+/// written from, and the command-line settings as given. `structid validate` rebuilds the
+/// estimate from it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Reproduction {
+    /// The model file, absolute and canonical.
+    pub model_file_absolute: String,
+    /// The data file, absolute and canonical.
+    pub data_file_absolute: String,
+    /// β.
+    pub beta: f64,
+    /// The σ override (`--sigma`), if any.
+    pub sigma: Option<f64>,
+    /// The solver as requested (`auto`, `exact`, `features`, `clarabel`, `admm`).
+    pub solver_requested: String,
+    /// The solver that ran (one of `exact`, `features`, `clarabel`, `admm`): an automatic
+    /// choice depends on the memory available, so the rerun forces this one.
+    pub solver: String,
+    /// `zero` or `estimate`.
+    pub initial_state: String,
+    /// The memory budget in MiB (`--memory-limit-mib`), if given.
+    pub memory_limit_mib: Option<u64>,
+    /// The dispersion override (`--dispersion`: `gaussian`, `gaussian-lowrank`, `fourier`,
+    /// `tv`), if any.
+    pub dispersion: Option<String>,
+    /// `--neighbours`, if given.
+    pub neighbours: Option<usize>,
+    /// `--tolerance`, if given.
+    pub tolerance: Option<f64>,
+    /// `--max-iterations`, if given.
+    pub max_iterations: Option<usize>,
+}
+
+/// The parts of a `report.json` that are read back (by `structid validate`). Unknown fields
+/// are ignored, so reports of any version parse; [`ReportRecord::reproduction`] is `None` for
+/// reports written before it existed.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+pub struct ReportRecord {
+    /// The model file as given on the command line.
+    pub model_file: Option<String>,
+    /// The data file as given on the command line.
+    pub data_file: Option<String>,
+    /// Number of samples L.
+    pub samples: usize,
+    /// The blocks, in model order.
+    pub blocks: Vec<RecordBlock>,
+    /// The estimated initial state, if it was estimated.
+    #[serde(default)]
+    pub initial_state: Option<Vec<f64>>,
+    /// Every file written, relative to the output directory.
+    #[serde(default)]
+    pub files: Vec<String>,
+    /// How to re-run the identification.
+    #[serde(default)]
+    pub reproduction: Option<Reproduction>,
+}
+
+/// One block of a [`ReportRecord`].
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+pub struct RecordBlock {
+    /// Block name.
+    pub name: String,
+    /// Indices into z of its inputs.
+    pub inputs: Vec<usize>,
+    /// Index into w of its output.
+    pub output: usize,
+}
+
+impl ReportRecord {
+    /// Parses the text of a `report.json`; `path` is used in error messages only.
+    ///
+    /// ```
+    /// use structid_io::ReportRecord;
+    /// let r = ReportRecord::parse(
+    ///     r#"{"samples": 3, "blocks": [{"name": "f", "inputs": [0], "output": 0}], "cost": {}}"#,
+    ///     None,
+    /// )
+    /// .unwrap();
+    /// assert_eq!((r.samples, r.blocks[0].name.as_str()), (3, "f"));
+    /// assert!(r.reproduction.is_none());
+    /// assert!(ReportRecord::parse("{}", None).is_err());
+    /// ```
+    pub fn parse(text: &str, path: Option<&Path>) -> Result<Self, IoError> {
+        serde_json::from_str(text).map_err(|e| {
+            let name = path.map_or_else(
+                || "the report".to_string(),
+                |p| format!("`{}`", p.display()),
+            );
+            IoError::InvalidArgument(format!(
+                "{name} is not a report.json written by `structid identify`: {e}"
+            ))
+        })
+    }
+
+    /// Reads and parses a `report.json`.
+    pub fn read(path: &Path) -> Result<Self, IoError> {
+        let text = std::fs::read_to_string(path).map_err(|source| IoError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, Some(path))
+    }
 }
 
 /// The automatic choice of hyperparameters: values, criterion, method and curve.
@@ -267,6 +379,7 @@ impl Report {
             blocks,
             selection: None,
             files: Vec::new(),
+            reproduction: None,
         })
     }
 

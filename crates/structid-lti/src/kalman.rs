@@ -674,6 +674,64 @@ impl KalmanWhitener {
             .run(&xs, &y[tl * p..], &mut out[tl * p..], self.len - tl, None);
     }
 
+    /// The innovations `nu_t = y_t - C x^_t` of one signal (time-major, `len * p` values),
+    /// in the units of `y`: the one-step-ahead prediction errors of the Kalman predictor
+    /// `y^_{t|t-1} = C x^_t` of the noise path from `y_0 .. y_{t-1}` (zero initial state,
+    /// `P_0 = 0`). [`whiten`](Self::whiten) returns the same innovations normalised,
+    /// `w_t = L_t^{-1} nu_t`; here they are not scaled, so `nu_t` has covariance `S_t`.
+    /// Overwrites `out`. Panics on inconsistent lengths; non-finite values propagate.
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
+    /// use structid_lti::StateSpace;
+    /// // y = e / (1 - 0.5 q^-1): x+ = 0.5 x + 0.5 e, y = x + e; the predictor of y_t from
+    /// // the past is 0.5 y_{t-1}, so the innovation is y_t - 0.5 y_{t-1} = e_t.
+    /// let noise = StateSpace::new(
+    ///     DMatrix::from_element(1, 1, 0.5),
+    ///     DMatrix::from_element(1, 1, 0.5),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    ///     DMatrix::from_element(1, 1, 1.0),
+    /// )
+    /// .unwrap();
+    /// let w = KalmanWhitener::new(&noise, 4, &WhiteningOptions::default()).unwrap();
+    /// let y = [2.0, 3.0, -1.0, 0.5];
+    /// let mut nu = [0.0; 4];
+    /// w.innovations(&y, &mut nu);
+    /// for (t, expected) in [2.0, 2.0, -2.5, 1.0].iter().enumerate() {
+    ///     assert!((nu[t] - expected).abs() < 1e-12);
+    /// }
+    /// ```
+    pub fn innovations(&self, y: &[f64], out: &mut [f64]) {
+        self.check_rows(y.len(), "y");
+        self.check_rows(out.len(), "out");
+        let (n, p) = (self.n, self.p);
+        let steady = self.steady_gains();
+        let mut xs = vec![0.0; n];
+        let mut xn = vec![0.0; n];
+        let mut om = vec![0.0; p];
+        for t in 0..self.len {
+            let (g, li) = self.gains_at(t, &steady);
+            let nu = &mut out[t * p..(t + 1) * p];
+            for c in 0..p {
+                let crow = &self.c[c * n..(c + 1) * n];
+                nu[c] = y[t * p + c] - crow.iter().zip(&xs).map(|(a, b)| a * b).sum::<f64>();
+            }
+            // The state update needs the normalised innovation: x^+ = A x^ + G L^{-1} nu.
+            for r in 0..p {
+                let row = &li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1];
+                om[r] = row.iter().zip(nu.iter()).map(|(a, b)| a * b).sum();
+            }
+            for i in 0..n {
+                let arow = &self.a[i * n..(i + 1) * n];
+                let grow = &g[i * p..(i + 1) * p];
+                xn[i] = arow.iter().zip(&xs).map(|(a, b)| a * b).sum::<f64>()
+                    + grow.iter().zip(&om).map(|(a, b)| a * b).sum::<f64>();
+            }
+            std::mem::swap(&mut xs, &mut xn);
+        }
+    }
+
     /// `out = W x` for many signals at once: each column of `x` (`len * p` rows, any
     /// strides, e.g. a transposed matrix) is one time-major signal. Overwrites `out`.
     ///

@@ -18,7 +18,6 @@ pub mod config;
 pub mod figures;
 pub mod results;
 pub mod run;
-pub mod shim;
 
 use std::path::PathBuf;
 

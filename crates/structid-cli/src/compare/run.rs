@@ -20,7 +20,6 @@ use crate::compare::results::{
     BlockRecord, CASE_FORMAT, CASES_DIR, CaseRecord, CostRecord, GridRecord, OutputRecord, Values,
     case_files, finite, read_case, write_tables,
 };
-use crate::compare::shim;
 use crate::error::CliError;
 use crate::figures::{GRID_1D, linspace, mean, span};
 
@@ -240,8 +239,13 @@ fn execute(ctx: &Context<'_>, case: &Case, rec: &mut CaseRecord) -> Result<(), C
         }
     }
     if let Some(v) = &validation {
-        let report = shim::validate(&model, &id.maps(), v, &shim::ValidationSettings::default())
-            .map_err(|e| CliError::from(e).context("validation"))?;
+        let report = structid_core::validation::validate(
+            &model,
+            &id.maps(),
+            v,
+            &structid_core::validation::ValidationSettings::default(),
+        )
+        .map_err(|e| CliError::from(e).context("validation"))?;
         for (o, (rms, fit)) in rec
             .validation
             .iter_mut()

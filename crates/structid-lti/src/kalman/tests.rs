@@ -621,3 +621,86 @@ proptest! {
         prop_assert!((&direct - &got).norm() <= 1e-8 * direct.norm().max(1e-12), "{}", (&direct - &got).norm());
     }
 }
+
+/// Dense reference of the innovations: ν_t = y_t − E[y_t | y_0 … y_(t−1)] for Gaussian y with
+/// covariance Σ = T·Tᵀ, i.e. y_t − Σ_(t,past)·Σ_past⁻¹·y_past, solved afresh for every t.
+fn dense_innovations(noise: &StateSpace, y: &[f64], len: usize) -> Vec<f64> {
+    let p = noise.outputs();
+    let t = noise.toeplitz_dense(len);
+    let sigma = &t * t.transpose();
+    let mut nu = y.to_vec();
+    for k in 1..len {
+        let past = k * p;
+        let s_pp = sigma.view((0, 0), (past, past)).into_owned();
+        let yp = DVector::from_column_slice(&y[..past]);
+        let coef = s_pp.lu().solve(&yp).expect("Σ_past invertible");
+        for c in 0..p {
+            let row = sigma.view((past + c, 0), (1, past));
+            nu[past + c] -= (row * &coef)[(0, 0)];
+        }
+    }
+    nu
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Property: the unscaled innovations are the one-step prediction errors of y given its
+    /// past (dense conditional expectation), and whitening is their normalisation by L_t⁻¹.
+    #[test]
+    fn prop_innovations_are_the_one_step_prediction_errors(
+        seed in any::<u64>(), n in 0usize..=3, p in 1usize..=2, extra in 1usize..=2, len in 1usize..=30
+    ) {
+        let noise = coloured(seed, n, p + extra, p);
+        let w = KalmanWhitener::new(&noise, len, &opts()).unwrap();
+        let y = random_signal(seed ^ 0x77, len, p);
+        let mut nu = vec![f64::NAN; len * p];
+        w.innovations(y.as_slice(), &mut nu);
+        let t = noise.toeplitz_dense(len);
+        let tol = dense_tol(&(&t * t.transpose()));
+        let reference = dense_innovations(&noise, y.as_slice(), len);
+        let scale = reference.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        prop_assert!(max_abs_diff(&nu, &reference) <= tol * scale,
+            "{} (tol {tol:e})", max_abs_diff(&nu, &reference));
+        if p == 1 {
+            // w_t = ν_t / √S_t with √S_t the diagonal of the Cholesky factor of T·Tᵀ.
+            let l = dense_chol(&noise, len);
+            let omega = whiten_vec(&w, y.as_slice());
+            for k in 0..len {
+                prop_assert!((omega[k] * l[(k, k)] - nu[k]).abs() <= tol * scale);
+            }
+        }
+    }
+}
+
+#[test]
+fn innovations_of_a_static_path_are_the_signal_and_of_an_invertible_path_the_noise() {
+    // Static noise: nothing to predict from the past.
+    let stat =
+        StateSpace::static_gain(DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.3, 2.0])).unwrap();
+    let w = KalmanWhitener::new(&stat, 5, &opts()).unwrap();
+    let y = random_signal(3, 5, 2);
+    let mut nu = vec![0.0; 10];
+    w.innovations(y.as_slice(), &mut nu);
+    assert_eq!(nu, y.as_slice());
+    // Square invertible D: e is recovered from the past, so ν_t = D·e_t exactly. A small C
+    // keeps the zeros (eigenvalues of A − B·D⁻¹·C) near the stable poles: minimum phase, so
+    // the recovery is numerically stable.
+    let s = random_stable_system(11, 3, 2, 2, 0.9);
+    let mut d = s.d().clone();
+    d[(0, 0)] += 2.0;
+    d[(1, 1)] += 2.0;
+    let sys = StateSpace::new(s.a().clone(), s.b().clone(), s.c() * 0.1, d).unwrap();
+    let e = random_signal(4, 300, 2);
+    let y = sys.simulate(&e).unwrap();
+    let w = KalmanWhitener::new(&sys, 300, &opts()).unwrap();
+    let mut nu = vec![0.0; 600];
+    w.innovations(y.as_slice(), &mut nu);
+    let d = sys.d();
+    for k in 0..300 {
+        for c in 0..2 {
+            let expected = d[(c, 0)] * e.get(k, 0) + d[(c, 1)] * e.get(k, 1);
+            assert!((nu[k * 2 + c] - expected).abs() < 1e-9, "{k} {c}");
+        }
+    }
+}

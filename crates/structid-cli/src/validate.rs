@@ -1,0 +1,705 @@
+//! `structid validate`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Parser;
+use serde_json::{Value, json};
+use structid_core::residual_tests::CorrelationTest;
+use structid_core::validation::{
+    ValidationInitialState, ValidationReport, ValidationSettings, validate,
+};
+use structid_core::{Identification, Interpolant, identify};
+use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
+use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, render_grid_svg};
+
+use crate::error::CliError;
+use crate::identify::{absolute, estimate_columns, load, model_and_data, protect_inputs};
+use crate::{Cli, Command, IdentifyArgs, InitialStateArg, ValidateArgs};
+
+/// Largest relative difference (max |Δŵ| / max |ŵ| per block) between the recomputed estimate
+/// and DIR/estimate.csv for the directory to count as reproduced.
+pub const W_TOLERANCE: f64 = 1e-6;
+
+/// Most points per line in simulation.svg (longer records are drawn decimated).
+const MAX_PLOT_POINTS: usize = 5000;
+
+/// The files written, in order.
+const OUTPUTS: [&str; 4] = [
+    "validation.json",
+    "simulation.csv",
+    "simulation.svg",
+    "residuals.svg",
+];
+
+fn list<S: AsRef<str>>(names: &[S]) -> String {
+    names
+        .iter()
+        .map(|n| format!("`{}`", n.as_ref()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The arguments of the identification recorded in a report, parsed like a command line so
+/// that options added later take their defaults.
+fn identify_args(rep: &Reproduction, dir: &Path, report: &Path) -> Result<IdentifyArgs, CliError> {
+    // `flag=value`, so that no value is taken for a flag; `{:?}` is the shortest form that
+    // parses back to the same f64.
+    let mut argv: Vec<String> = vec![
+        "structid".into(),
+        "identify".into(),
+        format!("--model={}", rep.model_file_absolute),
+        format!("--data={}", rep.data_file_absolute),
+        format!("--out={}", dir.display()),
+        format!("--beta={:?}", rep.beta),
+        // The solver that ran, not `auto`: the automatic choice depends on the free memory.
+        format!("--solver={}", rep.solver),
+        format!("--initial-state={}", rep.initial_state),
+    ];
+    let mut opt = |flag: &str, v: Option<String>| {
+        if let Some(v) = v {
+            argv.push(format!("{flag}={v}"));
+        }
+    };
+    opt("--sigma", rep.sigma.map(|v| format!("{v:?}")));
+    opt(
+        "--memory-limit-mib",
+        rep.memory_limit_mib.map(|v| v.to_string()),
+    );
+    opt("--dispersion", rep.dispersion.clone());
+    opt("--neighbours", rep.neighbours.map(|v| v.to_string()));
+    opt("--tolerance", rep.tolerance.map(|v| format!("{v:?}")));
+    opt(
+        "--max-iterations",
+        rep.max_iterations.map(|v| v.to_string()),
+    );
+    let invalid = |detail: String| {
+        CliError::input(format!(
+            "`{}` records identification settings that this version of structid does not accept: {detail}",
+            report.display()
+        ))
+    };
+    match Cli::try_parse_from(&argv) {
+        Ok(Cli {
+            command: Command::Identify(a),
+        }) => Ok(a),
+        Ok(_) => Err(invalid("not an identify command".into())),
+        Err(e) => Err(invalid(
+            e.to_string()
+                .lines()
+                .next()
+                .unwrap_or_default()
+                .trim_start_matches("error: ")
+                .to_string(),
+        )),
+    }
+}
+
+/// Checks that `--model` has the blocks of the estimate (same names, same number of inputs).
+fn check_blocks(
+    model: &ModelFile,
+    model_path: &Path,
+    record: &ReportRecord,
+) -> Result<(), CliError> {
+    let mut ours: Vec<&str> = model.blocks.iter().map(|b| b.name.as_str()).collect();
+    let mut theirs: Vec<&str> = record.blocks.iter().map(|b| b.name.as_str()).collect();
+    ours.sort_unstable();
+    theirs.sort_unstable();
+    if ours != theirs {
+        return Err(CliError::input(format!(
+            "--model `{}` is not the model of the estimate: its blocks are {} but the estimate's are {}",
+            model_path.display(),
+            list(&ours),
+            list(&theirs)
+        )));
+    }
+    for b in &model.blocks {
+        if let Some(r) = record.blocks.iter().find(|r| r.name == b.name)
+            && r.inputs.len() != b.inputs.len()
+        {
+            return Err(CliError::input(format!(
+                "--model `{}` is not the model of the estimate: block `{}` reads {} input(s) there but {} in the estimate",
+                model_path.display(),
+                b.name,
+                b.inputs.len(),
+                r.inputs.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The largest relative difference between the recomputed ŵ and DIR/estimate.csv, or an error
+/// when it exceeds [`W_TOLERANCE`] or the file does not fit.
+fn check_estimate(dir: &Path, mf: &ModelFile, id: &Identification) -> Result<f64, CliError> {
+    let mismatch = |detail: String| {
+        CliError::input(format!(
+            "the estimate directory `{}` does not match its report.json: {detail}. The model or data file may \
+             have changed since `structid identify` wrote it; run `structid identify` again",
+            dir.display()
+        ))
+    };
+    let path = dir.join("estimate.csv");
+    if !path.is_file() {
+        return Err(mismatch("estimate.csv is missing".into()));
+    }
+    let table = DataTable::read(&path)?;
+    let (names, columns) = estimate_columns(mf, id);
+    let mut worst = 0.0f64;
+    for (name, ours) in names.iter().zip(&columns).take(id.w_hat.channels()) {
+        let stored = table
+            .column(name)
+            .ok_or_else(|| mismatch(format!("estimate.csv has no column `{name}`")))?;
+        if stored.len() != ours.len() {
+            return Err(mismatch(format!(
+                "estimate.csv has {} rows but the recomputed estimate has {}",
+                stored.len(),
+                ours.len()
+            )));
+        }
+        let amax = |x: &[f64]| x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let scale = amax(stored).max(amax(ours));
+        let diff = stored
+            .iter()
+            .zip(ours)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        if scale > 0.0 {
+            worst = worst.max(diff / scale);
+        }
+    }
+    if worst.is_nan() || worst > W_TOLERANCE {
+        return Err(mismatch(format!(
+            "re-running the identification gives ŵ with a relative difference of {worst:.2e} from estimate.csv \
+             (tolerance {W_TOLERANCE:e})"
+        )));
+    }
+    Ok(worst)
+}
+
+/// Column names of simulation.csv: `time`, then per output `<y>`, `<y>_sim`,
+/// `<y>_prediction_error` (generic `y<c>` names if the model's names would collide).
+fn simulation_names(y_names: &[String]) -> Vec<String> {
+    let build = |names: &[String]| {
+        let mut out = vec!["time".to_string()];
+        for n in names {
+            out.extend([
+                n.clone(),
+                format!("{n}_sim"),
+                format!("{n}_prediction_error"),
+            ]);
+        }
+        out
+    };
+    let names = build(y_names);
+    let mut seen = std::collections::HashSet::new();
+    if names.iter().all(|n| seen.insert(n.clone())) {
+        names
+    } else {
+        let generic: Vec<String> = (0..y_names.len()).map(|c| format!("y{c}")).collect();
+        build(&generic)
+    }
+}
+
+/// Every `step`-th index so that at most [`MAX_PLOT_POINTS`] remain, plus the last one.
+fn plot_indices(len: usize) -> Vec<usize> {
+    let step = len.div_ceil(MAX_PLOT_POINTS).max(1);
+    let mut idx: Vec<usize> = (0..len).step_by(step).collect();
+    if len > 0 && idx.last() != Some(&(len - 1)) {
+        idx.push(len - 1);
+    }
+    idx
+}
+
+fn simulation_svg(
+    report: &ValidationReport,
+    measured: &structid_lti::Signal,
+    time: &[f64],
+    y_names: &[String],
+    time_label: &str,
+) -> Result<String, CliError> {
+    let idx = plot_indices(time.len());
+    let t: Vec<f64> = idx.iter().map(|&k| time[k]).collect();
+    let series: Vec<(Vec<f64>, Vec<f64>)> = (0..y_names.len())
+        .map(|c| {
+            (
+                idx.iter().map(|&k| measured.get(k, c)).collect(),
+                idx.iter().map(|&k| report.simulated.get(k, c)).collect(),
+            )
+        })
+        .collect();
+    let charts: Vec<Chart> = y_names
+        .iter()
+        .zip(&series)
+        .zip(&report.fit_percent)
+        .map(|((name, (y, ys)), fit)| {
+            Chart::new(
+                format!("{name}: measured and simulated (fit {fit:.1} %)"),
+                time_label,
+                name.as_str(),
+            )
+            .with(Series::line("measured", &t, y))
+            .with(Series::line("simulated", &t, ys))
+        })
+        .collect();
+    Ok(render_grid_svg(&charts, 1, (1000, 400))?)
+}
+
+fn residuals_svg(
+    report: &ValidationReport,
+    y_names: &[String],
+    u_names: &[String],
+) -> Result<String, CliError> {
+    let as_f64 = |t: &CorrelationTest| t.lags.iter().map(|&l| l as f64).collect::<Vec<f64>>();
+    let lags: Vec<(Vec<f64>, Vec<Vec<f64>>)> = report
+        .whiteness
+        .iter()
+        .zip(&report.input_correlation)
+        .map(|(w, cross)| (as_f64(w), cross.iter().map(as_f64).collect()))
+        .collect();
+    let mut charts = Vec::new();
+    for (c, name) in y_names.iter().enumerate() {
+        let w = &report.whiteness[c];
+        charts.push(
+            CorrelationChart::new(
+                format!("autocorrelation of ε ({name})"),
+                "lag τ",
+                "R_ε(τ)",
+                &lags[c].0,
+                &w.values,
+                w.bound,
+            )
+            .exempt_zero(),
+        );
+        for (j, u) in u_names.iter().enumerate() {
+            let t = &report.input_correlation[c][j];
+            charts.push(CorrelationChart::new(
+                format!("ε ({name}) against {u}"),
+                "lag τ",
+                "R_εu(τ)",
+                &lags[c].1[j],
+                &t.values,
+                t.bound,
+            ));
+        }
+    }
+    Ok(render_correlation_svg(
+        &charts,
+        1 + u_names.len(),
+        (600, 380),
+    )?)
+}
+
+fn test_json(t: &CorrelationTest) -> Result<Value, CliError> {
+    let mut v = serde_json::to_value(t)
+        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
+    if let Value::Object(m) = &mut v {
+        m.insert("passes".into(), json!(t.passes()));
+        m.insert("lags_outside".into(), json!(t.outside()));
+    }
+    Ok(v)
+}
+
+fn fmt_pct(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.2} %")
+    } else {
+        "undefined (constant output)".into()
+    }
+}
+
+fn pass(t: &CorrelationTest) -> String {
+    let n = t.outside().len();
+    let tested = if t.autocorrelation {
+        t.lags.iter().filter(|&&l| l != 0).count()
+    } else {
+        t.lags.len()
+    };
+    format!(
+        "{} ({n} of {tested} lags outside the 99 % band)",
+        if n == 0 { "pass" } else { "FAIL" }
+    )
+}
+
+/// Runs `structid validate`.
+pub fn run(a: ValidateArgs) -> Result<(), CliError> {
+    let t0 = Instant::now();
+    if a.max_lag == 0 {
+        return Err(CliError::input(
+            "invalid value 0 for --max-lag: it must be at least 1",
+        ));
+    }
+    // The estimate directory and its report.
+    let dir = &a.estimate;
+    if !dir.is_dir() {
+        return Err(CliError::input(format!(
+            "the estimate directory `{}` does not exist or is not a directory; give the --out directory of \
+             `structid identify`",
+            dir.display()
+        )));
+    }
+    let report_path = dir.join("report.json");
+    if !report_path.is_file() {
+        return Err(CliError::input(format!(
+            "`{}` has no report.json: it is not an output directory of `structid identify`",
+            dir.display()
+        )));
+    }
+    let record = ReportRecord::read(&report_path)?;
+    let rep = record.reproduction.clone().ok_or_else(|| {
+        CliError::input(format!(
+            "`{}` was written by an older structid that does not record how to reproduce the estimate; \
+             run `structid identify` again",
+            report_path.display()
+        ))
+    })?;
+
+    // --model must be the estimate's model.
+    let vmf = ModelFile::from_path(&a.model)?;
+    check_blocks(&vmf, &a.model, &record)?;
+
+    // The recorded identification, loaded (not run yet) so that its files can be protected.
+    let args = identify_args(&rep, dir, &report_path)?;
+    for (what, p) in [("model", &args.model), ("data", &args.data)] {
+        if !p.is_file() {
+            return Err(CliError::input(format!(
+                "the {what} file `{}` recorded in `{}` does not exist any more, so the estimate cannot be rebuilt",
+                p.display(),
+                report_path.display()
+            )));
+        }
+    }
+    let context = format!(
+        "re-running the identification recorded in `{}`",
+        report_path.display()
+    );
+    let (id_settings, sigma, emf) = load(&args).map_err(|e| e.context(context.clone()))?;
+
+    // Never overwrite an input: the files of the command, the estimate directory's files and
+    // the files of the recorded identification.
+    let mut guard = OutputGuard::new();
+    let mut others: Vec<PathBuf> = vec![
+        a.data.clone(),
+        report_path.clone(),
+        dir.join("estimate.csv"),
+    ];
+    others.extend(record.files.iter().map(|f| dir.join(f)));
+    let others_ref: Vec<&Path> = others.iter().map(PathBuf::as_path).collect();
+    protect_inputs(&mut guard, &vmf, &a.model, &others_ref);
+    protect_inputs(&mut guard, &emf, &args.model, &[&args.data]);
+    guard.check(&a.out)?;
+    for f in OUTPUTS {
+        guard.check(&a.out.join(f))?;
+    }
+    if a.out.exists() && !a.out.is_dir() {
+        return Err(CliError::input(format!(
+            "--out `{}` exists and is not a directory",
+            a.out.display()
+        )));
+    }
+
+    // The validation record, checked before the (possibly long) re-identification.
+    let table = DataTable::read(&a.data)?;
+    let vdata = vmf.select_data(&table)?;
+    if a.max_lag >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
+            a.max_lag,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
+
+    // Rebuild the estimate and check it against the directory.
+    let (edata, emodel) =
+        model_and_data(&emf, &args.data, sigma).map_err(|e| e.context(context.clone()))?;
+    let id = identify(&emodel, &edata, &id_settings)
+        .map_err(|e| CliError::from(e).context(context.clone()))?;
+    let w_difference = check_estimate(dir, &emf, &id)?;
+    let mut warnings = Vec::new();
+    if vmf.lft != emf.lft {
+        warnings.push(format!(
+            "the linear block of --model `{}` differs from that of the estimate's model file `{}`; the maps \
+             were estimated with the latter",
+            a.model.display(),
+            args.model.display()
+        ));
+    }
+
+    // Validate. Dispersions play no part here; σ = 1 only makes every block buildable.
+    let vmodel = vmf.to_model(Some(1.0), None)?;
+    let maps: Vec<&dyn Interpolant> = vmodel
+        .blocks()
+        .iter()
+        .map(|b| {
+            id.block(&b.name)
+                .map(|e| e.map.as_ref())
+                .ok_or_else(|| CliError::runtime(format!("the estimate has no block `{}`", b.name)))
+        })
+        .collect::<Result<_, _>>()?;
+    let initial_state = match a.initial_state {
+        InitialStateArg::Zero => ValidationInitialState::Zero,
+        InitialStateArg::Estimate => ValidationInitialState::Estimate,
+    };
+    let settings = ValidationSettings::builder()
+        .initial_state(initial_state)
+        .max_lag(a.max_lag)
+        .build()?;
+    let report = validate(&vmodel, &maps, &vdata, &settings)?;
+
+    // Outputs.
+    guard.create_dir(&a.out)?;
+    let y_names = vmf.signals.y.clone();
+    let u_names = vmf.signals.u.clone();
+    let len = report.samples;
+    let (time, time_label) = match vmf.lft.sample_time() {
+        Some(ts) => (
+            (0..len).map(|k| k as f64 * ts).collect::<Vec<f64>>(),
+            "time [s]",
+        ),
+        None => ((0..len).map(|k| k as f64).collect(), "sample"),
+    };
+    let mut columns = vec![time.clone()];
+    for c in 0..y_names.len() {
+        columns.push(vdata.y().channel(c));
+        columns.push(report.simulated.channel(c));
+        columns.push(report.prediction_error.channel(c));
+    }
+    let mut written = Vec::new();
+    let path = a.out.join("simulation.csv");
+    guard.write_csv(&path, &simulation_names(&y_names), &columns)?;
+    written.push(path);
+    let path = a.out.join("simulation.svg");
+    let svg = simulation_svg(&report, vdata.y(), &time, &y_names, time_label)?;
+    guard.write(&path, svg.as_bytes())?;
+    written.push(path);
+    let path = a.out.join("residuals.svg");
+    guard.write(
+        &path,
+        residuals_svg(&report, &y_names, &u_names)?.as_bytes(),
+    )?;
+    written.push(path);
+
+    let mut outputs = Vec::new();
+    for (c, name) in y_names.iter().enumerate() {
+        let cross = u_names
+            .iter()
+            .zip(&report.input_correlation[c])
+            .map(|(u, t)| {
+                let mut v = test_json(t)?;
+                if let Value::Object(m) = &mut v {
+                    m.insert("input".into(), json!(u));
+                }
+                Ok(v)
+            })
+            .collect::<Result<Vec<Value>, CliError>>()?;
+        outputs.push(json!({
+            "name": name,
+            "rms": report.rms[c],
+            "fit_percent": report.fit_percent[c],
+            "prediction_rms": report.prediction_rms[c],
+            "whiteness": test_json(&report.whiteness[c])?,
+            "input_correlation": cross,
+        }));
+    }
+    let json_path = a.out.join("validation.json");
+    let files: Vec<String> = written
+        .iter()
+        .chain(std::iter::once(&json_path))
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    let doc = json!({
+        "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
+        "inputs": {
+            "model_file": a.model.display().to_string(),
+            "model_file_absolute": absolute(&a.model).display().to_string(),
+            "estimate_dir": dir.display().to_string(),
+            "estimate_dir_absolute": absolute(dir).display().to_string(),
+            "data_file": a.data.display().to_string(),
+            "data_file_absolute": absolute(&a.data).display().to_string(),
+            "initial_state": crate::identify::value_name(a.initial_state),
+            "max_lag": a.max_lag,
+        },
+        "estimate": {
+            "report": report_path.display().to_string(),
+            "model_file": rep.model_file_absolute,
+            "data_file": rep.data_file_absolute,
+            "samples": record.samples,
+            "beta": rep.beta,
+            "solver": rep.solver,
+            "w_hat_max_relative_difference": w_difference,
+            "w_hat_tolerance": W_TOLERANCE,
+        },
+        "samples": len,
+        "sample_time": vmf.lft.sample_time(),
+        "initial_state": report.initial_state,
+        "outputs": outputs,
+        "whiteness_passes": report.whiteness_passes(),
+        "input_correlation_passes": report.input_correlation_passes(),
+        "warnings": warnings,
+        "files": files,
+    });
+    let mut text = serde_json::to_string_pretty(&doc)
+        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
+    text.push('\n');
+    guard.write(&json_path, text.as_bytes())?;
+    written.push(json_path);
+
+    print!(
+        "{}",
+        summary(
+            &report,
+            &y_names,
+            &u_names,
+            &a,
+            w_difference,
+            &warnings,
+            &written,
+            t0.elapsed().as_secs_f64()
+        )
+    );
+    Ok(())
+}
+
+fn summary(
+    report: &ValidationReport,
+    y_names: &[String],
+    u_names: &[String],
+    a: &ValidateArgs,
+    w_difference: f64,
+    warnings: &[String],
+    written: &[PathBuf],
+    seconds: f64,
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "validated the estimate in `{}` on {} samples of `{}` ({:.2} s)",
+        a.estimate.display(),
+        report.samples,
+        a.data.display(),
+        seconds
+    );
+    let _ = writeln!(
+        s,
+        "estimate rebuilt from its report.json: ŵ matches estimate.csv (max relative difference {w_difference:.1e})"
+    );
+    match &report.initial_state {
+        Some(x0) => {
+            let v: Vec<String> = x0.iter().map(|v| format!("{v:.4e}")).collect();
+            let _ = writeln!(s, "initial state: estimated, x₀ = [{}]", v.join(", "));
+        }
+        None => {
+            let _ = writeln!(s, "initial state: zero (the record starts at rest)");
+        }
+    }
+    for (c, name) in y_names.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "output {name}: simulation RMS {:.4e}, fit {}; one-step prediction RMS {:.4e}",
+            report.rms[c],
+            fmt_pct(report.fit_percent[c]),
+            report.prediction_rms[c]
+        );
+        let _ = writeln!(s, "  whiteness of ε: {}", pass(&report.whiteness[c]));
+        for (j, u) in u_names.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "  correlation of ε with {u}: {}",
+                pass(&report.input_correlation[c][j])
+            );
+        }
+    }
+    for w in warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
+    let _ = writeln!(s, "wrote:");
+    for p in written {
+        let _ = writeln!(s, "  {}", p.display());
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn simulation_column_names_fall_back_when_they_collide() {
+        let n = simulation_names(&["y".into(), "p".into()]);
+        assert_eq!(
+            n,
+            [
+                "time",
+                "y",
+                "y_sim",
+                "y_prediction_error",
+                "p",
+                "p_sim",
+                "p_prediction_error"
+            ]
+        );
+        let n = simulation_names(&["time".into()]);
+        assert_eq!(n, ["time", "y0", "y0_sim", "y0_prediction_error"]);
+        let n = simulation_names(&["a".into(), "a_sim".into()]);
+        assert_eq!(n[1], "y0");
+    }
+
+    #[test]
+    fn plot_indices_keep_the_ends_and_at_most_the_limit() {
+        assert_eq!(plot_indices(3), [0, 1, 2]);
+        let idx = plot_indices(12_345);
+        assert!(idx.len() <= MAX_PLOT_POINTS + 1);
+        assert_eq!((idx[0], *idx.last().unwrap()), (0, 12_344));
+        assert!(plot_indices(0).is_empty());
+    }
+
+    fn reproduction() -> Reproduction {
+        Reproduction {
+            model_file_absolute: "/m.toml".into(),
+            data_file_absolute: "/d.csv".into(),
+            beta: 0.1 + 0.2,
+            sigma: Some(1e-7),
+            solver_requested: "auto".into(),
+            solver: "admm".into(),
+            initial_state: "estimate".into(),
+            memory_limit_mib: Some(64),
+            dispersion: Some("tv".into()),
+            neighbours: Some(5),
+            tolerance: Some(1e-9),
+            max_iterations: Some(300),
+        }
+    }
+
+    #[test]
+    fn recorded_settings_parse_back_exactly() {
+        let rep = reproduction();
+        let a = identify_args(&rep, Path::new("-odd dir"), Path::new("r.json")).unwrap();
+        assert_eq!(a.beta, crate::AutoOr::Value(0.1 + 0.2));
+        assert_eq!(a.sigma, Some(crate::AutoOr::Value(1e-7)));
+        assert_eq!(a.out, Path::new("-odd dir"));
+        assert_eq!(a.model, Path::new("/m.toml"));
+        assert!(matches!(a.solver, crate::SolverArg::Admm));
+        assert!(matches!(a.initial_state, InitialStateArg::Estimate));
+        assert!(matches!(a.dispersion, Some(crate::DispersionArg::Tv)));
+        assert_eq!(
+            (
+                a.memory_limit_mib,
+                a.neighbours,
+                a.tolerance,
+                a.max_iterations
+            ),
+            (Some(64), Some(5), Some(1e-9), Some(300))
+        );
+        let bad = Reproduction {
+            solver: "magic".into(),
+            ..rep
+        };
+        let e = identify_args(&bad, Path::new("d"), Path::new("r.json"))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("r.json") && e.contains("magic"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+}

@@ -1,0 +1,431 @@
+//! Validation of estimated maps on a record: free-run simulation, one-step-ahead prediction and
+//! residual tests.
+//!
+//! Given the model, one map per block (typically [`crate::Identification::maps`]) and a record
+//! (preferably one that was *not* used for identification), [`validate`] answers two questions:
+//!
+//! 1. **Simulation.** How well does the model reproduce y from u alone? The LFT is run with the
+//!    maps in the loop ([`Model::simulate`], e = 0): z is computed from the *simulated* signals,
+//!    so errors of the maps propagate through the dynamics. Per output: RMS(y − y_sim) and the
+//!    fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) of MATLAB's `compare`
+//!    ([`crate::metrics::fit_percent`]). When the data carry measured z columns, the
+//!    simulation still computes z from the LFT's z-equations (C_z, D_zu), which must then
+//!    describe how z arises; the measured z serve the prediction only.
+//! 2. **One-step prediction.** What does the model leave unexplained? z is measurable (computed
+//!    from the measured u and y, see [`crate::Lft::measurability`]), so ŵ_k = N̂(z_k) is known
+//!    and
+//!
+//!    ```text
+//!    v = r − T_yw·ŵ − O·x̂₀ = T_ye·e        (r = y − T_yu·u, O·x̂₀ the free response)
+//!    ```
+//!
+//!    is the output of the noise path if the maps are right. The prediction error is the
+//!    innovation of v: ε_k = v_k − E[v_k | v_0 … v_(k−1)], from the time-varying Kalman
+//!    predictor of the noise path T_ye (started at rest; [`KalmanWhitener::innovations`]),
+//!    in the units of y (not normalised). For a static noise path (order 0) nothing is
+//!    predictable from the past and ε = v. Equivalently, ε_k = y_k − ŷ_(k|k−1) with
+//!
+//!    ```text
+//!    ŷ_(k|k−1) = (T_yu·u)_k + (O·x̂₀)_k + (T_yw·ŵ)_k + E[v_k | v_0 … v_(k−1)],
+//!    ```
+//!
+//!    which uses u_0 … u_k, the measured z_0 … z_k and y_0 … y_(k−1). (When z is computed by
+//!    output injection z = L_zu·u + Ψ·(y − L_yu·u), z_k itself contains y_k; the predictor then
+//!    uses the present value of the outputs that z reads, as the model structure implies.)
+//!    If the maps and the noise model are right, ε is white and uncorrelated with past inputs;
+//!    the residual tests of [`crate::residual_tests`] check both with 99 % bands.
+//!
+//! **Initial state.** [`ValidationInitialState::Zero`] assumes the record starts at rest.
+//! [`ValidationInitialState::Estimate`] estimates x₀ by generalised least squares from the
+//! one-step residual: with the maps fixed, r − T_yw·ŵ = O·x₀ + T_ye·e, so
+//! x̂₀ = argmin ‖W·(r − T_yw·ŵ − O·x₀)‖² with W the Kalman whitening operator of T_ye
+//! (WᵀW = (T_ye·T_yeᵀ)⁻¹; ordinary least squares when a static noise path leaves some output
+//! without noise, so that W does not exist). This is the Gauss–Markov estimate of x₀ given ŵ,
+//! the same correction as the exact solver's x̂₀ = (OᵀM⁻¹O)⁻¹OᵀM⁻¹r with the map term of M
+//! removed because ŵ is known. Directions of x₀ that do not reach y (numerically rank-deficient
+//! O) get the minimum-norm value: they reach neither z nor y, so they change no result.
+//! The simulation then starts from x̂₀ and the prediction uses v with O·x̂₀ removed.
+
+use faer::Mat;
+use nalgebra::{DMatrix, DVector};
+use structid_lti::Signal;
+use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
+
+use crate::error::{Error, Result};
+use crate::interpolant::Interpolant;
+use crate::metrics::{fit_percent, rms, rms_difference};
+use crate::model::{Data, Model};
+use crate::problem::Problem;
+use crate::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
+
+/// How [`validate`] treats the initial state of the linear block.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub enum ValidationInitialState {
+    /// The record starts at rest, x₀ = 0.
+    #[default]
+    Zero,
+    /// x₀ is estimated by generalised least squares from the one-step residual (see the
+    /// [module documentation](self)).
+    Estimate,
+}
+
+/// Settings of [`validate`]; build them with [`ValidationSettings::builder`].
+///
+/// ```
+/// use structid_core::validation::{ValidationInitialState, ValidationSettings};
+/// let s = ValidationSettings::default();
+/// assert_eq!((s.initial_state(), s.max_lag()), (ValidationInitialState::Zero, 25));
+/// let s = ValidationSettings::builder().max_lag(10).initial_state(ValidationInitialState::Estimate).build().unwrap();
+/// assert_eq!(s.max_lag(), 10);
+/// assert!(ValidationSettings::builder().max_lag(0).build().is_err());
+/// ```
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ValidationSettings {
+    initial_state: ValidationInitialState,
+    max_lag: usize,
+}
+
+impl Default for ValidationSettings {
+    /// A record at rest and correlation lags up to 25 (MATLAB's `resid` default).
+    fn default() -> Self {
+        Self {
+            initial_state: ValidationInitialState::Zero,
+            max_lag: 25,
+        }
+    }
+}
+
+impl ValidationSettings {
+    /// A builder starting from the defaults.
+    pub fn builder() -> ValidationSettingsBuilder {
+        ValidationSettingsBuilder {
+            inner: Self::default(),
+        }
+    }
+
+    /// How the initial state is treated.
+    pub fn initial_state(&self) -> ValidationInitialState {
+        self.initial_state
+    }
+
+    /// The largest lag of the correlation tests.
+    pub fn max_lag(&self) -> usize {
+        self.max_lag
+    }
+}
+
+/// Builder for [`ValidationSettings`]; [`ValidationSettingsBuilder::build`] validates.
+#[derive(Clone, Debug)]
+pub struct ValidationSettingsBuilder {
+    inner: ValidationSettings,
+}
+
+impl ValidationSettingsBuilder {
+    /// Zero or estimated initial state.
+    pub fn initial_state(mut self, initial_state: ValidationInitialState) -> Self {
+        self.inner.initial_state = initial_state;
+        self
+    }
+
+    /// The largest lag of the correlation tests (≥ 1, and less than the record length).
+    pub fn max_lag(mut self, max_lag: usize) -> Self {
+        self.inner.max_lag = max_lag;
+        self
+    }
+
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<ValidationSettings> {
+        if self.inner.max_lag == 0 {
+            return Err(Error::InvalidParameter {
+                name: "max_lag".into(),
+                value: 0.0,
+                reason: "must be at least 1 (lag 0 of an autocorrelation is 1 by definition)"
+                    .into(),
+            });
+        }
+        Ok(self.inner)
+    }
+}
+
+/// Everything [`validate`] computed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidationReport {
+    /// y simulated with the maps in the loop from u alone (e = 0, z from the simulated
+    /// signals), L × n_y.
+    pub simulated: Signal,
+    /// Per output: RMS(y − y_sim).
+    pub rms: Vec<f64>,
+    /// Per output: the fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) in percent (100 is perfect, 0 is
+    /// no better than the mean, NaN for a constant output).
+    pub fit_percent: Vec<f64>,
+    /// The one-step-ahead prediction errors ε_k = y_k − ŷ_(k|k−1) (innovations of the noise
+    /// path, in output units), L × n_y.
+    pub prediction_error: Signal,
+    /// Per output: RMS(ε).
+    pub prediction_rms: Vec<f64>,
+    /// Per output: the autocorrelation of ε at lags 0…max_lag with its 99 % band.
+    pub whiteness: Vec<CorrelationTest>,
+    /// `[output][input]`: the cross-correlation of ε with u at lags −max_lag…max_lag (a
+    /// positive lag pairs ε with past inputs).
+    pub input_correlation: Vec<Vec<CorrelationTest>>,
+    /// The estimated x₀ ([`ValidationInitialState::Estimate`]), otherwise `None`.
+    pub initial_state: Option<Vec<f64>>,
+    /// Number of samples L.
+    pub samples: usize,
+}
+
+impl ValidationReport {
+    /// Whether every output's ε passes the whiteness test.
+    pub fn whiteness_passes(&self) -> bool {
+        self.whiteness.iter().all(CorrelationTest::passes)
+    }
+
+    /// Whether every (output, input) pair passes the cross-correlation test.
+    pub fn input_correlation_passes(&self) -> bool {
+        self.input_correlation
+            .iter()
+            .flatten()
+            .all(CorrelationTest::passes)
+    }
+}
+
+/// Validates `maps` (one per block of `model`, in model order) on `data`: simulation with the
+/// maps in the loop, one-step-ahead prediction errors and their residual tests. See the
+/// [module documentation](self) for exactly what is simulated and predicted.
+///
+/// Errors: [`Error::DimensionMismatch`] when the number of maps differs from the number of
+/// blocks or the data's channels do not fit the model; [`Error::InvalidParameter`] when
+/// `max_lag` is not less than the record length; [`Error::AlgebraicLoop`] when D_zw ≠ 0 (no
+/// simulation possible); [`Error::NotMeasurable`] when z cannot be computed from the data (or,
+/// with an estimated x₀, when x₀ reaches z and y differently); [`Error::Numerical`] when a map
+/// returns a non-finite value or the simulation diverges; [`Error::InvalidStructure`] when the
+/// noise path has no Kalman predictor (some output without noise of its own).
+///
+/// ```
+/// use std::sync::Arc;
+/// use nalgebra::dmatrix;
+/// use structid_core::validation::{validate, ValidationSettings};
+/// use structid_core::{Data, KernelDispersion, Lft, LftMatrices, Model, NonlinearBlock};
+/// use structid_lti::Signal;
+/// // Hammerstein: x⁺ = 0.5x + w, y = x + e, w = tanh(u).
+/// let lft = Lft::new(LftMatrices {
+///     a: dmatrix![0.5], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![1.0],
+///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![0.0],
+///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+/// }).unwrap();
+/// let block = NonlinearBlock::new("N", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()));
+/// let model = Model::new(lft, vec![block]).unwrap();
+/// let tanh = |z: &[f64]| z[0].tanh();
+/// let u = Signal::from_fn(300, 1, |k, _| (0.37 * k as f64).sin() * 2.0);
+/// let y = model.simulate(&[&tanh], &u, None, None).unwrap().y;
+/// let data = Data::new(u, y).unwrap();
+///
+/// let report = validate(&model, &[&tanh], &data, &ValidationSettings::default()).unwrap();
+/// assert!(report.rms[0] < 1e-12 && report.fit_percent[0] > 99.999);
+/// // A map that is off by 20 % leaves an error that the input explains.
+/// let wrong = |z: &[f64]| 0.8 * z[0].tanh();
+/// let report = validate(&model, &[&wrong], &data, &ValidationSettings::default()).unwrap();
+/// assert!(report.fit_percent[0] < 90.0 && !report.input_correlation_passes());
+/// ```
+pub fn validate(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settings: &ValidationSettings,
+) -> Result<ValidationReport> {
+    let blocks = model.blocks();
+    if maps.len() != blocks.len() {
+        return Err(Error::DimensionMismatch {
+            what: "number of maps for validation (one per block, in model order)".into(),
+            expected: blocks.len().to_string(),
+            found: maps.len().to_string(),
+        });
+    }
+    let lft = model.lft();
+    data.check_against(lft)?;
+    let len = data.len();
+    let max_lag = settings.max_lag;
+    if max_lag == 0 || max_lag >= len {
+        return Err(Error::InvalidParameter {
+            name: "max_lag".into(),
+            value: max_lag as f64,
+            reason: format!(
+                "must be at least 1 and less than the number of samples ({len}); correlations \
+                 need overlapping samples"
+            ),
+        });
+    }
+    // Simulation needs no algebraic loop; check before the (longer) prediction work.
+    lft.check_no_algebraic_loop()?;
+    let problem = match settings.initial_state {
+        ValidationInitialState::Zero => Problem::from_model(model, data)?,
+        ValidationInitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
+    };
+    let ny = problem.outputs();
+
+    // v = r − T_yw·ŵ with ŵ = N̂(z) at the measured (computed) z.
+    let mut v = problem.residual().as_slice().to_vec();
+    let mut tmp = vec![0.0; len * ny];
+    for (block, map) in problem.blocks().iter().zip(maps) {
+        let w = map.eval_many(&block.z);
+        if let Some(k) = w.iter().position(|x| !x.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "the map of block `{}` returned {} at sample {k} (z = {:?}) of the validation record",
+                block.name,
+                w[k],
+                block.z.sample(k)
+            )));
+        }
+        block.path.apply(&w, &mut tmp);
+        v.iter_mut().zip(&tmp).for_each(|(a, b)| *a -= b);
+    }
+
+    let noise = lft.t_ye();
+    let dynamic_noise = noise.order() > 0;
+    let whitener = match KalmanWhitener::new(&noise, len, &WhiteningOptions::default()) {
+        Ok(w) => Some(w),
+        // A static path needs no predictor; only the GLS weighting of x₀ is lost.
+        Err(_) if !dynamic_noise => None,
+        Err(e) => {
+            return Err(Error::InvalidStructure(format!(
+                "one-step prediction needs the Kalman predictor of the noise path T_ye, which does not \
+                 exist for this model: {e}"
+            )));
+        }
+    };
+
+    let x0 = match problem.free_response() {
+        Some(o) if o.ncols() > 0 => {
+            let x0 = estimate_initial_state(o, &v, whitener.as_ref())?;
+            for (i, vi) in v.iter_mut().enumerate() {
+                *vi -= (0..o.ncols()).map(|j| o[(i, j)] * x0[j]).sum::<f64>();
+            }
+            Some(x0)
+        }
+        Some(_) => Some(Vec::new()),
+        None => None,
+    };
+
+    let eps = match (&whitener, dynamic_noise) {
+        (Some(w), true) => {
+            let mut eps = vec![0.0; len * ny];
+            w.innovations(&v, &mut eps);
+            eps
+        }
+        _ => v,
+    };
+    if let Some(i) = eps.iter().position(|x| !x.is_finite()) {
+        return Err(Error::Numerical(format!(
+            "the one-step prediction error is not finite at sample {} (output {}): the noise model's \
+             predictor is unstable on this record",
+            i / ny,
+            i % ny
+        )));
+    }
+    let prediction_error = Signal::new(ny, eps)?;
+
+    let sim = model.simulate(maps, data.u(), None, x0.as_deref())?;
+    let simulated = sim.y;
+    if let Some(i) = simulated.as_slice().iter().position(|x| !x.is_finite()) {
+        return Err(Error::Numerical(format!(
+            "the simulation with the maps in the loop diverged (output {} is not finite at sample {})",
+            i % ny,
+            i / ny
+        )));
+    }
+
+    let mut rms_sim = Vec::with_capacity(ny);
+    let mut fit = Vec::with_capacity(ny);
+    let mut prediction_rms = Vec::with_capacity(ny);
+    let mut whiteness = Vec::with_capacity(ny);
+    let mut input_correlation = Vec::with_capacity(ny);
+    let inputs: Vec<Vec<f64>> = (0..data.u().channels())
+        .map(|j| data.u().channel(j))
+        .collect();
+    for c in 0..ny {
+        let (y, ys, e) = (
+            data.y().channel(c),
+            simulated.channel(c),
+            prediction_error.channel(c),
+        );
+        rms_sim.push(rms_difference(&y, &ys));
+        fit.push(fit_or_nan(&y, &ys));
+        prediction_rms.push(rms(&e));
+        whiteness.push(non_negative_lags(autocorrelation(&e, max_lag)));
+        input_correlation.push(
+            inputs
+                .iter()
+                .map(|u| cross_correlation(&e, u, max_lag))
+                .collect(),
+        );
+    }
+    Ok(ValidationReport {
+        simulated,
+        rms: rms_sim,
+        fit_percent: fit,
+        prediction_error,
+        prediction_rms,
+        whiteness,
+        input_correlation,
+        initial_state: x0,
+        samples: len,
+    })
+}
+
+/// The fit in percent, NaN when the measured output is constant (the fit is undefined then).
+fn fit_or_nan(measured: &[f64], simulated: &[f64]) -> f64 {
+    let f = fit_percent(measured, simulated);
+    if f.is_finite() { f } else { f64::NAN }
+}
+
+/// An autocorrelation keeps its lags 0…max_lag: it is symmetric, so the negative lags repeat the
+/// positive ones and would count every lag outside the band twice.
+fn non_negative_lags(t: CorrelationTest) -> CorrelationTest {
+    let keep: Vec<usize> = (0..t.lags.len()).filter(|&i| t.lags[i] >= 0).collect();
+    CorrelationTest {
+        lags: keep.iter().map(|&i| t.lags[i]).collect(),
+        values: keep.iter().map(|&i| t.values[i]).collect(),
+        ..t
+    }
+}
+
+/// x̂₀ = argmin ‖W·(v − O·x₀)‖² (W = I without a whitener), minimum norm on the directions
+/// that O does not resolve.
+fn estimate_initial_state(
+    o: &Mat<f64>,
+    v: &[f64],
+    whitener: Option<&KalmanWhitener>,
+) -> Result<Vec<f64>> {
+    let (rows, n) = (o.nrows(), o.ncols());
+    let (ow, vw) = match whitener {
+        Some(w) => {
+            let mut ow = Mat::<f64>::zeros(rows, n);
+            w.whiten_columns(o.as_ref(), ow.as_mut());
+            let mut vw = vec![0.0; rows];
+            w.whiten(v, &mut vw);
+            (ow, vw)
+        }
+        None => (o.clone(), v.to_vec()),
+    };
+    let a = DMatrix::from_fn(rows, n, |i, j| ow[(i, j)]);
+    if a.iter().chain(&vw).any(|x| !x.is_finite()) {
+        return Err(Error::Numerical(
+            "the whitened free response is not finite; the initial state cannot be estimated on this \
+             record (is the noise model's predictor unstable?)"
+                .into(),
+        ));
+    }
+    let svd = a.svd(true, true);
+    let smax = svd.singular_values.max();
+    if smax == 0.0 {
+        // No state reaches y: x₀ is irrelevant.
+        return Ok(vec![0.0; n]);
+    }
+    let x = svd
+        .solve(&DVector::from_vec(vw), 1e-12 * smax)
+        .map_err(|e| Error::Numerical(format!("least squares for the initial state: {e}")))?;
+    Ok(x.iter().copied().collect())
+}
+
+#[cfg(test)]
+mod tests;
