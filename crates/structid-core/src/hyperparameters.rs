@@ -393,64 +393,80 @@ pub fn select(
     let mut method = String::new();
     let mut features: Option<FeatureScore> = None;
     // The best β (and its value and s²) for the given widths.
-    let mut best_beta =
-        |widths: &[Option<f64>], curve: &mut Vec<Trial>| -> Result<(f64, f64, Option<f64>)> {
-            let m = model_at(widths)?;
-            let problem = problem_of(&m)?;
-            let sigma = if selection.tune_sigma {
-                first_width(widths)
-            } else {
-                None
-            };
-            let mut score: Box<dyn BetaScore + '_> = match criterion {
-                Criterion::MarginalLikelihood | Criterion::Gcv => {
-                    if use_feature_path(&problem, settings)? {
-                        let f = match features.take().and_then(|f| f.reweighted(&problem)) {
-                            Some(f) => f,
-                            None => FeatureScore::new(&problem)?,
-                        };
-                        features = Some(f);
-                        Box::new(FeatureRef {
-                            score: features.as_mut().expect("just set"),
-                            criterion,
-                        })
-                    } else {
-                        Box::new(DenseScore::new(&problem, criterion)?)
-                    }
-                }
-                Criterion::CrossValidation { folds } => {
-                    Box::new(FoldScore::new(problem, settings.clone(), folds)?)
-                }
-                Criterion::Validation => Box::new(ValidationScore {
-                    problem,
-                    model: m,
-                    validation: validation.expect("checked above"),
-                    settings: settings.clone(),
-                }),
-            };
-            let mut eval = |lg: f64| -> Result<f64> {
-                let beta = 10f64.powf(lg);
-                let (value, _) = score.score(beta)?;
-                curve.push(Trial { beta, sigma, value });
-                Ok(value)
-            };
-            let (lg, value) = if selection.tune_beta {
-                let (lo, hi) = selection.beta_bounds;
-                minimise_log10(
-                    &mut eval,
-                    selection.beta_start.log10(),
-                    (lo.log10(), hi.log10()),
-                    selection.tolerance,
-                )?
-            } else {
-                let lg = settings.beta().log10();
-                (lg, eval(lg)?)
-            };
-            let beta = 10f64.powf(lg);
-            let (_, s2) = score.score(beta)?;
-            method = score.method();
-            Ok((beta, value, s2))
+    let mut best_beta = |widths: &[Option<f64>],
+                         curve: &mut Vec<Trial>|
+     -> Result<(f64, f64, Option<f64>)> {
+        let m = model_at(widths)?;
+        let problem = problem_of(&m)?;
+        let sigma = if selection.tune_sigma {
+            first_width(widths)
+        } else {
+            None
         };
+        let mut score: Box<dyn BetaScore + '_> = match criterion {
+            Criterion::MarginalLikelihood | Criterion::Gcv => {
+                let penalties = crate::solver::penalties(&problem)?;
+                if let Some(b) = problem
+                    .blocks()
+                    .iter()
+                    .zip(&penalties)
+                    .find_map(|(b, p)| (!matches!(p, Penalty::Quadratic(_))).then_some(b))
+                {
+                    return Err(Error::Unsupported(format!(
+                        "{} needs quadratic dispersions (a Gaussian-process model), but block `{}` has {}; \
+                             choose β by cross-validation or validation error instead",
+                        criterion.describe(),
+                        b.name,
+                        b.dispersion.describe()
+                    )));
+                }
+                if use_feature_path(&problem, settings)? {
+                    let f = match features.take().and_then(|f| f.reweighted(&problem)) {
+                        Some(f) => f,
+                        None => FeatureScore::new(&problem)?,
+                    };
+                    features = Some(f);
+                    Box::new(FeatureRef {
+                        score: features.as_mut().expect("just set"),
+                        criterion,
+                    })
+                } else {
+                    Box::new(DenseScore::new(&problem, criterion)?)
+                }
+            }
+            Criterion::CrossValidation { folds } => {
+                Box::new(FoldScore::new(problem, settings.clone(), folds)?)
+            }
+            Criterion::Validation => Box::new(ValidationScore {
+                problem,
+                model: m,
+                validation: validation.expect("checked above"),
+                settings: settings.clone(),
+            }),
+        };
+        let mut eval = |lg: f64| -> Result<f64> {
+            let beta = 10f64.powf(lg);
+            let (value, _) = score.score(beta)?;
+            curve.push(Trial { beta, sigma, value });
+            Ok(value)
+        };
+        let (lg, value) = if selection.tune_beta {
+            let (lo, hi) = selection.beta_bounds;
+            minimise_log10(
+                &mut eval,
+                selection.beta_start.log10(),
+                (lo.log10(), hi.log10()),
+                selection.tolerance,
+            )?
+        } else {
+            let lg = settings.beta().log10();
+            (lg, eval(lg)?)
+        };
+        let beta = 10f64.powf(lg);
+        let (_, s2) = score.score(beta)?;
+        method = score.method();
+        Ok((beta, value, s2))
+    };
 
     let (widths, beta, noise_variance) = if selection.tune_sigma {
         let d = selection.sigma_decades;
