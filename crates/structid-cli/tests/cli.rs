@@ -1,66 +1,9 @@
 //! End-to-end tests of the `structid` binary.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
-const BIN: &str = env!("CARGO_BIN_EXE_structid");
-
-struct Out {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-fn run(args: &[&str]) -> Out {
-    let out = Command::new(BIN)
-        .args(args)
-        .output()
-        .expect("the binary runs");
-    Out {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-fn ok(args: &[&str]) -> Out {
-    let o = run(args);
-    assert_eq!(
-        o.code, 0,
-        "structid {args:?} failed:\n{}\n{}",
-        o.stdout, o.stderr
-    );
-    o
-}
-
-/// Runs a command that must fail with a readable input error (exit code 2, no panic) and
-/// returns its stderr.
-fn input_error(args: &[&str]) -> String {
-    let o = run(args);
-    assert_eq!(
-        o.code, 2,
-        "structid {args:?}: expected exit code 2\nstdout: {}\nstderr: {}",
-        o.stdout, o.stderr
-    );
-    assert!(o.stderr.starts_with("error: "), "{}", o.stderr);
-    assert!(
-        !o.stderr.contains("panicked") && !o.stderr.contains("internal error"),
-        "{}",
-        o.stderr
-    );
-    assert!(!o.stderr.contains("RUST_BACKTRACE"), "{}", o.stderr);
-    o.stderr
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().expect("utf-8 temp path")
-}
-
-fn example_model(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../examples/models")
-        .join(name)
-}
+mod common;
+use common::*;
 
 /// A reproducible uniform input on [−2, 2] (a small LCG, so the test needs no RNG crate).
 fn write_input(path: &Path, len: usize, columns: &[&str]) {

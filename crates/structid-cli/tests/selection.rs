@@ -2,21 +2,13 @@
 //! reproducible by `structid validate`, and bad combinations are readable errors.
 
 use std::path::Path;
-use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_structid");
+mod common;
+use common::{p, run as run_out};
 
 fn run(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
+    let o = run_out(args);
+    (o.code, o.stdout, o.stderr)
 }
 
 fn json(path: &Path) -> serde_json::Value {

@@ -2,71 +2,9 @@
 //! from `identify`, then validation on a fresh record.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_structid");
-
-struct Out {
-    code: i32,
-    stdout: String,
-    stderr: String,
-}
-
-fn run_in(cwd: Option<&Path>, args: &[&str]) -> Out {
-    let mut cmd = Command::new(BIN);
-    cmd.args(args);
-    if let Some(d) = cwd {
-        cmd.current_dir(d);
-    }
-    let out = cmd.output().expect("the binary runs");
-    Out {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-fn ok_in(cwd: Option<&Path>, args: &[&str]) -> Out {
-    let o = run_in(cwd, args);
-    assert_eq!(
-        o.code, 0,
-        "structid {args:?} failed:\n{}\n{}",
-        o.stdout, o.stderr
-    );
-    o
-}
-
-fn ok(args: &[&str]) -> Out {
-    ok_in(None, args)
-}
-
-/// Runs a command that must fail with a readable input error (exit code 2, no panic) and
-/// returns its stderr.
-fn input_error(args: &[&str]) -> String {
-    let o = run_in(None, args);
-    assert_eq!(
-        o.code, 2,
-        "structid {args:?}: expected exit code 2\nstdout: {}\nstderr: {}",
-        o.stdout, o.stderr
-    );
-    assert!(o.stderr.starts_with("error: "), "{}", o.stderr);
-    assert!(
-        !o.stderr.contains("panicked") && !o.stderr.contains("internal error"),
-        "{}",
-        o.stderr
-    );
-    o.stderr
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().expect("utf-8 temp path")
-}
-
-fn example_model(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../examples/models")
-        .join(name)
-}
+mod common;
+use common::*;
 
 /// A reproducible uniform input on [−a, a] (a small LCG, so the test needs no RNG crate).
 fn write_input(path: &Path, len: usize, amplitude: f64, seed: u64) {

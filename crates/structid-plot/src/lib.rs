@@ -671,6 +671,36 @@ fn grid_layout(
     Ok((cols, rows, (w, h)))
 }
 
+/// Tiles `items` in one SVG figure, row by row with `cols` panels per row: each item is
+/// checked before anything is drawn, then drawn into its panel.
+fn render_tiled<T>(
+    items: &[T],
+    cols: usize,
+    panel_size: (u32, u32),
+    empty: &str,
+    check: impl Fn(&T) -> Result<(), PlotError>,
+    draw: impl Fn(&DrawingArea<SVGBackend<'_>, Shift>, &T) -> Result<(), PlotError>,
+) -> Result<String, PlotError> {
+    if items.is_empty() {
+        return Err(PlotError::EmptyData(empty.into()));
+    }
+    let (cols, rows, size) = grid_layout(items.len(), cols, panel_size)?;
+    for item in items {
+        check(item)?;
+    }
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
+        root.fill(&WHITE).map_err(backend_err)?;
+        let panels = root.split_evenly((rows, cols));
+        for (panel, item) in panels.iter().zip(items) {
+            draw(panel, item)?;
+        }
+        root.present().map_err(backend_err)?;
+    }
+    Ok(buf)
+}
+
 /// Renders several charts tiled in one SVG figure, row by row with `cols`
 /// panels per row (clamped to `1..=charts.len()`), each panel of
 /// `panel_size` pixels. The charts' own `size` fields are ignored.
@@ -700,24 +730,14 @@ pub fn render_grid_svg(
     cols: usize,
     panel_size: (u32, u32),
 ) -> Result<String, PlotError> {
-    if charts.is_empty() {
-        return Err(PlotError::EmptyData("grid has no charts".into()));
-    }
-    let (cols, rows, size) = grid_layout(charts.len(), cols, panel_size)?;
-    for c in charts {
-        c.ranges()?;
-    }
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
-        root.fill(&WHITE).map_err(backend_err)?;
-        let panels = root.split_evenly((rows, cols));
-        for (panel, chart) in panels.iter().zip(charts) {
-            draw_chart(panel, chart)?;
-        }
-        root.present().map_err(backend_err)?;
-    }
-    Ok(buf)
+    render_tiled(
+        charts,
+        cols,
+        panel_size,
+        "grid has no charts",
+        |c: &Chart<'_>| c.ranges().map(|_| ()),
+        draw_chart,
+    )
 }
 
 /// Heat map of a scalar field on a rectilinear grid.
@@ -1017,24 +1037,14 @@ pub fn render_heatmaps_svg(
     cols: usize,
     panel_size: (u32, u32),
 ) -> Result<String, PlotError> {
-    if maps.is_empty() {
-        return Err(PlotError::EmptyData("no heat maps".into()));
-    }
-    let (cols, rows, size) = grid_layout(maps.len(), cols, panel_size)?;
-    for m in maps {
-        m.validate()?;
-    }
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
-        root.fill(&WHITE).map_err(backend_err)?;
-        let panels = root.split_evenly((rows, cols));
-        for (panel, map) in panels.iter().zip(maps) {
-            draw_heatmap(panel, map)?;
-        }
-        root.present().map_err(backend_err)?;
-    }
-    Ok(buf)
+    render_tiled(
+        maps,
+        cols,
+        panel_size,
+        "no heat maps",
+        |m: &HeatMap<'_>| m.validate().map(|_| ()),
+        draw_heatmap,
+    )
 }
 
 /// A correlation function drawn as bars over its lags, with a symmetric
@@ -1263,24 +1273,14 @@ pub fn render_correlation_svg(
     cols: usize,
     panel_size: (u32, u32),
 ) -> Result<String, PlotError> {
-    if charts.is_empty() {
-        return Err(PlotError::EmptyData("no correlation charts".into()));
-    }
-    let (cols, rows, size) = grid_layout(charts.len(), cols, panel_size)?;
-    for c in charts {
-        c.layout()?;
-    }
-    let mut buf = String::new();
-    {
-        let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
-        root.fill(&WHITE).map_err(backend_err)?;
-        let panels = root.split_evenly((rows, cols));
-        for (panel, chart) in panels.iter().zip(charts) {
-            draw_correlation(panel, chart)?;
-        }
-        root.present().map_err(backend_err)?;
-    }
-    Ok(buf)
+    render_tiled(
+        charts,
+        cols,
+        panel_size,
+        "no correlation charts",
+        |c: &CorrelationChart<'_>| c.layout().map(|_| ()),
+        draw_correlation,
+    )
 }
 
 #[cfg(test)]
