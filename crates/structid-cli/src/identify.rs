@@ -275,6 +275,7 @@ fn reproduction(
         neighbours: a.neighbours,
         tolerance: a.tolerance,
         max_iterations: a.max_iterations,
+        block_sigmas: Vec::new(),
     }
 }
 
@@ -349,7 +350,17 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         let sel = select(&model, &data, validation.as_ref(), &settings, &how)?;
         let chosen = settings.with_beta(sel.beta)?;
         let report = SelectionReport::new(&sel);
-        (sel.identification, chosen, Some((report, sel.sigma)))
+        let widths: Vec<(String, f64)> = if auto_sigma {
+            sel.model
+                .blocks()
+                .iter()
+                .zip(&sel.widths)
+                .filter_map(|(b, w)| w.map(|w| (b.name.clone(), w)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        (sel.identification, chosen, Some((report, widths)))
     } else {
         (identify(&model, &data, &settings)?, settings, None)
     };
@@ -357,12 +368,14 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     guard.create_dir(&a.out)?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
     report.data_file = Some(a.data.display().to_string());
-    let chosen_sigma = match &selection {
-        Some((_, Some(s))) => Some(*s),
-        _ => sigma,
+    let (selection, block_sigmas) = match selection {
+        Some((r, w)) => (Some(r), w),
+        None => (None, Vec::new()),
     };
-    report.reproduction = Some(reproduction(&a, &id, settings.beta(), chosen_sigma));
-    report.selection = selection.map(|(r, _)| r);
+    let mut rec = reproduction(&a, &id, settings.beta(), sigma);
+    rec.block_sigmas = block_sigmas;
+    report.reproduction = Some(rec);
+    report.selection = selection;
     let mut written: Vec<PathBuf> = Vec::new();
 
     // estimate.csv: ŵ by block name (in w order), then ê.

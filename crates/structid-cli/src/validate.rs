@@ -373,7 +373,21 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "re-running the identification recorded in `{}`",
         report_path.display()
     );
-    let (id_settings, sigma, emf) = load(&args).map_err(|e| e.context(context.clone()))?;
+    let (id_settings, sigma, mut emf) = load(&args).map_err(|e| e.context(context.clone()))?;
+    // widths chosen by `--sigma auto`, block by block
+    for (name, w) in &rep.block_sigmas {
+        let b = emf
+            .blocks
+            .iter_mut()
+            .find(|b| &b.name == name)
+            .ok_or_else(|| {
+                CliError::input(format!(
+                    "`{}` records a width for block `{name}`, which its model file does not have",
+                    report_path.display()
+                ))
+            })?;
+        b.dispersion = b.dispersion.with_sigma(Some(*w));
+    }
 
     // Never overwrite an input: the files of the command, the estimate directory's files and
     // the files of the recorded identification.
@@ -668,6 +682,7 @@ mod tests {
             neighbours: Some(5),
             tolerance: Some(1e-9),
             max_iterations: Some(300),
+            block_sigmas: Vec::new(),
         }
     }
 

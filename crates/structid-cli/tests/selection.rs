@@ -71,6 +71,52 @@ fn automatic_beta_and_sigma_are_recorded_and_validate_reproduces_them() {
     ]);
     assert_eq!(code, 0, "{stdout}\n{err}");
 
+    // blocks of different widths: every block's chosen width is recorded and re-applied
+    let text = std::fs::read_to_string(&model).unwrap();
+    let i = text.rfind("sigma = 0.1").expect("the demo model gives σ");
+    let two = dir.path().join("two_widths.toml");
+    std::fs::write(
+        &two,
+        format!("{}sigma = 0.3{}", &text[..i], &text[i + 11..]),
+    )
+    .unwrap();
+    let out2 = dir.path().join("auto2");
+    let (code, _, err) = run(&[
+        "identify",
+        "-m",
+        p(&two),
+        "-d",
+        p(&data),
+        "-o",
+        p(&out2),
+        "--beta",
+        "auto",
+        "--sigma",
+        "auto",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let widths = json(&out2.join("report.json"))["reproduction"]["block_sigmas"].clone();
+    let w: Vec<f64> = widths
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p[1].as_f64().unwrap())
+        .collect();
+    assert_eq!(w.len(), 2);
+    assert!((w[1] / w[0] - 3.0).abs() < 1e-9, "{widths}");
+    let (code, stdout, err) = run(&[
+        "validate",
+        "-m",
+        p(&two),
+        "-e",
+        p(&out2),
+        "-d",
+        p(&data),
+        "-o",
+        p(&dir.path().join("val2")),
+    ]);
+    assert_eq!(code, 0, "{stdout}\n{err}");
+
     // total variation chooses by cross-validation by default
     let tv = dir.path().join("tv");
     let (code, stdout, err) = run(&[

@@ -390,12 +390,12 @@ pub fn select(
     let first_width = |w: &[Option<f64>]| w.iter().flatten().next().copied();
 
     let mut curve = Vec::new();
-    let mut method = String::new();
+    let method: String;
     let mut features: Option<FeatureScore> = None;
     // The best β (and its value and s²) for the given widths.
     let mut best_beta = |widths: &[Option<f64>],
                          curve: &mut Vec<Trial>|
-     -> Result<(f64, f64, Option<f64>)> {
+     -> Result<(f64, f64, Option<f64>, String)> {
         let m = model_at(widths)?;
         let problem = problem_of(&m)?;
         let sigma = if selection.tune_sigma {
@@ -434,20 +434,27 @@ pub fn select(
                     Box::new(DenseScore::new(&problem, criterion)?)
                 }
             }
-            Criterion::CrossValidation { folds } => {
-                Box::new(FoldScore::new(problem, settings.clone(), folds)?)
-            }
+            // the trial fits need no posterior: keeping one would cost memory (and sway the
+            // automatic solver choice) for nothing
+            Criterion::CrossValidation { folds } => Box::new(FoldScore::new(
+                problem,
+                settings.with_posterior(false),
+                folds,
+            )?),
             Criterion::Validation => Box::new(ValidationScore {
                 problem,
                 model: m,
                 validation: validation.expect("checked above"),
-                settings: settings.clone(),
+                settings: settings.with_posterior(false),
             }),
         };
+        // s² of every trial, so the choice needs no further evaluation (a CV trial is K fits)
+        let mut noise = Vec::new();
         let mut eval = |lg: f64| -> Result<f64> {
             let beta = 10f64.powf(lg);
-            let (value, _) = score.score(beta)?;
+            let (value, s2) = score.score(beta)?;
             curve.push(Trial { beta, sigma, value });
+            noise.push((lg, s2));
             Ok(value)
         };
         let (lg, value) = if selection.tune_beta {
@@ -463,26 +470,27 @@ pub fn select(
             (lg, eval(lg)?)
         };
         let beta = 10f64.powf(lg);
-        let (_, s2) = score.score(beta)?;
-        method = score.method();
-        Ok((beta, value, s2))
+        let s2 = noise.iter().find(|t| t.0 == lg).and_then(|t| t.1);
+        Ok((beta, value, s2, score.method()))
     };
 
     let (widths, beta, noise_variance) = if selection.tune_sigma {
         let d = selection.sigma_decades;
-        let mut best: Option<(f64, f64, Option<f64>, f64)> = None;
+        let mut best: Option<(f64, f64, Option<f64>, f64, String)> = None;
         let mut outer = |lf: f64| -> Result<f64> {
-            let (beta, value, s2) = best_beta(&widths_at(lf), &mut curve)?;
-            if best.is_none_or(|b| value < b.1) {
-                best = Some((beta, value, s2, lf));
+            let (beta, value, s2, how) = best_beta(&widths_at(lf), &mut curve)?;
+            if best.as_ref().is_none_or(|b| value < b.1) {
+                best = Some((beta, value, s2, lf, how));
             }
             Ok(value)
         };
         minimise_log10(&mut outer, 0.0, (-d, d), selection.tolerance.max(0.01))?;
-        let (beta, _, s2, lf) = best.expect("at least one trial");
+        let (beta, _, s2, lf, how) = best.expect("at least one trial");
+        method = how;
         (widths_at(lf), beta, s2)
     } else {
-        let (beta, _, s2) = best_beta(&widths0, &mut curve)?;
+        let (beta, _, s2, how) = best_beta(&widths0, &mut curve)?;
+        method = how;
         (widths0.clone(), beta, s2)
     };
     let chosen = model_at(&widths)?;
@@ -648,9 +656,12 @@ fn factored_value(
     let k = s.len();
     let nf = n as f64;
     let mut quad_sum = 0.0;
-    let mut logdet = (n - k) as f64 * lb.ln();
+    // k may exceed n (more features than rows): VᵀV then has k − n zero eigenvalues whose
+    // terms cancel the negative n − k exactly
+    let rows_minus_k = n as f64 - k as f64;
+    let mut logdet = rows_minus_k * lb.ln();
     let mut fitted = 0.0;
-    let mut trace = (n - k) as f64;
+    let mut trace = rows_minus_k;
     for j in 0..k {
         let sj = s[j].max(0.0);
         let d = sj + lb;
@@ -672,9 +683,9 @@ fn factored_value(
     };
     if !(value.is_finite() && quad > 0.0) {
         return Err(Error::Numerical(format!(
-            "the {} criterion is not finite at β = {:.3e} (rᵀM⁻¹r = {quad:.3e})",
+            "the {} criterion is not finite at L·β = {:.3e} (rᵀM⁻¹r = {quad:.3e})",
             criterion.describe(),
-            lb / (n as f64)
+            lb
         )));
     }
     Ok((value, s2))

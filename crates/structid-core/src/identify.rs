@@ -101,6 +101,19 @@ impl IdentifySettings {
         }
     }
 
+    /// The same settings with the posterior kept or not.
+    ///
+    /// ```
+    /// use structid_core::IdentifySettings;
+    /// assert!(IdentifySettings::default().with_posterior(true).posterior());
+    /// ```
+    pub fn with_posterior(&self, posterior: bool) -> Self {
+        Self {
+            posterior,
+            ..self.clone()
+        }
+    }
+
     /// The same settings with another solver choice.
     ///
     /// ```

@@ -344,3 +344,107 @@ fn bad_selection_settings_are_errors() {
         .is_err()
     );
 }
+
+#[test]
+fn more_features_than_samples_agree_with_the_dense_path() {
+    // σ = 0.05 on this record needs m ≈ 350 features for L = 60 rows
+    let exp = gp_experiment(60, 1e-2, 0.05, 0.01, 21);
+    for criterion in [Criterion::MarginalLikelihood, Criterion::Gcv] {
+        let how = SelectionSettings::builder()
+            .criterion(criterion)
+            .build()
+            .unwrap();
+        let run = |solver| {
+            let settings = IdentifySettings::builder().solver(solver).build().unwrap();
+            select(&exp.model, &exp.data, None, &settings, &how).unwrap()
+        };
+        let (dense, feat) = (run(SolverChoice::Exact), run(SolverChoice::Features));
+        assert!(feat.method.contains("m = "), "{}", feat.method);
+        let m: usize = feat
+            .method
+            .split("m = ")
+            .nth(1)
+            .unwrap()
+            .split(';')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(m > 60, "m = {m}");
+        for t in &dense.curve {
+            if let Some(u) = feat.curve.iter().find(|u| u.beta == t.beta) {
+                let tol = if criterion == Criterion::Gcv {
+                    1e-4 * t.value.abs()
+                } else {
+                    1e-3
+                };
+                assert!(
+                    (t.value - u.value).abs() <= tol,
+                    "{criterion:?} at β {}: {} vs {}",
+                    t.beta,
+                    t.value,
+                    u.value
+                );
+            }
+        }
+        assert!(
+            (dense.beta.log10() - feat.beta.log10()).abs() <= 0.03,
+            "{criterion:?}: {} vs {}",
+            dense.beta,
+            feat.beta
+        );
+    }
+}
+
+#[test]
+fn held_out_rows_give_the_same_fit_in_the_feature_and_exact_solvers() {
+    let exp = gp_experiment(150, 1e-2, 0.5, 0.01, 8);
+    let mut mask = vec![false; 150];
+    mask[50..90].iter_mut().for_each(|v| *v = true);
+    let problem = Problem::from_model(&exp.model, &exp.data)
+        .unwrap()
+        .with_held_out(mask.clone())
+        .unwrap();
+    let fit = |solver| {
+        let s = IdentifySettings::builder()
+            .beta(1e-2)
+            .solver(solver)
+            .build()
+            .unwrap();
+        identify_problem(&problem, &s).unwrap()
+    };
+    let (ex, fe) = (fit(SolverChoice::Exact), fit(SolverChoice::Features));
+    let scale = ex.blocks[0]
+        .w_hat
+        .iter()
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    for k in 0..150 {
+        assert!(
+            (ex.blocks[0].w_hat[k] - fe.blocks[0].w_hat[k]).abs() < 1e-7 * scale,
+            "ŵ at {k}"
+        );
+        assert!(
+            (ex.e_hat.get(k, 0) - fe.e_hat.get(k, 0)).abs() < 1e-7 * scale.max(1.0),
+            "ê at {k}"
+        );
+        if mask[k] {
+            assert_eq!(fe.e_hat.get(k, 0), 0.0, "held-out noise estimate at {k}");
+        }
+    }
+    // so cross-validation scores the same through either solver
+    let how = SelectionSettings::builder()
+        .criterion(Criterion::CrossValidation { folds: 3 })
+        .build()
+        .unwrap();
+    let cv = |solver| {
+        let s = IdentifySettings::builder().solver(solver).build().unwrap();
+        select(&exp.model, &exp.data, None, &s, &how).unwrap()
+    };
+    let (a, b) = (cv(SolverChoice::Exact), cv(SolverChoice::Features));
+    assert!(
+        a.curve[0].value > 1e-4,
+        "a held-out error cannot vanish: {}",
+        a.curve[0].value
+    );
+    assert!((a.curve[0].value - b.curve[0].value).abs() < 1e-6 * a.curve[0].value);
+}

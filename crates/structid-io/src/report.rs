@@ -84,6 +84,10 @@ pub struct Reproduction {
     pub tolerance: Option<f64>,
     /// `--max-iterations`, if given.
     pub max_iterations: Option<usize>,
+    /// Per-block widths σ chosen by `--sigma auto` (block name, σ), which replace the model
+    /// file's on the rerun; empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub block_sigmas: Vec<(String, f64)>,
 }
 
 /// The parts of a `report.json` that are read back (by `structid validate`). Unknown fields

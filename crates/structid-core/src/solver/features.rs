@@ -380,8 +380,14 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let assembled = assemble_blocks(problem, parts);
     let fitted = &assembled.fitted;
     // ρ = r − T_yw·ŵ − O·x₀; ê is the least-norm noise explaining it, ê = T_yeᵀ(T_ye·T_yeᵀ)⁻¹ρ.
+    // Held-out samples have no equation, so their noise estimate is its prior mean, 0 (the
+    // static whitening acts sample by sample): zero residual there.
+    let held = problem.held_out();
     let rho: Vec<f64> = (0..len * ny)
         .map(|idx| {
+            if held.is_some_and(|h| h[idx]) {
+                return 0.0;
+            }
             let ox: f64 = match (&x0, free) {
                 (Some(x0), Some(o)) => (0..nx).map(|j| o[(idx, j)] * x0[j]).sum(),
                 _ => 0.0,
@@ -411,7 +417,12 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut te = vec![0.0; len * ny];
     noise.apply(&e_hat, &mut te);
     let res2: f64 = rho.iter().zip(&te).map(|(a, b)| (a - b) * (a - b)).sum();
-    let r2: f64 = r.iter().map(|v| v * v).sum();
+    let r2: f64 = r
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !held.is_some_and(|h| h[*i]))
+        .map(|(_, v)| v * v)
+        .sum();
     let cost = cost_terms(mu, beta, &assembled)?;
     let mut warnings = Vec::new();
     let sqrt_w: Vec<Vec<f64>> = maps
