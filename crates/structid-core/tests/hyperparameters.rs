@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use structid_core::paper::{Experiment, gaussian_noise};
 use structid_core::scenarios::{Excitation, hammerstein_map};
 use structid_core::{
@@ -88,44 +88,50 @@ fn marginal_likelihood_recovers_beta_and_sigma_from_its_own_model() {
     }
 }
 
+/// Selects β by `criterion` through the dense (exact) and the feature path and checks that
+/// they evaluate the same function (equal values at every β both tried) and choose the same β.
+fn dense_and_feature_agree(exp: &Experiment, criterion: Criterion) -> (Selection, Selection) {
+    let how = SelectionSettings::builder()
+        .criterion(criterion)
+        .build()
+        .unwrap();
+    let run = |solver| {
+        let settings = IdentifySettings::builder().solver(solver).build().unwrap();
+        select(&exp.model, &exp.data, None, &settings, &how).unwrap()
+    };
+    let (dense, feat) = (run(SolverChoice::Exact), run(SolverChoice::Features));
+    assert!(dense.method.contains("dense"), "{}", dense.method);
+    assert!(feat.method.contains("feature"), "{}", feat.method);
+    for t in &dense.curve {
+        if let Some(u) = feat.curve.iter().find(|u| u.beta == t.beta) {
+            let tol = if criterion == Criterion::Gcv {
+                1e-4 * t.value.abs()
+            } else {
+                1e-3
+            };
+            assert!(
+                (t.value - u.value).abs() <= tol,
+                "{criterion:?} at β {}: {} vs {}",
+                t.beta,
+                t.value,
+                u.value
+            );
+        }
+    }
+    assert!(
+        (dense.beta.log10() - feat.beta.log10()).abs() <= 0.03,
+        "{criterion:?}: dense β {:.4e} vs feature β {:.4e}",
+        dense.beta,
+        feat.beta
+    );
+    (dense, feat)
+}
+
 #[test]
 fn dense_and_feature_paths_choose_the_same_beta() {
     let exp = gp_experiment(400, 1e-2, 0.5, 0.01, 5);
     for criterion in [Criterion::MarginalLikelihood, Criterion::Gcv] {
-        let how = SelectionSettings::builder()
-            .criterion(criterion)
-            .build()
-            .unwrap();
-        let run = |solver| {
-            let settings = IdentifySettings::builder().solver(solver).build().unwrap();
-            select(&exp.model, &exp.data, None, &settings, &how).unwrap()
-        };
-        let (dense, feat) = (run(SolverChoice::Exact), run(SolverChoice::Features));
-        assert!(dense.method.contains("dense"), "{}", dense.method);
-        assert!(feat.method.contains("feature"), "{}", feat.method);
-        assert!(
-            (dense.beta.log10() - feat.beta.log10()).abs() <= 0.03,
-            "{criterion:?}: dense β {:.4e} vs feature β {:.4e}",
-            dense.beta,
-            feat.beta
-        );
-        // the two paths evaluate the same function: equal values at the β both tried
-        for t in &dense.curve {
-            if let Some(u) = feat.curve.iter().find(|u| u.beta == t.beta) {
-                let tol = if criterion == Criterion::Gcv {
-                    1e-4 * t.value.abs()
-                } else {
-                    1e-3
-                };
-                assert!(
-                    (t.value - u.value).abs() <= tol,
-                    "{criterion:?} at β {}: {} vs {}",
-                    t.beta,
-                    t.value,
-                    u.value
-                );
-            }
-        }
+        dense_and_feature_agree(&exp, criterion);
     }
 }
 
@@ -350,16 +356,7 @@ fn more_features_than_samples_agree_with_the_dense_path() {
     // σ = 0.05 on this record needs m ≈ 350 features for L = 60 rows
     let exp = gp_experiment(60, 1e-2, 0.05, 0.01, 21);
     for criterion in [Criterion::MarginalLikelihood, Criterion::Gcv] {
-        let how = SelectionSettings::builder()
-            .criterion(criterion)
-            .build()
-            .unwrap();
-        let run = |solver| {
-            let settings = IdentifySettings::builder().solver(solver).build().unwrap();
-            select(&exp.model, &exp.data, None, &settings, &how).unwrap()
-        };
-        let (dense, feat) = (run(SolverChoice::Exact), run(SolverChoice::Features));
-        assert!(feat.method.contains("m = "), "{}", feat.method);
+        let (_, feat) = dense_and_feature_agree(&exp, criterion);
         let m: usize = feat
             .method
             .split("m = ")
@@ -371,28 +368,6 @@ fn more_features_than_samples_agree_with_the_dense_path() {
             .parse()
             .unwrap();
         assert!(m > 60, "m = {m}");
-        for t in &dense.curve {
-            if let Some(u) = feat.curve.iter().find(|u| u.beta == t.beta) {
-                let tol = if criterion == Criterion::Gcv {
-                    1e-4 * t.value.abs()
-                } else {
-                    1e-3
-                };
-                assert!(
-                    (t.value - u.value).abs() <= tol,
-                    "{criterion:?} at β {}: {} vs {}",
-                    t.beta,
-                    t.value,
-                    u.value
-                );
-            }
-        }
-        assert!(
-            (dense.beta.log10() - feat.beta.log10()).abs() <= 0.03,
-            "{criterion:?}: {} vs {}",
-            dense.beta,
-            feat.beta
-        );
     }
 }
 
