@@ -8,8 +8,8 @@ use structid_core::hyperparameters::{Criterion, Selection, SelectionSettings, se
 use structid_core::paper::{Experiment, gaussian_noise};
 use structid_core::scenarios::{Excitation, hammerstein_map};
 use structid_core::{
-    Dispersion, FeatureMap, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion,
-    Problem, SolverChoice, TotalVariation, identify_problem,
+    Dispersion, FeatureMap, FourierDispersion, FourierWeights, Identification, IdentifySettings,
+    KernelDispersion, Problem, SolverChoice, TotalVariation, identify_problem,
 };
 use structid_lti::testing::SplitMix64;
 
@@ -135,6 +135,25 @@ fn dense_and_feature_paths_choose_the_same_beta() {
     }
 }
 
+/// Fits `problem` at β = 1e-2 with two solvers; also the largest |ŵ| of the first fit.
+fn fit_both(
+    problem: &Problem,
+    a: SolverChoice,
+    b: SolverChoice,
+) -> (Identification, Identification, f64) {
+    let fit = |solver| {
+        let s = IdentifySettings::builder()
+            .beta(1e-2)
+            .solver(solver)
+            .build()
+            .unwrap();
+        identify_problem(problem, &s).unwrap()
+    };
+    let (x, y) = (fit(a), fit(b));
+    let scale = x.blocks[0].w_hat.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    (x, y, scale)
+}
+
 #[test]
 fn held_out_rows_give_the_same_fit_in_the_exact_and_conic_solvers() {
     let exp = hammerstein_map(
@@ -153,19 +172,7 @@ fn held_out_rows_give_the_same_fit_in_the_exact_and_conic_solvers() {
         .unwrap()
         .with_held_out(mask.clone())
         .unwrap();
-    let fit = |solver| {
-        let s = IdentifySettings::builder()
-            .beta(1e-2)
-            .solver(solver)
-            .build()
-            .unwrap();
-        identify_problem(&problem, &s).unwrap()
-    };
-    let (ex, co) = (fit(SolverChoice::Exact), fit(SolverChoice::Clarabel));
-    let scale = ex.blocks[0]
-        .w_hat
-        .iter()
-        .fold(0.0f64, |a, v| a.max(v.abs()));
+    let (ex, co, scale) = fit_both(&problem, SolverChoice::Exact, SolverChoice::Clarabel);
     for k in 0..120 {
         assert!(
             (ex.blocks[0].w_hat[k] - co.blocks[0].w_hat[k]).abs() < 1e-4 * scale,
@@ -380,19 +387,7 @@ fn held_out_rows_give_the_same_fit_in_the_feature_and_exact_solvers() {
         .unwrap()
         .with_held_out(mask.clone())
         .unwrap();
-    let fit = |solver| {
-        let s = IdentifySettings::builder()
-            .beta(1e-2)
-            .solver(solver)
-            .build()
-            .unwrap();
-        identify_problem(&problem, &s).unwrap()
-    };
-    let (ex, fe) = (fit(SolverChoice::Exact), fit(SolverChoice::Features));
-    let scale = ex.blocks[0]
-        .w_hat
-        .iter()
-        .fold(0.0f64, |a, v| a.max(v.abs()));
+    let (ex, fe, scale) = fit_both(&problem, SolverChoice::Exact, SolverChoice::Features);
     for k in 0..150 {
         assert!(
             (ex.blocks[0].w_hat[k] - fe.blocks[0].w_hat[k]).abs() < 1e-7 * scale,

@@ -339,35 +339,22 @@ fn columns(records: &[&CaseRecord]) -> Vec<Column> {
             )
         }));
     }
-    for name in &outputs {
-        let n = name.clone();
-        cols.push(column(
-            format!("val_rms_{name}"),
-            format!("val. RMS {name}"),
-            move |r| {
-                Cell::Number(
-                    r.validation
-                        .iter()
-                        .find(|o| o.name == n)
-                        .and_then(|o| o.rms),
-                )
-            },
-        ));
-    }
-    for name in &outputs {
-        let n = name.clone();
-        cols.push(column(
-            format!("val_fit_{name}"),
-            format!("val. fit {name} [%]"),
-            move |r| {
-                Cell::Number(
-                    r.validation
-                        .iter()
-                        .find(|o| o.name == n)
-                        .and_then(|o| o.fit_percent),
-                )
-            },
-        ));
+    // validation RMS, then fit %, one column per output
+    type Metric = fn(&OutputRecord) -> Option<f64>;
+    let metrics: [(&str, &str, Metric); 2] = [
+        ("val_rms", "val. RMS", |o| o.rms),
+        ("val_fit", "val. fit", |o| o.fit_percent),
+    ];
+    for (key, label, get) in metrics {
+        for name in &outputs {
+            let n = name.clone();
+            let unit = if key == "val_fit" { " [%]" } else { "" };
+            cols.push(column(
+                format!("{key}_{name}"),
+                format!("{label} {name}{unit}"),
+                move |r| Cell::Number(r.validation.iter().find(|o| o.name == n).and_then(get)),
+            ));
+        }
     }
     cols.extend([
         column("cost_noise", "noise term", |r| {
