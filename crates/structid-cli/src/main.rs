@@ -6,6 +6,9 @@
 //! structid validate --model M.toml --estimate DIR --data V.csv --out DIR2 [--initial-state zero|estimate] [--max-lag 25]
 //! structid demo spray [--out DIR] [--samples L] [--seed N]
 //! structid demo multi-input [--out DIR] [--samples L] [--seed N] [--noise-std S]
+//! structid data silverbox|tanks --file PATH --split NAME|all --out OUT
+//! structid data csv --file PATH [--columns C1,C2] [--names u,y] [--delimiter ';'] [--no-header]
+//!                   [--skip-rows N] [--range A..B] [--remove-mean] --out OUT.csv
 //! ```
 //!
 //! Exit codes: 0 success, 2 invalid usage or input (bad arguments, malformed model or data
@@ -13,6 +16,7 @@
 //! numerical breakdown, not enough memory).
 
 mod compare;
+mod data;
 mod demo;
 mod error;
 mod figures;
@@ -74,6 +78,15 @@ enum Command {
     /// DIR/results.md and figures. `structid compare merge DIR... --out DIR` combines shard
     /// directories (see --shard).
     Compare(compare::CompareArgs),
+    /// Prepare data files: benchmark splits and column selection from any delimited file.
+    ///
+    /// `structid data silverbox|tanks --file PATH --split NAME --out OUT.csv` extracts one split
+    /// of a benchmark record (nonlinearbenchmark.org) as a CSV file with columns u,y, ready for
+    /// `identify`, `validate` and `simulate`; `--split all` writes OUT/<split>.csv for every
+    /// split. `structid data csv` selects, reorders, renames and cuts the columns of any
+    /// delimited text file.
+    #[command(subcommand)]
+    Data(data::DataCommand),
 }
 
 /// A number, or `auto`.
@@ -347,6 +360,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Demo(DemoCommand::Spray(a)) => demo::spray(a),
         Command::Demo(DemoCommand::MultiInput(a)) => demo::multi_input(a),
         Command::Compare(a) => compare::run(a),
+        Command::Data(c) => data::run(c),
     }
 }
 

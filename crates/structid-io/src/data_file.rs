@@ -13,6 +13,9 @@
 //!   selected ([`DataTable::select`]). Files such as the cascaded-tanks benchmark, whose `Ts`
 //!   column holds a single value, can therefore be read and their other columns used.
 //!
+//! [`DataTable::read_with`] and [`CsvOptions`] add another delimiter, files without a header,
+//! leading lines to skip, and the selection, order and renaming of columns ([`ColumnRef`]).
+//!
 //! ```
 //! use structid_io::DataTable;
 //! let t = DataTable::parse("\"u0\",\"y0\",\n1.0, 2.0,\n3.0, 4.0,\n", None).unwrap();
@@ -45,12 +48,129 @@ pub struct DataTable {
     lines: Vec<u64>,
     /// For each column, the line of its first empty field.
     first_empty: Vec<Option<u64>>,
+    /// One-based file line of the header row, when the table was read with one.
+    header_line: Option<u64>,
     /// The file the table was read from.
     path: Option<PathBuf>,
 }
 
 /// The name the specification uses for the reader: `DataFile::read(path)`.
 pub type DataFile = DataTable;
+
+/// How [`DataTable::read_with`] reads a delimited text file.
+///
+/// The default reads a comma-separated file whose first non-blank, non-comment line is the
+/// header, keeping every column under its header name: exactly [`DataTable::read`].
+///
+/// * `delimiter`: the field separator (`b','`; `b';'` and `b'\t'` are common). Any ASCII
+///   character except a quote, `#` or a line break.
+/// * `header`: whether the first row (after `skip_rows`) names the columns. Without a header
+///   the columns are called `c0, c1, …` unless `names` names them.
+/// * `skip_rows`: physical lines at the start of the file to ignore, whatever they hold
+///   (comment or title lines of instrument logs). Line numbers in errors still count them.
+/// * `columns`: the columns to keep, in this order (see [`ColumnRef`]); `None` keeps all.
+///   Fields of the other columns are not parsed, and an empty field in a selected column is
+///   an error naming its line.
+/// * `names`: the names of the kept columns, one per selected column (or per file column
+///   when `columns` is `None`): renames header columns or names headerless ones.
+///
+/// ```
+/// use structid_io::{CsvOptions, DataTable};
+/// let options = CsvOptions { header: false, names: Some(vec!["u".into(), "y".into()]), ..Default::default() };
+/// let t = DataTable::parse_with("1,2,\n3,4,\n\n", None, &options).unwrap();
+/// assert_eq!(t.names, ["u", "y"]);
+/// assert_eq!(t.column("y").unwrap(), &[2.0, 4.0]);
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CsvOptions {
+    /// The field separator (default `b','`).
+    pub delimiter: u8,
+    /// Whether the first row names the columns (default `true`).
+    pub header: bool,
+    /// Lines at the start of the file to ignore (default 0).
+    pub skip_rows: usize,
+    /// The columns to keep, in order (default: all, in file order).
+    pub columns: Option<Vec<ColumnRef>>,
+    /// Names of the kept columns (default: the header's names, or `c0, c1, …` without header).
+    pub names: Option<Vec<String>>,
+}
+
+impl Default for CsvOptions {
+    fn default() -> Self {
+        Self {
+            delimiter: b',',
+            header: true,
+            skip_rows: 0,
+            columns: None,
+            names: None,
+        }
+    }
+}
+
+/// A column of a data file, by header name or by zero-based position.
+///
+/// In text form (`FromStr`, used by `structid data csv --columns`), `#` followed by digits is
+/// a zero-based index (`#0` is the first column) and anything else is a name, digits included
+/// (`3` is the column whose header is `3`). Surrounding whitespace is ignored.
+///
+/// ```
+/// use structid_io::ColumnRef;
+/// assert_eq!("#2".parse::<ColumnRef>().unwrap(), ColumnRef::Index(2));
+/// assert_eq!("V1".parse::<ColumnRef>().unwrap(), ColumnRef::Name("V1".into()));
+/// assert_eq!("3".parse::<ColumnRef>().unwrap(), ColumnRef::Name("3".into()));
+/// assert!("#x".parse::<ColumnRef>().is_err());
+/// assert_eq!(ColumnRef::parse_list("u, #1").unwrap(), [ColumnRef::Name("u".into()), ColumnRef::Index(1)]);
+/// assert_eq!(ColumnRef::Index(4).to_string(), "#4");
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum ColumnRef {
+    /// The column with this header name.
+    Name(String),
+    /// The column at this zero-based position.
+    Index(usize),
+}
+
+impl ColumnRef {
+    /// Parses a comma-separated list such as `V1,V2` or `#0,#3`.
+    pub fn parse_list(list: &str) -> Result<Vec<Self>, IoError> {
+        list.split(',').map(str::parse).collect()
+    }
+}
+
+impl std::str::FromStr for ColumnRef {
+    type Err = IoError;
+
+    fn from_str(s: &str) -> Result<Self, IoError> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Err(IoError::InvalidArgument(
+                "empty column reference; give a column name or `#` and a zero-based index".into(),
+            ));
+        }
+        match s.strip_prefix('#') {
+            Some(digits) => digits
+                .parse::<usize>()
+                .ok()
+                .filter(|_| digits.bytes().all(|b| b.is_ascii_digit()))
+                .map(ColumnRef::Index)
+                .ok_or_else(|| {
+                    IoError::InvalidArgument(format!(
+                        "invalid column reference `{s}`: `#` must be followed by a zero-based column index such as `#0`"
+                    ))
+                }),
+            None => Ok(ColumnRef::Name(s.to_string())),
+        }
+    }
+}
+
+impl std::fmt::Display for ColumnRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ColumnRef::Name(n) => f.write_str(n),
+            ColumnRef::Index(i) => write!(f, "#{i}"),
+        }
+    }
+}
 
 fn data_err(
     path: Option<&Path>,
@@ -95,6 +215,7 @@ impl DataTable {
         }
         Ok(Self {
             first_empty: vec![None; names.len()],
+            header_line: None,
             lines: (0..len as u64).map(|k| k + 2).collect(),
             names,
             columns,
@@ -103,34 +224,98 @@ impl DataTable {
     }
 
     /// Reads a CSV file (see the module documentation for the accepted format).
+    ///
+    /// The same as [`DataTable::read_with`] with the default [`CsvOptions`].
     pub fn read(path: &Path) -> Result<Self, IoError> {
+        Self::read_with(path, &CsvOptions::default())
+    }
+
+    /// Reads a CSV file with explicit [`CsvOptions`]: delimiter, header or not, lines to skip,
+    /// column selection and names.
+    ///
+    /// With [`CsvOptions::columns`] set, the table holds only the selected columns, in the
+    /// order given; fields of the other columns are not parsed at all (they may be empty or
+    /// non-numeric), and an empty field in a selected column is an error naming its line.
+    ///
+    /// ```
+    /// use structid_io::{ColumnRef, CsvOptions, DataTable};
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("log.txt");
+    /// std::fs::write(&path, "recorded 2024-01-01\n0.5;7;x\n0.25;8;y\n").unwrap();
+    /// let options = CsvOptions {
+    ///     delimiter: b';',
+    ///     header: false,
+    ///     skip_rows: 1,
+    ///     columns: Some(vec![ColumnRef::Index(1), ColumnRef::Index(0)]),
+    ///     names: Some(vec!["u".into(), "y".into()]),
+    /// };
+    /// let t = DataTable::read_with(&path, &options).unwrap();
+    /// assert_eq!(t.names, ["u", "y"]);
+    /// assert_eq!(t.columns, vec![vec![7.0, 8.0], vec![0.5, 0.25]]);
+    /// assert_eq!(t.line_of_row(1), Some(3));
+    /// ```
+    pub fn read_with(path: &Path, options: &CsvOptions) -> Result<Self, IoError> {
         let bytes = std::fs::read(path).map_err(|source| IoError::Read {
             path: path.to_path_buf(),
             source,
         })?;
-        let mut t = Self::parse_bytes(&bytes, Some(path))?;
+        let mut t = Self::parse_bytes(&bytes, Some(path), options)?;
         t.path = Some(path.to_path_buf());
         Ok(t)
     }
 
     /// Parses CSV text; `path` is only used in error messages.
     pub fn parse(text: &str, path: Option<&Path>) -> Result<Self, IoError> {
-        Self::parse_bytes(text.as_bytes(), path)
+        Self::parse_bytes(text.as_bytes(), path, &CsvOptions::default())
     }
 
-    fn parse_bytes(bytes: &[u8], path: Option<&Path>) -> Result<Self, IoError> {
+    /// Parses CSV text with explicit [`CsvOptions`] (see [`DataTable::read_with`]); `path` is
+    /// only used in error messages.
+    ///
+    /// ```
+    /// use structid_io::{CsvOptions, DataTable};
+    /// let options = CsvOptions {
+    ///     columns: Some(vec!["V2".parse().unwrap(), "#0".parse().unwrap()]),
+    ///     names: Some(vec!["y".into(), "u".into()]),
+    ///     ..CsvOptions::default()
+    /// };
+    /// let t = DataTable::parse_with("\"V1\",\"V2\",\n1,2,\n3,4,\n", None, &options).unwrap();
+    /// assert_eq!(t.names, ["y", "u"]);
+    /// assert_eq!(t.columns, vec![vec![2.0, 4.0], vec![1.0, 3.0]]);
+    /// ```
+    pub fn parse_with(
+        text: &str,
+        path: Option<&Path>,
+        options: &CsvOptions,
+    ) -> Result<Self, IoError> {
+        Self::parse_bytes(text.as_bytes(), path, options)
+    }
+
+    fn parse_bytes(
+        bytes: &[u8],
+        path: Option<&Path>,
+        options: &CsvOptions,
+    ) -> Result<Self, IoError> {
+        let delimiter = options.delimiter;
+        if matches!(delimiter, b'"' | b'\n' | b'\r' | b'#') || !delimiter.is_ascii() {
+            return Err(IoError::InvalidArgument(format!(
+                "invalid CSV delimiter {:?}: use an ASCII character other than a quote, `#` or a line break",
+                char::from(delimiter)
+            )));
+        }
         let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-        // Comment lines are blanked rather than left to the csv crate, which does not count
-        // them in its line numbers.
+        // Skipped lines and comment lines are blanked rather than left to the csv crate, which
+        // does not count them in its line numbers.
         let is_comment = |l: &[u8]| l.trim_ascii_start().first() == Some(&b'#');
+        let skip = options.skip_rows;
         let uncommented: Vec<u8>;
-        let bytes = if bytes.split(|&b| b == b'\n').any(is_comment) {
+        let bytes = if skip > 0 || bytes.split(|&b| b == b'\n').any(is_comment) {
             let mut out = Vec::with_capacity(bytes.len());
             for (i, l) in bytes.split(|&b| b == b'\n').enumerate() {
                 if i > 0 {
                     out.push(b'\n');
                 }
-                if !is_comment(l) {
+                if i >= skip && !is_comment(l) {
                     out.extend_from_slice(l);
                 }
             }
@@ -142,6 +327,7 @@ impl DataTable {
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
             .flexible(true)
+            .delimiter(delimiter)
             .trim(csv::Trim::All)
             .from_reader(bytes);
         // The csv crate does not count blank lines in `Position::line`, so lines are derived
@@ -162,7 +348,6 @@ impl DataTable {
             }
             line_starts.partition_point(|&s| s <= b) as u64
         };
-        let mut records = reader.records();
         let csv_err = |e: csv::Error| {
             let line = e.position().map(line_at);
             let msg = match e.kind() {
@@ -171,114 +356,197 @@ impl DataTable {
             };
             data_err(path, line, None, msg)
         };
-        // Header: the first record that is not blank.
-        let header = loop {
-            match records.next() {
-                None => {
-                    return Err(data_err(
-                        path,
-                        None,
-                        None,
-                        "the file is empty; expected a header row with column names followed by numeric rows",
+        // Every non-blank record with its line.
+        let mut rows: Vec<(u64, csv::StringRecord)> = Vec::new();
+        for r in reader.records() {
+            let r = r.map_err(csv_err)?;
+            if !is_blank(&r) {
+                rows.push((r.position().map_or(0, line_at), r));
+            }
+        }
+        let skipped = if skip > 0 {
+            format!(" after skipping the first {skip} line(s)")
+        } else {
+            String::new()
+        };
+        let (header_line, data, file_names) = if options.header {
+            let Some(((line, header), data)) = rows.split_first() else {
+                return Err(data_err(
+                    path,
+                    None,
+                    None,
+                    format!(
+                        "the file is empty{skipped}; expected a header row with column names followed by numeric rows"
+                    ),
+                ));
+            };
+            let mut names: Vec<String> = header.iter().map(|s| s.trim().to_string()).collect();
+            if names.len() > 1 && names.last().is_some_and(String::is_empty) {
+                names.pop();
+            }
+            if names.iter().all(|n| n.parse::<f64>().is_ok()) {
+                return Err(data_err(
+                    path,
+                    Some(*line),
+                    None,
+                    format!(
+                        "the first row ({}) looks numeric; the file needs a header row naming the columns",
+                        names.join(",")
+                    ),
+                ));
+            }
+            if data.is_empty() {
+                return Err(data_err(
+                    path,
+                    Some(*line),
+                    None,
+                    "the file has a header row but no data rows",
+                ));
+            }
+            (Some(*line), data, names)
+        } else {
+            let Some((_, first)) = rows.first() else {
+                return Err(data_err(
+                    path,
+                    None,
+                    None,
+                    format!("the file has no data rows{skipped}"),
+                ));
+            };
+            // A trailing delimiter on every line: the last column is empty in every row.
+            let n = first.len();
+            let trailing = n > 1
+                && rows
+                    .iter()
+                    .all(|(_, r)| r.get(n - 1).is_none_or(|f| f.trim().is_empty()));
+            let width = if trailing { n - 1 } else { n };
+            (
+                None,
+                &rows[..],
+                (0..width).map(|c| format!("c{c}")).collect(),
+            )
+        };
+        let width = file_names.len();
+
+        // The selected columns (file indices), in output order.
+        let selected: Vec<usize> = match &options.columns {
+            None => {
+                check_names(&file_names, path, header_line)?;
+                (0..width).collect()
+            }
+            Some(refs) => {
+                if refs.is_empty() {
+                    return Err(IoError::InvalidArgument(
+                        "no columns selected; name at least one column".into(),
                     ));
                 }
-                Some(r) => {
-                    let r = r.map_err(csv_err)?;
-                    if !is_blank(&r) {
-                        break r;
-                    }
+                let mut sel = Vec::with_capacity(refs.len());
+                for r in refs {
+                    sel.push(resolve_column(r, &file_names, path, header_line)?);
                 }
+                sel
             }
         };
-        let header_line = header.position().map(line_at);
-        let mut names: Vec<String> = header.iter().map(|s| s.trim().to_string()).collect();
-        if names.len() > 1 && names.last().is_some_and(String::is_empty) {
-            names.pop();
-        }
-        check_names(&names, path, header_line)?;
-        if names.iter().all(|n| n.parse::<f64>().is_ok()) {
-            return Err(data_err(
-                path,
-                header_line,
-                None,
-                format!(
-                    "the first row ({}) looks numeric; the file needs a header row naming the columns",
-                    names.join(",")
-                ),
-            ));
-        }
-        let ncols = names.len();
-        let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncols];
-        let mut first_empty: Vec<Option<u64>> = vec![None; ncols];
-        let mut lines = Vec::new();
-        for r in records {
-            let r = r.map_err(csv_err)?;
-            if is_blank(&r) {
-                continue;
+        let names: Vec<String> = match &options.names {
+            Some(given) => {
+                if given.len() != selected.len() {
+                    return Err(IoError::InvalidArgument(format!(
+                        "{} name(s) given ({}) for {} column(s); give one name per {} column",
+                        given.len(),
+                        given.join(","),
+                        selected.len(),
+                        if options.columns.is_some() {
+                            "selected"
+                        } else {
+                            "file"
+                        }
+                    )));
+                }
+                let names: Vec<String> = given.iter().map(|n| n.trim().to_string()).collect();
+                check_names(&names, None, None).map_err(|e| match e {
+                    IoError::Data { message, .. } => {
+                        IoError::InvalidArgument(format!("column names: {message}"))
+                    }
+                    other => other,
+                })?;
+                names
             }
-            let line = r.position().map_or(0, line_at);
-            let mut fields: Vec<&str> = r.iter().collect();
-            if fields.len() == ncols + 1 && fields.last().is_some_and(|f| f.is_empty()) {
-                fields.pop();
+            None => {
+                let names: Vec<String> = selected.iter().map(|&c| file_names[c].clone()).collect();
+                if let Some(n) = (0..names.len())
+                    .find(|&i| names[..i].contains(&names[i]))
+                    .map(|i| &names[i])
+                {
+                    return Err(IoError::InvalidArgument(format!(
+                        "column `{n}` is selected twice; give the copies distinct names to select a column more than once"
+                    )));
+                }
+                names
             }
-            if fields.len() != ncols {
+        };
+        // Errors are reported in file order: by line, then by column.
+        let mut order: Vec<usize> = (0..selected.len()).collect();
+        order.sort_by_key(|&j| selected[j]);
+        // Column names in error messages: as in the file when it has a header, otherwise as
+        // named by the caller.
+        let err_name = |j: usize| -> &str {
+            if header_line.is_some() {
+                &file_names[selected[j]]
+            } else {
+                &names[j]
+            }
+        };
+        let strict_empty = options.columns.is_some();
+        let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(data.len()); selected.len()];
+        let mut first_empty: Vec<Option<u64>> = vec![None; selected.len()];
+        let mut lines = Vec::with_capacity(data.len());
+        for (line, r) in data {
+            let line = *line;
+            let mut found = r.len();
+            if found == width + 1 && r.get(width).is_some_and(|f| f.trim().is_empty()) {
+                found = width;
+            }
+            if found != width {
+                let expected = match header_line {
+                    Some(_) => format!("as in the header ({})", file_names.join(",")),
+                    None => format!("as in the first row (line {})", data[0].0),
+                };
                 return Err(data_err(
                     path,
                     Some(line),
                     None,
-                    format!(
-                        "expected {ncols} field(s) as in the header ({}) but found {}",
-                        names.join(","),
-                        fields.len()
-                    ),
+                    format!("expected {width} field(s) {expected} but found {found}"),
                 ));
             }
-            for (c, field) in fields.iter().enumerate() {
-                let field = field.trim();
+            for &j in &order {
+                let field = r.get(selected[j]).unwrap_or("").trim();
                 let v = if field.is_empty() {
-                    if first_empty[c].is_none() {
-                        first_empty[c] = Some(line);
-                    }
-                    f64::NAN
-                } else {
-                    let v: f64 = field.parse().map_err(|_| {
-                        data_err(
-                            path,
-                            Some(line),
-                            Some(&names[c]),
-                            format!("cannot parse `{field}` as a number"),
-                        )
-                    })?;
-                    if v.is_nan() {
-                        return Err(data_err(path, Some(line), Some(&names[c]), "value is NaN"));
-                    }
-                    if v.is_infinite() {
+                    if strict_empty {
                         return Err(data_err(
                             path,
                             Some(line),
-                            Some(&names[c]),
-                            format!("value is infinite (`{field}`)"),
+                            Some(err_name(j)),
+                            "empty field; every selected column needs a value in every row",
                         ));
                     }
-                    v
+                    if first_empty[j].is_none() {
+                        first_empty[j] = Some(line);
+                    }
+                    f64::NAN
+                } else {
+                    parse_value(field)
+                        .map_err(|msg| data_err(path, Some(line), Some(err_name(j)), msg))?
                 };
-                columns[c].push(v);
+                columns[j].push(v);
             }
             lines.push(line);
-        }
-        if lines.is_empty() {
-            return Err(data_err(
-                path,
-                header_line,
-                None,
-                "the file has a header row but no data rows",
-            ));
         }
         Ok(Self {
             names,
             columns,
             lines,
             first_empty,
+            header_line,
             path: path.map(Path::to_path_buf),
         })
     }
@@ -337,9 +605,80 @@ impl DataTable {
         Signal::from_channels(&cols).map_err(|e| IoError::InvalidArgument(e.to_string()))
     }
 
+    /// The one-based file line of the header row (`None` for a table read without a header
+    /// or built with [`DataTable::new`]).
+    pub fn header_line(&self) -> Option<u64> {
+        self.header_line
+    }
+
     /// The one-based file line of data row `k`, if it exists.
     pub fn line_of_row(&self, k: usize) -> Option<u64> {
         self.lines.get(k).copied()
+    }
+}
+
+/// Parses one non-empty field as a finite number; the error is the message to report.
+fn parse_value(field: &str) -> Result<f64, String> {
+    let v: f64 = field
+        .parse()
+        .map_err(|_| format!("cannot parse `{field}` as a number"))?;
+    if v.is_nan() {
+        return Err("value is NaN".into());
+    }
+    if v.is_infinite() {
+        return Err(format!("value is infinite (`{field}`)"));
+    }
+    Ok(v)
+}
+
+/// The file index of a selected column.
+fn resolve_column(
+    r: &ColumnRef,
+    names: &[String],
+    path: Option<&Path>,
+    header_line: Option<u64>,
+) -> Result<usize, IoError> {
+    match r {
+        ColumnRef::Index(i) => {
+            if *i < names.len() {
+                Ok(*i)
+            } else {
+                Err(data_err(
+                    path,
+                    None,
+                    None,
+                    format!(
+                        "there is no column #{i}: the file has {} column(s), #0 to #{} ({}); column indices count from zero",
+                        names.len(),
+                        names.len().saturating_sub(1),
+                        names
+                            .iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ))
+            }
+        }
+        ColumnRef::Name(name) => {
+            let mut found = names.iter().enumerate().filter(|(_, n)| *n == name);
+            match (found.next(), found.next()) {
+                (Some((c, _)), None) => Ok(c),
+                (Some((a, _)), Some((b, _))) => Err(data_err(
+                    path,
+                    header_line,
+                    None,
+                    format!(
+                        "the header names column `{name}` twice (columns #{a} and #{b}); select it by index instead"
+                    ),
+                )),
+                _ => Err(IoError::MissingColumn {
+                    path: path.map(Path::to_path_buf),
+                    column: name.clone(),
+                    available: names.to_vec(),
+                }),
+            }
+        }
     }
 }
 
@@ -550,5 +889,221 @@ mod tests {
         assert_eq!(t.columns, cols);
         assert!(csv_bytes(&["a", "a"], &cols).is_err());
         assert!(csv_bytes(&["a"], &cols).is_err());
+    }
+
+    fn opts(columns: Option<&str>, names: Option<&str>) -> CsvOptions {
+        CsvOptions {
+            columns: columns.map(|c| ColumnRef::parse_list(c).unwrap()),
+            names: names.map(|n| n.split(',').map(str::to_string).collect()),
+            ..CsvOptions::default()
+        }
+    }
+
+    #[test]
+    fn options_trailing_delimiter_and_quoted_header() {
+        let text = "\"V1\",\"V2\",\n0.5,0.25,\n1.5,1.25,\n\n\n";
+        let t = DataTable::parse_with(text, None, &opts(Some("V2"), None)).unwrap();
+        assert_eq!(t.names, ["V2"]);
+        assert_eq!(t.columns, vec![vec![0.25, 1.25]]);
+        assert_eq!(t.header_line(), Some(1));
+        // Headerless: a last column empty in every row is a trailing delimiter and dropped …
+        let no_header = CsvOptions {
+            header: false,
+            ..CsvOptions::default()
+        };
+        let t = DataTable::parse_with("1,2,\n3,4,\n", None, &no_header).unwrap();
+        assert_eq!(t.names, ["c0", "c1"]);
+        assert_eq!(t.header_line(), None);
+        // … but kept, with its gaps, when some row has a value there.
+        let t = DataTable::parse_with("1,2,\n3,4,5\n", None, &no_header).unwrap();
+        assert_eq!(t.names, ["c0", "c1", "c2"]);
+        assert!(t.column("c2").unwrap()[0].is_nan());
+        assert_eq!(t.column("c2").unwrap()[1], 5.0);
+    }
+
+    #[test]
+    fn options_select_by_name_and_index_and_rename() {
+        let text = "a,b,c\n1,2,3\n4,5,6\n";
+        let t = DataTable::parse_with(text, None, &opts(Some("c,#0"), None)).unwrap();
+        assert_eq!(t.names, ["c", "a"]);
+        assert_eq!(t.columns, vec![vec![3.0, 6.0], vec![1.0, 4.0]]);
+        let t = DataTable::parse_with(text, None, &opts(Some("#1, c"), Some("u,y"))).unwrap();
+        assert_eq!(t.names, ["u", "y"]);
+        assert_eq!(t.columns, vec![vec![2.0, 5.0], vec![3.0, 6.0]]);
+        // Renaming every column without a selection.
+        let t = DataTable::parse_with(text, None, &opts(None, Some("x,y,z"))).unwrap();
+        assert_eq!(t.names, ["x", "y", "z"]);
+        // A column selected twice needs distinct names.
+        let e = DataTable::parse_with(text, None, &opts(Some("a,a"), None)).unwrap_err();
+        assert!(e.to_string().contains("selected twice"), "{e}");
+        let t = DataTable::parse_with(text, None, &opts(Some("a,a"), Some("a1,a2"))).unwrap();
+        assert_eq!(t.columns[0], t.columns[1]);
+        // Wrong number of names, duplicate names.
+        let e = DataTable::parse_with(text, None, &opts(Some("a,b"), Some("u"))).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("1 name(s) given (u) for 2 column(s)"),
+            "{e}"
+        );
+        let e = DataTable::parse_with(text, None, &opts(Some("a,b"), Some("u,u"))).unwrap_err();
+        assert!(e.to_string().contains("duplicate column name `u`"), "{e}");
+    }
+
+    #[test]
+    fn options_missing_column_is_named() {
+        let text = "a,b\n1,2\n";
+        let e = DataTable::parse_with(text, Some(Path::new("d.csv")), &opts(Some("a,V9"), None))
+            .unwrap_err();
+        assert!(matches!(&e, IoError::MissingColumn { column, .. } if column == "V9"));
+        assert_eq!(
+            e.to_string(),
+            "data file `d.csv` has no column `V9`; available columns: `a`, `b`"
+        );
+        let e = DataTable::parse_with(text, None, &opts(Some("#2"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no column #2") && e.contains("2 column(s), #0 to #1"),
+            "{e}"
+        );
+        let e = DataTable::parse_with("a,b,a\n1,2,3\n", None, &opts(Some("a"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 1") && e.contains("`a` twice"), "{e}");
+        // The duplicate does not matter when it is not selected.
+        assert!(DataTable::parse_with("a,b,a\n1,2,3\n", None, &opts(Some("b"), None)).is_ok());
+    }
+
+    #[test]
+    fn options_headerless_skip_rows_and_delimiter() {
+        let text = "instrument log\nstarted 12:00; 2 channels\n0.5;7\n\n0.25;8\n";
+        let options = CsvOptions {
+            delimiter: b';',
+            header: false,
+            skip_rows: 2,
+            names: Some(vec!["u".into(), "y".into()]),
+            ..CsvOptions::default()
+        };
+        let t = DataTable::parse_with(text, None, &options).unwrap();
+        assert_eq!(t.names, ["u", "y"]);
+        assert_eq!(t.columns, vec![vec![0.5, 0.25], vec![7.0, 8.0]]);
+        assert_eq!((t.line_of_row(0), t.line_of_row(1)), (Some(3), Some(5)));
+        // Tab-separated with a header after one skipped line; names by header.
+        let options = CsvOptions {
+            delimiter: b'\t',
+            skip_rows: 1,
+            ..CsvOptions::default()
+        };
+        let t = DataTable::parse_with("title\nu\ty\n1\t2\n", None, &options).unwrap();
+        assert_eq!(t.names, ["u", "y"]);
+        // Headerless columns are selected by index (or by their default names).
+        let options = CsvOptions {
+            header: false,
+            columns: Some(vec![ColumnRef::Index(1), ColumnRef::Name("c0".into())]),
+            ..CsvOptions::default()
+        };
+        let t = DataTable::parse_with("1,2\n3,4\n", None, &options).unwrap();
+        assert_eq!(t.names, ["c1", "c0"]);
+        assert_eq!(t.columns, vec![vec![2.0, 4.0], vec![1.0, 3.0]]);
+        // Skipping everything, a bad delimiter.
+        let options = CsvOptions {
+            skip_rows: 5,
+            ..CsvOptions::default()
+        };
+        let e = DataTable::parse_with("a\n1\n", None, &options)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("empty after skipping the first 5 line(s)"),
+            "{e}"
+        );
+        let options = CsvOptions {
+            delimiter: b'"',
+            ..CsvOptions::default()
+        };
+        assert!(DataTable::parse_with("a\n1\n", None, &options).is_err());
+        // Headerless wrong field count names the line and the first row.
+        let options = CsvOptions {
+            header: false,
+            ..CsvOptions::default()
+        };
+        let e = DataTable::parse_with("1,2\n3,4\n5\n", None, &options)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 3")
+                && e.contains("as in the first row (line 1)")
+                && e.contains("found 1"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn options_malformed_number_reports_its_line() {
+        let text = "title line\n# comment\nu;y;note\n1;2;ok\n\n3;x4;fine\n";
+        let options = CsvOptions {
+            delimiter: b';',
+            skip_rows: 1,
+            columns: Some(vec![
+                ColumnRef::Name("u".into()),
+                ColumnRef::Name("y".into()),
+            ]),
+            ..CsvOptions::default()
+        };
+        let e = DataTable::parse_with(text, Some(Path::new("m.csv")), &options)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "data file `m.csv`, line 6, column `y`: cannot parse `x4` as a number"
+        );
+        // Headerless: the error names the column as the caller named it.
+        let options = CsvOptions {
+            header: false,
+            names: Some(vec!["u".into(), "y".into()]),
+            ..CsvOptions::default()
+        };
+        let e = DataTable::parse_with("1,2\n3,NaN\n", None, &options)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "data, line 2, column `y`: value is NaN");
+    }
+
+    #[test]
+    fn options_unselected_columns_may_be_empty_or_text() {
+        // Like the cascaded-tanks file: Ts holds one value; `note` is text.
+        let text = "\"uEst\",\"yEst\",\"Ts\",\"note\",\n3.2,5.2,4,a,\n3.1,5.3,,,\n";
+        let t = DataTable::parse_with(text, None, &opts(Some("uEst,yEst"), Some("u,y"))).unwrap();
+        assert_eq!(t.columns, vec![vec![3.2, 3.1], vec![5.2, 5.3]]);
+        // A selected column with an empty field is an error at once, naming the line.
+        let e = DataTable::parse_with(text, None, &opts(Some("Ts"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 3") && e.contains("`Ts`") && e.contains("empty"),
+            "{e}"
+        );
+        let e = DataTable::parse_with(text, None, &opts(Some("note"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 2") && e.contains("cannot parse `a`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn column_refs_parse() {
+        assert_eq!(
+            ColumnRef::parse_list("V1,#3, 3").unwrap(),
+            [
+                ColumnRef::Name("V1".into()),
+                ColumnRef::Index(3),
+                ColumnRef::Name("3".into())
+            ]
+        );
+        for bad in ["", "#", "#-1", "#+1", "# 1", "#1x", "a,,b"] {
+            assert!(ColumnRef::parse_list(bad).is_err(), "{bad}");
+        }
     }
 }

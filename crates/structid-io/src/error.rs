@@ -65,6 +65,34 @@ pub enum IoError {
         available: Vec<String>,
     },
 
+    /// A benchmark data file is not where it was expected.
+    #[error(
+        "the {benchmark} benchmark file was not found at `{}`; {hint}",
+        path.display()
+    )]
+    BenchmarkMissing {
+        /// The benchmark (`Silverbox`, `cascaded tanks`).
+        benchmark: &'static str,
+        /// Where the file was expected.
+        path: PathBuf,
+        /// Which file is needed and where to get it.
+        hint: String,
+    },
+
+    /// A benchmark data file does not have the layout of the official file (header, number
+    /// of samples, sample time).
+    #[error("{}", benchmark_message(benchmark, path, *line, message))]
+    Benchmark {
+        /// The benchmark (`Silverbox`, `cascaded tanks`).
+        benchmark: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// One-based line of the offending row, when known.
+        line: Option<u64>,
+        /// What is wrong.
+        message: String,
+    },
+
     /// A file could not be read.
     #[error("cannot read `{}`", path.display())]
     Read {
@@ -132,6 +160,8 @@ impl IoError {
             | IoError::Sweep { .. }
             | IoError::Data { .. }
             | IoError::MissingColumn { .. }
+            | IoError::BenchmarkMissing { .. }
+            | IoError::Benchmark { .. }
             | IoError::Read { .. }
             | IoError::WouldOverwriteInput { .. }
             | IoError::InvalidArgument(_) => true,
@@ -238,6 +268,16 @@ fn data_message(
     s.push_str(": ");
     s.push_str(message);
     s
+}
+
+fn benchmark_message(benchmark: &str, path: &Path, line: Option<u64>, message: &str) -> String {
+    match line {
+        Some(l) => format!(
+            "{benchmark} benchmark file `{}`, line {l}: {message}",
+            path.display()
+        ),
+        None => format!("{benchmark} benchmark file `{}`: {message}", path.display()),
+    }
 }
 
 /// Formats an error and its chain of causes on one line each: `message`, then

@@ -5,6 +5,10 @@
 //!   their true maps. Every error names the line of the offending key. See [`model_file`] for
 //!   the format.
 //! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
+//!   [`DataTable::read_with`] with [`CsvOptions`] reads other layouts (delimiter, no header,
+//!   leading lines to skip) and selects, orders and renames columns ([`ColumnRef`]).
+//! * [`benchmarks`]: loaders of the Silverbox ([`Silverbox`]) and cascaded-tanks
+//!   ([`CascadedTanks`]) benchmark files with their official splits as [`Record`]s.
 //! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
 //! * [`Report`]: the `report.json` of an identification; [`ReportRecord`] reads one back.
 //! * [`SweepFile`]: the sweep configuration of `structid compare` (experiments × dispersions ×
@@ -40,6 +44,7 @@
 //! assert!((id.blocks[0].predict(&[1.0]) - 1.0).abs() < 0.05, "{}", id.blocks[0].predict(&[1.0]));
 //! ```
 
+pub mod benchmarks;
 pub mod data_file;
 pub mod error;
 pub mod model_file;
@@ -47,7 +52,10 @@ pub mod output;
 pub mod report;
 pub mod sweep_file;
 
-pub use data_file::{DataFile, DataTable, csv_bytes, format_number, write_csv};
+pub use benchmarks::{CascadedTanks, Record, Silverbox, SilverboxSplit, TanksSplit};
+pub use data_file::{
+    ColumnRef, CsvOptions, DataFile, DataTable, csv_bytes, format_number, write_csv,
+};
 pub use error::{ErrorChain, IoError, core_is_input_error};
 pub use model_file::{
     BlockSpec, DispersionSpec, ModelFile, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec,

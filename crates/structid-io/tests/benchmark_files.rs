@@ -1,27 +1,10 @@
 //! The official benchmark CSV files read as they are. Outside CI the tests skip with a message
 //! when `../shared/data` is absent; under CI (the `CI` variable set) they fail.
 
-use std::path::PathBuf;
-
 use structid_io::DataTable;
 
-fn shared_data(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(rel);
-    if p.is_file() {
-        Some(p)
-    } else if std::env::var_os("CI").is_some() {
-        // CI runs with shared/ beside the clone: a missing file there is a failure.
-        panic!(
-            "benchmark file {} is missing (CI is set, so this fails instead of skipping)",
-            p.display()
-        );
-    } else {
-        eprintln!("skipping: benchmark file {} is missing", p.display());
-        None
-    }
-}
+mod common;
+use common::benchmark_file as shared_data;
 
 #[test]
 fn silverbox_csv_with_quoted_header_and_trailing_commas() {

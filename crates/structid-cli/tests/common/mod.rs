@@ -75,3 +75,8 @@ pub fn example_model(name: &str) -> PathBuf {
         .join("../../examples/models")
         .join(name)
 }
+
+/// Where the measured benchmark files are (`$STRUCTID_DATA` or `../shared/data`), with the
+/// skip-or-fail-under-CI rule; shared with the tests of `structid-io`.
+#[path = "../../../structid-io/tests/common/mod.rs"]
+pub mod benchmark_data;
