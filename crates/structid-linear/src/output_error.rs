@@ -283,6 +283,18 @@ pub fn output_error(
     let orders = initial.orders();
     orders.validate()?;
     let (uc, yv) = prepare_data(u, y, initial.inputs(), "")?;
+    refine(&uc, &yv, initial, &orders, settings)
+}
+
+/// The Levenberg–Marquardt iteration of [`output_error()`] on checked data, with the orders
+/// given explicitly (they are not re-read from the leading zeros of `initial.num`).
+fn refine(
+    uc: &[Vec<f64>],
+    yv: &[f64],
+    initial: &PolynomialModel,
+    orders: &Orders,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
     let len = yv.len();
     let d = orders.parameters();
     let needed = settings.transient + d + 1;
@@ -302,12 +314,12 @@ pub fn output_error(
         });
     }
     let problem = Problem {
-        u: &uc,
-        y: &yv,
-        orders: &orders,
+        u: uc,
+        y: yv,
+        orders,
         transient: settings.transient,
     };
-    let mut theta = initial.parameters();
+    let mut theta = parameters_for(initial, orders);
     let mut yhat = problem.simulate(&theta);
     let initial_cost = problem.cost(&yhat);
     if !initial_cost.is_finite() {
@@ -379,7 +391,7 @@ pub fn output_error(
         .map(|c| c.iter().map(|v| (sigma2 * v.max(0.0)).sqrt()).collect())
         .unwrap_or_else(|| vec![f64::INFINITY; d]);
     let sample_time = settings.sample_time.or(initial.sample_time);
-    let model = PolynomialModel::from_parameters(&orders, &theta, sample_time)?;
+    let model = PolynomialModel::from_parameters(orders, &theta, sample_time)?;
     Ok(OeFit {
         model,
         cost,
@@ -420,7 +432,6 @@ pub fn oe(
         arx_settings.sample_time = settings.sample_time;
     }
     let mut initial = fit_arx(&uc, &yv, orders, &arx_settings, orders.max_lag())?.model;
-    // the ARX model's orders may read differently if a leading b is exactly zero
     if !schur_stable(&initial.den) {
         let r = root_radius(&initial.den);
         let c = 0.95 / r;
@@ -428,7 +439,19 @@ pub fn oe(
             *a *= c.powi(j as i32);
         }
     }
-    output_error(u, y, &initial, settings)
+    refine(&uc, &yv, &initial, orders, settings)
+}
+
+/// `θ = (b…, f…)` of `model` for the given orders (normalised by `den[0]`; missing
+/// coefficients are 0).
+fn parameters_for(model: &PolynomialModel, orders: &Orders) -> Vec<f64> {
+    let a0 = model.den[0];
+    let mut theta = Vec::with_capacity(orders.parameters());
+    for (i, (&nb, &nk)) in orders.nb.iter().zip(&orders.nk).enumerate() {
+        theta.extend((0..nb).map(|j| model.num[i].get(nk + j).map_or(0.0, |v| v / a0)));
+    }
+    theta.extend((1..=orders.na).map(|j| model.den.get(j).map_or(0.0, |v| v / a0)));
+    theta
 }
 
 /// The data and structure of an output-error problem; parameters `θ = (b…, f…)`.
