@@ -1,0 +1,705 @@
+//! Output-error (simulation-error) refinement by Levenberg–Marquardt.
+
+use nalgebra::{DMatrix, DVector};
+use structid_lti::Signal;
+
+use crate::arx::{ArxSettings, fit_arx, prepare_data};
+use crate::error::{LinearError, check_sample_time};
+use crate::orders::Orders;
+use crate::polynomial::{PolynomialModel, all_pole, root_radius, schur_stable, simulate_monic};
+
+/// Settings of [`output_error`] and [`oe`] (build with [`OeSettings::builder`];
+/// [`Default`] is valid).
+///
+/// ```
+/// use structid_linear::OeSettings;
+/// let s = OeSettings::builder().max_iterations(50).transient(20).build().unwrap();
+/// assert_eq!((s.max_iterations(), s.transient(), s.tolerance()), (50, 20, 1e-10));
+/// assert!(OeSettings::builder().tolerance(-1.0).build().is_err());
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct OeSettings {
+    max_iterations: usize,
+    tolerance: f64,
+    transient: usize,
+    sample_time: Option<f64>,
+    initial_damping: f64,
+    arx: ArxSettings,
+}
+
+impl Default for OeSettings {
+    /// 100 iterations, relative cost decrease 1e-10, no transient, sample time from the
+    /// initial model, initial damping μ₀ = 1e-3, default ARX settings for [`oe`].
+    fn default() -> Self {
+        OeSettings {
+            max_iterations: 100,
+            tolerance: 1e-10,
+            transient: 0,
+            sample_time: None,
+            initial_damping: 1e-3,
+            arx: ArxSettings::default(),
+        }
+    }
+}
+
+impl OeSettings {
+    /// A builder from the defaults.
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::builder().build().unwrap(), OeSettings::default());
+    /// ```
+    pub fn builder() -> OeSettingsBuilder {
+        OeSettingsBuilder(Self::default())
+    }
+    /// Maximum number of Levenberg–Marquardt iterations (Jacobian evaluations).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().max_iterations(), 100);
+    /// ```
+    pub fn max_iterations(&self) -> usize {
+        self.max_iterations
+    }
+    /// Convergence threshold on the relative cost decrease of an accepted step.
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().tolerance(), 1e-10);
+    /// ```
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance
+    }
+    /// Number of samples excluded at the start of the cost (the simulation still starts at
+    /// sample 0 from zero initial conditions).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().transient(), 0);
+    /// ```
+    pub fn transient(&self) -> usize {
+        self.transient
+    }
+    /// Sample time of the fitted model (`None`: that of the initial model).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().sample_time(), None);
+    /// ```
+    pub fn sample_time(&self) -> Option<f64> {
+        self.sample_time
+    }
+    /// Initial Marquardt damping μ₀ (relative to `diag(JᵀJ)`).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().initial_damping(), 1e-3);
+    /// ```
+    pub fn initial_damping(&self) -> f64 {
+        self.initial_damping
+    }
+    /// ARX settings used by [`oe`] for the initial model (its sample time is replaced by
+    /// [`sample_time`](Self::sample_time) when that is set).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().arx().ridge(), 0.0);
+    /// ```
+    pub fn arx(&self) -> &ArxSettings {
+        &self.arx
+    }
+}
+
+/// Builder for [`OeSettings`].
+///
+/// ```
+/// use structid_linear::{ArxSettings, OeSettings};
+/// let s = OeSettings::builder()
+///     .sample_time(0.01)
+///     .initial_damping(1e-2)
+///     .arx(ArxSettings::builder().ridge(1e-8).build().unwrap())
+///     .build()
+///     .unwrap();
+/// assert_eq!(s.arx().ridge(), 1e-8);
+/// ```
+#[derive(Clone, Debug)]
+pub struct OeSettingsBuilder(OeSettings);
+
+impl OeSettingsBuilder {
+    /// Iteration limit (≥ 1).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert!(OeSettings::builder().max_iterations(0).build().is_err());
+    /// ```
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.0.max_iterations = n;
+        self
+    }
+    /// Relative cost-decrease tolerance (≥ 0, finite).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert!(OeSettings::builder().tolerance(0.0).build().is_ok());
+    /// ```
+    pub fn tolerance(mut self, tol: f64) -> Self {
+        self.0.tolerance = tol;
+        self
+    }
+    /// Samples excluded at the start of the cost.
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::builder().transient(10).build().unwrap().transient(), 10);
+    /// ```
+    pub fn transient(mut self, samples: usize) -> Self {
+        self.0.transient = samples;
+        self
+    }
+    /// Sample time in seconds (positive, finite).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert!(OeSettings::builder().sample_time(-1.0).build().is_err());
+    /// ```
+    pub fn sample_time(mut self, ts: f64) -> Self {
+        self.0.sample_time = Some(ts);
+        self
+    }
+    /// Initial damping μ₀ (> 0, finite).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert!(OeSettings::builder().initial_damping(0.0).build().is_err());
+    /// ```
+    pub fn initial_damping(mut self, mu: f64) -> Self {
+        self.0.initial_damping = mu;
+        self
+    }
+    /// ARX settings for the initial model of [`oe`].
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// use structid_linear::ArxSettings;
+    /// let s = OeSettings::builder().arx(ArxSettings::builder().ridge(1.0).build().unwrap());
+    /// assert_eq!(s.build().unwrap().arx().ridge(), 1.0);
+    /// ```
+    pub fn arx(mut self, arx: ArxSettings) -> Self {
+        self.0.arx = arx;
+        self
+    }
+    /// Validates.
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert!(OeSettings::builder().build().is_ok());
+    /// ```
+    pub fn build(self) -> Result<OeSettings, LinearError> {
+        let s = self.0;
+        if s.max_iterations == 0 {
+            return Err(LinearError::param("max_iterations", "must be at least 1"));
+        }
+        if !(s.tolerance.is_finite() && s.tolerance >= 0.0) {
+            return Err(LinearError::param(
+                "tolerance",
+                format!("must be non-negative and finite, got {}", s.tolerance),
+            ));
+        }
+        if !(s.initial_damping.is_finite() && s.initial_damping > 0.0) {
+            return Err(LinearError::param(
+                "initial_damping",
+                format!("must be positive and finite, got {}", s.initial_damping),
+            ));
+        }
+        check_sample_time(s.sample_time)?;
+        Ok(s)
+    }
+}
+
+/// Result of [`output_error()`] / [`oe`].
+///
+/// ```
+/// use structid_linear::{oe, OeSettings, Orders};
+/// use structid_lti::Signal;
+/// let u = Signal::from_fn(200, 1, |k, _| ((k * k) as f64 * 0.37).sin());
+/// let mut y = vec![0.0; 200];
+/// for k in 1..200 {
+///     y[k] = 0.8 * y[k - 1] + u.get(k - 1, 0);
+/// }
+/// let fit = oe(&u, &Signal::new(1, y).unwrap(), &Orders::siso(1, 1, 1), &OeSettings::default()).unwrap();
+/// assert!(fit.converged && fit.cost <= fit.initial_cost);
+/// assert_eq!(fit.costs.len(), fit.iterations);
+/// assert!((fit.model.den[1] + 0.8).abs() < 1e-9);
+/// ```
+#[derive(Clone, Debug)]
+pub struct OeFit {
+    /// The fitted model (`den` = `F`).
+    pub model: PolynomialModel,
+    /// Mean squared simulation error over the samples after the transient.
+    pub cost: f64,
+    /// The same cost for the initial model.
+    pub initial_cost: f64,
+    /// Number of accepted Levenberg–Marquardt steps (`costs.len()`).
+    pub iterations: usize,
+    /// Cost after each accepted step (strictly decreasing, all below `initial_cost`).
+    pub costs: Vec<f64>,
+    /// Standard deviations of `θ = (b…, f…)` (order of [`PolynomialModel::parameters`]):
+    /// `sqrt(σ̂² diag((ΨᵀΨ)⁻¹))` at the estimate, `σ̂² = SSE/(N − d)`, `Ψ = ∂ŷ/∂θ`
+    /// (infinite when `ΨᵀΨ` is singular).
+    pub parameter_std: Vec<f64>,
+    /// `true` when the relative cost decrease fell below the tolerance, or no damped step
+    /// could lower the cost any more (a stationary point to working precision); `false` when
+    /// the iteration limit stopped the search.
+    pub converged: bool,
+}
+
+/// Output-error refinement by Levenberg–Marquardt starting from `initial` (e.g. an ARX fit,
+/// whose `den`/`num` set the orders `nf = na`, `nb`, `nk`; see [`PolynomialModel::orders`]).
+///
+/// Minimises `V(θ) = 1/N Σ_{k ≥ transient} (y_k − ŷ_k(θ))²` with
+/// `ŷ = Σ_i B_i(q)/F(q) u_i` simulated from zero initial conditions. The initial
+/// denominator must be stable ([`LinearError::UnstableInitialModel`] otherwise); steps that
+/// would make `F` unstable are rejected. Non-convergence within the iteration limit is
+/// reported by [`OeFit::converged`], not as an error.
+///
+/// ```
+/// use structid_linear::{output_error, OeSettings, PolynomialModel};
+/// use structid_lti::Signal;
+/// let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+/// let u = Signal::from_fn(300, 1, |k, _| ((k * k) as f64 * 0.37).sin());
+/// let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
+/// let start = PolynomialModel::new(vec![1.0, -1.4, 0.6], vec![vec![0.0, 0.9, 0.6]], None).unwrap();
+/// let fit = output_error(&u, &y, &start, &OeSettings::default()).unwrap();
+/// assert!(fit.converged && fit.cost < 1e-20 && fit.cost < fit.initial_cost);
+/// assert!((fit.model.den[2] - 0.7).abs() < 1e-8);
+/// ```
+pub fn output_error(
+    u: &Signal,
+    y: &Signal,
+    initial: &PolynomialModel,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
+    initial.validate()?;
+    let orders = initial.orders();
+    orders.validate()?;
+    let (uc, yv) = prepare_data(u, y, initial.inputs(), "")?;
+    refine(&uc, &yv, initial, &orders, settings)
+}
+
+/// The Levenberg–Marquardt iteration of [`output_error()`] on checked data, with the orders
+/// given explicitly (they are not re-read from the leading zeros of `initial.num`).
+fn refine(
+    uc: &[Vec<f64>],
+    yv: &[f64],
+    initial: &PolynomialModel,
+    orders: &Orders,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
+    let len = yv.len();
+    let d = orders.parameters();
+    let needed = settings.transient + d + 1;
+    if len < needed {
+        return Err(LinearError::TooFewSamples {
+            what: format!(
+                "output error with orders {orders} ({d} parameters) after a transient of {} samples",
+                settings.transient
+            ),
+            needed,
+            available: len,
+        });
+    }
+    if !schur_stable(&initial.den) {
+        return Err(LinearError::UnstableInitialModel {
+            spectral_radius: root_radius(&initial.den),
+        });
+    }
+    let problem = Problem {
+        u: uc,
+        y: yv,
+        orders,
+        transient: settings.transient,
+    };
+    let mut theta = parameters_for(initial, orders);
+    let mut yhat = problem.simulate(&theta);
+    let initial_cost = problem.cost(&yhat);
+    if !initial_cost.is_finite() {
+        return Err(LinearError::InvalidModel(
+            "the simulation of the initial model overflows".into(),
+        ));
+    }
+    let mut cost = initial_cost;
+    let mut costs = Vec::new();
+    let mut mu = settings.initial_damping;
+    let mut converged = cost == 0.0;
+    let mut evaluations = 0;
+    while !converged && evaluations < settings.max_iterations {
+        evaluations += 1;
+        let (h, g) = problem.normal_equations(&theta, &yhat);
+        let scale: Vec<f64> = {
+            let dmax = (0..d).map(|i| h[(i, i)]).fold(0.0, f64::max);
+            let floor = (dmax * 1e-300).max(f64::MIN_POSITIVE);
+            (0..d).map(|i| h[(i, i)].max(floor).sqrt()).collect()
+        };
+        let hs = DMatrix::from_fn(d, d, |i, j| h[(i, j)] / (scale[i] * scale[j]));
+        let gs = DVector::from_fn(d, |i, _| g[i] / scale[i]);
+        let mut accepted = None;
+        while mu < 1e20 {
+            let mut a = hs.clone();
+            for i in 0..d {
+                a[(i, i)] += mu * hs[(i, i)].max(1e-12);
+            }
+            let Some(chol) = a.cholesky() else {
+                mu *= 10.0;
+                continue;
+            };
+            let ds = chol.solve(&gs);
+            let cand: Vec<f64> = (0..d).map(|i| theta[i] + ds[i] / scale[i]).collect();
+            if cand.iter().any(|v| !v.is_finite()) || !problem.stable(&cand) {
+                mu *= 10.0;
+                continue;
+            }
+            let yc = problem.simulate(&cand);
+            let cc = problem.cost(&yc);
+            if cc < cost {
+                accepted = Some((cand, yc, cc));
+                break;
+            }
+            mu *= 10.0;
+        }
+        match accepted {
+            None => {
+                // no damped step lowers the cost: stationary to working precision
+                converged = true;
+            }
+            Some((cand, yc, cc)) => {
+                let rel = (cost - cc) / cost;
+                theta = cand;
+                yhat = yc;
+                cost = cc;
+                costs.push(cc);
+                mu = (mu / 10.0).max(1e-15);
+                if rel <= settings.tolerance || cost == 0.0 {
+                    converged = true;
+                }
+            }
+        }
+    }
+    let (h, _) = problem.normal_equations(&theta, &yhat);
+    let n = (len - settings.transient) as f64;
+    let sigma2 = cost * n / (n - d as f64);
+    let parameter_std = covariance_diagonal(&h)
+        .map(|c| c.iter().map(|v| (sigma2 * v.max(0.0)).sqrt()).collect())
+        .unwrap_or_else(|| vec![f64::INFINITY; d]);
+    let sample_time = settings.sample_time.or(initial.sample_time);
+    let model = PolynomialModel::from_parameters(orders, &theta, sample_time)?;
+    Ok(OeFit {
+        model,
+        cost,
+        initial_cost,
+        iterations: costs.len(),
+        costs,
+        parameter_std,
+        converged,
+    })
+}
+
+/// Convenience: [`arx`](crate::arx()) with `orders` (ARX settings from
+/// [`OeSettings::arx`]), then [`output_error`] from the ARX model.
+///
+/// If the ARX denominator happens to be unstable, its roots are first pulled radially
+/// inside the unit circle (`a_j ← a_j c^j` with `c = 0.95 / max|root|`), which keeps the
+/// shape of the model and makes it a valid starting point.
+///
+/// ```
+/// use structid_linear::{oe, OeSettings, Orders, PolynomialModel};
+/// use structid_lti::Signal;
+/// let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+/// let u = Signal::from_fn(300, 1, |k, _| ((k * k) as f64 * 0.37).sin());
+/// let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
+/// let fit = oe(&u, &y, &Orders::siso(2, 2, 1), &OeSettings::default()).unwrap();
+/// assert!((fit.model.den[1] + 1.5).abs() < 1e-8);
+/// ```
+pub fn oe(
+    u: &Signal,
+    y: &Signal,
+    orders: &Orders,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
+    orders.validate()?;
+    let (uc, yv) = prepare_data(u, y, orders.inputs(), "")?;
+    let mut arx_settings = settings.arx.clone();
+    if settings.sample_time.is_some() {
+        arx_settings.sample_time = settings.sample_time;
+    }
+    let mut initial = fit_arx(&uc, &yv, orders, &arx_settings, orders.max_lag())?.model;
+    if !schur_stable(&initial.den) {
+        let r = root_radius(&initial.den);
+        let c = 0.95 / r;
+        for (j, a) in initial.den.iter_mut().enumerate() {
+            *a *= c.powi(j as i32);
+        }
+    }
+    refine(&uc, &yv, &initial, orders, settings)
+}
+
+/// `θ = (b…, f…)` of `model` for the given orders (normalised by `den[0]`; missing
+/// coefficients are 0).
+fn parameters_for(model: &PolynomialModel, orders: &Orders) -> Vec<f64> {
+    let a0 = model.den[0];
+    let mut theta = Vec::with_capacity(orders.parameters());
+    for (i, (&nb, &nk)) in orders.nb.iter().zip(&orders.nk).enumerate() {
+        theta.extend((0..nb).map(|j| model.num[i].get(nk + j).map_or(0.0, |v| v / a0)));
+    }
+    theta.extend((1..=orders.na).map(|j| model.den.get(j).map_or(0.0, |v| v / a0)));
+    theta
+}
+
+/// The data and structure of an output-error problem; parameters `θ = (b…, f…)`.
+struct Problem<'a> {
+    u: &'a [Vec<f64>],
+    y: &'a [f64],
+    orders: &'a Orders,
+    transient: usize,
+}
+
+impl Problem<'_> {
+    fn split(&self, theta: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
+        let mut off = 0;
+        let mut num = Vec::with_capacity(self.orders.inputs());
+        for (&nb, &nk) in self.orders.nb.iter().zip(&self.orders.nk) {
+            let mut b = vec![0.0; nk];
+            b.extend_from_slice(&theta[off..off + nb]);
+            off += nb;
+            num.push(b);
+        }
+        let mut den = vec![1.0];
+        den.extend_from_slice(&theta[off..]);
+        (den, num)
+    }
+
+    fn stable(&self, theta: &[f64]) -> bool {
+        schur_stable(&self.split(theta).0)
+    }
+
+    fn simulate(&self, theta: &[f64]) -> Vec<f64> {
+        let (den, num) = self.split(theta);
+        simulate_monic(&den, &num, self.u, self.y.len())
+    }
+
+    fn cost(&self, yhat: &[f64]) -> f64 {
+        let n = self.y.len() - self.transient;
+        let sse: f64 = self.y[self.transient..]
+            .iter()
+            .zip(&yhat[self.transient..])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum();
+        sse / n as f64
+    }
+
+    /// `(ΨᵀΨ, Ψᵀε)` over the samples after the transient, with the sensitivities
+    /// `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/F · u_i` and `∂ŷ/∂f_j = −q^{−j}/F · ŷ` computed by
+    /// `n_u + 1` all-pole filters.
+    fn normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, Vec<f64>) {
+        let (den, _) = self.split(theta);
+        let len = self.y.len();
+        let d = theta.len();
+        // (filtered signal, lag, sign) per parameter
+        let mut filtered: Vec<Vec<f64>> = Vec::new();
+        let mut cols: Vec<(usize, usize, f64)> = Vec::with_capacity(d);
+        for (i, (&nb, &nk)) in self.orders.nb.iter().zip(&self.orders.nk).enumerate() {
+            if nb == 0 {
+                continue;
+            }
+            let mut w = vec![0.0; len];
+            all_pole(&den, &self.u[i], &mut w);
+            filtered.push(w);
+            for j in 0..nb {
+                cols.push((filtered.len() - 1, nk + j, 1.0));
+            }
+        }
+        if self.orders.na > 0 {
+            let mut v = vec![0.0; len];
+            all_pole(&den, yhat, &mut v);
+            filtered.push(v);
+            for j in 1..=self.orders.na {
+                cols.push((filtered.len() - 1, j, -1.0));
+            }
+        }
+        let mut h = DMatrix::zeros(d, d);
+        let mut g = vec![0.0; d];
+        let mut psi = vec![0.0; d];
+        for k in self.transient..len {
+            for (p, &(f, lag, sign)) in cols.iter().enumerate() {
+                psi[p] = if k >= lag {
+                    sign * filtered[f][k - lag]
+                } else {
+                    0.0
+                };
+            }
+            let e = self.y[k] - yhat[k];
+            for p in 0..d {
+                g[p] += psi[p] * e;
+                for q in p..d {
+                    h[(p, q)] += psi[p] * psi[q];
+                }
+            }
+        }
+        for p in 0..d {
+            for q in 0..p {
+                h[(p, q)] = h[(q, p)];
+            }
+        }
+        (h, g)
+    }
+}
+
+/// `diag(H⁻¹)` of a symmetric positive definite `H` (Jacobi-scaled Cholesky), `None` when
+/// `H` is singular.
+pub(crate) fn covariance_diagonal(h: &DMatrix<f64>) -> Option<Vec<f64>> {
+    let d = h.nrows();
+    let s: Vec<f64> = (0..d).map(|i| h[(i, i)].sqrt()).collect();
+    if s.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        return None;
+    }
+    let hs = DMatrix::from_fn(d, d, |i, j| h[(i, j)] / (s[i] * s[j]));
+    let inv = hs.cholesky()?.inverse();
+    let diag: Vec<f64> = (0..d).map(|i| inv[(i, i)] / (s[i] * s[i])).collect();
+    diag.iter().all(|v| v.is_finite()).then_some(diag)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arx::arx;
+    use crate::testutil::*;
+
+    fn truth() -> PolynomialModel {
+        PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], Some(0.1)).unwrap()
+    }
+
+    #[test]
+    fn output_noise_oe_beats_biased_arx() {
+        let g = truth();
+        let len = 5000;
+        let u = white(21, len, 1.0, 1);
+        let y0 = g.simulate(&u).unwrap();
+        let rms = (y0.iter().map(|v| v * v).sum::<f64>() / len as f64).sqrt();
+        // SNR 20 dB: noise std = rms / 10
+        let e = white(22, len, rms / 10.0, 1);
+        let y = Signal::new(1, y0.iter().zip(e.as_slice()).map(|(a, b)| a + b).collect()).unwrap();
+        let orders = Orders::siso(2, 2, 1);
+        let arx_fit = arx(&u, &y, &orders, &ArxSettings::default()).unwrap();
+        let fit = oe(&u, &y, &orders, &OeSettings::default()).unwrap();
+        assert!(fit.converged);
+        assert_eq!(fit.model.sample_time, None);
+        let t = g.parameters();
+        let est = fit.model.parameters();
+        for (p, ((a, b), s)) in est.iter().zip(&t).zip(&fit.parameter_std).enumerate() {
+            assert!(s.is_finite() && *s > 0.0);
+            assert!(
+                (a - b).abs() < 3.0 * s,
+                "parameter {p}: {a} vs {b}, std {s}"
+            );
+        }
+        let dist = |x: &[f64]| {
+            x.iter()
+                .zip(&t)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let (d_oe, d_arx) = (dist(&est), dist(&arx_fit.model.parameters()));
+        assert!(d_oe < d_arx, "OE error {d_oe} vs ARX error {d_arx}");
+        assert!(fit.cost < fit.initial_cost);
+        // the cost approaches the noise variance
+        let var = (rms / 10.0).powi(2);
+        assert!((fit.cost / var - 1.0).abs() < 0.1, "{} vs {var}", fit.cost);
+        assert_non_increasing(&fit);
+    }
+
+    fn assert_non_increasing(fit: &OeFit) {
+        let mut prev = fit.initial_cost;
+        for &c in &fit.costs {
+            assert!(c <= prev, "cost increased: {c} > {prev}");
+            prev = c;
+        }
+        assert_eq!(fit.costs.len(), fit.iterations);
+        assert_eq!(
+            fit.costs.last().copied().unwrap_or(fit.initial_cost),
+            fit.cost
+        );
+    }
+
+    #[test]
+    fn far_start_transient_and_miso() {
+        let g = PolynomialModel::new(
+            vec![1.0, -1.2, 0.5],
+            vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+            None,
+        )
+        .unwrap();
+        let u = white(31, 800, 1.0, 2);
+        let y = Signal::new(1, g.simulate(&u).unwrap()).unwrap();
+        let start = PolynomialModel::new(
+            vec![1.0, 0.3, 0.0],
+            vec![vec![1.0, 0.0], vec![0.0, 0.0, 1.0]],
+            None,
+        )
+        .unwrap();
+        let s = OeSettings::builder()
+            .transient(50)
+            .sample_time(0.5)
+            .build()
+            .unwrap();
+        let fit = output_error(&u, &y, &start, &s).unwrap();
+        assert!(fit.converged, "{fit:?}");
+        assert_close(&fit.model.parameters(), &g.parameters(), 1e-7);
+        assert_eq!(fit.model.sample_time, Some(0.5));
+        assert!(fit.parameter_std.iter().all(|v| v.is_finite()));
+        assert_non_increasing(&fit);
+        // the iteration limit reports non-convergence, not an error
+        let s1 = OeSettings::builder().max_iterations(1).build().unwrap();
+        let f1 = output_error(&u, &y, &start, &s1).unwrap();
+        assert!(!f1.converged);
+        assert!(f1.iterations <= 1);
+    }
+
+    #[test]
+    fn errors() {
+        let g = truth();
+        let u = white(41, 100, 1.0, 1);
+        let y = Signal::new(1, g.simulate(&u).unwrap()).unwrap();
+        let unstable =
+            PolynomialModel::new(vec![1.0, -2.0, 1.05], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+        let e = output_error(&u, &y, &unstable, &OeSettings::default()).unwrap_err();
+        match &e {
+            LinearError::UnstableInitialModel { spectral_radius } => {
+                assert!((spectral_radius - 1.05f64.sqrt()).abs() < 1e-9)
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+        assert!(e.to_string().contains("unstable"));
+        let s = OeSettings::builder().transient(96).build().unwrap();
+        assert!(matches!(
+            output_error(&u, &y, &g, &s),
+            Err(LinearError::TooFewSamples { needed: 101, .. })
+        ));
+        let mut yb = y.clone();
+        yb.as_mut_slice()[5] = f64::NAN;
+        assert!(matches!(
+            output_error(&u, &yb, &g, &OeSettings::default()),
+            Err(LinearError::NonFinite { sample: 5, .. })
+        ));
+        assert!(matches!(
+            oe(
+                &u,
+                &y.slice(0..50),
+                &Orders::siso(2, 2, 1),
+                &OeSettings::default()
+            ),
+            Err(LinearError::LengthMismatch { .. })
+        ));
+        assert!(OeSettings::builder().max_iterations(0).build().is_err());
+        assert!(OeSettings::builder().initial_damping(0.0).build().is_err());
+    }
+}

@@ -1,0 +1,353 @@
+//! ARX order selection over a grid by information criteria or validation simulation error.
+
+use std::ops::RangeInclusive;
+
+use structid_lti::Signal;
+
+use crate::arx::{ArxSettings, fit_arx, prepare_data};
+use crate::error::LinearError;
+use crate::orders::Orders;
+use crate::polynomial::{PolynomialModel, simulate_monic};
+
+/// How [`select_orders`] scores a fitted ARX model (`V` = mean squared equation error over
+/// the `N` equations, `d` = number of parameters; smaller is better).
+///
+/// ```
+/// use structid_linear::OrderCriterion;
+/// let c = OrderCriterion::Bic;
+/// assert_eq!(c.name(), "BIC");
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub enum OrderCriterion {
+    /// Akaike: `ln V + 2d/N`.
+    Aic,
+    /// Bayesian (Schwarz): `ln V + d ln N / N`.
+    Bic,
+    /// Akaike's final prediction error: `V (N + d)/(N − d)`.
+    Fpe,
+    /// Simulation mean squared error on a separate record (zero initial conditions). Among
+    /// the models whose error is within one standard error of the best (standard error of
+    /// the mean of the squared errors), the one with the fewest parameters wins (the
+    /// one-standard-error rule), so that statistical ties do not favour over-parameterised
+    /// models.
+    Validation {
+        /// Validation input (same channels as the estimation input).
+        u: Signal,
+        /// Validation output (one channel).
+        y: Signal,
+    },
+}
+
+impl OrderCriterion {
+    /// Short name for reports: `"AIC"`, `"BIC"`, `"FPE"`, `"validation"`.
+    ///
+    /// ```
+    /// use structid_linear::OrderCriterion;
+    /// assert_eq!(OrderCriterion::Fpe.name(), "FPE");
+    /// ```
+    pub fn name(&self) -> &'static str {
+        match self {
+            OrderCriterion::Aic => "AIC",
+            OrderCriterion::Bic => "BIC",
+            OrderCriterion::Fpe => "FPE",
+            OrderCriterion::Validation { .. } => "validation",
+        }
+    }
+}
+
+/// A grid of orders; the same `nb` and `nk` are used for every input.
+///
+/// ```
+/// use structid_linear::OrderGrid;
+/// let g = OrderGrid { na: 1..=4, nb: 1..=4, nk: 0..=3 };
+/// assert_eq!(g.len(), 64);
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OrderGrid {
+    /// Denominator orders.
+    pub na: RangeInclusive<usize>,
+    /// Numerator coefficient counts.
+    pub nb: RangeInclusive<usize>,
+    /// Input delays.
+    pub nk: RangeInclusive<usize>,
+}
+
+impl OrderGrid {
+    /// Number of grid points.
+    ///
+    /// ```
+    /// use structid_linear::OrderGrid;
+    /// assert_eq!(OrderGrid { na: 0..=2, nb: 1..=1, nk: 0..=1 }.len(), 6);
+    /// ```
+    pub fn len(&self) -> usize {
+        self.na.clone().count() * self.nb.clone().count() * self.nk.clone().count()
+    }
+
+    /// `true` when one of the ranges is empty.
+    ///
+    /// ```
+    /// use structid_linear::OrderGrid;
+    /// #[allow(clippy::reversed_empty_ranges)]
+    /// let g = OrderGrid { na: 1..=0, nb: 1..=1, nk: 0..=1 };
+    /// assert!(g.is_empty());
+    /// ```
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Result of [`select_orders`].
+///
+/// ```
+/// use structid_linear::{select_orders, ArxSettings, OrderCriterion, OrderGrid};
+/// use structid_lti::{testing::SplitMix64, Signal};
+/// let mut rng = SplitMix64::new(3);
+/// let u = Signal::from_fn(300, 1, |_, _| rng.uniform_in(-1.0, 1.0));
+/// let y = Signal::from_fn(300, 1, |k, _| if k > 0 { u.get(k - 1, 0) } else { 0.0 } + rng.uniform_in(-0.1, 0.1));
+/// let grid = OrderGrid { na: 0..=1, nb: 1..=2, nk: 0..=1 };
+/// let sel = select_orders(&u, &y, &grid, &OrderCriterion::Aic, &ArxSettings::default()).unwrap();
+/// assert_eq!(sel.table.len(), 8);
+/// assert_eq!(sel.model.orders(), sel.best);
+/// ```
+#[derive(Clone, Debug)]
+pub struct OrderSelection {
+    /// The selected orders.
+    pub best: Orders,
+    /// The ARX model fitted with the selected orders.
+    pub model: PolynomialModel,
+    /// Criterion value of every grid point that could be fitted, in grid order (`na`
+    /// outermost, then `nb`, then `nk`). Grid points whose regression fails (singular, too
+    /// few samples, no parameters) are left out; for [`OrderCriterion::Validation`], a model
+    /// whose simulation diverges scores `+∞`.
+    pub table: Vec<(Orders, f64)>,
+}
+
+/// Fits an ARX model at every point of `grid` and returns the best by `criterion`.
+///
+/// All fits use the same equations `k = K … L−1`, `K` the largest lag in the grid, so the
+/// criteria compare like with like.
+///
+/// ```
+/// use structid_linear::{select_orders, ArxSettings, OrderCriterion, OrderGrid, Orders};
+/// use structid_lti::{testing::SplitMix64, Signal};
+/// let mut rng = SplitMix64::new(1);
+/// let u = Signal::from_fn(400, 1, |_, _| rng.uniform_in(-1.0, 1.0));
+/// // y_k = 0.5 y_{k-1} + u_{k-1} + e_k
+/// let mut y = vec![0.0; 400];
+/// for k in 1..400 {
+///     y[k] = 0.5 * y[k - 1] + u.get(k - 1, 0) + rng.uniform_in(-0.05, 0.05);
+/// }
+/// let y = Signal::new(1, y).unwrap();
+/// let grid = OrderGrid { na: 1..=3, nb: 1..=3, nk: 0..=2 };
+/// let sel = select_orders(&u, &y, &grid, &OrderCriterion::Bic, &ArxSettings::default()).unwrap();
+/// assert_eq!(sel.best, Orders::siso(1, 1, 1));
+/// ```
+pub fn select_orders(
+    u: &Signal,
+    y: &Signal,
+    grid: &OrderGrid,
+    criterion: &OrderCriterion,
+    settings: &ArxSettings,
+) -> Result<OrderSelection, LinearError> {
+    if grid.is_empty() {
+        return Err(LinearError::param(
+            "grid",
+            "every order range must be non-empty",
+        ));
+    }
+    let inputs = u.channels();
+    if inputs == 0 {
+        return Err(LinearError::dims("input channels", "at least 1", 0));
+    }
+    let (uc, yv) = prepare_data(u, y, inputs, "")?;
+    let validation = match criterion {
+        OrderCriterion::Validation { u, y } => Some(prepare_data(u, y, inputs, "validation ")?),
+        _ => None,
+    };
+    let (na_max, nb_max, nk_max) = (*grid.na.end(), *grid.nb.end(), *grid.nk.end());
+    let start = na_max.max((nk_max + nb_max).saturating_sub(1));
+    let mut rows: Vec<(Orders, f64, f64, PolynomialModel)> = Vec::new(); // orders, value, SE, model
+    let mut last_error = None;
+    for na in grid.na.clone() {
+        for nb in grid.nb.clone() {
+            for nk in grid.nk.clone() {
+                let orders = Orders {
+                    na,
+                    nb: vec![nb; inputs],
+                    nk: vec![nk; inputs],
+                };
+                if orders.parameters() == 0 {
+                    continue;
+                }
+                let fit = match fit_arx(&uc, &yv, &orders, settings, start) {
+                    Ok(f) => f,
+                    Err(e) => {
+                        last_error = Some(e);
+                        continue;
+                    }
+                };
+                let n = fit.samples as f64;
+                let d = orders.parameters() as f64;
+                let v = fit.cost.max(f64::MIN_POSITIVE);
+                let (value, se) = match criterion {
+                    OrderCriterion::Aic => (v.ln() + 2.0 * d / n, 0.0),
+                    OrderCriterion::Bic => (v.ln() + d * n.ln() / n, 0.0),
+                    OrderCriterion::Fpe => (v * (n + d) / (n - d), 0.0),
+                    OrderCriterion::Validation { .. } => {
+                        let (vu, vy) = validation.as_ref().expect("validation data prepared");
+                        validation_error(&fit.model, vu, vy)
+                    }
+                };
+                rows.push((orders, value, se, fit.model));
+            }
+        }
+    }
+    if rows.is_empty() {
+        return Err(last_error.unwrap_or_else(|| {
+            LinearError::InvalidOrders("the grid has no point with parameters".into())
+        }));
+    }
+    let best_idx = pick(
+        &rows,
+        matches!(criterion, OrderCriterion::Validation { .. }),
+    );
+    let (best, _, _, model) = rows[best_idx].clone();
+    Ok(OrderSelection {
+        best,
+        model,
+        table: rows.into_iter().map(|(o, v, _, _)| (o, v)).collect(),
+    })
+}
+
+/// Index of the minimum; with `one_se`, the smallest model within one standard error of it.
+fn pick(rows: &[(Orders, f64, f64, PolynomialModel)], one_se: bool) -> usize {
+    let mut best = 0;
+    for (i, r) in rows.iter().enumerate() {
+        if r.1 < rows[best].1 || rows[best].1.is_nan() {
+            best = i;
+        }
+    }
+    if !one_se {
+        return best;
+    }
+    let limit = rows[best].1 + rows[best].2;
+    let mut chosen = best;
+    for (i, r) in rows.iter().enumerate() {
+        if r.1 <= limit {
+            let (dp, dc) = (r.0.parameters(), rows[chosen].0.parameters());
+            if dp < dc || (dp == dc && r.1 < rows[chosen].1) {
+                chosen = i;
+            }
+        }
+    }
+    chosen
+}
+
+/// Simulation MSE of `model` on a validation record and the standard error of that mean;
+/// `(+∞, 0)` when the simulation diverges.
+fn validation_error(model: &PolynomialModel, u: &[Vec<f64>], y: &[f64]) -> (f64, f64) {
+    let a0 = model.den[0];
+    let den: Vec<f64> = model.den.iter().map(|v| v / a0).collect();
+    let num: Vec<Vec<f64>> = model
+        .num
+        .iter()
+        .map(|b| b.iter().map(|v| v / a0).collect())
+        .collect();
+    let yhat = simulate_monic(&den, &num, u, y.len());
+    let n = y.len() as f64;
+    let sq: Vec<f64> = y.iter().zip(&yhat).map(|(a, b)| (a - b).powi(2)).collect();
+    let mse = sq.iter().sum::<f64>() / n;
+    if !mse.is_finite() {
+        return (f64::INFINITY, 0.0);
+    }
+    let var = sq.iter().map(|s| (s - mse).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mse, (var / n).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::*;
+
+    /// `A y = B u + e` with `A = 1 − 1.5q⁻¹ + 0.7q⁻²`, `B = q⁻¹(1 + 0.5q⁻¹)`.
+    fn record(seed: u64, len: usize, noise: f64) -> (Signal, Signal) {
+        let truth =
+            PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+        let u = white(seed, len, 1.0, 1);
+        let e = white(seed + 1000, len, noise, 1);
+        let two = PolynomialModel {
+            num: vec![truth.num[0].clone(), vec![1.0]],
+            ..truth
+        };
+        let ue = Signal::from_fn(
+            len,
+            2,
+            |k, c| if c == 0 { u.get(k, 0) } else { e.get(k, 0) },
+        );
+        let y = Signal::new(1, two.simulate(&ue).unwrap()).unwrap();
+        (u, y)
+    }
+
+    #[test]
+    fn bic_aic_fpe_and_validation_pick_the_true_orders() {
+        let (u, y) = record(51, 2000, 0.5);
+        let (uv, yv) = record(52, 2000, 0.5);
+        let grid = OrderGrid {
+            na: 1..=4,
+            nb: 1..=4,
+            nk: 0..=3,
+        };
+        let s = ArxSettings::default();
+        let truth = Orders::siso(2, 2, 1);
+        for crit in [
+            OrderCriterion::Bic,
+            OrderCriterion::Validation { u: uv, y: yv },
+        ] {
+            let sel = select_orders(&u, &y, &grid, &crit, &s).unwrap();
+            assert_eq!(sel.best, truth, "{}: {:?}", crit.name(), sel.table);
+            assert_eq!(sel.table.len(), 64);
+            assert_eq!(sel.model.orders(), truth);
+        }
+        // AIC and FPE at least find the right structure family (they may over-fit)
+        for crit in [OrderCriterion::Aic, OrderCriterion::Fpe] {
+            let sel = select_orders(&u, &y, &grid, &crit, &s).unwrap();
+            assert!(sel.best.na >= 2 && sel.best.nk[0] <= 1, "{}", crit.name());
+        }
+    }
+
+    #[test]
+    fn errors() {
+        let (u, y) = record(53, 100, 0.1);
+        let s = ArxSettings::default();
+        let (lo, hi) = (2, 1);
+        let empty = OrderGrid {
+            na: lo..=hi,
+            nb: 1..=1,
+            nk: 0..=0,
+        };
+        assert!(select_orders(&u, &y, &empty, &OrderCriterion::Aic, &s).is_err());
+        let grid = OrderGrid {
+            na: 1..=2,
+            nb: 1..=2,
+            nk: 0..=1,
+        };
+        let bad = OrderCriterion::Validation {
+            u: u.clone(),
+            y: y.slice(0..50),
+        };
+        assert!(matches!(
+            select_orders(&u, &y, &grid, &bad, &s),
+            Err(LinearError::LengthMismatch { .. })
+        ));
+        // every grid point needs more samples than available: the fit error is returned
+        let big = OrderGrid {
+            na: 60..=60,
+            nb: 60..=60,
+            nk: 0..=0,
+        };
+        assert!(matches!(
+            select_orders(&u, &y, &big, &OrderCriterion::Bic, &s),
+            Err(LinearError::TooFewSamples { .. })
+        ));
+    }
+}
