@@ -10,7 +10,9 @@
 //! * the core (re-exported at the top level) — the LFT model, measurability, dispersions and
 //!   kernels, [`identify()`], simulation with maps in the loop;
 //! * [`io`] — model files (TOML), data files (CSV), reports and atomic output;
-//! * [`plot`] — SVG figures.
+//! * [`plot`] — SVG figures;
+//! * [`linear`] — estimating the linear part: ARX, output error, order selection, periodic BLA;
+//! * [`silverbox`] — the Silverbox benchmark pipeline end to end.
 //!
 //! ```
 //! use std::sync::Arc;
@@ -20,7 +22,10 @@
 //! println!("J = {:.4}", id.cost.total);
 //! ```
 
+pub mod silverbox;
+
 pub use structid_core::*;
 pub use structid_io as io;
+pub use structid_linear as linear;
 pub use structid_lti as lti;
 pub use structid_plot as plot;

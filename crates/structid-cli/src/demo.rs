@@ -62,6 +62,7 @@ fn gaussian_block(
 /// The spray model in model-file form, with the true maps as expressions.
 pub fn spray_model_file(sigma: f64) -> ModelFile {
     ModelFile {
+        linear: None,
         lft: paper::spray_lft(),
         signals: SignalNames {
             u: vec!["u".into()],
@@ -285,6 +286,7 @@ pub fn multi_input(a: MultiInputArgs) -> Result<(), CliError> {
     )?;
     written.push(path);
     let mf = ModelFile {
+        linear: None,
         lft: exp.model.lft().clone(),
         signals: SignalNames {
             u: vec!["u0".into(), "u1".into()],

@@ -100,6 +100,18 @@ impl From<structid_core::Error> for CliError {
     }
 }
 
+impl From<structid_linear::LinearError> for CliError {
+    /// Estimating a linear block fails on its data or orders (NaN, too few samples, a singular
+    /// regression, an unstable start): input errors.
+    fn from(e: structid_linear::LinearError) -> Self {
+        Self {
+            code: EXIT_INPUT,
+            context: Some("linear estimation".into()),
+            error: Box::new(e),
+        }
+    }
+}
+
 impl From<structid_plot::PlotError> for CliError {
     fn from(e: structid_plot::PlotError) -> Self {
         Self {

@@ -376,15 +376,36 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     rec.block_sigmas = block_sigmas;
     report.reproduction = Some(rec);
     report.selection = selection;
+    let written = write_estimate(&a.out, &mut guard, &mf, &id, &mut report, a.no_bands)?;
+
+    print!(
+        "{}",
+        summary(&report, &id, &written, t0.elapsed().as_secs_f64())
+    );
+    Ok(())
+}
+
+/// Writes the files of an estimate into `out` (created): estimate.csv, map_<block>.csv and
+/// map_<block>.svg per block (with the posterior band unless `no_bands`), and report.json,
+/// whose `files` list they fill. Returns the paths written, report.json last.
+pub(crate) fn write_estimate(
+    out: &Path,
+    guard: &mut OutputGuard,
+    mf: &ModelFile,
+    id: &Identification,
+    report: &mut Report,
+    no_bands: bool,
+) -> Result<Vec<PathBuf>, CliError> {
     let mut written: Vec<PathBuf> = Vec::new();
 
     // estimate.csv: ŵ by block name (in w order), then ê.
-    let (names, columns) = estimate_columns(&mf, &id);
-    let path = a.out.join("estimate.csv");
+    let (names, columns) = estimate_columns(mf, id);
+    let path = out.join("estimate.csv");
     guard.write_csv(&path, &names, &columns)?;
     written.push(path);
 
     // Per-block grids and figures.
+    let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
     let z_names = mf.z_names();
     for (bi, est) in id.blocks.iter().enumerate() {
         let i = mf
@@ -401,7 +422,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         let input_names = grid_input_names(&z_names, &spec.inputs, mf.signals.z.is_some());
         let grid = MapGrid::new(est.map.as_ref(), &est.z);
         // Posterior standard deviation at the grid (or data) points, when a posterior was kept.
-        let std = if a.no_bands {
+        let std = if no_bands {
             None
         } else {
             id.posterior_std(bi, &grid.points(&est.z))?
@@ -411,11 +432,11 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         if std.is_some() {
             header.push("std".into());
         }
-        let grid_path = a.out.join(format!("map_{stem}.csv"));
+        let grid_path = out.join(format!("map_{stem}.csv"));
         guard.write_csv(&grid_path, &header, &grid.columns(est, std.as_deref()))?;
         let truth = spec.truth_map()?;
         let svg = map_svg(est, &grid, truth.as_deref(), &input_names, std.as_deref())?;
-        let svg_path = a.out.join(format!("map_{stem}.svg"));
+        let svg_path = out.join(format!("map_{stem}.svg"));
         guard.write(&svg_path, svg.as_bytes())?;
         if let Some(b) = report.block_mut(&est.name) {
             b.grid_file = Some(format!("map_{stem}.csv"));
@@ -425,7 +446,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         written.push(grid_path);
         written.push(svg_path);
     }
-    let report_path = a.out.join("report.json");
+    let report_path = out.join("report.json");
     report.files = written
         .iter()
         .chain(std::iter::once(&report_path))
@@ -433,12 +454,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         .collect();
     guard.write(&report_path, report.to_json_string()?.as_bytes())?;
     written.push(report_path);
-
-    print!(
-        "{}",
-        summary(&report, &id, &written, t0.elapsed().as_secs_f64())
-    );
-    Ok(())
+    Ok(written)
 }
 
 /// Names for the inputs of a block in its grid file: the measured z column names, or the

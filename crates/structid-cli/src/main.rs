@@ -21,6 +21,8 @@ mod demo;
 mod error;
 mod figures;
 mod identify;
+mod linear;
+mod refine;
 mod simulate;
 mod validate;
 
@@ -78,6 +80,22 @@ enum Command {
     /// DIR/results.md and figures. `structid compare merge DIR... --out DIR` combines shard
     /// directories (see --shard).
     Compare(compare::CompareArgs),
+    /// Estimate a linear block from data (ARX, then output error) and write it as a model file.
+    ///
+    /// Orders are given (--orders NA,NB,NK) or selected by an information criterion or on
+    /// validation data. The model file has a `[linear]` section placing the block in a
+    /// structure: `lti` (a nominal linear model), `output-feedback` (y = G·(u − N(y)) + e, with
+    /// an unknown map N) or `input` (y = G·N(u) + e), ready for `structid refine`.
+    Linear(linear::LinearArgs),
+    /// Refine an uncertain linear part: alternate between identifying the map with G fixed and
+    /// re-estimating G (output error) with the map fixed.
+    ///
+    /// Needs a model file with a `[linear]` section (see `structid linear`). β (and σ) are
+    /// chosen on the first pass; the alternation stops when the validation simulation error
+    /// stops improving. Writes DIR/model.toml (the refined linear part; `structid validate
+    /// --model DIR/model.toml --estimate DIR` reproduces the estimate), DIR/refine.csv and
+    /// DIR/refine.svg (costs and errors per iteration) and the files of `structid identify`.
+    Refine(refine::RefineArgs),
     /// Prepare data files: benchmark splits and column selection from any delimited file.
     ///
     /// `structid data silverbox|tanks --file PATH --split NAME --out OUT.csv` extracts one split
@@ -288,6 +306,10 @@ struct ValidateArgs {
     /// Largest lag of the correlation tests (less than the number of samples).
     #[arg(long, value_name = "N", default_value_t = 25)]
     max_lag: usize,
+    /// Leading samples that only settle the state: the simulation RMS and fit leave them out
+    /// (the Silverbox benchmark allows 50).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    settle: usize,
 }
 
 #[derive(Debug, Subcommand)]
@@ -360,6 +382,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Demo(DemoCommand::Spray(a)) => demo::spray(a),
         Command::Demo(DemoCommand::MultiInput(a)) => demo::multi_input(a),
         Command::Compare(a) => compare::run(a),
+        Command::Linear(a) => linear::run(a),
+        Command::Refine(a) => refine::run(a),
         Command::Data(c) => data::run(c),
     }
 }

@@ -415,6 +415,14 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     // The validation record, checked before the (possibly long) re-identification.
     let table = DataTable::read(&a.data)?;
     let vdata = vmf.select_data(&table)?;
+    if a.settle >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
+            a.settle,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
     if a.max_lag >= vdata.len() {
         return Err(CliError::input(format!(
             "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
@@ -458,6 +466,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     let settings = ValidationSettings::builder()
         .initial_state(initial_state)
         .max_lag(a.max_lag)
+        .settle(a.settle)
         .build()?;
     let report = validate(&vmodel, &maps, &vdata, &settings)?;
 
@@ -533,6 +542,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             "data_file_absolute": absolute(&a.data).display().to_string(),
             "initial_state": crate::identify::value_name(a.initial_state),
             "max_lag": a.max_lag,
+            "settle": a.settle,
         },
         "estimate": {
             "report": report_path.display().to_string(),

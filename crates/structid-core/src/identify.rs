@@ -128,6 +128,14 @@ impl IdentifySettings {
         }
     }
 
+    /// The same settings with another initial-state treatment.
+    pub fn with_initial_state(&self, initial_state: InitialState) -> Self {
+        Self {
+            initial_state,
+            ..self.clone()
+        }
+    }
+
     /// The same settings with another β (> 0), e.g. for a sweep.
     ///
     /// ```

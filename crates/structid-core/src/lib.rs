@@ -98,6 +98,7 @@ pub mod polynomial;
 pub mod posterior;
 pub mod problem;
 pub mod prox;
+pub mod refine;
 pub mod residual_tests;
 pub mod scenarios;
 pub mod simulate;

@@ -83,6 +83,7 @@ pub enum ValidationInitialState {
 pub struct ValidationSettings {
     initial_state: ValidationInitialState,
     max_lag: usize,
+    settle: usize,
 }
 
 impl Default for ValidationSettings {
@@ -91,6 +92,7 @@ impl Default for ValidationSettings {
         Self {
             initial_state: ValidationInitialState::Zero,
             max_lag: 25,
+            settle: 0,
         }
     }
 }
@@ -112,6 +114,12 @@ impl ValidationSettings {
     pub fn max_lag(&self) -> usize {
         self.max_lag
     }
+
+    /// Leading samples that only settle the state: the simulation RMS and fit leave them out
+    /// (benchmarks score from a given sample on; the Silverbox tests allow 50).
+    pub fn settle(&self) -> usize {
+        self.settle
+    }
 }
 
 /// Builder for [`ValidationSettings`]; [`ValidationSettingsBuilder::build`] validates.
@@ -130,6 +138,13 @@ impl ValidationSettingsBuilder {
     /// The largest lag of the correlation tests (≥ 1, and less than the record length).
     pub fn max_lag(mut self, max_lag: usize) -> Self {
         self.inner.max_lag = max_lag;
+        self
+    }
+
+    /// Leading samples left out of the simulation RMS and fit (default 0; less than the
+    /// record length).
+    pub fn settle(mut self, samples: usize) -> Self {
+        self.inner.settle = samples;
         self
     }
 
@@ -153,10 +168,11 @@ pub struct ValidationReport {
     /// y simulated with the maps in the loop from u alone (e = 0, z from the simulated
     /// signals), L × n_y.
     pub simulated: Signal,
-    /// Per output: RMS(y − y_sim).
+    /// Per output: RMS(y − y_sim) over the samples after the settling ones.
     pub rms: Vec<f64>,
-    /// Per output: the fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) in percent (100 is perfect, 0 is
-    /// no better than the mean, NaN for a constant output).
+    /// Per output: the fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) in percent over the samples after
+    /// the settling ones (100 is perfect, 0 is no better than the mean, NaN for a constant
+    /// output).
     pub fit_percent: Vec<f64>,
     /// The one-step-ahead prediction errors ε_k = y_k − ŷ_(k|k−1) (innovations of the noise
     /// path, in output units), L × n_y.
@@ -245,6 +261,15 @@ pub fn validate(
     data.check_against(lft)?;
     let len = data.len();
     let max_lag = settings.max_lag;
+    if settings.settle >= len {
+        return Err(Error::InvalidParameter {
+            name: "settle".into(),
+            value: settings.settle as f64,
+            reason: format!(
+                "must be less than the number of samples ({len}); nothing would be scored"
+            ),
+        });
+    }
     if max_lag == 0 || max_lag >= len {
         return Err(Error::InvalidParameter {
             name: "max_lag".into(),
@@ -342,14 +367,15 @@ pub fn validate(
     let inputs: Vec<Vec<f64>> = (0..data.u().channels())
         .map(|j| data.u().channel(j))
         .collect();
+    let settle = settings.settle;
     for c in 0..ny {
         let (y, ys, e) = (
             data.y().channel(c),
             simulated.channel(c),
             prediction_error.channel(c),
         );
-        rms_sim.push(rms_difference(&y, &ys));
-        fit.push(fit_or_nan(&y, &ys));
+        rms_sim.push(rms_difference(&y[settle..], &ys[settle..]));
+        fit.push(fit_or_nan(&y[settle..], &ys[settle..]));
         prediction_rms.push(rms(&e));
         whiteness.push(non_negative_lags(autocorrelation(&e, max_lag)));
         input_correlation.push(

@@ -58,12 +58,12 @@ pub use data_file::{
 };
 pub use error::{ErrorChain, IoError, core_is_input_error};
 pub use model_file::{
-    BlockSpec, DispersionSpec, ModelFile, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec,
-    default_sigma,
+    BlockSpec, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, SUPPORTED_DISPERSIONS,
+    SignalNames, TruthSpec, default_sigma,
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{
-    BlockReport, BlockSettings, DiagnosticsReport, RecordBlock, Report, ReportRecord, Reproduction,
-    SelectionReport, SettingsReport,
+    BlockReport, BlockSettings, DiagnosticsReport, RecordBlock, RefinementReport, Report,
+    ReportRecord, Reproduction, SelectionReport, SettingsReport,
 };
 pub use sweep_file::SweepFile;

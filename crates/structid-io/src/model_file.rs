@@ -69,11 +69,13 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
+use structid_core::refine::{InputNonlinearity, LinearStructure, OutputFeedback, lti_lft};
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
     Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
-    NonlinearBlock, TotalVariation,
+    NonlinearBlock, PolynomialDispersion, SumDispersion, TotalVariation,
 };
+use structid_linear::PolynomialModel;
 use structid_lti::{ContinuousStateSpace, Signal};
 use toml::Spanned;
 
@@ -119,6 +121,25 @@ pub enum DispersionSpec {
         /// Additive instead of tensor-product combination of several inputs.
         additive: bool,
     },
+    /// Ridge regression on the monomials up to a total degree
+    /// ([`structid_core::PolynomialDispersion`]).
+    Polynomial {
+        /// Total degree d.
+        degree: usize,
+        /// Weight λ of each normalised monomial (default 1).
+        scale: Option<f64>,
+    },
+    /// A kernel dispersion plus a polynomial trend ([`structid_core::SumDispersion`]): the key
+    /// `trend = d` or `trend = { degree = d, scale = λ }` on a Gaussian, low-rank Gaussian or
+    /// Fourier dispersion. Outside the data the estimate follows the polynomial.
+    WithTrend {
+        /// The kernel part.
+        kernel: Box<DispersionSpec>,
+        /// Total degree of the trend.
+        degree: usize,
+        /// Weight λ of each normalised monomial of the trend (default 1).
+        scale: Option<f64>,
+    },
     /// The total-variation dispersion ([`structid_core::TotalVariation`]); needs the clarabel or
     /// admm solver (chosen automatically).
     TotalVariation {
@@ -130,7 +151,13 @@ pub enum DispersionSpec {
 }
 
 /// The dispersion kinds a model file may name.
-pub const SUPPORTED_DISPERSIONS: &[&str] = &["gaussian", "gaussian-lowrank", "fourier", "tv"];
+pub const SUPPORTED_DISPERSIONS: &[&str] = &[
+    "gaussian",
+    "gaussian-lowrank",
+    "fourier",
+    "polynomial",
+    "tv",
+];
 
 /// The default kernel width for a block whose inputs are `z` (one point per sample):
 /// 0.1 × the largest range (max − min) over its channels, or 0.1 when every channel is
@@ -170,6 +197,8 @@ impl DispersionSpec {
             DispersionSpec::Fourier { .. } => "fourier",
             DispersionSpec::LowRankGaussian { .. } => "gaussian-lowrank",
             DispersionSpec::TotalVariation { .. } => "tv",
+            DispersionSpec::Polynomial { .. } => "polynomial",
+            DispersionSpec::WithTrend { kernel, .. } => kernel.kind(),
         }
     }
 
@@ -179,7 +208,8 @@ impl DispersionSpec {
             DispersionSpec::Gaussian { sigma }
             | DispersionSpec::Fourier { sigma, .. }
             | DispersionSpec::LowRankGaussian { sigma, .. } => *sigma,
-            DispersionSpec::TotalVariation { .. } => None,
+            DispersionSpec::WithTrend { kernel, .. } => kernel.sigma(),
+            DispersionSpec::TotalVariation { .. } | DispersionSpec::Polynomial { .. } => None,
         }
     }
 
@@ -196,7 +226,8 @@ impl DispersionSpec {
             DispersionSpec::Gaussian { sigma: s }
             | DispersionSpec::Fourier { sigma: s, .. }
             | DispersionSpec::LowRankGaussian { sigma: s, .. } => *s = sigma,
-            DispersionSpec::TotalVariation { .. } => {}
+            DispersionSpec::WithTrend { kernel, .. } => **kernel = kernel.with_sigma(sigma),
+            DispersionSpec::TotalVariation { .. } | DispersionSpec::Polynomial { .. } => {}
         }
         out
     }
@@ -222,6 +253,21 @@ impl DispersionSpec {
             }
             return Ok(Arc::new(tv));
         }
+        if let DispersionSpec::Polynomial { degree, scale } = self {
+            return Ok(Arc::new(polynomial(*degree, *scale)?));
+        }
+        if let DispersionSpec::WithTrend {
+            kernel,
+            degree,
+            scale,
+        } = self
+        {
+            let k = kernel.build(sigma_override, block_z)?;
+            return Ok(Arc::new(SumDispersion::new(vec![
+                k,
+                Arc::new(polynomial(*degree, *scale)?),
+            ])?));
+        }
         let s = match (sigma_override, self.sigma(), block_z) {
             (Some(s), _, _) | (None, Some(s), _) => s,
             (None, None, Some(z)) => default_sigma(z),
@@ -237,7 +283,9 @@ impl DispersionSpec {
             DispersionSpec::LowRankGaussian { tolerance, .. } => Ok(Arc::new(
                 LowRankGaussian::new(s, tolerance.unwrap_or(1e-8))?,
             )),
-            DispersionSpec::TotalVariation { .. } => unreachable!("handled above"),
+            DispersionSpec::TotalVariation { .. }
+            | DispersionSpec::Polynomial { .. }
+            | DispersionSpec::WithTrend { .. } => unreachable!("handled above"),
             DispersionSpec::Fourier {
                 harmonics,
                 additive,
@@ -254,6 +302,14 @@ impl DispersionSpec {
             }
         }
     }
+}
+
+fn polynomial(degree: usize, scale: Option<f64>) -> Result<PolynomialDispersion, IoError> {
+    let p = PolynomialDispersion::new(degree)?;
+    Ok(match scale {
+        Some(s) => p.with_scale(s)?,
+        None => p,
+    })
 }
 
 /// The true map of a block, when the model file gives one.
@@ -327,6 +383,9 @@ impl BlockSpec {
 pub struct ModelFile {
     /// The known linear block (discrete time).
     pub lft: Lft,
+    /// The polynomial form of the linear block when the file gives `[linear]` instead of
+    /// `[lft]` (then `lft` is its realisation).
+    pub linear: Option<LinearSpec>,
     /// Data column names.
     pub signals: SignalNames,
     /// The unknown static maps, in file order.
@@ -343,7 +402,8 @@ type RawMatrix = Spanned<Vec<Spanned<Vec<f64>>>>;
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawFile {
-    lft: Spanned<RawLft>,
+    lft: Option<Spanned<RawLft>>,
+    linear: Option<Spanned<RawLinear>>,
     signals: Spanned<RawSignals>,
     #[serde(default)]
     nonlinearity: Vec<Spanned<RawBlock>>,
@@ -378,6 +438,16 @@ struct RawLft {
     dze: Option<RawMatrix>,
     #[serde(rename = "Dzw", alias = "dzw", alias = "D_zw")]
     dzw: Option<RawMatrix>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLinear {
+    structure: Spanned<String>,
+    sample_time: Option<Spanned<f64>>,
+    den: Spanned<Vec<f64>>,
+    num: Spanned<Vec<Vec<f64>>>,
+    num_w: Option<Spanned<Vec<f64>>>,
 }
 
 #[derive(Deserialize)]
@@ -698,6 +768,421 @@ pub(crate) fn value_kind(v: &toml::Value) -> &'static str {
     }
 }
 
+/// The `[lft]` section: the twelve matrices, their dimensions and the time base.
+fn parse_lft(
+    raw_lft: RawLft,
+    lft_line: usize,
+    u: &[String],
+    y: &[String],
+    z_names: &Option<(Vec<String>, usize)>,
+    src: &Source<'_>,
+) -> Result<(Lft, Dim, Dim), IoError> {
+    // Matrices.
+    let mat = |name, raw| MatIn::new(name, raw, src, lft_line);
+    let a = mat("A", raw_lft.a)?;
+    let bu = mat("Bu", raw_lft.bu)?;
+    let be = mat("Be", raw_lft.be)?;
+    let bw = mat("Bw", raw_lft.bw)?;
+    let cy = mat("Cy", raw_lft.cy)?;
+    let dyu = mat("Dyu", raw_lft.dyu)?;
+    let dye = mat("Dye", raw_lft.dye)?;
+    let dyw = mat("Dyw", raw_lft.dyw)?;
+    let cz = mat("Cz", raw_lft.cz)?;
+    let dzu = mat("Dzu", raw_lft.dzu)?;
+    let dze = mat("Dze", raw_lft.dze)?;
+    let dzw = mat("Dzw", raw_lft.dzw)?;
+
+    let n = a.known_rows().unwrap_or(0);
+    if let Some(c) = a.known_cols()
+        && c != n
+    {
+        return Err(err_at(
+            a.line,
+            format!(
+                "matrix A has {} and {}; it must be square (n×n)",
+                plural(n, "row"),
+                plural(c, "column")
+            ),
+        ));
+    }
+    let dn = Dim {
+        value: n,
+        source: if n > 0 {
+            format!("A is {n}×{n} (n = {})", plural(n, "state"))
+        } else if a.given {
+            "A is empty (n = 0 states)".into()
+        } else {
+            "A is not given (n = 0 states)".into()
+        },
+        line: Some(a.line),
+    };
+    let du = Dim {
+        value: u.len(),
+        source: format!("[signals].u names {}", plural(u.len(), "input")),
+        line: None,
+    };
+    let dy = Dim {
+        value: y.len(),
+        source: format!("[signals].y names {}", plural(y.len(), "output")),
+        line: None,
+    };
+    let de = infer_cols(&[&be, &dye, &dze], "noise channel", "n_e");
+    let dw = infer_cols(&[&bw, &dyw, &dzw], "map output", "n_w");
+    let dz = {
+        let from_mat = [&cz, &dzu, &dze, &dzw]
+            .into_iter()
+            .find_map(|m| m.known_rows().map(|r| (m, r)));
+        match (from_mat, z_names) {
+            (Some((m, r)), _) => Dim {
+                value: r,
+                source: format!(
+                    "{} has {} (n_z = {})",
+                    m.name,
+                    plural(r, "row"),
+                    plural(r, "map input")
+                ),
+                line: Some(m.line),
+            },
+            (None, Some((names, _))) => Dim {
+                value: names.len(),
+                source: format!("[signals].z names {}", plural(names.len(), "column")),
+                line: None,
+            },
+            (None, None) => Dim {
+                value: 0,
+                source: "none of Cz, Dzu, Dze, Dzw has a row, so n_z = 0".into(),
+                line: None,
+            },
+        }
+    };
+    let mut m = LftMatrices {
+        a: a.to_matrix(&dn, &dn)?,
+        bu: bu.to_matrix(&dn, &du)?,
+        be: be.to_matrix(&dn, &de)?,
+        bw: bw.to_matrix(&dn, &dw)?,
+        cy: cy.to_matrix(&dy, &dn)?,
+        dyu: dyu.to_matrix(&dy, &du)?,
+        dye: dye.to_matrix(&dy, &de)?,
+        dyw: dyw.to_matrix(&dy, &dw)?,
+        cz: cz.to_matrix(&dz, &dn)?,
+        dzu: dzu.to_matrix(&dz, &du)?,
+        dze: dze.to_matrix(&dz, &de)?,
+        dzw: dzw.to_matrix(&dz, &dw)?,
+    };
+    if let Some((names, line)) = z_names
+        && names.len() != dz.value
+    {
+        return Err(err_at(
+            *line,
+            format!(
+                "[signals].z names {} but {}",
+                plural(names.len(), "column"),
+                dz.source
+            ),
+        ));
+    }
+
+    // Time base.
+    let sample_time = match &raw_lft.sample_time {
+        Some(ts) => {
+            let v = *ts.get_ref();
+            if !(v.is_finite() && v > 0.0) {
+                return Err(err_at(
+                    src.line(ts.span().start),
+                    format!(
+                        "sample_time = {v} is invalid; it must be a finite number of seconds greater than zero"
+                    ),
+                ));
+            }
+            Some(v)
+        }
+        None => None,
+    };
+    match raw_lft
+        .time
+        .as_ref()
+        .map(|t| (t.get_ref().as_str(), src.line(t.span().start)))
+    {
+        None | Some(("discrete", _)) => {}
+        Some(("continuous", line)) => {
+            let Some(ts) = sample_time else {
+                return Err(err_at(
+                    line,
+                    "time = \"continuous\" needs a sample_time (seconds) for the zero-order-hold discretisation",
+                ));
+            };
+            let (ne, nw, nu) = (de.value, dw.value, du.value);
+            let mut b = DMatrix::zeros(n, nu + ne + nw);
+            b.columns_mut(0, nu).copy_from(&m.bu);
+            b.columns_mut(nu, ne).copy_from(&m.be);
+            b.columns_mut(nu + ne, nw).copy_from(&m.bw);
+            let sys = ContinuousStateSpace::new(
+                m.a.clone(),
+                b,
+                DMatrix::zeros(0, n),
+                DMatrix::zeros(0, nu + ne + nw),
+            )
+            .and_then(|s| s.discretize_zoh(ts))
+            .map_err(|e| {
+                err_at(
+                    line,
+                    format!("cannot discretise the continuous-time block: {e}"),
+                )
+            })?;
+            m.a = sys.a().clone();
+            m.bu = sys.b().columns(0, nu).into_owned();
+            m.be = sys.b().columns(nu, ne).into_owned();
+            m.bw = sys.b().columns(nu + ne, nw).into_owned();
+        }
+        Some((other, line)) => {
+            return Err(err_at(
+                line,
+                format!(
+                    "time = \"{other}\" is not supported; use \"discrete\" (default) or \"continuous\""
+                ),
+            ));
+        }
+    }
+    let mut lft = Lft::new(m).map_err(|e| err_at(lft_line, e.to_string()))?;
+    if let Some(ts) = sample_time {
+        lft = lft
+            .with_sample_time(ts)
+            .map_err(|e| err_at(lft_line, e.to_string()))?;
+    }
+
+    Ok((lft, dz, dw))
+}
+
+/// The structure a `[linear]` section places its polynomial block in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinearStructureKind {
+    /// y = G·(u − N(y)) + e: one map in feedback from the measured output (z = y).
+    OutputFeedback,
+    /// y = G·N(u) + e: one map at the input (z = u).
+    Input,
+    /// y = G·u + e: no map (a nominal linear model).
+    Lti,
+}
+
+impl LinearStructureKind {
+    /// Every structure, in the order of the documentation.
+    pub const ALL: [Self; 3] = [Self::OutputFeedback, Self::Input, Self::Lti];
+
+    /// The name used in model files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::OutputFeedback => "output-feedback",
+            Self::Input => "input",
+            Self::Lti => "lti",
+        }
+    }
+
+    /// The structure called `name`, if any.
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// A `[linear]` section: a polynomial linear block G (one output) in a named structure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearSpec {
+    /// Where G sits.
+    pub structure: LinearStructureKind,
+    /// G in the structure's form: for output feedback its inputs are [u…, w] (the last
+    /// numerator is the effect of w on y, −B_u unless `num_w` was given); for an input map its
+    /// one input is w; for `lti` its inputs are u.
+    pub model: PolynomialModel,
+    /// Whether the feedback path has its own numerator (`num_w` given).
+    pub separate_numerator: bool,
+}
+
+impl LinearSpec {
+    /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`] (`None` for
+    /// `lti`, which has no map); `block` names the map.
+    pub fn structure(&self, block: &str) -> Option<Box<dyn LinearStructure>> {
+        match self.structure {
+            LinearStructureKind::OutputFeedback => Some(Box::new(
+                OutputFeedback::new(block).with_separate_numerator(self.separate_numerator),
+            )),
+            LinearStructureKind::Input => Some(Box::new(InputNonlinearity::new(block))),
+            LinearStructureKind::Lti => None,
+        }
+    }
+
+    /// The LFT of this linear block in its structure.
+    pub fn lft(&self) -> Result<Lft, IoError> {
+        Ok(match self.structure(BLOCK_PLACEHOLDER) {
+            Some(s) => s.lft(&self.model)?,
+            None => lti_lft(&self.model)?,
+        })
+    }
+}
+
+const BLOCK_PLACEHOLDER: &str = "N";
+
+/// The `[linear]` section: a polynomial G in a named structure, realised as an LFT.
+fn parse_linear(
+    raw: RawLinear,
+    line: usize,
+    u: &[String],
+    y: &[String],
+    z_names: &Option<(Vec<String>, usize)>,
+    src: &Source<'_>,
+) -> Result<(LinearSpec, Lft, Dim, Dim), IoError> {
+    let structure_line = src.line(raw.structure.span().start);
+    let Some(structure) = LinearStructureKind::parse(raw.structure.get_ref()) else {
+        return Err(err_at(
+            structure_line,
+            format!(
+                "[linear] structure = \"{}\" is unknown; supported: {}",
+                raw.structure.get_ref(),
+                LinearStructureKind::ALL
+                    .iter()
+                    .map(|k| format!("\"{}\"", k.name()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    };
+    if y.len() != 1 {
+        return Err(err_at(
+            line,
+            format!(
+                "[linear] describes a block with one output, but [signals].y names {}",
+                plural(y.len(), "output")
+            ),
+        ));
+    }
+    if let Some((_, zl)) = z_names {
+        return Err(err_at(
+            *zl,
+            "[signals].z is not used with [linear]: the structure fixes z (y for output feedback, u for an input map)",
+        ));
+    }
+    let sample_time = match &raw.sample_time {
+        Some(ts) if !(ts.get_ref().is_finite() && *ts.get_ref() > 0.0) => {
+            return Err(err_at(
+                src.line(ts.span().start),
+                format!(
+                    "sample_time = {} is invalid; it must be a finite number of seconds greater than zero",
+                    ts.get_ref()
+                ),
+            ));
+        }
+        Some(ts) => Some(*ts.get_ref()),
+        None => None,
+    };
+    let den_line = src.line(raw.den.span().start);
+    let den = raw.den.get_ref().clone();
+    if den.is_empty() || den[0] == 0.0 || den.iter().any(|v| !v.is_finite()) {
+        return Err(err_at(
+            den_line,
+            "[linear] den must list finite coefficients of 1, q⁻¹, q⁻², … with a nonzero first one",
+        ));
+    }
+    let num_line = src.line(raw.num.span().start);
+    let mut num = raw.num.get_ref().clone();
+    if num.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(err_at(
+            num_line,
+            "[linear] num has a coefficient that is not finite",
+        ));
+    }
+    let expected = match structure {
+        LinearStructureKind::Input => 1,
+        _ => u.len(),
+    };
+    if structure == LinearStructureKind::Input && u.len() != 1 {
+        return Err(err_at(
+            line,
+            format!(
+                "structure = \"input\" has one input u, but [signals].u names {}",
+                plural(u.len(), "input")
+            ),
+        ));
+    }
+    if num.len() != expected {
+        return Err(err_at(
+            num_line,
+            format!(
+                "[linear] num has {} but the structure needs {expected} (one per input u)",
+                plural(num.len(), "numerator")
+            ),
+        ));
+    }
+    let mut separate = false;
+    match (&raw.num_w, structure) {
+        (Some(nw), LinearStructureKind::OutputFeedback) => {
+            let l = src.line(nw.span().start);
+            let nw = nw.get_ref();
+            if nw.iter().any(|v| !v.is_finite()) {
+                return Err(err_at(
+                    l,
+                    "[linear] num_w has a coefficient that is not finite",
+                ));
+            }
+            if nw.first().is_some_and(|b| *b != 0.0) {
+                return Err(err_at(
+                    l,
+                    "[linear] num_w starts with a direct term; the feedback path needs a delay \
+                     (num_w = [0.0, …]), otherwise y_k depends on N(y_k)",
+                ));
+            }
+            separate = true;
+            num.push(nw.clone());
+        }
+        (Some(nw), _) => {
+            return Err(err_at(
+                src.line(nw.span().start),
+                format!(
+                    "num_w (a separate feedback numerator) only applies to structure = \"output-feedback\", not \"{}\"",
+                    structure.name()
+                ),
+            ));
+        }
+        (None, LinearStructureKind::OutputFeedback) => {
+            if u.len() != 1 {
+                return Err(err_at(
+                    line,
+                    "an output-feedback structure with several inputs u needs its feedback numerator num_w",
+                ));
+            }
+            if num[0].first().is_some_and(|b| *b != 0.0) {
+                return Err(err_at(
+                    num_line,
+                    "[linear] num starts with a direct term; the feedback path shares it and needs \
+                     a delay (num = [[0.0, …]]), otherwise y_k depends on N(y_k)",
+                ));
+            }
+            let bw: Vec<f64> = num[0].iter().map(|x| -x).collect();
+            num.push(if bw.is_empty() { vec![0.0] } else { bw });
+        }
+        (None, _) => {}
+    }
+    let spec = LinearSpec {
+        structure,
+        model: PolynomialModel {
+            den,
+            num,
+            sample_time,
+        },
+        separate_numerator: separate,
+    };
+    let lft = spec.lft().map_err(|e| err_at(line, e.to_string()))?;
+    let (nz, nw) = (lft.dims().z, lft.dims().w);
+    let what = match structure {
+        LinearStructureKind::OutputFeedback => "one map in feedback from y (z = y)",
+        LinearStructureKind::Input => "one map at the input (z = u)",
+        LinearStructureKind::Lti => "no map",
+    };
+    let dim = |value: usize| Dim {
+        value,
+        source: format!("[linear] structure = \"{}\" has {what}", structure.name()),
+        line: Some(structure_line),
+    };
+    Ok((spec, lft, dim(nz), dim(nw)))
+}
+
 fn parse_dispersion(
     v: Option<&Spanned<toml::Value>>,
     block: &str,
@@ -746,9 +1231,10 @@ fn unknown_dispersion_kind(owner: &str, kind: &str, line: usize) -> IoError {
 /// The keys a dispersion kind takes besides `kind`, or `None` for an unknown kind.
 pub(crate) fn dispersion_keys(kind: &str) -> Option<&'static [&'static str]> {
     match kind {
-        "gaussian" => Some(&["sigma"]),
-        "fourier" => Some(&["sigma", "harmonics", "combine"]),
-        "gaussian-lowrank" => Some(&["sigma", "tolerance"]),
+        "gaussian" => Some(&["sigma", "trend"]),
+        "fourier" => Some(&["sigma", "harmonics", "combine", "trend"]),
+        "gaussian-lowrank" => Some(&["sigma", "tolerance", "trend"]),
+        "polynomial" => Some(&["degree", "scale"]),
         "tv" => Some(&["neighbours", "interpolation"]),
         _ => None,
     }
@@ -758,6 +1244,97 @@ pub(crate) fn dispersion_keys(kind: &str) -> Option<&'static [&'static str]> {
 /// every message (e.g. "block `f`"); `line_of(key)` gives the line to report for a key
 /// (`"kind"` for problems with the table as a whole).
 pub(crate) fn dispersion_from_table(
+    t: &toml::Table,
+    owner: &str,
+    line_of: &dyn Fn(&str) -> usize,
+) -> Result<DispersionSpec, IoError> {
+    let base = base_dispersion_from_table(t, owner, line_of)?;
+    let Some(trend) = t.get("trend") else {
+        return Ok(base);
+    };
+    let line = line_of("trend");
+    let (degree, scale) = match trend {
+        toml::Value::Integer(_) => (polynomial_degree(Some(trend), owner, line)?, None),
+        toml::Value::Table(tt) => {
+            if let Some(key) = tt
+                .keys()
+                .find(|k| !["degree", "scale"].contains(&k.as_str()))
+            {
+                return Err(err_at(
+                    line,
+                    format!(
+                        "{owner}: unknown key `{key}` in the trend; it takes `degree`, `scale`"
+                    ),
+                ));
+            }
+            (
+                polynomial_degree(tt.get("degree"), owner, line)?,
+                polynomial_scale(tt.get("scale"), owner, line)?,
+            )
+        }
+        other => {
+            return Err(err_at(
+                line,
+                format!(
+                    "{owner}: trend must be a degree (trend = 3) or a table (trend = {{ degree = 3, scale = 10.0 }}), not {}",
+                    value_kind(other)
+                ),
+            ));
+        }
+    };
+    Ok(DispersionSpec::WithTrend {
+        kernel: Box::new(base),
+        degree,
+        scale,
+    })
+}
+
+fn polynomial_degree(v: Option<&toml::Value>, owner: &str, line: usize) -> Result<usize, IoError> {
+    match v {
+        Some(toml::Value::Integer(d)) if (0..=64).contains(d) => Ok(*d as usize),
+        Some(other) => Err(err_at(
+            line,
+            format!(
+                "{owner}: the polynomial degree must be a whole number from 0 to 64, not {other}"
+            ),
+        )),
+        None => Err(err_at(
+            line,
+            format!("{owner}: a polynomial needs its `degree`, e.g. degree = 3"),
+        )),
+    }
+}
+
+fn polynomial_scale(
+    v: Option<&toml::Value>,
+    owner: &str,
+    line: usize,
+) -> Result<Option<f64>, IoError> {
+    let s = match v {
+        None => return Ok(None),
+        Some(toml::Value::Float(s)) => *s,
+        Some(toml::Value::Integer(s)) => *s as f64,
+        Some(other) => {
+            return Err(err_at(
+                line,
+                format!(
+                    "{owner}: the polynomial scale must be a number, not {}",
+                    value_kind(other)
+                ),
+            ));
+        }
+    };
+    if s.is_finite() && s > 0.0 {
+        Ok(Some(s))
+    } else {
+        Err(err_at(
+            line,
+            format!("{owner}: the polynomial scale {s} must be a finite number greater than zero"),
+        ))
+    }
+}
+
+fn base_dispersion_from_table(
     t: &toml::Table,
     owner: &str,
     line_of: &dyn Fn(&str) -> usize,
@@ -827,6 +1404,10 @@ pub(crate) fn dispersion_from_table(
     }
     match kind {
         "gaussian" => Ok(DispersionSpec::Gaussian { sigma }),
+        "polynomial" => Ok(DispersionSpec::Polynomial {
+            degree: polynomial_degree(t.get("degree"), owner, line_of("degree"))?,
+            scale: polynomial_scale(t.get("scale"), owner, line_of("scale"))?,
+        }),
         "tv" => {
             let neighbours = match t.get("neighbours") {
                 None => None,
@@ -1122,9 +1703,7 @@ impl ModelFile {
     pub fn parse(text: &str, base_dir: Option<&Path>) -> Result<Self, IoError> {
         let src = Source::new(text);
         let raw: RawFile = toml::from_str(text).map_err(|e| toml_error(&e, &src))?;
-        let lft_line = src.line(raw.lft.span().start);
         let signals_line = src.line(raw.signals.span().start);
-        let raw_lft = raw.lft.into_inner();
         let raw_signals = raw.signals.into_inner();
 
         // Signals.
@@ -1147,178 +1726,33 @@ impl ModelFile {
             None => None,
         };
 
-        // Matrices.
-        let mat = |name, raw| MatIn::new(name, raw, &src, lft_line);
-        let a = mat("A", raw_lft.a)?;
-        let bu = mat("Bu", raw_lft.bu)?;
-        let be = mat("Be", raw_lft.be)?;
-        let bw = mat("Bw", raw_lft.bw)?;
-        let cy = mat("Cy", raw_lft.cy)?;
-        let dyu = mat("Dyu", raw_lft.dyu)?;
-        let dye = mat("Dye", raw_lft.dye)?;
-        let dyw = mat("Dyw", raw_lft.dyw)?;
-        let cz = mat("Cz", raw_lft.cz)?;
-        let dzu = mat("Dzu", raw_lft.dzu)?;
-        let dze = mat("Dze", raw_lft.dze)?;
-        let dzw = mat("Dzw", raw_lft.dzw)?;
-
-        let n = a.known_rows().unwrap_or(0);
-        if let Some(c) = a.known_cols()
-            && c != n
-        {
-            return Err(err_at(
-                a.line,
-                format!(
-                    "matrix A has {} and {}; it must be square (n×n)",
-                    plural(n, "row"),
-                    plural(c, "column")
-                ),
-            ));
-        }
-        let dn = Dim {
-            value: n,
-            source: if n > 0 {
-                format!("A is {n}×{n} (n = {})", plural(n, "state"))
-            } else if a.given {
-                "A is empty (n = 0 states)".into()
-            } else {
-                "A is not given (n = 0 states)".into()
-            },
-            line: Some(a.line),
-        };
-        let du = Dim {
-            value: u.len(),
-            source: format!("[signals].u names {}", plural(u.len(), "input")),
-            line: None,
-        };
-        let dy = Dim {
-            value: y.len(),
-            source: format!("[signals].y names {}", plural(y.len(), "output")),
-            line: None,
-        };
-        let de = infer_cols(&[&be, &dye, &dze], "noise channel", "n_e");
-        let dw = infer_cols(&[&bw, &dyw, &dzw], "map output", "n_w");
-        let dz = {
-            let from_mat = [&cz, &dzu, &dze, &dzw]
-                .into_iter()
-                .find_map(|m| m.known_rows().map(|r| (m, r)));
-            match (from_mat, &z_names) {
-                (Some((m, r)), _) => Dim {
-                    value: r,
-                    source: format!(
-                        "{} has {} (n_z = {})",
-                        m.name,
-                        plural(r, "row"),
-                        plural(r, "map input")
-                    ),
-                    line: Some(m.line),
-                },
-                (None, Some((names, _))) => Dim {
-                    value: names.len(),
-                    source: format!("[signals].z names {}", plural(names.len(), "column")),
-                    line: None,
-                },
-                (None, None) => Dim {
-                    value: 0,
-                    source: "none of Cz, Dzu, Dze, Dzw has a row, so n_z = 0".into(),
-                    line: None,
-                },
+        let (lft, dz, dw, lft_line, linear) = match (raw.lft, raw.linear) {
+            (Some(raw_lft), None) => {
+                let lft_line = src.line(raw_lft.span().start);
+                let (lft, dz, dw) =
+                    parse_lft(raw_lft.into_inner(), lft_line, &u, &y, &z_names, &src)?;
+                (lft, dz, dw, lft_line, None)
             }
-        };
-        let mut m = LftMatrices {
-            a: a.to_matrix(&dn, &dn)?,
-            bu: bu.to_matrix(&dn, &du)?,
-            be: be.to_matrix(&dn, &de)?,
-            bw: bw.to_matrix(&dn, &dw)?,
-            cy: cy.to_matrix(&dy, &dn)?,
-            dyu: dyu.to_matrix(&dy, &du)?,
-            dye: dye.to_matrix(&dy, &de)?,
-            dyw: dyw.to_matrix(&dy, &dw)?,
-            cz: cz.to_matrix(&dz, &dn)?,
-            dzu: dzu.to_matrix(&dz, &du)?,
-            dze: dze.to_matrix(&dz, &de)?,
-            dzw: dzw.to_matrix(&dz, &dw)?,
-        };
-        if let Some((names, line)) = &z_names
-            && names.len() != dz.value
-        {
-            return Err(err_at(
-                *line,
-                format!(
-                    "[signals].z names {} but {}",
-                    plural(names.len(), "column"),
-                    dz.source
-                ),
-            ));
-        }
-
-        // Time base.
-        let sample_time = match &raw_lft.sample_time {
-            Some(ts) => {
-                let v = *ts.get_ref();
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(err_at(
-                        src.line(ts.span().start),
-                        format!(
-                            "sample_time = {v} is invalid; it must be a finite number of seconds greater than zero"
-                        ),
-                    ));
-                }
-                Some(v)
+            (None, Some(raw_linear)) => {
+                let line = src.line(raw_linear.span().start);
+                let (spec, lft, dz, dw) =
+                    parse_linear(raw_linear.into_inner(), line, &u, &y, &z_names, &src)?;
+                (lft, dz, dw, line, Some(spec))
             }
-            None => None,
-        };
-        match raw_lft
-            .time
-            .as_ref()
-            .map(|t| (t.get_ref().as_str(), src.line(t.span().start)))
-        {
-            None | Some(("discrete", _)) => {}
-            Some(("continuous", line)) => {
-                let Some(ts) = sample_time else {
-                    return Err(err_at(
-                        line,
-                        "time = \"continuous\" needs a sample_time (seconds) for the zero-order-hold discretisation",
-                    ));
-                };
-                let (ne, nw, nu) = (de.value, dw.value, du.value);
-                let mut b = DMatrix::zeros(n, nu + ne + nw);
-                b.columns_mut(0, nu).copy_from(&m.bu);
-                b.columns_mut(nu, ne).copy_from(&m.be);
-                b.columns_mut(nu + ne, nw).copy_from(&m.bw);
-                let sys = ContinuousStateSpace::new(
-                    m.a.clone(),
-                    b,
-                    DMatrix::zeros(0, n),
-                    DMatrix::zeros(0, nu + ne + nw),
-                )
-                .and_then(|s| s.discretize_zoh(ts))
-                .map_err(|e| {
-                    err_at(
-                        line,
-                        format!("cannot discretise the continuous-time block: {e}"),
-                    )
-                })?;
-                m.a = sys.a().clone();
-                m.bu = sys.b().columns(0, nu).into_owned();
-                m.be = sys.b().columns(nu, ne).into_owned();
-                m.bw = sys.b().columns(nu + ne, nw).into_owned();
-            }
-            Some((other, line)) => {
+            (Some(_), Some(raw_linear)) => {
                 return Err(err_at(
-                    line,
-                    format!(
-                        "time = \"{other}\" is not supported; use \"discrete\" (default) or \"continuous\""
-                    ),
+                    src.line(raw_linear.span().start),
+                    "the file has both [lft] and [linear]; give the linear block one way",
                 ));
             }
-        }
-        let mut lft = Lft::new(m).map_err(|e| err_at(lft_line, e.to_string()))?;
-        if let Some(ts) = sample_time {
-            lft = lft
-                .with_sample_time(ts)
-                .map_err(|e| err_at(lft_line, e.to_string()))?;
-        }
+            (None, None) => {
+                return Err(err_at(
+                    1,
+                    "the file has neither [lft] (a state-space LFT) nor [linear] (a polynomial \
+                     linear block with a named structure)",
+                ));
+            }
+        };
 
         // Blocks.
         let mut blocks: Vec<BlockSpec> = Vec::with_capacity(raw.nonlinearity.len());
@@ -1406,6 +1840,7 @@ impl ModelFile {
         };
         let mf = Self {
             lft,
+            linear,
             signals,
             blocks,
             path: None,
@@ -1539,7 +1974,6 @@ impl ModelFile {
     /// written in its discretised form.
     pub fn to_toml_string(&self) -> String {
         let mut s = String::new();
-        let m = self.lft.matrices();
         let d = self.lft.dims();
         let _ = writeln!(
             s,
@@ -1547,25 +1981,10 @@ impl ModelFile {
              # n = {} states, n_u = {}, n_e = {}, n_w = {}, n_y = {}, n_z = {}.",
             d.states, d.u, d.e, d.w, d.y, d.z
         );
-        s.push_str("[lft]\n");
-        if let Some(ts) = self.lft.sample_time() {
-            let _ = writeln!(s, "sample_time = {}", format_number(ts));
-        }
-        for (name, mat) in [
-            ("A", &m.a),
-            ("Bu", &m.bu),
-            ("Be", &m.be),
-            ("Bw", &m.bw),
-            ("Cy", &m.cy),
-            ("Dyu", &m.dyu),
-            ("Dye", &m.dye),
-            ("Dyw", &m.dyw),
-            ("Cz", &m.cz),
-            ("Dzu", &m.dzu),
-            ("Dze", &m.dze),
-            ("Dzw", &m.dzw),
-        ] {
-            let _ = writeln!(s, "{name} = {}", matrix_toml(mat));
+        if let Some(lin) = &self.linear {
+            write_linear(&mut s, lin);
+        } else {
+            write_lft(&mut s, &self.lft);
         }
         s.push_str("\n[signals]\n");
         let _ = writeln!(s, "u = {}", string_list(&self.signals.u));
@@ -1587,61 +2006,15 @@ impl ModelFile {
             );
             let _ = writeln!(s, "output = {}", b.output);
             match &b.dispersion {
-                DispersionSpec::Gaussian { sigma: Some(sg) } => {
-                    let _ = writeln!(
-                        s,
-                        "dispersion = {{ kind = \"gaussian\", sigma = {} }}",
-                        format_number(*sg)
-                    );
-                }
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
                 }
-                DispersionSpec::TotalVariation {
-                    neighbours,
-                    interpolation,
-                } => {
-                    let mut parts = vec!["kind = \"tv\"".to_string()];
-                    if let Some(k) = neighbours {
-                        parts.push(format!("neighbours = {k}"));
-                    }
-                    match interpolation {
-                        Some(GraphInterpolation::Nearest) => {
-                            parts.push("interpolation = \"nearest\"".into())
-                        }
-                        Some(GraphInterpolation::InverseDistance) => {
-                            parts.push("interpolation = \"inverse-distance\"".into())
-                        }
-                        None => {}
-                    }
-                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
-                }
-                DispersionSpec::LowRankGaussian { sigma, tolerance } => {
-                    let mut parts = vec!["kind = \"gaussian-lowrank\"".to_string()];
-                    if let Some(sg) = sigma {
-                        parts.push(format!("sigma = {}", format_number(*sg)));
-                    }
-                    if let Some(t) = tolerance {
-                        parts.push(format!("tolerance = {}", format_number(*t)));
-                    }
-                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
-                }
-                DispersionSpec::Fourier {
-                    sigma,
-                    harmonics,
-                    additive,
-                } => {
-                    let mut parts = vec!["kind = \"fourier\"".to_string()];
-                    if let Some(sg) = sigma {
-                        parts.push(format!("sigma = {}", format_number(*sg)));
-                    }
-                    if let Some(n) = harmonics {
-                        parts.push(format!("harmonics = {n}"));
-                    }
-                    if *additive {
-                        parts.push("combine = \"additive\"".into());
-                    }
-                    let _ = writeln!(s, "dispersion = {{ {} }}", parts.join(", "));
+                other => {
+                    let _ = writeln!(
+                        s,
+                        "dispersion = {{ {} }}",
+                        dispersion_keys_toml(other).join(", ")
+                    );
                 }
             }
             match &b.truth {
@@ -1656,6 +2029,137 @@ impl ModelFile {
         }
         s
     }
+}
+
+fn write_lft(s: &mut String, lft: &Lft) {
+    let m = lft.matrices();
+    s.push_str("[lft]\n");
+    if let Some(ts) = lft.sample_time() {
+        let _ = writeln!(s, "sample_time = {}", format_number(ts));
+    }
+    for (name, mat) in [
+        ("A", &m.a),
+        ("Bu", &m.bu),
+        ("Be", &m.be),
+        ("Bw", &m.bw),
+        ("Cy", &m.cy),
+        ("Dyu", &m.dyu),
+        ("Dye", &m.dye),
+        ("Dyw", &m.dyw),
+        ("Cz", &m.cz),
+        ("Dzu", &m.dzu),
+        ("Dze", &m.dze),
+        ("Dzw", &m.dzw),
+    ] {
+        let _ = writeln!(s, "{name} = {}", matrix_toml(mat));
+    }
+}
+
+fn write_linear(s: &mut String, lin: &LinearSpec) {
+    let list = |v: &[f64]| {
+        format!(
+            "[{}]",
+            v.iter()
+                .map(|x| format_number(*x))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    };
+    s.push_str("[linear]\n");
+    let _ = writeln!(s, "structure = {}", toml_string(lin.structure.name()));
+    if let Some(ts) = lin.model.sample_time {
+        let _ = writeln!(s, "sample_time = {}", format_number(ts));
+    }
+    let _ = writeln!(s, "den = {}", list(&lin.model.den));
+    let n_u = match lin.structure {
+        LinearStructureKind::OutputFeedback => lin.model.num.len() - 1,
+        _ => lin.model.num.len(),
+    };
+    let _ = writeln!(
+        s,
+        "num = [{}]",
+        lin.model.num[..n_u]
+            .iter()
+            .map(|b| list(b))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if lin.separate_numerator {
+        let _ = writeln!(s, "num_w = {}", list(&lin.model.num[n_u]));
+    }
+}
+
+/// The `key = value` pairs of a dispersion's inline table, `kind` first.
+fn dispersion_keys_toml(spec: &DispersionSpec) -> Vec<String> {
+    let mut parts = vec![format!("kind = \"{}\"", spec.kind())];
+    let sigma = |parts: &mut Vec<String>, sigma: &Option<f64>| {
+        if let Some(sg) = sigma {
+            parts.push(format!("sigma = {}", format_number(*sg)));
+        }
+    };
+    match spec {
+        DispersionSpec::Gaussian { sigma: sg } => sigma(&mut parts, sg),
+        DispersionSpec::TotalVariation {
+            neighbours,
+            interpolation,
+        } => {
+            if let Some(k) = neighbours {
+                parts.push(format!("neighbours = {k}"));
+            }
+            match interpolation {
+                Some(GraphInterpolation::Nearest) => {
+                    parts.push("interpolation = \"nearest\"".into())
+                }
+                Some(GraphInterpolation::InverseDistance) => {
+                    parts.push("interpolation = \"inverse-distance\"".into())
+                }
+                None => {}
+            }
+        }
+        DispersionSpec::LowRankGaussian {
+            sigma: sg,
+            tolerance,
+        } => {
+            sigma(&mut parts, sg);
+            if let Some(t) = tolerance {
+                parts.push(format!("tolerance = {}", format_number(*t)));
+            }
+        }
+        DispersionSpec::Fourier {
+            sigma: sg,
+            harmonics,
+            additive,
+        } => {
+            sigma(&mut parts, sg);
+            if let Some(n) = harmonics {
+                parts.push(format!("harmonics = {n}"));
+            }
+            if *additive {
+                parts.push("combine = \"additive\"".into());
+            }
+        }
+        DispersionSpec::Polynomial { degree, scale } => {
+            parts.push(format!("degree = {degree}"));
+            if let Some(sc) = scale {
+                parts.push(format!("scale = {}", format_number(*sc)));
+            }
+        }
+        DispersionSpec::WithTrend {
+            kernel,
+            degree,
+            scale,
+        } => {
+            parts = dispersion_keys_toml(kernel);
+            parts.push(match scale {
+                Some(sc) => format!(
+                    "trend = {{ degree = {degree}, scale = {} }}",
+                    format_number(*sc)
+                ),
+                None => format!("trend = {degree}"),
+            });
+        }
+    }
+    parts
 }
 
 fn toml_string(s: &str) -> String {

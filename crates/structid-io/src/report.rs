@@ -50,6 +50,30 @@ pub struct Report {
     /// How to re-run this identification exactly (absent in reports of older versions).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reproduction: Option<Reproduction>,
+    /// The alternating refinement that produced the linear part (`structid refine` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refinement: Option<RefinementReport>,
+}
+
+/// What `structid refine` did: every alternation's costs and validation error.
+#[derive(Clone, Debug, Serialize)]
+pub struct RefinementReport {
+    /// The structure, e.g. `output feedback y = G·(u − N(y)) + e`.
+    pub structure: String,
+    /// The validation record: a file, or the held-out fraction of the data.
+    pub validation: Option<String>,
+    /// Leading validation samples not scored.
+    pub settle: usize,
+    /// Every alternation, in order.
+    pub iterations: Vec<structid_core::refine::RefineIteration>,
+    /// Index of the iteration whose model was kept.
+    pub best: usize,
+    /// Why the alternation stopped.
+    pub stop_reason: String,
+    /// The β used (chosen on the first pass when automatic).
+    pub beta: f64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
 }
 
 /// Everything needed to re-run an identification exactly: the files with absolute
@@ -384,6 +408,7 @@ impl Report {
             selection: None,
             files: Vec::new(),
             reproduction: None,
+            refinement: None,
         })
     }
 

@@ -1,0 +1,356 @@
+//! `structid linear`: estimate the linear part (ARX, then output error) and write it as a model
+//! file with a `[linear]` section, ready for `structid refine` or `structid identify`.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use structid_io::{
+    BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, OutputGuard,
+    SignalNames,
+};
+use structid_linear::{
+    ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx, oe,
+    select_orders,
+};
+use structid_lti::Signal;
+
+use crate::error::CliError;
+
+/// Arguments of `structid linear`.
+#[derive(Debug, Args)]
+pub struct LinearArgs {
+    /// The estimation data (CSV with a header row).
+    #[arg(long, short = 'd', value_name = "DATA.csv")]
+    data: PathBuf,
+    /// The input column(s), comma-separated.
+    #[arg(long, value_name = "COLS", default_value = "u", value_delimiter = ',')]
+    input: Vec<String>,
+    /// The output column.
+    #[arg(long, value_name = "COL", default_value = "y")]
+    output: String,
+    /// Orders `NA,NB,NK`: denominator order, numerator coefficients and input delay (MATLAB's
+    /// arx convention). Without it, orders are selected by --select.
+    #[arg(long, value_name = "NA,NB,NK", value_delimiter = ',', num_args = 3)]
+    orders: Option<Vec<usize>>,
+    /// Order selection over NA, NB ∈ 1…--max-order and NK ∈ --min-delay…--max-delay: `aic`,
+    /// `bic`, `fpe` (ARX criteria) or `validation` (simulation error on --validation-data).
+    #[arg(long, value_name = "aic|bic|fpe|validation", default_value = "bic")]
+    select: SelectArg,
+    /// Largest NA and NB of the selection grid.
+    #[arg(long, value_name = "N", default_value_t = 6)]
+    max_order: usize,
+    /// Smallest delay NK of the selection grid (output feedback needs 1).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    min_delay: usize,
+    /// Largest delay NK of the selection grid.
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    max_delay: usize,
+    /// Validation record for `--select validation`.
+    #[arg(long, value_name = "V.csv")]
+    validation_data: Option<PathBuf>,
+    /// `arx` (least squares) or `oe` (ARX, then output-error refinement by
+    /// Levenberg–Marquardt: the simulation error is minimised).
+    #[arg(long, value_name = "arx|oe", default_value = "oe")]
+    method: MethodArg,
+    /// Leading samples left out of the output-error cost (the unknown initial state).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    transient: usize,
+    /// Sample time in seconds, recorded in the model file.
+    #[arg(long, value_name = "TS")]
+    sample_time: Option<f64>,
+    /// Where the estimated block goes: `lti` (y = G·u + e, no map), `output-feedback`
+    /// (y = G·(u − N(y)) + e) or `input` (y = G·N(u) + e).
+    #[arg(long, value_name = "lti|output-feedback|input", default_value = "lti")]
+    structure: StructureArg,
+    /// Output feedback only: give the feedback path its own numerator (y = B_u/F·u + B_w/F·N(y)).
+    #[arg(long)]
+    separate_numerator: bool,
+    /// Name of the map of an output-feedback or input structure.
+    #[arg(long, value_name = "NAME", default_value = "N")]
+    map: String,
+    /// Dispersion of the map: `gaussian`, `gaussian-lowrank`, `fourier`, `tv` or `polynomial`.
+    #[arg(long, value_name = "KIND", default_value = "fourier")]
+    dispersion: MapDispersionArg,
+    /// Add a polynomial trend of this degree to a kernel dispersion (the degree itself for
+    /// `--dispersion polynomial`): the map then extrapolates like the polynomial.
+    #[arg(long, value_name = "D")]
+    trend: Option<usize>,
+    /// The model file to write (never one of the inputs).
+    #[arg(long, short = 'o', value_name = "MODEL.toml")]
+    out: PathBuf,
+}
+
+/// Values of `--select`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SelectArg {
+    /// Akaike's information criterion.
+    Aic,
+    /// The Bayesian (Schwarz) criterion.
+    Bic,
+    /// Akaike's final prediction error.
+    Fpe,
+    /// Simulation error on a validation record.
+    Validation,
+}
+
+/// Values of `--method`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodArg {
+    /// Least squares on the equation error.
+    Arx,
+    /// Simulation (output) error, started from ARX.
+    Oe,
+}
+
+/// Values of `--structure`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StructureArg {
+    /// No map.
+    Lti,
+    /// A map in feedback from y.
+    OutputFeedback,
+    /// A map at the input.
+    Input,
+}
+
+/// Values of `--dispersion` for the map of `structid linear`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MapDispersionArg {
+    /// The Gaussian RKHS norm.
+    Gaussian,
+    /// The Gaussian through Nyström features.
+    GaussianLowrank,
+    /// The Fourier-series kernel.
+    Fourier,
+    /// Total variation.
+    Tv,
+    /// A polynomial (ridge regression on monomials).
+    Polynomial,
+}
+
+fn read_signals(path: &std::path::Path, a: &LinearArgs) -> Result<(Signal, Signal), CliError> {
+    let table = DataTable::read(path)?;
+    let u = table.select(&a.input)?;
+    let y = table.select(std::slice::from_ref(&a.output))?;
+    Ok((u, y))
+}
+
+fn map_dispersion(a: &LinearArgs) -> Result<DispersionSpec, CliError> {
+    let kernel = match a.dispersion {
+        MapDispersionArg::Gaussian => DispersionSpec::Gaussian { sigma: None },
+        MapDispersionArg::GaussianLowrank => DispersionSpec::LowRankGaussian {
+            sigma: None,
+            tolerance: None,
+        },
+        MapDispersionArg::Fourier => DispersionSpec::Fourier {
+            sigma: None,
+            harmonics: None,
+            additive: false,
+        },
+        MapDispersionArg::Tv => {
+            if a.trend.is_some() {
+                return Err(CliError::input(
+                    "--trend applies to kernel dispersions (gaussian, gaussian-lowrank, fourier), not tv",
+                ));
+            }
+            DispersionSpec::TotalVariation {
+                neighbours: None,
+                interpolation: None,
+            }
+        }
+        MapDispersionArg::Polynomial => {
+            return Ok(DispersionSpec::Polynomial {
+                degree: a.trend.unwrap_or(3),
+                scale: None,
+            });
+        }
+    };
+    Ok(match a.trend {
+        Some(degree) => DispersionSpec::WithTrend {
+            kernel: Box::new(kernel),
+            degree,
+            scale: None,
+        },
+        None => kernel,
+    })
+}
+
+/// Runs `structid linear`.
+pub fn run(a: LinearArgs) -> Result<(), CliError> {
+    let mut guard = OutputGuard::new();
+    guard.protect(&a.data);
+    if let Some(v) = &a.validation_data {
+        guard.protect(v);
+    }
+    guard.check(&a.out)?;
+    if let Some(ts) = a.sample_time
+        && !(ts.is_finite() && ts > 0.0)
+    {
+        return Err(CliError::input(format!(
+            "invalid value {ts} for --sample-time: it must be a finite number of seconds greater than zero"
+        )));
+    }
+    if (a.select == SelectArg::Validation) != a.validation_data.is_some() && a.orders.is_none() {
+        return Err(CliError::input(
+            "--select validation and --validation-data V.csv go together",
+        ));
+    }
+    if a.structure == StructureArg::Input && a.input.len() != 1 {
+        return Err(CliError::input(
+            "--structure input takes exactly one input column",
+        ));
+    }
+    if a.separate_numerator && a.structure != StructureArg::OutputFeedback {
+        return Err(CliError::input(
+            "--separate-numerator applies to --structure output-feedback only",
+        ));
+    }
+    let (u, y) = read_signals(&a.data, &a)?;
+    let mut arx_settings = ArxSettings::builder();
+    let mut oe_settings = OeSettings::builder().transient(a.transient);
+    if let Some(ts) = a.sample_time {
+        arx_settings = arx_settings.sample_time(ts);
+        oe_settings = oe_settings.sample_time(ts);
+    }
+    let arx_settings = arx_settings.build()?;
+    let oe_settings = oe_settings.arx(arx_settings.clone()).build()?;
+
+    // Orders: given, or selected on the ARX fits.
+    let (orders, selection_note) = match &a.orders {
+        Some(o) => (
+            Orders::new(o[0], vec![o[1]; a.input.len()], vec![o[2]; a.input.len()])?,
+            None,
+        ),
+        None => {
+            if a.max_order == 0 || a.min_delay > a.max_delay {
+                return Err(CliError::input(
+                    "the selection grid is empty: --max-order must be ≥ 1 and --min-delay ≤ --max-delay",
+                ));
+            }
+            let criterion = match a.select {
+                SelectArg::Aic => OrderCriterion::Aic,
+                SelectArg::Bic => OrderCriterion::Bic,
+                SelectArg::Fpe => OrderCriterion::Fpe,
+                SelectArg::Validation => {
+                    let path = a.validation_data.as_ref().ok_or_else(|| {
+                        CliError::input("--select validation needs --validation-data V.csv")
+                    })?;
+                    let (u, y) = read_signals(path, &a)?;
+                    OrderCriterion::Validation { u, y }
+                }
+            };
+            let grid = OrderGrid {
+                na: 1..=a.max_order,
+                nb: 1..=a.max_order,
+                nk: a.min_delay..=a.max_delay,
+            };
+            let sel = select_orders(&u, &y, &grid, &criterion, &arx_settings)?;
+            let note = format!(
+                "orders selected by {} over {} candidates",
+                criterion.name(),
+                sel.table.len()
+            );
+            (sel.best, Some(note))
+        }
+    };
+    if a.structure == StructureArg::OutputFeedback && orders.nk.iter().any(|&k| k == 0) {
+        return Err(CliError::input(
+            "an output-feedback structure needs an input delay NK ≥ 1 (otherwise y_k depends on N(y_k))",
+        ));
+    }
+    let (model, cost, what): (PolynomialModel, f64, String) = match a.method {
+        MethodArg::Arx => {
+            let fit = arx(&u, &y, &orders, &arx_settings)?;
+            (fit.model, fit.cost, "equation error (ARX)".into())
+        }
+        MethodArg::Oe => {
+            let fit = oe(&u, &y, &orders, &oe_settings)?;
+            let note = if fit.converged {
+                format!("simulation error (OE, {} iterations)", fit.iterations)
+            } else {
+                format!(
+                    "simulation error (OE, stopped after {} iterations without converging)",
+                    fit.iterations
+                )
+            };
+            (fit.model, fit.cost, note)
+        }
+    };
+    let structure = match a.structure {
+        StructureArg::Lti => LinearStructureKind::Lti,
+        StructureArg::OutputFeedback => LinearStructureKind::OutputFeedback,
+        StructureArg::Input => LinearStructureKind::Input,
+    };
+    let mut g = model.clone();
+    if structure == LinearStructureKind::OutputFeedback {
+        // The feedback path starts as the input path: y = G·(u − w).
+        let bw: Vec<f64> = g.num[0].iter().map(|x| -x).collect();
+        g.num.push(bw);
+    }
+    let spec = LinearSpec {
+        structure,
+        model: g,
+        separate_numerator: a.separate_numerator,
+    };
+    let lft = spec.lft()?;
+    let blocks = match structure {
+        LinearStructureKind::Lti => Vec::new(),
+        _ => vec![BlockSpec {
+            name: a.map.clone(),
+            inputs: vec![0],
+            output: 0,
+            dispersion: map_dispersion(&a)?,
+            truth: None,
+        }],
+    };
+    let mf = ModelFile {
+        lft,
+        linear: Some(spec),
+        signals: SignalNames {
+            u: a.input.clone(),
+            y: vec![a.output.clone()],
+            z: None,
+        },
+        blocks,
+        path: None,
+    };
+    let text = mf.to_toml_string();
+    // The file must read back as written.
+    ModelFile::parse(&text, None).map_err(|e| {
+        CliError::runtime(format!(
+            "internal error: the model file does not read back: {e}"
+        ))
+    })?;
+    guard.write(&a.out, text.as_bytes())?;
+
+    let sim = model.simulate(&u)?;
+    let fit = structid_core::metrics::fit_percent(&y.channel(0), &sim);
+    println!(
+        "linear block: na = {}, nb = {:?}, nk = {:?}{}",
+        orders.na,
+        orders.nb,
+        orders.nk,
+        selection_note
+            .map(|n| format!(" ({n})"))
+            .unwrap_or_default()
+    );
+    println!(
+        "fitted by {what}: mean squared error {cost:.4e}; simulation fit on the data {fit:.2} % ({})",
+        if model.is_stable() {
+            "stable"
+        } else {
+            "UNSTABLE"
+        }
+    );
+    println!(
+        "structure: {}{}",
+        structure.name(),
+        if structure == LinearStructureKind::Lti {
+            String::new()
+        } else {
+            format!(", map `{}`", a.map)
+        }
+    );
+    println!("wrote {}", a.out.display());
+    Ok(())
+}

@@ -1,0 +1,425 @@
+//! `structid refine`: alternate between identifying the maps and re-estimating the linear part
+//! of a model file with a `[linear]` section.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use structid_core::hyperparameters::{Criterion, SelectionSettings};
+use structid_core::refine::{RefineSettings, refine};
+use structid_core::{Data, IdentifySettings, InitialState};
+use structid_io::{
+    DataTable, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
+};
+use structid_linear::OeSettings;
+use structid_plot::{Chart, Series, render_chart_svg};
+
+use crate::error::CliError;
+use crate::identify::{absolute, model_and_data, write_estimate};
+use crate::{AutoOr, InitialStateArg};
+
+/// Arguments of `structid refine`.
+#[derive(Debug, Args)]
+pub struct RefineArgs {
+    /// The model file: a `[linear]` section with structure "output-feedback" or "input" (the
+    /// starting linear part, e.g. from `structid linear`) and the map's `[[nonlinearity]]`.
+    #[arg(long, short = 'm', value_name = "MODEL.toml")]
+    model: PathBuf,
+    /// The estimation data (CSV with the columns of `[signals]`).
+    #[arg(long, short = 'd', value_name = "DATA.csv")]
+    data: PathBuf,
+    /// Output directory (created if needed).
+    #[arg(long, short = 'o', value_name = "DIR")]
+    out: PathBuf,
+    /// A validation record (CSV like --data): the alternation stops when its simulation error
+    /// stops improving, and the best iteration is kept.
+    #[arg(long, value_name = "V.csv", conflicts_with = "validation_fraction")]
+    validation_data: Option<PathBuf>,
+    /// Hold out the last fraction of --data as the validation record instead (0 < F < 1).
+    #[arg(long, value_name = "F")]
+    validation_fraction: Option<f64>,
+    /// Leading validation samples that only settle the state and are not scored.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    settle: usize,
+    /// Largest number of alternations.
+    #[arg(long, value_name = "N", default_value_t = 10)]
+    iterations: usize,
+    /// Stop when the validation error (without one, J) improves by less than this fraction.
+    #[arg(long, value_name = "TOL", default_value_t = 1e-3)]
+    tolerance: f64,
+    /// β > 0, or `auto` (chosen on the first pass by --selection, then kept so that J can only
+    /// decrease).
+    #[arg(
+        long,
+        value_name = "B|auto",
+        allow_negative_numbers = true,
+        default_value = "auto"
+    )]
+    beta: AutoOr,
+    /// Kernel width σ > 0 of the map, or `auto` (chosen with β on the first pass). Default:
+    /// the model file's, else 0.1 × the range of the map's input.
+    #[arg(long, value_name = "S|auto", allow_negative_numbers = true)]
+    sigma: Option<AutoOr>,
+    /// Criterion of automatic β/σ: `ml` (marginal likelihood) or `gcv`.
+    #[arg(long, value_name = "ml|gcv", default_value = "ml")]
+    selection: RefineSelectionArg,
+    /// Initial state: `zero` (the record starts at rest) or `estimate` (estimated in both
+    /// steps; use it for records cut from a longer experiment).
+    #[arg(long, value_name = "zero|estimate", default_value = "zero")]
+    initial_state: InitialStateArg,
+    /// Skip the posterior uncertainty band of the map.
+    #[arg(long)]
+    no_bands: bool,
+}
+
+/// Values of `refine --selection`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RefineSelectionArg {
+    /// Maximum marginal likelihood.
+    Ml,
+    /// Generalised cross-validation.
+    Gcv,
+}
+
+/// Splits a record at sample `at`: (first part, rest).
+fn split(data: &Data, at: usize) -> Result<(Data, Data), CliError> {
+    let part = |r: std::ops::Range<usize>| Data::new(data.u().slice(r.clone()), data.y().slice(r));
+    Ok((part(0..at)?, part(at..data.len())?))
+}
+
+/// Runs `structid refine`.
+pub fn run(a: RefineArgs) -> Result<(), CliError> {
+    let t0 = Instant::now();
+    let mf = ModelFile::from_path(&a.model)?;
+    let Some(spec) = mf.linear.clone() else {
+        return Err(CliError::input(format!(
+            "`{}` gives its linear block as [lft]; refinement needs a [linear] section with a \
+             structure (write one with `structid linear --structure output-feedback …`)",
+            a.model.display()
+        )));
+    };
+    if mf.blocks.len() != 1 {
+        return Err(CliError::input(format!(
+            "`{}` has {} maps; refinement needs a structure with exactly one (structure = \
+             \"output-feedback\" or \"input\")",
+            a.model.display(),
+            mf.blocks.len()
+        )));
+    }
+    let block = mf.blocks[0].name.clone();
+    let structure = spec
+        .structure(&block)
+        .ok_or_else(|| CliError::input("structure = \"lti\" has no map to refine"))?;
+    if a.iterations == 0 {
+        return Err(CliError::input("--iterations must be at least 1"));
+    }
+    if !(a.tolerance.is_finite() && a.tolerance >= 0.0) {
+        return Err(CliError::input(format!(
+            "invalid value {} for --tolerance: it must be a finite number ≥ 0",
+            a.tolerance
+        )));
+    }
+    if let Some(f) = a.validation_fraction
+        && !(f > 0.0 && f < 1.0)
+    {
+        return Err(CliError::input(format!(
+            "invalid value {f} for --validation-fraction: it must lie strictly between 0 and 1"
+        )));
+    }
+    let mut guard = OutputGuard::new();
+    guard.protect(&a.model).protect(&a.data);
+    if let Some(v) = &a.validation_data {
+        guard.protect(v);
+    }
+    guard.check(&a.out)?;
+    for f in [
+        "model.toml",
+        "refine.csv",
+        "refine.svg",
+        "estimation.csv",
+        "report.json",
+    ] {
+        guard.check(&a.out.join(f))?;
+    }
+    if a.out.exists() && !a.out.is_dir() {
+        return Err(CliError::input(format!(
+            "--out `{}` exists and is not a directory",
+            a.out.display()
+        )));
+    }
+
+    // Records.
+    let sigma = match a.sigma {
+        Some(AutoOr::Value(s)) if !(s.is_finite() && s > 0.0) => {
+            return Err(CliError::input(format!(
+                "invalid value {s} for --sigma: it must be a finite number greater than zero"
+            )));
+        }
+        Some(AutoOr::Value(s)) => Some(s),
+        _ => None,
+    };
+    let (all, model) = model_and_data(&mf, &a.data, sigma)?;
+    let (data, validation, validation_note, estimation_file) = match (
+        &a.validation_data,
+        a.validation_fraction,
+    ) {
+        (Some(v), _) => {
+            let vd = mf.select_data(&DataTable::read(v)?)?;
+            (all, Some(vd), Some(v.display().to_string()), None)
+        }
+        (None, Some(f)) => {
+            let at = ((1.0 - f) * all.len() as f64).round() as usize;
+            if at < 10 || all.len() - at <= a.settle {
+                return Err(CliError::input(format!(
+                    "--validation-fraction {f} leaves {at} estimation and {} validation samples \
+                     (after {} settling ones); both parts need samples",
+                    all.len() - at,
+                    a.settle
+                )));
+            }
+            let (est, val) = split(&all, at)?;
+            (
+                est,
+                Some(val),
+                Some(format!(
+                    "the last {} samples of {} (fraction {f})",
+                    all.len() - at,
+                    a.data.display()
+                )),
+                Some(a.out.join("estimation.csv")),
+            )
+        }
+        (None, None) => (all, None, None, None),
+    };
+    if let Some(v) = &validation
+        && a.settle >= v.len()
+    {
+        return Err(CliError::input(format!(
+            "--settle {} is not less than the {} validation samples",
+            a.settle,
+            v.len()
+        )));
+    }
+
+    // Settings.
+    let initial_state = match a.initial_state {
+        InitialStateArg::Zero => InitialState::Zero,
+        InitialStateArg::Estimate => InitialState::Estimate,
+    };
+    let auto_beta = a.beta == AutoOr::Auto;
+    let auto_sigma = a.sigma == Some(AutoOr::Auto);
+    let beta = match a.beta {
+        AutoOr::Value(b) if !(b.is_finite() && b > 0.0) => {
+            return Err(CliError::input(format!(
+                "invalid value {b} for --beta: it must be a finite number greater than zero"
+            )));
+        }
+        AutoOr::Value(b) => b,
+        AutoOr::Auto => 0.01,
+    };
+    let identify_settings = IdentifySettings::builder()
+        .beta(beta)
+        .initial_state(initial_state)
+        .posterior(!a.no_bands)
+        .build()?;
+    let selection = if auto_beta || auto_sigma {
+        Some(
+            SelectionSettings::builder()
+                .criterion(match a.selection {
+                    RefineSelectionArg::Ml => Criterion::MarginalLikelihood,
+                    RefineSelectionArg::Gcv => Criterion::Gcv,
+                })
+                .tune_beta(auto_beta)
+                .tune_sigma(auto_sigma)
+                .build()?,
+        )
+    } else {
+        None
+    };
+    let mut oe = OeSettings::builder();
+    if let Some(ts) = spec.model.sample_time {
+        oe = oe.sample_time(ts);
+    }
+    let settings = RefineSettings::builder()
+        .max_iterations(a.iterations)
+        .tolerance(a.tolerance)
+        .identify(identify_settings.clone())
+        .selection(selection)
+        .oe(oe.build()?)
+        .settle(a.settle)
+        .build()?;
+    let dispersion = model.blocks()[0].dispersion.clone();
+    let r = refine(
+        structure.as_ref(),
+        &spec.model,
+        dispersion,
+        &data,
+        validation.as_ref(),
+        &settings,
+    )?;
+
+    // The refined model file: the new linear part, the width actually used.
+    let mut refined = mf.clone();
+    let mut lin = spec.clone();
+    lin.model = r.linear.clone();
+    refined.lft = lin.lft()?;
+    refined.linear = Some(lin);
+    let width = r.model.blocks()[0].dispersion.width();
+    refined.blocks[0].dispersion = refined.blocks[0].dispersion.with_sigma(width);
+    refined.path = None;
+
+    guard.create_dir(&a.out)?;
+    let model_path = a.out.join("model.toml");
+    guard.write(&model_path, refined.to_toml_string().as_bytes())?;
+    let data_file = match &estimation_file {
+        Some(path) => {
+            let names: Vec<String> = refined
+                .signals
+                .u
+                .iter()
+                .chain(&refined.signals.y)
+                .cloned()
+                .collect();
+            let mut columns: Vec<Vec<f64>> = (0..data.u().channels())
+                .map(|c| data.u().channel(c))
+                .collect();
+            columns.extend((0..data.y().channels()).map(|c| data.y().channel(c)));
+            guard.write_csv(path, &names, &columns)?;
+            path.clone()
+        }
+        None => a.data.clone(),
+    };
+    let id = &r.identification;
+    let chosen = identify_settings.with_beta(r.beta)?;
+    let mut report = Report::new(&refined, id, &chosen, None)?;
+    report.model_file = Some(model_path.display().to_string());
+    report.data_file = Some(data_file.display().to_string());
+    report.reproduction = Some(Reproduction {
+        model_file_absolute: absolute(&model_path).display().to_string(),
+        data_file_absolute: absolute(&data_file).display().to_string(),
+        beta: r.beta,
+        sigma: None,
+        solver_requested: "auto".into(),
+        solver: id
+            .diagnostics
+            .solver
+            .split_whitespace()
+            .next()
+            .unwrap_or_default()
+            .to_string(),
+        initial_state: crate::identify::value_name(a.initial_state),
+        memory_limit_mib: None,
+        dispersion: None,
+        neighbours: None,
+        tolerance: None,
+        max_iterations: None,
+        block_sigmas: Vec::new(),
+    });
+    report.selection = r.selection.as_ref().map(structid_io::SelectionReport::new);
+    report.refinement = Some(RefinementReport {
+        structure: structure.describe(),
+        validation: validation_note,
+        settle: a.settle,
+        iterations: r.iterations.clone(),
+        best: r.best,
+        stop_reason: r.stop_reason.clone(),
+        beta: r.beta,
+        seconds: r.seconds,
+    });
+
+    // The iteration table and figure.
+    let csv_path = a.out.join("refine.csv");
+    let n = r.iterations.len();
+    let col = |f: &dyn Fn(&structid_core::refine::RefineIteration) -> f64| -> Vec<f64> {
+        r.iterations.iter().map(f).collect()
+    };
+    guard.write_csv(
+        &csv_path,
+        &[
+            "iteration",
+            "cost_after_maps",
+            "noise_after_maps",
+            "dispersion_term",
+            "cost_after_linear",
+            "estimation_rms",
+            "validation_rms",
+            "oe_iterations",
+            "seconds",
+        ],
+        &[
+            (0..n).map(|i| i as f64).collect(),
+            col(&|i| i.cost_after_maps),
+            col(&|i| i.noise_after_maps),
+            col(&|i| i.dispersion_term),
+            col(&|i| i.cost_after_linear.unwrap_or(f64::NAN)),
+            col(&|i| i.estimation_rms),
+            col(&|i| i.validation_rms.unwrap_or(f64::NAN)),
+            col(&|i| i.oe_iterations as f64),
+            col(&|i| i.seconds),
+        ],
+    )?;
+    let svg_path = a.out.join("refine.svg");
+    let x: Vec<f64> = (0..n).map(|i| i as f64).collect();
+    let est = col(&|i| i.estimation_rms);
+    let val = col(&|i| i.validation_rms.unwrap_or(f64::NAN));
+    let mut chart = Chart::new(
+        "Alternating refinement",
+        "iteration",
+        "RMS simulation error",
+    )
+    .with(Series::line("estimation record", &x, &est));
+    if validation.is_some() {
+        chart = chart.with(Series::line("validation record", &x, &val));
+    }
+    guard.write(&svg_path, render_chart_svg(&chart)?.as_bytes())?;
+
+    let mut written = write_estimate(&a.out, &mut guard, &refined, id, &mut report, a.no_bands)?;
+    written.splice(0..0, [model_path, csv_path, svg_path]);
+    if let Some(p) = estimation_file {
+        written.insert(1, p);
+    }
+    print!("{}", summary(&r, &written, t0.elapsed().as_secs_f64()));
+    Ok(())
+}
+
+fn summary(r: &structid_core::refine::Refinement, written: &[PathBuf], seconds: f64) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "refinement: {} iteration(s), kept iteration {} ({}); β = {}",
+        r.iterations.len(),
+        r.best,
+        r.stop_reason,
+        format_number(r.beta)
+    );
+    let _ = writeln!(
+        s,
+        "  it  J after maps  J after linear  estimation RMS  validation RMS"
+    );
+    for (i, it) in r.iterations.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "  {i:>2}  {:>12.5e}  {:>14}  {:>14.5e}  {:>14}",
+            it.cost_after_maps,
+            it.cost_after_linear
+                .map(|c| format!("{c:.5e}"))
+                .unwrap_or_else(|| "—".into()),
+            it.estimation_rms,
+            it.validation_rms
+                .map(|v| format!("{v:.5e}"))
+                .unwrap_or_else(|| "—".into()),
+        );
+    }
+    let den: Vec<String> = r.linear.den.iter().map(|v| format!("{v:.6}")).collect();
+    let _ = writeln!(s, "linear part: den = [{}]", den.join(", "));
+    for (i, b) in r.linear.num.iter().enumerate() {
+        let nums: Vec<String> = b.iter().map(|v| format!("{v:.6}")).collect();
+        let _ = writeln!(s, "             num[{i}] = [{}]", nums.join(", "));
+    }
+    let _ = writeln!(s, "wrote ({seconds:.1} s):");
+    for p in written {
+        let _ = writeln!(s, "  {}", p.display());
+    }
+    s
+}
