@@ -565,6 +565,23 @@ fn auto_quadratic(
         && penalties
             .iter()
             .all(|p| matches!(p, crate::Penalty::Quadratic(q) if q.features().is_some()));
+    // Both solvers minimise the same J when K = ΨΛΨᵀ; the feature solve costs O(L·m²) against
+    // the exact O((L·n_y)³), so it wins whenever the features are few.
+    let features: usize = penalties
+        .iter()
+        .filter_map(|p| match p {
+            crate::Penalty::Quadratic(q) => q.features().map(|(m, _)| m.dim()),
+            _ => None,
+        })
+        .sum();
+    let rows = problem.len() * problem.outputs();
+    if featured && 4 * (features + nx) <= rows {
+        let id = solver::features::solve(problem, settings)?;
+        let reason = format!(
+            "automatic: every block has finite features ({features} in all, at most a quarter of              the {rows} output samples), the feature solver"
+        );
+        return Ok((id, Some(reason)));
+    }
     if need > settings.effective_memory_limit() && featured {
         let mut id = solver::features::solve(problem, settings)?;
         id.diagnostics.warnings.push(format!(

@@ -436,16 +436,25 @@ impl Default for RefineSettings {
             tolerance: 1e-3,
             identify: IdentifySettings::default(),
             selection: Some(SelectionSettings::default()),
-            oe: OeSettings::default(),
+            oe: default_oe(),
             settle: 0,
         }
     }
 }
 
+/// Output-error settings of the linear step: a relative cost decrease of 1e-7 ends a step
+/// (each alternation restarts from the current G, so a tighter tolerance buys nothing).
+fn default_oe() -> OeSettings {
+    OeSettings::builder()
+        .tolerance(1e-7)
+        .build()
+        .unwrap_or_default()
+}
+
 impl RefineSettings {
     /// A builder starting from the defaults: at most 10 alternations, stop when the
     /// validation error improves by less than 0.1 %, β (and σ if the selection says so) by
-    /// marginal likelihood on the first pass, default output-error settings.
+    /// marginal likelihood on the first pass, output error to a relative decrease of 1e-7.
     pub fn builder() -> RefineSettingsBuilder {
         RefineSettingsBuilder {
             inner: Self::default(),
@@ -514,7 +523,8 @@ impl RefineSettingsBuilder {
         self
     }
 
-    /// Output-error settings of the linear step.
+    /// Output-error settings of the linear step. Keep `transient` at 0: the cost guarantee
+    /// compares the output-error cost with the map step's noise term over all samples.
     pub fn oe(mut self, s: OeSettings) -> Self {
         self.inner.oe = s;
         self
