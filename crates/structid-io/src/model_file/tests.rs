@@ -513,3 +513,148 @@ fn total_variation_dispersion_parses_builds_and_round_trips() {
         assert!(e.contains(needle) && e.contains("line"), "{bad}: {e}");
     }
 }
+
+/// A Silverbox-like file: G = (0.1q⁻¹ + 0.05q⁻²)/(1 − 1.6q⁻¹ + 0.8q⁻²) in output feedback.
+const LINEAR: &str = r#"[linear]
+structure = "output-feedback"
+sample_time = 0.5
+den = [1.0, -1.6, 0.8]
+num = [[0.0, 0.1, 0.05]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "stiffness"
+inputs = [0]
+output = 0
+dispersion = { kind = "fourier", sigma = 0.2, trend = 3 }
+"#;
+
+#[test]
+fn linear_section_is_the_output_feedback_lft_of_its_polynomials() {
+    let m = ModelFile::parse(LINEAR, None).unwrap();
+    let d = m.lft.dims();
+    assert_eq!((d.states, d.u, d.w, d.y, d.z), (2, 1, 1, 1, 1));
+    assert_eq!(m.lft.sample_time(), Some(0.5));
+    let lin = m.linear.as_ref().unwrap();
+    assert_eq!(lin.structure, LinearStructureKind::OutputFeedback);
+    assert!(!lin.separate_numerator);
+    // The feedback path shares the numerator: w enters exactly like −u.
+    let (tu, tw) = (m.lft.t_yu().markov_parameters(6), m.lft.t_yw().markov_parameters(6));
+    for (a, b) in tu.iter().zip(&tw) {
+        assert!((a[(0, 0)] + b[(0, 0)]).abs() < 1e-15);
+    }
+    // The u path is G: its impulse response follows the difference equation.
+    let h: Vec<f64> = tu.iter().map(|m| m[(0, 0)]).collect();
+    let mut g = vec![0.0; 6];
+    for k in 0..6 {
+        let b = [0.0, 0.1, 0.05].get(k).copied().unwrap_or(0.0);
+        g[k] = b + 1.6 * if k >= 1 { g[k - 1] } else { 0.0 }
+            - 0.8 * if k >= 2 { g[k - 2] } else { 0.0 };
+    }
+    for (a, b) in h.iter().zip(&g) {
+        assert!((a - b).abs() < 1e-12, "{h:?} vs {g:?}");
+    }
+    // z = y: measured, including the noise.
+    assert_eq!(m.lft.matrices().dze[(0, 0)], 1.0);
+    assert!(matches!(
+        &m.blocks[0].dispersion,
+        DispersionSpec::WithTrend { degree: 3, scale: None, kernel } if kernel.kind() == "fourier"
+    ));
+}
+
+#[test]
+fn linear_sections_and_trends_round_trip() {
+    let separate = LINEAR.replace(
+        "num = [[0.0, 0.1, 0.05]]",
+        "num = [[0.0, 0.1, 0.05]]\nnum_w = [0.0, -0.2]",
+    );
+    let input = r#"[linear]
+structure = "input"
+den = [1.0, -0.5]
+num = [[0.0, 2.0]]
+[signals]
+u = ["u"]
+y = ["y"]
+[[nonlinearity]]
+name = "actuator"
+inputs = [0]
+output = 0
+dispersion = { kind = "polynomial", degree = 5, scale = 2.5 }
+"#;
+    let lti = "[linear]\nstructure = \"lti\"\nden = [1.0, -0.5]\nnum = [[1.0, 2.0], [0.0, 1.0]]\n[signals]\nu = [\"a\", \"b\"]\ny = [\"y\"]\n";
+    for text in [LINEAR, &separate, input, lti] {
+        let m = ModelFile::parse(text, None).unwrap();
+        let again = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+        assert_eq!(m, again, "{}", m.to_toml_string());
+        assert!(m.to_toml_string().contains("[linear]"));
+    }
+    let m = ModelFile::parse(&separate, None).unwrap();
+    assert!(m.linear.as_ref().unwrap().separate_numerator);
+    assert_eq!(m.linear.as_ref().unwrap().model.num[1], vec![0.0, -0.2]);
+    let m = ModelFile::parse(lti, None).unwrap();
+    assert_eq!((m.lft.dims().w, m.lft.dims().z, m.lft.dims().u), (0, 0, 2));
+    // The trend and polynomial dispersions build what they say.
+    let m = ModelFile::parse(LINEAR, None).unwrap();
+    let d = m.blocks[0].dispersion.build(None, None).unwrap();
+    assert!(d.describe().contains("polynomial(degree=3"), "{}", d.describe());
+    assert_eq!(d.width(), Some(0.2));
+}
+
+#[test]
+fn linear_section_errors_name_the_line() {
+    let cases: [(String, &str, usize); 8] = [
+        (
+            LINEAR.replace("output-feedback", "feedforward"),
+            "supported: \"output-feedback\", \"input\", \"lti\"",
+            2,
+        ),
+        (
+            LINEAR.replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.3, 0.1, 0.05]]"),
+            "direct term",
+            5,
+        ),
+        (
+            LINEAR.replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.0, 0.1], [0.0, 1.0]]"),
+            "2 numerators",
+            5,
+        ),
+        (
+            LINEAR.replace("den = [1.0, -1.6, 0.8]", "den = [0.0, -1.6, 0.8]"),
+            "nonzero first one",
+            4,
+        ),
+        (
+            LINEAR.replace(
+                "num = [[0.0, 0.1, 0.05]]",
+                "num = [[0.0, 0.1, 0.05]]\nnum_w = [0.1, 0.2]",
+            ),
+            "needs a delay",
+            6,
+        ),
+        (
+            LINEAR.replace("[signals]", "[lft]\nA = []\n[signals]"),
+            "both [lft] and [linear]",
+            1,
+        ),
+        (
+            LINEAR.replace("trend = 3", "trend = { degree = 3, scale = -1.0 }"),
+            "greater than zero",
+            15,
+        ),
+        (
+            LINEAR.replace("sample_time = 0.5", "sample_time = -0.5"),
+            "sample_time",
+            3,
+        ),
+    ];
+    for (text, needle, line) in cases {
+        let e = err(&text);
+        assert!(e.contains(needle), "{e}");
+        assert!(e.contains(&format!("line {line}")), "{e}");
+    }
+    let lti_with_map = LINEAR.replace("output-feedback", "lti");
+    assert!(err(&lti_with_map).contains("z[0]"));
+}

@@ -2,18 +2,33 @@
 //!
 //! Shared by the tests of `structid-io` and, through `#[path]`, those of `structid-cli`.
 //! The directory is `$STRUCTID_DATA` when that variable is set, otherwise `../shared/data`
-//! beside the workspace root (`CARGO_MANIFEST_DIR/../../../shared/data`, for every crate of
-//! the workspace). A test that needs a missing file skips with a message, except under CI
+//! beside the workspace root (found from the including crate's manifest directory, so the root
+//! package's tests include this file too, through `#[path]`). A test that needs a missing file skips with a message, except under CI
 //! (the `CI` variable set), where a missing file is a failure naming the path.
 #![allow(dead_code)] // each test crate uses its own subset
 
 use std::path::PathBuf;
 
+/// The workspace root: the nearest directory above the including crate's manifest that
+/// holds `Cargo.lock` (so that every crate of the workspace, and the root package, agree).
+pub fn workspace_root() -> PathBuf {
+    let start = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut dir = start.clone();
+    loop {
+        if dir.join("Cargo.lock").is_file() {
+            return dir;
+        }
+        if !dir.pop() {
+            return start;
+        }
+    }
+}
+
 /// The directory holding the benchmark data.
 pub fn data_dir() -> PathBuf {
     match std::env::var_os("STRUCTID_DATA") {
         Some(d) if !d.is_empty() => PathBuf::from(d),
-        _ => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
+        _ => workspace_root().join("../shared/data"),
     }
 }
 

@@ -1,0 +1,52 @@
+//! The Silverbox pipeline on the real benchmark file, in release mode within CI time: the
+//! issue's requirement is at most 1.0 mV RMS on the full arrow test; this test asserts 0.8 mV.
+//!
+//! The candidate search is narrowed to the structure that the full search of
+//! `examples/silverbox.rs` chooses (n = 6, separate feedback numerator, cubic map; see
+//! BENCHMARKS.md), so the test runs one refinement on the fitting part and one on the whole
+//! estimation split.
+
+#[path = "../crates/structid-io/tests/common/mod.rs"]
+mod common;
+
+use structid::io::Silverbox;
+use structid::silverbox::{SilverboxSettings, run};
+
+#[test]
+fn silverbox_full_arrow_test_is_below_one_millivolt() {
+    let Some(path) = common::silverbox_file() else {
+        return;
+    };
+    let sb = Silverbox::load(&path).unwrap();
+    let settings = SilverboxSettings {
+        orders: vec![6],
+        numerators: vec![true],
+        kernel_margin: f64::INFINITY,
+        ..SilverboxSettings::default()
+    };
+    let r = run(&sb, &settings).unwrap();
+    let score = |name: &str| {
+        r.tests
+            .iter()
+            .find(|t| t.split == name)
+            .map(|t| (t.rms, t.bla2_rms))
+            .unwrap()
+    };
+    let (arrow, bla) = score("test-arrow-full");
+    eprintln!(
+        "silverbox: arrow {:.3} mV (own second-order BLA {:.3} mV), {:.1} s",
+        1e3 * arrow,
+        1e3 * bla,
+        r.seconds
+    );
+    assert!(arrow < 0.8e-3, "full arrow test RMS {:.3} mV", 1e3 * arrow);
+    // The BLA is an order of magnitude worse (published: 13.5 mV), so the map does the work.
+    assert!(bla > 10.0 * arrow, "BLA {bla} vs {arrow}");
+    let (no_extrapolation, _) = score("test-arrow-no-extrapolation");
+    let (multisine, _) = score("test-multisine");
+    assert!(no_extrapolation < 0.6e-3, "{no_extrapolation}");
+    assert!(multisine < 0.6e-3, "{multisine}");
+    // The chosen structure's validation error beats its BLA's by far.
+    let c = &r.candidates[r.chosen];
+    assert!(c.validation_rms < 0.2 * c.bla_validation_rms, "{c:?}");
+}
