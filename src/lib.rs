@@ -23,6 +23,7 @@
 //! ```
 
 pub mod silverbox;
+pub mod tanks;
 
 pub use structid_core::*;
 pub use structid_io as io;
