@@ -94,7 +94,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::create_dir_all(&out)?;
     let id = &f.identification;
     let grid: Vec<f64> = (0..=240).map(|i| -0.3 + 0.6 * i as f64 / 240.0).collect();
-    let points = Signal::from_channels(&[grid.clone()])?;
+    let points = Signal::from_channels(std::slice::from_ref(&grid))?;
     let nhat: Vec<f64> = grid.iter().map(|&y| id.blocks[0].predict(&[y])).collect();
     let std = id
         .posterior_std(0, &points)?

@@ -3,6 +3,7 @@
 //! Needs `cascaded_tanks/dataBenchmark.csv` under `$STRUCTID_DATA` or `../shared/data`; skips
 //! with a message when it is missing, except under CI.
 
+#[path = "../crates/structid-io/tests/common/mod.rs"]
 mod common;
 
 use structid::io::CascadedTanks;

@@ -542,7 +542,10 @@ fn linear_section_is_the_output_feedback_lft_of_its_polynomials() {
     assert_eq!(lin.structure, LinearStructureKind::OutputFeedback);
     assert!(!lin.separate_numerator);
     // The feedback path shares the numerator: w enters exactly like −u.
-    let (tu, tw) = (m.lft.t_yu().markov_parameters(6), m.lft.t_yw().markov_parameters(6));
+    let (tu, tw) = (
+        m.lft.t_yu().markov_parameters(6),
+        m.lft.t_yw().markov_parameters(6),
+    );
     for (a, b) in tu.iter().zip(&tw) {
         assert!((a[(0, 0)] + b[(0, 0)]).abs() < 1e-15);
     }
@@ -599,7 +602,11 @@ dispersion = { kind = "polynomial", degree = 5, scale = 2.5 }
     // The trend and polynomial dispersions build what they say.
     let m = ModelFile::parse(LINEAR, None).unwrap();
     let d = m.blocks[0].dispersion.build(None, None).unwrap();
-    assert!(d.describe().contains("polynomial(degree=3"), "{}", d.describe());
+    assert!(
+        d.describe().contains("polynomial(degree=3"),
+        "{}",
+        d.describe()
+    );
     assert_eq!(d.width(), Some(0.2));
 }
 

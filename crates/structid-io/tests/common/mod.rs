@@ -1,10 +1,10 @@
 //! Finding the measured benchmark files (`/work/shared/data` beside the workspace).
 //!
-//! Shared by the tests of `structid-io` and, through `#[path]`, those of `structid-cli`.
-//! The directory is `$STRUCTID_DATA` when that variable is set, otherwise `../shared/data`
-//! beside the workspace root (found from the including crate's manifest directory, so the root
-//! package's tests include this file too, through `#[path]`). A test that needs a missing file skips with a message, except under CI
-//! (the `CI` variable set), where a missing file is a failure naming the path.
+//! Shared by the tests of `structid-io` and, through `#[path]`, those of `structid-cli` and of
+//! the root package. The directory is `$STRUCTID_DATA` when that variable is set, otherwise
+//! `../shared/data` beside the workspace root (found from the including crate's manifest
+//! directory). A test that needs a missing file skips with a message, except under CI (the
+//! `CI` variable set), where a missing file is a failure naming the path.
 #![allow(dead_code)] // each test crate uses its own subset
 
 use std::path::PathBuf;
