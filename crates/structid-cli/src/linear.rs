@@ -30,8 +30,8 @@ pub struct LinearArgs {
     output: String,
     /// Orders `NA,NB,NK`: denominator order, numerator coefficients and input delay (MATLAB's
     /// arx convention). Without it, orders are selected by --select.
-    #[arg(long, value_name = "NA,NB,NK", value_delimiter = ',', num_args = 3)]
-    orders: Option<Vec<usize>>,
+    #[arg(long, value_name = "NA,NB,NK", value_parser = parse_orders)]
+    orders: Option<[usize; 3]>,
     /// Order selection over NA, NB ∈ 1…--max-order and NK ∈ --min-delay…--max-delay: `aic`,
     /// `bic`, `fpe` (ARX criteria) or `validation` (simulation error on --validation-data).
     #[arg(long, value_name = "aic|bic|fpe|validation", default_value = "bic")]
@@ -78,6 +78,17 @@ pub struct LinearArgs {
     /// The model file to write (never one of the inputs).
     #[arg(long, short = 'o', value_name = "MODEL.toml")]
     out: PathBuf,
+}
+
+/// `NA,NB,NK` as three whole numbers.
+fn parse_orders(text: &str) -> Result<[usize; 3], String> {
+    let v: Vec<usize> = text
+        .split(',')
+        .map(|x| x.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{text}` is not three whole numbers NA,NB,NK: {e}"))?;
+    <[usize; 3]>::try_from(v)
+        .map_err(|v| format!("`{text}` has {} numbers; give three: NA,NB,NK", v.len()))
 }
 
 /// Values of `--select`.

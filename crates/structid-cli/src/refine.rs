@@ -36,7 +36,9 @@ pub struct RefineArgs {
     /// stops improving, and the best iteration is kept.
     #[arg(long, value_name = "V.csv", conflicts_with = "validation_fraction")]
     validation_data: Option<PathBuf>,
-    /// Hold out the last fraction of --data as the validation record instead (0 < F < 1).
+    /// Hold out the last fraction of --data as the validation record instead (0 < F < 1): the
+    /// maps and G are estimated on the rest, and the validation error is that of a simulation
+    /// of the whole file, scored on the held-out samples.
     #[arg(long, value_name = "F")]
     validation_fraction: Option<f64>,
     /// Leading validation samples that only settle the state and are not scored.
@@ -160,7 +162,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         _ => None,
     };
     let (all, model) = model_and_data(&mf, &a.data, sigma)?;
-    let (data, validation, validation_note, estimation_file) = match (
+    let (data, validation, validation_note, estimation_file): (Data, Option<Data>, _, _) = match (
         &a.validation_data,
         a.validation_fraction,
     ) {
@@ -178,21 +180,25 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
                     a.settle
                 )));
             }
-            let (est, val) = split(&all, at)?;
+            // The validation record is the whole file, simulated from its start and scored
+            // after the estimation part: the held-out samples do not start at rest.
+            let (est, _) = split(&all, at)?;
+            let note = format!(
+                "the last {} samples of {} (fraction {f}), simulated from the start of the file",
+                all.len() - at,
+                a.data.display()
+            );
             (
                 est,
-                Some(val),
-                Some(format!(
-                    "the last {} samples of {} (fraction {f})",
-                    all.len() - at,
-                    a.data.display()
-                )),
+                Some(all),
+                Some(note),
                 Some(a.out.join("estimation.csv")),
             )
         }
         (None, None) => (all, None, None, None),
     };
     if let Some(v) = &validation
+        && a.validation_fraction.is_none()
         && a.settle >= v.len()
     {
         return Err(CliError::input(format!(
@@ -241,13 +247,17 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(ts) = spec.model.sample_time {
         oe = oe.sample_time(ts);
     }
+    let settle = match a.validation_fraction {
+        Some(_) => data.len() + a.settle,
+        None => a.settle,
+    };
     let settings = RefineSettings::builder()
         .max_iterations(a.iterations)
         .tolerance(a.tolerance)
         .identify(identify_settings.clone())
         .selection(selection)
         .oe(oe.build()?)
-        .settle(a.settle)
+        .settle(settle)
         .build()?;
     let dispersion = model.blocks()[0].dispersion.clone();
     let r = refine(
@@ -320,7 +330,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     report.refinement = Some(RefinementReport {
         structure: structure.describe(),
         validation: validation_note,
-        settle: a.settle,
+        settle,
         iterations: r.iterations.clone(),
         best: r.best,
         stop_reason: r.stop_reason.clone(),
