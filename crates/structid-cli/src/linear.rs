@@ -55,6 +55,10 @@ pub struct LinearArgs {
     /// Leading samples left out of the output-error cost (the unknown initial state).
     #[arg(long, value_name = "N", default_value_t = 0)]
     transient: usize,
+    /// Initial state of the output-error fit: `zero` (the record starts at rest) or `estimate`
+    /// (estimated with the model; for records cut from a longer experiment).
+    #[arg(long, value_name = "zero|estimate", default_value = "zero")]
+    initial_state: crate::InitialStateArg,
     /// Sample time in seconds, recorded in the model file.
     #[arg(long, value_name = "TS")]
     sample_time: Option<f64>,
@@ -264,7 +268,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             (sel.best, Some(note))
         }
     };
-    if a.structure == StructureArg::OutputFeedback && orders.nk.iter().any(|&k| k == 0) {
+    if a.structure == StructureArg::OutputFeedback && orders.nk.contains(&0) {
         return Err(CliError::input(
             "an output-feedback structure needs an input delay NK ≥ 1 (otherwise y_k depends on N(y_k))",
         ));
@@ -275,7 +279,19 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             (fit.model, fit.cost, "equation error (ARX)".into())
         }
         MethodArg::Oe => {
-            let fit = oe(&u, &y, &orders, &oe_settings)?;
+            let fit = match a.initial_state {
+                crate::InitialStateArg::Zero => oe(&u, &y, &orders, &oe_settings)?,
+                crate::InitialStateArg::Estimate => {
+                    let start = arx(&u, &y, &orders, &arx_settings)?.model;
+                    structid_core::refine::output_error_with_state(
+                        &u,
+                        &y,
+                        &start,
+                        &oe_settings,
+                        true,
+                    )?
+                }
+            };
             let note = if fit.converged {
                 format!("simulation error (OE, {} iterations)", fit.iterations)
             } else {

@@ -91,7 +91,10 @@ fn linear_then_refine_then_validate() {
     ]);
     assert!(o.stdout.contains("na = 2"), "{}", o.stdout);
     let text = std::fs::read_to_string(&bla).unwrap();
-    assert!(text.contains("[linear]") && text.contains("output-feedback"), "{text}");
+    assert!(
+        text.contains("[linear]") && text.contains("output-feedback"),
+        "{text}"
+    );
     assert!(text.contains("kind = \"polynomial\", degree = 3"), "{text}");
 
     // Refinement with a held-out quarter.
@@ -160,7 +163,9 @@ fn linear_then_refine_then_validate() {
     ]);
     let v = json(&vout.join("validation.json"));
     assert_eq!(v["inputs"]["settle"], 20);
-    let rms = v["outputs"][0]["rms"].as_f64().unwrap_or_else(|| panic!("{v}"));
+    let rms = v["outputs"][0]["rms"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{v}"));
     assert!(rms < 0.004, "validation simulation RMS {rms}\n{}", o.stdout);
 }
 
@@ -174,7 +179,13 @@ fn refine_and_linear_reject_bad_input() {
     write_input(&u, 300, 3);
     let data = d.join("data.csv");
     ok(&[
-        "simulate", "--model", p(&truth), "--input", p(&u), "--out", p(&data),
+        "simulate",
+        "--model",
+        p(&truth),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
     ]);
     let hammerstein = common::example_model("hammerstein.toml");
     let out = d.join("out");

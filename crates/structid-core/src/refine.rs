@@ -8,10 +8,10 @@
 //!
 //! 1. **Maps, G fixed.** Build the structured model from G ([`LinearStructure::model`]) and
 //!    identify the maps with [`identify()`]; β (and σ) are chosen on the first pass by
-//!    [`hyperparameters::select`] and then kept.
+//!    [`crate::hyperparameters::select`] and then kept.
 //! 2. **G, maps fixed.** With the map outputs fixed at their sample values ŵ, the inputs of G
 //!    are known signals (for output feedback, u and ŵ = N̂(y) with y measured), so this step is
-//!    an output-error estimate of G ([`structid_linear::output_error`], Levenberg–Marquardt
+//!    an output-error estimate of G ([`structid_linear::output_error()`], Levenberg–Marquardt
 //!    started at the current G).
 //! 3. Repeat until the simulation error on a validation record stops improving.
 //!
@@ -60,7 +60,7 @@ pub trait LinearStructure: Send + Sync {
     /// The name of the unknown map.
     fn block_name(&self) -> &str;
 
-    /// The LFT for the linear part `g`: one map reading z[0] and writing w[0], white output
+    /// The LFT for the linear part `g`: one map reading z\[0\] and writing w\[0\], white output
     /// noise (y = … + e) so that [`refine`]'s cost decreases.
     fn lft(&self, g: &PolynomialModel) -> Result<Lft>;
 
