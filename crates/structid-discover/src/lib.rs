@@ -1,0 +1,29 @@
+//! # structid-discover: naming what a model is missing
+//!
+//! The discovery workflow of structid starts from a model that almost fits: it finds where the
+//! simulation and the measurements disagree, inserts an unknown static block at candidate
+//! places of the structure, identifies it nonparametrically (structid's `identify`), and
+//! names what the estimate shows. This crate holds that last step so far:
+//!
+//! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
+//!   Stribeck friction, odd and even polynomial stiffness, quantisation, offset, gain error),
+//!   each a parametric family with documented parameters, fitted to the points (z_k, ŵ_k) of a
+//!   nonparametric estimate by least squares with 95 % intervals, ranked by the Bayesian
+//!   information criterion, and named only when the best fit is within the noise.
+//!
+//! ```
+//! use structid_discover::effects::{Effect, NamingSettings, name_effect};
+//! // Points of an estimated map: a saturation at ±1 with slope 2.
+//! let z: Vec<f64> = (0..400).map(|k| -1.5 + 3.0 * k as f64 / 399.0).collect();
+//! let w: Vec<f64> = z.iter().map(|z| (2.0 * z).clamp(-1.0, 1.0)).collect();
+//! let naming = name_effect(&z, &w, &NamingSettings::default()).unwrap();
+//! let best = naming.named.unwrap();
+//! assert_eq!(best.effect, Effect::Saturation);
+//! println!("{}: {}", best.effect.name(), best.expression);
+//! ```
+
+pub mod effects;
+
+pub use effects::{
+    Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
+};
