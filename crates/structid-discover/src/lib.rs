@@ -3,8 +3,10 @@
 //! The discovery workflow of structid starts from a model that almost fits: it finds where the
 //! simulation and the measurements disagree, inserts an unknown static block at candidate
 //! places of the structure, identifies it nonparametrically (structid's `identify`), and
-//! names what the estimate shows. This crate holds that last step so far:
+//! names what the estimate shows. This crate holds so far:
 //!
+//! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
+//!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
 //! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
 //!   Stribeck friction, odd and even polynomial stiffness, quantisation, offset, gain error),
 //!   each a parametric family with documented parameters, fitted to the points (z_k, ŵ_k) of a
@@ -23,6 +25,7 @@
 //! ```
 
 pub mod effects;
+pub mod localise;
 
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
