@@ -11,7 +11,9 @@
 //!   Stribeck friction, odd and even polynomial stiffness, quantisation, offset, gain error),
 //!   each a parametric family with documented parameters, fitted to the points (z_k, ŵ_k) of a
 //!   nonparametric estimate by least squares with 95 % intervals, ranked by the Bayesian
-//!   information criterion, and named only when the best fit is within the noise.
+//!   information criterion, and named only when the best fit is within the noise;
+//! * [`hysteresis`]: whether the residual of a static fit depends on the direction of motion
+//!   (hysteresis or backlash: an effect that is not static and must not be forced into a name).
 //!
 //! ```
 //! use structid_discover::effects::{Effect, NamingSettings, name_effect};
@@ -25,6 +27,7 @@
 //! ```
 
 pub mod effects;
+pub mod hysteresis;
 pub mod localise;
 
 pub use effects::{

@@ -1,0 +1,208 @@
+//! Is an effect static at all? A test for dependence on the direction of motion.
+//!
+//! A static map w = N(z) gives the same w whether z rises or falls. Hysteresis and backlash
+//! do not: the paper's Example 1 shows the best static dispersion staying high. Given the
+//! points (z_k, w_k) in time order and a static fit f, [`direction_dependence`] splits the
+//! residual r_k = w_k − f(z_k) by the direction of z (sign of z_(k+1) − z_(k−1)) inside
+//! quantile bins of z, so that a map that merely differs across z is not mistaken for
+//! hysteresis, and measures
+//!
+//! ```text
+//!   explained = Σ_b Σ_(d ∈ {rising, falling}) n_bd·(m_bd − m_b)²  /  Σ_k r_k²
+//! ```
+//!
+//! (m_bd the mean residual of bin b's samples moving in direction d, m_b the bin's mean: the
+//! share of the residual energy that the direction explains beyond z itself)
+//!
+//! together with the standardised difference of the rising and falling means. The effect is
+//! reported as dynamic ("hysteresis or backlash suspected") when direction explains more than
+//! `threshold` (0.1 is a good default) of the residual energy and the difference is significant
+//! (|t| > 5).
+
+/// The outcome of [`direction_dependence`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DirectionTest {
+    /// Share of the residual energy explained by the direction of z within z-bins (0…1).
+    pub explained: f64,
+    /// The pooled t statistic of (mean rising − mean falling residual) within bins.
+    pub t_statistic: f64,
+    /// Samples used (those with a nonzero direction).
+    pub samples: usize,
+    /// Whether the effect looks dynamic (direction-dependent).
+    pub dynamic: bool,
+}
+
+/// Tests whether the residual `r` of a static fit depends on the direction of `z` (both in
+/// time order); see the [module documentation](self). `threshold` is the share of residual
+/// energy direction must explain to call the effect dynamic.
+///
+/// ```
+/// use structid_discover::hysteresis::direction_dependence;
+/// // Backlash of half-width 0.3 driven by a sine, against the static fit w = z.
+/// let z: Vec<f64> = (0..2000).map(|k| (k as f64 * 0.02).sin()).collect();
+/// let mut w = vec![0.0; z.len()];
+/// for k in 1..z.len() {
+///     w[k] = if z[k] - w[k - 1] > 0.3 { z[k] - 0.3 } else if z[k] - w[k - 1] < -0.3 { z[k] + 0.3 } else { w[k - 1] };
+/// }
+/// let r: Vec<f64> = w.iter().zip(&z).map(|(w, z)| w - z).collect();
+/// assert!(direction_dependence(&z, &r, 0.1).dynamic);
+/// ```
+pub fn direction_dependence(z: &[f64], r: &[f64], threshold: f64) -> DirectionTest {
+    let n = z.len().min(r.len());
+    let none = DirectionTest {
+        explained: 0.0,
+        t_statistic: 0.0,
+        samples: 0,
+        dynamic: false,
+    };
+    if n < 20 {
+        return none;
+    }
+    // Direction by the central difference; flat samples carry no direction.
+    let mut up: Vec<bool> = Vec::with_capacity(n);
+    let mut keep: Vec<usize> = Vec::with_capacity(n);
+    for k in 1..n - 1 {
+        let d = z[k + 1] - z[k - 1];
+        if d != 0.0 && d.is_finite() && r[k].is_finite() && z[k].is_finite() {
+            keep.push(k);
+            up.push(d > 0.0);
+        }
+    }
+    let m = keep.len();
+    if m < 20 {
+        return none;
+    }
+    // Quantile bins of z over the kept samples.
+    let bins = (m / 50).clamp(2, 20);
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| z[keep[a]].total_cmp(&z[keep[b]]));
+    let mut bin = vec![0; m];
+    for (rank, &i) in order.iter().enumerate() {
+        bin[i] = rank * bins / m;
+    }
+    // Per bin and direction: count, sum, sum of squares.
+    let mut acc = vec![[(0usize, 0.0f64, 0.0f64); 2]; bins];
+    for i in 0..m {
+        let v = r[keep[i]];
+        let a = &mut acc[bin[i]][usize::from(up[i])];
+        a.0 += 1;
+        a.1 += v;
+        a.2 += v * v;
+    }
+    let total: f64 = keep.iter().map(|&k| r[k] * r[k]).sum();
+    if total <= 0.0 {
+        return DirectionTest { samples: m, ..none };
+    }
+    let (mut between, mut diff_sum, mut var_sum, mut within) = (0.0, 0.0, 0.0, 0.0);
+    let mut dof = 0usize;
+    for b in &acc {
+        let [(n0, s0, q0), (n1, s1, q1)] = *b;
+        if n0 < 2 || n1 < 2 {
+            continue;
+        }
+        let (m0, m1) = (s0 / n0 as f64, s1 / n1 as f64);
+        let nb = (n0 + n1) as f64;
+        let mb = (s0 + s1) / nb;
+        // Energy explained by splitting this bin by direction (around the bin's mean).
+        between += n0 as f64 * (m0 - mb).powi(2) + n1 as f64 * (m1 - mb).powi(2);
+        within += (q0 - s0 * m0) + (q1 - s1 * m1);
+        dof += n0 + n1 - 2;
+        diff_sum += (m1 - m0) * nb;
+        var_sum += nb * nb * (1.0 / n0 as f64 + 1.0 / n1 as f64);
+    }
+    if dof == 0 {
+        return DirectionTest { samples: m, ..none };
+    }
+    let pooled = (within / dof as f64).max(f64::MIN_POSITIVE);
+    let t = diff_sum / (pooled * var_sum).sqrt();
+    let explained = (between / total).clamp(0.0, 1.0);
+    DirectionTest {
+        explained,
+        t_statistic: t,
+        samples: m,
+        dynamic: explained > threshold && t.abs() > 5.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, Normal};
+
+    fn input(len: usize, seed: u64) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let n = Normal::new(0.0, 1.0).unwrap();
+        let mut s = 0.0;
+        (0..len)
+            .map(|_| {
+                s = 0.95 * s + 0.3 * n.sample(&mut rng);
+                s
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_static_map_with_noise_is_not_dynamic() {
+        for seed in 0..10 {
+            let z = input(3000, seed);
+            let mut rng = StdRng::seed_from_u64(seed + 100);
+            let n = Normal::new(0.0, 0.05).unwrap();
+            // The residual of a correct static fit: noise only.
+            let r: Vec<f64> = z.iter().map(|_| n.sample(&mut rng)).collect();
+            let t = direction_dependence(&z, &r, 0.1);
+            assert!(!t.dynamic && t.explained < 0.02, "seed {seed}: {t:?}");
+            // A wrong static fit (a missing z³) is still not direction-dependent.
+            let r: Vec<f64> = z
+                .iter()
+                .map(|z| 0.3 * z.powi(3) + n.sample(&mut rng))
+                .collect();
+            let t = direction_dependence(&z, &r, 0.1);
+            assert!(
+                !t.dynamic && t.explained < 0.02,
+                "seed {seed} (wrong static map): {t:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn backlash_and_bouc_wen_hysteresis_are_dynamic() {
+        for seed in 0..10 {
+            let z = input(3000, seed);
+            // Backlash of half-width 0.2; the static fit is the identity.
+            let mut w = vec![0.0; z.len()];
+            for k in 1..z.len() {
+                let d = z[k] - w[k - 1];
+                w[k] = if d > 0.2 {
+                    z[k] - 0.2
+                } else if d < -0.2 {
+                    z[k] + 0.2
+                } else {
+                    w[k - 1]
+                };
+            }
+            let r: Vec<f64> = w.iter().zip(&z).map(|(w, z)| w - z).collect();
+            let t = direction_dependence(&z, &r, 0.1);
+            assert!(t.dynamic && t.explained > 0.15, "backlash {seed}: {t:?}");
+            // Bouc–Wen: ḣ = A·ż − β|ż|·h − γ·ż·|h|, w = α·z + (1 − α)·h.
+            let (a, b, g, alpha) = (1.0, 2.0, 1.0, 0.3);
+            let mut h = 0.0;
+            let mut r = vec![0.0; z.len()];
+            for k in 1..z.len() {
+                let dz = z[k] - z[k - 1];
+                h += a * dz - b * dz.abs() * h - g * dz * h.abs();
+                // Residual against the best linear static part α·z: the hysteretic term.
+                r[k] = (1.0 - alpha) * h;
+            }
+            let t = direction_dependence(&z, &r, 0.1);
+            assert!(t.dynamic, "Bouc–Wen {seed}: {t:?}");
+        }
+    }
+
+    #[test]
+    fn short_or_flat_records_are_not_dynamic() {
+        assert!(!direction_dependence(&[1.0; 10], &[1.0; 10], 0.25).dynamic);
+        assert!(!direction_dependence(&[1.0; 100], &[0.5; 100], 0.25).dynamic);
+    }
+}
