@@ -8,7 +8,8 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, lti_lft, refine,
+    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, lti_lft,
+    output_error_with_state, refine,
 };
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
@@ -291,4 +292,67 @@ fn bad_settings_and_structures_are_errors() {
             .estimate_linear(&two, &w, &g, &OeSettings::default(), false)
             .is_err()
     );
+}
+
+/// The cost of `g` on (u, y) with its best initial state: least squares on the free responses
+/// q^{−j}/F·δ, j < n (what identify() reaches with InitialState::Estimate for this G).
+fn best_initial_state_cost(g: &PolynomialModel, u: &Signal, y: &Signal) -> f64 {
+    let len = y.len();
+    let n = (g.den.len() - 1).max(g.num[0].len() - 1);
+    let sim = g.simulate(u).unwrap();
+    let r = nalgebra::DVector::from_fn(len, |k, _| y.get(k, 0) - sim[k]);
+    let delta = Signal::from_fn(len, 1, |k, _| if k == 0 { 1.0 } else { 0.0 });
+    let columns: Vec<Vec<f64>> = (0..n)
+        .map(|j| {
+            let mut b = vec![0.0; j];
+            b.push(1.0);
+            let m = PolynomialModel {
+                den: g.den.clone(),
+                num: vec![b],
+                sample_time: None,
+            };
+            m.simulate(&delta).unwrap()
+        })
+        .collect();
+    let phi = nalgebra::DMatrix::from_fn(len, n, |k, j| columns[j][k]);
+    let c = phi.clone().svd(true, true).solve(&r, 1e-14).unwrap();
+    (r - phi * c).norm_squared() / len as f64
+}
+
+/// The linear step with a free initial state starts where the map step left off (G with its
+/// best initial state), so even a single Levenberg–Marquardt iteration cannot end above it:
+/// the cost guarantee does not depend on the output-error fit converging.
+#[test]
+fn free_initial_state_fit_never_ends_above_the_start_with_its_best_state() {
+    let g = truth();
+    let len = 300;
+    let u = input(len, 0.3, 5);
+    let free = PolynomialModel {
+        den: g.den.clone(),
+        num: vec![vec![5.0, -3.0]],
+        sample_time: None,
+    };
+    let delta = Signal::from_fn(len, 1, |k, _| if k == 0 { 1.0 } else { 0.0 });
+    let (forced, response) = (g.simulate(&u).unwrap(), free.simulate(&delta).unwrap());
+    let y = Signal::from_fn(len, 1, |k, _| {
+        forced[k] + response[k] + 0.01 * (1.3 * k as f64).sin().signum()
+    });
+    let start_cost = best_initial_state_cost(&g, &u, &y);
+    for iterations in 1..4 {
+        let s = OeSettings::builder()
+            .max_iterations(iterations)
+            .build()
+            .unwrap();
+        let fit = output_error_with_state(&u, &y, &g, &s, true).unwrap();
+        assert!(
+            (fit.initial_cost - start_cost).abs() <= 1e-9 * start_cost,
+            "initial cost {} vs the start's best {start_cost}",
+            fit.initial_cost
+        );
+        assert!(
+            fit.cost <= start_cost * (1.0 + 1e-12),
+            "{iterations} iteration(s): {} > the start's best {start_cost}",
+            fit.cost
+        );
+    }
 }
