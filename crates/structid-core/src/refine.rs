@@ -157,6 +157,19 @@ pub fn output_error_with_state(
     settings: &OeSettings,
     free_initial_state: bool,
 ) -> Result<OeFit> {
+    // The output-error orders are read from the numerators (nk = leading zeros): an all-zero
+    // numerator would have no free coefficient and its path would silently stay at zero.
+    if let Some(i) = g
+        .num
+        .iter()
+        .position(|b| !b.is_empty() && b.iter().all(|&v| v == 0.0))
+    {
+        return Err(Error::InvalidStructure(format!(
+            "numerator {i} of the linear part is all zeros, so output error cannot tell its \
+             delay and would keep that path at zero; start it from small nonzero coefficients \
+             after the delay (e.g. [0.0, 1e-6, 1e-6] for a delay of one sample)"
+        )));
+    }
     if !free_initial_state {
         return output_error(inputs, y, g, settings).map_err(linear_error);
     }

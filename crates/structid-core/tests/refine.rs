@@ -287,6 +287,23 @@ fn bad_settings_and_structures_are_errors() {
     .unwrap();
     let g = structure.initial_from_bla(&truth()).unwrap();
     let w = Signal::zeros(50, 1);
+    // A feedback numerator started at zero has no free coefficient (its orders are read
+    // from the leading zeros): an error, not a path silently fixed at zero.
+    let separate = OutputFeedback::new("N").with_separate_numerator(true);
+    let mut zero_w = g.clone();
+    zero_w.num[1] = vec![0.0, 0.0, 0.0];
+    let one = Data::new(
+        Signal::from_fn(50, 1, |k, _| ((k * k) as f64 * 0.37).sin()),
+        Signal::from_fn(50, 1, |k, _| (k as f64 * 0.1).sin()),
+    )
+    .unwrap();
+    for free in [false, true] {
+        let e = separate
+            .estimate_linear(&one, &w, &zero_w, &OeSettings::default(), free)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("all zeros"), "{e}");
+    }
     assert!(
         structure
             .estimate_linear(&two, &w, &g, &OeSettings::default(), false)
