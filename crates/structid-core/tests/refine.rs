@@ -373,3 +373,24 @@ fn free_initial_state_fit_never_ends_above_the_start_with_its_best_state() {
         );
     }
 }
+
+/// With few features (a polynomial plus a Fourier series on 1500 samples) the automatic choice
+/// is the feature solver, and its reason reads as one sentence.
+#[test]
+fn auto_uses_the_feature_solver_when_the_features_are_few() {
+    let u = input(1500, 0.3, 11);
+    let y = simulate(&truth(), &stiffness, &u, 0.01, 11);
+    let structure = OutputFeedback::new("N");
+    let model = structure
+        .model(&structure.initial_from_bla(&truth()).unwrap(), dispersion(&y))
+        .unwrap();
+    let id = structid_core::identify(
+        &model,
+        &Data::new(u, y).unwrap(),
+        &IdentifySettings::builder().beta(1e-6).build().unwrap(),
+    )
+    .unwrap();
+    let reason = &id.diagnostics.solver_reason;
+    assert!(reason.contains("the feature solver"), "{reason}");
+    assert!(!reason.contains("  "), "stray spaces: {reason:?}");
+}
