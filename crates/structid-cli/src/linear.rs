@@ -220,6 +220,27 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             "--separate-numerator applies to --structure output-feedback only",
         ));
     }
+    if a.structure == StructureArg::OutputFeedback && a.input.len() > 1 && !a.separate_numerator {
+        return Err(CliError::input(
+            "--structure output-feedback with several inputs needs --separate-numerator: the \
+             feedback path cannot share the numerator of several inputs",
+        ));
+    }
+    if let Some(d) = a.trend
+        && d > 64
+    {
+        return Err(CliError::input(format!(
+            "invalid value {d} for --trend: the polynomial degree must be at most 64"
+        )));
+    }
+    if a.method == MethodArg::Arx
+        && (a.transient > 0 || matches!(a.initial_state, crate::InitialStateArg::Estimate))
+    {
+        return Err(CliError::input(
+            "--transient and --initial-state estimate apply to the output-error fit (--method oe); \
+             an ARX fit ignores them",
+        ));
+    }
     let (u, y) = read_signals(&a.data, &a)?;
     let mut arx_settings = ArxSettings::builder();
     let mut oe_settings = OeSettings::builder().transient(a.transient);

@@ -223,6 +223,63 @@ fn refine_and_linear_reject_bad_input() {
         p(&d.join("m.toml")),
     ]);
     assert!(e.contains("delay"), "{e}");
+    // Options that would be accepted but ignored, or a file that would not read back.
+    let two = d.join("two.csv");
+    let text = std::fs::read_to_string(&data).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let mut two_text = format!("{header},u2\n");
+    for (k, l) in lines.enumerate() {
+        two_text.push_str(&format!("{l},{}\n", (k as f64 * 0.3).sin()));
+    }
+    std::fs::write(&two, two_text).unwrap();
+    let inputs = format!("{},u2", header.split(',').find(|c| *c == "u").unwrap());
+    for (args, expect) in [
+        (
+            vec![
+                "--data",
+                p(&two),
+                "--input",
+                &inputs,
+                "--structure",
+                "output-feedback",
+            ],
+            "--separate-numerator",
+        ),
+        (
+            vec![
+                "--data",
+                p(&data),
+                "--structure",
+                "output-feedback",
+                "--trend",
+                "65",
+            ],
+            "--trend",
+        ),
+        (
+            vec![
+                "--data",
+                p(&data),
+                "--method",
+                "arx",
+                "--initial-state",
+                "estimate",
+            ],
+            "--method oe",
+        ),
+        (
+            vec!["--data", p(&data), "--method", "arx", "--transient", "10"],
+            "--method oe",
+        ),
+    ] {
+        let mut all = vec!["linear", "--orders", "2,2,1"];
+        all.extend(args);
+        let m = d.join("m2.toml");
+        all.extend(["--out", p(&m)]);
+        let e = input_error(&all);
+        assert!(e.contains(expect), "{all:?}: {e}");
+    }
     // The model file is an input: never overwritten.
     let e = input_error(&[
         "linear",

@@ -578,7 +578,8 @@ fn auto_quadratic(
     if featured && 4 * (features + nx) <= rows {
         let id = solver::features::solve(problem, settings)?;
         let reason = format!(
-            "automatic: every block has finite features ({features} in all, at most a quarter of              the {rows} output samples), the feature solver"
+            "automatic: every block has finite features ({features} in all, at most a quarter of \
+             the {rows} output samples), the feature solver"
         );
         return Ok((id, Some(reason)));
     }

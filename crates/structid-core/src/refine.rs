@@ -157,6 +157,19 @@ pub fn output_error_with_state(
     settings: &OeSettings,
     free_initial_state: bool,
 ) -> Result<OeFit> {
+    // The output-error orders are read from the numerators (nk = leading zeros): an all-zero
+    // numerator would have no free coefficient and its path would silently stay at zero.
+    if let Some(i) = g
+        .num
+        .iter()
+        .position(|b| !b.is_empty() && b.iter().all(|&v| v == 0.0))
+    {
+        return Err(Error::InvalidStructure(format!(
+            "numerator {i} of the linear part is all zeros, so output error cannot tell its \
+             delay and would keep that path at zero; start it from small nonzero coefficients \
+             after the delay (e.g. [0.0, 1e-6, 1e-6] for a delay of one sample)"
+        )));
+    }
     if !free_initial_state {
         return output_error(inputs, y, g, settings).map_err(linear_error);
     }
@@ -181,11 +194,60 @@ pub fn output_error_with_state(
         }
     });
     let mut start = g.clone();
-    // A tiny nonzero start keeps every numerator coefficient a free parameter.
-    start.num.push(vec![1e-12; order]);
+    // Start the impulse numerator at the best initial state for `g` (a linear least-squares
+    // problem once F is fixed), so that the fit begins at the cost identify() reaches with
+    // InitialState::Estimate and can only go below it, however early the iteration stops.
+    start.num.push(best_impulse_numerator(inputs, y, g, order)?);
     let mut fit = output_error(&with_impulse, y, &start, settings).map_err(linear_error)?;
     fit.model.num.truncate(m);
     Ok(fit)
+}
+
+/// The numerator I (`order` coefficients) whose impulse response I/F·δ best fits the
+/// residual y − G·inputs in least squares: the free response of the best initial state for G.
+/// Coefficients that come out exactly zero are replaced by a tiny value so that every one
+/// stays a free parameter of the output-error fit (the orders are read from the numerators).
+fn best_impulse_numerator(
+    inputs: &Signal,
+    y: &Signal,
+    g: &PolynomialModel,
+    order: usize,
+) -> Result<Vec<f64>> {
+    let len = y.len();
+    let tiny = |v: Vec<f64>| -> Vec<f64> {
+        v.into_iter()
+            .map(|c| if c == 0.0 || !c.is_finite() { 1e-12 } else { c })
+            .collect()
+    };
+    if len == 0 || y.channels() != 1 || inputs.len() != len {
+        // output_error() reports the mismatch.
+        return Ok(vec![1e-12; order]);
+    }
+    let sim = g.simulate(inputs).map_err(linear_error)?;
+    // The impulse response h of 1/F; column j of the regressors is h delayed by j.
+    let a0 = g.den[0];
+    let mut h = vec![0.0; len];
+    for k in 0..len {
+        let mut v = if k == 0 { 1.0 / a0 } else { 0.0 };
+        for (j, a) in g.den.iter().enumerate().skip(1) {
+            if j <= k {
+                v -= a / a0 * h[k - j];
+            }
+        }
+        h[k] = v;
+    }
+    let phi = DMatrix::from_fn(len, order, |k, j| if k >= j { h[k - j] } else { 0.0 });
+    let r = nalgebra::DVector::from_fn(len, |k, _| y.get(k, 0) - sim[k]);
+    if phi.iter().chain(r.iter()).any(|v| !v.is_finite()) {
+        return Ok(vec![1e-12; order]);
+    }
+    let svd = phi.svd(true, true);
+    let eps = 1e-12 * svd.singular_values.max();
+    let c = svd
+        .solve(&r, eps)
+        .map(|c| c.iter().copied().collect())
+        .unwrap_or_else(|_| vec![0.0; order]);
+    Ok(tiny(c))
 }
 
 fn one_channel(data: &Data, what: &str) -> Result<()> {

@@ -8,7 +8,8 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, lti_lft, refine,
+    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, lti_lft,
+    output_error_with_state, refine,
 };
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
@@ -286,9 +287,110 @@ fn bad_settings_and_structures_are_errors() {
     .unwrap();
     let g = structure.initial_from_bla(&truth()).unwrap();
     let w = Signal::zeros(50, 1);
+    // A feedback numerator started at zero has no free coefficient (its orders are read
+    // from the leading zeros): an error, not a path silently fixed at zero.
+    let separate = OutputFeedback::new("N").with_separate_numerator(true);
+    let mut zero_w = g.clone();
+    zero_w.num[1] = vec![0.0, 0.0, 0.0];
+    let one = Data::new(
+        Signal::from_fn(50, 1, |k, _| ((k * k) as f64 * 0.37).sin()),
+        Signal::from_fn(50, 1, |k, _| (k as f64 * 0.1).sin()),
+    )
+    .unwrap();
+    for free in [false, true] {
+        let e = separate
+            .estimate_linear(&one, &w, &zero_w, &OeSettings::default(), free)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("all zeros"), "{e}");
+    }
     assert!(
         structure
             .estimate_linear(&two, &w, &g, &OeSettings::default(), false)
             .is_err()
     );
+}
+
+/// The cost of `g` on (u, y) with its best initial state: least squares on the free responses
+/// q^{−j}/F·δ, j < n (what identify() reaches with InitialState::Estimate for this G).
+fn best_initial_state_cost(g: &PolynomialModel, u: &Signal, y: &Signal) -> f64 {
+    let len = y.len();
+    let n = (g.den.len() - 1).max(g.num[0].len() - 1);
+    let sim = g.simulate(u).unwrap();
+    let r = nalgebra::DVector::from_fn(len, |k, _| y.get(k, 0) - sim[k]);
+    let delta = Signal::from_fn(len, 1, |k, _| if k == 0 { 1.0 } else { 0.0 });
+    let columns: Vec<Vec<f64>> = (0..n)
+        .map(|j| {
+            let mut b = vec![0.0; j];
+            b.push(1.0);
+            let m = PolynomialModel {
+                den: g.den.clone(),
+                num: vec![b],
+                sample_time: None,
+            };
+            m.simulate(&delta).unwrap()
+        })
+        .collect();
+    let phi = nalgebra::DMatrix::from_fn(len, n, |k, j| columns[j][k]);
+    let c = phi.clone().svd(true, true).solve(&r, 1e-14).unwrap();
+    (r - phi * c).norm_squared() / len as f64
+}
+
+/// The linear step with a free initial state starts where the map step left off (G with its
+/// best initial state), so even a single Levenberg–Marquardt iteration cannot end above it:
+/// the cost guarantee does not depend on the output-error fit converging.
+#[test]
+fn free_initial_state_fit_never_ends_above_the_start_with_its_best_state() {
+    let g = truth();
+    let len = 300;
+    let u = input(len, 0.3, 5);
+    let free = PolynomialModel {
+        den: g.den.clone(),
+        num: vec![vec![5.0, -3.0]],
+        sample_time: None,
+    };
+    let delta = Signal::from_fn(len, 1, |k, _| if k == 0 { 1.0 } else { 0.0 });
+    let (forced, response) = (g.simulate(&u).unwrap(), free.simulate(&delta).unwrap());
+    let y = Signal::from_fn(len, 1, |k, _| {
+        forced[k] + response[k] + 0.01 * (1.3 * k as f64).sin().signum()
+    });
+    let start_cost = best_initial_state_cost(&g, &u, &y);
+    for iterations in 1..4 {
+        let s = OeSettings::builder()
+            .max_iterations(iterations)
+            .build()
+            .unwrap();
+        let fit = output_error_with_state(&u, &y, &g, &s, true).unwrap();
+        assert!(
+            (fit.initial_cost - start_cost).abs() <= 1e-9 * start_cost,
+            "initial cost {} vs the start's best {start_cost}",
+            fit.initial_cost
+        );
+        assert!(
+            fit.cost <= start_cost * (1.0 + 1e-12),
+            "{iterations} iteration(s): {} > the start's best {start_cost}",
+            fit.cost
+        );
+    }
+}
+
+/// With few features (a polynomial plus a Fourier series on 1500 samples) the automatic choice
+/// is the feature solver, and its reason reads as one sentence.
+#[test]
+fn auto_uses_the_feature_solver_when_the_features_are_few() {
+    let u = input(1500, 0.3, 11);
+    let y = simulate(&truth(), &stiffness, &u, 0.01, 11);
+    let structure = OutputFeedback::new("N");
+    let model = structure
+        .model(&structure.initial_from_bla(&truth()).unwrap(), dispersion(&y))
+        .unwrap();
+    let id = structid_core::identify(
+        &model,
+        &Data::new(u, y).unwrap(),
+        &IdentifySettings::builder().beta(1e-6).build().unwrap(),
+    )
+    .unwrap();
+    let reason = &id.diagnostics.solver_reason;
+    assert!(reason.contains("the feature solver"), "{reason}");
+    assert!(!reason.contains("  "), "stray spaces: {reason:?}");
 }
