@@ -601,6 +601,16 @@ impl RefineSettingsBuilder {
     /// Validates and returns the settings.
     pub fn build(self) -> Result<RefineSettings> {
         let s = self.inner;
+        if s.oe.transient() != 0 {
+            return Err(Error::InvalidParameter {
+                name: "transient".into(),
+                value: s.oe.transient() as f64,
+                reason: "the output-error step of a refinement scores every sample, as the map \
+                         step does (otherwise J could increase); estimate the initial state \
+                         instead of skipping a transient"
+                    .into(),
+            });
+        }
         if s.max_iterations == 0 {
             return Err(Error::InvalidParameter {
                 name: "max_iterations".into(),

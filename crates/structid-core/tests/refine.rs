@@ -264,6 +264,13 @@ fn input_nonlinearity_refinement_lowers_the_validation_error() {
 fn bad_settings_and_structures_are_errors() {
     assert!(RefineSettings::builder().max_iterations(0).build().is_err());
     assert!(RefineSettings::builder().tolerance(-1.0).build().is_err());
+    // A transient in the output-error step would compare J over different samples.
+    let e = RefineSettings::builder()
+        .oe(OeSettings::builder().transient(10).build().unwrap())
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("transient"), "{e}");
     let structure = OutputFeedback::new("N");
     // A feedback path without delay is an algebraic loop.
     let direct = PolynomialModel {
@@ -382,7 +389,10 @@ fn auto_uses_the_feature_solver_when_the_features_are_few() {
     let y = simulate(&truth(), &stiffness, &u, 0.01, 11);
     let structure = OutputFeedback::new("N");
     let model = structure
-        .model(&structure.initial_from_bla(&truth()).unwrap(), dispersion(&y))
+        .model(
+            &structure.initial_from_bla(&truth()).unwrap(),
+            dispersion(&y),
+        )
         .unwrap();
     let id = structid_core::identify(
         &model,

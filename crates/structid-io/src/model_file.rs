@@ -1110,6 +1110,28 @@ fn parse_linear(
             ),
         ));
     }
+    // An all-zero numerator would be read as "no path at all" (the delay is read from the
+    // leading zeros), so refinement could never move it.
+    if structure != LinearStructureKind::Lti
+        && let Some(i) = num.iter().position(|b| b.iter().all(|v| *v == 0.0))
+    {
+        return Err(err_at(
+            num_line,
+            format!(
+                "[linear] num[{i}] is all zeros: start from small nonzero coefficients after the \
+                 delay (e.g. [0.0, 0.01]) so that the path can be estimated"
+            ),
+        ));
+    }
+    if let Some(nw) = &raw.num_w
+        && nw.get_ref().iter().all(|v| *v == 0.0)
+    {
+        return Err(err_at(
+            src.line(nw.span().start),
+            "[linear] num_w is all zeros: start from small nonzero coefficients after the delay \
+             (e.g. [0.0, -0.01]) so that the feedback path can be estimated",
+        ));
+    }
     let mut separate = false;
     match (&raw.num_w, structure) {
         (Some(nw), LinearStructureKind::OutputFeedback) => {

@@ -662,6 +662,21 @@ fn linear_section_errors_name_the_line() {
         assert!(e.contains(needle), "{e}");
         assert!(e.contains(&format!("line {line}")), "{e}");
     }
+    let zeros = LINEAR.replace(
+        "num = [[0.0, 0.1, 0.05]]",
+        "num = [[0.0, 0.1, 0.05]]\nnum_w = [0.0, 0.0]",
+    );
+    let e = err(&zeros);
+    assert!(
+        e.contains("num_w is all zeros") && e.contains("line 6"),
+        "{e}"
+    );
+    let zeros = LINEAR.replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.0, 0.0]]");
+    let e = err(&zeros);
+    assert!(
+        e.contains("num[0] is all zeros") && e.contains("line 5"),
+        "{e}"
+    );
     let lti_with_map = LINEAR.replace("output-feedback", "lti");
     assert!(err(&lti_with_map).contains("z[0]"));
 }
