@@ -22,6 +22,7 @@
 //! println!("J = {:.4}", id.cost.total);
 //! ```
 
+mod pipeline;
 pub mod silverbox;
 pub mod tanks;
 

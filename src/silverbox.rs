@@ -23,7 +23,7 @@
 //!
 //! The map's dispersion is a cubic polynomial (ridge regression on 1, y, y², y³, the physics'
 //! stiffness with an even term) or that polynomial plus a Gaussian-like Fourier kernel
-//! ([`SumDispersion`]). The validation part has the estimation amplitudes, so it cannot judge
+//! ([`SumDispersion`](crate::SumDispersion)). The validation part has the estimation amplitudes, so it cannot judge
 //! extrapolation (the last part of the arrow test reaches 40 % beyond them): the kernel is kept
 //! only when it lowers the validation error by more than `kernel_margin` (5 %), and otherwise
 //! the simpler map wins. Outside the data, the kernel part of a sum reverts towards zero with
@@ -32,16 +32,12 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings};
-use structid_core::refine::{
-    LinearStructure, OutputFeedback, RefineSettings, Refinement, output_error_with_state, refine,
-};
-use structid_core::{
-    Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
-    Interpolant, MapBinding, Model, PolynomialDispersion, Result, Signal, SumDispersion,
-};
-use structid_io::{IoError, Silverbox, SilverboxSplit};
-use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx};
+use structid_core::refine::{LinearStructure, OutputFeedback, Refinement, refine};
+use structid_core::{Data, Dispersion, Interpolant, MapBinding, Model, Result, Signal};
+use structid_io::{Silverbox, SilverboxSplit};
+use structid_linear::PolynomialModel;
+
+use crate::pipeline::{io, map_dispersion, range, refine_settings, rms_from};
 
 /// Settings of the Silverbox pipeline.
 #[derive(Clone, Debug)]
@@ -136,10 +132,6 @@ pub struct SilverboxResult {
     pub seconds: f64,
 }
 
-fn io(e: IoError) -> structid_core::Error {
-    structid_core::Error::InvalidStructure(e.to_string())
-}
-
 /// The map's dispersion: the polynomial of the trend degree alone, or with a Gaussian-like
 /// Fourier kernel added.
 fn dispersion(
@@ -147,47 +139,14 @@ fn dispersion(
     y: &Signal,
     with_kernel: bool,
 ) -> Result<Arc<dyn Dispersion>> {
-    let trend = Arc::new(
-        PolynomialDispersion::new(settings.trend_degree)?.with_scale(settings.trend_scale)?,
-    );
-    if !with_kernel {
-        return Ok(trend);
-    }
-    let v = y.channel(0);
-    let (lo, hi) = v
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
-            (l.min(x), h.max(x))
-        });
-    let kernel = FourierDispersion::new(FourierWeights::GaussianLike {
-        sigma: settings.sigma_fraction * (hi - lo),
-    })?;
-    Ok(Arc::new(SumDispersion::new(vec![Arc::new(kernel), trend])?))
+    let sigma = with_kernel.then(|| settings.sigma_fraction * range(&y.channel(0)));
+    map_dispersion(settings.trend_degree, settings.trend_scale, sigma)
 }
 
-/// The BLA of order n: ARX, then output error with a free initial state.
+/// The BLA of order n (na = nb = n, nk = 1): ARX, then output error with a free initial
+/// state.
 pub fn bla(data: &Data, order: usize, sample_time: f64) -> Result<PolynomialModel> {
-    let lin = |e: structid_linear::LinearError| {
-        structid_core::Error::InvalidStructure(format!("linear estimation: {e}"))
-    };
-    let arx_settings = ArxSettings::builder()
-        .sample_time(sample_time)
-        .build()
-        .map_err(lin)?;
-    let start = arx(
-        data.u(),
-        data.y(),
-        &Orders::siso(order, order, 1),
-        &arx_settings,
-    )
-    .map_err(lin)?
-    .model;
-    let oe = OeSettings::builder()
-        .sample_time(sample_time)
-        .tolerance(1e-7)
-        .build()
-        .map_err(lin)?;
-    Ok(output_error_with_state(data.u(), data.y(), &start, &oe, true)?.model)
+    crate::pipeline::bla(data, order, sample_time)
 }
 
 /// Simulates `model` with `map` in the loop from rest over `u`.
@@ -206,47 +165,6 @@ pub fn simulate(model: &Model, map: &dyn Interpolant, u: &Signal) -> Result<Vec<
     Ok(sim.y.channel(0))
 }
 
-fn rms_from(a: &[f64], b: &[f64], from: usize) -> f64 {
-    let n = a.len().saturating_sub(from).max(1);
-    (a[from..]
-        .iter()
-        .zip(&b[from..])
-        .map(|(x, y)| (x - y).powi(2))
-        .sum::<f64>()
-        / n as f64)
-        .sqrt()
-}
-
-fn refine_settings(
-    settings: &SilverboxSettings,
-    max_iterations: usize,
-    tolerance: f64,
-    settle: usize,
-    sample_time: f64,
-) -> Result<RefineSettings> {
-    let identify = IdentifySettings::builder()
-        .initial_state(InitialState::Estimate)
-        .posterior(true)
-        .build()?;
-    let selection = SelectionSettings::builder()
-        .criterion(Criterion::MarginalLikelihood)
-        .tune_sigma(settings.tune_sigma)
-        .build()?;
-    let oe = OeSettings::builder()
-        .sample_time(sample_time)
-        .tolerance(1e-7)
-        .build()
-        .map_err(|e| structid_core::Error::InvalidStructure(e.to_string()))?;
-    RefineSettings::builder()
-        .max_iterations(max_iterations)
-        .tolerance(tolerance)
-        .identify(identify)
-        .selection(Some(selection))
-        .oe(oe)
-        .settle(settle)
-        .build()
-}
-
 /// Refines one candidate on the fitting part and scores it on the validation part.
 fn try_candidate(
     settings: &SilverboxSettings,
@@ -260,7 +178,14 @@ fn try_candidate(
     let ts = g.sample_time.unwrap_or(1.0);
     let structure = OutputFeedback::new("N").with_separate_numerator(separate);
     let g0 = structure.initial_from_bla(g)?;
-    let rs = refine_settings(settings, settings.max_iterations, 1e-3, fit.len(), ts)?;
+    let rs = refine_settings(
+        settings.max_iterations,
+        1e-3,
+        fit.len(),
+        ts,
+        settings.tune_sigma,
+        true,
+    )?;
     let disp = dispersion(settings, est.y(), with_kernel)?;
     // Validation: the whole estimation split, scored after the fitting part, so that the
     // transient of the initial state is not scored.
@@ -340,7 +265,7 @@ pub fn run(sb: &Silverbox, settings: &SilverboxSettings) -> Result<SilverboxResu
     let structure = OutputFeedback::new("N").with_separate_numerator(c.separate_numerator);
     let g = bla(&est, c.order, ts)?;
     let g0 = structure.initial_from_bla(&g)?;
-    let rs = refine_settings(settings, c.iterations, 0.0, 0, ts)?;
+    let rs = refine_settings(c.iterations, 0.0, 0, ts, settings.tune_sigma, true)?;
     let refinement = refine(
         &structure,
         &g0,

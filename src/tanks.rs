@@ -22,7 +22,7 @@
 //!    estimation record (from a zero state; the transient has died out long before the
 //!    validation part starts), with and without the overflow clip (see below).
 //! 4. For the best order of each structure with a map, a Fourier kernel plus the polynomial
-//!    trend ([`SumDispersion`]) replaces the plain polynomial when it lowers the validation
+//!    trend ([`SumDispersion`](crate::SumDispersion)) replaces the plain polynomial when it lowers the validation
 //!    error by more than `kernel_margin`.
 //! 5. The best candidate of each structure is simulated on the test record from u alone. By
 //!    default it is the model fitted on the fitting part, i.e. exactly the model the
@@ -36,7 +36,7 @@
 //! **Initial state.** The records do not start at rest, and the benchmark scores all 1024 test
 //! samples. The benchmark's description says that both records start from the same unknown
 //! state, so the test simulation starts from the initial state estimated on the estimation
-//! record: by [`identify()`](crate::identify()) with [`InitialState::Estimate`] for a
+//! record: by [`identify()`](crate::identify()) with [`InitialState::Estimate`](crate::InitialState::Estimate) for a
 //! structured model, by least squares on the free response for a linear one. The scores from a
 //! zero (deviation) state are reported too ([`TanksModel::test_rms_zero_state`]).
 
@@ -44,18 +44,14 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
-use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, Refinement, lti_lft, refine,
+    InputNonlinearity, LinearStructure, OutputFeedback, Refinement, lti_lft, refine,
 };
-use structid_core::{
-    Data, Dispersion, Error, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
-    Lft, PolynomialDispersion, Result, Signal, SumDispersion,
-};
-use structid_io::{CascadedTanks, IoError, Record};
-use structid_linear::{OeSettings, PolynomialModel};
+use structid_core::{Data, Dispersion, Error, Lft, Result, Signal};
+use structid_io::{CascadedTanks, Record};
+use structid_linear::PolynomialModel;
 
-use crate::silverbox::bla;
+use crate::pipeline::{bla, io, map_dispersion, range, refine_settings};
 
 /// Published RMS simulation errors on the test record, volts (Table 3 of Forgione and Piga,
 /// European Journal of Control 2021), as (method, RMS or range).
@@ -271,23 +267,10 @@ pub struct TanksResult {
     pub seconds: f64,
 }
 
-fn io(e: IoError) -> Error {
-    Error::InvalidStructure(e.to_string())
-}
-
 fn centred(rec: &Record, u0: f64, y0: f64) -> Result<Data> {
     let u = Signal::new(1, rec.u.iter().map(|v| v - u0).collect())?;
     let y = Signal::new(1, rec.y.iter().map(|v| v - y0).collect())?;
     Data::new(u, y)
-}
-
-fn range(v: &[f64]) -> f64 {
-    let (lo, hi) = v
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
-            (l.min(x), h.max(x))
-        });
-    hi - lo
 }
 
 /// The map's dispersion: the polynomial alone, or with a Gaussian-like Fourier kernel whose
@@ -297,43 +280,8 @@ fn dispersion(
     z: &[f64],
     with_kernel: bool,
 ) -> Result<Arc<dyn Dispersion>> {
-    let trend = Arc::new(
-        PolynomialDispersion::new(settings.trend_degree)?.with_scale(settings.trend_scale)?,
-    );
-    if !with_kernel {
-        return Ok(trend);
-    }
-    let kernel = FourierDispersion::new(FourierWeights::GaussianLike {
-        sigma: settings.sigma_fraction * range(z),
-    })?;
-    Ok(Arc::new(SumDispersion::new(vec![Arc::new(kernel), trend])?))
-}
-
-fn refine_settings(
-    max_iterations: usize,
-    tolerance: f64,
-    settle: usize,
-    sample_time: f64,
-) -> Result<RefineSettings> {
-    let identify = IdentifySettings::builder()
-        .initial_state(InitialState::Estimate)
-        .build()?;
-    let selection = SelectionSettings::builder()
-        .criterion(Criterion::MarginalLikelihood)
-        .build()?;
-    let oe = OeSettings::builder()
-        .sample_time(sample_time)
-        .tolerance(1e-7)
-        .build()
-        .map_err(|e| Error::InvalidStructure(e.to_string()))?;
-    RefineSettings::builder()
-        .max_iterations(max_iterations)
-        .tolerance(tolerance)
-        .identify(identify)
-        .selection(Some(selection))
-        .oe(oe)
-        .settle(settle)
-        .build()
+    let sigma = with_kernel.then(|| settings.sigma_fraction * range(z));
+    map_dispersion(settings.trend_degree, settings.trend_scale, sigma)
 }
 
 /// A model that can be simulated: the linear part alone or a refinement's model and maps.
@@ -366,18 +314,7 @@ impl Sim<'_> {
 }
 
 fn rms_from(sim: Option<&[f64]>, y: &[f64], from: usize) -> f64 {
-    let Some(sim) = sim else {
-        return f64::INFINITY;
-    };
-    let n = y.len().saturating_sub(from).max(1);
-    let r = (sim[from..]
-        .iter()
-        .zip(&y[from..])
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        / n as f64)
-        .sqrt();
-    if r.is_finite() { r } else { f64::INFINITY }
+    sim.map_or(f64::INFINITY, |sim| crate::pipeline::rms_from(sim, y, from))
 }
 
 /// The initial state of a linear model by least squares on its free response over `data`:
@@ -481,7 +418,14 @@ impl Context<'_> {
                 .linear_structure()
                 .ok_or_else(|| Error::InvalidStructure("no map".into()))?;
             let g0 = ls.initial_from_bla(g)?;
-            let rs = refine_settings(self.settings.max_iterations, 1e-3, self.cut, self.ts)?;
+            let rs = refine_settings(
+                self.settings.max_iterations,
+                1e-3,
+                self.cut,
+                self.ts,
+                false,
+                false,
+            )?;
             let disp = dispersion(self.settings, &self.map_input(s), kernel)?;
             let r = refine(ls.as_ref(), &g0, disp, &self.fit, Some(&self.est), &rs)?;
             let (v, vc) = self.validation(&Sim::Structured(&r))?;
@@ -620,7 +564,7 @@ pub fn run(tanks: &CascadedTanks, settings: &TanksSettings) -> Result<TanksResul
                     let g0 = ls.initial_from_bla(&g)?;
                     // The alternation with the lowest simulation error on the estimation
                     // record itself (from a zero state) is kept.
-                    let rs = refine_settings(settings.max_iterations, 1e-3, 0, ts)?;
+                    let rs = refine_settings(settings.max_iterations, 1e-3, 0, ts, false, false)?;
                     let disp = dispersion(settings, &cx.map_input(c.structure), c.kernel)?;
                     refine(ls.as_ref(), &g0, disp, &cx.est, Some(&cx.est), &rs)?
                 } else {
