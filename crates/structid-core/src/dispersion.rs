@@ -152,6 +152,20 @@ pub trait FeatureMap: Send + Sync {
     }
 }
 
+/// K(a, b) = ψ(a)ᵀΛψ(b) of a feature map: the [`Kernel::eval`] of a kernel that is given by
+/// its features.
+pub(crate) fn feature_kernel(map: &dyn FeatureMap, a: &[f64], b: &[f64]) -> f64 {
+    let m = map.dim();
+    let (mut pa, mut pb) = (vec![0.0; m], vec![0.0; m]);
+    map.eval_into(a, &mut pa);
+    map.eval_into(b, &mut pb);
+    pa.iter()
+        .zip(&pb)
+        .zip(map.weights())
+        .map(|((x, y), l)| x * y * l)
+        .sum()
+}
+
 /// Any [`Kernel`] as a quadratic dispersion: D(z, w) = wᵀK⁻¹w with K_ij = k(z_i, z_j).
 ///
 /// ```

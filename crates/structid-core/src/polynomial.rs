@@ -224,15 +224,7 @@ impl FeatureMap for PolynomialFeatures {
 
 impl Kernel for PolynomialFeatures {
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
-        let m = self.dim();
-        let (mut pa, mut pb) = (vec![0.0; m], vec![0.0; m]);
-        self.eval_into(a, &mut pa);
-        self.eval_into(b, &mut pb);
-        pa.iter()
-            .zip(&pb)
-            .zip(&self.weights)
-            .map(|((x, y), l)| x * y * l)
-            .sum()
+        crate::dispersion::feature_kernel(self, a, b)
     }
 
     fn describe(&self) -> String {
