@@ -351,6 +351,11 @@ pub fn select(
         }
         _ => None,
     };
+    if model.blocks().is_empty() {
+        return Err(Error::InvalidStructure(
+            "the model has no nonlinear block: there is nothing to select β for".into(),
+        ));
+    }
     let widths0: Vec<Option<f64>> = model
         .blocks()
         .iter()

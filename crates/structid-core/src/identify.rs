@@ -485,6 +485,12 @@ pub fn identify(model: &Model, data: &Data, settings: &IdentifySettings) -> Resu
 /// [`identify()`] for a problem posed directly in operator form.
 pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     positive_finite("beta", settings.beta)?;
+    // A problem without blocks is fine for validation (a nominal linear model), not here.
+    if problem.blocks().is_empty() {
+        return Err(Error::InvalidStructure(
+            "the problem has no nonlinear block to identify".into(),
+        ));
+    }
     let (mut id, reason) = match settings.solver {
         SolverChoice::Exact => (solver::exact::solve(problem, settings)?, None),
         SolverChoice::Features => (solver::features::solve(problem, settings)?, None),

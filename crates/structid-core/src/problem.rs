@@ -70,11 +70,6 @@ impl Problem {
                 found: noise.outputs().to_string(),
             });
         }
-        if blocks.is_empty() {
-            return Err(Error::InvalidStructure(
-                "the problem has no nonlinear block to identify".into(),
-            ));
-        }
         let mut seen = vec![false; blocks.len()];
         for b in &blocks {
             match seen.get_mut(b.output) {

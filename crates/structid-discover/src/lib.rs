@@ -5,6 +5,9 @@
 //! places of the structure, identifies it nonparametrically (structid's `identify`), and
 //! names what the estimate shows. This crate holds so far:
 //!
+//! * [`gap`]: how large the gap between a model's simulation and a record is, whether it is
+//!   only noise (a model-free noise level and portmanteau tests of whiteness and of linear and
+//!   nonlinear input correlation), and where it sits;
 //! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
 //!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
 //! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
@@ -27,6 +30,7 @@
 //! ```
 
 pub mod effects;
+pub mod gap;
 pub mod hysteresis;
 pub mod localise;
 

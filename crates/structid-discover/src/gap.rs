@@ -1,0 +1,545 @@
+//! The gap between a model and a record: how large it is, whether it is only noise, and where
+//! it sits.
+//!
+//! [`gap`] simulates the model (with its maps, if any) on the record from u alone with the
+//! initial state estimated (`structid_core::validate` with
+//! [`ValidationInitialState::Estimate`]) and examines the simulation residual ε = y − ŷ:
+//!
+//! * its RMS and fit (MATLAB's `compare` NRMSE fit in percent);
+//! * a noise level that does not depend on the model, σ̂ = MAD(Δε)/(0.6745·√2): first
+//!   differences remove the slow part of a model error, and for white noise Δε has standard
+//!   deviation √2·σ;
+//! * portmanteau tests, together at the 0.1 % level (Bonferroni over the tests), so that the whole
+//!   family of lags has one error rate (a lag-by-lag band would flag a correct model about
+//!   40 % of the time over 50 lags): the
+//!   Ljung–Box statistic of ε (whiteness), the Box–Jenkins statistic N·Σ_τ r²_εu(τ) for each
+//!   input with u prewhitened by an AR(10) fit (so that the lags are independent under the null
+//!   hypothesis; a coloured input would inflate the statistic), and the same for ε against
+//!   u² − mean(u²) and ε² against u² (the nonlinear correlation tests of Billings and Voon,
+//!   which see even nonlinearities that leave ε uncorrelated with u itself);
+//! * the time windows where the moving RMS of ε exceeds `band`·σ̂, and the operating regions of
+//!   the candidate signals where its energy concentrates ([`crate::localise`]).
+//!
+//! The verdict is "no missing effect detected" when every test passes and RMS(ε) ≤
+//! `noise_ratio`·σ̂; otherwise the failing statistics are listed.
+
+use std::ops::Range;
+
+use structid_core::residual_tests::{autocorrelation, cross_correlation};
+use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
+use structid_core::{Data, Interpolant, Model, Result};
+
+use crate::localise::{Region, exceedance_windows, operating_regions};
+
+/// Settings of [`gap`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct GapSettings {
+    /// Largest lag of the correlation tests (default 25).
+    pub max_lag: usize,
+    /// Window of the moving RMS in samples (default: L/50, at least 20).
+    pub window: Option<usize>,
+    /// A window exceeds the noise band when its RMS is above `band`·σ̂ (default 3).
+    pub band: f64,
+    /// The gap counts as noise only when RMS(ε) ≤ `noise_ratio`·σ̂ (default 1.5).
+    pub noise_ratio: f64,
+    /// Smallest share of the samples an operating region may hold (default 0.05).
+    pub min_region_share: f64,
+}
+
+impl Default for GapSettings {
+    fn default() -> Self {
+        Self {
+            max_lag: 25,
+            window: None,
+            band: 3.0,
+            noise_ratio: 1.5,
+            min_region_share: 0.05,
+        }
+    }
+}
+
+/// One portmanteau test.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Portmanteau {
+    /// What is tested, e.g. `whiteness of ε` or `ε against u`.
+    pub name: String,
+    /// The statistic.
+    pub statistic: f64,
+    /// Its critical value: the quantile of χ² with `lags` degrees of freedom at 1 − 0.001/m for
+    /// m tests (Bonferroni), so that the family errs 0.1 % of the time.
+    pub critical: f64,
+    /// Degrees of freedom.
+    pub lags: usize,
+}
+
+impl Portmanteau {
+    /// Whether the statistic is below its critical value.
+    pub fn passes(&self) -> bool {
+        self.statistic <= self.critical
+    }
+}
+
+/// Everything [`gap`] found.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Gap {
+    /// The simulation residual ε = y − ŷ (first output).
+    pub residual: Vec<f64>,
+    /// The simulated output ŷ (first output).
+    pub simulated: Vec<f64>,
+    /// RMS(ε).
+    pub rms: f64,
+    /// The fit in percent.
+    pub fit_percent: f64,
+    /// The noise level σ̂ from the differenced residual.
+    pub noise_std: f64,
+    /// The portmanteau tests.
+    pub tests: Vec<Portmanteau>,
+    /// Time windows where ε exceeds its band.
+    pub windows: Vec<Range<usize>>,
+    /// Operating regions, best first.
+    pub regions: Vec<Region>,
+    /// Whether a missing effect was detected.
+    pub missing_effect: bool,
+    /// The verdict in words, with the statistics behind it.
+    pub verdict: String,
+}
+
+/// The standard normal quantile Φ⁻¹(p) for 0 < p < 1 (Acklam's rational approximation,
+/// relative error below 1.2e-9).
+///
+/// ```
+/// let z = structid_discover::gap::normal_quantile(0.99);
+/// assert!((z - 2.326_347_874).abs() < 1e-8);
+/// ```
+pub fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969_683_028_665_376e1,
+        2.209_460_984_245_205e2,
+        -2.759_285_104_469_687e2,
+        1.383_577_518_672_69e2,
+        -3.066_479_806_614_716e1,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -5.447_609_879_822_406e1,
+        1.615_858_368_580_409e2,
+        -1.556_989_798_598_866e2,
+        6.680_131_188_771_972e1,
+        -1.328_068_155_288_572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -3.223_964_580_411_365e-1,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] = [
+        7.784_695_709_041_462e-3,
+        3.224_671_290_700_398e-1,
+        2.445_134_137_142_996,
+        3.754_408_661_907_416,
+    ];
+    let p = p.clamp(1e-300, 1.0 - 1e-16);
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.02425 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.02425 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
+}
+
+/// The `p` quantile of χ² with `k` degrees of freedom (Wilson–Hilferty; within 1 % for k ≥ 5
+/// and p ≤ 0.9999).
+///
+/// ```
+/// let q = structid_discover::gap::chi_square_quantile(0.99, 25);
+/// assert!((q - 44.31).abs() < 0.3);
+/// ```
+pub fn chi_square_quantile(p: f64, k: usize) -> f64 {
+    let k = k.max(1) as f64;
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + normal_quantile(p) * a.sqrt()).powi(3).max(0.0)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// σ̂ = MAD(Δε)/(0.6745·√2).
+///
+/// ```
+/// use structid_discover::gap::noise_level;
+/// // A slow model error of amplitude 1 barely counts as noise.
+/// let e: Vec<f64> = (0..1000).map(|k| (k as f64 * 0.01).sin()).collect();
+/// assert!(noise_level(&e) < 0.01);
+/// ```
+pub fn noise_level(residual: &[f64]) -> f64 {
+    let d: Vec<f64> = residual.windows(2).map(|w| w[1] - w[0]).collect();
+    let m = median(d.clone());
+    let mad = median(d.iter().map(|v| (v - m).abs()).collect());
+    mad / (0.674_489_75 * std::f64::consts::SQRT_2)
+}
+
+/// The one-step prediction errors of an AR(`order`) model of `s` fitted by least squares
+/// (zeros over the first `order` samples): `s` made white, so that its correlations with a
+/// white ε are independent across lags.
+fn prewhiten(s: &[f64], order: usize) -> Vec<f64> {
+    let n = s.len();
+    let mean = s.iter().sum::<f64>() / n.max(1) as f64;
+    let c: Vec<f64> = s.iter().map(|v| v - mean).collect();
+    if n <= 2 * order + 1 || order == 0 {
+        return c;
+    }
+    let rows = n - order;
+    let a = nalgebra::DMatrix::from_fn(rows, order, |r, j| c[r + order - 1 - j]);
+    let b = nalgebra::DVector::from_fn(rows, |r, _| c[r + order]);
+    let svd = a.svd(true, true);
+    let tol = 1e-10 * svd.singular_values.max();
+    let Ok(phi) = svd.solve(&b, tol) else {
+        return c;
+    };
+    let mut out = vec![0.0; n];
+    for k in order..n {
+        out[k] = c[k] - (0..order).map(|j| phi[j] * c[k - 1 - j]).sum::<f64>();
+    }
+    out
+}
+
+/// N·Σ_τ r²(ε, s_w)(τ) with s prewhitened: χ² with 2·max_lag + 1 degrees of freedom when ε is
+/// white and independent of s.
+fn portmanteau_cross(name: String, e: &[f64], s: &[f64], max_lag: usize) -> Portmanteau {
+    let sw = prewhiten(s, 10.min(s.len() / 20));
+    let c = cross_correlation(e, &sw, max_lag);
+    let n = e.len() as f64;
+    let statistic = n * c.values.iter().map(|v| v * v).sum::<f64>();
+    Portmanteau {
+        name,
+        statistic,
+        critical: f64::NAN,
+        lags: c.values.len(),
+    }
+}
+
+/// Examines the gap between `model` (with `maps`, one per block) and `data`; `candidates` are
+/// the signals (name, samples) to localise it in. See the [module documentation](self).
+pub fn gap(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    candidates: &[(String, Vec<f64>)],
+    settings: &GapSettings,
+) -> Result<Gap> {
+    let v = validate(
+        model,
+        maps,
+        data,
+        &ValidationSettings::builder()
+            .initial_state(ValidationInitialState::Estimate)
+            .max_lag(settings.max_lag)
+            .build()?,
+    )?;
+    let y = data.y().channel(0);
+    let simulated = v.simulated.channel(0);
+    let residual: Vec<f64> = y.iter().zip(&simulated).map(|(a, b)| a - b).collect();
+    let n = residual.len();
+    let noise_std = noise_level(&residual);
+    let max_lag = settings.max_lag.min(n.saturating_sub(1)).max(1);
+
+    // Ljung–Box on the residual's autocorrelation.
+    let auto = autocorrelation(&residual, max_lag);
+    let nf = n as f64;
+    let q: f64 = auto
+        .lags
+        .iter()
+        .zip(&auto.values)
+        .filter(|(l, _)| **l > 0)
+        .map(|(l, r)| r * r / (nf - *l as f64))
+        .sum::<f64>()
+        * nf
+        * (nf + 2.0);
+    let mut tests = vec![Portmanteau {
+        name: "whiteness of ε (Ljung–Box)".into(),
+        statistic: q,
+        critical: f64::NAN,
+        lags: max_lag,
+    }];
+    let centred_square = |s: &[f64]| {
+        let m = s.iter().map(|v| v * v).sum::<f64>() / s.len() as f64;
+        s.iter().map(|v| v * v - m).collect::<Vec<f64>>()
+    };
+    let e2 = centred_square(&residual);
+    for c in 0..data.u().channels() {
+        let u = data.u().channel(c);
+        let u2 = centred_square(&u);
+        tests.push(portmanteau_cross(
+            format!("ε against u{c}"),
+            &residual,
+            &u,
+            max_lag,
+        ));
+        tests.push(portmanteau_cross(
+            format!("ε against u{c}²"),
+            &residual,
+            &u2,
+            max_lag,
+        ));
+        tests.push(portmanteau_cross(
+            format!("ε² against u{c}²"),
+            &e2,
+            &u2,
+            max_lag,
+        ));
+    }
+    // Bonferroni: each test at 0.1 %/m, so that a correct model fails any of them 0.1 % of the
+    // time. A missing effect worth naming moves these statistics far beyond that.
+    let level = 1.0 - 0.001 / tests.len() as f64;
+    for t in &mut tests {
+        t.critical = chi_square_quantile(level, t.lags);
+    }
+    let window = settings.window.unwrap_or((n / 50).max(20));
+    let windows = exceedance_windows(&residual, noise_std, settings.band, window);
+    let signals: Vec<(&str, &[f64])> = candidates
+        .iter()
+        .map(|(name, s)| (name.as_str(), s.as_slice()))
+        .collect();
+    let regions = operating_regions(&residual, &signals, settings.min_region_share);
+    let rms = v.rms[0];
+    let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
+    let too_large = rms > settings.noise_ratio * noise_std;
+    let missing_effect = too_large || !failing.is_empty();
+    let verdict = if missing_effect {
+        let mut why: Vec<String> = failing
+            .iter()
+            .map(|t| format!("{} = {:.1} > {:.1}", t.name, t.statistic, t.critical))
+            .collect();
+        if too_large {
+            why.insert(
+                0,
+                format!(
+                    "RMS(ε) = {rms:.4e} is {:.1}× the noise level σ̂ = {noise_std:.4e}",
+                    rms / noise_std.max(f64::MIN_POSITIVE)
+                ),
+            );
+        }
+        format!("missing effect: {}", why.join("; "))
+    } else {
+        format!(
+            "no missing effect detected: RMS(ε) = {rms:.4e} within {}× σ̂ = {noise_std:.4e}, and ε \
+             passes the whiteness and (non)linear input-correlation tests at the 0.1 % level",
+            settings.noise_ratio
+        )
+    };
+    Ok(Gap {
+        residual,
+        simulated,
+        rms,
+        fit_percent: v.fit_percent[0],
+        noise_std,
+        tests,
+        windows,
+        regions,
+        missing_effect,
+        verdict,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::dmatrix;
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, Normal};
+    use structid_core::{Lft, LftMatrices, Signal};
+
+    /// y = G·u + e with G = 0.5q⁻¹/(1 − 0.8q⁻¹), no map.
+    fn nominal() -> Model {
+        let lft = Lft::new(LftMatrices {
+            a: dmatrix![0.8],
+            bu: dmatrix![0.5],
+            be: dmatrix![0.0],
+            bw: nalgebra::DMatrix::zeros(1, 0),
+            cy: dmatrix![1.0],
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: nalgebra::DMatrix::zeros(1, 0),
+            cz: nalgebra::DMatrix::zeros(0, 1),
+            dzu: nalgebra::DMatrix::zeros(0, 1),
+            dze: nalgebra::DMatrix::zeros(0, 1),
+            dzw: nalgebra::DMatrix::zeros(0, 0),
+        })
+        .unwrap();
+        Model::new(lft, vec![]).unwrap()
+    }
+
+    fn record(seed: u64, effect: Option<fn(f64) -> f64>) -> Data {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let n = Normal::new(0.0, 1.0).unwrap();
+        let mut s = 0.0;
+        let u = Signal::from_fn(2000, 1, |_, _| {
+            s = 0.6 * s + 0.8 * n.sample(&mut rng);
+            s
+        });
+        // The true system: the nominal one, with an input map when `effect` is given.
+        let v = match effect {
+            Some(f) => Signal::from_fn(u.len(), 1, |k, _| f(u.get(k, 0))),
+            None => u.clone(),
+        };
+        let y0 = nominal().lft().simulate(&[], &v, None, None).unwrap().y;
+        let noise = Normal::new(0.0, 0.05).unwrap();
+        let y = Signal::from_fn(u.len(), 1, |k, _| y0.get(k, 0) + noise.sample(&mut rng));
+        Data::new(u, y).unwrap()
+    }
+
+    fn candidates(d: &Data) -> Vec<(String, Vec<f64>)> {
+        vec![
+            ("u".into(), d.u().channel(0)),
+            ("y".into(), d.y().channel(0)),
+        ]
+    }
+
+    #[test]
+    fn the_noise_level_of_white_noise_is_its_standard_deviation() {
+        let mut rng = StdRng::seed_from_u64(5);
+        let n = Normal::new(0.0, 0.3).unwrap();
+        let e: Vec<f64> = (0..20000).map(|_| n.sample(&mut rng)).collect();
+        assert!((noise_level(&e) - 0.3).abs() < 0.01, "{}", noise_level(&e));
+        assert!((chi_square_quantile(0.99, 51) - 77.386).abs() < 0.3);
+        assert!((normal_quantile(0.975) - 1.959_963_985).abs() < 1e-8);
+        assert!((normal_quantile(1e-5) + 4.264_890_794).abs() < 1e-7);
+    }
+
+    #[test]
+    fn the_true_linear_model_leaves_no_missing_effect() {
+        let mut flagged = 0;
+        for seed in 0..20 {
+            let d = record(seed, None);
+            let g = gap(
+                &nominal(),
+                &[],
+                &d,
+                &candidates(&d),
+                &GapSettings::default(),
+            )
+            .unwrap();
+            assert!((g.noise_std - 0.05).abs() < 0.01, "σ̂ = {}", g.noise_std);
+            if g.missing_effect {
+                flagged += 1;
+            }
+        }
+        // The tests together err 0.1 % of the time, plus the RMS criterion: at most 1 of 20.
+        assert!(flagged <= 1, "{flagged} of 20 correct models flagged");
+    }
+
+    #[test]
+    fn a_hidden_saturation_is_detected_and_localised_at_large_inputs() {
+        let sat: fn(f64) -> f64 = |u| u.clamp(-1.0, 1.0);
+        let d = record(7, Some(sat));
+        let g = gap(
+            &nominal(),
+            &[],
+            &d,
+            &candidates(&d),
+            &GapSettings::default(),
+        )
+        .unwrap();
+        assert!(g.missing_effect, "{}", g.verdict);
+        let best = &g.regions[0];
+        assert!(best.lift > 2.0, "{best:?}");
+        assert!(
+            matches!(
+                best.side,
+                crate::localise::Side::OutsideMagnitude
+                    | crate::localise::Side::Above
+                    | crate::localise::Side::Below
+            ),
+            "{best:?}"
+        );
+        assert!(!g.windows.is_empty());
+    }
+
+    #[test]
+    fn an_even_nonlinearity_is_seen_by_the_nonlinear_correlation_tests() {
+        // u + 0.3u²: the square leaves ε uncorrelated with u itself (u is symmetric).
+        let even: fn(f64) -> f64 = |u| u + 0.3 * u * u;
+        let d = record(3, Some(even));
+        let g = gap(
+            &nominal(),
+            &[],
+            &d,
+            &candidates(&d),
+            &GapSettings::default(),
+        )
+        .unwrap();
+        let t = g.tests.iter().find(|t| t.name == "ε against u0²").unwrap();
+        assert!(!t.passes(), "{t:?}");
+        assert!(g.missing_effect);
+    }
+
+    #[test]
+    fn maps_in_the_loop_are_used() {
+        // With the map that generated the data in the model, the gap closes again.
+        let sat = |z: &[f64]| z[0].clamp(-1.0, 1.0);
+        let d = record(11, Some(|u| u.clamp(-1.0, 1.0)));
+        let lft = Lft::new(LftMatrices {
+            a: dmatrix![0.8],
+            bu: dmatrix![0.0],
+            be: dmatrix![0.0],
+            bw: dmatrix![0.5],
+            cy: dmatrix![1.0],
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: dmatrix![0.0],
+            cz: dmatrix![0.0],
+            dzu: dmatrix![1.0],
+            dze: dmatrix![0.0],
+            dzw: dmatrix![0.0],
+        })
+        .unwrap();
+        let block = structid_core::NonlinearBlock::new(
+            "N",
+            vec![0],
+            0,
+            std::sync::Arc::new(structid_core::KernelDispersion::gaussian(0.3).unwrap()),
+        );
+        let model = Model::new(lft, vec![block]).unwrap();
+        let g = gap(
+            &model,
+            &[&sat],
+            &d,
+            &candidates(&d),
+            &GapSettings::default(),
+        )
+        .unwrap();
+        // The residual is the noise (std 0.05) alone.
+        assert!(g.rms < 0.055 && g.rms < 1.2 * g.noise_std, "{}", g.verdict);
+        let without = gap(
+            &nominal(),
+            &[],
+            &d,
+            &candidates(&d),
+            &GapSettings::default(),
+        )
+        .unwrap();
+        assert!(without.rms > 2.0 * g.rms && without.missing_effect);
+    }
+}
