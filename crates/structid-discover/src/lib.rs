@@ -8,6 +8,9 @@
 //! * [`gap`]: how large the gap between a model's simulation and a record is, whether it is
 //!   only noise (a model-free noise level and portmanteau tests of whiteness and of linear and
 //!   nonlinear input correlation), and where it sits;
+//! * [`hypotheses`]: the augmented LFTs that insert one unknown static block into a nominal
+//!   linear model at the input, at the output, in feedback from the output or from its rate
+//!   (a dynamic Ψ_M in the paper's Definition 1);
 //! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
 //!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
 //! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
@@ -31,6 +34,7 @@
 
 pub mod effects;
 pub mod gap;
+pub mod hypotheses;
 pub mod hysteresis;
 pub mod localise;
 
