@@ -13,24 +13,14 @@
 //! Environment overrides: `TANKS_ORDERS=1,2,3`, `TANKS_DEGREE=3`, `TANKS_SIGMA=0.2`,
 //! `TANKS_NO_KERNEL`, `TANKS_NO_OVERFLOW`, `TANKS_NO_REFIT`.
 
-use std::path::PathBuf;
-
 use structid::io::{CascadedTanks, write_atomic};
 use structid::plot::{Chart, Series, render_chart_svg};
 use structid::tanks::{PUBLISHED, TanksSettings, run};
 
+mod common;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let path = args.first().map(PathBuf::from).unwrap_or_else(|| {
-        let base = std::env::var("STRUCTID_DATA")
-            .map(PathBuf::from)
-            .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-        base.join("cascaded_tanks/dataBenchmark.csv")
-    });
-    let out = args
-        .get(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("target/cascaded_tanks"));
+    let (path, out) = common::benchmark_args("cascaded_tanks/dataBenchmark.csv", "cascaded_tanks");
     let tanks = CascadedTanks::load(&path)?;
     let mut settings = TanksSettings::default();
     if let Ok(v) = std::env::var("TANKS_ORDERS") {

@@ -10,25 +10,15 @@
 //! `map.svg` (N̂(y) with its 95 % band over the arrow test's amplitude range), `error.svg` (the
 //! arrow-test simulation error over time) and `results.json`.
 
-use std::path::PathBuf;
-
 use structid::Signal;
 use structid::io::{Silverbox, write_atomic};
 use structid::plot::{Chart, Series, render_chart_svg};
 use structid::silverbox::{SilverboxSettings, run};
 
+mod common;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let path = args.first().map(PathBuf::from).unwrap_or_else(|| {
-        let base = std::env::var("STRUCTID_DATA")
-            .map(PathBuf::from)
-            .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-        base.join("silverbox/SNLS80mV.csv")
-    });
-    let out = args
-        .get(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("target/silverbox"));
+    let (path, out) = common::benchmark_args("silverbox/SNLS80mV.csv", "silverbox");
     let sb = Silverbox::load(&path)?;
     let mut settings = SilverboxSettings::default();
     if let Ok(v) = std::env::var("SB_SIGMA") {

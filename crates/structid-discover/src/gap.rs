@@ -417,6 +417,11 @@ mod tests {
         ]
     }
 
+    /// The gap of `model` on `d` with u and y as candidates and default settings.
+    fn gap_of(model: &Model, maps: &[&dyn Interpolant], d: &Data) -> Gap {
+        gap(model, maps, d, &candidates(d), &GapSettings::default()).unwrap()
+    }
+
     #[test]
     fn the_noise_level_of_white_noise_is_its_standard_deviation() {
         let mut rng = StdRng::seed_from_u64(5);
@@ -433,14 +438,7 @@ mod tests {
         let mut flagged = 0;
         for seed in 0..20 {
             let d = record(seed, None);
-            let g = gap(
-                &nominal(),
-                &[],
-                &d,
-                &candidates(&d),
-                &GapSettings::default(),
-            )
-            .unwrap();
+            let g = gap_of(&nominal(), &[], &d);
             assert!((g.noise_std - 0.05).abs() < 0.01, "σ̂ = {}", g.noise_std);
             if g.missing_effect {
                 flagged += 1;
@@ -454,14 +452,7 @@ mod tests {
     fn a_hidden_saturation_is_detected_and_localised_at_large_inputs() {
         let sat: fn(f64) -> f64 = |u| u.clamp(-1.0, 1.0);
         let d = record(7, Some(sat));
-        let g = gap(
-            &nominal(),
-            &[],
-            &d,
-            &candidates(&d),
-            &GapSettings::default(),
-        )
-        .unwrap();
+        let g = gap_of(&nominal(), &[], &d);
         assert!(g.missing_effect, "{}", g.verdict);
         let best = &g.regions[0];
         assert!(best.lift > 2.0, "{best:?}");
@@ -482,14 +473,7 @@ mod tests {
         // u + 0.3u²: the square leaves ε uncorrelated with u itself (u is symmetric).
         let even: fn(f64) -> f64 = |u| u + 0.3 * u * u;
         let d = record(3, Some(even));
-        let g = gap(
-            &nominal(),
-            &[],
-            &d,
-            &candidates(&d),
-            &GapSettings::default(),
-        )
-        .unwrap();
+        let g = gap_of(&nominal(), &[], &d);
         let t = g.tests.iter().find(|t| t.name == "ε against u0²").unwrap();
         assert!(!t.passes(), "{t:?}");
         assert!(g.missing_effect);
@@ -522,24 +506,10 @@ mod tests {
             std::sync::Arc::new(structid_core::KernelDispersion::gaussian(0.3).unwrap()),
         );
         let model = Model::new(lft, vec![block]).unwrap();
-        let g = gap(
-            &model,
-            &[&sat],
-            &d,
-            &candidates(&d),
-            &GapSettings::default(),
-        )
-        .unwrap();
+        let g = gap_of(&model, &[&sat], &d);
         // The residual is the noise (std 0.05) alone.
         assert!(g.rms < 0.055 && g.rms < 1.2 * g.noise_std, "{}", g.verdict);
-        let without = gap(
-            &nominal(),
-            &[],
-            &d,
-            &candidates(&d),
-            &GapSettings::default(),
-        )
-        .unwrap();
+        let without = gap_of(&nominal(), &[], &d);
         assert!(without.rms > 2.0 * g.rms && without.missing_effect);
     }
 }
