@@ -772,7 +772,7 @@ impl FeatureScore {
 
 fn free_state_unsupported() -> Error {
     Error::Unsupported(
-        "marginal likelihood and GCV with an estimated initial state are not supported; use          cross-validation or validation selection, or a zero initial state"
+        "marginal likelihood and GCV with an estimated initial state are not supported; use cross-validation or validation selection, or a zero initial state"
             .into(),
     )
 }

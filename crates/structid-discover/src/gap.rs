@@ -44,6 +44,9 @@ pub struct GapSettings {
     pub noise_ratio: f64,
     /// Smallest share of the samples an operating region may hold (default 0.05).
     pub min_region_share: f64,
+    /// The initial state of the simulation (default: estimated; a record that starts at rest
+    /// can use zero, and a model whose x₀ reaches z differently from y must).
+    pub initial_state: ValidationInitialState,
 }
 
 impl Default for GapSettings {
@@ -54,6 +57,7 @@ impl Default for GapSettings {
             band: 3.0,
             noise_ratio: 1.5,
             min_region_share: 0.05,
+            initial_state: ValidationInitialState::Estimate,
         }
     }
 }
@@ -253,7 +257,7 @@ pub fn gap(
         maps,
         data,
         &ValidationSettings::builder()
-            .initial_state(ValidationInitialState::Estimate)
+            .initial_state(settings.initial_state)
             .max_lag(settings.max_lag)
             .build()?,
     )?;

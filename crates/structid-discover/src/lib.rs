@@ -32,6 +32,7 @@
 //! println!("{}: {}", best.effect.name(), best.expression);
 //! ```
 
+pub mod discover;
 pub mod effects;
 pub mod gap;
 pub mod hypotheses;

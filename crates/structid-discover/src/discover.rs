@@ -1,0 +1,1257 @@
+//! The discovery workflow: from a nominal linear model that almost fits to a named missing
+//! effect, its place in the structure, and the gap it closes.
+//!
+//! [`discover`] takes a nominal single-input, single-output polynomial model G (no maps), an
+//! estimation record and a validation record, and answers four questions:
+//!
+//! 1. **Is something missing?** The [`gap`] of G on both records: RMS, fit, a model-free noise
+//!    level and portmanteau tests (whiteness; ε against u, u², and ε² against u²). When the
+//!    gap is within the noise and every test passes on both records, the verdict is "no
+//!    missing effect detected" and the workflow stops there.
+//! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
+//!    noise band) and in operating space (regions of u, y, their rates and the simulated linear
+//!    output G·u where the residual energy concentrates).
+//! 3. **Where in the structure does it act?** Each [`Location`] inserts one unknown static
+//!    block ([`crate::hypotheses`]). Its map is identified by structid's `identify` with a
+//!    quadratic dispersion (a Gaussian-like Fourier kernel plus a low-degree polynomial trend,
+//!    finitely many features, so O(L·m²)), β (and, optionally, σ) by maximum marginal
+//!    likelihood, and the initial state estimated. The hypotheses are ranked by their
+//!    simulation RMS on the validation record.
+//! 4. **What is it?** The best hypothesis's points (z_k, ŵ_k) are fitted by every family of the
+//!    [`crate::effects`] library and ranked by BIC. When the best family is non-smooth (a kink
+//!    or a jump) and [`DiscoverSettings::total_variation`] is on, the map is also estimated
+//!    with total variation (β by validation) and that estimate is used when it validates
+//!    better. A family is *named* only if the augmented model with the parametric map
+//!    simulates the validation record about as well as with the nonparametric map (within
+//!    [`DiscoverSettings::naming_tolerance`], or within the noise); otherwise the effect is an
+//!    "unnamed static effect" and the nonparametric map is kept, as a table. Before naming,
+//!    the residual is tested for dependence on the direction of z
+//!    ([`crate::hysteresis::direction_dependence`]) after deconvolving it to the block's output
+//!    (a ridge-regularised inverse of L_yw, by conjugate gradients); if it depends on the
+//!    direction, the effect is reported as "dynamic: hysteresis or backlash suspected" and no
+//!    static name is forced.
+//!
+//! The result ([`Discovery`]) holds the augmented model with its map and the gap before and
+//! after on both records.
+//!
+//! Structural ambiguities are reported, not hidden: a gain or offset at the input cannot be
+//! told from one at the output of a linear G, and a *gain* means the linear model was wrong.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::refine::lti_lft;
+use structid_core::solver::admm::AdmmSettings;
+use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
+use structid_core::{
+    Data, Dispersion, Error, ExprMap, FourierDispersion, FourierWeights, IdentifySettings,
+    InitialState, Interpolant, LookupTable, Model, PolynomialDispersion, Result, Signal,
+    SumDispersion, TotalVariation,
+};
+use structid_linear::PolynomialModel;
+use structid_lti::LinearSystem;
+
+use crate::effects::{Effect, EffectFit, Naming, NamingSettings, name_effect};
+use crate::gap::{Gap, GapSettings, gap};
+use crate::hypotheses::{Hypothesis, Location, hypothesis};
+use crate::hysteresis::{DirectionTest, direction_dependence};
+
+/// Settings of [`discover`]; build them with [`DiscoverSettings::builder`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiscoverSettings {
+    locations: Vec<Location>,
+    library: Vec<Effect>,
+    gap: GapSettings,
+    sigma_fraction: f64,
+    trend_degree: usize,
+    tune_sigma: bool,
+    total_variation: bool,
+    naming_tolerance: f64,
+    naming_points: usize,
+    hysteresis_threshold: f64,
+    table_points: usize,
+    settle: usize,
+}
+
+impl Default for DiscoverSettings {
+    /// Every location, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
+    /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, naming
+    /// tolerance 1.15, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
+    /// settling samples.
+    fn default() -> Self {
+        Self {
+            locations: Location::ALL.to_vec(),
+            library: Effect::LIBRARY.to_vec(),
+            gap: GapSettings::default(),
+            sigma_fraction: 0.1,
+            trend_degree: 3,
+            tune_sigma: false,
+            total_variation: true,
+            naming_tolerance: 1.15,
+            naming_points: 3000,
+            hysteresis_threshold: 0.1,
+            table_points: 201,
+            settle: 0,
+        }
+    }
+}
+
+impl DiscoverSettings {
+    /// A builder starting from the defaults.
+    ///
+    /// ```
+    /// use structid_discover::discover::DiscoverSettings;
+    /// use structid_discover::hypotheses::Location;
+    /// let s = DiscoverSettings::builder()
+    ///     .locations(vec![Location::Input, Location::OutputFeedback])
+    ///     .total_variation(false)
+    ///     .build()
+    ///     .unwrap();
+    /// assert_eq!(s.locations().len(), 2);
+    /// assert!(DiscoverSettings::builder().sigma_fraction(0.0).build().is_err());
+    /// ```
+    pub fn builder() -> DiscoverSettingsBuilder {
+        DiscoverSettingsBuilder {
+            inner: Self::default(),
+        }
+    }
+
+    /// The candidate locations.
+    pub fn locations(&self) -> &[Location] {
+        &self.locations
+    }
+
+    /// The families tried when naming.
+    pub fn library(&self) -> &[Effect] {
+        &self.library
+    }
+
+    /// Settings of the gap analysis.
+    pub fn gap(&self) -> &GapSettings {
+        &self.gap
+    }
+
+    /// The Fourier kernel's starting width as a fraction of the range of z.
+    pub fn sigma_fraction(&self) -> f64 {
+        self.sigma_fraction
+    }
+
+    /// Degree of the polynomial trend added to the kernel (0: none).
+    pub fn trend_degree(&self) -> usize {
+        self.trend_degree
+    }
+
+    /// Whether σ is tuned with β by marginal likelihood.
+    pub fn tune_sigma(&self) -> bool {
+        self.tune_sigma
+    }
+
+    /// Whether total variation is tried when the estimate looks non-smooth.
+    pub fn total_variation(&self) -> bool {
+        self.total_variation
+    }
+
+    /// A family is named when the validation RMS with its parametric map is at most this
+    /// factor times that with the nonparametric map (or within 1.5 × the noise level).
+    pub fn naming_tolerance(&self) -> f64 {
+        self.naming_tolerance
+    }
+
+    /// Largest number of points (z_k, ŵ_k) the families are fitted to (evenly spaced in time).
+    pub fn naming_points(&self) -> usize {
+        self.naming_points
+    }
+
+    /// Share of the deconvolved residual energy that the direction of z must explain for the
+    /// effect to be called dynamic.
+    pub fn hysteresis_threshold(&self) -> f64 {
+        self.hysteresis_threshold
+    }
+
+    /// Number of breakpoints of the table written for an unnamed map.
+    pub fn table_points(&self) -> usize {
+        self.table_points
+    }
+
+    /// Samples at the start of each record left out of every RMS.
+    pub fn settle(&self) -> usize {
+        self.settle
+    }
+}
+
+/// Builder of [`DiscoverSettings`].
+#[derive(Clone, Debug)]
+pub struct DiscoverSettingsBuilder {
+    inner: DiscoverSettings,
+}
+
+impl DiscoverSettingsBuilder {
+    /// The candidate locations (default: all four).
+    pub fn locations(mut self, locations: Vec<Location>) -> Self {
+        self.inner.locations = locations;
+        self
+    }
+
+    /// The families tried when naming (default: [`Effect::LIBRARY`]).
+    pub fn library(mut self, library: Vec<Effect>) -> Self {
+        self.inner.library = library;
+        self
+    }
+
+    /// Settings of the gap analysis.
+    pub fn gap(mut self, gap: GapSettings) -> Self {
+        self.inner.gap = gap;
+        self
+    }
+
+    /// The kernel's starting width as a fraction of the range of z (default 0.1).
+    pub fn sigma_fraction(mut self, f: f64) -> Self {
+        self.inner.sigma_fraction = f;
+        self
+    }
+
+    /// Degree of the polynomial trend (default 3; 0 for none).
+    pub fn trend_degree(mut self, d: usize) -> Self {
+        self.inner.trend_degree = d;
+        self
+    }
+
+    /// Whether σ is tuned by marginal likelihood too (default off: the feedback hypotheses
+    /// that do not hold drive σ, and with it the number of features, to its limit).
+    pub fn tune_sigma(mut self, on: bool) -> Self {
+        self.inner.tune_sigma = on;
+        self
+    }
+
+    /// Whether total variation is tried for non-smooth estimates (default on).
+    pub fn total_variation(mut self, on: bool) -> Self {
+        self.inner.total_variation = on;
+        self
+    }
+
+    /// Naming tolerance on the validation RMS (default 1.15).
+    pub fn naming_tolerance(mut self, t: f64) -> Self {
+        self.inner.naming_tolerance = t;
+        self
+    }
+
+    /// Largest number of naming points (default 3000).
+    pub fn naming_points(mut self, n: usize) -> Self {
+        self.inner.naming_points = n;
+        self
+    }
+
+    /// The hysteresis threshold (default 0.1).
+    pub fn hysteresis_threshold(mut self, t: f64) -> Self {
+        self.inner.hysteresis_threshold = t;
+        self
+    }
+
+    /// Breakpoints of a written table (default 201).
+    pub fn table_points(mut self, n: usize) -> Self {
+        self.inner.table_points = n;
+        self
+    }
+
+    /// Settling samples left out of every RMS (default 0).
+    pub fn settle(mut self, n: usize) -> Self {
+        self.inner.settle = n;
+        self
+    }
+
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<DiscoverSettings> {
+        let s = self.inner;
+        let bad = |name: &str, value: f64, reason: &str| Error::InvalidParameter {
+            name: name.into(),
+            value,
+            reason: reason.into(),
+        };
+        if s.locations.is_empty() {
+            return Err(Error::InvalidStructure(
+                "discovery needs at least one candidate location".into(),
+            ));
+        }
+        if s.library.is_empty() {
+            return Err(Error::InvalidStructure(
+                "discovery needs at least one effect family to name".into(),
+            ));
+        }
+        if !(s.sigma_fraction.is_finite() && s.sigma_fraction > 0.0) {
+            return Err(bad(
+                "sigma_fraction",
+                s.sigma_fraction,
+                "must be a positive fraction of the range of z",
+            ));
+        }
+        if !(s.naming_tolerance.is_finite() && s.naming_tolerance >= 1.0) {
+            return Err(bad(
+                "naming_tolerance",
+                s.naming_tolerance,
+                "must be at least 1 (a ratio of validation RMS values)",
+            ));
+        }
+        if s.naming_points < 20 {
+            return Err(bad(
+                "naming_points",
+                s.naming_points as f64,
+                "must be at least 20",
+            ));
+        }
+        if !(s.hysteresis_threshold > 0.0 && s.hysteresis_threshold < 1.0) {
+            return Err(bad(
+                "hysteresis_threshold",
+                s.hysteresis_threshold,
+                "must be a share between 0 and 1",
+            ));
+        }
+        if s.table_points < 2 {
+            return Err(bad(
+                "table_points",
+                s.table_points as f64,
+                "must be at least 2",
+            ));
+        }
+        if s.trend_degree > 64 {
+            return Err(bad(
+                "trend_degree",
+                s.trend_degree as f64,
+                "must be at most 64",
+            ));
+        }
+        Ok(s)
+    }
+}
+
+/// A map estimate drawn for reports: values (and, when available, the ±2σ posterior band) on
+/// a grid over the range of z seen in the estimation record.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MapCurve {
+    /// Grid of z.
+    pub z: Vec<f64>,
+    /// N̂(z) on the grid.
+    pub w: Vec<f64>,
+    /// Posterior standard deviation on the grid, when the solver kept the posterior.
+    pub std: Option<Vec<f64>>,
+}
+
+/// One identified hypothesis.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HypothesisResult {
+    /// Where the block was put.
+    pub location: Location,
+    /// The dispersion used, e.g. `sum(fourier(sigma=0.1), polynomial(3))`.
+    pub dispersion: String,
+    /// β chosen.
+    pub beta: f64,
+    /// The kernel width chosen (when it has one).
+    pub sigma: Option<f64>,
+    /// The cost terms at the estimate: μ = (1/L)·Σ|ê_k|² and D(z, ŵ).
+    pub noise_term: f64,
+    /// D(z, ŵ) at the estimate.
+    pub dispersion_value: f64,
+    /// Simulation RMS on the estimation record (x₀ estimated).
+    pub estimation_rms: f64,
+    /// Simulation RMS on the validation record (x₀ estimated); infinite when the simulation
+    /// diverged.
+    pub validation_rms: f64,
+    /// The estimated map.
+    pub curve: MapCurve,
+    /// Points (z_k, ŵ_k), at most [`DiscoverSettings::naming_points`], evenly spaced in time.
+    pub points: (Vec<f64>, Vec<f64>),
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Why the hypothesis could not be identified or simulated, if so.
+    pub failure: Option<String>,
+}
+
+/// What the missing effect was found to be.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum Classification {
+    /// A family of the library fits within the noise.
+    Named(EffectFit),
+    /// A static effect no family fits: the nonparametric map is kept.
+    Unnamed,
+    /// The effect depends on the direction of z: "dynamic: hysteresis or backlash suspected".
+    Dynamic,
+}
+
+impl Classification {
+    /// The name for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Classification::Named(fit) => fit.effect.name(),
+            Classification::Unnamed => "unnamed static effect".into(),
+            Classification::Dynamic => "dynamic: hysteresis or backlash suspected".into(),
+        }
+    }
+}
+
+/// The map the augmented model carries.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum AugmentedMap {
+    /// A named family: its expression in `z0` (model-file `truth` syntax).
+    Expression(String),
+    /// The nonparametric estimate sampled on a grid (piecewise linear, edge values held).
+    Table {
+        /// Breakpoints.
+        z: Vec<f64>,
+        /// Values.
+        w: Vec<f64>,
+    },
+}
+
+impl AugmentedMap {
+    /// The map as an [`Interpolant`] (what `structid simulate` and `validate` will use).
+    pub fn interpolant(&self) -> Result<Box<dyn Interpolant>> {
+        Ok(match self {
+            AugmentedMap::Expression(e) => Box::new(ExprMap::parse(e, 1)?),
+            AugmentedMap::Table { z, w } => Box::new(LookupTable::one_d(z.clone(), w.clone())?),
+        })
+    }
+}
+
+/// The nominal model with the found effect added.
+#[derive(Clone, Debug)]
+pub struct Augmented {
+    /// Where the block sits.
+    pub location: Location,
+    /// The nominal linear model (unchanged).
+    pub linear: PolynomialModel,
+    /// The augmented LFT with its block `N`.
+    pub model: Model,
+    /// Its map.
+    pub map: AugmentedMap,
+    /// The gap of the augmented model on the estimation record.
+    pub estimation_gap: Gap,
+    /// The gap of the augmented model on the validation record.
+    pub validation_gap: Gap,
+}
+
+/// The effect found at the best location.
+#[derive(Clone, Debug)]
+pub struct Finding {
+    /// The best location (lowest validation RMS).
+    pub location: Location,
+    /// Locations that explain the data equally well by construction (e.g. a gain at the
+    /// input or at the output of a linear G), including `location`.
+    pub equivalent_locations: Vec<Location>,
+    /// Which estimate was named: `quadratic` or `total variation`.
+    pub estimator: String,
+    /// Validation RMS with the nonparametric map that was named.
+    pub nonparametric_rms: f64,
+    /// The total-variation estimate's validation RMS, when it was tried.
+    pub total_variation_rms: Option<f64>,
+    /// Every family's fit, best BIC first.
+    pub naming: Naming,
+    /// Validation RMS with each family's parametric map tried, in the order of
+    /// `naming.ranked` (`None` for those not simulated).
+    pub family_rms: Vec<Option<f64>>,
+    /// The direction test on the deconvolved residual.
+    pub direction: DirectionTest,
+    /// What the effect is.
+    pub classification: Classification,
+    /// Remarks for the engineer (e.g. "a gain error means the linear model was wrong").
+    pub remarks: Vec<String>,
+    /// The augmented model.
+    pub augmented: Augmented,
+    /// RMS of the validation gap before / after (≥ 1 when the effect helps).
+    pub shrink: f64,
+}
+
+/// Everything [`discover`] found.
+#[derive(Clone, Debug)]
+pub struct Discovery {
+    /// The gap of the nominal model on the estimation record.
+    pub estimation_gap: Gap,
+    /// The gap of the nominal model on the validation record.
+    pub validation_gap: Gap,
+    /// Whether a missing effect was detected (on either record).
+    pub missing_effect: bool,
+    /// Every hypothesis tried, best validation RMS first (empty when nothing is missing).
+    pub hypotheses: Vec<HypothesisResult>,
+    /// The effect found (when something is missing and a hypothesis could be identified).
+    pub finding: Option<Finding>,
+    /// The verdict in one paragraph.
+    pub verdict: String,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// The candidate signals for localisation: u, y, their rates, and the simulated linear output.
+pub fn candidate_signals(data: &Data, linear_output: &[f64], ts: f64) -> Vec<(String, Vec<f64>)> {
+    let rate = |s: &[f64]| -> Vec<f64> {
+        (0..s.len())
+            .map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / ts })
+            .collect()
+    };
+    let u = data.u().channel(0);
+    let y = data.y().channel(0);
+    vec![
+        ("u".to_string(), u.clone()),
+        ("y".to_string(), y.clone()),
+        ("du/dt".to_string(), rate(&u)),
+        ("dy/dt".to_string(), rate(&y)),
+        ("G·u (simulated linear output)".to_string(), linear_output.to_vec()),
+    ]
+}
+
+fn check_records(g: &PolynomialModel, est: &Data, val: &Data) -> Result<()> {
+    if g.num.len() != 1 {
+        return Err(Error::InvalidStructure(format!(
+            "discovery needs a nominal model with one input; this one has {}",
+            g.num.len()
+        )));
+    }
+    for (what, d) in [("estimation", est), ("validation", val)] {
+        if d.u().channels() != 1 || d.y().channels() != 1 {
+            return Err(Error::DimensionMismatch {
+                what: format!("channels of the {what} record"),
+                expected: "one input u and one output y".into(),
+                found: format!(
+                    "{} input(s) and {} output(s)",
+                    d.u().channels(),
+                    d.y().channels()
+                ),
+            });
+        }
+        if d.u().len() < 100 {
+            return Err(Error::InvalidParameter {
+                name: format!("length of the {what} record"),
+                value: d.u().len() as f64,
+                reason: "discovery needs at least 100 samples per record".into(),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn minmax(v: &[f64]) -> (f64, f64) {
+    v.iter()
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        })
+}
+
+/// The quadratic dispersion of every hypothesis: a Gaussian-like Fourier kernel of width
+/// `fraction`·range(z), plus a polynomial trend so that the map extrapolates.
+fn quadratic_dispersion(range: f64, settings: &DiscoverSettings) -> Result<Arc<dyn Dispersion>> {
+    let sigma = settings.sigma_fraction * range.max(f64::MIN_POSITIVE);
+    let kernel: Arc<dyn Dispersion> = Arc::new(FourierDispersion::new(
+        FourierWeights::GaussianLike { sigma },
+    )?);
+    if settings.trend_degree == 0 {
+        return Ok(kernel);
+    }
+    // The trend's monomials are normalised to the range; a weight of 10 keeps them nearly
+    // unpenalised relative to the kernel, so the kernel only carries what they cannot.
+    let trend = Arc::new(PolynomialDispersion::new(settings.trend_degree)?.with_scale(10.0)?);
+    Ok(Arc::new(SumDispersion::new(vec![kernel, trend])?))
+}
+
+/// z of a hypothesis on a record (measured for the rate, computed otherwise).
+fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
+    match data.z() {
+        Some(z) => Ok(z.channel(0)),
+        None => Ok(h.model.lft().compute_z(data.u(), data.y())?.0.channel(0)),
+    }
+}
+
+/// How the initial state is treated at `location`: estimated, except for the sensor map,
+/// whose z = G·u would depend on an unknown x₀ (no longer measurable), so the record is
+/// taken to start at rest there.
+fn initial_state(location: Location) -> (InitialState, ValidationInitialState) {
+    match location {
+        Location::Output | Location::RateFeedback => {
+            (InitialState::Zero, ValidationInitialState::Zero)
+        }
+        _ => (InitialState::Estimate, ValidationInitialState::Estimate),
+    }
+}
+
+/// Simulation RMS of `model` (block at `location`) with `map` on `data` (infinite when the
+/// simulation fails).
+fn simulation_rms(
+    model: &Model,
+    location: Location,
+    map: &dyn Interpolant,
+    data: &Data,
+    settle: usize,
+) -> f64 {
+    let settings = ValidationSettings::builder()
+        .initial_state(initial_state(location).1)
+        .settle(settle)
+        .build()
+        .unwrap_or_default();
+    match validate(model, &[map], data, &settings) {
+        Ok(v) if v.rms[0].is_finite() => v.rms[0],
+        _ => f64::INFINITY,
+    }
+}
+
+fn even_indices(len: usize, max: usize) -> Vec<usize> {
+    let step = len.div_ceil(max).max(1);
+    (0..len).step_by(step).collect()
+}
+
+/// An identified hypothesis with the objects later steps need.
+struct Fitted {
+    result: HypothesisResult,
+    hypothesis: Hypothesis,
+    map: Box<dyn Interpolant>,
+    z: Vec<f64>,
+    w_hat: Vec<f64>,
+    e_hat: Vec<f64>,
+}
+
+fn identify_hypothesis(
+    g: &PolynomialModel,
+    location: Location,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Fitted> {
+    let t0 = Instant::now();
+    // A first hypothesis only to compute z; the dispersion's width depends on its range.
+    let probe = hypothesis(g, location, Arc::new(PolynomialDispersion::new(1)?))?;
+    let est_h = probe.data(est)?;
+    let z = z_of(&probe, &est_h)?;
+    let (lo, hi) = minmax(&z);
+    if !(hi > lo) {
+        return Err(Error::InvalidStructure(format!(
+            "z {} is constant on the estimation record",
+            location.describe()
+        )));
+    }
+    let dispersion = quadratic_dispersion(hi - lo, settings)?;
+    let h = hypothesis(g, location, dispersion)?;
+    // Marginal likelihood is defined for x₀ = 0: β and σ are chosen so, and the map is then
+    // identified at the chosen values with x₀ estimated.
+    let x0 = initial_state(location).0;
+    let identify = IdentifySettings::builder()
+        .initial_state(InitialState::Zero)
+        .posterior(true)
+        .build()?;
+    let selection = SelectionSettings::builder()
+        .criterion(Criterion::MarginalLikelihood)
+        .tune_sigma(settings.tune_sigma)
+        .build()?;
+    let sel = select(&h.model, &est_h, None, &identify, &selection)?;
+    eprintln!("DEBUG {location:?} method {} trials {} sel {:.2}s solver {} {}", sel.method, sel.curve.len(), sel.seconds, sel.identification.diagnostics.solver, sel.identification.diagnostics.solver_reason);
+    let id = if x0 == InitialState::Zero {
+        sel.identification
+    } else {
+        structid_core::identify(
+            &sel.model,
+            &est_h,
+            &identify.with_initial_state(x0).with_beta(sel.beta)?,
+        )?
+    };
+    let block = &id.blocks[0];
+    let val_h = h.data(val)?;
+    let validation_rms = simulation_rms(&sel.model, location, block.map.as_ref(), &val_h, settings.settle);
+    let estimation_rms = simulation_rms(&sel.model, location, block.map.as_ref(), &est_h, settings.settle);
+    let grid: Vec<f64> = (0..101)
+        .map(|i| lo + (hi - lo) * i as f64 / 100.0)
+        .collect();
+    let grid_signal = Signal::from_fn(grid.len(), 1, |k, _| grid[k]);
+    let w_grid: Vec<f64> = grid.iter().map(|z| block.predict(&[*z])).collect();
+    let std = id.posterior_std(0, &grid_signal).ok().flatten();
+    let zk = block.z.channel(0);
+    let idx = even_indices(zk.len(), settings.naming_points);
+    let points = (
+        idx.iter().map(|&k| zk[k]).collect(),
+        idx.iter().map(|&k| block.w_hat[k]).collect(),
+    );
+    let result = HypothesisResult {
+        location,
+        dispersion: block.dispersion.clone(),
+        beta: sel.beta,
+        sigma: sel.sigma,
+        noise_term: id.cost.noise,
+        dispersion_value: block.dispersion_value,
+        estimation_rms,
+        validation_rms,
+        curve: MapCurve {
+            z: grid,
+            w: w_grid,
+            std,
+        },
+        points,
+        seconds: t0.elapsed().as_secs_f64(),
+        failure: None,
+    };
+    let w_hat = block.w_hat.clone();
+    let e_hat = id.e_hat.channel(0);
+    let map = id
+        .blocks
+        .into_iter()
+        .next()
+        .map(|b| b.map)
+        .ok_or_else(|| Error::Numerical("identification returned no block".into()))?;
+    Ok(Fitted {
+        result,
+        hypothesis: Hypothesis {
+            model: sel.model,
+            ..h
+        },
+        map,
+        z: zk,
+        w_hat,
+        e_hat,
+    })
+}
+
+/// Total variation at the best location, β by validation simulation error.
+fn total_variation_fit(
+    hyp: &Hypothesis,
+    est: &Data,
+    val: &Data,
+    settle: usize,
+) -> Result<(Box<dyn Interpolant>, Vec<f64>, Vec<f64>, f64)> {
+    let h = Hypothesis {
+        model: Model::new(
+            hyp.model.lft().clone(),
+            vec![structid_core::NonlinearBlock::new(
+                "N",
+                vec![0],
+                0,
+                Arc::new(TotalVariation::new()),
+            )],
+        )?,
+        ..hyp.clone()
+    };
+    let est_h = h.data(est)?;
+    let val_h = h.data(val)?;
+    // Naming needs the shape of the map, not eight digits of it: a looser ADMM tolerance and
+    // a coarser β search keep this step at a fraction of a second per fit.
+    let identify = IdentifySettings::builder()
+        .initial_state(initial_state(hyp.location).0)
+        .admm(AdmmSettings::builder().tolerance(1e-5).build()?)
+        .build()?;
+    let selection = SelectionSettings::builder()
+        .criterion(Criterion::Validation)
+        .tolerance(0.25)
+        .build()?;
+    let sel = select(&h.model, &est_h, Some(&val_h), &identify, &selection)?;
+    let mut id = sel.identification;
+    eprintln!("DEBUG tv {} trials {} {:.2}s solver {} iters {}", sel.method, sel.curve.len(), sel.seconds, id.diagnostics.solver, id.diagnostics.iterations);
+    let block = id.blocks.remove(0);
+    let rms = simulation_rms(&sel.model, hyp.location, block.map.as_ref(), &val_h, settle);
+    let z = block.z.channel(0);
+    Ok((block.map, z, block.w_hat, rms))
+}
+
+/// Ridge deconvolution of `r` through the SISO operator T = L_yw: argmin ‖r − T·δ‖² + λ‖δ‖²
+/// by conjugate gradients on (TᵀT + λI)·δ = Tᵀ·r, with Tᵀ applied as time reversal around T.
+fn deconvolve(h: &Hypothesis, r: &[f64]) -> Result<Vec<f64>> {
+    let t = h.model.lft().t_yw();
+    let n = r.len();
+    let apply = |v: &[f64]| -> Result<Vec<f64>> {
+        let s = Signal::from_fn(n, 1, |k, _| v[k]);
+        Ok(t.simulate(&s)?.channel(0))
+    };
+    let adjoint = |v: &[f64]| -> Result<Vec<f64>> {
+        let rev: Vec<f64> = v.iter().rev().copied().collect();
+        let mut out = apply(&rev)?;
+        out.reverse();
+        Ok(out)
+    };
+    // λ = 1 % of the operator's largest gain² (estimated by power iteration), so that only the
+    // frequencies T passes at least a tenth of its peak gain are recovered.
+    let mut v: Vec<f64> = (0..n).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
+    let mut gain2 = 1.0;
+    for _ in 0..20 {
+        let tv = adjoint(&apply(&v)?)?;
+        let norm = tv.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let vn = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm == 0.0 || vn == 0.0 {
+            break;
+        }
+        gain2 = norm / vn;
+        v = tv.iter().map(|x| x / norm).collect();
+    }
+    let lambda = 0.01 * gain2;
+    let normal = |x: &[f64]| -> Result<Vec<f64>> {
+        let ttx = adjoint(&apply(x)?)?;
+        Ok(ttx.iter().zip(x).map(|(a, b)| a + lambda * b).collect())
+    };
+    let b = adjoint(r)?;
+    let mut x = vec![0.0; n];
+    let mut res = b.clone();
+    let mut p = res.clone();
+    let mut rr: f64 = res.iter().map(|v| v * v).sum();
+    let stop = 1e-8 * rr.max(f64::MIN_POSITIVE);
+    for _ in 0..100 {
+        if rr <= stop {
+            break;
+        }
+        let ap = normal(&p)?;
+        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
+        if pap <= 0.0 {
+            break;
+        }
+        let alpha = rr / pap;
+        for k in 0..n {
+            x[k] += alpha * p[k];
+            res[k] -= alpha * ap[k];
+        }
+        let rr_new: f64 = res.iter().map(|v| v * v).sum();
+        let beta = rr_new / rr;
+        rr = rr_new;
+        for k in 0..n {
+            p[k] = res[k] + beta * p[k];
+        }
+    }
+    Ok(x)
+}
+
+/// Remarks and equivalent locations for a named effect.
+fn structural_remarks(location: Location, class: &Classification) -> (Vec<Location>, Vec<String>) {
+    let mut remarks = Vec::new();
+    let mut equivalent = vec![location];
+    if let Classification::Named(fit) = class {
+        let io = matches!(location, Location::Input | Location::Output);
+        match fit.effect {
+            Effect::Gain => {
+                remarks.push(
+                    "a gain error means the linear model was wrong: re-estimate G rather than \
+                     adding a map"
+                        .into(),
+                );
+                if io {
+                    remarks.push(
+                        "a gain at the input and one at the output are the same model for a \
+                         linear G"
+                            .into(),
+                    );
+                    equivalent = vec![Location::Input, Location::Output];
+                }
+            }
+            Effect::Offset if io => {
+                remarks.push(
+                    "an offset at the input and one at the output are the same model up to \
+                     G's static gain"
+                        .into(),
+                );
+                equivalent = vec![Location::Input, Location::Output];
+            }
+            _ => {}
+        }
+        if matches!(location, Location::OutputFeedback | Location::RateFeedback)
+            && fit
+                .parameter("a1")
+                .or_else(|| fit.parameter("viscous"))
+                .is_some()
+        {
+            remarks.push(
+                "the linear part of a feedback map trades off against G's denominator \
+                 (F + k·B with N − k·z): it is determined here because G is held at the nominal \
+                 model"
+                    .into(),
+            );
+        }
+    }
+    (equivalent, remarks)
+}
+
+fn non_smooth(effect: Effect) -> bool {
+    matches!(
+        effect,
+        Effect::Saturation
+            | Effect::AsymmetricSaturation
+            | Effect::DeadZone
+            | Effect::CoulombViscous
+            | Effect::Stribeck
+            | Effect::Quantisation
+    )
+}
+
+/// Runs the discovery workflow (see the [module documentation](self)) for the nominal
+/// single-input, single-output model `nominal` on the estimation record `est`, ranking and
+/// checking on the validation record `val`.
+///
+/// Errors: several inputs or outputs, records shorter than 100 samples, a nominal model that
+/// cannot be realised; a hypothesis that fails is recorded in
+/// [`HypothesisResult::failure`] and ranked last instead.
+pub fn discover(
+    nominal: &PolynomialModel,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Discovery> {
+    let t0 = Instant::now();
+    check_records(nominal, est, val)?;
+    let ts = nominal.sample_time.unwrap_or(1.0);
+    let nominal_model = Model::new(lti_lft(nominal)?, Vec::new())?;
+    let linear_output = |d: &Data| -> Result<Vec<f64>> {
+        Ok(nominal_model
+            .lft()
+            .t_yu()
+            .simulate(d.u())?
+            .channel(0))
+    };
+    let est_candidates = candidate_signals(est, &linear_output(est)?, ts);
+    let val_candidates = candidate_signals(val, &linear_output(val)?, ts);
+    let mut gap_settings = settings.gap.clone();
+    gap_settings.max_lag = gap_settings.max_lag.min(est.u().len() / 4).max(1);
+    let estimation_gap = gap(&nominal_model, &[], est, &est_candidates, &gap_settings)?;
+    let validation_gap = gap(&nominal_model, &[], val, &val_candidates, &gap_settings)?;
+    let missing_effect = estimation_gap.missing_effect || validation_gap.missing_effect;
+    if !missing_effect {
+        let verdict = format!(
+            "no missing effect detected: on the estimation record {}; on the validation record {}",
+            estimation_gap.verdict, validation_gap.verdict
+        );
+        return Ok(Discovery {
+            estimation_gap,
+            validation_gap,
+            missing_effect,
+            hypotheses: Vec::new(),
+            finding: None,
+            verdict,
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+    }
+
+    // Identify every hypothesis; failures are kept, ranked last.
+    let mut fitted: Vec<Fitted> = Vec::new();
+    let mut failed: Vec<HypothesisResult> = Vec::new();
+    for &location in &settings.locations {
+        let t = Instant::now();
+        match identify_hypothesis(nominal, location, est, val, settings) {
+            Ok(f) => fitted.push(f),
+            Err(e) => failed.push(HypothesisResult {
+                location,
+                dispersion: String::new(),
+                beta: f64::NAN,
+                sigma: None,
+                noise_term: f64::NAN,
+                dispersion_value: f64::NAN,
+                estimation_rms: f64::INFINITY,
+                validation_rms: f64::INFINITY,
+                curve: MapCurve {
+                    z: Vec::new(),
+                    w: Vec::new(),
+                    std: None,
+                },
+                points: (Vec::new(), Vec::new()),
+                seconds: t.elapsed().as_secs_f64(),
+                failure: Some(e.to_string()),
+            }),
+        }
+    }
+    fitted.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms));
+    let mut hypotheses: Vec<HypothesisResult> = fitted.iter().map(|f| f.result.clone()).collect();
+    hypotheses.extend(failed);
+    let Some(best) = fitted
+        .into_iter()
+        .next()
+        .filter(|f| f.result.validation_rms.is_finite())
+    else {
+        let verdict = format!(
+            "a missing effect was detected ({}), but no hypothesis could be identified and \
+             simulated: {}",
+            validation_gap.verdict,
+            hypotheses
+                .iter()
+                .filter_map(|h| h.failure.as_ref().map(|f| format!("{:?}: {f}", h.location)))
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+        return Ok(Discovery {
+            estimation_gap,
+            validation_gap,
+            missing_effect,
+            hypotheses,
+            finding: None,
+            verdict,
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+    };
+    let finding = name_and_add(nominal, best, est, val, &est_candidates, &val_candidates, &gap_settings, &validation_gap, settings)?;
+    let verdict = verdict_text(&validation_gap, &finding);
+    Ok(Discovery {
+        estimation_gap,
+        validation_gap,
+        missing_effect,
+        hypotheses,
+        finding: Some(finding),
+        verdict,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+fn verdict_text(before: &Gap, f: &Finding) -> String {
+    let what = match &f.classification {
+        Classification::Named(fit) => {
+            let params = fit
+                .parameters
+                .iter()
+                .map(|p| format!("{} = {:.4}", p.name, p.value))
+                .collect::<Vec<_>>()
+                .join(", ");
+            format!("{} ({params})", fit.effect.name())
+        }
+        other => other.describe(),
+    };
+    format!(
+        "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({:.1}× smaller), fit {:.1} % → {:.1} %",
+        f.location.describe(),
+        before.rms,
+        f.augmented.validation_gap.rms,
+        f.shrink,
+        before.fit_percent,
+        f.augmented.validation_gap.fit_percent
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn name_and_add(
+    nominal: &PolynomialModel,
+    best: Fitted,
+    est: &Data,
+    val: &Data,
+    est_candidates: &[(String, Vec<f64>)],
+    val_candidates: &[(String, Vec<f64>)],
+    gap_settings: &GapSettings,
+    before: &Gap,
+    settings: &DiscoverSettings,
+) -> Result<Finding> {
+    let location = best.result.location;
+    let h = best.hypothesis.clone();
+    let val_h = h.data(val)?;
+    let est_h = h.data(est)?;
+    let naming_settings = NamingSettings {
+        library: settings.library.clone(),
+        noise_std: None,
+        tolerance: 1.5,
+    };
+    let subsample = |z: &[f64], w: &[f64]| {
+        let idx = even_indices(z.len(), settings.naming_points);
+        (
+            idx.iter().map(|&k| z[k]).collect::<Vec<f64>>(),
+            idx.iter().map(|&k| w[k]).collect::<Vec<f64>>(),
+        )
+    };
+    let (zs, ws) = subsample(&best.z, &best.w_hat);
+    let tn = Instant::now();
+    let mut naming = name_effect(&zs, &ws, &naming_settings)
+        .map_err(|e| Error::Numerical(format!("naming the effect: {e}")))?;
+    eprintln!("DEBUG naming {:.2}s", tn.elapsed().as_secs_f64());
+    let mut estimator = "quadratic".to_string();
+    let mut nonparametric_rms = best.result.validation_rms;
+    let mut map: Box<dyn Interpolant> = best.map;
+    let mut z_named = best.z.clone();
+    let mut total_variation_rms = None;
+    if settings.total_variation
+        && naming
+            .ranked
+            .first()
+            .is_some_and(|f| non_smooth(f.effect))
+    {
+        if let Ok((tv_map, tz, tw, rms)) =
+            total_variation_fit(&h, est, val, settings.settle)
+        {
+            total_variation_rms = Some(rms);
+            if rms < nonparametric_rms {
+                let (zs, ws) = subsample(&tz, &tw);
+                if let Ok(n) = name_effect(&zs, &ws, &naming_settings) {
+                    naming = n;
+                    estimator = "total variation".into();
+                    nonparametric_rms = rms;
+                    map = tv_map;
+                    z_named = tz;
+                }
+            }
+        }
+    }
+
+    eprintln!("DEBUG after tv {:.2}s", tn.elapsed().as_secs_f64());
+    // Direction dependence of the residual, deconvolved to the block's output.
+    let direction = {
+        let r = if estimator == "quadratic" {
+            best.e_hat.clone()
+        } else {
+            // The equation residual with the named estimate: y − L_yu·u − L_yw·N̂(z).
+            let sim = h.model.lft().t_yw().simulate(&Signal::from_fn(z_named.len(), 1, |k, _| {
+                map.eval(&[z_named[k]])
+            }))?;
+            let base = h.model.lft().t_yu().simulate(est_h.u())?;
+            let y = est_h.y().channel(0);
+            (0..y.len())
+                .map(|k| y[k] - base.get(k, 0) - sim.get(k, 0))
+                .collect()
+        };
+        let delta = deconvolve(&h, &r)?;
+        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+        direction_dependence(&z_named[skip..], &delta[skip..], settings.hysteresis_threshold)
+    };
+
+    // Name: the best BIC family among the first three whose parametric map validates within
+    // the tolerance (or within the noise) of the nonparametric one.
+    let noise = before.noise_std;
+    let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
+    let mut classification = Classification::Unnamed;
+    if direction.dynamic {
+        classification = Classification::Dynamic;
+    } else {
+        for (i, fit) in naming.ranked.iter().take(3).enumerate() {
+            let Ok(m) = ExprMap::parse(&fit.expression, 1) else {
+                continue;
+            };
+            let rms = simulation_rms(&h.model, location, &m, &val_h, settings.settle);
+            family_rms[i] = Some(rms);
+            if rms <= settings.naming_tolerance * nonparametric_rms || rms <= 1.5 * noise {
+                classification = Classification::Named(fit.clone());
+                break;
+            }
+        }
+    }
+    let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
+    if let Classification::Named(_) = classification {
+    } else {
+        remarks.push(format!(
+            "the best family ({}) does not validate within the tolerance of the nonparametric \
+             map, so the map is kept as a table",
+            naming
+                .ranked
+                .first()
+                .map(|f| f.effect.name())
+                .unwrap_or_else(|| "none".into())
+        ));
+    }
+    if matches!(classification, Classification::Dynamic) {
+        remarks.push(format!(
+            "the direction of z explains {:.0} % of the deconvolved residual (t = {:.1}); the \
+             augmented model carries the best static approximation as a table",
+            100.0 * direction.explained,
+            direction.t_statistic
+        ));
+    }
+    let augmented_map = match &classification {
+        Classification::Named(fit) => AugmentedMap::Expression(fit.expression.clone()),
+        _ => {
+            let (lo, hi) = minmax(&z_named);
+            let pad = 0.25 * (hi - lo);
+            let n = settings.table_points;
+            let z: Vec<f64> = (0..n)
+                .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
+                .collect();
+            let w = z.iter().map(|z| map.eval(&[*z])).collect();
+            AugmentedMap::Table { z, w }
+        }
+    };
+    let interp = augmented_map.interpolant()?;
+    let gap_settings = &GapSettings {
+        initial_state: initial_state(location).1,
+        ..gap_settings.clone()
+    };
+    let estimation_gap = gap(&h.model, &[interp.as_ref()], &est_h, est_candidates, gap_settings)?;
+    let validation_gap = gap(&h.model, &[interp.as_ref()], &val_h, val_candidates, gap_settings)?;
+    let shrink = before.rms / validation_gap.rms;
+    Ok(Finding {
+        location,
+        equivalent_locations,
+        estimator,
+        nonparametric_rms,
+        total_variation_rms,
+        naming,
+        family_rms,
+        direction,
+        classification,
+        remarks,
+        augmented: Augmented {
+            location,
+            linear: nominal.clone(),
+            model: h.model.clone(),
+            map: augmented_map,
+            estimation_gap,
+            validation_gap,
+        },
+        shrink,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, Normal};
+    use structid_core::MapBinding;
+
+    fn nominal() -> PolynomialModel {
+        PolynomialModel {
+            den: vec![1.0, -1.5, 0.7],
+            num: vec![vec![0.0, 0.1, 0.1]],
+            sample_time: Some(0.05),
+        }
+    }
+
+    /// Data of the nominal G with `truth` at `location` (or none), filtered-noise input.
+    fn record(location: Option<Location>, truth: fn(f64) -> f64, seed: u64, n: usize) -> Data {
+        let g = nominal();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let norm = Normal::new(0.0, 1.0).unwrap();
+        let mut s = 0.0;
+        let u = Signal::from_fn(n, 1, |_, _| {
+            s = 0.8 * s + 0.6 * norm.sample(&mut rng);
+            s
+        });
+        let noise = Normal::new(0.0, 0.005).unwrap();
+        let e = Signal::from_fn(n, 1, |_, _| noise.sample(&mut rng));
+        let y = match location {
+            None => {
+                let model = Model::new(lti_lft(&g).unwrap(), Vec::new()).unwrap();
+                model.lft().simulate(&[], &u, Some(&e), None).unwrap().y
+            }
+            Some(loc) => {
+                let h = hypothesis(&g, loc, Arc::new(PolynomialDispersion::new(1).unwrap()))
+                    .unwrap();
+                let f = |z: &[f64]| truth(z[0]);
+                h.model
+                    .lft()
+                    .simulate(
+                        &[MapBinding {
+                            inputs: &[0],
+                            output: 0,
+                            map: &f,
+                        }],
+                        &u,
+                        Some(&e),
+                        None,
+                    )
+                    .unwrap()
+                    .y
+            }
+        };
+        Data::new(u, y).unwrap()
+    }
+
+    #[test]
+    fn scratch_saturation_at_the_input() {
+        let sat: fn(f64) -> f64 = |z| (1.5 * z).clamp(-0.8, 0.8);
+        let est = record(Some(Location::Input), sat, 1, 3000);
+        let val = record(Some(Location::Input), sat, 2, 3000);
+        let d = discover(&nominal(), &est, &val, &DiscoverSettings::default()).unwrap();
+        for h in &d.hypotheses {
+            eprintln!("{:?} val {:.4e} est {:.4e} {:.2}s {:?}", h.location, h.validation_rms, h.estimation_rms, h.seconds, h.failure);
+        }
+        eprintln!("{}", d.verdict);
+        let f = d.finding.unwrap();
+        eprintln!("{:?} {:?} {:?} {:?}", f.classification, f.direction, f.family_rms, f.remarks);
+        eprintln!("seconds {}", d.seconds);
+    }
+
+    #[test]
+    fn scratch_lti() {
+        let est = record(None, |z| z, 3, 3000);
+        let val = record(None, |z| z, 4, 3000);
+        let d = discover(&nominal(), &est, &val, &DiscoverSettings::default()).unwrap();
+        eprintln!("{}", d.verdict);
+        assert!(!d.missing_effect);
+    }
+}
