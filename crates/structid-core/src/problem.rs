@@ -168,7 +168,8 @@ impl Problem {
 
     /// Like [`Problem::from_model`], and also sets up the estimation of the LFT's unknown initial
     /// state. z must stay computable with x₀ ≠ 0: measured, or the x₀-part of z must be Ψ times
-    /// that of y ([`Error::NotMeasurable`] otherwise).
+    /// that of y ([`Error::NotMeasurable`] otherwise, in particular for a dynamic Ψ(q) with
+    /// states of its own, [`ZSource::Dynamic`]).
     pub fn from_model_with_initial_state(model: &Model, data: &Data) -> Result<Self> {
         let problem = Self::from_model(model, data)?;
         let lft = model.lft();
@@ -178,6 +179,21 @@ impl Problem {
             // The x₀-part of z is C_z·A^k·x₀; it must equal Ψ·C_y·A^k·x₀ (Ψ = 0 for z = L_zu·u).
             let psi = match problem.z_source() {
                 ZSource::OutputInjection { psi } => psi.clone(),
+                // z = Ψ(q)·y also depends on Ψ's own initial state, which is part of x₀.
+                ZSource::Dynamic { system } if system.order() > 0 => {
+                    return Err(Error::NotMeasurable {
+                        explanation: format!(
+                            "with an unknown initial state, z is no longer computable from u and y: it is \
+                             filtered from y through a dynamic Ψ(q) with {} state(s) (e.g. the previous \
+                             output of a measured rate), whose initial value is part of the unknown x₀; \
+                             provide z as measured data columns, or identify with a zero initial state",
+                            system.order()
+                        ),
+                    });
+                }
+                ZSource::Dynamic { system } => {
+                    system.d().columns(lft.dims().u, lft.dims().y).into_owned()
+                }
                 _ => nalgebra::DMatrix::zeros(lft.dims().z, lft.dims().y),
             };
             let mut ak = nalgebra::DMatrix::<f64>::identity(n, n);

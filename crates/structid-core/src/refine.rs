@@ -112,6 +112,140 @@ pub fn lti_lft(g: &PolynomialModel) -> Result<Lft> {
     polynomial_lft(g, g.num.len(), false)
 }
 
+/// The LFT of a sensor (output) map, y = N(G·u) + e: the linear output G·u = Σ_i B_i/F·u_i is
+/// the map's input z, and the map's output is measured in white noise. z depends on u only, so
+/// it is measurable without being measured (z = L_zu·u). The sample time of `g` is kept.
+///
+/// ```
+/// use structid_core::refine::output_sensor_lft;
+/// use structid_core::{MapBinding, ZSource};
+/// use structid_linear::PolynomialModel;
+/// use structid_lti::Signal;
+/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
+/// let lft = output_sensor_lft(&g).unwrap();
+/// assert_eq!((lft.dims().u, lft.dims().w, lft.dims().z), (1, 1, 1));
+/// assert_eq!(lft.measurability().unwrap(), ZSource::InputOnly);
+/// // y = tanh(G·u): with u a unit step, G·u = 0, 1, 1.5, …
+/// let tanh = |z: &[f64]| z[0].tanh();
+/// let u = Signal::from_fn(3, 1, |_, _| 1.0);
+/// let sim = lft.simulate(&[MapBinding { inputs: &[0], output: 0, map: &tanh }], &u, None, None).unwrap();
+/// assert!((sim.y.get(2, 0) - 1.5f64.tanh()).abs() < 1e-12);
+/// ```
+pub fn output_sensor_lft(g: &PolynomialModel) -> Result<Lft> {
+    if g.num.is_empty() {
+        return Err(Error::InvalidStructure(
+            "an output (sensor) map needs a linear part with at least one input".into(),
+        ));
+    }
+    let ss = g.to_state_space().map_err(linear_error)?;
+    let n = ss.order();
+    let mut lft = Lft::new(LftMatrices {
+        a: ss.a().clone(),
+        bu: ss.b().clone(),
+        be: DMatrix::zeros(n, 1),
+        bw: DMatrix::zeros(n, 1),
+        cy: DMatrix::zeros(1, n),
+        dyu: DMatrix::zeros(1, g.num.len()),
+        dye: DMatrix::identity(1, 1),
+        dyw: DMatrix::identity(1, 1),
+        cz: ss.c().clone(),
+        dzu: ss.d().clone(),
+        dze: DMatrix::zeros(1, 1),
+        dzw: DMatrix::zeros(1, 1),
+    })?;
+    if let Some(ts) = g.sample_time {
+        lft = lft.with_sample_time(ts)?;
+    }
+    Ok(lft)
+}
+
+/// The LFT of rate feedback (friction-like), y = G·(u − N(ẏ)) + e, where the map reads the
+/// measured output's backward difference ẏ_k = (y_k − y_(k−1))/T_s with T_s the sample time of
+/// `g` (1 when it has none) and y_(−1) = 0.
+///
+/// The LFT carries the previous output as an extra state m_k = y_(k−1): with G = (A, B, C)
+///
+/// ```text
+///   x⁺ = A·x + B·u − B·w,   m⁺ = C·x + e,   y = C·x + e,   z = (C·x + e − m)/T_s
+/// ```
+///
+/// z is a *dynamic* function of the measured output, z = Ψ(q)·y with Ψ = (1 − q⁻¹)/T_s (the
+/// paper's Definition 1 with an LTI Ψ_M), which [`Lft::measurability`] recognises as
+/// [`crate::ZSource::Dynamic`]. G must have one input and an input delay (nk ≥ 1, i.e. its
+/// numerator starts with 0); otherwise y_k would depend on N(ẏ_k), an algebraic loop.
+///
+/// ```
+/// use structid_core::refine::rate_feedback_lft;
+/// use structid_core::ZSource;
+/// use structid_linear::PolynomialModel;
+/// use structid_lti::Signal;
+/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
+/// let lft = rate_feedback_lft(&g).unwrap();
+/// assert_eq!(lft.dims().states, 2);
+/// assert!(matches!(lft.measurability().unwrap(), ZSource::Dynamic { .. }));
+/// // z is the measured rate: y = 0, 1, 3 gives z = 0, 10, 20.
+/// let u = Signal::zeros(3, 1);
+/// let y = Signal::new(1, vec![0.0, 1.0, 3.0]).unwrap();
+/// let (z, _) = lft.compute_z(&u, &y).unwrap();
+/// assert!(z.as_slice().iter().zip([0.0, 10.0, 20.0]).all(|(a, b)| (a - b).abs() < 1e-12));
+///
+/// let direct = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![1.0]], sample_time: None };
+/// assert!(rate_feedback_lft(&direct).unwrap_err().to_string().contains("delay"));
+/// ```
+pub fn rate_feedback_lft(g: &PolynomialModel) -> Result<Lft> {
+    if g.num.len() != 1 {
+        return Err(Error::InvalidStructure(format!(
+            "rate feedback y = G·(u − N(ẏ)) + e needs a linear part with exactly one input; \
+             this one has {}",
+            g.num.len()
+        )));
+    }
+    if g.num[0].first().is_some_and(|b| *b != 0.0) {
+        return Err(Error::InvalidStructure(format!(
+            "rate feedback y = G·(u − N(ẏ)) + e needs G to have an input delay (nk ≥ 1, a \
+             numerator starting with 0; it starts with {}); otherwise y_k depends on N(ẏ_k), \
+             an algebraic loop",
+            g.num[0][0]
+        )));
+    }
+    let ts = g.sample_time.unwrap_or(1.0);
+    // States [x; m] with m_k = y_(k−1): x⁺ = A·x + B·(u − w), m⁺ = C·x + e,
+    // y = C·x + e, z = (C·x + e − m)/T_s.
+    let ss = g.to_state_space().map_err(linear_error)?;
+    let n = ss.order();
+    let (a, b, c) = (ss.a(), ss.b(), ss.c());
+    let mut aa = DMatrix::zeros(n + 1, n + 1);
+    aa.view_mut((0, 0), (n, n)).copy_from(a);
+    aa.view_mut((n, 0), (1, n)).copy_from(c);
+    let mut bu = DMatrix::zeros(n + 1, 1);
+    bu.view_mut((0, 0), (n, 1)).copy_from(b);
+    let bw = -&bu;
+    let mut be = DMatrix::zeros(n + 1, 1);
+    be[(n, 0)] = 1.0;
+    let mut cy = DMatrix::zeros(1, n + 1);
+    cy.view_mut((0, 0), (1, n)).copy_from(c);
+    let mut cz = &cy / ts;
+    cz[(0, n)] = -1.0 / ts;
+    let mut lft = Lft::new(LftMatrices {
+        a: aa,
+        bu,
+        be,
+        bw,
+        cy,
+        dyu: DMatrix::zeros(1, 1),
+        dye: DMatrix::identity(1, 1),
+        dyw: DMatrix::zeros(1, 1),
+        cz,
+        dzu: DMatrix::zeros(1, 1),
+        dze: DMatrix::from_element(1, 1, 1.0 / ts),
+        dzw: DMatrix::zeros(1, 1),
+    })?;
+    if let Some(t) = g.sample_time {
+        lft = lft.with_sample_time(t)?;
+    }
+    Ok(lft)
+}
+
 /// The LFT of y = Σ_i B_i/F·[u; w]_i + e: the first `nu` inputs of `g` are u, the rest w.
 /// `z_from_y` adds z = y (output feedback); otherwise there is no z (a model without maps).
 fn polynomial_lft(g: &PolynomialModel, nu: usize, z_from_y: bool) -> Result<Lft> {

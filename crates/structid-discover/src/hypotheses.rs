@@ -17,11 +17,10 @@
 
 use std::sync::Arc;
 
-use nalgebra::DMatrix;
-use structid_core::refine::{InputNonlinearity, LinearStructure, OutputFeedback};
-use structid_core::{
-    Data, Dispersion, Error, Lft, LftMatrices, Model, NonlinearBlock, Result, Signal,
+use structid_core::refine::{
+    InputNonlinearity, LinearStructure, OutputFeedback, output_sensor_lft, rate_feedback_lft,
 };
+use structid_core::{Data, Dispersion, Error, Model, NonlinearBlock, Result, Signal};
 use structid_linear::PolynomialModel;
 
 /// Where the unknown block is inserted.
@@ -129,7 +128,6 @@ pub fn hypothesis(
     siso(g)?;
     let ts = g.sample_time.unwrap_or(1.0);
     let block = || NonlinearBlock::new("N", vec![0], 0, Arc::clone(&dispersion));
-    let lift = |e: structid_linear::LinearError| Error::InvalidStructure(e.to_string());
     let lft = match location {
         Location::Input => InputNonlinearity::new("N").lft(g)?,
         Location::OutputFeedback => {
@@ -137,61 +135,10 @@ pub fn hypothesis(
             let s = OutputFeedback::new("N");
             s.lft(&s.initial_from_bla(g)?)?
         }
-        Location::Output => {
-            let ss = g.to_state_space().map_err(lift)?;
-            let n = ss.order();
-            Lft::new(LftMatrices {
-                a: ss.a().clone(),
-                bu: ss.b().clone(),
-                be: DMatrix::zeros(n, 1),
-                bw: DMatrix::zeros(n, 1),
-                cy: DMatrix::zeros(1, n),
-                dyu: DMatrix::zeros(1, 1),
-                dye: DMatrix::identity(1, 1),
-                dyw: DMatrix::identity(1, 1),
-                cz: ss.c().clone(),
-                dzu: ss.d().clone(),
-                dze: DMatrix::zeros(1, 1),
-                dzw: DMatrix::zeros(1, 1),
-            })?
-        }
+        Location::Output => output_sensor_lft(g)?,
         Location::RateFeedback => {
             delayed(g, location)?;
-            // States [x; m] with m_k = y_(k−1): x⁺ = A·x + B·(u − w), m⁺ = C·x + e,
-            // y = C·x + e, z = (C·x + e − m)/T_s.
-            let ss = g.to_state_space().map_err(lift)?;
-            let n = ss.order();
-            let (a, b, c) = (ss.a(), ss.b(), ss.c());
-            let mut aa = DMatrix::zeros(n + 1, n + 1);
-            aa.view_mut((0, 0), (n, n)).copy_from(a);
-            aa.view_mut((n, 0), (1, n)).copy_from(c);
-            let mut bu = DMatrix::zeros(n + 1, 1);
-            bu.view_mut((0, 0), (n, 1)).copy_from(b);
-            let bw = -&bu;
-            let mut be = DMatrix::zeros(n + 1, 1);
-            be[(n, 0)] = 1.0;
-            let mut cy = DMatrix::zeros(1, n + 1);
-            cy.view_mut((0, 0), (1, n)).copy_from(c);
-            let mut cz = &cy / ts;
-            cz[(0, n)] = -1.0 / ts;
-            let mut lft = Lft::new(LftMatrices {
-                a: aa,
-                bu,
-                be,
-                bw,
-                cy,
-                dyu: DMatrix::zeros(1, 1),
-                dye: DMatrix::identity(1, 1),
-                dyw: DMatrix::zeros(1, 1),
-                cz,
-                dzu: DMatrix::zeros(1, 1),
-                dze: DMatrix::from_element(1, 1, 1.0 / ts),
-                dzw: DMatrix::zeros(1, 1),
-            })?;
-            if let Some(t) = g.sample_time {
-                lft = lft.with_sample_time(t)?;
-            }
-            lft
+            rate_feedback_lft(g)?
         }
     };
     Ok(Hypothesis {
