@@ -79,6 +79,7 @@
 //! assert!(id.diagnostics.feasibility_residual < 1e-9);
 //! ```
 
+pub mod augment;
 pub mod dispersion;
 pub mod error;
 pub mod fourier;

@@ -137,26 +137,7 @@ pub fn output_sensor_lft(g: &PolynomialModel) -> Result<Lft> {
             "an output (sensor) map needs a linear part with at least one input".into(),
         ));
     }
-    let ss = g.to_state_space().map_err(linear_error)?;
-    let n = ss.order();
-    let mut lft = Lft::new(LftMatrices {
-        a: ss.a().clone(),
-        bu: ss.b().clone(),
-        be: DMatrix::zeros(n, 1),
-        bw: DMatrix::zeros(n, 1),
-        cy: DMatrix::zeros(1, n),
-        dyu: DMatrix::zeros(1, g.num.len()),
-        dye: DMatrix::identity(1, 1),
-        dyw: DMatrix::identity(1, 1),
-        cz: ss.c().clone(),
-        dzu: ss.d().clone(),
-        dze: DMatrix::zeros(1, 1),
-        dzw: DMatrix::zeros(1, 1),
-    })?;
-    if let Some(ts) = g.sample_time {
-        lft = lft.with_sample_time(ts)?;
-    }
-    Ok(lft)
+    crate::augment::at_output(&lti_lft(g)?)
 }
 
 /// The LFT of rate feedback (friction-like), y = G·(u − N(ẏ)) + e, where the map reads the
@@ -208,42 +189,7 @@ pub fn rate_feedback_lft(g: &PolynomialModel) -> Result<Lft> {
             g.num[0][0]
         )));
     }
-    let ts = g.sample_time.unwrap_or(1.0);
-    // States [x; m] with m_k = y_(k−1): x⁺ = A·x + B·(u − w), m⁺ = C·x + e,
-    // y = C·x + e, z = (C·x + e − m)/T_s.
-    let ss = g.to_state_space().map_err(linear_error)?;
-    let n = ss.order();
-    let (a, b, c) = (ss.a(), ss.b(), ss.c());
-    let mut aa = DMatrix::zeros(n + 1, n + 1);
-    aa.view_mut((0, 0), (n, n)).copy_from(a);
-    aa.view_mut((n, 0), (1, n)).copy_from(c);
-    let mut bu = DMatrix::zeros(n + 1, 1);
-    bu.view_mut((0, 0), (n, 1)).copy_from(b);
-    let bw = -&bu;
-    let mut be = DMatrix::zeros(n + 1, 1);
-    be[(n, 0)] = 1.0;
-    let mut cy = DMatrix::zeros(1, n + 1);
-    cy.view_mut((0, 0), (1, n)).copy_from(c);
-    let mut cz = &cy / ts;
-    cz[(0, n)] = -1.0 / ts;
-    let mut lft = Lft::new(LftMatrices {
-        a: aa,
-        bu,
-        be,
-        bw,
-        cy,
-        dyu: DMatrix::zeros(1, 1),
-        dye: DMatrix::identity(1, 1),
-        dyw: DMatrix::zeros(1, 1),
-        cz,
-        dzu: DMatrix::zeros(1, 1),
-        dze: DMatrix::from_element(1, 1, 1.0 / ts),
-        dzw: DMatrix::zeros(1, 1),
-    })?;
-    if let Some(t) = g.sample_time {
-        lft = lft.with_sample_time(t)?;
-    }
-    Ok(lft)
+    crate::augment::rate_feedback(&lti_lft(g)?)
 }
 
 /// The LFT of y = Σ_i B_i/F·[u; w]_i + e: the first `nu` inputs of `g` are u, the rest w.

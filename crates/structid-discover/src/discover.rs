@@ -41,7 +41,6 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
-use structid_core::refine::lti_lft;
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
 use structid_core::{
@@ -49,18 +48,17 @@ use structid_core::{
     InitialState, Interpolant, LookupTable, Model, PolynomialDispersion, Result, Signal,
     SumDispersion, TotalVariation,
 };
-use structid_linear::PolynomialModel;
 use structid_lti::LinearSystem;
 
 use crate::effects::{Effect, EffectFit, Naming, NamingSettings, name_effect};
 use crate::gap::{Gap, GapSettings, gap};
-use crate::hypotheses::{Hypothesis, Location, hypothesis};
+use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::{DirectionTest, direction_dependence};
 
 /// Settings of [`discover`]; build them with [`DiscoverSettings::builder`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiscoverSettings {
-    locations: Vec<Location>,
+    locations: Option<Vec<Location>>,
     library: Vec<Effect>,
     gap: GapSettings,
     sigma_fraction: f64,
@@ -75,13 +73,13 @@ pub struct DiscoverSettings {
 }
 
 impl Default for DiscoverSettings {
-    /// Every location, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
+    /// Every location of the nominal model, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
     /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, naming
     /// tolerance 1.15, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
     /// settling samples.
     fn default() -> Self {
         Self {
-            locations: Location::ALL.to_vec(),
+            locations: None,
             library: Effect::LIBRARY.to_vec(),
             gap: GapSettings::default(),
             sigma_fraction: 0.1,
@@ -108,7 +106,7 @@ impl DiscoverSettings {
     ///     .total_variation(false)
     ///     .build()
     ///     .unwrap();
-    /// assert_eq!(s.locations().len(), 2);
+    /// assert_eq!(s.locations().unwrap().len(), 2);
     /// assert!(DiscoverSettings::builder().sigma_fraction(0.0).build().is_err());
     /// ```
     pub fn builder() -> DiscoverSettingsBuilder {
@@ -117,9 +115,9 @@ impl DiscoverSettings {
         }
     }
 
-    /// The candidate locations.
-    pub fn locations(&self) -> &[Location] {
-        &self.locations
+    /// The candidate locations (`None`: every location of the nominal model).
+    pub fn locations(&self) -> Option<&[Location]> {
+        self.locations.as_deref()
     }
 
     /// The families tried when naming.
@@ -187,9 +185,10 @@ pub struct DiscoverSettingsBuilder {
 }
 
 impl DiscoverSettingsBuilder {
-    /// The candidate locations (default: all four).
+    /// The candidate locations (default: the four built-in ones and those the nominal model
+    /// declares).
     pub fn locations(mut self, locations: Vec<Location>) -> Self {
-        self.inner.locations = locations;
+        self.inner.locations = Some(locations);
         self
     }
 
@@ -268,7 +267,7 @@ impl DiscoverSettingsBuilder {
             value,
             reason: reason.into(),
         };
-        if s.locations.is_empty() {
+        if s.locations.as_ref().is_some_and(Vec::is_empty) {
             return Err(Error::InvalidStructure(
                 "discovery needs at least one candidate location".into(),
             ));
@@ -417,8 +416,6 @@ impl AugmentedMap {
 pub struct Augmented {
     /// Where the block sits.
     pub location: Location,
-    /// The nominal linear model (unchanged).
-    pub linear: PolynomialModel,
     /// The augmented LFT with its block `N`.
     pub model: Model,
     /// Its map.
@@ -493,17 +490,14 @@ pub fn candidate_signals(data: &Data, linear_output: &[f64], ts: f64) -> Vec<(St
         ("y".to_string(), y.clone()),
         ("du/dt".to_string(), rate(&u)),
         ("dy/dt".to_string(), rate(&y)),
-        ("G·u (simulated linear output)".to_string(), linear_output.to_vec()),
+        (
+            "G·u (simulated linear output)".to_string(),
+            linear_output.to_vec(),
+        ),
     ]
 }
 
-fn check_records(g: &PolynomialModel, est: &Data, val: &Data) -> Result<()> {
-    if g.num.len() != 1 {
-        return Err(Error::InvalidStructure(format!(
-            "discovery needs a nominal model with one input; this one has {}",
-            g.num.len()
-        )));
-    }
+fn check_records(est: &Data, val: &Data) -> Result<()> {
     for (what, d) in [("estimation", est), ("validation", val)] {
         if d.u().channels() != 1 || d.y().channels() != 1 {
             return Err(Error::DimensionMismatch {
@@ -539,9 +533,10 @@ fn minmax(v: &[f64]) -> (f64, f64) {
 /// `fraction`·range(z), plus a polynomial trend so that the map extrapolates.
 fn quadratic_dispersion(range: f64, settings: &DiscoverSettings) -> Result<Arc<dyn Dispersion>> {
     let sigma = settings.sigma_fraction * range.max(f64::MIN_POSITIVE);
-    let kernel: Arc<dyn Dispersion> = Arc::new(FourierDispersion::new(
-        FourierWeights::GaussianLike { sigma },
-    )?);
+    let kernel: Arc<dyn Dispersion> =
+        Arc::new(FourierDispersion::new(FourierWeights::GaussianLike {
+            sigma,
+        })?);
     if settings.trend_degree == 0 {
         return Ok(kernel);
     }
@@ -607,7 +602,7 @@ struct Fitted {
 }
 
 fn identify_hypothesis(
-    g: &PolynomialModel,
+    nominal: &Nominal,
     location: Location,
     est: &Data,
     val: &Data,
@@ -615,18 +610,18 @@ fn identify_hypothesis(
 ) -> Result<Fitted> {
     let t0 = Instant::now();
     // A first hypothesis only to compute z; the dispersion's width depends on its range.
-    let probe = hypothesis(g, location, Arc::new(PolynomialDispersion::new(1)?))?;
+    let probe = nominal.hypothesis(location, Arc::new(PolynomialDispersion::new(1)?))?;
     let est_h = probe.data(est)?;
     let z = z_of(&probe, &est_h)?;
     let (lo, hi) = minmax(&z);
     if !(hi > lo) {
         return Err(Error::InvalidStructure(format!(
             "z {} is constant on the estimation record",
-            location.describe()
+            nominal.describe(location)
         )));
     }
     let dispersion = quadratic_dispersion(hi - lo, settings)?;
-    let h = hypothesis(g, location, dispersion)?;
+    let h = nominal.hypothesis(location, dispersion)?;
     // Marginal likelihood is defined for x₀ = 0: β and σ are chosen so, and the map is then
     // identified at the chosen values with x₀ estimated.
     let x0 = initial_state(location).0;
@@ -639,7 +634,14 @@ fn identify_hypothesis(
         .tune_sigma(settings.tune_sigma)
         .build()?;
     let sel = select(&h.model, &est_h, None, &identify, &selection)?;
-    eprintln!("DEBUG {location:?} method {} trials {} sel {:.2}s solver {} {}", sel.method, sel.curve.len(), sel.seconds, sel.identification.diagnostics.solver, sel.identification.diagnostics.solver_reason);
+    eprintln!(
+        "DEBUG {location:?} method {} trials {} sel {:.2}s solver {} {}",
+        sel.method,
+        sel.curve.len(),
+        sel.seconds,
+        sel.identification.diagnostics.solver,
+        sel.identification.diagnostics.solver_reason
+    );
     let id = if x0 == InitialState::Zero {
         sel.identification
     } else {
@@ -651,8 +653,20 @@ fn identify_hypothesis(
     };
     let block = &id.blocks[0];
     let val_h = h.data(val)?;
-    let validation_rms = simulation_rms(&sel.model, location, block.map.as_ref(), &val_h, settings.settle);
-    let estimation_rms = simulation_rms(&sel.model, location, block.map.as_ref(), &est_h, settings.settle);
+    let validation_rms = simulation_rms(
+        &sel.model,
+        location,
+        block.map.as_ref(),
+        &val_h,
+        settings.settle,
+    );
+    let estimation_rms = simulation_rms(
+        &sel.model,
+        location,
+        block.map.as_ref(),
+        &est_h,
+        settings.settle,
+    );
     let grid: Vec<f64> = (0..101)
         .map(|i| lo + (hi - lo) * i as f64 / 100.0)
         .collect();
@@ -737,7 +751,14 @@ fn total_variation_fit(
         .build()?;
     let sel = select(&h.model, &est_h, Some(&val_h), &identify, &selection)?;
     let mut id = sel.identification;
-    eprintln!("DEBUG tv {} trials {} {:.2}s solver {} iters {}", sel.method, sel.curve.len(), sel.seconds, id.diagnostics.solver, id.diagnostics.iterations);
+    eprintln!(
+        "DEBUG tv {} trials {} {:.2}s solver {} iters {}",
+        sel.method,
+        sel.curve.len(),
+        sel.seconds,
+        id.diagnostics.solver,
+        id.diagnostics.iterations
+    );
     let block = id.blocks.remove(0);
     let rms = simulation_rms(&sel.model, hyp.location, block.map.as_ref(), &val_h, settle);
     let z = block.z.channel(0);
@@ -877,24 +898,22 @@ fn non_smooth(effect: Effect) -> bool {
 /// cannot be realised; a hypothesis that fails is recorded in
 /// [`HypothesisResult::failure`] and ranked last instead.
 pub fn discover(
-    nominal: &PolynomialModel,
+    nominal: &Nominal,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
 ) -> Result<Discovery> {
     let t0 = Instant::now();
-    check_records(nominal, est, val)?;
-    let ts = nominal.sample_time.unwrap_or(1.0);
-    let nominal_model = Model::new(lti_lft(nominal)?, Vec::new())?;
+    check_records(est, val)?;
+    let ts = nominal.lft().sample_time().unwrap_or(1.0);
+    let nominal_model = nominal.model()?;
     let linear_output = |d: &Data| -> Result<Vec<f64>> {
-        Ok(nominal_model
-            .lft()
-            .t_yu()
-            .simulate(d.u())?
-            .channel(0))
+        Ok(nominal_model.lft().t_yu().simulate(d.u())?.channel(0))
     };
-    let est_candidates = candidate_signals(est, &linear_output(est)?, ts);
-    let val_candidates = candidate_signals(val, &linear_output(val)?, ts);
+    let mut est_candidates = candidate_signals(est, &linear_output(est)?, ts);
+    est_candidates.extend(nominal.state_signals(est)?);
+    let mut val_candidates = candidate_signals(val, &linear_output(val)?, ts);
+    val_candidates.extend(nominal.state_signals(val)?);
     let mut gap_settings = settings.gap.clone();
     gap_settings.max_lag = gap_settings.max_lag.min(est.u().len() / 4).max(1);
     let estimation_gap = gap(&nominal_model, &[], est, &est_candidates, &gap_settings)?;
@@ -919,7 +938,11 @@ pub fn discover(
     // Identify every hypothesis; failures are kept, ranked last.
     let mut fitted: Vec<Fitted> = Vec::new();
     let mut failed: Vec<HypothesisResult> = Vec::new();
-    for &location in &settings.locations {
+    let locations = settings
+        .locations
+        .clone()
+        .unwrap_or_else(|| nominal.locations());
+    for location in locations {
         let t = Instant::now();
         match identify_hypothesis(nominal, location, est, val, settings) {
             Ok(f) => fitted.push(f),
@@ -971,8 +994,17 @@ pub fn discover(
             seconds: t0.elapsed().as_secs_f64(),
         });
     };
-    let finding = name_and_add(nominal, best, est, val, &est_candidates, &val_candidates, &gap_settings, &validation_gap, settings)?;
-    let verdict = verdict_text(&validation_gap, &finding);
+    let finding = name_and_add(
+        best,
+        est,
+        val,
+        &est_candidates,
+        &val_candidates,
+        &gap_settings,
+        &validation_gap,
+        settings,
+    )?;
+    let verdict = verdict_text(nominal, &validation_gap, &finding);
     Ok(Discovery {
         estimation_gap,
         validation_gap,
@@ -984,7 +1016,7 @@ pub fn discover(
     })
 }
 
-fn verdict_text(before: &Gap, f: &Finding) -> String {
+fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> String {
     let what = match &f.classification {
         Classification::Named(fit) => {
             let params = fit
@@ -999,7 +1031,7 @@ fn verdict_text(before: &Gap, f: &Finding) -> String {
     };
     format!(
         "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({:.1}× smaller), fit {:.1} % → {:.1} %",
-        f.location.describe(),
+        nominal.describe(f.location),
         before.rms,
         f.augmented.validation_gap.rms,
         f.shrink,
@@ -1010,7 +1042,6 @@ fn verdict_text(before: &Gap, f: &Finding) -> String {
 
 #[allow(clippy::too_many_arguments)]
 fn name_and_add(
-    nominal: &PolynomialModel,
     best: Fitted,
     est: &Data,
     val: &Data,
@@ -1046,15 +1077,8 @@ fn name_and_add(
     let mut map: Box<dyn Interpolant> = best.map;
     let mut z_named = best.z.clone();
     let mut total_variation_rms = None;
-    if settings.total_variation
-        && naming
-            .ranked
-            .first()
-            .is_some_and(|f| non_smooth(f.effect))
-    {
-        if let Ok((tv_map, tz, tw, rms)) =
-            total_variation_fit(&h, est, val, settings.settle)
-        {
+    if settings.total_variation && naming.ranked.first().is_some_and(|f| non_smooth(f.effect)) {
+        if let Ok((tv_map, tz, tw, rms)) = total_variation_fit(&h, est, val, settings.settle) {
             total_variation_rms = Some(rms);
             if rms < nonparametric_rms {
                 let (zs, ws) = subsample(&tz, &tw);
@@ -1076,9 +1100,13 @@ fn name_and_add(
             best.e_hat.clone()
         } else {
             // The equation residual with the named estimate: y − L_yu·u − L_yw·N̂(z).
-            let sim = h.model.lft().t_yw().simulate(&Signal::from_fn(z_named.len(), 1, |k, _| {
-                map.eval(&[z_named[k]])
-            }))?;
+            let sim =
+                h.model
+                    .lft()
+                    .t_yw()
+                    .simulate(&Signal::from_fn(z_named.len(), 1, |k, _| {
+                        map.eval(&[z_named[k]])
+                    }))?;
             let base = h.model.lft().t_yu().simulate(est_h.u())?;
             let y = est_h.y().channel(0);
             (0..y.len())
@@ -1087,7 +1115,11 @@ fn name_and_add(
         };
         let delta = deconvolve(&h, &r)?;
         let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
-        direction_dependence(&z_named[skip..], &delta[skip..], settings.hysteresis_threshold)
+        direction_dependence(
+            &z_named[skip..],
+            &delta[skip..],
+            settings.hysteresis_threshold,
+        )
     };
 
     // Name: the best BIC family among the first three whose parametric map validates within
@@ -1149,8 +1181,20 @@ fn name_and_add(
         initial_state: initial_state(location).1,
         ..gap_settings.clone()
     };
-    let estimation_gap = gap(&h.model, &[interp.as_ref()], &est_h, est_candidates, gap_settings)?;
-    let validation_gap = gap(&h.model, &[interp.as_ref()], &val_h, val_candidates, gap_settings)?;
+    let estimation_gap = gap(
+        &h.model,
+        &[interp.as_ref()],
+        &est_h,
+        est_candidates,
+        gap_settings,
+    )?;
+    let validation_gap = gap(
+        &h.model,
+        &[interp.as_ref()],
+        &val_h,
+        val_candidates,
+        gap_settings,
+    )?;
     let shrink = before.rms / validation_gap.rms;
     Ok(Finding {
         location,
@@ -1165,7 +1209,6 @@ fn name_and_add(
         remarks,
         augmented: Augmented {
             location,
-            linear: nominal.clone(),
             model: h.model.clone(),
             map: augmented_map,
             estimation_gap,
@@ -1178,10 +1221,13 @@ fn name_and_add(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hypotheses::hypothesis;
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
     use structid_core::MapBinding;
+    use structid_core::refine::lti_lft;
+    use structid_linear::PolynomialModel;
 
     fn nominal() -> PolynomialModel {
         PolynomialModel {
@@ -1209,8 +1255,8 @@ mod tests {
                 model.lft().simulate(&[], &u, Some(&e), None).unwrap().y
             }
             Some(loc) => {
-                let h = hypothesis(&g, loc, Arc::new(PolynomialDispersion::new(1).unwrap()))
-                    .unwrap();
+                let h =
+                    hypothesis(&g, loc, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
                 let f = |z: &[f64]| truth(z[0]);
                 h.model
                     .lft()
@@ -1236,13 +1282,25 @@ mod tests {
         let sat: fn(f64) -> f64 = |z| (1.5 * z).clamp(-0.8, 0.8);
         let est = record(Some(Location::Input), sat, 1, 3000);
         let val = record(Some(Location::Input), sat, 2, 3000);
-        let d = discover(&nominal(), &est, &val, &DiscoverSettings::default()).unwrap();
+        let d = discover(
+            &Nominal::from_polynomial(&nominal()).unwrap(),
+            &est,
+            &val,
+            &DiscoverSettings::default(),
+        )
+        .unwrap();
         for h in &d.hypotheses {
-            eprintln!("{:?} val {:.4e} est {:.4e} {:.2}s {:?}", h.location, h.validation_rms, h.estimation_rms, h.seconds, h.failure);
+            eprintln!(
+                "{:?} val {:.4e} est {:.4e} {:.2}s {:?}",
+                h.location, h.validation_rms, h.estimation_rms, h.seconds, h.failure
+            );
         }
         eprintln!("{}", d.verdict);
         let f = d.finding.unwrap();
-        eprintln!("{:?} {:?} {:?} {:?}", f.classification, f.direction, f.family_rms, f.remarks);
+        eprintln!(
+            "{:?} {:?} {:?} {:?}",
+            f.classification, f.direction, f.family_rms, f.remarks
+        );
         eprintln!("seconds {}", d.seconds);
     }
 
@@ -1250,7 +1308,13 @@ mod tests {
     fn scratch_lti() {
         let est = record(None, |z| z, 3, 3000);
         let val = record(None, |z| z, 4, 3000);
-        let d = discover(&nominal(), &est, &val, &DiscoverSettings::default()).unwrap();
+        let d = discover(
+            &Nominal::from_polynomial(&nominal()).unwrap(),
+            &est,
+            &val,
+            &DiscoverSettings::default(),
+        )
+        .unwrap();
         eprintln!("{}", d.verdict);
         assert!(!d.missing_effect);
     }

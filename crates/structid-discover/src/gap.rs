@@ -3,9 +3,13 @@
 //!
 //! [`gap`] simulates the model (with its maps, if any) on the record from u alone with the
 //! initial state estimated (`structid_core::validate` with
-//! [`ValidationInitialState::Estimate`]) and examines the simulation residual ε = y − ŷ:
+//! [`ValidationInitialState::Estimate`]) and examines the simulation residual y − ŷ and the
+//! one-step prediction errors ε of the model's noise path (for an output-error model, whose
+//! noise is white at the output, the two are the same signal; a model with a noise model is
+//! judged by its innovations, so that coloured noise it explains is not taken for a missing
+//! effect):
 //!
-//! * its RMS and fit (MATLAB's `compare` NRMSE fit in percent);
+//! * the simulation RMS and fit (MATLAB's `compare` NRMSE fit in percent);
 //! * a noise level that does not depend on the model, σ̂ = MAD(Δε)/(0.6745·√2): first
 //!   differences remove the slow part of a model error, and for white noise Δε has standard
 //!   deviation √2·σ;
@@ -90,8 +94,10 @@ pub struct Gap {
     pub residual: Vec<f64>,
     /// The simulated output ŷ (first output).
     pub simulated: Vec<f64>,
-    /// RMS(ε).
+    /// RMS of the simulation residual y − ŷ.
     pub rms: f64,
+    /// RMS of the one-step prediction errors ε (equal to `rms` for an output-error model).
+    pub prediction_rms: f64,
     /// The fit in percent.
     pub fit_percent: f64,
     /// The noise level σ̂ from the differenced residual.
@@ -264,12 +270,13 @@ pub fn gap(
     let y = data.y().channel(0);
     let simulated = v.simulated.channel(0);
     let residual: Vec<f64> = y.iter().zip(&simulated).map(|(a, b)| a - b).collect();
+    let innovations = v.prediction_error.channel(0);
     let n = residual.len();
-    let noise_std = noise_level(&residual);
+    let noise_std = noise_level(&innovations);
     let max_lag = settings.max_lag.min(n.saturating_sub(1)).max(1);
 
     // Ljung–Box on the residual's autocorrelation.
-    let auto = autocorrelation(&residual, max_lag);
+    let auto = autocorrelation(&innovations, max_lag);
     let nf = n as f64;
     let q: f64 = auto
         .lags
@@ -290,19 +297,19 @@ pub fn gap(
         let m = s.iter().map(|v| v * v).sum::<f64>() / s.len() as f64;
         s.iter().map(|v| v * v - m).collect::<Vec<f64>>()
     };
-    let e2 = centred_square(&residual);
+    let e2 = centred_square(&innovations);
     for c in 0..data.u().channels() {
         let u = data.u().channel(c);
         let u2 = centred_square(&u);
         tests.push(portmanteau_cross(
             format!("ε against u{c}"),
-            &residual,
+            &innovations,
             &u,
             max_lag,
         ));
         tests.push(portmanteau_cross(
             format!("ε against u{c}²"),
-            &residual,
+            &innovations,
             &u2,
             max_lag,
         ));
@@ -328,7 +335,8 @@ pub fn gap(
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let rms = v.rms[0];
     let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
-    let too_large = rms > settings.noise_ratio * noise_std;
+    let prediction_rms = v.prediction_rms[0];
+    let too_large = prediction_rms > settings.noise_ratio * noise_std;
     let missing_effect = too_large || !failing.is_empty();
     let verdict = if missing_effect {
         let mut why: Vec<String> = failing
@@ -339,15 +347,15 @@ pub fn gap(
             why.insert(
                 0,
                 format!(
-                    "RMS(ε) = {rms:.4e} is {:.1}× the noise level σ̂ = {noise_std:.4e}",
-                    rms / noise_std.max(f64::MIN_POSITIVE)
+                    "RMS(ε) = {prediction_rms:.4e} is {:.1}× the noise level σ̂ = {noise_std:.4e}",
+                    prediction_rms / noise_std.max(f64::MIN_POSITIVE)
                 ),
             );
         }
         format!("missing effect: {}", why.join("; "))
     } else {
         format!(
-            "no missing effect detected: RMS(ε) = {rms:.4e} within {}× σ̂ = {noise_std:.4e}, and ε \
+            "no missing effect detected: RMS(ε) = {prediction_rms:.4e} within {}× σ̂ = {noise_std:.4e}, and ε \
              passes the whiteness and (non)linear input-correlation tests at the 0.1 % level",
             settings.noise_ratio
         )
@@ -356,6 +364,7 @@ pub fn gap(
         residual,
         simulated,
         rms,
+        prediction_rms,
         fit_percent: v.fit_percent[0],
         noise_std,
         tests,

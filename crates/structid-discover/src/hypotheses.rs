@@ -1,43 +1,46 @@
 //! Candidate places for a missing static effect in a nominal linear model.
 //!
-//! The nominal model is a polynomial G (one output): y = Σ_i B_i/F·u_i + e. Each
-//! [`Location`] inserts one unknown static block N and gives the LFT of the augmented model:
+//! A [`Nominal`] model is an LFT without maps, y = G·u + H·e (one input, one output, any noise
+//! path H), possibly with *declared* injection points and signals: w columns and z rows of its
+//! LFT that the model file names, unused until a block is put there. Each [`Location`] inserts
+//! one unknown static block N (the LFTs are built by [`structid_core::augment`]):
 //!
 //! | location | model | z (measurable because) |
 //! |---|---|---|
-//! | [`Location::Input`] | y = G·N(u) + e | z = u |
-//! | [`Location::Output`] | y = N(G·u) + e (a sensor map) | z = G·u depends on u only |
-//! | [`Location::OutputFeedback`] | y = G·(u − N(y)) + e | z = y is measured |
-//! | [`Location::RateFeedback`] | y = G·(u − N(ẏ)) + e, ẏ_k = (y_k − y_(k−1))/T_s | z = Ψ(q)·y with the LTI Ψ = (1 − q⁻¹)/T_s |
+//! | [`Location::Input`] | y = G·N(u) + H·e | z = u |
+//! | [`Location::Output`] | y = N(G·u) + H·e (a sensor map) | z = G·u depends on u only |
+//! | [`Location::OutputFeedback`] | y = G·(u − N(y)) + H·e | z = y is measured |
+//! | [`Location::RateFeedback`] | y = G·(u − N(ẏ)) + H·e, ẏ_k = (y_k − y_(k−1))/T_s | z = Ψ(q)·y with the LTI Ψ = (1 − q⁻¹)/T_s |
+//! | [`Location::Declared`] | the nominal LFT's declared w column and z row | checked by measurability |
 //!
 //! For the rate, z is a *dynamic* function of the measured output (the paper's Definition 1
-//! with an LTI Ψ_M): the LFT carries Ψ's state (the previous output), and the record gets z
-//! computed from the measured y ([`Hypothesis::data`]) so that identification sees the
-//! measured rate. Every location but the input needs one sample of delay in G (nk ≥ 1).
+//! with an LTI Ψ_M): the LFT carries Ψ's state (the previous output), and
+//! [`Hypothesis::data`] attaches the measured z to the record. The feedback locations need one
+//! sample of delay in G (D_yu = 0).
 
 use std::sync::Arc;
 
-use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, output_sensor_lft, rate_feedback_lft,
-};
-use structid_core::{Data, Dispersion, Error, Model, NonlinearBlock, Result, Signal};
+use structid_core::refine::lti_lft;
+use structid_core::{Data, Dispersion, Error, Lft, Model, NonlinearBlock, Result, Signal, augment};
 use structid_linear::PolynomialModel;
 
 /// Where the unknown block is inserted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum Location {
-    /// An actuator map ahead of G: y = G·N(u) + e.
+    /// An actuator map ahead of G: y = G·N(u) + H·e.
     Input,
-    /// A sensor map of the linear output: y = N(G·u) + e.
+    /// A sensor map of the linear output: y = N(G·u) + H·e.
     Output,
-    /// Stiffness-like feedback from the output: y = G·(u − N(y)) + e.
+    /// Stiffness-like feedback from the output: y = G·(u − N(y)) + H·e.
     OutputFeedback,
-    /// Friction-like feedback from the output's rate: y = G·(u − N(ẏ)) + e.
+    /// Friction-like feedback from the output's rate: y = G·(u − N(ẏ)) + H·e.
     RateFeedback,
+    /// The `i`-th location declared with the nominal model ([`Nominal::with_location`]).
+    Declared(usize),
 }
 
 impl Location {
-    /// Every location, in the order of the table above.
+    /// The four built-in locations, in the order of the table above.
     pub const ALL: [Location; 4] = [
         Location::Input,
         Location::Output,
@@ -45,14 +48,215 @@ impl Location {
         Location::RateFeedback,
     ];
 
-    /// A short description for reports.
+    /// A short description for reports (see [`Nominal::describe`] for declared locations'
+    /// names).
     pub fn describe(self) -> &'static str {
         match self {
             Location::Input => "at the input: y = G·N(u) + e",
             Location::Output => "at the output (sensor): y = N(G·u) + e",
             Location::OutputFeedback => "in feedback from the output: y = G·(u − N(y)) + e",
             Location::RateFeedback => "in feedback from the output rate: y = G·(u − N(ẏ)) + e",
+            Location::Declared(_) => "at a location declared with the nominal model",
         }
+    }
+
+    /// A short identifier: `input`, `output`, `output-feedback`, `rate-feedback` or
+    /// `declared-i` (the `[linear]` structure names of model files for the first four).
+    pub fn key(self) -> String {
+        match self {
+            Location::Input => "input".into(),
+            Location::Output => "output".into(),
+            Location::OutputFeedback => "output-feedback".into(),
+            Location::RateFeedback => "rate-feedback".into(),
+            Location::Declared(i) => format!("declared-{i}"),
+        }
+    }
+}
+
+/// A location the nominal model declares: the block reads z row `z` and writes w column `w`
+/// of the nominal LFT.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct DeclaredLocation {
+    /// Its name, e.g. `spring`.
+    pub name: String,
+    /// The z row the block reads.
+    pub z: usize,
+    /// The w column the block writes.
+    pub w: usize,
+}
+
+/// A state of the nominal model named for localisation (e.g. `position`).
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct NamedState {
+    /// The name.
+    pub name: String,
+    /// The state's index in the nominal LFT.
+    pub state: usize,
+}
+
+/// A nominal model: an LFT without maps, with its declared locations and named states.
+#[derive(Clone, Debug)]
+pub struct Nominal {
+    lft: Lft,
+    declared: Vec<DeclaredLocation>,
+    states: Vec<NamedState>,
+}
+
+impl Nominal {
+    /// A nominal model from an LFT with one input and one output. Its w columns and z rows,
+    /// if any, are only used by locations declared with [`Nominal::with_location`].
+    pub fn new(lft: Lft) -> Result<Self> {
+        let d = lft.dims();
+        if d.u != 1 || d.y != 1 {
+            return Err(Error::InvalidStructure(format!(
+                "discovery needs a nominal model with one input and one output; this one has {} \
+                 input(s) and {} output(s)",
+                d.u, d.y
+            )));
+        }
+        Ok(Self {
+            lft,
+            declared: Vec::new(),
+            states: Vec::new(),
+        })
+    }
+
+    /// The nominal model y = G·u + e of a polynomial G (white output noise).
+    ///
+    /// ```
+    /// use structid_discover::hypotheses::{Location, Nominal};
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
+    /// let nominal = Nominal::from_polynomial(&g).unwrap();
+    /// assert_eq!(nominal.locations(), Location::ALL.to_vec());
+    /// ```
+    pub fn from_polynomial(g: &PolynomialModel) -> Result<Self> {
+        Self::new(lti_lft(g)?)
+    }
+
+    /// Declares a location: a block reading z row `z` and writing w column `w` of the LFT.
+    pub fn with_location(mut self, name: &str, z: usize, w: usize) -> Result<Self> {
+        // Fails early when the channels do not exist.
+        augment::declared(&self.lft, z, w)?;
+        self.declared.push(DeclaredLocation {
+            name: name.to_string(),
+            z,
+            w,
+        });
+        Ok(self)
+    }
+
+    /// Names a state of the LFT for localisation.
+    pub fn with_state(mut self, name: &str, state: usize) -> Result<Self> {
+        if state >= self.lft.dims().states {
+            return Err(Error::InvalidStructure(format!(
+                "named state `{name}` is state {state}, but the nominal model has {} state(s)",
+                self.lft.dims().states
+            )));
+        }
+        self.states.push(NamedState {
+            name: name.to_string(),
+            state,
+        });
+        Ok(self)
+    }
+
+    /// The nominal LFT (with its declared channels).
+    pub fn lft(&self) -> &Lft {
+        &self.lft
+    }
+
+    /// The declared locations.
+    pub fn declared(&self) -> &[DeclaredLocation] {
+        &self.declared
+    }
+
+    /// The named states.
+    pub fn states(&self) -> &[NamedState] {
+        &self.states
+    }
+
+    /// The nominal model without any block (its declared channels dropped).
+    pub fn model(&self) -> Result<Model> {
+        Model::new(augment::without_blocks(&self.lft)?, Vec::new())
+    }
+
+    /// Every candidate location: the four built-in ones, then the declared ones.
+    pub fn locations(&self) -> Vec<Location> {
+        Location::ALL
+            .into_iter()
+            .chain((0..self.declared.len()).map(Location::Declared))
+            .collect()
+    }
+
+    /// A description of `location` for reports.
+    pub fn describe(&self, location: Location) -> String {
+        match location {
+            Location::Declared(i) => match self.declared.get(i) {
+                Some(d) => format!(
+                    "at the declared location `{}` (z row {}, w column {})",
+                    d.name, d.z, d.w
+                ),
+                None => format!("at declared location {i} (not declared)"),
+            },
+            other => other.describe().to_string(),
+        }
+    }
+
+    /// The named states simulated from u (nominal model, zero initial state), by name.
+    pub fn state_signals(&self, data: &Data) -> Result<Vec<(String, Vec<f64>)>> {
+        if self.states.is_empty() {
+            return Ok(Vec::new());
+        }
+        let n = self.lft.dims().states;
+        let (_, x) = self.lft.t_yu().simulate_states(&vec![0.0; n], data.u())?;
+        Ok(self
+            .states
+            .iter()
+            .map(|s| (s.name.clone(), x.channel(s.state)))
+            .collect())
+    }
+
+    /// Builds the hypothesis that a static block with `dispersion` sits at `location`.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::KernelDispersion;
+    /// use structid_discover::hypotheses::Nominal;
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
+    /// let nominal = Nominal::from_polynomial(&g).unwrap();
+    /// for loc in nominal.locations() {
+    ///     let h = nominal.hypothesis(loc, Arc::new(KernelDispersion::gaussian(0.3).unwrap())).unwrap();
+    ///     assert_eq!(h.model.blocks().len(), 1);
+    /// }
+    /// ```
+    pub fn hypothesis(
+        &self,
+        location: Location,
+        dispersion: Arc<dyn Dispersion>,
+    ) -> Result<Hypothesis> {
+        let base = augment::without_blocks(&self.lft)?;
+        let lft = match location {
+            Location::Input => augment::at_input(&base)?,
+            Location::Output => augment::at_output(&base)?,
+            Location::OutputFeedback => augment::output_feedback(&base)?,
+            Location::RateFeedback => augment::rate_feedback(&base)?,
+            Location::Declared(i) => {
+                let d = self.declared.get(i).ok_or_else(|| {
+                    Error::InvalidStructure(format!(
+                        "location {i} is not declared (the nominal model declares {})",
+                        self.declared.len()
+                    ))
+                })?;
+                augment::declared(&self.lft, d.z, d.w)?
+            }
+        };
+        Ok(Hypothesis {
+            location,
+            model: Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, dispersion)])?,
+            sample_time: self.lft.sample_time().unwrap_or(1.0),
+        })
     }
 }
 
@@ -69,7 +273,8 @@ pub struct Hypothesis {
 
 impl Hypothesis {
     /// The record as identification needs it: for the rate, with the measured z = Ψ(q)·y
-    /// attached; otherwise unchanged.
+    /// attached (measurability would compute the same z, through the inverted noise path);
+    /// otherwise unchanged.
     pub fn data(&self, data: &Data) -> Result<Data> {
         match self.location {
             Location::RateFeedback => {
@@ -86,28 +291,9 @@ impl Hypothesis {
     }
 }
 
-fn siso(g: &PolynomialModel) -> Result<()> {
-    if g.num.len() != 1 {
-        return Err(Error::InvalidStructure(format!(
-            "hypotheses are built for a nominal model with one input; this one has {}",
-            g.num.len()
-        )));
-    }
-    Ok(())
-}
-
-fn delayed(g: &PolynomialModel, location: Location) -> Result<()> {
-    if g.num[0].first().is_some_and(|b| *b != 0.0) {
-        return Err(Error::InvalidStructure(format!(
-            "a block {} needs G to have an input delay (nk ≥ 1); otherwise the loop is algebraic",
-            location.describe()
-        )));
-    }
-    Ok(())
-}
-
 /// Builds the hypothesis that a static block with `dispersion` sits at `location` of the
-/// nominal single-input model `g`.
+/// nominal single-input model `g` (shorthand for [`Nominal::from_polynomial`] then
+/// [`Nominal::hypothesis`]).
 ///
 /// ```
 /// use std::sync::Arc;
@@ -125,27 +311,7 @@ pub fn hypothesis(
     location: Location,
     dispersion: Arc<dyn Dispersion>,
 ) -> Result<Hypothesis> {
-    siso(g)?;
-    let ts = g.sample_time.unwrap_or(1.0);
-    let block = || NonlinearBlock::new("N", vec![0], 0, Arc::clone(&dispersion));
-    let lft = match location {
-        Location::Input => InputNonlinearity::new("N").lft(g)?,
-        Location::OutputFeedback => {
-            delayed(g, location)?;
-            let s = OutputFeedback::new("N");
-            s.lft(&s.initial_from_bla(g)?)?
-        }
-        Location::Output => output_sensor_lft(g)?,
-        Location::RateFeedback => {
-            delayed(g, location)?;
-            rate_feedback_lft(g)?
-        }
-    };
-    Ok(Hypothesis {
-        location,
-        model: Model::new(lft, vec![block()])?,
-        sample_time: ts,
-    })
+    Nominal::from_polynomial(g)?.hypothesis(location, dispersion)
 }
 
 #[cfg(test)]
