@@ -24,6 +24,7 @@
 
 mod pipeline;
 pub mod silverbox;
+pub mod silverbox_discovery;
 pub mod tanks;
 
 pub use structid_core::*;

@@ -634,14 +634,6 @@ fn identify_hypothesis(
         .tune_sigma(settings.tune_sigma)
         .build()?;
     let sel = select(&h.model, &est_h, None, &identify, &selection)?;
-    eprintln!(
-        "DEBUG {location:?} method {} trials {} sel {:.2}s solver {} {}",
-        sel.method,
-        sel.curve.len(),
-        sel.seconds,
-        sel.identification.diagnostics.solver,
-        sel.identification.diagnostics.solver_reason
-    );
     let id = if x0 == InitialState::Zero {
         sel.identification
     } else {
@@ -751,14 +743,6 @@ fn total_variation_fit(
         .build()?;
     let sel = select(&h.model, &est_h, Some(&val_h), &identify, &selection)?;
     let mut id = sel.identification;
-    eprintln!(
-        "DEBUG tv {} trials {} {:.2}s solver {} iters {}",
-        sel.method,
-        sel.curve.len(),
-        sel.seconds,
-        id.diagnostics.solver,
-        id.diagnostics.iterations
-    );
     let block = id.blocks.remove(0);
     let rms = simulation_rms(&sel.model, hyp.location, block.map.as_ref(), &val_h, settle);
     let z = block.z.channel(0);
@@ -1068,10 +1052,8 @@ fn name_and_add(
         )
     };
     let (zs, ws) = subsample(&best.z, &best.w_hat);
-    let tn = Instant::now();
     let mut naming = name_effect(&zs, &ws, &naming_settings)
         .map_err(|e| Error::Numerical(format!("naming the effect: {e}")))?;
-    eprintln!("DEBUG naming {:.2}s", tn.elapsed().as_secs_f64());
     let mut estimator = "quadratic".to_string();
     let mut nonparametric_rms = best.result.validation_rms;
     let mut map: Box<dyn Interpolant> = best.map;
@@ -1093,7 +1075,6 @@ fn name_and_add(
         }
     }
 
-    eprintln!("DEBUG after tv {:.2}s", tn.elapsed().as_secs_f64());
     // Direction dependence of the residual, deconvolved to the block's output.
     let direction = {
         let r = if estimator == "quadratic" {
