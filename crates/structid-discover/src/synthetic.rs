@@ -234,7 +234,10 @@ pub const STATIC_PAIRS: [(Effect, Location); 17] = [
     (Effect::Quantisation, Location::Output),
     (Effect::EvenPolynomial { degree: 2 }, Location::Output),
     (Effect::OddPolynomial { degree: 3 }, Location::Output),
-    (Effect::OddPolynomial { degree: 3 }, Location::OutputFeedback),
+    (
+        Effect::OddPolynomial { degree: 3 },
+        Location::OutputFeedback,
+    ),
     (Effect::Saturation, Location::OutputFeedback),
     (Effect::CoulombViscous, Location::RateFeedback),
     (Effect::Stribeck, Location::RateFeedback),
@@ -265,10 +268,15 @@ fn static_pair(seed: u64) -> (Effect, Location) {
 /// assert!(case.equivalent_locations().is_empty());
 /// ```
 pub fn generate(kind: CaseKind, seed: u64) -> Case {
+    generate_counted(kind, seed).0
+}
+
+/// [`generate`] with the number of draws it took.
+fn generate_counted(kind: CaseKind, seed: u64) -> (Case, usize) {
     let mut rng = StdRng::seed_from_u64(seed);
-    for _attempt in 0..10_000 {
+    for draws in 1..=10_000 {
         if let Some(case) = attempt(kind, seed, &mut rng) {
-            return case;
+            return (case, draws);
         }
     }
     panic!("synthetic: no valid {kind:?} case for seed {seed} after 10000 draws")
@@ -559,9 +567,10 @@ fn rms_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn range(v: &[f64]) -> (f64, f64) {
-    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
-        (l.min(*x), h.max(*x))
-    })
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(*x), h.max(*x))
+        })
 }
 
 fn fraction(v: &[f64], pred: impl Fn(f64) -> bool) -> f64 {
@@ -613,10 +622,26 @@ fn loop_stable(g: &PolynomialModel, lo: f64, hi: f64, rate: bool) -> bool {
     })
 }
 
-/// Width of the loop in the (z, w) plane: over 20 quantile bins of z, the mean over bins of
-/// |mean w while z last moved up − mean w while z last moved down|, relative to the range of
-/// w. About 0 for a static map.
-fn loop_width(z: &[f64], w: &[f64]) -> f64 {
+/// How hysteretic the points (z_k, w_k) are, from 20 quantile bins of z and the direction
+/// in which z last moved:
+///
+/// * `width`: the mean over bins of |mean w moving up − mean w moving down|, relative to the
+///   range of w (the loop's width in the (z, w) plane);
+/// * `explained`: the share of the energy of w about its bin means that the direction
+///   explains.
+///
+/// Both are about 0 for a static map.
+#[derive(Clone, Copy, Debug)]
+struct Loop {
+    width: f64,
+    explained: f64,
+}
+
+fn hysteresis_loop(z: &[f64], w: &[f64]) -> Loop {
+    let none = Loop {
+        width: 0.0,
+        explained: 0.0,
+    };
     let n = z.len().min(w.len());
     let mut dir = 0i8;
     let mut samples: Vec<(f64, f64, bool)> = Vec::with_capacity(n);
@@ -632,32 +657,42 @@ fn loop_width(z: &[f64], w: &[f64]) -> f64 {
         }
     }
     if samples.len() < 100 {
-        return 0.0;
+        return none;
     }
     samples.sort_by(|a, b| a.0.total_cmp(&b.0));
     let bins = 20;
     let per = samples.len() / bins;
-    let mut gaps = Vec::new();
+    let (mut gaps, mut between, mut total) = (Vec::new(), 0.0, 0.0);
     for chunk in samples.chunks(per) {
-        let (mut su, mut nu, mut sd, mut nd) = (0.0, 0, 0.0, 0);
+        let (mut su, mut nu, mut sd, mut nd) = (0.0, 0.0, 0.0, 0.0);
         for (_, w, up) in chunk {
             if *up {
                 su += w;
-                nu += 1;
+                nu += 1.0;
             } else {
                 sd += w;
-                nd += 1;
+                nd += 1.0;
             }
         }
-        if nu >= 5 && nd >= 5 {
-            gaps.push((su / nu as f64 - sd / nd as f64).abs());
+        let mean = (su + sd) / (nu + nd);
+        total += chunk
+            .iter()
+            .map(|(_, w, _)| (w - mean).powi(2))
+            .sum::<f64>();
+        if nu >= 5.0 && nd >= 5.0 {
+            let (mu, md) = (su / nu, sd / nd);
+            gaps.push((mu - md).abs());
+            between += nu * (mu - mean).powi(2) + nd * (md - mean).powi(2);
         }
     }
     let (lo, hi) = range(&w[..n]);
-    if gaps.len() < bins / 2 || hi <= lo {
-        return 0.0;
+    if gaps.len() < bins / 2 || hi <= lo || total <= 0.0 {
+        return none;
     }
-    gaps.iter().sum::<f64>() / gaps.len() as f64 / (hi - lo)
+    Loop {
+        width: gaps.iter().sum::<f64>() / gaps.len() as f64 / (hi - lo),
+        explained: between / total,
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -705,11 +740,20 @@ struct InputSpec {
     p2: f64,
 }
 
-fn draw_input_spec(rng: &mut StdRng, kind: InputKind, bw: f64, len: usize) -> InputSpec {
+/// `smooth` lowers the band of the noise and the multisine by 5 (used for hysteresis, so
+/// that the input does not reverse within the play at every sample).
+fn draw_input_spec(
+    rng: &mut StdRng,
+    kind: InputKind,
+    bw: f64,
+    len: usize,
+    smooth: bool,
+) -> InputSpec {
     let amplitude = uniform(rng, 0.5, 2.0);
+    let band = if smooth { 0.2 } else { 1.0 };
     let (p1, p2) = match kind {
-        InputKind::FilteredNoise => ((bw * uniform(rng, 0.5, 2.0)).min(0.25), 0.0),
-        InputKind::Multisine => ((bw * uniform(rng, 1.0, 2.0)).min(0.4), 0.0),
+        InputKind::FilteredNoise => ((band * bw * uniform(rng, 0.5, 2.0)).min(0.25), 0.0),
+        InputKind::Multisine => ((band * bw * uniform(rng, 1.0, 2.0)).min(0.4), 0.0),
         InputKind::RandomSteps => {
             let tau = 1.0 / (2.0 * std::f64::consts::PI * bw);
             let lo = (0.5 * tau).max(5.0);
@@ -901,7 +945,13 @@ fn draw_theta(
 
 /// Whether the effect is clearly active on the block input `z` of the simulation with it,
 /// and (feedback) every local slope over the range leaves the linearised loop stable.
-fn active(effect: Effect, theta: &[f64], location: Location, g: &PolynomialModel, z: &[f64]) -> bool {
+fn active(
+    effect: Effect,
+    theta: &[f64],
+    location: Location,
+    g: &PolynomialModel,
+    z: &[f64],
+) -> bool {
     let (zlo, zhi) = range(z);
     let zmax = max_abs(z);
     let ok = match effect {
@@ -984,15 +1034,19 @@ fn attempt(kind: CaseKind, seed: u64, rng: &mut StdRng) -> Option<Case> {
     let bw = bandwidth(&g);
     let len = rng.random_range(2000..=4000);
     let pair = static_pair(seed);
-    let continuous_motion =
-        kind == CaseKind::Hysteresis || (kind == CaseKind::Static && pair.1 == Location::RateFeedback);
+    let continuous_motion = kind == CaseKind::Hysteresis
+        || (kind == CaseKind::Static && pair.1 == Location::RateFeedback);
     let kinds: &[InputKind] = if continuous_motion {
-        &[InputKind::FilteredNoise, InputKind::Multisine, InputKind::Chirp]
+        &[
+            InputKind::FilteredNoise,
+            InputKind::Multisine,
+            InputKind::Chirp,
+        ]
     } else {
         &InputKind::ALL
     };
     let input = kinds[rng.random_range(0..kinds.len())];
-    let spec = draw_input_spec(rng, input, bw, len);
+    let spec = draw_input_spec(rng, input, bw, len, kind == CaseKind::Hysteresis);
     let u = realise(&spec, rng, len, spec.amplitude);
     let y_nominal = g.simulate(&signal(&u)).ok()?;
     let nominal_peak = max_abs(&y_nominal).max(max_abs(&u));
@@ -1041,7 +1095,8 @@ fn attempt(kind: CaseKind, seed: u64, rng: &mut StdRng) -> Option<Case> {
             }
         }
         Hidden::Backlash { .. } | Hidden::BoucWen { .. } => {
-            if loop_width(&clean.z, &clean.w) < 0.05 {
+            let l = hysteresis_loop(&clean.z, &clean.w);
+            if l.width < 0.08 || l.explained < 0.2 {
                 return None;
             }
         }
@@ -1151,7 +1206,10 @@ mod tests {
             for seed in 0..40 {
                 let c = generate(kind, seed);
                 let g = &c.nominal;
-                assert!(g.is_stable() && g.spectral_radius() < 0.99, "{kind:?} {seed}");
+                assert!(
+                    g.is_stable() && g.spectral_radius() < 0.99,
+                    "{kind:?} {seed}"
+                );
                 assert_eq!(g.num.len(), 1);
                 assert_eq!(g.num[0][0], 0.0, "nk = 1");
                 assert_ne!(g.num[0][1], 0.0, "nk = 1");
@@ -1249,7 +1307,12 @@ mod tests {
         assert!(inputs.iter().all(|n| *n >= 20), "{inputs:?}");
         // Any 30 consecutive seeds cover every pair.
         let pairs: std::collections::HashSet<usize> = (100..130)
-            .map(|s| STATIC_PAIRS.iter().position(|p| *p == static_pair(s)).unwrap())
+            .map(|s| {
+                STATIC_PAIRS
+                    .iter()
+                    .position(|p| *p == static_pair(s))
+                    .unwrap()
+            })
             .collect();
         assert_eq!(pairs.len(), STATIC_PAIRS.len());
     }
@@ -1271,9 +1334,21 @@ mod tests {
             }
         }
         assert_eq!(seen, 4);
-        assert!(generate(CaseKind::None, 0).equivalent_locations().is_empty());
-        assert!(generate(CaseKind::Hysteresis, 0).equivalent_locations().is_empty());
-        assert!(generate(CaseKind::Hysteresis, 1).equivalent_locations().is_empty());
+        assert!(
+            generate(CaseKind::None, 0)
+                .equivalent_locations()
+                .is_empty()
+        );
+        assert!(
+            generate(CaseKind::Hysteresis, 0)
+                .equivalent_locations()
+                .is_empty()
+        );
+        assert!(
+            generate(CaseKind::Hysteresis, 1)
+                .equivalent_locations()
+                .is_empty()
+        );
     }
 
     #[test]
@@ -1291,7 +1366,12 @@ mod tests {
                     off[i] *= factor;
                     if effect == Effect::Offset {
                         // Unless it happens to be the other location's constant.
-                        let other = theta[0] * if location == Location::Input { g0 } else { 1.0 / g0 };
+                        let other = theta[0]
+                            * if location == Location::Input {
+                                g0
+                            } else {
+                                1.0 / g0
+                            };
                         if (off[0] - other).abs() <= 0.2 * other.abs() {
                             continue;
                         }
@@ -1410,8 +1490,8 @@ mod tests {
             let c = generate(CaseKind::Hysteresis, seed);
             let u = c.estimation.u().as_slice();
             let t = trace(&c.nominal, &c.hidden, u, None).unwrap();
-            let width = loop_width(&t.z, &t.w);
-            assert!(width >= 0.05, "{seed}: {width}");
+            let l = hysteresis_loop(&t.z, &t.w);
+            assert!(l.width >= 0.08 && l.explained >= 0.2, "{seed}: {l:?}");
             assert_ne!(c.input, InputKind::RandomSteps);
             match c.hidden {
                 Hidden::Backlash { width } => {
@@ -1439,7 +1519,8 @@ mod tests {
         // A static map has no loop.
         let z: Vec<f64> = (0..2000).map(|k| (k as f64 * 0.01).sin()).collect();
         let w: Vec<f64> = z.iter().map(|z| z.powi(3)).collect();
-        assert!(loop_width(&z, &w) < 1e-3);
+        let l = hysteresis_loop(&z, &w);
+        assert!(l.width < 1e-3 && l.explained < 1e-3, "{l:?}");
     }
 
     /// w minus its mean in 40 quantile bins of z (a nonparametric static fit).
@@ -1454,6 +1535,40 @@ mod tests {
             }
         }
         r
+    }
+
+    /// Statistics of the drawn cases (run with `--ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn print_case_statistics() {
+        for kind in [CaseKind::Static, CaseKind::Hysteresis, CaseKind::None] {
+            for seed in 0..60 {
+                let (c, draws) = generate_counted(kind, seed);
+                let u = c.estimation.u().as_slice();
+                let t = trace(&c.nominal, &c.hidden, u, None).unwrap();
+                let y0 = c.nominal.simulate(c.estimation.u()).unwrap();
+                let ratio = rms_diff(&t.y, &y0) / c.noise_std;
+                let r = static_residual(&t.z, &t.w);
+                let dd = crate::hysteresis::direction_dependence(&t.z, &r, 0.1);
+                let what = match &c.hidden {
+                    Hidden::Static {
+                        effect, location, ..
+                    } => format!("{effect:?}@{location:?}"),
+                    h => format!("{h:?}").chars().take(40).collect(),
+                };
+                println!(
+                    "{kind:?} {seed:3} draws {draws:3} {:?} L {} ts {:.3} bw {:.4} {what} ratio {ratio:.1} loop {:.3} expl {:.2} dd {:.2}/{:.1}",
+                    c.input,
+                    c.estimation.len(),
+                    c.nominal.sample_time.unwrap(),
+                    bandwidth(&c.nominal),
+                    hysteresis_loop(&t.z, &t.w).width,
+                    hysteresis_loop(&t.z, &t.w).explained,
+                    dd.explained,
+                    dd.t_statistic
+                );
+            }
+        }
     }
 
     #[test]
