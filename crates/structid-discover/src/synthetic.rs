@@ -32,22 +32,30 @@
 //! * **Input** ([`InputKind`], drawn uniformly): filtered noise, a random-phase multisine,
 //!   random steps held for several samples (the slow excitation), or a logarithmic chirp
 //!   from well below to about G's bandwidth. Each has its own random parameters relative to
-//!   G's −3 dB bandwidth; the peak amplitude is drawn in [0.5, 2]. Random steps are not used
-//!   with rate feedback (the velocity is zero between steps, so friction acts only at the
-//!   edges) nor with hysteresis (nothing moves between steps, and the direction of motion
-//!   that tells hysteresis from a static map is only seen at the edges).
+//!   G's −3 dB bandwidth (five times lower for the noise and the multisine of hysteresis
+//!   cases, so that the input does not reverse inside the play at every sample); the peak
+//!   amplitude is drawn in [0.5, 2]. Random steps are not used with rate feedback (the
+//!   velocity is zero between steps, so friction acts only at the edges) nor with hysteresis
+//!   (nothing moves between steps, and the direction of motion that tells hysteresis from a
+//!   static map is only seen at the edges).
 //! * **Parameters** relative to the range of the block's input z in the nominal simulation
 //!   (u, G·u, y or ẏ, see [`Location`]): a saturation level at 30–70 % of max |z|, a dead
 //!   zone half-width at 10–30 %, 6–20 quantisation levels over the range, a cubic term that
 //!   changes the map by 15–60 % at the edge of the range, friction levels of 10–35 % of the
 //!   input's RMS, and so on. The slope of saturations, dead zones and input or output
 //!   polynomials is 1: the nominal model is the small-signal truth. Feedback gains are set
-//!   relative to G's DC gain and every local slope the map takes over the range must leave
-//!   the linearised loop stable (pole radius ≤ 0.99).
+//!   relative to G's DC gain, and every local slope the map takes over the range (for
+//!   friction, the viscous slope) must leave the linearised loop stable (pole radius ≤ 0.99).
+//!   Backlash: half-width 10–30 % of max |u|. Bouc–Wen: stiffness 0.5–1.5 / G(1), elastic
+//!   share α ∈ [0.05, 0.3], n ∈ {1, 2}, yield level 15–40 % of the peak output.
 //! * **Checks**, with a redraw (deterministic from the seed) on failure: the effect must be
-//!   active (e.g. a saturation clips 5–70 % of the samples, a dead zone holds 10–80 %), every
-//!   signal finite and bounded (|y| ≤ 20 × the nominal peak), and the effect's contribution
-//!   RMS(y_with_effect − G·u) at least 8 × the noise std on the estimation record.
+//!   active (e.g. a saturation clips 5–70 % of the samples, a dead zone holds 10–80 %), a
+//!   hysteresis loop wide (in the plane of the element's input and output, over 20 bins of
+//!   the input, rising and falling means at least 8 % of the output's range apart on
+//!   average, and the direction of motion explaining at least 20 % of the output's variation
+//!   about the bin means), every signal finite and bounded (|y| ≤ 20 × the nominal peak), and
+//!   the effect's contribution RMS(y_with_effect − G·u) at least 8 × the noise std on the
+//!   estimation record.
 //! * **Noise**: white Gaussian e added to the output, std 0.5–2 % of std(y) (of the noise-free
 //!   output with the effect; for a stuck block, whose output is nearly constant, of G·u),
 //!   capped so that the 8 × rule holds. In the static cases e is the `e` of the LFT, so in
@@ -89,10 +97,11 @@ use crate::hypotheses::{Location, hypothesis};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum InputKind {
     /// White Gaussian noise through a second-order low-pass with its cutoff at 0.5–2 × G's
-    /// bandwidth.
+    /// bandwidth (five times lower in hysteresis cases).
     FilteredNoise,
     /// A random-phase multisine with equal amplitudes on the frequency lines k/L from the
-    /// lowest up to 1–2 × G's bandwidth.
+    /// lowest up to 1–2 × G's bandwidth (five times lower in hysteresis cases; at most 200
+    /// lines, evenly spread).
     Multisine,
     /// Random levels, each held for a random number of samples (at least 5, around G's time
     /// constant): the slow excitation.
@@ -117,7 +126,8 @@ pub enum Hidden {
     /// No effect: y = G·u + e.
     None,
     /// A static block N(z) = `effect.eval(theta, z)` at `location`, simulated with the LFT of
-    /// [`hypothesis`] for that location.
+    /// [`hypothesis`] for that location and the output noise as its `e` (in feedback
+    /// locations the block therefore sees the measured output or rate, as hypothesised).
     Static {
         /// The family.
         effect: Effect,
