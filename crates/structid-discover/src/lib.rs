@@ -19,7 +19,10 @@
 //!   nonparametric estimate by least squares with 95 % intervals, ranked by the Bayesian
 //!   information criterion, and named only when the best fit is within the noise;
 //! * [`hysteresis`]: whether the residual of a static fit depends on the direction of motion
-//!   (hysteresis or backlash: an effect that is not static and must not be forced into a name).
+//!   (hysteresis or backlash: an effect that is not static and must not be forced into a name);
+//! * [`synthetic`]: test cases for the workflow, a random nominal model plus records of a
+//!   system with one hidden effect (a static effect at a location, none, or hysteresis),
+//!   deterministic in a seed.
 //!
 //! ```
 //! use structid_discover::effects::{Effect, NamingSettings, name_effect};
@@ -38,6 +41,7 @@ pub mod gap;
 pub mod hypotheses;
 pub mod hysteresis;
 pub mod localise;
+pub mod synthetic;
 
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
