@@ -599,8 +599,81 @@ struct Fitted {
     z: Vec<f64>,
     w_hat: Vec<f64>,
     e_hat: Vec<f64>,
+    /// `quadratic` or `total variation`.
+    estimator: &'static str,
 }
 
+/// The parts of a fit every estimator shares: simulation RMS on both records, the map on a
+/// grid, and the naming points.
+#[allow(clippy::too_many_arguments)]
+fn finish_fit(
+    location: Location,
+    estimator: &'static str,
+    h: Hypothesis,
+    id: structid_core::Identification,
+    beta: f64,
+    sigma: Option<f64>,
+    est_h: &Data,
+    val_h: &Data,
+    settings: &DiscoverSettings,
+    t0: Instant,
+) -> Result<Fitted> {
+    let block = &id.blocks[0];
+    let validation_rms =
+        simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings.settle);
+    let estimation_rms =
+        simulation_rms(&h.model, location, block.map.as_ref(), est_h, settings.settle);
+    let zk = block.z.channel(0);
+    let (lo, hi) = minmax(&zk);
+    let grid: Vec<f64> = (0..101)
+        .map(|i| lo + (hi - lo) * i as f64 / 100.0)
+        .collect();
+    let grid_signal = Signal::from_fn(grid.len(), 1, |k, _| grid[k]);
+    let w_grid: Vec<f64> = grid.iter().map(|z| block.predict(&[*z])).collect();
+    let std = id.posterior_std(0, &grid_signal).ok().flatten();
+    let idx = even_indices(zk.len(), settings.naming_points);
+    let points = (
+        idx.iter().map(|&k| zk[k]).collect(),
+        idx.iter().map(|&k| block.w_hat[k]).collect(),
+    );
+    let result = HypothesisResult {
+        location,
+        dispersion: block.dispersion.clone(),
+        beta,
+        sigma,
+        noise_term: id.cost.noise,
+        dispersion_value: block.dispersion_value,
+        estimation_rms,
+        validation_rms,
+        curve: MapCurve {
+            z: grid,
+            w: w_grid,
+            std,
+        },
+        points,
+        seconds: t0.elapsed().as_secs_f64(),
+        failure: None,
+    };
+    let w_hat = block.w_hat.clone();
+    let e_hat = id.e_hat.channel(0);
+    let map = id
+        .blocks
+        .into_iter()
+        .next()
+        .map(|b| b.map)
+        .ok_or_else(|| Error::Numerical("identification returned no block".into()))?;
+    Ok(Fitted {
+        result,
+        hypothesis: h,
+        map,
+        z: zk,
+        w_hat,
+        e_hat,
+        estimator,
+    })
+}
+
+/// The quadratic estimate at `location`: Fourier kernel plus trend, β by marginal likelihood.
 fn identify_hypothesis(
     nominal: &Nominal,
     location: Location,
@@ -643,80 +716,24 @@ fn identify_hypothesis(
             &identify.with_initial_state(x0).with_beta(sel.beta)?,
         )?
     };
-    let block = &id.blocks[0];
-    let val_h = h.data(val)?;
-    let validation_rms = simulation_rms(
-        &sel.model,
-        location,
-        block.map.as_ref(),
-        &val_h,
-        settings.settle,
-    );
-    let estimation_rms = simulation_rms(
-        &sel.model,
-        location,
-        block.map.as_ref(),
-        &est_h,
-        settings.settle,
-    );
-    let grid: Vec<f64> = (0..101)
-        .map(|i| lo + (hi - lo) * i as f64 / 100.0)
-        .collect();
-    let grid_signal = Signal::from_fn(grid.len(), 1, |k, _| grid[k]);
-    let w_grid: Vec<f64> = grid.iter().map(|z| block.predict(&[*z])).collect();
-    let std = id.posterior_std(0, &grid_signal).ok().flatten();
-    let zk = block.z.channel(0);
-    let idx = even_indices(zk.len(), settings.naming_points);
-    let points = (
-        idx.iter().map(|&k| zk[k]).collect(),
-        idx.iter().map(|&k| block.w_hat[k]).collect(),
-    );
-    let result = HypothesisResult {
-        location,
-        dispersion: block.dispersion.clone(),
-        beta: sel.beta,
-        sigma: sel.sigma,
-        noise_term: id.cost.noise,
-        dispersion_value: block.dispersion_value,
-        estimation_rms,
-        validation_rms,
-        curve: MapCurve {
-            z: grid,
-            w: w_grid,
-            std,
-        },
-        points,
-        seconds: t0.elapsed().as_secs_f64(),
-        failure: None,
+    let h = Hypothesis {
+        model: sel.model,
+        ..h
     };
-    let w_hat = block.w_hat.clone();
-    let e_hat = id.e_hat.channel(0);
-    let map = id
-        .blocks
-        .into_iter()
-        .next()
-        .map(|b| b.map)
-        .ok_or_else(|| Error::Numerical("identification returned no block".into()))?;
-    Ok(Fitted {
-        result,
-        hypothesis: Hypothesis {
-            model: sel.model,
-            ..h
-        },
-        map,
-        z: zk,
-        w_hat,
-        e_hat,
-    })
+    let val_h = h.data(val)?;
+    finish_fit(
+        location, "quadratic", h, id, sel.beta, sel.sigma, &est_h, &val_h, settings, t0,
+    )
 }
 
-/// Total variation at the best location, β by validation simulation error.
+/// The total-variation estimate at the location of `hyp`, β by validation simulation error.
 fn total_variation_fit(
     hyp: &Hypothesis,
     est: &Data,
     val: &Data,
-    settle: usize,
-) -> Result<(Box<dyn Interpolant>, Vec<f64>, Vec<f64>, f64)> {
+    settings: &DiscoverSettings,
+) -> Result<Fitted> {
+    let t0 = Instant::now();
     let h = Hypothesis {
         model: Model::new(
             hyp.model.lft().clone(),
@@ -742,11 +759,34 @@ fn total_variation_fit(
         .tolerance(0.25)
         .build()?;
     let sel = select(&h.model, &est_h, Some(&val_h), &identify, &selection)?;
-    let mut id = sel.identification;
-    let block = id.blocks.remove(0);
-    let rms = simulation_rms(&sel.model, hyp.location, block.map.as_ref(), &val_h, settle);
-    let z = block.z.channel(0);
-    Ok((block.map, z, block.w_hat, rms))
+    let h = Hypothesis {
+        model: sel.model,
+        ..h
+    };
+    finish_fit(
+        hyp.location,
+        "total variation",
+        h,
+        sel.identification,
+        sel.beta,
+        None,
+        &est_h,
+        &val_h,
+        settings,
+        t0,
+    )
+}
+
+/// The direction test of a fit: its noise estimate ê (what the static map leaves
+/// unexplained) deconvolved to the block's output and split by the direction of z.
+fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<DirectionTest> {
+    let delta = deconvolve(&f.hypothesis, &f.e_hat)?;
+    let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+    Ok(direction_dependence(
+        &f.z[skip..],
+        &delta[skip..],
+        settings.hysteresis_threshold,
+    ))
 }
 
 /// Ridge deconvolution of `r` through the SISO operator T = L_yw: argmin ‖r − T·δ‖² + λ‖δ‖²
@@ -930,41 +970,78 @@ pub fn discover(
         let t = Instant::now();
         match identify_hypothesis(nominal, location, est, val, settings) {
             Ok(f) => fitted.push(f),
-            Err(e) => failed.push(HypothesisResult {
-                location,
-                dispersion: String::new(),
-                beta: f64::NAN,
-                sigma: None,
-                noise_term: f64::NAN,
-                dispersion_value: f64::NAN,
-                estimation_rms: f64::INFINITY,
-                validation_rms: f64::INFINITY,
-                curve: MapCurve {
-                    z: Vec::new(),
-                    w: Vec::new(),
-                    std: None,
-                },
-                points: (Vec::new(), Vec::new()),
-                seconds: t.elapsed().as_secs_f64(),
-                failure: Some(e.to_string()),
-            }),
+            Err(e) => failed.push(failure(location, t, &e)),
         }
     }
-    fitted.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms));
+    let by_validation = |v: &mut Vec<Fitted>| {
+        v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms))
+    };
+    by_validation(&mut fitted);
+    // Total variation, where a smooth estimate cannot do: at every location when the best
+    // quadratic estimate closes less than half the gap (steps and jumps that a kernel of
+    // width σ smooths away, e.g. a fine quantiser), else at the best location when its
+    // best-fitting family has a kink or a jump.
+    if settings.total_variation
+        && let Some(best) = fitted.first()
+    {
+        let everywhere = !(best.result.validation_rms <= 0.5 * validation_gap.rms);
+        let kinked = !everywhere && {
+            let (zs, ws) = subsample(&best.z, &best.w_hat, settings.naming_points);
+            name_effect(&zs, &ws, &naming_settings(settings))
+                .ok()
+                .and_then(|n| parsimonious(&n).first().map(|f| non_smooth(f.effect)))
+                .unwrap_or(false)
+        };
+        let targets: Vec<Hypothesis> = if everywhere {
+            fitted.iter().map(|f| f.hypothesis.clone()).collect()
+        } else if kinked {
+            vec![best.hypothesis.clone()]
+        } else {
+            Vec::new()
+        };
+        for h in targets {
+            let t = Instant::now();
+            match total_variation_fit(&h, est, val, settings) {
+                Ok(f) => fitted.push(f),
+                Err(e) => failed.push(failure(h.location, t, &e)),
+            }
+        }
+        by_validation(&mut fitted);
+    }
+    // Direction dependence of every fit that explains the data about as well as the best: a
+    // hysteresis may be best approximated statically at a location other than its own.
+    let best_rms = fitted
+        .first()
+        .map(|f| f.result.validation_rms)
+        .unwrap_or(f64::INFINITY);
+    let mut directions: Vec<Option<DirectionTest>> = Vec::with_capacity(fitted.len());
+    for f in &fitted {
+        directions.push(if f.result.validation_rms <= 1.5 * best_rms {
+            direction_test(f, settings).ok()
+        } else {
+            None
+        });
+    }
+    let dynamic = directions
+        .iter()
+        .enumerate()
+        .filter_map(|(i, d)| d.as_ref().filter(|d| d.dynamic).map(|d| (i, d.explained)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i);
+    let chosen = dynamic.unwrap_or(0);
     let mut hypotheses: Vec<HypothesisResult> = fitted.iter().map(|f| f.result.clone()).collect();
     hypotheses.extend(failed);
-    let Some(best) = fitted
-        .into_iter()
-        .next()
-        .filter(|f| f.result.validation_rms.is_finite())
-    else {
+    if !best_rms.is_finite() {
         let verdict = format!(
             "a missing effect was detected ({}), but no hypothesis could be identified and \
              simulated: {}",
             validation_gap.verdict,
             hypotheses
                 .iter()
-                .filter_map(|h| h.failure.as_ref().map(|f| format!("{:?}: {f}", h.location)))
+                .filter_map(|h| h
+                    .failure
+                    .as_ref()
+                    .map(|f| format!("{}: {f}", h.location.key())))
                 .collect::<Vec<_>>()
                 .join("; ")
         );
@@ -977,9 +1054,25 @@ pub fn discover(
             verdict,
             seconds: t0.elapsed().as_secs_f64(),
         });
+    }
+    let tv_rms = {
+        let loc = fitted[chosen].result.location;
+        fitted
+            .iter()
+            .find(|f| f.result.location == loc && f.estimator == "total variation")
+            .map(|f| f.result.validation_rms)
     };
+    let direction = directions[chosen].clone().unwrap_or(DirectionTest {
+        explained: 0.0,
+        t_statistic: 0.0,
+        samples: 0,
+        dynamic: false,
+    });
+    let best = fitted.swap_remove(chosen);
     let finding = name_and_add(
         best,
+        direction,
+        tv_rms,
         est,
         val,
         &est_candidates,
@@ -998,6 +1091,68 @@ pub fn discover(
         verdict,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+fn failure(location: Location, t: Instant, e: &Error) -> HypothesisResult {
+    HypothesisResult {
+        location,
+        dispersion: String::new(),
+        beta: f64::NAN,
+        sigma: None,
+        noise_term: f64::NAN,
+        dispersion_value: f64::NAN,
+        estimation_rms: f64::INFINITY,
+        validation_rms: f64::INFINITY,
+        curve: MapCurve {
+            z: Vec::new(),
+            w: Vec::new(),
+            std: None,
+        },
+        points: (Vec::new(), Vec::new()),
+        seconds: t.elapsed().as_secs_f64(),
+        failure: Some(e.to_string()),
+    }
+}
+
+fn naming_settings(settings: &DiscoverSettings) -> NamingSettings {
+    NamingSettings {
+        library: settings.library.clone(),
+        noise_std: None,
+        tolerance: 1.5,
+    }
+}
+
+fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>) {
+    let idx = even_indices(z.len(), max);
+    (
+        idx.iter().map(|&k| z[k]).collect(),
+        idx.iter().map(|&k| w[k]).collect(),
+    )
+}
+
+/// The families in the order they are offered for naming: those whose map fit is within 25 %
+/// of the best family's RMS, fewest parameters first, then the rest by BIC.
+///
+/// The points (z_k, ŵ_k) are a smoothed estimate, not independent noisy samples, so BIC alone
+/// rewards families that bend to the estimate's artefacts (a Stribeck curve for a gain, an
+/// asymmetric saturation for a symmetric one). A family with fewer parameters that fits
+/// about as well is the better name.
+fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
+    let best = naming
+        .ranked
+        .iter()
+        .map(|f| f.rms)
+        .fold(f64::INFINITY, f64::min);
+    let near = |f: &EffectFit| f.rms <= 1.25 * best + 1e-12;
+    let mut first: Vec<EffectFit> = naming.ranked.iter().filter(|f| near(f)).cloned().collect();
+    first.sort_by(|a, b| {
+        a.parameters
+            .len()
+            .cmp(&b.parameters.len())
+            .then(a.rms.total_cmp(&b.rms))
+    });
+    first.extend(naming.ranked.iter().filter(|f| !near(f)).cloned());
+    first
 }
 
 fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> String {
@@ -1027,6 +1182,8 @@ fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> String {
 #[allow(clippy::too_many_arguments)]
 fn name_and_add(
     best: Fitted,
+    direction: DirectionTest,
+    total_variation_rms: Option<f64>,
     est: &Data,
     val: &Data,
     est_candidates: &[(String, Vec<f64>)],
@@ -1039,72 +1196,14 @@ fn name_and_add(
     let h = best.hypothesis.clone();
     let val_h = h.data(val)?;
     let est_h = h.data(est)?;
-    let naming_settings = NamingSettings {
-        library: settings.library.clone(),
-        noise_std: None,
-        tolerance: 1.5,
-    };
-    let subsample = |z: &[f64], w: &[f64]| {
-        let idx = even_indices(z.len(), settings.naming_points);
-        (
-            idx.iter().map(|&k| z[k]).collect::<Vec<f64>>(),
-            idx.iter().map(|&k| w[k]).collect::<Vec<f64>>(),
-        )
-    };
-    let (zs, ws) = subsample(&best.z, &best.w_hat);
-    let mut naming = name_effect(&zs, &ws, &naming_settings)
+    let (zs, ws) = subsample(&best.z, &best.w_hat, settings.naming_points);
+    let mut naming = name_effect(&zs, &ws, &naming_settings(settings))
         .map_err(|e| Error::Numerical(format!("naming the effect: {e}")))?;
-    let mut estimator = "quadratic".to_string();
-    let mut nonparametric_rms = best.result.validation_rms;
-    let mut map: Box<dyn Interpolant> = best.map;
-    let mut z_named = best.z.clone();
-    let mut total_variation_rms = None;
-    if settings.total_variation && naming.ranked.first().is_some_and(|f| non_smooth(f.effect)) {
-        if let Ok((tv_map, tz, tw, rms)) = total_variation_fit(&h, est, val, settings.settle) {
-            total_variation_rms = Some(rms);
-            if rms < nonparametric_rms {
-                let (zs, ws) = subsample(&tz, &tw);
-                if let Ok(n) = name_effect(&zs, &ws, &naming_settings) {
-                    naming = n;
-                    estimator = "total variation".into();
-                    nonparametric_rms = rms;
-                    map = tv_map;
-                    z_named = tz;
-                }
-            }
-        }
-    }
+    naming.ranked = parsimonious(&naming);
+    let nonparametric_rms = best.result.validation_rms;
 
-    // Direction dependence of the residual, deconvolved to the block's output.
-    let direction = {
-        let r = if estimator == "quadratic" {
-            best.e_hat.clone()
-        } else {
-            // The equation residual with the named estimate: y − L_yu·u − L_yw·N̂(z).
-            let sim =
-                h.model
-                    .lft()
-                    .t_yw()
-                    .simulate(&Signal::from_fn(z_named.len(), 1, |k, _| {
-                        map.eval(&[z_named[k]])
-                    }))?;
-            let base = h.model.lft().t_yu().simulate(est_h.u())?;
-            let y = est_h.y().channel(0);
-            (0..y.len())
-                .map(|k| y[k] - base.get(k, 0) - sim.get(k, 0))
-                .collect()
-        };
-        let delta = deconvolve(&h, &r)?;
-        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
-        direction_dependence(
-            &z_named[skip..],
-            &delta[skip..],
-            settings.hysteresis_threshold,
-        )
-    };
-
-    // Name: the best BIC family among the first three whose parametric map validates within
-    // the tolerance (or within the noise) of the nonparametric one.
+    // Name: the first family (in parsimonious order) among the first three whose parametric
+    // map validates within the tolerance of the nonparametric one, or within the noise.
     let noise = before.noise_std;
     let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
     let mut classification = Classification::Unnamed;
@@ -1123,37 +1222,41 @@ fn name_and_add(
             }
         }
     }
+    naming.named = match &classification {
+        Classification::Named(fit) => Some(fit.clone()),
+        _ => None,
+    };
     let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
-    if let Classification::Named(_) = classification {
-    } else {
-        remarks.push(format!(
-            "the best family ({}) does not validate within the tolerance of the nonparametric \
-             map, so the map is kept as a table",
+    match &classification {
+        Classification::Named(_) => {}
+        Classification::Unnamed => remarks.push(format!(
+            "no family validates within {}× the nonparametric map's RMS (best: {}), so the \
+             map is kept as a table",
+            settings.naming_tolerance,
             naming
                 .ranked
                 .first()
                 .map(|f| f.effect.name())
                 .unwrap_or_else(|| "none".into())
-        ));
-    }
-    if matches!(classification, Classification::Dynamic) {
-        remarks.push(format!(
-            "the direction of z explains {:.0} % of the deconvolved residual (t = {:.1}); the \
-             augmented model carries the best static approximation as a table",
+        )),
+        Classification::Dynamic => remarks.push(format!(
+            "the direction of z explains {:.0} % of the deconvolved residual (t = {:.1}): the \
+             effect is not static; the augmented model carries the best static approximation \
+             as a table",
             100.0 * direction.explained,
             direction.t_statistic
-        ));
+        )),
     }
     let augmented_map = match &classification {
         Classification::Named(fit) => AugmentedMap::Expression(fit.expression.clone()),
         _ => {
-            let (lo, hi) = minmax(&z_named);
+            let (lo, hi) = minmax(&best.z);
             let pad = 0.25 * (hi - lo);
             let n = settings.table_points;
             let z: Vec<f64> = (0..n)
                 .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
                 .collect();
-            let w = z.iter().map(|z| map.eval(&[*z])).collect();
+            let w = z.iter().map(|z| best.map.eval(&[*z])).collect();
             AugmentedMap::Table { z, w }
         }
     };
@@ -1162,25 +1265,13 @@ fn name_and_add(
         initial_state: initial_state(location).1,
         ..gap_settings.clone()
     };
-    let estimation_gap = gap(
-        &h.model,
-        &[interp.as_ref()],
-        &est_h,
-        est_candidates,
-        gap_settings,
-    )?;
-    let validation_gap = gap(
-        &h.model,
-        &[interp.as_ref()],
-        &val_h,
-        val_candidates,
-        gap_settings,
-    )?;
+    let estimation_gap = gap(&h.model, &[interp.as_ref()], &est_h, est_candidates, gap_settings)?;
+    let validation_gap = gap(&h.model, &[interp.as_ref()], &val_h, val_candidates, gap_settings)?;
     let shrink = before.rms / validation_gap.rms;
     Ok(Finding {
         location,
         equivalent_locations,
-        estimator,
+        estimator: best.estimator.to_string(),
         nonparametric_rms,
         total_variation_rms,
         naming,

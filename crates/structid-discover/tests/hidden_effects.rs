@@ -64,7 +64,7 @@ fn static_effects_are_named_located_and_close_the_gap() {
             None => (false, false, false, 1.0),
         };
         eprintln!(
-            "seed {seed:2}: {:<40} {:<16} θ {:?} → {} at {:?} (named {named}, located {located}, params {within}), shrink {shrink:.1}×, {:.1} s",
+            "seed {seed:2}: {:<40} {:<16} θ {:?} → {} at {:?} (named {named}, located {located}, params {within}), shrink {shrink:.1}×, {:.1} s, dir {:?}, {}",
             effect.name(),
             location.key(),
             theta,
@@ -76,7 +76,9 @@ fn static_effects_are_named_located_and_close_the_gap() {
                 })
                 .unwrap_or_else(|| "nothing".into()),
             d.finding.as_ref().map(|f| f.location.key()),
-            d.seconds
+            d.seconds,
+            d.finding.as_ref().map(|f| (f.direction.explained, f.direction.t_statistic)),
+            d.finding.as_ref().map(|f| f.estimator.clone()).unwrap_or_default()
         );
         correct += usize::from(named && located);
         params_ok += usize::from(within);
