@@ -104,7 +104,7 @@ fn lti_data_gives_no_missing_effect() {
         if !d.missing_effect {
             quiet += 1;
         } else {
-            eprintln!("seed {seed}: false alarm: {}", d.verdict);
+            eprintln!("seed {seed}: false alarm: {}\n  est: {}\n  val: {}\n  input {:?}", d.verdict, d.estimation_gap.verdict, d.validation_gap.verdict, case.input);
         }
     }
     eprintln!("LTI: no missing effect in {quiet}/{cases}");
