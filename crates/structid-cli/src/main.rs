@@ -61,11 +61,13 @@ enum Command {
     /// Reads the input columns named in `[signals].u` from the input CSV and writes the u, y and
     /// z columns plus one `w_<block>` column per block. Needs D_zw = 0 (no algebraic loop).
     Simulate(SimulateArgs),
-    /// Validate an estimate on a record: simulation, one-step prediction and residual tests.
+    /// Validate an estimate (or the true maps) on a record: simulation, one-step prediction
+    /// and residual tests.
     ///
-    /// Rebuilds the estimate in DIR (the --out directory of `structid identify`) by re-running
-    /// the identification recorded in DIR/report.json and checking it against DIR/estimate.csv,
-    /// then simulates the model with the estimated maps in the loop on the validation data and
+    /// With --estimate DIR, rebuilds the estimate in DIR (the --out directory of `structid
+    /// identify`) by re-running the identification recorded in DIR/report.json and checking it
+    /// against DIR/estimate.csv; without it, uses the `truth` map of every block of --model.
+    /// Then simulates the model with these maps in the loop on the validation data and
     /// computes the one-step-ahead prediction errors and their whiteness and input
     /// cross-correlation tests (99 % bands). Writes DIR2/validation.json, DIR2/simulation.csv,
     /// DIR2/simulation.svg and DIR2/residuals.svg.
@@ -287,12 +289,14 @@ struct SimulateArgs {
 /// Arguments of `structid validate`.
 #[derive(Debug, Args)]
 struct ValidateArgs {
-    /// The model file (TOML) of the estimate (same blocks as in DIR/report.json).
+    /// The model file (TOML) of the estimate (same blocks as in DIR/report.json); without
+    /// --estimate, the model whose true maps are validated.
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
-    /// The output directory of `structid identify` holding the estimate.
+    /// The output directory of `structid identify` holding the estimate. Without it, the
+    /// model is validated with its true maps: every block of --model needs a `truth`.
     #[arg(long, short = 'e', value_name = "DIR")]
-    estimate: PathBuf,
+    estimate: Option<PathBuf>,
     /// The validation data (CSV with the columns named in the model's `[signals]`).
     #[arg(long, short = 'd', value_name = "V.csv")]
     data: PathBuf,

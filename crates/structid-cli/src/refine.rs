@@ -10,7 +10,8 @@ use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{RefineSettings, refine};
 use structid_core::{Data, IdentifySettings, InitialState};
 use structid_io::{
-    DataTable, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
+    DataTable, LinearStructureKind, ModelFile, OutputGuard, RefinementReport, Report, Reproduction,
+    format_number,
 };
 use structid_linear::OeSettings;
 use structid_plot::{Chart, Series, render_chart_svg};
@@ -101,6 +102,15 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             a.model.display()
         )));
     };
+    if !spec.structure.refinable() && spec.structure != LinearStructureKind::Lti {
+        return Err(CliError::input(format!(
+            "`{}` has structure = \"{}\", which `structid refine` does not support (it \
+             re-estimates G for structure = \"output-feedback\" or \"input\"); identify its map \
+             with G fixed by `structid identify`",
+            a.model.display(),
+            spec.structure.name()
+        )));
+    }
     if mf.blocks.len() != 1 {
         return Err(CliError::input(format!(
             "`{}` has {} maps; refinement needs a structure with exactly one (structure = \
@@ -110,9 +120,12 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         )));
     }
     let block = mf.blocks[0].name.clone();
-    let structure = spec
-        .structure(&block)
-        .ok_or_else(|| CliError::input("structure = \"lti\" has no map to refine"))?;
+    let structure = spec.structure(&block).ok_or_else(|| {
+        CliError::input(format!(
+            "structure = \"{}\" has no map to refine",
+            spec.structure.name()
+        ))
+    })?;
     if a.iterations == 0 {
         return Err(CliError::input("--iterations must be at least 1"));
     }

@@ -321,30 +321,29 @@ fn pass(t: &CorrelationTest) -> String {
     )
 }
 
-/// Runs `structid validate`.
-pub fn run(a: ValidateArgs) -> Result<(), CliError> {
-    let t0 = Instant::now();
-    if a.max_lag == 0 {
-        return Err(CliError::input(
-            "invalid value 0 for --max-lag: it must be at least 1",
-        ));
-    }
-    // The estimate directory and its report.
-    let dir = &a.estimate;
-    if !dir.is_dir() {
-        return Err(CliError::input(format!(
-            "the estimate directory `{}` does not exist or is not a directory; give the --out directory of \
-             `structid identify`",
-            dir.display()
-        )));
-    }
+/// The recorded identification of `--estimate DIR`, loaded but not run yet.
+struct Recorded {
+    dir: PathBuf,
+    report_path: PathBuf,
+    record: ReportRecord,
+    rep: Reproduction,
+    args: IdentifyArgs,
+    id_settings: structid_core::IdentifySettings,
+    sigma: Option<f64>,
+    model: ModelFile,
+}
+
+/// An estimate rebuilt from its directory and checked against it.
+struct Rebuilt {
+    recorded: Recorded,
+    id: Identification,
+    w_difference: f64,
+}
+
+/// Checks the estimate directory and its report, and `--model` against it; loads the
+/// recorded identification.
+fn recorded(dir: &Path, vmf: &ModelFile, model_path: &Path) -> Result<Recorded, CliError> {
     let report_path = dir.join("report.json");
-    if !report_path.is_file() {
-        return Err(CliError::input(format!(
-            "`{}` has no report.json: it is not an output directory of `structid identify`",
-            dir.display()
-        )));
-    }
     let record = ReportRecord::read(&report_path)?;
     let rep = record.reproduction.clone().ok_or_else(|| {
         CliError::input(format!(
@@ -355,8 +354,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     })?;
 
     // --model must be the estimate's model.
-    let vmf = ModelFile::from_path(&a.model)?;
-    check_blocks(&vmf, &a.model, &record)?;
+    check_blocks(vmf, model_path, &record)?;
 
     // The recorded identification, loaded (not run yet) so that its files can be protected.
     let args = identify_args(&rep, dir, &report_path)?;
@@ -373,7 +371,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "re-running the identification recorded in `{}`",
         report_path.display()
     );
-    let (id_settings, sigma, mut emf) = load(&args).map_err(|e| e.context(context.clone()))?;
+    let (id_settings, sigma, mut emf) = load(&args).map_err(|e| e.context(context))?;
     // widths chosen by `--sigma auto`, block by block
     for (name, w) in &rep.block_sigmas {
         let b = emf
@@ -388,19 +386,97 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             })?;
         b.dispersion = b.dispersion.with_sigma(Some(*w));
     }
+    Ok(Recorded {
+        dir: dir.to_path_buf(),
+        report_path,
+        record,
+        rep,
+        args,
+        id_settings,
+        sigma,
+        model: emf,
+    })
+}
 
-    // Never overwrite an input: the files of the command, the estimate directory's files and
-    // the files of the recorded identification.
+/// Re-runs the recorded identification and checks it against the directory.
+fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
+    let context = format!(
+        "re-running the identification recorded in `{}`",
+        recorded.report_path.display()
+    );
+    let (edata, emodel) = model_and_data(&recorded.model, &recorded.args.data, recorded.sigma)
+        .map_err(|e| e.context(context.clone()))?;
+    let id = identify(&emodel, &edata, &recorded.id_settings)
+        .map_err(|e| CliError::from(e).context(context))?;
+    let w_difference = check_estimate(&recorded.dir, &recorded.model, &id)?;
+    Ok(Rebuilt {
+        recorded,
+        id,
+        w_difference,
+    })
+}
+
+/// Runs `structid validate`.
+pub fn run(a: ValidateArgs) -> Result<(), CliError> {
+    let t0 = Instant::now();
+    if a.max_lag == 0 {
+        return Err(CliError::input(
+            "invalid value 0 for --max-lag: it must be at least 1",
+        ));
+    }
     let mut guard = OutputGuard::new();
-    let mut others: Vec<PathBuf> = vec![
-        a.data.clone(),
-        report_path.clone(),
-        dir.join("estimate.csv"),
-    ];
-    others.extend(record.files.iter().map(|f| dir.join(f)));
-    let others_ref: Vec<&Path> = others.iter().map(PathBuf::as_path).collect();
-    protect_inputs(&mut guard, &vmf, &a.model, &others_ref);
-    protect_inputs(&mut guard, &emf, &args.model, &[&args.data]);
+    let (vmf, recorded) = match &a.estimate {
+        Some(dir) => {
+            // The estimate directory and its report.
+            if !dir.is_dir() {
+                return Err(CliError::input(format!(
+                    "the estimate directory `{}` does not exist or is not a directory; give the --out directory of \
+                     `structid identify`",
+                    dir.display()
+                )));
+            }
+            if !dir.join("report.json").is_file() {
+                return Err(CliError::input(format!(
+                    "`{}` has no report.json: it is not an output directory of `structid identify`",
+                    dir.display()
+                )));
+            }
+            let vmf = ModelFile::from_path(&a.model)?;
+            let rec = recorded(dir, &vmf, &a.model)?;
+            // Never overwrite an input: the files of the command, the estimate directory's
+            // files and the files of the recorded identification.
+            let mut others: Vec<PathBuf> = vec![
+                a.data.clone(),
+                rec.report_path.clone(),
+                dir.join("estimate.csv"),
+            ];
+            others.extend(rec.record.files.iter().map(|f| dir.join(f)));
+            let others_ref: Vec<&Path> = others.iter().map(PathBuf::as_path).collect();
+            protect_inputs(&mut guard, &vmf, &a.model, &others_ref);
+            protect_inputs(&mut guard, &rec.model, &rec.args.model, &[&rec.args.data]);
+            (vmf, Some(rec))
+        }
+        None => {
+            let vmf = ModelFile::from_path(&a.model)?;
+            let missing: Vec<&str> = vmf
+                .blocks
+                .iter()
+                .filter(|b| b.truth.is_none())
+                .map(|b| b.name.as_str())
+                .collect();
+            if !missing.is_empty() {
+                return Err(CliError::input(format!(
+                    "without --estimate, `structid validate` checks the true maps of `{}`, but block(s) {} have \
+                     no `truth`; give every block a truth (truth = \"expression in z0, z1, …\" or \
+                     truth = {{ table = \"file.csv\" }}), or validate an estimate with --estimate DIR",
+                    a.model.display(),
+                    list(&missing)
+                )));
+            }
+            protect_inputs(&mut guard, &vmf, &a.model, &[&a.data]);
+            (vmf, None)
+        }
+    };
     guard.check(&a.out)?;
     for f in OUTPUTS {
         guard.check(&a.out.join(f))?;
@@ -432,31 +508,43 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         )));
     }
 
-    // Rebuild the estimate and check it against the directory.
-    let (edata, emodel) =
-        model_and_data(&emf, &args.data, sigma).map_err(|e| e.context(context.clone()))?;
-    let id = identify(&emodel, &edata, &id_settings)
-        .map_err(|e| CliError::from(e).context(context.clone()))?;
-    let w_difference = check_estimate(dir, &emf, &id)?;
+    // The maps: the estimate rebuilt and checked against its directory, or the true maps.
+    let rebuilt = recorded.map(rebuild).transpose()?;
     let mut warnings = Vec::new();
-    if vmf.lft != emf.lft {
+    if let Some(r) = &rebuilt
+        && vmf.lft != r.recorded.model.lft
+    {
         warnings.push(format!(
             "the linear block of --model `{}` differs from that of the estimate's model file `{}`; the maps \
              were estimated with the latter",
             a.model.display(),
-            args.model.display()
+            r.recorded.args.model.display()
         ));
     }
+    let truth = match &rebuilt {
+        Some(_) => None,
+        None => Some(
+            vmf.truth_maps()?
+                .ok_or_else(|| CliError::runtime("a block has no truth map"))?,
+        ),
+    };
 
     // Validate. Dispersions play no part here; σ = 1 only makes every block buildable.
     let vmodel = vmf.to_model(Some(1.0), None)?;
     let maps: Vec<&dyn Interpolant> = vmodel
         .blocks()
         .iter()
-        .map(|b| {
-            id.block(&b.name)
-                .map(|e| e.map.as_ref())
-                .ok_or_else(|| CliError::runtime(format!("the estimate has no block `{}`", b.name)))
+        .map(|b| match (&rebuilt, &truth) {
+            (Some(r), _) => r.id.block(&b.name).map(|e| e.map.as_ref()).ok_or_else(|| {
+                CliError::runtime(format!("the estimate has no block `{}`", b.name))
+            }),
+            (None, Some(t)) => vmf
+                .blocks
+                .iter()
+                .position(|s| s.name == b.name)
+                .map(|i| t[i].as_ref())
+                .ok_or_else(|| CliError::runtime(format!("no true map for block `{}`", b.name))),
+            (None, None) => Err(CliError::runtime("no maps to validate")),
         })
         .collect::<Result<_, _>>()?;
     let initial_state = match a.initial_state {
@@ -531,29 +619,50 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         .chain(std::iter::once(&json_path))
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
-    let doc = json!({
+    let estimate = match &rebuilt {
+        Some(r) => {
+            let rec = &r.recorded;
+            json!({
+                "report": rec.report_path.display().to_string(),
+                "model_file": rec.rep.model_file_absolute,
+                "data_file": rec.rep.data_file_absolute,
+                "samples": rec.record.samples,
+                "beta": rec.rep.beta,
+                "solver": rec.rep.solver,
+                "w_hat_max_relative_difference": r.w_difference,
+                "w_hat_tolerance": W_TOLERANCE,
+            })
+        }
+        None => Value::Null,
+    };
+    let truths: Vec<Value> = match &rebuilt {
+        Some(_) => Vec::new(),
+        None => vmf
+            .blocks
+            .iter()
+            .map(|b| {
+                json!({
+                    "name": b.name,
+                    "truth": b.truth.as_ref().map(|t| t.describe()),
+                })
+            })
+            .collect(),
+    };
+    let mut doc = json!({
         "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
         "inputs": {
             "model_file": a.model.display().to_string(),
             "model_file_absolute": absolute(&a.model).display().to_string(),
-            "estimate_dir": dir.display().to_string(),
-            "estimate_dir_absolute": absolute(dir).display().to_string(),
+            "estimate_dir": a.estimate.as_ref().map(|d| d.display().to_string()),
+            "estimate_dir_absolute": a.estimate.as_ref().map(|d| absolute(d).display().to_string()),
             "data_file": a.data.display().to_string(),
             "data_file_absolute": absolute(&a.data).display().to_string(),
             "initial_state": crate::identify::value_name(a.initial_state),
             "max_lag": a.max_lag,
             "settle": a.settle,
         },
-        "estimate": {
-            "report": report_path.display().to_string(),
-            "model_file": rep.model_file_absolute,
-            "data_file": rep.data_file_absolute,
-            "samples": record.samples,
-            "beta": rep.beta,
-            "solver": rep.solver,
-            "w_hat_max_relative_difference": w_difference,
-            "w_hat_tolerance": W_TOLERANCE,
-        },
+        "maps": if rebuilt.is_some() { "estimate" } else { "truth" },
+        "estimate": estimate,
         "samples": len,
         "sample_time": vmf.lft.sample_time(),
         "initial_state": report.initial_state,
@@ -563,6 +672,11 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "warnings": warnings,
         "files": files,
     });
+    if rebuilt.is_none()
+        && let Value::Object(m) = &mut doc
+    {
+        m.insert("truth".into(), json!(truths));
+    }
     let mut text = serde_json::to_string_pretty(&doc)
         .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
@@ -576,7 +690,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             &y_names,
             &u_names,
             &a,
-            w_difference,
+            rebuilt.as_ref().map(|r| r.w_difference),
             &warnings,
             &written,
             t0.elapsed().as_secs_f64()
@@ -590,24 +704,34 @@ fn summary(
     y_names: &[String],
     u_names: &[String],
     a: &ValidateArgs,
-    w_difference: f64,
+    w_difference: Option<f64>,
     warnings: &[String],
     written: &[PathBuf],
     seconds: f64,
 ) -> String {
     let mut s = String::new();
+    let what = match &a.estimate {
+        Some(dir) => format!("the estimate in `{}`", dir.display()),
+        None => format!("the true maps of `{}`", a.model.display()),
+    };
     let _ = writeln!(
         s,
-        "validated the estimate in `{}` on {} samples of `{}` ({:.2} s)",
-        a.estimate.display(),
+        "validated {what} on {} samples of `{}` ({:.2} s)",
         report.samples,
         a.data.display(),
         seconds
     );
-    let _ = writeln!(
-        s,
-        "estimate rebuilt from its report.json: ŵ matches estimate.csv (max relative difference {w_difference:.1e})"
-    );
+    match w_difference {
+        Some(w) => {
+            let _ = writeln!(
+                s,
+                "estimate rebuilt from its report.json: ŵ matches estimate.csv (max relative difference {w:.1e})"
+            );
+        }
+        None => {
+            let _ = writeln!(s, "maps: the `truth` of every block (no --estimate given)");
+        }
+    }
     match &report.initial_state {
         Some(x0) => {
             let v: Vec<String> = x0.iter().map(|v| format!("{v:.4e}")).collect();

@@ -324,3 +324,104 @@ fn validate_errors_are_readable() {
     assert!(!out.exists());
     ok(&refs(&args(&model, &estimate, &val, &out)));
 }
+
+#[test]
+fn validate_without_estimate_uses_the_true_maps() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A model file with a truth map, and noise-free data simulated from it.
+    let model = d.join("model.toml");
+    std::fs::write(
+        &model,
+        std::fs::read_to_string(example_model("hammerstein.toml")).unwrap(),
+    )
+    .unwrap();
+    let (u, val) = (d.join("u.csv"), d.join("val.csv"));
+    write_input(&u, 400, 1.0, 7);
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&val),
+    ]);
+    let out = d.join("validation");
+    let o = ok(&[
+        "validate",
+        "--model",
+        p(&model),
+        "--data",
+        p(&val),
+        "--out",
+        p(&out),
+    ]);
+    for s in [
+        "validated the true maps",
+        "400 samples",
+        "no --estimate",
+        "output y: simulation RMS",
+    ] {
+        assert!(o.stdout.contains(s), "missing `{s}` in:\n{}", o.stdout);
+    }
+    assert!(!o.stdout.contains("estimate.csv"), "{}", o.stdout);
+    for f in ["simulation.svg", "residuals.svg"] {
+        assert_svg(&out.join(f));
+    }
+    assert!(out.join("simulation.csv").is_file());
+    let v = read_json(&out.join("validation.json"));
+    assert_eq!(v["maps"], "truth");
+    assert!(v["estimate"].is_null(), "{v}");
+    assert!(v["inputs"]["estimate_dir"].is_null(), "{v}");
+    assert_eq!(v["truth"][0]["name"], "N");
+    assert_eq!(v["truth"][0]["truth"], "tanh(2*z0)");
+    assert_eq!(v["samples"], 400);
+    let y = &v["outputs"][0];
+    let fit = y["fit_percent"].as_f64().unwrap();
+    assert!(fit > 99.9999, "fit {fit} %");
+    assert!(y["rms"].as_f64().unwrap() < 1e-9, "{y}");
+
+    // --initial-state estimate works the same way.
+    let out2 = d.join("validation2");
+    ok(&[
+        "validate",
+        "--model",
+        p(&model),
+        "--data",
+        p(&val),
+        "--out",
+        p(&out2),
+        "--initial-state",
+        "estimate",
+    ]);
+    let v = read_json(&out2.join("validation.json"));
+    assert!(v["outputs"][0]["fit_percent"].as_f64().unwrap() > 99.9999);
+
+    // A block without a truth and no --estimate: an input error naming the blocks.
+    let text = std::fs::read_to_string(&model).unwrap();
+    let no_truth = d.join("no_truth.toml");
+    std::fs::write(
+        &no_truth,
+        text.lines()
+            .filter(|l| !l.starts_with("truth"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+    )
+    .unwrap();
+    let out3 = d.join("validation3");
+    let e = input_error(&[
+        "validate",
+        "--model",
+        p(&no_truth),
+        "--data",
+        p(&val),
+        "--out",
+        p(&out3),
+    ]);
+    assert!(
+        e.contains("`N`") && e.contains("truth") && e.contains("--estimate"),
+        "{e}"
+    );
+    assert!(!out3.exists());
+}

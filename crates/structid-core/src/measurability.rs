@@ -48,8 +48,8 @@ pub enum ZSource {
     /// stacked input `[u; y]` from a zero initial state.
     Dynamic {
         /// The noise path inverted through D_ye (inputs `[u; y]`, outputs z), reduced to the
-        /// states that z observes.
-        system: StateSpace,
+        /// states that z observes (boxed: it is much larger than the other variants).
+        system: Box<StateSpace>,
     },
 }
 
@@ -135,7 +135,9 @@ impl Lft {
             return Ok(ZSource::OutputInjection { psi });
         }
         match dynamic_inverse(self) {
-            Ok(system) => Ok(ZSource::Dynamic { system }),
+            Ok(system) => Ok(ZSource::Dynamic {
+                system: Box::new(system),
+            }),
             Err(why_not_dynamic) => Err(Error::NotMeasurable {
                 explanation: format!(
                     "the part of z driven by the noise e and the map outputs w is not a fixed linear function of y \

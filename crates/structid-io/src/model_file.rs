@@ -44,6 +44,33 @@
 //! continuous-time realisation, discretised by a zero-order hold on the whole input [u e w]
 //! (C and D are unchanged). The default is `time = "discrete"`.
 //!
+//! ## `[linear]` (instead of `[lft]`)
+//! A polynomial linear block G with one output, y = Σ_i B_i(q)/F(q)·u_i, placed in a named
+//! structure from which the LFT is built ([`LinearSpec`]):
+//!
+//! ```toml
+//! [linear]
+//! structure = "output-feedback"
+//! sample_time = 0.1              # optional (T_s of rate feedback; 1 when omitted)
+//! den = [1.0, -1.2, 0.5]         # F(q) = 1 + f₁q⁻¹ + f₂q⁻²
+//! num = [[0.0, 0.3, 0.2]]        # per input u: coefficients of 1, q⁻¹, … (leading zeros = delay)
+//! # num_w = [0.0, -0.3, -0.2]    # output feedback only: the feedback path's own numerator
+//! ```
+//!
+//! | `structure` | model | z (measurable because) |
+//! |---|---|---|
+//! | `"output-feedback"` | y = G·(u − N(y)) + e | z = y, measured |
+//! | `"input"` | y = G·N(u) + e | z = u |
+//! | `"output"` | y = N(G·u) + e (a sensor map) | z = G·u, depends on u only |
+//! | `"rate-feedback"` | y = G·(u − N(ẏ)) + e, ẏ_k = (y_k − y_(k−1))/T_s | z = Δy/T_s = Ψ(q)·y with the LTI Ψ = (1 − q⁻¹)/T_s, a dynamic Ψ_M |
+//! | `"lti"` | y = G·u + e | no map |
+//!
+//! `num` has one numerator per input u; `input`, `output` and `rate-feedback` take exactly one
+//! input. The feedback structures need a delay in G (num starting with 0), otherwise y_k would
+//! depend on N(y_k) or N(ẏ_k); `num_w` applies to `output-feedback` only. Every structure but
+//! `lti` has one map (`inputs = [0]`, `output = 0`); `[signals].z` is not used. Only
+//! `output-feedback` and `input` can be refined by `structid refine`.
+//!
 //! ## `[[nonlinearity]]`
 //! One table per unknown static map: a unique `name`, the z channels it reads (`inputs`, indices
 //! into z), the w channel it writes (`output`), its `dispersion` and optionally its `truth`.
@@ -69,7 +96,10 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
-use structid_core::refine::{InputNonlinearity, LinearStructure, OutputFeedback, lti_lft};
+use structid_core::refine::{
+    InputNonlinearity, LinearStructure, OutputFeedback, lti_lft, output_sensor_lft,
+    rate_feedback_lft,
+};
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
     Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
@@ -960,21 +990,40 @@ pub enum LinearStructureKind {
     OutputFeedback,
     /// y = G·N(u) + e: one map at the input (z = u).
     Input,
+    /// y = N(G·u) + e: one sensor map at the output of G (z = G·u, which depends on u only);
+    /// see [`output_sensor_lft`].
+    OutputSensor,
+    /// y = G·(u − N(ẏ)) + e with ẏ_k = (y_k − y_(k−1))/T_s: one map in feedback from the rate of
+    /// the measured output (z = Δy/T_s, a dynamic Ψ_M); see [`rate_feedback_lft`].
+    RateFeedback,
     /// y = G·u + e: no map (a nominal linear model).
     Lti,
 }
 
 impl LinearStructureKind {
     /// Every structure, in the order of the documentation.
-    pub const ALL: [Self; 3] = [Self::OutputFeedback, Self::Input, Self::Lti];
+    pub const ALL: [Self; 5] = [
+        Self::OutputFeedback,
+        Self::Input,
+        Self::OutputSensor,
+        Self::RateFeedback,
+        Self::Lti,
+    ];
 
     /// The name used in model files.
     pub fn name(self) -> &'static str {
         match self {
             Self::OutputFeedback => "output-feedback",
             Self::Input => "input",
+            Self::OutputSensor => "output",
+            Self::RateFeedback => "rate-feedback",
             Self::Lti => "lti",
         }
+    }
+
+    /// Whether `structid refine` (a [`LinearStructure`]) supports the structure.
+    pub fn refinable(self) -> bool {
+        matches!(self, Self::OutputFeedback | Self::Input)
     }
 
     /// The structure called `name`, if any.
@@ -990,30 +1039,39 @@ pub struct LinearSpec {
     pub structure: LinearStructureKind,
     /// G in the structure's form: for output feedback its inputs are [u…, w] (the last
     /// numerator is the effect of w on y, −B_u unless `num_w` was given); for an input map its
-    /// one input is w; for `lti` its inputs are u.
+    /// one input is w; for an output (sensor) map and rate feedback its one input is u; for
+    /// `lti` its inputs are u.
     pub model: PolynomialModel,
     /// Whether the feedback path has its own numerator (`num_w` given).
     pub separate_numerator: bool,
 }
 
 impl LinearSpec {
-    /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`] (`None` for
-    /// `lti`, which has no map); `block` names the map.
+    /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`]; `block`
+    /// names the map. `None` for `lti` (no map) and for `output` and `rate-feedback`, which
+    /// refinement does not support (see [`LinearStructureKind::refinable`]).
     pub fn structure(&self, block: &str) -> Option<Box<dyn LinearStructure>> {
         match self.structure {
             LinearStructureKind::OutputFeedback => Some(Box::new(
                 OutputFeedback::new(block).with_separate_numerator(self.separate_numerator),
             )),
             LinearStructureKind::Input => Some(Box::new(InputNonlinearity::new(block))),
-            LinearStructureKind::Lti => None,
+            LinearStructureKind::OutputSensor
+            | LinearStructureKind::RateFeedback
+            | LinearStructureKind::Lti => None,
         }
     }
 
     /// The LFT of this linear block in its structure.
     pub fn lft(&self) -> Result<Lft, IoError> {
-        Ok(match self.structure(BLOCK_PLACEHOLDER) {
-            Some(s) => s.lft(&self.model)?,
-            None => lti_lft(&self.model)?,
+        Ok(match self.structure {
+            LinearStructureKind::OutputSensor => output_sensor_lft(&self.model)?,
+            LinearStructureKind::RateFeedback => rate_feedback_lft(&self.model)?,
+            LinearStructureKind::Lti => lti_lft(&self.model)?,
+            LinearStructureKind::OutputFeedback | LinearStructureKind::Input => self
+                .structure(BLOCK_PLACEHOLDER)
+                .expect("output feedback and input maps are refinable structures")
+                .lft(&self.model)?,
         })
     }
 }
@@ -1056,7 +1114,8 @@ fn parse_linear(
     if let Some((_, zl)) = z_names {
         return Err(err_at(
             *zl,
-            "[signals].z is not used with [linear]: the structure fixes z (y for output feedback, u for an input map)",
+            "[signals].z is not used with [linear]: the structure fixes z (y for output feedback, u for an input map, \
+             G·u for an output map, Δy/T_s for rate feedback)",
         ));
     }
     let sample_time = match &raw.sample_time {
@@ -1088,15 +1147,19 @@ fn parse_linear(
             "[linear] num has a coefficient that is not finite",
         ));
     }
-    let expected = match structure {
-        LinearStructureKind::Input => 1,
-        _ => u.len(),
-    };
-    if structure == LinearStructureKind::Input && u.len() != 1 {
+    let single_input = matches!(
+        structure,
+        LinearStructureKind::Input
+            | LinearStructureKind::OutputSensor
+            | LinearStructureKind::RateFeedback
+    );
+    let expected = if single_input { 1 } else { u.len() };
+    if single_input && u.len() != 1 {
         return Err(err_at(
             line,
             format!(
-                "structure = \"input\" has one input u, but [signals].u names {}",
+                "structure = \"{}\" has one input u, but [signals].u names {}",
+                structure.name(),
                 plural(u.len(), "input")
             ),
         ));
@@ -1179,6 +1242,15 @@ fn parse_linear(
             let bw: Vec<f64> = num[0].iter().map(|x| -x).collect();
             num.push(if bw.is_empty() { vec![0.0] } else { bw });
         }
+        (None, LinearStructureKind::RateFeedback) => {
+            if num[0].first().is_some_and(|b| *b != 0.0) {
+                return Err(err_at(
+                    num_line,
+                    "[linear] num starts with a direct term; rate feedback needs a delay \
+                     (num = [[0.0, …]]), otherwise y_k depends on N(ẏ_k)",
+                ));
+            }
+        }
         (None, _) => {}
     }
     let spec = LinearSpec {
@@ -1195,6 +1267,8 @@ fn parse_linear(
     let what = match structure {
         LinearStructureKind::OutputFeedback => "one map in feedback from y (z = y)",
         LinearStructureKind::Input => "one map at the input (z = u)",
+        LinearStructureKind::OutputSensor => "one map at the output (z = G·u)",
+        LinearStructureKind::RateFeedback => "one map in feedback from the rate of y (z = Δy/T_s)",
         LinearStructureKind::Lti => "no map",
     };
     let dim = |value: usize| Dim {

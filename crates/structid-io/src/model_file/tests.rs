@@ -615,7 +615,7 @@ fn linear_section_errors_name_the_line() {
     let cases: [(String, &str, usize); 8] = [
         (
             LINEAR.replace("output-feedback", "feedforward"),
-            "supported: \"output-feedback\", \"input\", \"lti\"",
+            "supported: \"output-feedback\", \"input\", \"output\", \"rate-feedback\", \"lti\"",
             2,
         ),
         (
@@ -679,4 +679,139 @@ fn linear_section_errors_name_the_line() {
     );
     let lti_with_map = LINEAR.replace("output-feedback", "lti");
     assert!(err(&lti_with_map).contains("z[0]"));
+}
+
+/// G = (0.1q⁻¹ + 0.05q⁻²)/(1 − 1.6q⁻¹ + 0.8q⁻²) with a sensor map or in rate feedback.
+fn sensor_or_rate(structure: &str) -> String {
+    LINEAR
+        .replace("output-feedback", structure)
+        .replace("stiffness", "N")
+}
+
+/// The largest difference between the first `count` Markov parameters of two LFTs (all paths).
+fn markov_distance(a: &Lft, b: &Lft, count: usize) -> f64 {
+    let (ha, hb) = (
+        a.state_space().markov_parameters(count),
+        b.state_space().markov_parameters(count),
+    );
+    assert_eq!(ha.len(), hb.len());
+    ha.iter()
+        .zip(&hb)
+        .map(|(x, y)| {
+            assert_eq!(x.shape(), y.shape());
+            (x - y).abs().max()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn output_and_rate_feedback_structures_parse_to_the_builders_lfts() {
+    let g = PolynomialModel {
+        den: vec![1.0, -1.6, 0.8],
+        num: vec![vec![0.0, 0.1, 0.05]],
+        sample_time: Some(0.5),
+    };
+    for (name, kind, builder) in [
+        (
+            "output",
+            LinearStructureKind::OutputSensor,
+            output_sensor_lft as fn(&PolynomialModel) -> structid_core::Result<Lft>,
+        ),
+        (
+            "rate-feedback",
+            LinearStructureKind::RateFeedback,
+            rate_feedback_lft,
+        ),
+    ] {
+        let text = sensor_or_rate(name);
+        let m = ModelFile::parse(&text, None).unwrap();
+        let lin = m.linear.as_ref().unwrap();
+        assert_eq!(lin.structure, kind);
+        assert_eq!(LinearStructureKind::parse(name), Some(kind));
+        assert_eq!(lin.model, g, "{name}: num is G's numerator of u");
+        assert!(!lin.separate_numerator);
+        assert!(lin.structure("N").is_none() && !kind.refinable());
+        let expected = builder(&g).unwrap();
+        assert_eq!(m.lft.dims(), expected.dims(), "{name}");
+        assert_eq!(m.lft.sample_time(), Some(0.5));
+        let d = markov_distance(&m.lft, &expected, 12);
+        assert!(d == 0.0, "{name}: impulse responses differ by {d}");
+        let (dims, blocks) = (m.lft.dims(), m.to_model(None, None).unwrap());
+        assert_eq!((dims.u, dims.y, dims.w, dims.z), (1, 1, 1, 1));
+        assert_eq!(blocks.blocks().len(), 1);
+        // z is computed, never read: G·u for the sensor, a dynamic Ψ for the rate.
+        let source = m.lft.measurability().unwrap();
+        match kind {
+            LinearStructureKind::OutputSensor => {
+                assert_eq!(source, structid_core::ZSource::InputOnly)
+            }
+            _ => assert!(matches!(source, structid_core::ZSource::Dynamic { .. })),
+        }
+        // The file writes back as read.
+        let again = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+        assert_eq!(m, again, "{}", m.to_toml_string());
+        assert!(
+            m.to_toml_string()
+                .contains(&format!("structure = \"{name}\""))
+        );
+    }
+    // The sensor path: y = w + e and z = G·u, whose impulse response is G's.
+    let m = ModelFile::parse(&sensor_or_rate("output"), None).unwrap();
+    let g_ss = g.to_state_space().unwrap();
+    let (hz, hg) = (m.lft.t_zu().markov_parameters(8), g_ss.markov_parameters(8));
+    for (a, b) in hz.iter().zip(&hg) {
+        assert!((a[(0, 0)] - b[(0, 0)]).abs() < 1e-15);
+    }
+    assert_eq!(m.lft.matrices().dyw[(0, 0)], 1.0);
+}
+
+#[test]
+fn output_and_rate_feedback_errors_name_the_line() {
+    // Rate feedback needs the delay (num is on line 5).
+    let direct = sensor_or_rate("rate-feedback")
+        .replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.3, 0.1, 0.05]]");
+    let e = err(&direct);
+    assert!(
+        e.contains("direct term") && e.contains("rate feedback") && e.contains("line 5"),
+        "{e}"
+    );
+    // The sensor map does not need one.
+    let sensor_direct =
+        sensor_or_rate("output").replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.3, 0.1, 0.05]]");
+    assert!(ModelFile::parse(&sensor_direct, None).is_ok());
+    for name in ["output", "rate-feedback"] {
+        // Several inputs: the error points at [linear] (line 1).
+        let two = sensor_or_rate(name)
+            .replace("u = [\"u\"]", "u = [\"u\", \"v\"]")
+            .replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.0, 0.1], [0.0, 1.0]]");
+        let e = err(&two);
+        assert!(
+            e.contains(&format!("structure = \"{name}\" has one input u"))
+                && e.contains("2 inputs")
+                && e.contains("line 1"),
+            "{name}: {e}"
+        );
+        // Two numerators for one input (line 5).
+        let e = err(&sensor_or_rate(name)
+            .replace("num = [[0.0, 0.1, 0.05]]", "num = [[0.0, 0.1], [0.0, 1.0]]"));
+        assert!(
+            e.contains("2 numerators") && e.contains("line 5"),
+            "{name}: {e}"
+        );
+        // num_w belongs to output feedback (line 6).
+        let e = err(&sensor_or_rate(name).replace(
+            "num = [[0.0, 0.1, 0.05]]",
+            "num = [[0.0, 0.1, 0.05]]\nnum_w = [0.0, -0.2]",
+        ));
+        assert!(
+            e.contains("only applies to structure = \"output-feedback\"") && e.contains("line 6"),
+            "{name}: {e}"
+        );
+        // z is fixed by the structure ([signals].z is on line 10).
+        let e = err(&sensor_or_rate(name).replace("y = [\"y\"]", "y = [\"y\"]\nz = [\"z\"]"));
+        assert!(
+            e.contains("[signals].z is not used") && e.contains("line 10"),
+            "{name}: {e}"
+        );
+    }
 }
