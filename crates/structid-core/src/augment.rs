@@ -63,13 +63,14 @@ fn with_time(nominal: &Lft, m: LftMatrices) -> Result<Lft> {
 /// y = G·N(u) + H·e: an actuator map ahead of the nominal model (one input).
 ///
 /// ```
-/// use nalgebra::dmatrix;
+/// use nalgebra::{DMatrix, dmatrix};
 /// use structid_core::{Lft, LftMatrices, augment};
 /// // y = 0.5/(q − 0.8)·u + e
 /// let nominal = Lft::new(LftMatrices {
-///     a: dmatrix![0.8], bu: dmatrix![0.5], be: dmatrix![0.0], bw: dmatrix![],
-///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![],
-///     cz: dmatrix![], dzu: dmatrix![], dze: dmatrix![], dzw: dmatrix![],
+///     a: dmatrix![0.8], bu: dmatrix![0.5], be: dmatrix![0.0], bw: DMatrix::zeros(1, 0),
+///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: DMatrix::zeros(1, 0),
+///     cz: DMatrix::zeros(0, 1), dzu: DMatrix::zeros(0, 1), dze: DMatrix::zeros(0, 1),
+///     dzw: DMatrix::zeros(0, 0),
 /// }).unwrap();
 /// let lft = augment::at_input(&nominal).unwrap();
 /// assert_eq!((lft.dims().w, lft.dims().z), (1, 1));
