@@ -71,14 +71,20 @@ fn static_effects_are_named_located_and_close_the_gap() {
             d.finding
                 .as_ref()
                 .map(|f| match &f.classification {
-                    Classification::Named(fit) => format!("{} {:?}", fit.effect.name(), fit.values()),
+                    Classification::Named(fit) =>
+                        format!("{} {:?}", fit.effect.name(), fit.values()),
                     other => other.describe(),
                 })
                 .unwrap_or_else(|| "nothing".into()),
             d.finding.as_ref().map(|f| f.location.key()),
             d.seconds,
-            d.finding.as_ref().map(|f| (f.direction.explained, f.direction.t_statistic)),
-            d.finding.as_ref().map(|f| f.estimator.clone()).unwrap_or_default()
+            d.finding
+                .as_ref()
+                .map(|f| (f.direction.explained, f.direction.t_statistic)),
+            d.finding
+                .as_ref()
+                .map(|f| f.estimator.clone())
+                .unwrap_or_default()
         );
         correct += usize::from(named && located);
         params_ok += usize::from(within);
@@ -89,8 +95,14 @@ fn static_effects_are_named_located_and_close_the_gap() {
     eprintln!(
         "static: named and located {correct}/{cases}, parameters within 20 % {params_ok}/{cases}, median shrink {m:.1}×"
     );
-    assert!(correct as f64 >= 0.9 * n, "named and located {correct}/{cases}");
-    assert!(params_ok as f64 >= 0.8 * n, "parameters within 20 % {params_ok}/{cases}");
+    assert!(
+        correct as f64 >= 0.9 * n,
+        "named and located {correct}/{cases}"
+    );
+    assert!(
+        params_ok as f64 >= 0.8 * n,
+        "parameters within 20 % {params_ok}/{cases}"
+    );
     assert!(m >= 5.0, "median shrink {m:.2}×");
 }
 
@@ -104,7 +116,10 @@ fn lti_data_gives_no_missing_effect() {
         if !d.missing_effect {
             quiet += 1;
         } else {
-            eprintln!("seed {seed}: false alarm: {}\n  est: {}\n  val: {}\n  input {:?}", d.verdict, d.estimation_gap.verdict, d.validation_gap.verdict, case.input);
+            eprintln!(
+                "seed {seed}: false alarm: {}\n  est: {}\n  val: {}\n  input {:?}",
+                d.verdict, d.estimation_gap.verdict, d.validation_gap.verdict, case.input
+            );
         }
     }
     eprintln!("LTI: no missing effect in {quiet}/{cases}");
@@ -126,7 +141,8 @@ fn hysteresis_is_reported_as_dynamic() {
                 Hidden::Backlash { .. } => "backlash",
                 _ => "Bouc–Wen",
             },
-            f.map(|f| f.classification.describe()).unwrap_or_else(|| "nothing".into()),
+            f.map(|f| f.classification.describe())
+                .unwrap_or_else(|| "nothing".into()),
             f.map(|f| f.location.key()),
             f.map(|f| f.direction.explained).unwrap_or(0.0),
             f.map(|f| f.direction.t_statistic).unwrap_or(0.0),
