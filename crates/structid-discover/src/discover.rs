@@ -1,41 +1,69 @@
 //! The discovery workflow: from a nominal linear model that almost fits to a named missing
 //! effect, its place in the structure, and the gap it closes.
 //!
-//! [`discover`] takes a nominal single-input, single-output polynomial model G (no maps), an
-//! estimation record and a validation record, and answers four questions:
+//! [`discover`] takes a [`Nominal`] model (an LFT without maps, y = G·u + H·e, one input and
+//! one output, possibly with declared locations and named states), an estimation record and a
+//! validation record, and answers four questions:
 //!
-//! 1. **Is something missing?** The [`gap`] of G on both records: RMS, fit, a model-free noise
-//!    level and portmanteau tests (whiteness; ε against u, u², and ε² against u²). When the
-//!    gap is within the noise and every test passes on both records, the verdict is "no
-//!    missing effect detected" and the workflow stops there.
+//! 1. **Is something missing?** The [`gap`] of the nominal model on both records: simulation
+//!    RMS and fit, a model-free noise level σ̂, and portmanteau tests of its innovations ε
+//!    (whiteness; ε against u, against u², and ε² against u², together at the 0.1 % level).
+//!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
+//!    effect detected" with the statistics behind it, and the workflow stops there.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
-//!    noise band) and in operating space (regions of u, y, their rates and the simulated linear
-//!    output G·u where the residual energy concentrates).
+//!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
+//!    output G·u and the named states where the residual energy concentrates, e.g. `|u| > 0.8`).
 //! 3. **Where in the structure does it act?** Each [`Location`] inserts one unknown static
-//!    block ([`crate::hypotheses`]). Its map is identified by structid's `identify` with a
-//!    quadratic dispersion (a Gaussian-like Fourier kernel plus a low-degree polynomial trend,
-//!    finitely many features, so O(L·m²)), β (and, optionally, σ) by maximum marginal
-//!    likelihood, and the initial state estimated. The hypotheses are ranked by their
-//!    simulation RMS on the validation record.
-//! 4. **What is it?** The best hypothesis's points (z_k, ŵ_k) are fitted by every family of the
-//!    [`crate::effects`] library and ranked by BIC. When the best family is non-smooth (a kink
-//!    or a jump) and [`DiscoverSettings::total_variation`] is on, the map is also estimated
-//!    with total variation (β by validation) and that estimate is used when it validates
-//!    better. A family is *named* only if the augmented model with the parametric map
-//!    simulates the validation record about as well as with the nonparametric map (within
-//!    [`DiscoverSettings::naming_tolerance`], or within the noise); otherwise the effect is an
-//!    "unnamed static effect" and the nonparametric map is kept, as a table. Before naming,
-//!    the residual is tested for dependence on the direction of z
-//!    ([`crate::hysteresis::direction_dependence`]) after deconvolving it to the block's output
-//!    (a ridge-regularised inverse of L_yw, by conjugate gradients); if it depends on the
-//!    direction, the effect is reported as "dynamic: hysteresis or backlash suspected" and no
-//!    static name is forced.
-//!
-//! The result ([`Discovery`]) holds the augmented model with its map and the gap before and
-//! after on both records.
+//!    block ([`crate::hypotheses`], [`structid_core::augment`]). Its map is identified by
+//!    structid's `identify` with a quadratic dispersion (a Gaussian-like Fourier kernel of width
+//!    σ = 0.1 × the range of z plus a cubic polynomial trend: finitely many features, so
+//!    O(L·m²)), β by maximum marginal likelihood (σ too, optionally), the initial state
+//!    estimated (zero for the sensor and rate locations, whose z an unknown x₀ would make
+//!    unmeasurable). Total variation (β by validation, ADMM) is added where a smooth estimate
+//!    cannot do: at every location when the best quadratic estimate closes less than half the
+//!    gap (e.g. a fine quantiser), otherwise at the best location when a family with a kink or
+//!    a jump fits its estimate about as well as the best family. All estimates are ranked by
+//!    their simulation RMS on the validation record.
+//! 4. **Is it static?** For every estimate within 1.5× of the best validation RMS, the noise
+//!    estimate ê (what the static map leaves unexplained) is deconvolved to the block's output
+//!    (a ridge-regularised inverse of L_yw, by conjugate gradients, with the adjoint applied by
+//!    time reversal) and tested for dependence on the direction of z
+//!    ([`crate::hysteresis::direction_dependence`]). If one depends on the direction, the effect
+//!    is reported as "dynamic: hysteresis or backlash suspected" at that location, and no
+//!    static name is forced (the paper's Example 1).
+//! 5. **What is it?** The best estimate's points (z_k, ŵ_k) are fitted by every family of the
+//!    [`crate::effects`] library. The points are a smoothed estimate, not independent noisy
+//!    samples, so BIC alone rewards families that bend to its artefacts; the families whose
+//!    map fit is within 25 % of the best one's are offered first, fewest parameters first
+//!    ([`parsimonious`] order), then the rest by BIC. The first three are refined by output
+//!    error (Levenberg–Marquardt on the estimation record's simulation error with the
+//!    parametric map in the loop; 95 % intervals from s²·(JᵀJ)⁻¹) and simulated on the
+//!    validation record. The simplest that validates within
+//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂) is
+//!    *named*, unless a richer one that also does is a fifth better. Otherwise the effect is an
+//!    "unnamed static effect" and the nonparametric map is kept as a table.
+//! 6. **How much better is the model with it?** The augmented model (named expression or
+//!    table) is examined like the nominal one on both records: the gap before and after, and
+//!    the shrink of the validation RMS. A gap whose tests failed but which no candidate block
+//!    shrinks by [`MIN_CONFIRMING_SHRINK`] is not reported as a missing effect.
 //!
 //! Structural ambiguities are reported, not hidden: a gain or offset at the input cannot be
-//! told from one at the output of a linear G, and a *gain* means the linear model was wrong.
+//! told from one at the output of a linear G (both are then listed as equivalent locations),
+//! a *gain* means the linear model was wrong, and in a feedback location the map's linear
+//! part trades off against G's denominator (F + k·B with N − k·z).
+//!
+//! ```no_run
+//! use structid_discover::discover::{DiscoverSettings, discover};
+//! use structid_discover::hypotheses::Nominal;
+//! # fn records() -> (structid_core::Data, structid_core::Data) { unimplemented!() }
+//! let g = structid_linear::PolynomialModel {
+//!     den: vec![1.0, -1.5, 0.7], num: vec![vec![0.0, 0.1, 0.1]], sample_time: Some(0.05),
+//! };
+//! let (estimation, validation) = records();
+//! let d = discover(&Nominal::from_polynomial(&g).unwrap(), &estimation, &validation,
+//!                  &DiscoverSettings::default()).unwrap();
+//! println!("{}", d.verdict);
+//! ```
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -701,7 +729,7 @@ fn identify_hypothesis(
     let est_h = probe.data(est)?;
     let z = z_of(&probe, &est_h)?;
     let (lo, hi) = minmax(&z);
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return Err(Error::InvalidStructure(format!(
             "z {} is constant on the estimation record",
             nominal.describe(location)
@@ -1139,7 +1167,8 @@ pub fn discover(
     if settings.total_variation
         && let Some(best) = fitted.first()
     {
-        let everywhere = !(best.result.validation_rms <= 0.5 * validation_gap.rms);
+        let everywhere = best.result.validation_rms.is_nan()
+            || best.result.validation_rms > 0.5 * validation_gap.rms;
         let kinked = !everywhere && {
             let (zs, ws) = subsample(&best.z, &best.w_hat, settings.naming_points);
             name_effect(&zs, &ws, &naming_settings(settings))
@@ -1317,14 +1346,14 @@ fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>) {
     )
 }
 
-/// The families in the order they are offered for naming: those whose map fit is within 25 %
+/// The families of `naming` in the order they are offered for naming: those whose map fit is within 25 %
 /// of the best family's RMS, fewest parameters first, then the rest by BIC.
 ///
 /// The points (z_k, ŵ_k) are a smoothed estimate, not independent noisy samples, so BIC alone
 /// rewards families that bend to the estimate's artefacts (a Stribeck curve for a gain, an
 /// asymmetric saturation for a symmetric one). A family with fewer parameters that fits
 /// about as well is the better name.
-fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
+pub fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
     let best = naming
         .ranked
         .iter()

@@ -3,14 +3,18 @@
 //! The discovery workflow of structid starts from a model that almost fits: it finds where the
 //! simulation and the measurements disagree, inserts an unknown static block at candidate
 //! places of the structure, identifies it nonparametrically (structid's `identify`), and
-//! names what the estimate shows. This crate holds so far:
+//! names what the estimate shows, then adds it to the model and shows the gap shrink. The
+//! workflow is [`discover::discover`] (CLI: `structid discover`); its parts are:
 //!
+//! * [`discover`](mod@discover): the workflow itself (gap → where → which location → is it static → what is
+//!   it → the augmented model and the gap after), with its settings and result;
 //! * [`gap`]: how large the gap between a model's simulation and a record is, whether it is
 //!   only noise (a model-free noise level and portmanteau tests of whiteness and of linear and
 //!   nonlinear input correlation), and where it sits;
-//! * [`hypotheses`]: the augmented LFTs that insert one unknown static block into a nominal
-//!   linear model at the input, at the output, in feedback from the output or from its rate
-//!   (a dynamic Ψ_M in the paper's Definition 1);
+//! * [`hypotheses`]: the nominal model ([`hypotheses::Nominal`]: an LFT without maps, with
+//!   declared locations and named states) and the augmented LFTs that insert one unknown static
+//!   block at the input, at the output, in feedback from the output or from its rate (a
+//!   dynamic Ψ_M in the paper's Definition 1), or at a declared location;
 //! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
 //!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
 //! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
@@ -43,6 +47,7 @@ pub mod hysteresis;
 pub mod localise;
 pub mod synthetic;
 
+pub use discover::{Classification, DiscoverSettings, Discovery, discover};
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
 };
