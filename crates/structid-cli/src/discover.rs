@@ -22,6 +22,7 @@ use structid_io::{
     BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile,
     OutputGuard, SignalNames, TruthSpec, format_number,
 };
+use structid_lti::LinearSystem as _;
 use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
 
 use crate::error::CliError;
@@ -615,9 +616,10 @@ fn residual_svg(g: &Gap, band: f64, time: &TimeAxis) -> Result<String, CliError>
 
 /// The binned residual (mean and RMS per quantile bin) against each candidate signal.
 fn regions_svg(residual: &[f64], candidates: &[(String, Vec<f64>)]) -> Result<String, CliError> {
-    let binned: Vec<(String, Vec<f64>, Vec<f64>, Vec<f64>)> = candidates
+    type Binned = (String, Vec<f64>, Vec<f64>, Vec<f64>);
+    let binned: Vec<Binned> = candidates
         .iter()
-        .map(|(name, s)| {
+        .map(|(name, s)| -> Binned {
             let b = binned_residual(residual, s, REGION_BINS);
             (
                 name.clone(),
