@@ -19,8 +19,8 @@ use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
 use structid_io::{
-    BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile,
-    OutputGuard, SignalNames, TruthSpec, format_number,
+    BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, OutputGuard,
+    SignalNames, TruthSpec, format_number,
 };
 use structid_lti::LinearSystem as _;
 use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
@@ -284,7 +284,10 @@ fn parse_locations(
     Ok(Some(out))
 }
 
-fn settings(a: &DiscoverArgs, locations: Option<Vec<Location>>) -> Result<DiscoverSettings, CliError> {
+fn settings(
+    a: &DiscoverArgs,
+    locations: Option<Vec<Location>>,
+) -> Result<DiscoverSettings, CliError> {
     if !(a.sigma_fraction.is_finite() && a.sigma_fraction > 0.0) {
         return Err(CliError::input(format!(
             "invalid value {} for --sigma-fraction: it must be a finite fraction of the range of z \
@@ -523,7 +526,7 @@ fn write_augmented(
     let expected = f.augmented.validation_gap.rms;
     let rms = simulate_file(&path, &val.table, initial_state, max_lag)?;
     let difference = (rms - expected).abs() / expected.abs().max(f64::MIN_POSITIVE);
-    if !(difference <= SELF_CHECK_TOLERANCE) {
+    if difference.is_nan() || difference > SELF_CHECK_TOLERANCE {
         // Never leave a model file behind that does not reproduce the report.
         let _ = std::fs::remove_file(&path);
         return Err(CliError::runtime(format!(
@@ -643,7 +646,11 @@ fn regions_svg(residual: &[f64], candidates: &[(String, Vec<f64>)]) -> Result<St
             .with(Series::line("RMS", x, rms))
         })
         .collect();
-    Ok(render_grid_svg(&charts, 3.min(charts.len().max(1)), (480, 340))?)
+    Ok(render_grid_svg(
+        &charts,
+        3.min(charts.len().max(1)),
+        (480, 340),
+    )?)
 }
 
 fn z_label(location: Location) -> &'static str {
@@ -661,8 +668,14 @@ fn map_svg(h: &HypothesisResult, f: &Finding) -> Result<String, CliError> {
     let c = &h.curve;
     let band = c.std.as_ref().map(|s| {
         (
-            c.w.iter().zip(s).map(|(w, s)| w - 2.0 * s).collect::<Vec<f64>>(),
-            c.w.iter().zip(s).map(|(w, s)| w + 2.0 * s).collect::<Vec<f64>>(),
+            c.w.iter()
+                .zip(s)
+                .map(|(w, s)| w - 2.0 * s)
+                .collect::<Vec<f64>>(),
+            c.w.iter()
+                .zip(s)
+                .map(|(w, s)| w + 2.0 * s)
+                .collect::<Vec<f64>>(),
         )
     });
     let n = h.points.0.len();
@@ -819,8 +832,16 @@ fn gap_table(s: &mut String, estimation: &Gap, validation: &Gap) {
     let _ = writeln!(
         s,
         "| missing effect | {} | {} |",
-        if estimation.missing_effect { "yes" } else { "no" },
-        if validation.missing_effect { "yes" } else { "no" }
+        if estimation.missing_effect {
+            "yes"
+        } else {
+            "no"
+        },
+        if validation.missing_effect {
+            "yes"
+        } else {
+            "no"
+        }
     );
     s.push('\n');
     let _ = writeln!(
@@ -992,13 +1013,12 @@ fn validate_command(r: &ReportInputs<'_>, w: &Written) -> String {
 }
 
 fn identify_command(r: &ReportInputs<'_>, f: &Finding) -> String {
-    let beta = r
-        .d
-        .hypotheses
-        .iter()
-        .find(|h| h.location == f.location)
-        .map(|h| h.beta)
-        .unwrap_or(f64::NAN);
+    let beta =
+        r.d.hypotheses
+            .iter()
+            .find(|h| h.location == f.location)
+            .map(|h| h.beta)
+            .unwrap_or(f64::NAN);
     format!(
         "structid identify --model {} --data {} --out {} --beta {} --initial-state {}",
         r.a.out.join("augmented.toml").display(),
@@ -1071,7 +1091,7 @@ fn report_md(r: &ReportInputs<'_>) -> String {
         for (i, h) in d.hypotheses.iter().enumerate() {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} | {:.1} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
                 i + 1,
                 cell(&location_text(r.nominal, h.location)),
                 cell(&h.dispersion),
@@ -1220,10 +1240,8 @@ fn finding_md(s: &mut String, r: &ReportInputs<'_>, f: &Finding) {
         r.nominal.describe(f.location),
         match &f.augmented.map {
             AugmentedMap::Expression(x) => format!("N(z) = `{x}`"),
-            AugmentedMap::Table { z, .. } => format!(
-                "N as a table of {} points in `{TABLE_FILE}`",
-                z.len()
-            ),
+            AugmentedMap::Table { z, .. } =>
+                format!("N as a table of {} points in `{TABLE_FILE}`", z.len()),
         }
     );
     gap_table(s, &f.augmented.estimation_gap, &f.augmented.validation_gap);
@@ -1447,8 +1465,7 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
 fn command_line() -> String {
     let quote = |a: String| {
         if !a.is_empty()
-            && a
-                .chars()
+            && a.chars()
                 .all(|c| c.is_alphanumeric() || "-_./=,:+@%".contains(c))
         {
             a
@@ -1474,7 +1491,10 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
 
     // Never overwrite an input; refuse a bad output directory before the long part.
     let mut guard = OutputGuard::new();
-    guard.protect(&a.model).protect(&a.data).protect(&a.validate);
+    guard
+        .protect(&a.model)
+        .protect(&a.data)
+        .protect(&a.validate);
     guard.check(&a.out)?;
     for f in OUTPUTS {
         guard.check(&a.out.join(f))?;
@@ -1500,11 +1520,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     }
     let d = discover(&nominal, &est.data, &val.data, &settings)?;
     // The gap's lags, as discovery sets them.
-    let max_lag = settings
-        .gap()
-        .max_lag
-        .min(est.data.len() / 4)
-        .max(1);
+    let max_lag = settings.gap().max_lag.min(est.data.len() / 4).max(1);
 
     guard.create_dir(&a.out)?;
     let command = command_line();
@@ -1884,7 +1900,11 @@ mod tests {
     #[test]
     fn locations_parse_by_key_and_reject_unknown_names() {
         let nominal = Nominal::from_polynomial(&g()).unwrap();
-        let given = vec!["input".to_string(), " output-feedback".into(), "input".into()];
+        let given = vec![
+            "input".to_string(),
+            " output-feedback".into(),
+            "input".into(),
+        ];
         assert_eq!(
             parse_locations(Some(&given), &nominal).unwrap(),
             Some(vec![Location::Input, Location::OutputFeedback])

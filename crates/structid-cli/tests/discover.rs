@@ -169,9 +169,16 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
     let before = j["gap_before"]["validation"]["rms"].as_f64().unwrap();
     let after_rms = f["gap_after"]["validation"]["rms"].as_f64().unwrap();
     assert!(before > 3.0 * after_rms, "{before} → {after_rms}");
-    assert!(j["hypotheses"].as_array().unwrap().len() == 4, "{}", j["hypotheses"]);
+    assert!(
+        j["hypotheses"].as_array().unwrap().len() == 4,
+        "{}",
+        j["hypotheses"]
+    );
     let check = &j["augmented"]["self_check"];
-    assert!(check["relative_difference"].as_f64().unwrap() <= 1e-6, "{check}");
+    assert!(
+        check["relative_difference"].as_f64().unwrap() <= 1e-6,
+        "{check}"
+    );
 
     // The figures.
     for f in ["residual.svg", "regions.svg", "map.svg", "before_after.svg"] {
@@ -236,7 +243,10 @@ fn an_lti_record_has_no_missing_effect() {
     );
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("no missing effect detected"), "{md}");
-    assert!(md.contains("Portmanteau") && !md.contains("| rank | location"), "{md}");
+    assert!(
+        md.contains("Portmanteau") && !md.contains("| rank | location"),
+        "{md}"
+    );
     assert!(!out.join("augmented.toml").exists());
     assert!(!out.join("map.svg").exists());
     let j = json(&out.join("report.json"));
@@ -253,7 +263,11 @@ fn bad_models_and_arguments_are_input_errors() {
     let est = d.join("est.csv");
     let mut text = String::from("u,y\n");
     for k in 0..300 {
-        text.push_str(&format!("{},{}\n", (k as f64 * 0.1).sin(), (k as f64 * 0.1).cos()));
+        text.push_str(&format!(
+            "{},{}\n",
+            (k as f64 * 0.1).sin(),
+            (k as f64 * 0.1).cos()
+        ));
     }
     std::fs::write(&est, &text).unwrap();
     let nominal = d.join("nominal.toml");
@@ -303,7 +317,10 @@ fn bad_models_and_arguments_are_input_errors() {
 
     // Bad options.
     let e = run(&nominal, &est, &["--locations", "input,elsewhere"]);
-    assert!(e.contains("elsewhere") && e.contains("output-feedback"), "{e}");
+    assert!(
+        e.contains("elsewhere") && e.contains("output-feedback"),
+        "{e}"
+    );
     let e = run(&nominal, &est, &["--naming-tolerance", "0.5"]);
     assert!(e.contains("--naming-tolerance"), "{e}");
     let e = run(&nominal, &est, &["--hysteresis-threshold", "1.5"]);
