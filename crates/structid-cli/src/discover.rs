@@ -1169,17 +1169,19 @@ fn finding_md(s: &mut String, r: &ReportInputs<'_>, f: &Finding) {
             .map(|v| format!(" (total variation tried: {})", e(v)))
             .unwrap_or_default()
     );
-    if f.equivalent_locations.len() > 1 {
-        let _ = writeln!(
-            s,
-            "- equivalent locations (the same model for a linear G): {}",
+    let _ = writeln!(
+        s,
+        "- equivalent locations (the same model for a linear G): {}",
+        if f.equivalent_locations.len() > 1 {
             f.equivalent_locations
                 .iter()
                 .map(|l| format!("`{}`", l.key()))
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
-    }
+        } else {
+            format!("none besides `{}`", f.location.key())
+        }
+    );
     s.push('\n');
     let _ = writeln!(
         s,

@@ -304,6 +304,12 @@ fn bad_models_and_arguments_are_input_errors() {
     let e = run(&nominal, &d.join("missing.csv"), &[]);
     assert!(e.contains("missing.csv"), "{e}");
 
+    // Too short a record for discovery.
+    let short = d.join("short.csv");
+    std::fs::write(&short, text.lines().take(51).collect::<Vec<_>>().join("\n")).unwrap();
+    let e = run(&nominal, &short, &[]);
+    assert!(e.contains("100 samples"), "{e}");
+
     // Two outputs.
     let two = d.join("two.toml");
     std::fs::write(
