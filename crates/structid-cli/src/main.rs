@@ -9,6 +9,9 @@
 //! structid data silverbox|tanks --file PATH --split NAME|all --out OUT
 //! structid data csv --file PATH [--columns C1,C2] [--names u,y] [--delimiter ';'] [--no-header]
 //!                   [--skip-rows N] [--range A..B] [--remove-mean] --out OUT.csv
+//! structid discover --model NOMINAL.toml --data EST.csv --validate VAL.csv --out DIR [--locations L1,L2]
+//!                   [--no-tv] [--settle N] [--sigma-fraction F] [--trend D] [--tune-sigma]
+//!                   [--naming-tolerance T] [--hysteresis-threshold T]
 //! ```
 //!
 //! Exit codes: 0 success, 2 invalid usage or input (bad arguments, malformed model or data
@@ -18,6 +21,7 @@
 mod compare;
 mod data;
 mod demo;
+mod discover;
 mod error;
 mod figures;
 mod identify;
@@ -107,6 +111,25 @@ enum Command {
     /// delimited text file.
     #[command(subcommand)]
     Data(data::DataCommand),
+    /// Find what a nominal linear model is missing: where, and which static effect.
+    ///
+    /// Starts from a nominal model that almost fits (one input, one output, no maps: `[linear]`
+    /// with structure = "lti", e.g. from `structid linear --structure lti`, or `[lft]`). Tests
+    /// whether its residual on the two records is only noise (size against a model-free noise
+    /// level, whiteness and (non)linear input-correlation tests) and where it is not, in time
+    /// and in operating space. If something is missing, inserts one unknown static block at each
+    /// candidate location (input, output, output feedback, rate feedback), identifies it on
+    /// --data, ranks the locations by the simulation error on --validate, and names the best
+    /// map from a library of effects (saturation, dead zone, friction, polynomial stiffness,
+    /// quantisation, offset, gain) when its parametric form validates as well, or reports it as
+    /// unnamed or dynamic (hysteresis or backlash suspected).
+    ///
+    /// Writes DIR/report.md (readable on its own), DIR/report.json, the figures
+    /// DIR/residual.svg, regions.svg, map.svg and before_after.svg, and, when an effect was
+    /// found, DIR/augmented.toml: the nominal model plus the block `N` with the map found as
+    /// its `truth` (DIR/N_table.csv for an unnamed map), checked to reproduce the report's
+    /// validation RMS when read back. Input files are never overwritten.
+    Discover(discover::DiscoverArgs),
 }
 
 /// A number, or `auto`.
@@ -389,6 +412,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Linear(a) => linear::run(a),
         Command::Refine(a) => refine::run(a),
         Command::Data(c) => data::run(c),
+        Command::Discover(a) => discover::run(a),
     }
 }
 
