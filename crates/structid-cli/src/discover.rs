@@ -347,10 +347,7 @@ fn read_record(mf: &ModelFile, path: &Path) -> Result<Record, CliError> {
 /// How the initial state is treated at `location` (as `structid_discover` does): estimated,
 /// except for the sensor map and the rate, whose z would depend on an unknown x₀.
 fn initial_state(location: Location) -> ValidationInitialState {
-    match location {
-        Location::Output | Location::RateFeedback => ValidationInitialState::Zero,
-        _ => ValidationInitialState::Estimate,
-    }
+    structid_discover::discover::initial_state(location).1
 }
 
 fn initial_state_name(s: ValidationInitialState) -> &'static str {
@@ -410,9 +407,16 @@ fn augmented_file(
                 separate_numerator: false,
             })
         }
-        // TODO(lead): once branch `mf` (the [linear] structures "output" and "rate-feedback")
-        // is merged, write Location::Output and Location::RateFeedback of a [linear] nominal
-        // model as [linear] too (structure = location.key(), same den/num).
+        (Some(spec), Location::Output) => Some(LinearSpec {
+            structure: LinearStructureKind::OutputSensor,
+            model: spec.model.clone(),
+            separate_numerator: false,
+        }),
+        (Some(spec), Location::RateFeedback) => Some(LinearSpec {
+            structure: LinearStructureKind::RateFeedback,
+            model: spec.model.clone(),
+            separate_numerator: false,
+        }),
         _ => None,
     };
     let (lft, form) = match &linear {
@@ -1874,7 +1878,7 @@ mod tests {
                 TABLE_FILE,
             )
             .unwrap();
-            let expect_linear = matches!(location, Location::Input | Location::OutputFeedback);
+            let expect_linear = !matches!(location, Location::Declared(_));
             assert_eq!(form.starts_with("[linear]"), expect_linear, "{form}");
             let sub = dir.path().join(location.key());
             std::fs::create_dir_all(&sub).unwrap();

@@ -586,10 +586,19 @@ fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
     }
 }
 
-/// How the initial state is treated at `location`: estimated, except for the sensor map,
-/// whose z = G·u would depend on an unknown x₀ (no longer measurable), so the record is
-/// taken to start at rest there.
-fn initial_state(location: Location) -> (InitialState, ValidationInitialState) {
+/// How the initial state is treated at `location` (in identification, and in simulation):
+/// estimated, except for the sensor map and the rate, whose z (G·u, and Ψ's memory of the
+/// previous output) would depend on an unknown x₀ and no longer be measurable, so the record
+/// is taken to start at rest there.
+///
+/// ```
+/// use structid_core::ValidationInitialState;
+/// use structid_discover::discover::initial_state;
+/// use structid_discover::hypotheses::Location;
+/// assert_eq!(initial_state(Location::Input).1, ValidationInitialState::Estimate);
+/// assert_eq!(initial_state(Location::Output).1, ValidationInitialState::Zero);
+/// ```
+pub fn initial_state(location: Location) -> (InitialState, ValidationInitialState) {
     match location {
         Location::Output | Location::RateFeedback => {
             (InitialState::Zero, ValidationInitialState::Zero)
