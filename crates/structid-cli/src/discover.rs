@@ -508,7 +508,14 @@ fn write_augmented(
         f.location,
         f.augmented.model.lft(),
         &f.augmented.map,
-        block_dispersion(sigma, trend),
+        match sigma {
+            Some(_) => block_dispersion(sigma, trend),
+            // The map was estimated with total variation, which has no width.
+            None => DispersionSpec::TotalVariation {
+                neighbours: None,
+                interpolation: None,
+            },
+        },
         TABLE_FILE,
     )?;
     let table = match &f.augmented.map {

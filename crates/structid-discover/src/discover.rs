@@ -376,7 +376,7 @@ pub struct HypothesisResult {
     pub dispersion: String,
     /// β chosen.
     pub beta: f64,
-    /// The kernel width chosen (when it has one).
+    /// The kernel width used (tuned or fixed; `None` for total variation).
     pub sigma: Option<f64>,
     /// The cost terms at the estimate: μ = (1/L)·Σ|ê_k|² and D(z, ŵ).
     pub noise_term: f64,
@@ -772,13 +772,17 @@ fn identify_hypothesis(
         ..h
     };
     let val_h = h.data(val)?;
+    // The width used: the tuned one, or the fixed fraction of the range.
+    let sigma = sel.sigma.or(Some(
+        settings.sigma_fraction * (hi - lo).max(f64::MIN_POSITIVE),
+    ));
     finish_fit(
         location,
         "quadratic",
         h,
         id,
         sel.beta,
-        sel.sigma,
+        sigma,
         &est_h,
         &val_h,
         settings,
