@@ -76,7 +76,8 @@
 //! into z), the w channel it writes (`output`), its `dispersion` and optionally its `truth`.
 //! Every w channel must be written by exactly one block — except in a *nominal* `[lft]` model
 //! (a file without blocks), whose w columns and z rows are declared injection points and signals
-//! for `structid discover` (see `[discover]`); [`ModelFile::to_model`] drops them (w = 0).
+//! for `structid discover` (see `[discover]`); [`ModelFile::model_lft`] and
+//! [`ModelFile::to_model`] drop the w columns (w = 0).
 //!
 //! * `dispersion = { kind = "gaussian", sigma = 0.4 }`: the Gaussian RKHS dispersion. When
 //!   `sigma` is omitted (or the whole `dispersion` key is), σ is chosen when the data are known:
@@ -2269,12 +2270,38 @@ impl ModelFile {
                 d,
             ));
         }
-        let lft = if self.blocks.is_empty() && self.lft.dims().w > 0 {
-            without_w(&self.lft)?
+        Ok(Model::new(self.model_lft()?, blocks)?)
+    }
+
+    /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a
+    /// nominal model (no blocks), whose w columns — injection points declared for
+    /// `structid discover` — are dropped (w = 0; the z rows are kept).
+    ///
+    /// ```
+    /// use structid_io::ModelFile;
+    /// let m = ModelFile::parse(r#"
+    ///     [lft]
+    ///     A = [[0.5]]
+    ///     Bu = [[1.0]]
+    ///     Bw = [[-1.0]]
+    ///     Cy = [[1.0]]
+    ///     Dye = [[1.0]]
+    ///     Cz = [[1.0]]
+    ///     [signals]
+    ///     u = ["u"]
+    ///     y = ["y"]
+    ///     [discover]
+    ///     locations = [{ name = "spring", z = 0, w = 0 }]
+    /// "#, None).unwrap();
+    /// assert_eq!(m.lft.dims().w, 1);
+    /// assert_eq!(m.model_lft().unwrap().dims().w, 0);
+    /// ```
+    pub fn model_lft(&self) -> Result<Lft, IoError> {
+        if self.blocks.is_empty() && self.lft.dims().w > 0 {
+            without_w(&self.lft)
         } else {
-            self.lft.clone()
-        };
-        Ok(Model::new(lft, blocks)?)
+            Ok(self.lft.clone())
+        }
     }
 
     /// Gives every block the dispersion `spec` (as `structid identify --dispersion` does). When
