@@ -73,6 +73,7 @@ pub fn spray_model_file(sigma: f64) -> ModelFile {
             gaussian_block("f", vec![0], 0, sigma, SPRAY_F),
             gaussian_block("g", vec![0], 1, sigma, SPRAY_G),
         ],
+        discover: None,
         path: None,
     }
 }
@@ -300,6 +301,7 @@ pub fn multi_input(a: MultiInputArgs) -> Result<(), CliError> {
             MULTI_SIGMA,
             MULTI_INPUT_MAP,
         )],
+        discover: None,
         path: None,
     };
     let model_text = format!(

@@ -360,6 +360,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             z: None,
         },
         blocks,
+        discover: None,
         path: None,
     };
     let text = mf.to_toml_string();

@@ -15,7 +15,9 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, &mf, &a.model, &[&a.input]);
     guard.check(&a.out)?;
-    mf.lft.check_no_algebraic_loop().map_err(|e| {
+    // A nominal model's declared w columns carry w = 0.
+    let lft = mf.model_lft()?;
+    lft.check_no_algebraic_loop().map_err(|e| {
         CliError::from(e).context(format!("cannot simulate `{}`", a.model.display()))
     })?;
     let missing: Vec<String> = mf
@@ -59,7 +61,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
         .select(&mf.signals.u)
         .map_err(|e| CliError::from(e).context("reading the inputs named in [signals].u"))?;
     let len = u.len();
-    let dims = mf.lft.dims();
+    let dims = lft.dims();
     let e = (noise_std > 0.0).then(|| gaussian_noise(len, dims.e, noise_std, a.seed));
     let bindings: Vec<MapBinding<'_>> = mf
         .blocks
@@ -71,7 +73,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
             map: m.as_ref(),
         })
         .collect();
-    let sim = mf.lft.simulate(&bindings, &u, e.as_ref(), None)?;
+    let sim = lft.simulate(&bindings, &u, e.as_ref(), None)?;
 
     let mut columns: Vec<Vec<f64>> = Vec::with_capacity(names.len());
     columns.extend((0..dims.u).map(|c| u.channel(c)));

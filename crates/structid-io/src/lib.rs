@@ -58,8 +58,9 @@ pub use data_file::{
 };
 pub use error::{ErrorChain, IoError, core_is_input_error};
 pub use model_file::{
-    BlockSpec, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, SUPPORTED_DISPERSIONS,
-    SignalNames, TruthSpec, default_sigma,
+    BUILT_IN_LOCATIONS, BlockSpec, DeclaredLocationSpec, DiscoverSpec, DispersionSpec, LinearSpec,
+    LinearStructureKind, ModelFile, NamedStateSpec, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec,
+    default_sigma,
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{

@@ -74,7 +74,10 @@
 //! ## `[[nonlinearity]]`
 //! One table per unknown static map: a unique `name`, the z channels it reads (`inputs`, indices
 //! into z), the w channel it writes (`output`), its `dispersion` and optionally its `truth`.
-//! Every w channel must be written by exactly one block.
+//! Every w channel must be written by exactly one block — except in a *nominal* `[lft]` model
+//! (a file without blocks), whose w columns and z rows are declared injection points and signals
+//! for `structid discover` (see `[discover]`); [`ModelFile::model_lft`] and
+//! [`ModelFile::to_model`] drop the w columns (w = 0).
 //!
 //! * `dispersion = { kind = "gaussian", sigma = 0.4 }`: the Gaussian RKHS dispersion. When
 //!   `sigma` is omitted (or the whole `dispersion` key is), σ is chosen when the data are known:
@@ -87,6 +90,21 @@
 //!   a complete grid in two), the path relative to the model file's directory. A trailing
 //!   column `std` (the posterior standard deviation in the map files of `structid identify`)
 //!   is ignored.
+//!
+//! ## `[discover]` (nominal models only)
+//! What a nominal model ([`DiscoverSpec`]) declares for `structid discover`: extra candidate
+//! locations of a missing block on its declared channels, and states named for localisation.
+//!
+//! ```toml
+//! [discover]
+//! locations = [ { name = "spring", z = 0, w = 0 } ]   # a block reading z row 0, writing w column 0
+//! states = [ { name = "velocity", state = 1 } ]        # state 1 of the LFT, named
+//! ```
+//!
+//! Indices are 0-based and must exist (z < n_z, w < n_w, state < n); names are non-empty and
+//! unique, and a location may not be called like a built-in one ([`BUILT_IN_LOCATIONS`],
+//! `declared-<i>`); each (z, w) pair is declared once. The section is rejected in a file with
+//! `[[nonlinearity]]` blocks. Both keys are optional (`[[discover.locations]]` tables work too).
 //!
 //! Every error names the line of the offending key.
 
@@ -420,9 +438,47 @@ pub struct ModelFile {
     pub signals: SignalNames,
     /// The unknown static maps, in file order.
     pub blocks: Vec<BlockSpec>,
+    /// The `[discover]` section of a nominal model (one without blocks): declared candidate
+    /// locations and named states for `structid discover`.
+    pub discover: Option<DiscoverSpec>,
     /// The file it was read from.
     pub path: Option<PathBuf>,
 }
+
+/// A candidate location declared in `[discover]`: a block reading z row `z` and writing
+/// w column `w` of the nominal model's LFT.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DeclaredLocationSpec {
+    /// Its name (unique, not empty, not the key of a built-in location), e.g. `spring`.
+    pub name: String,
+    /// The z row the block reads (< n_z).
+    pub z: usize,
+    /// The w column the block writes (< n_w).
+    pub w: usize,
+}
+
+/// A state of the nominal model's LFT named in `[discover]` for localisation.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NamedStateSpec {
+    /// Its name (unique, not empty), e.g. `velocity`.
+    pub name: String,
+    /// The state's index in the LFT (< n).
+    pub state: usize,
+}
+
+/// The `[discover]` section: what a nominal model (a file without `[[nonlinearity]]` blocks)
+/// declares for `structid discover`, in file order.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DiscoverSpec {
+    /// Extra candidate locations of the missing block, besides the built-in ones.
+    pub locations: Vec<DeclaredLocationSpec>,
+    /// Named states, offered as candidate signals when localising an effect.
+    pub states: Vec<NamedStateSpec>,
+}
+
+/// The keys of the built-in discovery locations; a declared location may not take one of
+/// these names (nor `declared-<i>`), since `structid discover --locations` accepts both.
+pub const BUILT_IN_LOCATIONS: &[&str] = &["input", "output", "output-feedback", "rate-feedback"];
 
 // ---------------------------------------------------------------------------------------------
 // Raw (serde) form
@@ -437,6 +493,31 @@ struct RawFile {
     signals: Spanned<RawSignals>,
     #[serde(default)]
     nonlinearity: Vec<Spanned<RawBlock>>,
+    discover: Option<Spanned<RawDiscover>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDiscover {
+    #[serde(default)]
+    locations: Vec<Spanned<RawLocation>>,
+    #[serde(default)]
+    states: Vec<Spanned<RawState>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLocation {
+    name: Spanned<String>,
+    z: Spanned<i64>,
+    w: Spanned<i64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawState {
+    name: Spanned<String>,
+    state: Spanned<i64>,
 }
 
 #[derive(Deserialize)]
@@ -737,8 +818,18 @@ pub(crate) fn toml_error(e: &toml::de::Error, src: &Source<'_>) -> IoError {
         Some(span) => {
             let (line, column) = src.line_col(span.start);
             let text = src.line_text(line).trim();
+            // Errors about a key or value (reported by the deserialiser) point at the key itself;
+            // syntax errors at the start of a line usually come from the line before.
+            let about_key = [
+                "unknown field",
+                "missing field",
+                "invalid type",
+                "invalid value",
+            ]
+            .iter()
+            .any(|p| message.starts_with(p));
             let mut message = format!("invalid TOML: {message}");
-            if column > 1 || line == 1 {
+            if column > 1 || line == 1 || about_key {
                 if !text.is_empty() {
                     let _ = write!(message, " in `{text}`");
                 }
@@ -1755,6 +1846,166 @@ fn parse_index_list(
     Ok(out)
 }
 
+/// Whether `name` has the form `declared-<i>`, the key of the i-th declared location.
+fn is_declared_key(name: &str) -> bool {
+    name.strip_prefix("declared-")
+        .is_some_and(|i| !i.is_empty() && i.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The `[discover]` section, checked against the LFT: indices in range, names unique and not
+/// empty, each location once and a valid single-block LFT.
+fn parse_discover(
+    raw: &RawDiscover,
+    lft: &Lft,
+    dz: &Dim,
+    dw: &Dim,
+    src: &Source<'_>,
+) -> Result<DiscoverSpec, IoError> {
+    let index = |v: &Spanned<i64>, key: &str, owner: &str| -> Result<(usize, usize), IoError> {
+        let line = src.line(v.span().start);
+        let i = *v.get_ref();
+        usize::try_from(i).map(|i| (i, line)).map_err(|_| {
+            err_at(
+                line,
+                format!("{owner}: {key} = {i} is negative; indices start at 0"),
+            )
+        })
+    };
+    let name_of = |v: &Spanned<String>, what: &str| -> Result<(String, usize), IoError> {
+        let line = src.line(v.span().start);
+        let name = v.get_ref().trim().to_string();
+        if name.is_empty() {
+            return Err(err_at(
+                line,
+                format!("a [discover] {what} has an empty name"),
+            ));
+        }
+        Ok((name, line))
+    };
+
+    let mut out = DiscoverSpec::default();
+    let mut lines: Vec<usize> = Vec::new();
+    for entry in &raw.locations {
+        let entry_line = src.line(entry.span().start);
+        let r = entry.get_ref();
+        let (name, name_line) = name_of(&r.name, "location")?;
+        if BUILT_IN_LOCATIONS.contains(&name.as_str()) || is_declared_key(&name) {
+            return Err(err_at(
+                name_line,
+                format!(
+                    "the [discover] location `{name}` has the name of a built-in location key \
+                     ({}, declared-<i>); choose another name",
+                    BUILT_IN_LOCATIONS.join(", ")
+                ),
+            ));
+        }
+        if let Some(j) = out.locations.iter().position(|l| l.name == name) {
+            return Err(err_at(
+                name_line,
+                format!(
+                    "two [discover] locations are named `{name}` (lines {} and {name_line}); names \
+                     must be unique",
+                    lines[j]
+                ),
+            ));
+        }
+        let owner = format!("[discover] location `{name}`");
+        let (z, z_line) = index(&r.z, "z", &owner)?;
+        if z >= dz.value {
+            return Err(err_at(
+                z_line,
+                format!(
+                    "{owner} reads z row {z} but the model has {} (indices 0…): {}",
+                    plural(dz.value, "z row"),
+                    dz.source
+                ),
+            ));
+        }
+        let (w, w_line) = index(&r.w, "w", &owner)?;
+        if w >= dw.value {
+            return Err(err_at(
+                w_line,
+                format!(
+                    "{owner} writes w column {w} but the model has {} (indices 0…): {}",
+                    plural(dw.value, "w column"),
+                    dw.source
+                ),
+            ));
+        }
+        if let Some(j) = out.locations.iter().position(|l| l.z == z && l.w == w) {
+            return Err(err_at(
+                entry_line,
+                format!(
+                    "[discover] locations `{}` (line {}) and `{name}` are both z row {z} → w column \
+                     {w}; declare each location once",
+                    out.locations[j].name, lines[j]
+                ),
+            ));
+        }
+        // Safety net: the core builds the block's LFT from the same indices.
+        structid_core::augment::declared(lft, z, w)
+            .map_err(|e| err_at(entry_line, format!("{owner}: {e}")))?;
+        out.locations.push(DeclaredLocationSpec { name, z, w });
+        lines.push(entry_line);
+    }
+
+    let n = lft.dims().states;
+    let mut lines: Vec<usize> = Vec::new();
+    for entry in &raw.states {
+        let r = entry.get_ref();
+        let (name, name_line) = name_of(&r.name, "state")?;
+        if let Some(j) = out.states.iter().position(|s| s.name == name) {
+            return Err(err_at(
+                name_line,
+                format!(
+                    "two [discover] states are named `{name}` (lines {} and {name_line}); names \
+                     must be unique",
+                    lines[j]
+                ),
+            ));
+        }
+        let owner = format!("[discover] state `{name}`");
+        let (state, state_line) = index(&r.state, "state", &owner)?;
+        if state >= n {
+            return Err(err_at(
+                state_line,
+                format!(
+                    "{owner} is state {state} but the model has {} (indices 0…)",
+                    plural(n, "state")
+                ),
+            ));
+        }
+        out.states.push(NamedStateSpec { name, state });
+        lines.push(name_line);
+    }
+    Ok(out)
+}
+
+/// The LFT without its w columns: a nominal model, whose declared injection points carry
+/// w = 0 (its z rows are kept).
+fn without_w(lft: &Lft) -> Result<Lft, IoError> {
+    let m = lft.matrices();
+    let d = lft.dims();
+    let nominal = Lft::new(LftMatrices {
+        a: m.a.clone(),
+        bu: m.bu.clone(),
+        be: m.be.clone(),
+        bw: DMatrix::zeros(d.states, 0),
+        cy: m.cy.clone(),
+        dyu: m.dyu.clone(),
+        dye: m.dye.clone(),
+        dyw: DMatrix::zeros(d.y, 0),
+        cz: m.cz.clone(),
+        dzu: m.dzu.clone(),
+        dze: m.dze.clone(),
+        dzw: DMatrix::zeros(d.z, 0),
+    })?;
+    Ok(match lft.sample_time() {
+        Some(ts) => nominal.with_sample_time(ts)?,
+        None => nominal,
+    })
+}
+
 impl ModelFile {
     /// Reads and validates a model file. Relative truth-table paths are resolved against the
     /// file's directory.
@@ -1919,11 +2170,39 @@ impl ModelFile {
             });
             block_lines.push(entry_line);
         }
-        if let Some(c) = owner.iter().position(Option::is_none) {
+
+        // Discovery: a nominal model's declared locations and named states.
+        let discover = match &raw.discover {
+            Some(d) => {
+                if let Some(first) = block_lines.first() {
+                    return Err(err_at(
+                        src.line(d.span().start),
+                        format!(
+                            "[discover] describes a nominal model for `structid discover`, but the \
+                             file has {} (the first at line {first}); remove [discover] or the blocks",
+                            plural(blocks.len(), "[[nonlinearity]] block")
+                        ),
+                    ));
+                }
+                Some(parse_discover(d.get_ref(), &lft, &dz, &dw, &src)?)
+            }
+            None => None,
+        };
+
+        // Every w channel needs its block, except in a nominal [lft] model (no blocks), whose
+        // w columns are declared injection points.
+        let nominal = blocks.is_empty() && linear.is_none();
+        if !nominal && let Some(c) = owner.iter().position(Option::is_none) {
+            let unused = if linear.is_none() {
+                "; unused w columns (injection points declared for `structid discover`, see \
+                 [discover]) are only allowed in a nominal model without [[nonlinearity]] blocks"
+            } else {
+                ""
+            };
             return Err(err_at(
                 dw.line.unwrap_or(lft_line),
                 format!(
-                    "w[{c}] is not produced by any block ({}); add a [[nonlinearity]] with output = {c}",
+                    "w[{c}] is not produced by any block ({}); add a [[nonlinearity]] with output = {c}{unused}",
                     dw.source
                 ),
             ));
@@ -1939,6 +2218,7 @@ impl ModelFile {
             linear,
             signals,
             blocks,
+            discover,
             path: None,
         };
         // Safety net: the core's own validation must agree.
@@ -1948,7 +2228,8 @@ impl ModelFile {
 
     /// Builds the core [`Model`]: each block's dispersion with σ from `sigma_override`, else
     /// from the file, else [`default_sigma`] of the block's channels of `z_for_defaults` (the
-    /// full z signal, L × n_z), which is then required.
+    /// full z signal, L × n_z), which is then required. A nominal model (no blocks) drops its
+    /// w columns, the injection points it declares for `structid discover`: there w = 0.
     pub fn to_model(
         &self,
         sigma_override: Option<f64>,
@@ -1989,7 +2270,38 @@ impl ModelFile {
                 d,
             ));
         }
-        Ok(Model::new(self.lft.clone(), blocks)?)
+        Ok(Model::new(self.model_lft()?, blocks)?)
+    }
+
+    /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a
+    /// nominal model (no blocks), whose w columns — injection points declared for
+    /// `structid discover` — are dropped (w = 0; the z rows are kept).
+    ///
+    /// ```
+    /// use structid_io::ModelFile;
+    /// let m = ModelFile::parse(r#"
+    ///     [lft]
+    ///     A = [[0.5]]
+    ///     Bu = [[1.0]]
+    ///     Bw = [[-1.0]]
+    ///     Cy = [[1.0]]
+    ///     Dye = [[1.0]]
+    ///     Cz = [[1.0]]
+    ///     [signals]
+    ///     u = ["u"]
+    ///     y = ["y"]
+    ///     [discover]
+    ///     locations = [{ name = "spring", z = 0, w = 0 }]
+    /// "#, None).unwrap();
+    /// assert_eq!(m.lft.dims().w, 1);
+    /// assert_eq!(m.model_lft().unwrap().dims().w, 0);
+    /// ```
+    pub fn model_lft(&self) -> Result<Lft, IoError> {
+        if self.blocks.is_empty() && self.lft.dims().w > 0 {
+            without_w(&self.lft)
+        } else {
+            Ok(self.lft.clone())
+        }
     }
 
     /// Gives every block the dispersion `spec` (as `structid identify --dispersion` does). When
@@ -2066,8 +2378,8 @@ impl ModelFile {
     }
 
     /// The model file in canonical form. Parsing the text (with the same base directory for
-    /// truth tables) gives back the same [`Lft`], signals and blocks. A continuous-time file is
-    /// written in its discretised form.
+    /// truth tables) gives back the same [`Lft`], signals, blocks and `[discover]` section. A
+    /// continuous-time file is written in its discretised form.
     pub fn to_toml_string(&self) -> String {
         let mut s = String::new();
         let d = self.lft.dims();
@@ -2087,6 +2399,9 @@ impl ModelFile {
         let _ = writeln!(s, "y = {}", string_list(&self.signals.y));
         if let Some(z) = &self.signals.z {
             let _ = writeln!(s, "z = {}", string_list(z));
+        }
+        if let Some(d) = &self.discover {
+            write_discover(&mut s, d);
         }
         for b in &self.blocks {
             s.push_str("\n[[nonlinearity]]\n");
@@ -2148,6 +2463,35 @@ fn write_lft(s: &mut String, lft: &Lft) {
         ("Dzw", &m.dzw),
     ] {
         let _ = writeln!(s, "{name} = {}", matrix_toml(mat));
+    }
+}
+
+fn write_discover(s: &mut String, d: &DiscoverSpec) {
+    s.push_str("\n[discover]\n");
+    if !d.locations.is_empty() {
+        s.push_str("locations = [   # a block reading z row `z` and writing w column `w`\n");
+        for l in &d.locations {
+            let _ = writeln!(
+                s,
+                "  {{ name = {}, z = {}, w = {} }},",
+                toml_string(&l.name),
+                l.z,
+                l.w
+            );
+        }
+        s.push_str("]\n");
+    }
+    if !d.states.is_empty() {
+        s.push_str("states = [   # states of the LFT named for localisation\n");
+        for st in &d.states {
+            let _ = writeln!(
+                s,
+                "  {{ name = {}, state = {} }},",
+                toml_string(&st.name),
+                st.state
+            );
+        }
+        s.push_str("]\n");
     }
 }
 

@@ -205,13 +205,21 @@ fn block_errors_name_the_line() {
         e.contains("both write w[0]") && e.contains("line 31"),
         "{e}"
     );
-    let bad = CANONICAL
-        .split("[[nonlinearity]]")
-        .next()
-        .unwrap()
-        .to_string();
+    let bad = format!(
+        "{}\n[[nonlinearity]]\nname = \"g\"\ninputs = [0]\noutput = 0\n",
+        CANONICAL
+            .replace("Bw = [[1.0]]", "Bw = [[1.0, 0.5]]")
+            .replace("Dyw = [[0.0]]", "Dyw = [[0.0, 0.0]]")
+            .replace("Dzw = [[0.0]]", "Dzw = [[0.0, 0.0]]")
+            .split("[[nonlinearity]]")
+            .next()
+            .unwrap()
+    );
     let e = err(&bad);
-    assert!(e.contains("w[0] is not produced by any block"), "{e}");
+    assert!(
+        e.contains("w[1] is not produced by any block") && e.contains("[discover]"),
+        "{e}"
+    );
     let bad = CANONICAL.replace("tanh(z0)", "tanh(z1)");
     let e = err(&bad);
     assert!(
@@ -814,4 +822,258 @@ fn output_and_rate_feedback_errors_name_the_line() {
             "{name}: {e}"
         );
     }
+}
+
+/// A nominal model (no blocks) with two declared w columns and two z rows: a mass with
+/// position and velocity states, spring and damper injection points.
+const NOMINAL: &str = r#"[lft]
+sample_time = 0.1
+A = [[1.0, 0.1], [-0.2, 0.9]]
+Bu = [[0.0], [0.1]]
+Bw = [[0.0, 0.0], [-0.1, 0.1]]
+Cy = [[1.0, 0.0]]
+Dye = [[1.0]]
+Cz = [[1.0, 0.0], [0.0, 1.0]]
+
+[signals]
+u = ["force"]
+y = ["position"]
+
+[discover]
+locations = [
+  { name = "spring", z = 0, w = 0 },
+  { name = "damper", z = 1, w = 0 },
+]
+states = [{ name = "velocity", state = 1 }]
+"#;
+
+#[test]
+fn discover_section_declares_locations_and_states_of_a_nominal_model() {
+    let m = ModelFile::parse(NOMINAL, None).unwrap();
+    let d = m.lft.dims();
+    assert_eq!((d.states, d.u, d.e, d.w, d.y, d.z), (2, 1, 1, 2, 1, 2));
+    assert!(m.blocks.is_empty());
+    assert_eq!(
+        m.discover,
+        Some(DiscoverSpec {
+            locations: vec![
+                DeclaredLocationSpec {
+                    name: "spring".into(),
+                    z: 0,
+                    w: 0
+                },
+                DeclaredLocationSpec {
+                    name: "damper".into(),
+                    z: 1,
+                    w: 0
+                },
+            ],
+            states: vec![NamedStateSpec {
+                name: "velocity".into(),
+                state: 1
+            }],
+        })
+    );
+    // The core model of a nominal file: no blocks, the declared w columns dropped, z kept.
+    let model = m.to_model(None, None).unwrap();
+    assert!(model.blocks().is_empty());
+    let md = model.lft().dims();
+    assert_eq!((md.states, md.w, md.z), (2, 0, 2));
+    assert_eq!(model.lft().sample_time(), Some(0.1));
+    assert_eq!(model.lft().matrices().a, m.lft.matrices().a);
+    // The array-of-tables spelling is the same section.
+    let long = NOMINAL.split("[discover]").next().unwrap().to_string()
+        + "[[discover.locations]]\nname = \"spring\"\nz = 0\nw = 0\n\n\
+           [[discover.locations]]\nname = \"damper\"\nz = 1\nw = 0\n\n\
+           [[discover.states]]\nname = \"velocity\"\nstate = 1\n";
+    assert_eq!(ModelFile::parse(&long, None).unwrap(), m);
+    // Without [discover] the nominal model with declared channels is accepted as well.
+    let plain = NOMINAL.split("[discover]").next().unwrap();
+    let p = ModelFile::parse(plain, None).unwrap();
+    assert_eq!((p.discover, p.lft), (None, m.lft));
+}
+
+#[test]
+fn nominal_model_without_blocks_keeps_its_unused_w_columns() {
+    // The canonical block's LFT without its [[nonlinearity]]: w[0] is a declared injection point.
+    let text = CANONICAL.split("[[nonlinearity]]").next().unwrap();
+    let m = ModelFile::parse(text, None).unwrap();
+    assert_eq!((m.lft.dims().w, m.lft.dims().z), (1, 1));
+    assert!(m.blocks.is_empty() && m.discover.is_none());
+    assert_eq!(m.to_model(None, None).unwrap().lft().dims().w, 0);
+    let back = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(back, m);
+    // A [linear] structure with a map still needs its block.
+    let e = err(
+        "[linear]\nstructure = \"input\"\nden = [1.0, -0.5]\nnum = [[0.0, 1.0]]\n\
+                 [signals]\nu = [\"u\"]\ny = [\"y\"]\n",
+    );
+    assert!(
+        e.contains("w[0] is not produced by any block") && !e.contains("[discover]"),
+        "{e}"
+    );
+}
+
+#[test]
+fn discover_section_round_trips_through_to_toml_string() {
+    let m = ModelFile::parse(NOMINAL, None).unwrap();
+    let text = m.to_toml_string();
+    assert!(text.contains("[discover]"), "{text}");
+    let back = ModelFile::parse(&text, None).unwrap();
+    assert_eq!(back, m);
+    // Awkward names, only states, and an empty section.
+    let odd = NOMINAL.replace("\"spring\"", "\"spring \\\"k\\\"\"");
+    let m = ModelFile::parse(&odd, None).unwrap();
+    assert_eq!(
+        m.discover.as_ref().unwrap().locations[0].name,
+        "spring \"k\""
+    );
+    assert_eq!(ModelFile::parse(&m.to_toml_string(), None).unwrap(), m);
+    let states_only = NOMINAL.split("locations = [").next().unwrap().to_string()
+        + "states = [{ name = \"position\", state = 0 }, { name = \"velocity\", state = 1 }]\n";
+    let m = ModelFile::parse(&states_only, None).unwrap();
+    assert_eq!(m.discover.as_ref().unwrap().states.len(), 2);
+    assert_eq!(ModelFile::parse(&m.to_toml_string(), None).unwrap(), m);
+    let empty = NOMINAL.split("locations = [").next().unwrap();
+    let m = ModelFile::parse(empty, None).unwrap();
+    assert_eq!(m.discover, Some(DiscoverSpec::default()));
+    assert_eq!(ModelFile::parse(&m.to_toml_string(), None).unwrap(), m);
+    // A [linear] lti model may name states of its realisation.
+    let lti = "[linear]\nstructure = \"lti\"\nden = [1.0, -1.2, 0.5]\nnum = [[0.0, 0.3, 0.2]]\n\
+               [signals]\nu = [\"u\"]\ny = [\"y\"]\n[discover]\nstates = [{ name = \"s1\", state = 1 }]\n";
+    let m = ModelFile::parse(lti, None).unwrap();
+    assert_eq!(m.discover.as_ref().unwrap().states[0].state, 1);
+    assert_eq!(ModelFile::parse(&m.to_toml_string(), None).unwrap(), m);
+}
+
+#[test]
+fn discover_errors_name_the_line() {
+    let cases: &[(&str, &str, &[&str], usize)] = &[
+        // (replace, with, message parts, line)
+        (
+            "{ name = \"spring\", z = 0, w = 0 }",
+            "{ name = \"spring\", z = 2, w = 0 }",
+            &[
+                "[discover] location `spring` reads z row 2",
+                "2 z rows",
+                "Cz has 2 rows",
+            ],
+            16,
+        ),
+        (
+            "{ name = \"damper\", z = 1, w = 0 }",
+            "{ name = \"damper\", z = 1, w = 5 }",
+            &["location `damper` writes w column 5", "2 w columns", "Bw"],
+            17,
+        ),
+        (
+            "state = 1 }",
+            "state = 2 }",
+            &["[discover] state `velocity` is state 2", "2 states"],
+            19,
+        ),
+        (
+            "z = 1, w = 0",
+            "z = -1, w = 0",
+            &["location `damper`: z = -1 is negative"],
+            17,
+        ),
+        (
+            "state = 1 }",
+            "state = -3 }",
+            &["state `velocity`: state = -3 is negative"],
+            19,
+        ),
+        (
+            "name = \"damper\"",
+            "name = \" \"",
+            &["a [discover] location has an empty name"],
+            17,
+        ),
+        (
+            "name = \"velocity\"",
+            "name = \"\"",
+            &["a [discover] state has an empty name"],
+            19,
+        ),
+        (
+            "name = \"damper\"",
+            "name = \"spring\"",
+            &["two [discover] locations are named `spring` (lines 16 and 17)"],
+            17,
+        ),
+        (
+            "states = [{ name = \"velocity\", state = 1 }]",
+            "states = [\n{ name = \"v\", state = 1 },\n{ name = \"v\", state = 0 },\n]",
+            &["two [discover] states are named `v` (lines 20 and 21)"],
+            21,
+        ),
+        (
+            "name = \"damper\"",
+            "name = \"output-feedback\"",
+            &["`output-feedback` has the name of a built-in location"],
+            17,
+        ),
+        (
+            "name = \"damper\"",
+            "name = \"declared-0\"",
+            &["`declared-0` has the name of a built-in location"],
+            17,
+        ),
+        (
+            "name = \"damper\", z = 1",
+            "name = \"damper\", z = 0",
+            &["locations `spring` (line 16) and `damper` are both z row 0 → w column 0"],
+            17,
+        ),
+        (
+            "states = [",
+            "named = 1\nstates = [",
+            &["unknown field `named`", "in `named = 1`"],
+            19,
+        ),
+        (
+            "z = 1, w = 0",
+            "z = 1, w = 0, row = 3",
+            &["unknown field `row`"],
+            17,
+        ),
+        ("z = 1, w = 0", "z = 1", &["missing field `w`"], 17),
+        ("z = 1, w = 0", "z = 1.5, w = 0", &["invalid TOML"], 17),
+    ];
+    for (from, to, parts, line) in cases {
+        assert!(NOMINAL.contains(from), "{from}");
+        let e = err(&NOMINAL.replacen(from, to, 1));
+        for p in *parts {
+            assert!(e.contains(p), "{to}: `{p}` not in: {e}");
+        }
+        assert!(
+            e.contains(&format!("(line {line})")) || e.contains(&format!("(line {line}, ")),
+            "{to}: not line {line}: {e}"
+        );
+    }
+
+    // [discover] describes a nominal model: not with blocks.
+    let with_block = format!(
+        "{}\n[discover]\nstates = [{{ name = \"x\", state = 0 }}]\n",
+        CANONICAL
+    );
+    let e = err(&with_block);
+    assert!(
+        e.contains("[discover] describes a nominal model")
+            && e.contains("1 [[nonlinearity]] block (the first at line 21)")
+            && e.contains("(line 28)"),
+        "{e}"
+    );
+    // [linear] lti has no w column to declare a location on.
+    let lti = "[linear]\nstructure = \"lti\"\nden = [1.0, -0.5]\nnum = [[0.0, 1.0]]\n\
+               [signals]\nu = [\"u\"]\ny = [\"y\"]\n[discover]\n\
+               locations = [{ name = \"k\", z = 0, w = 0 }]\n";
+    let e = err(lti);
+    assert!(
+        e.contains("reads z row 0 but the model has 0 z rows")
+            && e.contains("[linear] structure = \"lti\" has no map")
+            && e.contains("(line 9)"),
+        "{e}"
+    );
 }
