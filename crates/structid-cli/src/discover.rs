@@ -224,17 +224,29 @@ fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
             path.display()
         )));
     }
-    match &mf.linear {
+    let mut nominal = match &mf.linear {
         Some(spec) if spec.structure == LinearStructureKind::Lti => {
-            Ok(Nominal::from_polynomial(&spec.model)?)
+            Nominal::from_polynomial(&spec.model)?
         }
-        Some(spec) => Err(CliError::input(format!(
-            "`{}` has [linear] structure = \"{}\"; discovery needs structure = \"lti\" ({how})",
-            path.display(),
-            spec.structure.name()
-        ))),
-        None => Ok(Nominal::new(mf.lft.clone())?),
+        Some(spec) => {
+            return Err(CliError::input(format!(
+                "`{}` has [linear] structure = \"{}\"; discovery needs structure = \"lti\" ({how})",
+                path.display(),
+                spec.structure.name()
+            )));
+        }
+        None => Nominal::new(mf.lft.clone())?,
+    };
+    // The locations and states the model file declares ([discover]).
+    if let Some(d) = &mf.discover {
+        for l in &d.locations {
+            nominal = nominal.with_location(&l.name, l.z, l.w)?;
+        }
+        for st in &d.states {
+            nominal = nominal.with_state(&st.name, st.state)?;
+        }
     }
+    Ok(nominal)
 }
 
 /// `--locations`: keys of the built-in locations, `declared-i`, or names of declared ones.
@@ -434,6 +446,7 @@ fn augmented_file(
         },
     };
     let mf = ModelFile {
+        discover: None,
         lft,
         linear,
         signals: SignalNames {
@@ -1367,7 +1380,10 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
         None => Value::Null,
         Some(f) => {
             let (kind, named) = match &f.classification {
-                Classification::Named(fit) => ("named", fit_json(fit, None)?),
+                Classification::Named(fit) => (
+                    "named",
+                    fit_json(fit, Some(f.augmented.validation_gap.rms))?,
+                ),
                 Classification::Unnamed => ("unnamed", Value::Null),
                 Classification::Dynamic => ("dynamic", Value::Null),
             };

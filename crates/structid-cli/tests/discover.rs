@@ -360,3 +360,67 @@ fn bad_models_and_arguments_are_input_errors() {
     assert!(e.contains("refusing") || e.contains("input"), "{e}");
     assert!(!out.exists(), "nothing is written on an input error");
 }
+
+/// A nominal `[lft]` model with a declared location `spring` (z = the measured position, w
+/// entering the position equation, unlike the built-in feedback into the input channel) and a
+/// named state `velocity`.
+const DECLARED: &str = r#"[lft]
+sample_time = 0.05
+A = [[1.0, 0.05], [-0.1, 0.9]]
+Bu = [[0.0], [0.05]]
+Bw = [[-0.05], [0.0]]
+Cy = [[1.0, 0.0]]
+Dye = [[1.0]]
+Cz = [[1.0, 0.0]]
+Dze = [[1.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+"#;
+
+#[test]
+fn a_location_the_model_file_declares_is_a_candidate_and_wins_when_the_effect_sits_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = format!(
+        "{DECLARED}\n[[nonlinearity]]\nname = \"spring\"\ninputs = [0]\noutput = 0\n\
+         dispersion = {{ kind = \"polynomial\", degree = 3 }}\ntruth = \"2*z0^3\"\n"
+    );
+    let (est, val) = records(d, &truth);
+    let nominal = d.join("nominal.toml");
+    std::fs::write(
+        &nominal,
+        format!(
+            "{DECLARED}\n[discover]\nlocations = [{{ name = \"spring\", z = 0, w = 0 }}]\n\
+             states = [{{ name = \"velocity\", state = 1 }}]\n"
+        ),
+    )
+    .unwrap();
+    let out = d.join("found");
+    let o = ok(&[
+        "discover",
+        "--model",
+        p(&nominal),
+        "--data",
+        p(&est),
+        "--validate",
+        p(&val),
+        "--out",
+        p(&out),
+    ]);
+    assert!(o.stdout.contains("spring"), "{}", o.stdout);
+    let j = json(&out.join("report.json"));
+    let f = &j["finding"];
+    assert_eq!(f["location"], "declared-0", "{f}");
+    assert_eq!(
+        f["named_effect"]["family"]["OddPolynomial"]["degree"], 3,
+        "{f}"
+    );
+    // The named state is a candidate signal of the localisation.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("velocity"), "{md}");
+    // A declared location is written in [lft] form and reads back.
+    let mf = structid_io::ModelFile::from_path(&out.join("augmented.toml")).unwrap();
+    assert!(mf.linear.is_none() && mf.blocks.len() == 1);
+}
