@@ -1,9 +1,9 @@
 //! The discovery workflow on the Silverbox estimation split (the target: at most 60 s
-//! for the 65 536-sample split over all default locations).
+//! for the 65k-sample split over all default locations).
 //!
 //! One iteration is `structid::silverbox_discovery::run` with its default settings: the
-//! second-order BLA on the fitting part (52 429 samples), then `discover` over the four default
-//! locations (each identified on the fitting part and ranked on the 13 107 validation
+//! second-order BLA on the fitting part (52 050 samples), then `discover` over the four default
+//! locations (each identified on the fitting part and ranked on the 13 012 validation
 //! samples), the naming of the effect and the simulation of the three test splits. The
 //! Silverbox file is found as by the tests (`$STRUCTID_DATA`, else `../shared/data` beside
 //! the workspace); when it is missing the benchmark prints a message and measures nothing.
