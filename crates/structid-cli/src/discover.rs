@@ -1037,12 +1037,7 @@ fn validate_command(r: &ReportInputs<'_>, w: &Written) -> String {
 }
 
 fn identify_command(r: &ReportInputs<'_>, f: &Finding) -> String {
-    let beta =
-        r.d.hypotheses
-            .iter()
-            .find(|h| h.location == f.location)
-            .map(|h| h.beta)
-            .unwrap_or(f64::NAN);
+    let beta = f.hypothesis.beta;
     format!(
         "structid identify --model {} --data {} --out {} --beta {} --initial-state {}",
         r.a.out.join("augmented.toml").display(),
@@ -1092,7 +1087,7 @@ fn report_md(r: &ReportInputs<'_>) -> String {
     let _ = writeln!(s, "## 3. Where in operating space\n");
     regions_section(&mut s, &d.estimation_gap, &d.validation_gap);
 
-    if !d.missing_effect {
+    if d.hypotheses.is_empty() {
         let _ = writeln!(
             s,
             "No hypotheses were tried: the nominal model's residual is within {}× its noise \
@@ -1100,6 +1095,14 @@ fn report_md(r: &ReportInputs<'_>) -> String {
             r.settings.gap().noise_ratio
         );
     } else {
+        if !d.missing_effect {
+            let _ = writeln!(
+                s,
+                "A test of the nominal model's gap failed (section 1), so every candidate \
+                 location was tried; none reduces the validation RMS enough to confirm a \
+                 missing effect (see the verdict).\n"
+            );
+        }
         let _ = writeln!(s, "## 4. Where in the structure: hypotheses\n");
         let _ = writeln!(
             s,
@@ -1394,12 +1397,7 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
                 .enumerate()
                 .map(|(i, fit)| fit_json(fit, f.family_rms.get(i).copied().flatten()))
                 .collect::<Result<Vec<Value>, CliError>>()?;
-            let curve = d
-                .hypotheses
-                .iter()
-                .find(|h| h.location == f.location)
-                .map(|h| json_value(&h.curve))
-                .transpose()?;
+            let curve = Some(json_value(&f.hypothesis.curve)?);
             let map = match &f.augmented.map {
                 AugmentedMap::Expression(x) => json!({ "expression": x }),
                 AugmentedMap::Table { z, .. } => json!({ "table": TABLE_FILE, "points": z.len() }),
@@ -1613,11 +1611,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         ),
     ));
     if let Some(f) = &d.finding {
-        if let Some(h) = d
-            .hypotheses
-            .iter()
-            .find(|h| h.location == f.location && !h.curve.z.is_empty())
-        {
+        if let Some(h) = Some(&f.hypothesis).filter(|h| !h.curve.z.is_empty()) {
             let path = a.out.join("map.svg");
             guard.write(&path, map_svg(h, f)?.as_bytes())?;
             written_files.push(path);

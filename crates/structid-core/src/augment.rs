@@ -46,7 +46,7 @@ fn no_direct_feedthrough(nominal: &Lft, what: &str) -> Result<()> {
     if m.dyu.iter().any(|v| *v != 0.0) {
         return Err(Error::InvalidStructure(format!(
             "a block {what} needs G to have an input delay (D_yu = 0); otherwise y_k depends on \
-             N(y_k), an algebraic loop"
+             the map of y_k itself, an algebraic loop"
         )));
     }
     Ok(())

@@ -204,7 +204,9 @@ impl DiscoverSettings {
         self.table_points
     }
 
-    /// Samples at the start of each record left out of every RMS.
+    /// Samples at the start of each record left out of the simulation RMS that ranks the
+    /// hypotheses, refines and checks the named families (the gaps before and after are over
+    /// the whole records).
     pub fn settle(&self) -> usize {
         self.settle
     }
@@ -285,7 +287,7 @@ impl DiscoverSettingsBuilder {
         self
     }
 
-    /// Settling samples left out of every RMS (default 0).
+    /// Settling samples left out of the ranking and naming RMS (default 0).
     pub fn settle(mut self, n: usize) -> Self {
         self.inner.settle = n;
         self
@@ -463,6 +465,8 @@ pub struct Augmented {
 pub struct Finding {
     /// The best location (lowest validation RMS).
     pub location: Location,
+    /// The estimate that was named (one of [`Discovery::hypotheses`]).
+    pub hypothesis: HypothesisResult,
     /// Locations that explain the data equally well by construction (e.g. a gain at the
     /// input or at the output of a linear G), including `location`.
     pub equivalent_locations: Vec<Location>,
@@ -542,6 +546,18 @@ fn check_records(est: &Data, val: &Data) -> Result<()> {
                 ),
             });
         }
+        let u = d.u().channel(0);
+        let mean = u.iter().sum::<f64>() / u.len().max(1) as f64;
+        let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / u.len().max(1) as f64;
+        if var <= 1e-20 * mean.powi(2).max(f64::MIN_POSITIVE) {
+            return Err(Error::InvalidParameter {
+                name: format!("input of the {what} record"),
+                value: mean,
+                reason: "u is constant: a record without excitation cannot show what the \
+                         model is missing"
+                    .into(),
+            });
+        }
         if d.u().len() < 100 {
             return Err(Error::InvalidParameter {
                 name: format!("length of the {what} record"),
@@ -549,6 +565,28 @@ fn check_records(est: &Data, val: &Data) -> Result<()> {
                 reason: "discovery needs at least 100 samples per record".into(),
             });
         }
+    }
+    Ok(())
+}
+
+/// A nominal model whose simulation from u diverges cannot be compared with data: its poles
+/// must lie inside the unit circle.
+fn check_stable(nominal: &Nominal) -> Result<()> {
+    let a = &nominal.lft().matrices().a;
+    if a.nrows() == 0 {
+        return Ok(());
+    }
+    let radius = a
+        .complex_eigenvalues()
+        .iter()
+        .map(|l| l.norm())
+        .fold(0.0, f64::max);
+    if radius.is_nan() || radius >= 1.0 {
+        return Err(Error::InvalidStructure(format!(
+            "the nominal model is not stable (spectral radius {radius:.6} ≥ 1): its simulation \
+             from u diverges, so its gap to the data means nothing; re-estimate it (e.g. \
+             `structid linear --method oe`)"
+        )));
     }
     Ok(())
 }
@@ -660,13 +698,26 @@ fn finish_fit(
     t0: Instant,
 ) -> Result<Fitted> {
     let block = &id.blocks[0];
+    let zk = block.z.channel(0);
+    let (lo, hi) = minmax(&zk);
+    // Outside the estimation range a map is an extrapolation (a kernel reverts to zero, a
+    // trend runs away): a hypothesis is ranked by the better of its map as estimated and the
+    // map held at its edge values there, so that the location, not the extrapolation, decides.
+    let held = |z: &[f64]| block.map.eval(&[z[0].clamp(lo, hi)]);
     let validation_rms = simulation_rms(
         &h.model,
         location,
         block.map.as_ref(),
         val_h,
         settings.settle,
-    );
+    )
+    .min(simulation_rms(
+        &h.model,
+        location,
+        &held,
+        val_h,
+        settings.settle,
+    ));
     let estimation_rms = simulation_rms(
         &h.model,
         location,
@@ -674,8 +725,6 @@ fn finish_fit(
         est_h,
         settings.settle,
     );
-    let zk = block.z.channel(0);
-    let (lo, hi) = minmax(&zk);
     let grid: Vec<f64> = (0..101)
         .map(|i| lo + (hi - lo) * i as f64 / 100.0)
         .collect();
@@ -842,9 +891,14 @@ fn total_variation_fit(
 }
 
 /// The direction test of a fit: its noise estimate ê (what the static map leaves
-/// unexplained) deconvolved to the block's output and split by the direction of z.
+/// unexplained), through the noise path to the output and deconvolved to the block's output,
+/// split by the direction of z.
 fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<DirectionTest> {
-    let delta = deconvolve(&f.hypothesis, &f.e_hat)?;
+    // The model's output residual is L_ye·ê = L_yw·δ: filter ê through the noise path first
+    // (the identity for an output-error model), then invert L_yw.
+    let e = Signal::from_fn(f.e_hat.len(), 1, |k, _| f.e_hat[k]);
+    let r = f.hypothesis.model.lft().t_ye().simulate(&e)?.channel(0);
+    let delta = deconvolve(&f.hypothesis, &r)?;
     let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
     Ok(direction_dependence(
         &f.z[skip..],
@@ -1124,6 +1178,7 @@ pub fn discover(
 ) -> Result<Discovery> {
     let t0 = Instant::now();
     check_records(est, val)?;
+    check_stable(nominal)?;
     let ts = nominal.lft().sample_time().unwrap_or(1.0);
     let nominal_model = nominal.model()?;
     let linear_output = |d: &Data| -> Result<Vec<f64>> {
@@ -1290,8 +1345,8 @@ pub fn discover(
     if finding.shrink < MIN_CONFIRMING_SHRINK {
         let verdict = format!(
             "no missing effect detected: the nominal model's gap failed a test (estimation \
-             record: {}; validation record: {}), but no static block at any candidate location \
-             reduces the validation RMS by {:.0} % or more (best: {} {}, RMS {:.4e} → {:.4e})",
+             record: {}; validation record: {}), but the best candidate block reduces the \
+             validation RMS by less than {:.0} % ({} {}, RMS {:.4e} → {:.4e})",
             estimation_gap.verdict,
             validation_gap.verdict,
             100.0 * (1.0 - 1.0 / MIN_CONFIRMING_SHRINK),
@@ -1521,6 +1576,7 @@ fn name_and_add(
     let shrink = before.rms / validation_gap.rms;
     Ok(Finding {
         location,
+        hypothesis: best.result.clone(),
         equivalent_locations,
         estimator: best.estimator.to_string(),
         nonparametric_rms,
@@ -1681,6 +1737,19 @@ mod tests {
         )
         .unwrap();
         assert!(discover(&nominal, &two, &long, &DiscoverSettings::default()).is_err());
+        // An input without excitation.
+        let constant = Data::new(Signal::from_fn(500, 1, |_, _| 0.3), long.y().clone()).unwrap();
+        let e = discover(&nominal, &constant, &long, &DiscoverSettings::default()).unwrap_err();
+        assert!(e.to_string().contains("constant"), "{e}");
+        // An unstable nominal model (a pole at 1.1).
+        let unstable = Nominal::from_polynomial(&PolynomialModel {
+            den: vec![1.0, -2.1, 1.1],
+            num: vec![vec![0.0, 0.1]],
+            sample_time: Some(0.05),
+        })
+        .unwrap();
+        let e = discover(&unstable, &long, &long, &DiscoverSettings::default()).unwrap_err();
+        assert!(e.to_string().contains("not stable"), "{e}");
     }
 
     /// Deconvolution through the sensor location's L_yw = 1 is r/(1 + λ) with λ = 1 % of the

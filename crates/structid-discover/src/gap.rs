@@ -10,7 +10,8 @@
 //! effect):
 //!
 //! * the simulation RMS and fit (MATLAB's `compare` NRMSE fit in percent);
-//! * a noise level that does not depend on the model, σ̂ = MAD(Δε)/(0.6745·√2): first
+//! * a noise level that does not depend on the model, σ̂ = MAD(Δε)/(0.6745·√2) (at least
+//!   the quantisation noise q/√12 of an output with few distinct values): first
 //!   differences remove the slow part of a model error, and for white noise Δε has standard
 //!   deviation √2·σ;
 //! * portmanteau tests, together at the 0.1 % level (Bonferroni over the tests), so that the whole
@@ -249,6 +250,23 @@ fn portmanteau_cross(name: String, e: &[f64], s: &[f64], max_lag: usize) -> Port
     }
 }
 
+/// The quantisation noise q/√12 of a signal with fewer distinct values than half its samples
+/// (q the smallest step between them), 0 otherwise.
+fn quantisation_floor(y: &[f64]) -> f64 {
+    let mut v: Vec<f64> = y.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    if v.len() < 2 || 2 * v.len() >= y.len() {
+        return 0.0;
+    }
+    let q = v
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if q.is_finite() { q / 12f64.sqrt() } else { 0.0 }
+}
+
 /// Examines the gap between `model` (with `maps`, one per block) and `data`; `candidates` are
 /// the signals (name, samples) to localise it in. See the [module documentation](self).
 pub fn gap(
@@ -272,7 +290,9 @@ pub fn gap(
     let residual: Vec<f64> = y.iter().zip(&simulated).map(|(a, b)| a - b).collect();
     let innovations = v.prediction_error.channel(0);
     let n = residual.len();
-    let noise_std = noise_level(&innovations);
+    // A quantised output (few distinct values) makes most differences exactly zero and the
+    // MAD collapse; the quantisation error q/√12 is a floor for the noise level.
+    let noise_std = noise_level(&innovations).max(quantisation_floor(&y));
     let max_lag = settings.max_lag.min(n.saturating_sub(1)).max(1);
 
     // Ljung–Box on the residual's autocorrelation.

@@ -114,6 +114,14 @@ impl Nominal {
                 d.u, d.y
             )));
         }
+        if lft.matrices().dye.iter().all(|v| *v == 0.0) {
+            return Err(Error::InvalidStructure(
+                "the nominal model has no noise on y (D_ye = 0): identification and the \
+                 residual tests need the output's noise path; give [lft] a Dye (e.g. \
+                 Dye = [[1.0]] for white output noise)"
+                    .into(),
+            ));
+        }
         Ok(Self {
             lft,
             declared: Vec::new(),
