@@ -1787,7 +1787,6 @@ fn summary(r: &ReportInputs<'_>, written: &[PathBuf], removed: &[PathBuf], secon
 #[cfg(test)]
 mod tests {
     use super::*;
-    use structid_core::MapBinding;
     use structid_core::{KernelDispersion, Signal};
     use structid_linear::PolynomialModel;
 
@@ -1852,22 +1851,8 @@ mod tests {
                 )
                 .unwrap();
             let interp = map.interpolant().unwrap();
-            let f = |z: &[f64]| interp.eval(z);
             let us = Signal::from_fn(n, 1, |k, _| u[k]);
-            let sim = h
-                .model
-                .lft()
-                .simulate(
-                    &[MapBinding {
-                        inputs: &[0],
-                        output: 0,
-                        map: &f,
-                    }],
-                    &us,
-                    None,
-                    None,
-                )
-                .unwrap();
+            let sim = h.simulate(interp.as_ref(), &us, None).unwrap();
             let y: Vec<f64> = (0..n)
                 .map(|k| sim.y.get(k, 0) + 0.01 * ((k * 7919 % 101) as f64 / 50.0 - 1.0))
                 .collect();

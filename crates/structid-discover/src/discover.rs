@@ -1604,7 +1604,6 @@ mod tests {
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
-    use structid_core::MapBinding;
     use structid_core::refine::lti_lft;
     use structid_linear::PolynomialModel;
 
@@ -1637,20 +1636,7 @@ mod tests {
                 let h =
                     hypothesis(&g, loc, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
                 let f = |z: &[f64]| truth(z[0]);
-                h.model
-                    .lft()
-                    .simulate(
-                        &[MapBinding {
-                            inputs: &[0],
-                            output: 0,
-                            map: &f,
-                        }],
-                        &u,
-                        Some(&e),
-                        None,
-                    )
-                    .unwrap()
-                    .y
+                h.simulate(&f, &u, Some(&e)).unwrap().y
             }
         };
         Data::new(u, y).unwrap()

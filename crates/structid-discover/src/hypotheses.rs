@@ -21,7 +21,10 @@
 use std::sync::Arc;
 
 use structid_core::refine::lti_lft;
-use structid_core::{Data, Dispersion, Error, Lft, Model, NonlinearBlock, Result, Signal, augment};
+use structid_core::{
+    Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, NonlinearBlock, Result, Signal,
+    Simulation, augment,
+};
 use structid_linear::PolynomialModel;
 
 /// Where the unknown block is inserted.
@@ -280,6 +283,39 @@ pub struct Hypothesis {
 }
 
 impl Hypothesis {
+    /// Simulates the augmented model with `map` in its block N from `u`, with the noise `e`
+    /// (zero when `None`) and a zero initial state.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{PolynomialDispersion, Signal};
+    /// use structid_discover::hypotheses::{Location, hypothesis};
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+    /// let h = hypothesis(&g, Location::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
+    /// let square = |z: &[f64]| z[0] * z[0];
+    /// let sim = h.simulate(&square, &Signal::from_fn(3, 1, |_, _| 2.0), None).unwrap();
+    /// assert_eq!(sim.y.channel(0), vec![0.0, 4.0, 6.0]); // y_k = 0.5·y_(k−1) + u²_(k−1)
+    /// ```
+    pub fn simulate(
+        &self,
+        map: &dyn Interpolant,
+        u: &Signal,
+        e: Option<&Signal>,
+    ) -> Result<Simulation> {
+        let f = |z: &[f64]| map.eval(z);
+        self.model.lft().simulate(
+            &[MapBinding {
+                inputs: &[0],
+                output: 0,
+                map: &f,
+            }],
+            u,
+            e,
+            None,
+        )
+    }
+
     /// The record as identification needs it: for the rate, with the measured z = Ψ(q)·y
     /// attached (measurability would compute the same z, through the inverted noise path);
     /// otherwise unchanged.
@@ -328,9 +364,7 @@ mod tests {
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
-    use structid_core::{
-        IdentifySettings, InitialState, MapBinding, PolynomialDispersion, identify,
-    };
+    use structid_core::{IdentifySettings, InitialState, PolynomialDispersion, identify};
 
     fn nominal() -> PolynomialModel {
         PolynomialModel {
@@ -365,20 +399,7 @@ mod tests {
         let f = |z: &[f64]| truth(z[0]);
         let noise = Normal::new(0.0, 1e-3).unwrap();
         let e = Signal::from_fn(u.len(), 1, |_, _| noise.sample(&mut rng));
-        let sim = h
-            .model
-            .lft()
-            .simulate(
-                &[MapBinding {
-                    inputs: &[0],
-                    output: 0,
-                    map: &f,
-                }],
-                &u,
-                Some(&e),
-                None,
-            )
-            .unwrap();
+        let sim = h.simulate(&f, &u, Some(&e)).unwrap();
         let data = h.data(&Data::new(u, sim.y.clone()).unwrap()).unwrap();
         // The measured z of the record is the z of the simulation.
         if let Some(z) = data.z() {

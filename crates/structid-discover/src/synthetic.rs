@@ -87,7 +87,7 @@ use nalgebra::DVector;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use structid_core::{Data, Error, MapBinding, PolynomialDispersion, Result, Signal};
+use structid_core::{Data, Error, PolynomialDispersion, Result, Signal};
 use structid_linear::PolynomialModel;
 
 use crate::effects::Effect;
@@ -452,16 +452,7 @@ fn static_trace(
     let h = hypothesis(g, location, Arc::new(PolynomialDispersion::new(1)?))?;
     let f = |z: &[f64]| map(z[0]);
     let e = e.map(signal);
-    let sim = h.model.lft().simulate(
-        &[MapBinding {
-            inputs: &[0],
-            output: 0,
-            map: &f,
-        }],
-        &signal(u),
-        e.as_ref(),
-        None,
-    )?;
+    let sim = h.simulate(&f, &signal(u), e.as_ref())?;
     Ok(Trace {
         y: sim.y.channel(0),
         z: sim.z.channel(0),
@@ -1440,22 +1431,7 @@ mod tests {
                 (&c.estimation, &c.estimation_noise),
                 (&c.validation, &c.validation_noise),
             ] {
-                let sim = |e: Option<&Signal>| {
-                    h.model
-                        .lft()
-                        .simulate(
-                            &[MapBinding {
-                                inputs: &[0],
-                                output: 0,
-                                map: &f,
-                            }],
-                            d.u(),
-                            e,
-                            None,
-                        )
-                        .unwrap()
-                        .y
-                };
+                let sim = |e: Option<&Signal>| h.simulate(&f, d.u(), e).unwrap().y;
                 let noisy = sim(Some(&signal(e)));
                 let worst = (0..d.len())
                     .map(|k| (noisy.get(k, 0) - d.y().get(k, 0)).abs())
