@@ -1535,6 +1535,13 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
 
     let est = read_record(&mf, &a.data)?;
     let val = read_record(&mf, &a.validate)?;
+    if std::fs::canonicalize(&a.data).ok() == std::fs::canonicalize(&a.validate).ok() {
+        eprintln!(
+            "warning: --validate is the --data file: the hypotheses are ranked and the effect is \
+             named on the record they were estimated on, which favours whatever overfits; give \
+             a separate validation record"
+        );
+    }
     for (flag, r) in [("--data", &est), ("--validate", &val)] {
         if a.settle >= r.data.len() {
             return Err(CliError::input(format!(
