@@ -1535,13 +1535,6 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
 
     let est = read_record(&mf, &a.data)?;
     let val = read_record(&mf, &a.validate)?;
-    if std::fs::canonicalize(&a.data).ok() == std::fs::canonicalize(&a.validate).ok() {
-        eprintln!(
-            "warning: --validate is the --data file: the hypotheses are ranked and the effect is \
-             named on the record they were estimated on, which favours whatever overfits; give \
-             a separate validation record"
-        );
-    }
     for (flag, r) in [("--data", &est), ("--validate", &val)] {
         if a.settle >= r.data.len() {
             return Err(CliError::input(format!(
@@ -1553,6 +1546,14 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         }
     }
     let d = discover(&nominal, &est.data, &val.data, &settings)?;
+    // Said after the run, so that an input error is the first line of stderr.
+    if std::fs::canonicalize(&a.data).ok() == std::fs::canonicalize(&a.validate).ok() {
+        eprintln!(
+            "warning: --validate is the --data file: the hypotheses are ranked and the effect is \
+             named on the record they were estimated on, which favours whatever overfits; give \
+             a separate validation record"
+        );
+    }
     // The gap's lags, as discovery sets them.
     let max_lag = settings.gap().max_lag.min(est.data.len() / 4).max(1);
 

@@ -317,15 +317,18 @@ impl Hypothesis {
     }
 
     /// The record as identification needs it: for the rate, with the measured z = Ψ(q)·y
-    /// attached (measurability would compute the same z, through the inverted noise path);
-    /// otherwise unchanged.
+    /// attached (measurability would compute the same z, through the inverted noise path,
+    /// except at the first sample, whose rate is taken as 0 here); otherwise unchanged.
     pub fn data(&self, data: &Data) -> Result<Data> {
         match self.location {
             Location::RateFeedback => {
                 let y = data.y();
                 let ts = self.sample_time;
+                // The first sample has no predecessor in the record: its rate is taken as 0
+                // rather than y₀/T_s (a record rarely starts at y = 0, and one spurious rate
+                // of y₀/T_s would set the map's range and kernel width).
                 let z = Signal::from_fn(y.len(), 1, |k, _| {
-                    let prev = if k > 0 { y.get(k - 1, 0) } else { 0.0 };
+                    let prev = if k > 0 { y.get(k - 1, 0) } else { y.get(0, 0) };
                     (y.get(k, 0) - prev) / ts
                 });
                 data.clone().with_z(z)
@@ -401,9 +404,10 @@ mod tests {
         let e = Signal::from_fn(u.len(), 1, |_, _| noise.sample(&mut rng));
         let sim = h.simulate(&f, &u, Some(&e)).unwrap();
         let data = h.data(&Data::new(u, sim.y.clone()).unwrap()).unwrap();
-        // The measured z of the record is the z of the simulation.
+        // The measured z of the record is the z of the simulation (after the first sample,
+        // whose rate the record sets to 0 and the LFT, starting from m = 0, to y₀/T_s).
         if let Some(z) = data.z() {
-            let d: f64 = (0..z.len())
+            let d: f64 = (1..z.len())
                 .map(|k| (z.get(k, 0) - sim.z.get(k, 0)).abs())
                 .fold(0.0, f64::max);
             assert!(
