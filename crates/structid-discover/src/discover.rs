@@ -1167,9 +1167,9 @@ fn non_smooth(effect: Effect) -> bool {
 /// shrinks the validation RMS by at least [`MIN_CONFIRMING_SHRINK`]; otherwise the verdict is
 /// "no missing effect detected", with the failed test and the best attempt in the text.
 ///
-/// Errors: several inputs or outputs, records shorter than 100 samples, a nominal model that
-/// cannot be realised; a hypothesis that fails is recorded in
-/// [`HypothesisResult::failure`] and ranked last instead.
+/// Errors: several inputs or outputs, records shorter than 100 samples, a constant input, an
+/// unstable nominal model (its simulation would diverge); a hypothesis that fails is recorded
+/// in [`HypothesisResult::failure`] and ranked last instead.
 pub fn discover(
     nominal: &Nominal,
     est: &Data,
