@@ -84,6 +84,22 @@ fn records(dir: &Path, model: &str) -> (std::path::PathBuf, std::path::PathBuf) 
     (dir.join("est.csv"), dir.join("val.csv"))
 }
 
+/// `structid discover` on the nominal model and the two records, writing to `out`; it must
+/// succeed.
+fn discover(nominal: &Path, est: &Path, val: &Path, out: &Path) -> common::Out {
+    ok(&[
+        "discover",
+        "--model",
+        p(nominal),
+        "--data",
+        p(est),
+        "--validate",
+        p(val),
+        "--out",
+        p(out),
+    ])
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -110,17 +126,7 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
     let nominal = d.join("nominal.toml");
     std::fs::write(&nominal, NOMINAL).unwrap();
     let out = d.join("found");
-    let o = ok(&[
-        "discover",
-        "--model",
-        p(&nominal),
-        "--data",
-        p(&est),
-        "--validate",
-        p(&val),
-        "--out",
-        p(&out),
-    ]);
+    let o = discover(&nominal, &est, &val, &out);
     assert!(o.stdout.contains("verdict: missing effect"), "{}", o.stdout);
     assert!(o.stdout.contains("best location: `input`"), "{}", o.stdout);
     assert!(o.stdout.contains("effect: saturation"), "{}", o.stdout);
@@ -236,17 +242,7 @@ fn an_lti_record_has_no_missing_effect() {
     let nominal = d.join("nominal.toml");
     std::fs::write(&nominal, NOMINAL).unwrap();
     let out = d.join("nothing");
-    let o = ok(&[
-        "discover",
-        "--model",
-        p(&nominal),
-        "--data",
-        p(&est),
-        "--validate",
-        p(&val),
-        "--out",
-        p(&out),
-    ]);
+    let o = discover(&nominal, &est, &val, &out);
     assert!(
         o.stdout.contains("verdict: no missing effect detected"),
         "{}",
@@ -398,17 +394,7 @@ fn a_location_the_model_file_declares_is_a_candidate_and_wins_when_the_effect_si
     )
     .unwrap();
     let out = d.join("found");
-    let o = ok(&[
-        "discover",
-        "--model",
-        p(&nominal),
-        "--data",
-        p(&est),
-        "--validate",
-        p(&val),
-        "--out",
-        p(&out),
-    ]);
+    let o = discover(&nominal, &est, &val, &out);
     assert!(o.stdout.contains("spring"), "{}", o.stdout);
     let j = json(&out.join("report.json"));
     let f = &j["finding"];
