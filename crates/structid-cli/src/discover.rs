@@ -1522,16 +1522,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .protect(&a.model)
         .protect(&a.data)
         .protect(&a.validate);
-    guard.check(&a.out)?;
-    for f in OUTPUTS {
-        guard.check(&a.out.join(f))?;
-    }
-    if a.out.exists() && !a.out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            a.out.display()
-        )));
-    }
+    guard.check_out_dir(&a.out, OUTPUTS)?;
 
     let est = read_record(&mf, &a.data)?;
     let val = read_record(&mf, &a.validate)?;

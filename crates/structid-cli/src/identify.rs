@@ -305,25 +305,18 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     }
     protect_inputs(&mut guard, &mf, &a.model, &inputs);
     // Refuse a bad output directory before the (possibly long) identification.
-    guard.check(&a.out)?;
     let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
-    for f in ["estimate.csv", "report.json"]
-        .into_iter()
-        .map(String::from)
-        .chain(
-            stems
-                .iter()
-                .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
-        )
-    {
-        guard.check(&a.out.join(f))?;
-    }
-    if a.out.exists() && !a.out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            a.out.display()
-        )));
-    }
+    guard.check_out_dir(
+        &a.out,
+        ["estimate.csv", "report.json"]
+            .into_iter()
+            .map(String::from)
+            .chain(
+                stems
+                    .iter()
+                    .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
+            ),
+    )?;
     let (data, model) = model_and_data(&mf, &a.data, sigma)?;
     let (id, settings, selection) = if auto_beta || auto_sigma {
         let quadratic = !mf

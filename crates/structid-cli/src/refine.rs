@@ -147,22 +147,16 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(v) = &a.validation_data {
         guard.protect(v);
     }
-    guard.check(&a.out)?;
-    for f in [
-        "model.toml",
-        "refine.csv",
-        "refine.svg",
-        "estimation.csv",
-        "report.json",
-    ] {
-        guard.check(&a.out.join(f))?;
-    }
-    if a.out.exists() && !a.out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            a.out.display()
-        )));
-    }
+    guard.check_out_dir(
+        &a.out,
+        [
+            "model.toml",
+            "refine.csv",
+            "refine.svg",
+            "estimation.csv",
+            "report.json",
+        ],
+    )?;
 
     // Records.
     let sigma = match a.sigma {

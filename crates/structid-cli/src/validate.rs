@@ -477,16 +477,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             (vmf, None)
         }
     };
-    guard.check(&a.out)?;
-    for f in OUTPUTS {
-        guard.check(&a.out.join(f))?;
-    }
-    if a.out.exists() && !a.out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            a.out.display()
-        )));
-    }
+    guard.check_out_dir(&a.out, OUTPUTS)?;
 
     // The validation record, checked before the (possibly long) re-identification.
     let table = DataTable::read(&a.data)?;

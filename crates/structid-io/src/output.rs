@@ -65,6 +65,38 @@ impl OutputGuard {
         Ok(())
     }
 
+    /// Checks an output directory before a command does any work: neither `dir` nor any of
+    /// the `files` it will write there is a protected input, and `dir`, if it exists, is a
+    /// directory ([`IoError::InvalidArgument`] otherwise).
+    ///
+    /// ```
+    /// use std::path::Path;
+    /// use structid_io::OutputGuard;
+    /// let dir = std::env::temp_dir().join("structid-doc-check-out-dir");
+    /// let input = dir.join("data.csv");
+    /// let mut guard = OutputGuard::new();
+    /// guard.protect(&input);
+    /// assert!(guard.check_out_dir(&dir, ["report.json"]).is_ok());
+    /// assert!(guard.check_out_dir(&dir, ["data.csv"]).is_err());
+    /// ```
+    pub fn check_out_dir<P: AsRef<Path>>(
+        &self,
+        dir: &Path,
+        files: impl IntoIterator<Item = P>,
+    ) -> Result<(), IoError> {
+        self.check(dir)?;
+        for f in files {
+            self.check(&dir.join(f))?;
+        }
+        if dir.exists() && !dir.is_dir() {
+            return Err(IoError::InvalidArgument(format!(
+                "--out `{}` exists and is not a directory",
+                dir.display()
+            )));
+        }
+        Ok(())
+    }
+
     /// [`write_atomic`] with this guard's inputs protected.
     pub fn write(&self, path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         self.check(path)?;
