@@ -150,6 +150,13 @@ pub trait FeatureMap: Send + Sync {
         let _ = width;
         None
     }
+
+    /// The feature map as plain data ([`crate::estimate::StoredKernel`]), so that a feature
+    /// expansion on it can be stored in an [`crate::estimate::Estimate`]; `None` (the default)
+    /// for a feature map without a stored form.
+    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+        None
+    }
 }
 
 /// K(a, b) = ψ(a)ᵀΛψ(b) of a feature map: the [`Kernel::eval`] of a kernel that is given by

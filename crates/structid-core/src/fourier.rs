@@ -56,7 +56,8 @@ pub enum FourierWeights {
 }
 
 /// How several inputs are combined.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Combination {
     /// Tensor product of the per-input series: all interactions, (2N+1)^p features.
     #[default]
@@ -227,7 +228,7 @@ impl Dispersion for FourierDispersion {
 }
 
 /// The Fourier-series kernel on a fixed domain: a [`Kernel`] with an explicit [`FeatureMap`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FourierKernel {
     /// Per input: (offset, scale) with t = offset + scale·z.
     affine: Vec<(f64, f64)>,
@@ -371,6 +372,43 @@ impl FourierKernel {
         })
     }
 
+    /// Number of inputs p.
+    pub fn inputs(&self) -> usize {
+        self.affine.len()
+    }
+
+    /// Checks that numbers read from a file fit together (every index within the harmonics,
+    /// one weight per feature), so that evaluation cannot index out of range.
+    pub(crate) fn check_stored(&self) -> Result<()> {
+        let p = self.affine.len();
+        let ok = p > 0
+            && self.lambda.len() == p
+            && self.lambda.iter().all(|l| !l.is_empty())
+            && match self.combination {
+                Combination::Tensor => {
+                    self.index.len() == self.weights.len()
+                        && self.index.iter().all(|mi| {
+                            mi.len() == p
+                                && mi
+                                    .iter()
+                                    .zip(&self.lambda)
+                                    .all(|(&(h, kind), l)| h < l.len() && kind < 2)
+                        })
+                }
+                Combination::Additive => {
+                    self.weights.len()
+                        == 1 + self.lambda.iter().map(|l| 2 * (l.len() - 1)).sum::<usize>()
+                }
+            };
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::InvalidStructure(
+                "stored Fourier kernel: its harmonics, feature indices and weights do not fit together".into(),
+            ))
+        }
+    }
+
     /// Number of harmonics N per input.
     pub fn harmonics(&self) -> Vec<usize> {
         self.lambda.iter().map(|l| l.len() - 1).collect()
@@ -383,6 +421,10 @@ impl FourierKernel {
 }
 
 impl Kernel for FourierKernel {
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Fourier(self.clone()))
+    }
+
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         let series = |j: usize| -> f64 {
             let d = self.unit(a, j) - self.unit(b, j);
@@ -407,6 +449,10 @@ impl Kernel for FourierKernel {
 }
 
 impl FeatureMap for FourierKernel {
+    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Fourier(self.clone()))
+    }
+
     fn dim(&self) -> usize {
         self.weights.len()
     }
@@ -601,6 +647,13 @@ impl Interpolant for FeatureExpansion {
         let mut psi = vec![0.0; self.coef.len()];
         self.map.eval_into(z, &mut psi);
         psi.iter().zip(&self.coef).map(|(a, b)| a * b).sum()
+    }
+
+    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+        Some(crate::estimate::StoredMap::FeatureExpansion {
+            features: self.map.stored_features()?,
+            coefficients: self.coef.clone(),
+        })
     }
 }
 

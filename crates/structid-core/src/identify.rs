@@ -15,7 +15,7 @@ use crate::solver::admm::AdmmSettings;
 use crate::solver::conic::ConicSettings;
 
 /// Which solver `identify` uses.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum SolverChoice {
     /// Pick from the dispersions and the problem size.
@@ -56,7 +56,7 @@ impl SolverChoice {
 /// assert_eq!(s.beta(), 0.1);
 /// assert!(IdentifySettings::builder().beta(-1.0).build().is_err());
 /// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IdentifySettings {
     beta: f64,
     solver: SolverChoice,
@@ -68,7 +68,7 @@ pub struct IdentifySettings {
 }
 
 /// How the LFT's initial state is treated.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum InitialState {
     /// The system starts at rest, x₀ = 0 (the paper's assumption).
     #[default]
@@ -270,7 +270,7 @@ impl IdentifySettingsBuilder {
 }
 
 /// The cost terms of eq. (4) at the optimum.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CostTerms {
     /// μ = (1/L)·Σ_k |ê_k|².
     pub noise: f64,

@@ -52,6 +52,13 @@ pub trait Kernel: Send + Sync + fmt::Debug {
         None
     }
 
+    /// The kernel as plain data ([`crate::estimate::StoredKernel`]), so that a kernel
+    /// expansion on it can be stored in an [`crate::estimate::Estimate`]; `None` (the
+    /// default) for a kernel without a stored form.
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        None
+    }
+
     /// The same kernel with another width; `None` (the default) when it has none.
     fn with_width(&self, width: f64) -> Option<Result<Self>>
     where
@@ -194,6 +201,10 @@ impl Kernel for GaussianKernel {
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
         self.normalisation(a.len()) * (-d2 / (2.0 * self.sigma * self.sigma)).exp()
+    }
+
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Gaussian { sigma: self.sigma })
     }
 
     fn describe(&self) -> String {
@@ -380,6 +391,14 @@ impl<K: Kernel> Interpolant for KernelExpansion<K> {
             .into_par_iter()
             .map(|k| self.eval(z.sample(k)))
             .collect()
+    }
+
+    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+        Some(crate::estimate::StoredMap::KernelExpansion {
+            kernel: self.kernel.stored_kernel()?,
+            centres: crate::estimate::StoredPoints::from_signal(&self.centres),
+            alpha: self.alpha.clone(),
+        })
     }
 }
 

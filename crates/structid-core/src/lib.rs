@@ -82,6 +82,7 @@
 pub mod augment;
 pub mod dispersion;
 pub mod error;
+pub mod estimate;
 pub mod fourier;
 pub mod hyperparameters;
 pub mod identify;
@@ -110,6 +111,7 @@ pub mod validation;
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};
+pub use estimate::{Estimate, Prediction, PredictionSettings};
 pub use fourier::{
     Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights,
 };

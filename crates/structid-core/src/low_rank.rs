@@ -175,9 +175,44 @@ impl NystromFeatures {
     pub fn relative_trace_error(&self) -> f64 {
         self.trace_error
     }
+
+    fn to_stored(&self) -> crate::estimate::StoredKernel {
+        let r = self.l_pp.nrows();
+        crate::estimate::StoredKernel::Nystrom(crate::estimate::NystromStored {
+            sigma: self.kernel.sigma(),
+            centres: crate::estimate::StoredPoints::from_signal(&self.centres),
+            l_pp: (0..r * r).map(|i| self.l_pp[(i / r, i % r)]).collect(),
+            weights: self.weights.clone(),
+            trace_error: self.trace_error,
+        })
+    }
+
+    /// The features from their stored numbers, checked for consistent sizes.
+    pub(crate) fn from_stored(s: &crate::estimate::NystromStored) -> Result<Self> {
+        let r = s.weights.len();
+        let centres = s.centres.to_signal()?;
+        if centres.len() < r || s.l_pp.len() != r * r || (0..r).any(|i| s.l_pp[i * r + i] == 0.0) {
+            return Err(Error::InvalidStructure(format!(
+                "stored Nyström features: rank {r}, {} centres and a factor of {} values do not fit together",
+                centres.len(),
+                s.l_pp.len()
+            )));
+        }
+        Ok(Self {
+            kernel: GaussianKernel::new(s.sigma)?,
+            centres,
+            l_pp: DMatrix::from_row_slice(r, r, &s.l_pp),
+            weights: s.weights.clone(),
+            trace_error: s.trace_error,
+        })
+    }
 }
 
 impl FeatureMap for NystromFeatures {
+    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(self.to_stored())
+    }
+
     fn dim(&self) -> usize {
         self.weights.len()
     }
@@ -199,6 +234,10 @@ impl FeatureMap for NystromFeatures {
 }
 
 impl Kernel for NystromFeatures {
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(self.to_stored())
+    }
+
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         let k = self.weights.len();
         let (mut pa, mut pb) = (vec![0.0; k], vec![0.0; k]);

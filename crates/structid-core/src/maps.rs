@@ -82,6 +82,13 @@ impl Interpolant for ExprMap {
             .collect();
         self.expr.eval(&vars).unwrap_or(f64::NAN)
     }
+
+    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+        Some(crate::estimate::StoredMap::Expression {
+            expression: self.text.clone(),
+            inputs: self.dim,
+        })
+    }
 }
 
 /// A static map given by a table: piecewise-linear in one input, bilinear on a rectangular grid
@@ -226,7 +233,29 @@ impl LookupTable {
     }
 }
 
+impl LookupTable {
+    /// The table as rows `[z…, value]`, the form [`LookupTable::from_rows`] reads.
+    pub fn rows(&self) -> Vec<Vec<f64>> {
+        match self {
+            Self::OneD { x, v } => x.iter().zip(v).map(|(a, b)| vec![*a, *b]).collect(),
+            Self::Grid2D { x, y, values } => {
+                let mut rows = Vec::with_capacity(values.len());
+                for (j, b) in y.iter().enumerate() {
+                    for (i, a) in x.iter().enumerate() {
+                        rows.push(vec![*a, *b, values[i + j * x.len()]]);
+                    }
+                }
+                rows
+            }
+        }
+    }
+}
+
 impl Interpolant for LookupTable {
+    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+        Some(crate::estimate::StoredMap::Table { rows: self.rows() })
+    }
+
     fn eval(&self, z: &[f64]) -> f64 {
         match self {
             Self::OneD { x, v } => {

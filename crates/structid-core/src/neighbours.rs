@@ -599,6 +599,21 @@ impl ScatteredInterpolant {
         }
     }
 
+    /// The nodes.
+    pub fn tree(&self) -> &KdTree {
+        &self.tree
+    }
+
+    /// The value at each node, in the nodes' original order.
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// How node values are combined.
+    pub fn weighting(&self) -> Weighting {
+        self.weighting
+    }
+
     /// The interpolated value at `q` (`q.len()` = the tree's dimension).
     ///
     /// * [`Weighting::Nearest`]: the value of the nearest node (any one of them if tied).

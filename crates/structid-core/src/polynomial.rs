@@ -129,7 +129,7 @@ impl Dispersion for PolynomialDispersion {
 /// assert_eq!(psi, [1.0, 2.0, 4.0]);
 /// assert_eq!(f.eval(&[5.0], &[3.0]), 1.0 + 2.0 * 1.0 + 4.0 * 1.0);
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PolynomialFeatures {
     affine: Vec<(f64, f64)>,
     exponents: Vec<Vec<u32>>,
@@ -180,6 +180,23 @@ impl PolynomialFeatures {
         })
     }
 
+    /// Checks that numbers read from a file fit together (one exponent per input, one weight
+    /// per feature), so that evaluation cannot index out of range.
+    pub(crate) fn check_stored(&self) -> Result<()> {
+        let p = self.affine.len();
+        if p > 0
+            && self.exponents.len() == self.weights.len()
+            && self.exponents.iter().all(|e| e.len() == p)
+        {
+            Ok(())
+        } else {
+            Err(Error::InvalidStructure(
+                "stored polynomial features: exponents, inputs and weights do not fit together"
+                    .into(),
+            ))
+        }
+    }
+
     /// The exponents α of each feature, in feature order.
     pub fn exponents(&self) -> &[Vec<u32>] {
         &self.exponents
@@ -192,6 +209,10 @@ impl PolynomialFeatures {
 }
 
 impl FeatureMap for PolynomialFeatures {
+    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Polynomial(self.clone()))
+    }
+
     fn dim(&self) -> usize {
         self.exponents.len()
     }
@@ -223,6 +244,10 @@ impl FeatureMap for PolynomialFeatures {
 }
 
 impl Kernel for PolynomialFeatures {
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Polynomial(self.clone()))
+    }
+
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         crate::dispersion::feature_kernel(self, a, b)
     }

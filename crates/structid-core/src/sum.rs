@@ -165,7 +165,24 @@ impl StackedFeatures {
     }
 }
 
+impl StackedFeatures {
+    fn to_stored(&self) -> Option<crate::estimate::StoredKernel> {
+        Some(crate::estimate::StoredKernel::Stacked {
+            parts: self
+                .maps
+                .iter()
+                .map(|m| m.stored_features())
+                .collect::<Option<_>>()?,
+            width_part: self.width_part,
+        })
+    }
+}
+
 impl FeatureMap for StackedFeatures {
+    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+        self.to_stored()
+    }
+
     fn dim(&self) -> usize {
         self.weights.len()
     }
@@ -194,6 +211,10 @@ impl FeatureMap for StackedFeatures {
 }
 
 impl Kernel for StackedFeatures {
+    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+        self.to_stored()
+    }
+
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         crate::dispersion::feature_kernel(self, a, b)
     }
@@ -224,12 +245,12 @@ impl QuadraticPenalty for SumGram {
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {
         // Σ_k α_k (K₁ + K₂)(z, z_k) = N̂₁(z) + N̂₂(z) with the same α.
-        Box::new(SumInterpolant(
+        crate::estimate::stored::sum_of(
             self.parts
                 .iter()
                 .map(|p| p.interpolant(alpha.clone()))
                 .collect(),
-        ))
+        )
     }
 
     fn cross_columns(&self, points: &Signal, mut out: faer::MatMut<'_, f64>) -> bool {
@@ -254,14 +275,6 @@ impl QuadraticPenalty for SumGram {
                 .for_each(|(a, b)| *a += b);
         }
         Some(d)
-    }
-}
-
-struct SumInterpolant(Vec<Box<dyn Interpolant>>);
-
-impl Interpolant for SumInterpolant {
-    fn eval(&self, z: &[f64]) -> f64 {
-        self.0.iter().map(|f| f.eval(z)).sum()
     }
 }
 

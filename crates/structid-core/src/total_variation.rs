@@ -234,11 +234,18 @@ impl NodeInterpolation for ChainInterpolation {
     }
 }
 
-struct PiecewiseLinearMap(PiecewiseLinear);
+pub(crate) struct PiecewiseLinearMap(pub(crate) PiecewiseLinear);
 
 impl Interpolant for PiecewiseLinearMap {
     fn eval(&self, z: &[f64]) -> f64 {
         self.0.eval(z[0])
+    }
+
+    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+        Some(crate::estimate::StoredMap::PiecewiseLinear {
+            knots: self.0.knots().to_vec(),
+            values: self.0.values().to_vec(),
+        })
     }
 }
 
@@ -308,11 +315,11 @@ struct GraphNodes {
 
 impl NodeInterpolation for GraphNodes {
     fn interpolant(&self, values: Vec<f64>) -> Box<dyn Interpolant> {
-        Box::new(ScaledScattered {
-            inner: ScatteredInterpolant::new(self.tree.clone(), values, self.weighting),
-            lo: self.lo.clone(),
-            scale: self.scale.clone(),
-        })
+        Box::new(crate::estimate::stored::ScaledScatteredMap::new(
+            ScatteredInterpolant::new(self.tree.clone(), values, self.weighting),
+            self.lo.clone(),
+            self.scale.clone(),
+        ))
     }
 
     fn describe(&self) -> String {
@@ -322,23 +329,6 @@ impl NodeInterpolation for GraphNodes {
                 "inverse squared distance over the {neighbours} nearest nodes (inputs scaled to [0, 1])"
             ),
         }
-    }
-}
-
-struct ScaledScattered {
-    inner: ScatteredInterpolant,
-    lo: Vec<f64>,
-    scale: Vec<f64>,
-}
-
-impl Interpolant for ScaledScattered {
-    fn eval(&self, z: &[f64]) -> f64 {
-        let q: Vec<f64> = z
-            .iter()
-            .zip(self.lo.iter().zip(&self.scale))
-            .map(|(v, (l, s))| (v - l) * s)
-            .collect();
-        self.inner.eval(&q)
     }
 }
 

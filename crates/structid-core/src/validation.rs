@@ -59,7 +59,7 @@ use crate::problem::Problem;
 use crate::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
 
 /// How [`validate`] treats the initial state of the linear block.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum ValidationInitialState {
     /// The record starts at rest, x₀ = 0.
     #[default]
@@ -282,54 +282,14 @@ pub fn validate(
     }
     // Simulation needs no algebraic loop; check before the (longer) prediction work.
     lft.check_no_algebraic_loop()?;
-    let problem = match settings.initial_state {
-        ValidationInitialState::Zero => Problem::from_model(model, data)?,
-        ValidationInitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
-    };
-    let ny = problem.outputs();
-
-    // v = r − T_yw·ŵ with ŵ = N̂(z) at the measured (computed) z.
-    let mut v = problem.residual().as_slice().to_vec();
-    let mut tmp = vec![0.0; len * ny];
-    for (block, map) in problem.blocks().iter().zip(maps) {
-        let w = map.eval_many(&block.z);
-        if let Some(k) = w.iter().position(|x| !x.is_finite()) {
-            return Err(Error::Numerical(format!(
-                "the map of block `{}` returned {} at sample {k} (z = {:?}) of the validation record",
-                block.name,
-                w[k],
-                block.z.sample(k)
-            )));
-        }
-        block.path.apply(&w, &mut tmp);
-        v.iter_mut().zip(&tmp).for_each(|(a, b)| *a -= b);
-    }
-
-    let noise = lft.t_ye();
-    let dynamic_noise = noise.order() > 0;
-    let whitener = match KalmanWhitener::new(&noise, len, &WhiteningOptions::default()) {
-        Ok(w) => Some(w),
-        // A static path needs no predictor; only the GLS weighting of x₀ is lost.
-        Err(_) if !dynamic_noise => None,
-        Err(e) => {
-            return Err(Error::InvalidStructure(format!(
-                "one-step prediction needs the Kalman predictor of the noise path T_ye, which does not \
-                 exist for this model: {e}"
-            )));
-        }
-    };
-
-    let x0 = match problem.free_response() {
-        Some(o) if o.ncols() > 0 => {
-            let x0 = estimate_initial_state(o, &v, whitener.as_ref())?;
-            for (i, vi) in v.iter_mut().enumerate() {
-                *vi -= (0..o.ncols()).map(|j| o[(i, j)] * x0[j]).sum::<f64>();
-            }
-            Some(x0)
-        }
-        Some(_) => Some(Vec::new()),
-        None => None,
-    };
+    let MeasuredResidual {
+        v,
+        whitener,
+        dynamic_noise,
+        x0,
+        ..
+    } = measured_residual(model, maps, data, settings.initial_state)?;
+    let ny = lft.dims().y;
 
     let eps = match (&whitener, dynamic_noise) {
         (Some(w), true) => {
@@ -395,6 +355,95 @@ pub fn validate(
         input_correlation,
         initial_state: x0,
         samples: len,
+    })
+}
+
+/// What the one-step predictor and the k-step predictor share: the measured residual
+/// v = r − T_yw·ŵ − O·x̂₀ with ŵ = N̂(z) at the measured z, the Kalman predictor of the noise
+/// path, and x̂₀.
+pub(crate) struct MeasuredResidual {
+    /// v, time-major (L · n_y).
+    pub(crate) v: Vec<f64>,
+    /// The Kalman predictor of T_ye (`None` for a static path without one).
+    pub(crate) whitener: Option<KalmanWhitener>,
+    /// Whether T_ye has dynamics.
+    pub(crate) dynamic_noise: bool,
+    /// x̂₀: `None` with a zero initial state.
+    pub(crate) x0: Option<Vec<f64>>,
+    /// ŵ = N̂(z) at the measured z, L × n_w.
+    pub(crate) w_hat: Signal,
+}
+
+/// v = r − T_yw·ŵ − O·x̂₀ (see the [module documentation](self)); the data must already have
+/// been checked against the model.
+pub(crate) fn measured_residual(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    initial_state: ValidationInitialState,
+) -> Result<MeasuredResidual> {
+    let lft = model.lft();
+    let len = data.len();
+    let problem = match initial_state {
+        ValidationInitialState::Zero => Problem::from_model(model, data)?,
+        ValidationInitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
+    };
+    let ny = problem.outputs();
+
+    // v = r − T_yw·ŵ with ŵ = N̂(z) at the measured (computed) z.
+    let mut v = problem.residual().as_slice().to_vec();
+    let mut tmp = vec![0.0; len * ny];
+    let nw = lft.dims().w;
+    let mut w_hat = vec![0.0; len * nw];
+    for (block, map) in problem.blocks().iter().zip(maps) {
+        let w = map.eval_many(&block.z);
+        if let Some(k) = w.iter().position(|x| !x.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "the map of block `{}` returned {} at sample {k} (z = {:?}) of the validation record",
+                block.name,
+                w[k],
+                block.z.sample(k)
+            )));
+        }
+        for (k, wk) in w.iter().enumerate() {
+            w_hat[k * nw + block.output] = *wk;
+        }
+        block.path.apply(&w, &mut tmp);
+        v.iter_mut().zip(&tmp).for_each(|(a, b)| *a -= b);
+    }
+
+    let noise = lft.t_ye();
+    let dynamic_noise = noise.order() > 0;
+    let whitener = match KalmanWhitener::new(&noise, len, &WhiteningOptions::default()) {
+        Ok(w) => Some(w),
+        // A static path needs no predictor; only the GLS weighting of x₀ is lost.
+        Err(_) if !dynamic_noise => None,
+        Err(e) => {
+            return Err(Error::InvalidStructure(format!(
+                "one-step prediction needs the Kalman predictor of the noise path T_ye, which does not \
+                 exist for this model: {e}"
+            )));
+        }
+    };
+
+    let x0 = match problem.free_response() {
+        Some(o) if o.ncols() > 0 => {
+            let x0 = estimate_initial_state(o, &v, whitener.as_ref())?;
+            for (i, vi) in v.iter_mut().enumerate() {
+                *vi -= (0..o.ncols()).map(|j| o[(i, j)] * x0[j]).sum::<f64>();
+            }
+            Some(x0)
+        }
+        Some(_) => Some(Vec::new()),
+        None => None,
+    };
+
+    Ok(MeasuredResidual {
+        v,
+        whitener,
+        dynamic_noise,
+        x0,
+        w_hat: Signal::new(nw, w_hat)?,
     })
 }
 

@@ -703,6 +703,37 @@ impl KalmanWhitener {
     /// }
     /// ```
     pub fn innovations(&self, y: &[f64], out: &mut [f64]) {
+        self.filter(y, out, None);
+    }
+
+    /// The innovations (as [`innovations`](Self::innovations)) and the one-step predicted
+    /// states x̂_(t|t−1) of the noise path, written time-major into `states` (`len · n`
+    /// values, n = [`order`](Self::order)): the state the filter holds before it reads y_t.
+    /// A k-step-ahead predictor starts from them. Panics on inconsistent lengths.
+    ///
+    /// ```
+    /// use nalgebra::dmatrix;
+    /// use structid_lti::StateSpace;
+    /// use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
+    /// // v_t = e_t + 0.5·e_(t−1): x⁺ = e, v = 0.5·x + e.
+    /// let noise = StateSpace::new(dmatrix![0.0], dmatrix![1.0], dmatrix![0.5], dmatrix![1.0], None).unwrap();
+    /// let w = KalmanWhitener::new(&noise, 3, &WhiteningOptions::default()).unwrap();
+    /// let (mut nu, mut x) = ([0.0; 3], [0.0; 3]);
+    /// w.predicted_states(&[1.0, 0.0, 0.0], &mut nu, &mut x);
+    /// assert_eq!(x[0], 0.0); // started at rest
+    /// // v_t − C·x̂_(t|t−1) is the innovation.
+    /// assert!((0.0 - 0.5 * x[1] - nu[1]).abs() < 1e-15);
+    /// ```
+    pub fn predicted_states(&self, y: &[f64], out: &mut [f64], states: &mut [f64]) {
+        assert_eq!(
+            states.len(),
+            self.len * self.n,
+            "states must hold len · n values"
+        );
+        self.filter(y, out, Some(states));
+    }
+
+    fn filter(&self, y: &[f64], out: &mut [f64], mut states: Option<&mut [f64]>) {
         self.check_rows(y.len(), "y");
         self.check_rows(out.len(), "out");
         let (n, p) = (self.n, self.p);
@@ -711,6 +742,9 @@ impl KalmanWhitener {
         let mut xn = vec![0.0; n];
         let mut om = vec![0.0; p];
         for t in 0..self.len {
+            if let Some(st) = states.as_deref_mut() {
+                st[t * n..(t + 1) * n].copy_from_slice(&xs);
+            }
             let (g, li) = self.gains_at(t, &steady);
             let nu = &mut out[t * p..(t + 1) * p];
             for c in 0..p {

@@ -69,7 +69,7 @@ pub const NAME: &str = "admm";
 /// assert_eq!(s.max_iterations(), 50_000);
 /// assert!(AdmmSettings::builder().relaxation(2.5).build().is_err());
 /// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AdmmSettings {
     tolerance: f64,
     max_iterations: usize,

@@ -47,7 +47,7 @@ use crate::total_variation::TvPenalty;
 /// assert_eq!(s.tolerance(), 1e-9);
 /// assert!(ConicSettings::builder().tolerance(0.0).build().is_err());
 /// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ConicSettings {
     tolerance: f64,
     max_iterations: u32,
