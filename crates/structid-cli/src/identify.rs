@@ -4,6 +4,8 @@ use std::collections::HashSet;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use structid_core::estimate::{Estimate, SignalNames};
+use structid_io::estimate_json;
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
@@ -308,7 +310,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
     guard.check_out_dir(
         &a.out,
-        ["estimate.csv", "report.json"]
+        ["estimate.csv", "estimate.json", "report.json"]
             .into_iter()
             .map(String::from)
             .chain(
@@ -369,7 +371,16 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     rec.block_sigmas = block_sigmas;
     report.reproduction = Some(rec);
     report.selection = selection;
-    let written = write_estimate(&a.out, &mut guard, &mf, &id, &mut report, a.no_bands)?;
+    let stored = Estimate::from_identification(&model, &id, &data, &settings)?;
+    let written = write_estimate(
+        &a.out,
+        &mut guard,
+        &mf,
+        &id,
+        &stored,
+        &mut report,
+        a.no_bands,
+    )?;
 
     print!(
         "{}",
@@ -378,18 +389,29 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Writes the files of an estimate into `out` (created): estimate.csv, map_<block>.csv and
-/// map_<block>.svg per block (with the posterior band unless `no_bands`), and report.json,
-/// whose `files` list they fill. Returns the paths written, report.json last.
+/// Writes the files of an estimate into `out` (created): estimate.json (the fitted model,
+/// self-contained: `validate`, `simulate` and `predict` read it without the data),
+/// estimate.csv, map_<block>.csv and map_<block>.svg per block (with the posterior band unless
+/// `no_bands`), and report.json, whose `files` list they fill. Returns the paths written,
+/// report.json last.
 pub(crate) fn write_estimate(
     out: &Path,
     guard: &mut OutputGuard,
     mf: &ModelFile,
     id: &Identification,
+    stored: &Estimate,
     report: &mut Report,
     no_bands: bool,
 ) -> Result<Vec<PathBuf>, CliError> {
     let mut written: Vec<PathBuf> = Vec::new();
+
+    let stored = stored.clone().with_signal_names(SignalNames {
+        u: mf.signals.u.clone(),
+        y: mf.signals.y.clone(),
+    })?;
+    let path = out.join("estimate.json");
+    guard.write(&path, &estimate_json(&stored)?)?;
+    written.push(path);
 
     // estimate.csv: ŵ by block name (in w order), then ê.
     let (names, columns) = estimate_columns(mf, id);

@@ -28,6 +28,7 @@ mod identify;
 mod linear;
 mod refine;
 mod simulate;
+mod stored;
 mod validate;
 
 use std::path::PathBuf;
@@ -76,6 +77,14 @@ enum Command {
     /// cross-correlation tests (99 % bands). Writes DIR2/validation.json, DIR2/simulation.csv,
     /// DIR2/simulation.svg and DIR2/residuals.svg.
     Validate(ValidateArgs),
+    /// k-step-ahead prediction of a stored estimate on a record.
+    ///
+    /// ŷ(t|t−k) uses u up to t and y up to t−k: the state is predicted by the Kalman predictor
+    /// of the noise model with the maps evaluated at the measured z, then the model runs k − 1
+    /// steps with the maps in the loop. k = 1 is `validate`'s one-step predictor; k ≥ the
+    /// record length is the simulation. Writes DIR/prediction.csv (time, y, ŷ per output) and
+    /// DIR/prediction.json (RMS and fit per output).
+    Predict(PredictArgs),
     /// Run the examples of the paper end to end, with no files to prepare.
     #[command(subcommand)]
     Demo(DemoCommand),
@@ -287,9 +296,19 @@ enum InitialStateArg {
 /// Arguments of `structid simulate`.
 #[derive(Debug, Args)]
 struct SimulateArgs {
-    /// The model file (TOML); every block needs a `truth`.
-    #[arg(long, short = 'm', value_name = "MODEL.toml")]
-    model: PathBuf,
+    /// The model file (TOML); every block needs a `truth`. Give this or --estimate.
+    #[arg(
+        long,
+        short = 'm',
+        value_name = "MODEL.toml",
+        required_unless_present = "estimate",
+        conflicts_with = "estimate"
+    )]
+    model: Option<PathBuf>,
+    /// A stored estimate (estimate.json of `identify`, `refine` or `discover`) to simulate
+    /// instead of a model file's true maps; the input columns are the estimate's input names.
+    #[arg(long, short = 'e', value_name = "FILE.json")]
+    estimate: Option<PathBuf>,
     /// CSV file holding the input columns named in [signals].u.
     #[arg(long, short = 'i', value_name = "U.csv")]
     input: PathBuf,
@@ -313,12 +332,16 @@ struct SimulateArgs {
 #[derive(Debug, Args)]
 struct ValidateArgs {
     /// The model file (TOML) of the estimate (same blocks as in DIR/report.json); without
-    /// --estimate, the model whose true maps are validated.
+    /// --estimate, the model whose true maps are validated. Not needed with --estimate
+    /// FILE.json.
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
-    model: PathBuf,
-    /// The output directory of `structid identify` holding the estimate. Without it, the
-    /// model is validated with its true maps: every block of --model needs a `truth`.
-    #[arg(long, short = 'e', value_name = "DIR")]
+    model: Option<PathBuf>,
+    /// The estimate: a stored estimate file (DIR/estimate.json, written by `identify`,
+    /// `refine` and `discover`; it needs neither --model nor the estimation data), or the
+    /// output directory of an older `structid identify`, rebuilt by re-running the
+    /// identification it records. Without it, the model is validated with its true maps:
+    /// every block of --model needs a `truth`.
+    #[arg(long, short = 'e', value_name = "FILE.json|DIR")]
     estimate: Option<PathBuf>,
     /// The validation data (CSV with the columns named in the model's `[signals]`).
     #[arg(long, short = 'd', value_name = "V.csv")]
@@ -335,6 +358,30 @@ struct ValidateArgs {
     max_lag: usize,
     /// Leading samples that only settle the state: the simulation RMS and fit leave them out
     /// (the Silverbox benchmark allows 50).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    settle: usize,
+}
+
+/// Arguments of `structid predict`.
+#[derive(Debug, Args)]
+struct PredictArgs {
+    /// The stored estimate (estimate.json of `identify`, `refine` or `discover`).
+    #[arg(long, short = 'e', value_name = "FILE.json")]
+    estimate: PathBuf,
+    /// The record (CSV with the estimate's input and output columns).
+    #[arg(long, short = 'd', value_name = "V.csv")]
+    data: PathBuf,
+    /// The horizon k ≥ 1.
+    #[arg(long, short = 'k', value_name = "K", default_value_t = 1)]
+    horizon: usize,
+    /// Output directory (created if needed).
+    #[arg(long, short = 'o', value_name = "DIR")]
+    out: PathBuf,
+    /// Initial state of the record: `zero` (at rest) or `estimate` (x₀ by least squares from
+    /// the one-step residual).
+    #[arg(long, value_name = "zero|estimate", default_value = "zero")]
+    initial_state: InitialStateArg,
+    /// Leading samples left out of the RMS and fit.
     #[arg(long, value_name = "N", default_value_t = 0)]
     settle: usize,
 }
@@ -406,6 +453,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Identify(a) => identify::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Validate(a) => validate::run(a),
+        Command::Predict(a) => stored::predict(a),
         Command::Demo(DemoCommand::Spray(a)) => demo::spray(a),
         Command::Demo(DemoCommand::MultiInput(a)) => demo::multi_input(a),
         Command::Compare(a) => compare::run(a),

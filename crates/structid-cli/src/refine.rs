@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
+use structid_core::estimate::{Estimate, Provenance};
 
 use clap::Args;
 use structid_core::hyperparameters::{Criterion, SelectionSettings};
@@ -155,6 +156,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             "refine.svg",
             "estimation.csv",
             "report.json",
+            "estimate.json",
         ],
     )?;
 
@@ -391,7 +393,20 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     }
     guard.write(&svg_path, render_chart_svg(&chart)?.as_bytes())?;
 
-    let mut written = write_estimate(&a.out, &mut guard, &refined, id, &mut report, a.no_bands)?;
+    let mut stored = Estimate::from_identification(&r.model, id, &data, &identify_settings)?;
+    stored = stored.clone().with_provenance(Provenance {
+        workflow: "refine".into(),
+        ..stored.provenance().clone()
+    });
+    let mut written = write_estimate(
+        &a.out,
+        &mut guard,
+        &refined,
+        id,
+        &stored,
+        &mut report,
+        a.no_bands,
+    )?;
     written.splice(0..0, [model_path, csv_path, svg_path]);
     if let Some(p) = estimation_file {
         written.insert(1, p);

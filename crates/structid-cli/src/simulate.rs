@@ -11,14 +11,24 @@ use crate::identify::protect_inputs;
 /// Runs `structid simulate`.
 pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     let noise_std = non_negative("--noise-std", a.noise_std)?;
-    let mf = ModelFile::from_path(&a.model)?;
+    let model_path = match (&a.model, &a.estimate) {
+        (_, Some(e)) => return crate::stored::simulate(&a, e, noise_std),
+        (Some(m), None) => m.clone(),
+        (None, None) => {
+            return Err(CliError::input(
+                "give --model MODEL.toml or --estimate FILE.json",
+            ));
+        }
+    };
+    let model_path = model_path.as_path();
+    let mf = ModelFile::from_path(model_path)?;
     let mut guard = OutputGuard::new();
-    protect_inputs(&mut guard, &mf, &a.model, &[&a.input]);
+    protect_inputs(&mut guard, &mf, model_path, &[&a.input]);
     guard.check(&a.out)?;
     // A nominal model's declared w columns carry w = 0.
     let lft = mf.model_lft()?;
     lft.check_no_algebraic_loop().map_err(|e| {
-        CliError::from(e).context(format!("cannot simulate `{}`", a.model.display()))
+        CliError::from(e).context(format!("cannot simulate `{}`", model_path.display()))
     })?;
     let missing: Vec<String> = mf
         .blocks
@@ -30,7 +40,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
         return Err(CliError::input(format!(
             "cannot simulate `{}`: block(s) {} have no `truth`; simulation needs the true map of every block \
              (truth = \"expression in z0, z1, …\" or truth = {{ table = \"file.csv\" }})",
-            a.model.display(),
+            model_path.display(),
             missing.join(", ")
         )));
     }
@@ -51,7 +61,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
                 "cannot simulate `{}`: the output column `{n}` would appear twice; the u, y and z names in \
                  [signals] and the `w_<block>` columns must all differ (z columns are named z0, z1, … unless \
                  [signals].z names them)",
-                a.model.display()
+                model_path.display()
             )));
         }
     }

@@ -179,7 +179,7 @@ fn check_estimate(dir: &Path, mf: &ModelFile, id: &Identification) -> Result<f64
 
 /// Column names of simulation.csv: `time`, then per output `<y>`, `<y>_sim`,
 /// `<y>_prediction_error` (generic `y<c>` names if the model's names would collide).
-fn simulation_names(y_names: &[String]) -> Vec<String> {
+pub(crate) fn simulation_names(y_names: &[String]) -> Vec<String> {
     let build = |names: &[String]| {
         let mut out = vec!["time".to_string()];
         for n in names {
@@ -211,7 +211,7 @@ fn plot_indices(len: usize) -> Vec<usize> {
     idx
 }
 
-fn simulation_svg(
+pub(crate) fn simulation_svg(
     report: &ValidationReport,
     measured: &structid_lti::Signal,
     time: &[f64],
@@ -245,7 +245,7 @@ fn simulation_svg(
     Ok(render_grid_svg(&charts, 1, (1000, 400))?)
 }
 
-fn residuals_svg(
+pub(crate) fn residuals_svg(
     report: &ValidationReport,
     y_names: &[String],
     u_names: &[String],
@@ -300,7 +300,7 @@ fn test_json(t: &CorrelationTest) -> Result<Value, CliError> {
     Ok(v)
 }
 
-fn fmt_pct(v: f64) -> String {
+pub(crate) fn fmt_pct(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.2} %")
     } else {
@@ -308,7 +308,7 @@ fn fmt_pct(v: f64) -> String {
     }
 }
 
-fn pass(t: &CorrelationTest) -> String {
+pub(crate) fn pass(t: &CorrelationTest) -> String {
     let n = t.outside().len();
     let tested = if t.autocorrelation {
         t.lags.iter().filter(|&&l| l != 0).count()
@@ -418,6 +418,17 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
 
 /// Runs `structid validate`.
 pub fn run(a: ValidateArgs) -> Result<(), CliError> {
+    if let Some(p) = &a.estimate
+        && p.is_file()
+    {
+        return crate::stored::validate(&a, p);
+    }
+    let model_path = a.model.clone().ok_or_else(|| {
+        CliError::input(
+            "--model is required, except with --estimate FILE.json (a stored estimate, which carries its model)",
+        )
+    })?;
+    let model_path = model_path.as_path();
     let t0 = Instant::now();
     if a.max_lag == 0 {
         return Err(CliError::input(
@@ -441,8 +452,8 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
                     dir.display()
                 )));
             }
-            let vmf = ModelFile::from_path(&a.model)?;
-            let rec = recorded(dir, &vmf, &a.model)?;
+            let vmf = ModelFile::from_path(model_path)?;
+            let rec = recorded(dir, &vmf, model_path)?;
             // Never overwrite an input: the files of the command, the estimate directory's
             // files and the files of the recorded identification.
             let mut others: Vec<PathBuf> = vec![
@@ -452,12 +463,12 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             ];
             others.extend(rec.record.files.iter().map(|f| dir.join(f)));
             let others_ref: Vec<&Path> = others.iter().map(PathBuf::as_path).collect();
-            protect_inputs(&mut guard, &vmf, &a.model, &others_ref);
+            protect_inputs(&mut guard, &vmf, model_path, &others_ref);
             protect_inputs(&mut guard, &rec.model, &rec.args.model, &[&rec.args.data]);
             (vmf, Some(rec))
         }
         None => {
-            let vmf = ModelFile::from_path(&a.model)?;
+            let vmf = ModelFile::from_path(model_path)?;
             let missing: Vec<&str> = vmf
                 .blocks
                 .iter()
@@ -469,11 +480,11 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
                     "without --estimate, `structid validate` checks the true maps of `{}`, but block(s) {} have \
                      no `truth`; give every block a truth (truth = \"expression in z0, z1, …\" or \
                      truth = {{ table = \"file.csv\" }}), or validate an estimate with --estimate DIR",
-                    a.model.display(),
+                    model_path.display(),
                     list(&missing)
                 )));
             }
-            protect_inputs(&mut guard, &vmf, &a.model, &[&a.data]);
+            protect_inputs(&mut guard, &vmf, model_path, &[&a.data]);
             (vmf, None)
         }
     };
@@ -508,7 +519,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         warnings.push(format!(
             "the linear block of --model `{}` differs from that of the estimate's model file `{}`; the maps \
              were estimated with the latter",
-            a.model.display(),
+            model_path.display(),
             r.recorded.args.model.display()
         ));
     }
@@ -582,28 +593,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     )?;
     written.push(path);
 
-    let mut outputs = Vec::new();
-    for (c, name) in y_names.iter().enumerate() {
-        let cross = u_names
-            .iter()
-            .zip(&report.input_correlation[c])
-            .map(|(u, t)| {
-                let mut v = test_json(t)?;
-                if let Value::Object(m) = &mut v {
-                    m.insert("input".into(), json!(u));
-                }
-                Ok(v)
-            })
-            .collect::<Result<Vec<Value>, CliError>>()?;
-        outputs.push(json!({
-            "name": name,
-            "rms": report.rms[c],
-            "fit_percent": report.fit_percent[c],
-            "prediction_rms": report.prediction_rms[c],
-            "whiteness": test_json(&report.whiteness[c])?,
-            "input_correlation": cross,
-        }));
-    }
+    let outputs = outputs_json(&report, &y_names, &u_names)?;
     let json_path = a.out.join("validation.json");
     let files: Vec<String> = written
         .iter()
@@ -642,8 +632,8 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     let mut doc = json!({
         "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
         "inputs": {
-            "model_file": a.model.display().to_string(),
-            "model_file_absolute": absolute(&a.model).display().to_string(),
+            "model_file": model_path.display().to_string(),
+            "model_file_absolute": absolute(model_path).display().to_string(),
             "estimate_dir": a.estimate.as_ref().map(|d| d.display().to_string()),
             "estimate_dir_absolute": a.estimate.as_ref().map(|d| absolute(d).display().to_string()),
             "data_file": a.data.display().to_string(),
@@ -678,6 +668,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "{}",
         summary(
             &report,
+            model_path,
             &y_names,
             &u_names,
             &a,
@@ -690,8 +681,40 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// Per output: RMS, fit, prediction RMS and the residual tests, as validation.json lists them.
+pub(crate) fn outputs_json(
+    report: &ValidationReport,
+    y_names: &[String],
+    u_names: &[String],
+) -> Result<Vec<Value>, CliError> {
+    let mut outputs = Vec::new();
+    for (c, name) in y_names.iter().enumerate() {
+        let cross = u_names
+            .iter()
+            .zip(&report.input_correlation[c])
+            .map(|(u, t)| {
+                let mut v = test_json(t)?;
+                if let Value::Object(m) = &mut v {
+                    m.insert("input".into(), json!(u));
+                }
+                Ok(v)
+            })
+            .collect::<Result<Vec<Value>, CliError>>()?;
+        outputs.push(json!({
+            "name": name,
+            "rms": report.rms[c],
+            "fit_percent": report.fit_percent[c],
+            "prediction_rms": report.prediction_rms[c],
+            "whiteness": test_json(&report.whiteness[c])?,
+            "input_correlation": cross,
+        }));
+    }
+    Ok(outputs)
+}
+
 fn summary(
     report: &ValidationReport,
+    model_path: &Path,
     y_names: &[String],
     u_names: &[String],
     a: &ValidateArgs,
@@ -703,7 +726,7 @@ fn summary(
     let mut s = String::new();
     let what = match &a.estimate {
         Some(dir) => format!("the estimate in `{}`", dir.display()),
-        None => format!("the true maps of `{}`", a.model.display()),
+        None => format!("the true maps of `{}`", model_path.display()),
     };
     let _ = writeln!(
         s,

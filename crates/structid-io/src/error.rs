@@ -137,6 +137,18 @@ pub enum IoError {
     /// JSON serialisation failed.
     #[error("cannot serialise JSON")]
     Json(#[from] serde_json::Error),
+
+    /// A stored estimate (JSON) cannot be read: malformed JSON, or numbers that do not fit
+    /// together.
+    #[error("cannot read the estimate `{}`{}: {message}", path.display(), line.map(|l| format!(" (line {l})")).unwrap_or_default())]
+    Estimate {
+        /// The estimate file.
+        path: PathBuf,
+        /// The line of a JSON syntax error, when known.
+        line: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 impl IoError {
@@ -157,6 +169,7 @@ impl IoError {
     pub fn is_input_error(&self) -> bool {
         match self {
             IoError::Model { .. }
+            | IoError::Estimate { .. }
             | IoError::Sweep { .. }
             | IoError::Data { .. }
             | IoError::MissingColumn { .. }

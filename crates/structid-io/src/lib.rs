@@ -47,6 +47,7 @@
 pub mod benchmarks;
 pub mod data_file;
 pub mod error;
+pub mod estimate_file;
 pub mod model_file;
 pub mod output;
 pub mod report;
@@ -57,6 +58,7 @@ pub use data_file::{
     ColumnRef, CsvOptions, DataFile, DataTable, csv_bytes, format_number, write_csv,
 };
 pub use error::{ErrorChain, IoError, core_is_input_error};
+pub use estimate_file::{estimate_json, read_estimate};
 pub use model_file::{
     BUILT_IN_LOCATIONS, BlockSpec, DeclaredLocationSpec, DiscoverSpec, DispersionSpec, LinearSpec,
     LinearStructureKind, ModelFile, NamedStateSpec, SUPPORTED_DISPERSIONS, SignalNames, TruthSpec,

@@ -271,6 +271,18 @@ pub struct EstimateData {
     pub initial_state: Option<Vec<f64>>,
     /// How it was produced.
     pub provenance: Provenance,
+    /// The names of the input and output channels, when known (a data file's columns).
+    #[serde(default)]
+    pub signals: Option<SignalNames>,
+}
+
+/// The names of an estimate's input and output channels.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SignalNames {
+    /// One name per input u.
+    pub u: Vec<String>,
+    /// One name per output y.
+    pub y: Vec<String>,
 }
 
 /// A fitted model: the linear block with every map, ready to simulate, predict and validate;
@@ -334,6 +346,16 @@ impl TryFrom<EstimateData> for Estimate {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
+        if let Some(names) = &data.signals {
+            let d = model.lft().dims();
+            if names.u.len() != d.u || names.y.len() != d.y {
+                return Err(Error::DimensionMismatch {
+                    what: "stored signal names (inputs, outputs)".into(),
+                    expected: format!("({}, {})", d.u, d.y),
+                    found: format!("({}, {})", names.u.len(), names.y.len()),
+                });
+            }
+        }
         if let Some(x0) = &data.initial_state
             && x0.len() != model.lft().dims().states
         {
@@ -414,6 +436,7 @@ impl Estimate {
             blocks: stored,
             initial_state,
             provenance,
+            signals: None,
         })
     }
 
@@ -477,6 +500,21 @@ impl Estimate {
     pub fn with_provenance(mut self, provenance: Provenance) -> Self {
         self.data.provenance = provenance;
         self
+    }
+
+    /// The names of the input and output channels, when known.
+    pub fn signals(&self) -> Option<&SignalNames> {
+        self.data.signals.as_ref()
+    }
+
+    /// The same estimate with channel names (one per input and per output).
+    ///
+    /// # Errors
+    /// [`Error::DimensionMismatch`] when the numbers of names do not match the LFT.
+    pub fn with_signal_names(self, names: SignalNames) -> Result<Self> {
+        let mut data = self.data;
+        data.signals = Some(names);
+        Self::try_from(data)
     }
 
     /// Simulates y from u with the maps in the loop and e = 0, from `x0` (zero when `None`).
