@@ -12,22 +12,57 @@
 //! * [`io`] — model files (TOML), data files (CSV), reports and atomic output;
 //! * [`plot`] — SVG figures;
 //! * [`linear`] — estimating the linear part: ARX, output error, order selection, periodic BLA;
-//! * [`silverbox`] — the Silverbox benchmark pipeline end to end.
+//! * [`discover`] — the discovery workflow: what a nominal model is missing, where, and which effect;
+//! * [`nalgebra`] and [`faer`] — the versions the public types use, so that a program needs only
+//!   `structid` in its Cargo.toml;
+//! * [`prelude`] — the names a typical program uses.
+//!
+//! The benchmark protocols (Silverbox, Cascaded Tanks) live in the unpublished crate
+//! `structid-benchmarks` of the workspace, with their tests and examples.
+//!
+//! A Hammerstein model y = G·N(u) + e, fitted and kept as an [`Estimate`], with nothing but
+//! `structid` in Cargo.toml:
 //!
 //! ```
 //! use std::sync::Arc;
-//! use structid::{identify, paper, IdentifySettings, KernelDispersion};
-//! let exp = paper::spray(500, 1.0, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 1).unwrap();
-//! let id = identify(&exp.model, &exp.data, &IdentifySettings::default()).unwrap();
-//! println!("J = {:.4}", id.cost.total);
+//! use structid::nalgebra::DMatrix;
+//! use structid::prelude::*;
+//! // G: x⁺ = 0.5x + w, y = x + e; the map reads z = u.
+//! let m = |v: f64| DMatrix::from_element(1, 1, v);
+//! let lft = Lft::new(LftMatrices {
+//!     a: m(0.5), bu: m(0.0), be: m(0.0), bw: m(1.0), cy: m(1.0), dyu: m(0.0), dye: m(1.0),
+//!     dyw: m(0.0), cz: m(0.0), dzu: m(1.0), dze: m(0.0), dzw: m(0.0),
+//! }).unwrap();
+//! let n = NonlinearBlock::new("N", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()));
+//! let model = Model::new(lft, vec![n]).unwrap();
+//! let u = Signal::from_fn(400, 1, |k, _| 2.0 * (0.37 * k as f64).sin());
+//! let truth = |z: &[f64]| z[0].clamp(-1.0, 1.0);
+//! let y = model.simulate(&[&truth], &u, None, None).unwrap().y;
+//! let data = Data::new(u, y).unwrap();
+//! let estimate = model.fit(&data, &IdentifySettings::builder().beta(1e-5).build().unwrap()).unwrap();
+//! let fresh = Signal::from_fn(200, 1, |k, _| 1.5 * (0.11 * k as f64).cos());
+//! let y_hat = estimate.simulate(&fresh, None).unwrap().y;
+//! let y_true = model.simulate(&[&truth], &fresh, None, None).unwrap().y;
+//! let err = (0..200).map(|k| (y_hat.get(k, 0) - y_true.get(k, 0)).abs()).fold(0.0, f64::max);
+//! assert!(err < 0.05, "max error {err}");
 //! ```
 
-mod pipeline;
-pub mod silverbox;
-pub mod silverbox_discovery;
-pub mod tanks;
-
 pub use structid_core::*;
+pub use structid_discover as discover;
+pub use {faer, nalgebra};
+
+/// The names a typical program uses: the model, the data, the dispersions, identification,
+/// the fitted [`Estimate`] and its settings.
+pub mod prelude {
+    pub use structid_core::estimate::{Estimate, Prediction, PredictionSettings};
+    pub use structid_core::validation::{ValidationSettings, validate};
+    pub use structid_core::{
+        Data, Dispersion, FourierDispersion, FourierWeights, GaussianKernel, IdentifySettings,
+        Interpolant, KernelDispersion, Lft, LftMatrices, Model, NonlinearBlock,
+        PolynomialDispersion, Signal, SolverChoice, SumDispersion, TotalVariation, identify,
+    };
+    pub use structid_linear::PolynomialModel;
+}
 pub use structid_io as io;
 pub use structid_linear as linear;
 pub use structid_lti as lti;

@@ -3,11 +3,11 @@
 //! Needs `cascaded_tanks/dataBenchmark.csv` under `$STRUCTID_DATA` or `../shared/data`; skips
 //! with a message when it is missing, except under CI.
 
-#[path = "../crates/structid-io/tests/common/mod.rs"]
+#[path = "../../structid-io/tests/common/mod.rs"]
 mod common;
 
 use structid::io::CascadedTanks;
-use structid::tanks::{TanksSettings, TanksStructure, run};
+use structid_benchmarks::tanks::{TanksSettings, TanksStructure, run};
 
 #[test]
 fn tanks_pipeline_beats_its_own_linear_baseline_on_the_test_record() {

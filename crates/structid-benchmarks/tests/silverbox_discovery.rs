@@ -3,11 +3,11 @@
 //! feedback from y, and adding it must shrink the full arrow test's RMS at least 5× from the
 //! BLA's.
 
-#[path = "../crates/structid-io/tests/common/mod.rs"]
+#[path = "../../structid-io/tests/common/mod.rs"]
 mod common;
 
 use structid::io::Silverbox;
-use structid::silverbox_discovery::{SilverboxDiscoverySettings, run};
+use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, run};
 use structid_discover::Effect;
 use structid_discover::discover::Classification;
 use structid_discover::hypotheses::Location;

@@ -57,7 +57,7 @@ use crate::pipeline::{bla, io, map_dispersion, range, refine_settings};
 /// European Journal of Control 2021), as (method, RMS or range).
 ///
 /// ```
-/// assert_eq!(structid::tanks::PUBLISHED[0], ("best linear approximation", "0.75"));
+/// assert_eq!(structid_benchmarks::tanks::PUBLISHED[0], ("best linear approximation", "0.75"));
 /// ```
 pub const PUBLISHED: [(&str, &str); 5] = [
     ("best linear approximation", "0.75"),
@@ -70,7 +70,7 @@ pub const PUBLISHED: [(&str, &str); 5] = [
 /// The structures tried on the cascaded tanks.
 ///
 /// ```
-/// use structid::tanks::TanksStructure;
+/// use structid_benchmarks::tanks::TanksStructure;
 /// assert_eq!(TanksStructure::InputNonlinearity.name(), "y = G·N(u)");
 /// assert!(!TanksStructure::Linear.has_map());
 /// ```
@@ -127,7 +127,7 @@ impl TanksStructure {
 /// Settings of the cascaded-tanks pipeline.
 ///
 /// ```
-/// let s = structid::tanks::TanksSettings::default();
+/// let s = structid_benchmarks::tanks::TanksSettings::default();
 /// assert_eq!(s.orders, vec![1, 2, 3, 4]);
 /// assert!(s.overflow);
 /// ```

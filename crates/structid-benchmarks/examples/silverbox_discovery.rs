@@ -8,7 +8,7 @@
 mod common;
 
 use structid::io::Silverbox;
-use structid::silverbox_discovery::{SilverboxDiscoverySettings, run};
+use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, run};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (path, _out) = common::benchmark_args("silverbox/SNLS80mV.csv", "silverbox_discovery");

@@ -13,7 +13,7 @@
 use structid::Signal;
 use structid::io::{Silverbox, write_atomic};
 use structid::plot::{Chart, Series, render_chart_svg};
-use structid::silverbox::{SilverboxSettings, run};
+use structid_benchmarks::silverbox::{SilverboxSettings, run};
 
 mod common;
 

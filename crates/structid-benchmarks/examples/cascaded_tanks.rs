@@ -15,7 +15,7 @@
 
 use structid::io::{CascadedTanks, write_atomic};
 use structid::plot::{Chart, Series, render_chart_svg};
-use structid::tanks::{PUBLISHED, TanksSettings, run};
+use structid_benchmarks::tanks::{PUBLISHED, TanksSettings, run};
 
 mod common;
 

@@ -1,7 +1,7 @@
 //! The discovery workflow on the Silverbox estimation split (the target: at most 60 s
 //! for the 65k-sample split over all default locations).
 //!
-//! One iteration is `structid::silverbox_discovery::run` with its default settings: the
+//! One iteration is `structid_benchmarks::silverbox_discovery::run` with its default settings: the
 //! second-order BLA on the fitting part (52 050 samples), then `discover` over the four default
 //! locations (each identified on the fitting part and ranked on the 13 012 validation
 //! samples), the naming of the effect and the simulation of the three test splits. The
@@ -12,7 +12,7 @@
 //! between the BLA and `discover` comes from `cargo run --release --example
 //! silverbox_discovery`.
 
-#[path = "../crates/structid-io/tests/common/mod.rs"]
+#[path = "../../structid-io/tests/common/mod.rs"]
 mod common;
 
 use std::hint::black_box;
@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use structid::io::Silverbox;
-use structid::silverbox_discovery::{SilverboxDiscoverySettings, run};
+use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, run};
 
 fn bench(c: &mut Criterion) {
     let path = common::data_dir().join("silverbox/SNLS80mV.csv");

@@ -6,11 +6,11 @@
 //! BENCHMARKS.md), so the test runs one refinement on the fitting part and one on the whole
 //! estimation split.
 
-#[path = "../crates/structid-io/tests/common/mod.rs"]
+#[path = "../../structid-io/tests/common/mod.rs"]
 mod common;
 
 use structid::io::Silverbox;
-use structid::silverbox::{SilverboxSettings, run};
+use structid_benchmarks::silverbox::{SilverboxSettings, run};
 
 #[test]
 fn silverbox_full_arrow_test_is_below_one_millivolt() {
