@@ -68,6 +68,8 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use nalgebra::{DMatrix, DVector};
+
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
@@ -76,6 +78,7 @@ use structid_core::{
     InitialState, Interpolant, LookupTable, Model, PolynomialDispersion, Result, Signal,
     SumDispersion, TotalVariation,
 };
+use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings};
 use structid_lti::LinearSystem;
 
 use crate::effects::{Effect, EffectFit, Naming, NamingSettings, name_effect};
@@ -941,83 +944,38 @@ fn polish(fit: &EffectFit, h: &Hypothesis, est_h: &Data, settle: usize) -> Effec
         return fit.clone();
     }
     let effect = fit.effect;
-    let residual = |theta: &[f64]| -> Option<Vec<f64>> {
-        let map = |z: &[f64]| effect.eval(theta, z[0]);
-        simulation_residual(&h.model, h.location, &map, est_h, settle)
+    let settings = LmSettings::builder()
+        .max_iterations(30)
+        .tolerance(1e-10)
+        .initial_damping(1e-3)
+        .damping_increase(4.0)
+        .damping_decrease(3.0)
+        .min_damping(1e-12)
+        .max_damping(f64::INFINITY)
+        .max_step_attempts(10)
+        .build();
+    let mut problem = PolishProblem {
+        effect,
+        h,
+        est_h,
+        settle,
     };
-    let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-    let mut theta = fit.values();
-    let Some(mut r) = residual(&theta) else {
+    // A start whose simulation fails leaves the map fit as it is.
+    let Ok(lm) =
+        settings.and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, &fit.values()))
+    else {
         return fit.clone();
     };
-    let mut c = cost(&r);
-    let p = theta.len();
-    let mut mu = 1e-3;
-    let mut jacobian: Option<nalgebra::DMatrix<f64>> = None;
-    for _ in 0..30 {
-        // J by forward differences.
-        let n = r.len();
-        let mut j = nalgebra::DMatrix::zeros(n, p);
-        let mut ok = true;
-        for i in 0..p {
-            let step = 1e-6 * theta[i].abs().max(1e-3);
-            let mut t = theta.clone();
-            t[i] += step;
-            match residual(&t) {
-                Some(ri) => {
-                    for k in 0..n {
-                        j[(k, i)] = (ri[k] - r[k]) / step;
-                    }
-                }
-                None => ok = false,
-            }
-        }
-        if !ok {
-            break;
-        }
-        let jtj = j.transpose() * &j;
-        let jtr = j.transpose() * nalgebra::DVector::from_column_slice(&r);
-        jacobian = Some(j);
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut a = jtj.clone();
-            for i in 0..p {
-                a[(i, i)] += mu * jtj[(i, i)].max(1e-300);
-            }
-            let Some(delta) = a.lu().solve(&jtr) else {
-                mu *= 4.0;
-                continue;
-            };
-            let trial: Vec<f64> = theta.iter().zip(delta.iter()).map(|(t, d)| t - d).collect();
-            if let Some(rt) = residual(&trial) {
-                let ct = cost(&rt);
-                if ct < c {
-                    let relative = (c - ct) / c.max(f64::MIN_POSITIVE);
-                    theta = trial;
-                    r = rt;
-                    c = ct;
-                    mu = (mu / 3.0).max(1e-12);
-                    improved = relative > 1e-10;
-                    break;
-                }
-            }
-            mu *= 4.0;
-        }
-        if !improved {
-            break;
-        }
-    }
+    let cov = lm.covariance(&mut problem);
     let names = effect.parameter_names();
-    let n = r.len();
-    let s2 = c / (n.saturating_sub(p)).max(1) as f64;
-    let cov = jacobian.and_then(|j| (j.transpose() * j).try_inverse());
-    let parameters = theta
+    let parameters = lm
+        .theta
         .iter()
         .enumerate()
         .map(|(i, &value)| {
             let half = cov
                 .as_ref()
-                .map(|cv| 1.96 * (s2 * cv[(i, i)]).max(0.0).sqrt())
+                .map(|cv| 1.96 * cv[(i, i)].max(0.0).sqrt())
                 .unwrap_or(f64::INFINITY);
             crate::effects::Parameter {
                 name: names[i].clone(),
@@ -1029,8 +987,47 @@ fn polish(fit: &EffectFit, h: &Hypothesis, est_h: &Data, settle: usize) -> Effec
     EffectFit {
         effect,
         parameters,
-        expression: effect.expression(&theta),
+        expression: effect.expression(&lm.theta),
         ..fit.clone()
+    }
+}
+
+/// The output-error problem of [`polish`]: the simulation residual of the estimation record
+/// with the family's map in the loop; a θ whose simulation fails is rejected.
+struct PolishProblem<'a> {
+    effect: Effect,
+    h: &'a Hypothesis,
+    est_h: &'a Data,
+    settle: usize,
+}
+
+impl LeastSquaresProblem for PolishProblem<'_> {
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
+        let effect = self.effect;
+        let map = |z: &[f64]| effect.eval(theta, z[0]);
+        simulation_residual(
+            &self.h.model,
+            self.h.location,
+            &map,
+            self.est_h,
+            self.settle,
+        )
+        .map(DVector::from_vec)
+    }
+
+    /// Forward differences (a family has at most four parameters, each costs a simulation).
+    fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let mut j = DMatrix::zeros(r.len(), theta.len());
+        for i in 0..theta.len() {
+            let step = 1e-6 * theta[i].abs().max(1e-3);
+            let mut t = theta.to_vec();
+            t[i] += step;
+            let ri = self.residuals(&t)?;
+            for k in 0..r.len() {
+                j[(k, i)] = (ri[k] - r[k]) / step;
+            }
+        }
+        Some(j)
     }
 }
 

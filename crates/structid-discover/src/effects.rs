@@ -19,6 +19,9 @@
 //! at the kinks of the non-smooth families they are approximate.
 
 use nalgebra::{DMatrix, DVector};
+use structid_linear::levenberg_marquardt::{
+    LeastSquaresProblem, LevenbergMarquardt, LmSettings, covariance_from_normal,
+};
 
 /// Errors of effect fitting.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -409,48 +412,47 @@ fn jacobian(effect: Effect, theta: &[f64], z: &[f64]) -> DMatrix<f64> {
     j
 }
 
-/// Levenberg–Marquardt from `start`; returns (θ, RSS).
-fn levenberg_marquardt(effect: Effect, start: &[f64], z: &[f64], w: &[f64]) -> (Vec<f64>, f64) {
-    let mut theta = start.to_vec();
-    let mut rss = rss_of(effect, &theta, z, w);
-    let mut mu = 1e-3;
-    for _ in 0..200 {
-        let j = jacobian(effect, &theta, z);
-        let r = DVector::from_iterator(
-            z.len(),
-            z.iter()
-                .zip(w)
-                .map(|(zk, wk)| wk - effect.eval(&theta, *zk)),
-        );
-        let jtj = j.transpose() * &j;
-        let jtr = j.transpose() * r;
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut m = jtj.clone();
-            for d in 0..m.nrows() {
-                m[(d, d)] += mu * jtj[(d, d)].max(1e-12);
-            }
-            let Some(step) = m.lu().solve(&jtr) else {
-                mu *= 10.0;
-                continue;
-            };
-            let cand: Vec<f64> = theta.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-            let c = rss_of(effect, &cand, z, w);
-            if c.is_finite() && c < rss {
-                let rel = (rss - c) / rss.max(f64::MIN_POSITIVE);
-                theta = cand;
-                rss = c;
-                mu = (mu / 10.0).max(1e-12);
-                improved = rel > 1e-12;
-                break;
-            }
-            mu *= 10.0;
-        }
-        if !improved {
-            break;
-        }
+/// The least-squares problem of fitting `effect` to the points: residuals `w_k − f(z_k; θ)`.
+struct EffectProblem<'a> {
+    effect: Effect,
+    z: &'a [f64],
+    w: &'a [f64],
+}
+
+impl LeastSquaresProblem for EffectProblem<'_> {
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
+        Some(DVector::from_iterator(
+            self.z.len(),
+            self.z
+                .iter()
+                .zip(self.w)
+                .map(|(zk, wk)| wk - self.effect.eval(theta, *zk)),
+        ))
     }
-    (theta, rss)
+
+    fn jacobian(&mut self, theta: &[f64], _: &DVector<f64>) -> Option<DMatrix<f64>> {
+        Some(-jacobian(self.effect, theta, self.z))
+    }
+}
+
+/// Levenberg–Marquardt from `start` (at most 200 iterations of at most 20 trials, relative
+/// decrease 1e-12); returns (θ, RSS), the start itself when its RSS is not finite.
+fn levenberg_marquardt(effect: Effect, start: &[f64], z: &[f64], w: &[f64]) -> (Vec<f64>, f64) {
+    let settings = LmSettings::builder()
+        .max_iterations(200)
+        .tolerance(1e-12)
+        .initial_damping(1e-3)
+        .damping_increase(10.0)
+        .damping_decrease(10.0)
+        .min_damping(1e-12)
+        .max_damping(f64::INFINITY)
+        .max_step_attempts(20)
+        .build();
+    let mut problem = EffectProblem { effect, z, w };
+    match settings.and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, start)) {
+        Ok(fit) => (fit.theta, fit.cost),
+        Err(_) => (start.to_vec(), rss_of(effect, start, z, w)),
+    }
 }
 
 /// Fits `effect` to the points (z_k, w_k) by least squares.
@@ -521,14 +523,14 @@ pub fn fit_effect(effect: Effect, z: &[f64], w: &[f64]) -> Result<EffectFit, Eff
     let rss = rss_of(effect, &theta, z, w);
     let sigma2 = rss / (n - p) as f64;
     let j = jacobian(effect, &theta, z);
-    let cov = (j.transpose() * &j).try_inverse();
+    let cov = covariance_from_normal(&(j.transpose() * &j), sigma2);
     let parameters = names
         .into_iter()
         .enumerate()
         .map(|(i, name)| {
             let se = cov
                 .as_ref()
-                .map(|c| (sigma2 * c[(i, i)]).max(0.0).sqrt())
+                .map(|c| c[(i, i)].max(0.0).sqrt())
                 .filter(|s| s.is_finite())
                 .unwrap_or(f64::INFINITY);
             Parameter {

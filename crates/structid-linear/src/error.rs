@@ -92,6 +92,10 @@ pub enum LinearError {
         /// Largest root modulus of the initial denominator `F`.
         spectral_radius: f64,
     },
+    /// A Levenberg–Marquardt search cannot start: the starting point is empty or not
+    /// finite, the problem rejects it, or the cost there is not finite.
+    #[error("the least-squares search cannot start: {0}")]
+    InvalidStart(String),
     /// The record length is not a whole number of periods.
     #[error("the record of {len} samples is not a whole number of periods of {period} samples")]
     PeriodMismatch {

@@ -57,6 +57,10 @@
 //! or no step lowers the cost (converged), or at the iteration limit (`converged = false`,
 //! not an error).
 //!
+//! The iteration is the workspace's one Levenberg–Marquardt solver, [`levenberg_marquardt`]
+//! ([`LevenbergMarquardt`] on a [`LeastSquaresProblem`]), which other crates use for their
+//! own nonlinear least-squares fits.
+//!
 //! # Order selection ([`select_orders`]) and nonparametric BLA ([`bla_periodic`])
 //! ARX fits over a grid of `(na, nb, nk)` scored by AIC `ln V + 2d/N`, BIC `ln V + d ln N/N`,
 //! FPE `V (N+d)/(N−d)` or the simulation error on a validation record; and the frequency
@@ -82,6 +86,7 @@
 pub mod arx;
 pub mod bla;
 pub mod error;
+pub mod levenberg_marquardt;
 pub mod orders;
 pub mod output_error;
 pub mod polynomial;
@@ -90,6 +95,10 @@ pub mod selection;
 pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx};
 pub use bla::{FrequencyResponse, bla_periodic};
 pub use error::LinearError;
+pub use levenberg_marquardt::{
+    LeastSquaresProblem, LevenbergMarquardt, LmConvergence, LmFit, LmSettings, LmSettingsBuilder,
+    LmStatus, covariance_from_normal,
+};
 pub use orders::Orders;
 pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, oe, output_error};
 pub use polynomial::PolynomialModel;

@@ -5,6 +5,7 @@ use structid_lti::Signal;
 
 use crate::arx::{ArxSettings, fit_arx, prepare_data};
 use crate::error::{LinearError, check_sample_time};
+use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
 use crate::orders::Orders;
 use crate::polynomial::{PolynomialModel, all_pole, root_radius, schur_stable, simulate_monic};
 
@@ -107,6 +108,21 @@ impl OeSettings {
     /// ```
     pub fn arx(&self) -> &ArxSettings {
         &self.arx
+    }
+
+    /// The solver settings of the refinement: these limits with damping × 10 after a failed
+    /// trial, ÷ 10 (floor 1e-15) after an accepted step, up to 1e20.
+    pub(crate) fn lm(&self) -> Result<LmSettings, LinearError> {
+        LmSettings::builder()
+            .max_iterations(self.max_iterations)
+            .tolerance(self.tolerance)
+            .initial_damping(self.initial_damping)
+            .damping_increase(10.0)
+            .damping_decrease(10.0)
+            .min_damping(1e-15)
+            .max_damping(1e20)
+            .max_step_attempts(usize::MAX)
+            .build()
     }
 }
 
@@ -313,93 +329,41 @@ fn refine(
             spectral_radius: root_radius(&initial.den),
         });
     }
-    let problem = Problem {
+    let mut problem = Problem {
         u: uc,
         y: yv,
         orders,
         transient: settings.transient,
+        last: None,
     };
-    let mut theta = parameters_for(initial, orders);
-    let mut yhat = problem.simulate(&theta);
-    let initial_cost = problem.cost(&yhat);
-    if !initial_cost.is_finite() {
-        return Err(LinearError::InvalidModel(
-            "the simulation of the initial model overflows".into(),
-        ));
-    }
-    let mut cost = initial_cost;
-    let mut costs = Vec::new();
-    let mut mu = settings.initial_damping;
-    let mut converged = cost == 0.0;
-    let mut evaluations = 0;
-    while !converged && evaluations < settings.max_iterations {
-        evaluations += 1;
-        let (h, g) = problem.normal_equations(&theta, &yhat);
-        let scale: Vec<f64> = {
-            let dmax = (0..d).map(|i| h[(i, i)]).fold(0.0, f64::max);
-            let floor = (dmax * 1e-300).max(f64::MIN_POSITIVE);
-            (0..d).map(|i| h[(i, i)].max(floor).sqrt()).collect()
-        };
-        let hs = DMatrix::from_fn(d, d, |i, j| h[(i, j)] / (scale[i] * scale[j]));
-        let gs = DVector::from_fn(d, |i, _| g[i] / scale[i]);
-        let mut accepted = None;
-        while mu < 1e20 {
-            let mut a = hs.clone();
-            for i in 0..d {
-                a[(i, i)] += mu * hs[(i, i)].max(1e-12);
+    let fit = LevenbergMarquardt::new(settings.lm()?)
+        .minimize(&mut problem, &parameters_for(initial, orders))
+        .map_err(|e| match e {
+            // the initial model is finite and stable, so only its simulation can fail
+            LinearError::InvalidStart(_) => {
+                LinearError::InvalidModel("the simulation of the initial model overflows".into())
             }
-            let Some(chol) = a.cholesky() else {
-                mu *= 10.0;
-                continue;
-            };
-            let ds = chol.solve(&gs);
-            let cand: Vec<f64> = (0..d).map(|i| theta[i] + ds[i] / scale[i]).collect();
-            if cand.iter().any(|v| !v.is_finite()) || !problem.stable(&cand) {
-                mu *= 10.0;
-                continue;
-            }
-            let yc = problem.simulate(&cand);
-            let cc = problem.cost(&yc);
-            if cc < cost {
-                accepted = Some((cand, yc, cc));
-                break;
-            }
-            mu *= 10.0;
-        }
-        match accepted {
-            None => {
-                // no damped step lowers the cost: stationary to working precision
-                converged = true;
-            }
-            Some((cand, yc, cc)) => {
-                let rel = (cost - cc) / cost;
-                theta = cand;
-                yhat = yc;
-                cost = cc;
-                costs.push(cc);
-                mu = (mu / 10.0).max(1e-15);
-                if rel <= settings.tolerance || cost == 0.0 {
-                    converged = true;
-                }
-            }
-        }
-    }
-    let (h, _) = problem.normal_equations(&theta, &yhat);
+            other => other,
+        })?;
     let n = (len - settings.transient) as f64;
-    let sigma2 = cost * n / (n - d as f64);
-    let parameter_std = covariance_diagonal(&h)
-        .map(|c| c.iter().map(|v| (sigma2 * v.max(0.0)).sqrt()).collect())
+    let parameter_std = fit
+        .covariance(&mut problem)
+        .map(|c| (0..d).map(|i| c[(i, i)].max(0.0).sqrt()).collect())
         .unwrap_or_else(|| vec![f64::INFINITY; d]);
+    let theta = &fit.theta;
     let sample_time = settings.sample_time.or(initial.sample_time);
-    let model = PolynomialModel::from_parameters(orders, &theta, sample_time)?;
+    let model = PolynomialModel::from_parameters(orders, theta, sample_time)?;
+    // The solver minimises the sum of squares; the reported cost is its mean.
     Ok(OeFit {
         model,
-        cost,
-        initial_cost,
-        iterations: costs.len(),
-        costs,
+        cost: fit.cost / n,
+        initial_cost: fit.initial_cost / n,
+        iterations: fit.costs.len(),
+        costs: fit.costs.iter().map(|c| c / n).collect(),
         parameter_std,
-        converged,
+        // No damped step lowering the cost is a stationary point to working precision,
+        // which this fit has always reported as converged.
+        converged: matches!(fit.status, LmStatus::Converged(_) | LmStatus::NoProgress),
     })
 }
 
@@ -454,12 +418,69 @@ fn parameters_for(model: &PolynomialModel, orders: &Orders) -> Vec<f64> {
     theta
 }
 
-/// The data and structure of an output-error problem; parameters `θ = (b…, f…)`.
+/// All-pole filtered signals and, per parameter, (filtered signal, lag, sign).
+type Sensitivities = (Vec<Vec<f64>>, Vec<(usize, usize, f64)>);
+
+/// The data and structure of an output-error problem; parameters `θ = (b…, f…)`,
+/// residuals `ε_k = y_k − ŷ_k(θ)` after the transient, rejecting unstable denominators.
 struct Problem<'a> {
     u: &'a [Vec<f64>],
     y: &'a [f64],
     orders: &'a Orders,
     transient: usize,
+    /// The last simulation `(θ, ŷ)`: the sensitivities filter all of ŷ (the transient
+    /// included), so the normal equations at an accepted θ reuse it instead of simulating
+    /// again.
+    last: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+impl LeastSquaresProblem for Problem<'_> {
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
+        if !self.stable(theta) {
+            return None;
+        }
+        let yhat = self.simulate(theta);
+        let t = self.transient;
+        let r = DVector::from_iterator(
+            self.y.len() - t,
+            self.y[t..].iter().zip(&yhat[t..]).map(|(a, b)| a - b),
+        );
+        self.last = Some((theta.to_vec(), yhat));
+        Some(r)
+    }
+
+    /// `∂ε/∂θ = −Ψ`, materialised (the solver itself uses [`Self::normal_equations`]).
+    fn jacobian(&mut self, theta: &[f64], _: &DVector<f64>) -> Option<DMatrix<f64>> {
+        self.simulate_at(theta);
+        let Some((_, yhat)) = &self.last else {
+            return None;
+        };
+        let (filtered, cols) = self.sensitivities(theta, yhat);
+        let t = self.transient;
+        Some(DMatrix::from_fn(self.y.len() - t, theta.len(), |row, p| {
+            let (f, lag, sign) = cols[p];
+            let k = row + t;
+            if k >= lag {
+                -sign * filtered[f][k - lag]
+            } else {
+                0.0
+            }
+        }))
+    }
+
+    fn normal_equations(
+        &mut self,
+        theta: &[f64],
+        _: &DVector<f64>,
+    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        self.simulate_at(theta);
+        let Some((_, yhat)) = &self.last else {
+            return None;
+        };
+        let (h, g) = self.psi_normal_equations(theta, yhat);
+        // Jᵀε with J = −Ψ
+        Some((h, DVector::from_iterator(g.len(), g.iter().map(|v| -v))))
+    }
 }
 
 impl Problem<'_> {
@@ -486,20 +507,17 @@ impl Problem<'_> {
         simulate_monic(&den, &num, self.u, self.y.len())
     }
 
-    fn cost(&self, yhat: &[f64]) -> f64 {
-        let n = self.y.len() - self.transient;
-        let sse: f64 = self.y[self.transient..]
-            .iter()
-            .zip(&yhat[self.transient..])
-            .map(|(a, b)| (a - b).powi(2))
-            .sum();
-        sse / n as f64
+    /// Makes `last` the simulation at θ (simulating only when it is not).
+    fn simulate_at(&mut self, theta: &[f64]) {
+        if !matches!(&self.last, Some((t, _)) if t == theta) {
+            self.last = Some((theta.to_vec(), self.simulate(theta)));
+        }
     }
 
-    /// `(ΨᵀΨ, Ψᵀε)` over the samples after the transient, with the sensitivities
-    /// `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/F · u_i` and `∂ŷ/∂f_j = −q^{−j}/F · ŷ` computed by
-    /// `n_u + 1` all-pole filters.
-    fn normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, Vec<f64>) {
+    /// The sensitivities `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/F · u_i` and
+    /// `∂ŷ/∂f_j = −q^{−j}/F · ŷ` as `n_u + 1` all-pole filtered signals and, per parameter,
+    /// (filtered signal, lag, sign).
+    fn sensitivities(&self, theta: &[f64], yhat: &[f64]) -> Sensitivities {
         let (den, _) = self.split(theta);
         let len = self.y.len();
         let d = theta.len();
@@ -525,6 +543,15 @@ impl Problem<'_> {
                 cols.push((filtered.len() - 1, j, -1.0));
             }
         }
+        (filtered, cols)
+    }
+
+    /// `(ΨᵀΨ, Ψᵀε)` over the samples after the transient, accumulated row by row from the
+    /// sensitivities (`O(L·d²)`, Ψ never stored).
+    fn psi_normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, Vec<f64>) {
+        let (filtered, cols) = self.sensitivities(theta, yhat);
+        let len = self.y.len();
+        let d = theta.len();
         let mut h = DMatrix::zeros(d, d);
         let mut g = vec![0.0; d];
         let mut psi = vec![0.0; d];
@@ -551,20 +578,6 @@ impl Problem<'_> {
         }
         (h, g)
     }
-}
-
-/// `diag(H⁻¹)` of a symmetric positive definite `H` (Jacobi-scaled Cholesky), `None` when
-/// `H` is singular.
-pub(crate) fn covariance_diagonal(h: &DMatrix<f64>) -> Option<Vec<f64>> {
-    let d = h.nrows();
-    let s: Vec<f64> = (0..d).map(|i| h[(i, i)].sqrt()).collect();
-    if s.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-        return None;
-    }
-    let hs = DMatrix::from_fn(d, d, |i, j| h[(i, j)] / (s[i] * s[j]));
-    let inv = hs.cholesky()?.inverse();
-    let diag: Vec<f64> = (0..d).map(|i| inv[(i, i)] / (s[i] * s[i])).collect();
-    diag.iter().all(|v| v.is_finite()).then_some(diag)
 }
 
 #[cfg(test)]
@@ -662,6 +675,45 @@ mod tests {
         let f1 = output_error(&u, &y, &start, &s1).unwrap();
         assert!(!f1.converged);
         assert!(f1.iterations <= 1);
+    }
+
+    #[test]
+    fn accumulated_normal_equations_equal_those_of_the_jacobian() {
+        let g = PolynomialModel::new(
+            vec![1.0, -1.2, 0.5],
+            vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+            None,
+        )
+        .unwrap();
+        let u = white(51, 300, 1.0, 2);
+        let y = white(52, 300, 1.0, 1);
+        let orders = g.orders();
+        let (uc, yv) = prepare_data(&u, &y, 2, "").unwrap();
+        let mut p = Problem {
+            u: &uc,
+            y: &yv,
+            orders: &orders,
+            transient: 20,
+            last: None,
+        };
+        let theta = parameters_for(&g, &orders);
+        let r = p.residuals(&theta).unwrap();
+        let j = p.jacobian(&theta, &r).unwrap();
+        let (h, jtr) = p.normal_equations(&theta, &r).unwrap();
+        let h_ref = j.transpose() * &j;
+        let jtr_ref = j.transpose() * &r;
+        assert!((&h - &h_ref).norm() <= 1e-12 * h_ref.norm());
+        assert!((&jtr - &jtr_ref).norm() <= 1e-12 * jtr_ref.norm());
+        // J = −∂ŷ/∂θ: a finite difference of the residuals
+        let step = 1e-7;
+        let mut t = theta.clone();
+        t[4] += step;
+        let fd = (p.residuals(&t).unwrap() - &r) / step;
+        assert!((fd - j.column(4)).norm() <= 1e-5 * j.column(4).norm());
+        // unstable denominators are rejected
+        let mut bad = theta.clone();
+        bad[4] = 1.5;
+        assert!(p.residuals(&bad).is_none());
     }
 
     #[test]
