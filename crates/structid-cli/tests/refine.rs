@@ -167,6 +167,25 @@ fn linear_then_refine_then_validate() {
         .as_f64()
         .unwrap_or_else(|| panic!("{v}"));
     assert!(rms < 0.004, "validation simulation RMS {rms}\n{}", o.stdout);
+
+    // The stored estimate of the refinement validates alike with the estimation data gone.
+    std::fs::remove_file(&est).unwrap();
+    let sout = d.join("validation-stored");
+    ok(&[
+        "validate",
+        "--estimate",
+        p(&out.join("estimate.json")),
+        "--data",
+        p(&val),
+        "--settle",
+        "20",
+        "--out",
+        p(&sout),
+    ]);
+    let s = json(&sout.join("validation.json"));
+    let stored = s["outputs"][0]["rms"].as_f64().unwrap();
+    assert!((stored - rms).abs() <= 1e-12 * rms, "stored {stored} vs rebuilt {rms}");
+    assert_eq!(s["estimate"]["workflow"], "refine");
 }
 
 #[test]
