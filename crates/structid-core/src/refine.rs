@@ -48,9 +48,10 @@ use crate::error::{Error, Result};
 use crate::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use crate::identify::{Identification, IdentifySettings, InitialState, identify};
 use crate::interpolant::Interpolant;
-use crate::lft::{Lft, LftMatrices};
+use crate::lft::Lft;
 use crate::model::{Data, Model, NonlinearBlock};
 use crate::simulate::MapBinding;
+use crate::structure::{self, Site};
 
 /// Where the uncertain linear block sits in the structure, and how it is re-estimated.
 pub trait LinearStructure: Send + Sync {
@@ -98,129 +99,8 @@ fn linear_error(e: structid_linear::LinearError) -> Error {
     Error::InvalidStructure(format!("linear estimation: {e}"))
 }
 
-/// The LFT of a linear model without maps, y = Σ_i B_i/F·u_i + e (white output noise): the
-/// nominal model of a system before any map is added.
-///
-/// ```
-/// use structid_core::refine::lti_lft;
-/// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = lti_lft(&g).unwrap();
-/// assert_eq!((lft.dims().w, lft.dims().z), (0, 0));
-/// ```
-pub fn lti_lft(g: &PolynomialModel) -> Result<Lft> {
-    polynomial_lft(g, g.num.len(), false)
-}
-
-/// The LFT of a sensor (output) map, y = N(G·u) + e: the linear output G·u = Σ_i B_i/F·u_i is
-/// the map's input z, and the map's output is measured in white noise. z depends on u only, so
-/// it is measurable without being measured (z = L_zu·u). The sample time of `g` is kept.
-///
-/// ```
-/// use structid_core::refine::output_sensor_lft;
-/// use structid_core::{MapBinding, ZSource};
-/// use structid_linear::PolynomialModel;
-/// use structid_lti::Signal;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = output_sensor_lft(&g).unwrap();
-/// assert_eq!((lft.dims().u, lft.dims().w, lft.dims().z), (1, 1, 1));
-/// assert_eq!(lft.measurability().unwrap(), ZSource::InputOnly);
-/// // y = tanh(G·u): with u a unit step, G·u = 0, 1, 1.5, …
-/// let tanh = |z: &[f64]| z[0].tanh();
-/// let u = Signal::from_fn(3, 1, |_, _| 1.0);
-/// let sim = lft.simulate(&[MapBinding { inputs: &[0], output: 0, map: &tanh }], &u, None, None).unwrap();
-/// assert!((sim.y.get(2, 0) - 1.5f64.tanh()).abs() < 1e-12);
-/// ```
-pub fn output_sensor_lft(g: &PolynomialModel) -> Result<Lft> {
-    if g.num.is_empty() {
-        return Err(Error::InvalidStructure(
-            "an output (sensor) map needs a linear part with at least one input".into(),
-        ));
-    }
-    crate::augment::at_output(&lti_lft(g)?)
-}
-
-/// The LFT of rate feedback (friction-like), y = G·(u − N(ẏ)) + e, where the map reads the
-/// measured output's backward difference ẏ_k = (y_k − y_(k−1))/T_s with T_s the sample time of
-/// `g` (1 when it has none) and y_(−1) = 0.
-///
-/// The LFT carries the previous output as an extra state m_k = y_(k−1): with G = (A, B, C)
-///
-/// ```text
-///   x⁺ = A·x + B·u − B·w,   m⁺ = C·x + e,   y = C·x + e,   z = (C·x + e − m)/T_s
-/// ```
-///
-/// z is a *dynamic* function of the measured output, z = Ψ(q)·y with Ψ = (1 − q⁻¹)/T_s (the
-/// paper's Definition 1 with an LTI Ψ_M), which [`Lft::measurability`] recognises as
-/// [`crate::ZSource::Dynamic`]. G must have one input and an input delay (nk ≥ 1, i.e. its
-/// numerator starts with 0); otherwise y_k would depend on N(ẏ_k), an algebraic loop.
-///
-/// ```
-/// use structid_core::refine::rate_feedback_lft;
-/// use structid_core::ZSource;
-/// use structid_linear::PolynomialModel;
-/// use structid_lti::Signal;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = rate_feedback_lft(&g).unwrap();
-/// assert_eq!(lft.dims().states, 2);
-/// assert!(matches!(lft.measurability().unwrap(), ZSource::Dynamic { .. }));
-/// // z is the measured rate: y = 0, 1, 3 gives z = 0, 10, 20.
-/// let u = Signal::zeros(3, 1);
-/// let y = Signal::new(1, vec![0.0, 1.0, 3.0]).unwrap();
-/// let (z, _) = lft.compute_z(&u, &y).unwrap();
-/// assert!(z.as_slice().iter().zip([0.0, 10.0, 20.0]).all(|(a, b)| (a - b).abs() < 1e-12));
-///
-/// let direct = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![1.0]], sample_time: None };
-/// assert!(rate_feedback_lft(&direct).unwrap_err().to_string().contains("delay"));
-/// ```
-pub fn rate_feedback_lft(g: &PolynomialModel) -> Result<Lft> {
-    if g.num.len() != 1 {
-        return Err(Error::InvalidStructure(format!(
-            "rate feedback y = G·(u − N(ẏ)) + e needs a linear part with exactly one input; \
-             this one has {}",
-            g.num.len()
-        )));
-    }
-    if g.num[0].first().is_some_and(|b| *b != 0.0) {
-        return Err(Error::InvalidStructure(format!(
-            "rate feedback y = G·(u − N(ẏ)) + e needs G to have an input delay (nk ≥ 1, a \
-             numerator starting with 0; it starts with {}); otherwise y_k depends on N(ẏ_k), \
-             an algebraic loop",
-            g.num[0][0]
-        )));
-    }
-    crate::augment::rate_feedback(&lti_lft(g)?)
-}
-
-/// The LFT of y = Σ_i B_i/F·[u; w]_i + e: the first `nu` inputs of `g` are u, the rest w.
-/// `z_from_y` adds z = y (output feedback); otherwise there is no z (a model without maps).
-fn polynomial_lft(g: &PolynomialModel, nu: usize, z_from_y: bool) -> Result<Lft> {
-    let ss = g.to_state_space().map_err(linear_error)?;
-    let n = ss.order();
-    let nw = ss.inputs() - nu;
-    let (b, c, d) = (ss.b(), ss.c(), ss.d());
-    let (ny, nz) = (1, usize::from(z_from_y));
-    let matrices = LftMatrices {
-        a: ss.a().clone(),
-        bu: b.columns(0, nu).into_owned(),
-        be: DMatrix::zeros(n, ny),
-        bw: b.columns(nu, nw).into_owned(),
-        cy: c.clone(),
-        dyu: d.columns(0, nu).into_owned(),
-        dye: DMatrix::identity(ny, ny),
-        dyw: d.columns(nu, nw).into_owned(),
-        // z = y: the same rows as y, noise included (z is the measured output).
-        cz: c.rows(0, nz).into_owned(),
-        dzu: d.view((0, 0), (nz, nu)).into_owned(),
-        dze: DMatrix::identity(nz, ny),
-        dzw: d.view((0, nu), (nz, nw)).into_owned(),
-    };
-    let mut lft = Lft::new(matrices)?;
-    if let Some(ts) = g.sample_time {
-        lft = lft.with_sample_time(ts)?;
-    }
-    Ok(lft)
-}
+/// The LFT of a linear model without maps (white output noise); see [`structure::realise`].
+pub use crate::structure::realise as lti_lft;
 
 /// Output-error estimate of `g` from `inputs` to `y`, optionally with a free initial state.
 ///
@@ -402,20 +282,17 @@ impl LinearStructure for OutputFeedback {
     }
 
     fn lft(&self, g: &PolynomialModel) -> Result<Lft> {
-        if g.num.len() < 2 {
-            return Err(Error::InvalidStructure(
-                "an output-feedback linear part needs at least one u input and the w input".into(),
-            ));
-        }
-        let nu = g.num.len() - 1;
-        if g.num[nu].first().is_some_and(|b| *b != 0.0) {
-            return Err(Error::InvalidStructure(format!(
-                "the feedback path of `{}` has a direct term (b_0 = {}); it needs an input delay \
-                 nk ≥ 1, otherwise y_k depends on N(y_k) (an algebraic loop)",
-                self.name, g.num[nu][0]
-            )));
-        }
-        polynomial_lft(g, nu, true)
+        structure::polynomial_lft(g, Some(Site::OutputFeedback), true).map_err(|e| match e {
+            // Name the block in the message, as the model file's users know it.
+            Error::InvalidStructure(m) if m.starts_with("the feedback path") => {
+                Error::InvalidStructure(m.replacen(
+                    "the feedback path",
+                    &format!("the feedback path of `{}`", self.name),
+                    1,
+                ))
+            }
+            other => other,
+        })
     }
 
     fn estimate_linear(
@@ -510,32 +387,7 @@ impl LinearStructure for InputNonlinearity {
     }
 
     fn lft(&self, g: &PolynomialModel) -> Result<Lft> {
-        if g.num.len() != 1 {
-            return Err(Error::InvalidStructure(
-                "an input-nonlinearity linear part has exactly one input (the map's output)".into(),
-            ));
-        }
-        // G's only input is w; u reaches y only through the map.
-        let ss = g.to_state_space().map_err(linear_error)?;
-        let n = ss.order();
-        let mut lft = Lft::new(LftMatrices {
-            a: ss.a().clone(),
-            bu: DMatrix::zeros(n, 1),
-            be: DMatrix::zeros(n, 1),
-            bw: ss.b().clone(),
-            cy: ss.c().clone(),
-            dyu: DMatrix::zeros(1, 1),
-            dye: DMatrix::identity(1, 1),
-            dyw: ss.d().clone(),
-            cz: DMatrix::zeros(1, n),
-            dzu: DMatrix::identity(1, 1),
-            dze: DMatrix::zeros(1, 1),
-            dzw: DMatrix::zeros(1, 1),
-        })?;
-        if let Some(ts) = g.sample_time {
-            lft = lft.with_sample_time(ts)?;
-        }
-        Ok(lft)
+        structure::polynomial_lft(g, Some(Site::Input), false)
     }
 
     fn estimate_linear(
