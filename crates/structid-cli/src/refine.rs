@@ -267,7 +267,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         .build()?;
     let dispersion = model.blocks()[0].dispersion.clone();
     let r = refine(
-        structure.as_ref(),
+        &structure,
         &spec.model,
         dispersion,
         &data,

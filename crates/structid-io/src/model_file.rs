@@ -114,7 +114,7 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
-use structid_core::refine::{InputNonlinearity, LinearStructure, OutputFeedback};
+use structid_core::refine::LinearStructure;
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
     Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
@@ -1142,14 +1142,11 @@ impl LinearSpec {
     /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`]; `block`
     /// names the map. `None` for `lti` (no map) and for `output` and `rate-feedback`, which
     /// refinement does not support (see [`LinearSpec::refinable`]).
-    pub fn structure(&self, block: &str) -> Option<Box<dyn LinearStructure>> {
-        match self.structure {
-            Some(Site::OutputFeedback) => Some(Box::new(
-                OutputFeedback::new(block).with_separate_numerator(self.separate_numerator),
-            )),
-            Some(Site::Input) => Some(Box::new(InputNonlinearity::new(block))),
-            _ => None,
-        }
+    pub fn structure(&self, block: &str) -> Option<LinearStructure> {
+        let site = self.structure.filter(|_| self.refinable())?;
+        LinearStructure::new(block, site)
+            .ok()
+            .map(|s| s.with_separate_numerator(self.separate_numerator))
     }
 
     /// The LFT of this linear block in its structure.
