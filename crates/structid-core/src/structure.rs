@@ -202,20 +202,20 @@ pub fn without_blocks(nominal: &Lft) -> Result<Lft> {
 #[derive(Clone, Debug)]
 pub enum LinearPart {
     /// A nominal LFT (any noise path, possibly with declared channels).
-    Lft(Lft),
+    Lft(Box<Lft>),
     /// A polynomial G, realised with white output noise ([`realise`]).
     Polynomial(PolynomialModel),
 }
 
 impl From<Lft> for LinearPart {
     fn from(l: Lft) -> Self {
-        LinearPart::Lft(l)
+        LinearPart::Lft(Box::new(l))
     }
 }
 
 impl From<&Lft> for LinearPart {
     fn from(l: &Lft) -> Self {
-        LinearPart::Lft(l.clone())
+        LinearPart::Lft(Box::new(l.clone()))
     }
 }
 
