@@ -20,7 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for h in &r.discovery.hypotheses {
         println!(
             "  {:<16} validation RMS {:.4e}  estimation RMS {:.4e}  β {:.2e}  {:.2} s {}",
-            h.location.key(),
+            h.location.name(),
             h.validation_rms,
             h.estimation_rms,
             h.beta,

@@ -2,7 +2,8 @@
 //! b·y³ = u (Wigren and Schoukens, 2013).
 //!
 //! Structure: y = G·(u − w) + e with w = N(y), G a discrete linear block estimated from the
-//! data and N a static map of the measured output ([`OutputFeedback`]).
+//! data and N a static map of the measured output
+//! ([`LinearStructure::output_feedback`]).
 //!
 //! Pipeline ([`run`]):
 //! 1. The estimation split is divided into a fitting part (the first 80 %) and a validation
@@ -32,7 +33,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::refine::{LinearStructure, OutputFeedback, Refinement, refine};
+use structid_core::refine::{LinearStructure, Refinement, refine};
 use structid_core::{Data, Dispersion, Interpolant, MapBinding, Model, Result, Signal};
 use structid_io::{Silverbox, SilverboxSplit};
 use structid_linear::PolynomialModel;
@@ -176,7 +177,7 @@ fn try_candidate(
     est: &Data,
 ) -> Result<Candidate> {
     let ts = g.sample_time.unwrap_or(1.0);
-    let structure = OutputFeedback::new("N").with_separate_numerator(separate);
+    let structure = LinearStructure::output_feedback("N").with_separate_numerator(separate);
     let g0 = structure.initial_from_bla(g)?;
     let rs = refine_settings(
         settings.max_iterations,
@@ -262,7 +263,8 @@ pub fn run(sb: &Silverbox, settings: &SilverboxSettings) -> Result<SilverboxResu
     let c = candidates[chosen].clone();
 
     // Final model on the whole estimation split.
-    let structure = OutputFeedback::new("N").with_separate_numerator(c.separate_numerator);
+    let structure =
+        LinearStructure::output_feedback("N").with_separate_numerator(c.separate_numerator);
     let g = bla(&est, c.order, ts)?;
     let g0 = structure.initial_from_bla(&g)?;
     let rs = refine_settings(c.iterations, 0.0, 0, ts, settings.tune_sigma, true)?;

@@ -44,9 +44,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
-use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, Refinement, lti_lft, refine,
-};
+use structid_core::refine::{LinearStructure, Refinement, lti_lft, refine};
 use structid_core::{Data, Dispersion, Error, Lft, Result, Signal};
 use structid_io::{CascadedTanks, Record};
 use structid_linear::PolynomialModel;
@@ -112,14 +110,14 @@ impl TanksStructure {
         self != Self::Linear
     }
 
-    fn linear_structure(self) -> Option<Box<dyn LinearStructure>> {
+    fn linear_structure(self) -> Option<LinearStructure> {
         match self {
             Self::Linear => None,
-            Self::OutputFeedback => Some(Box::new(OutputFeedback::new("N"))),
-            Self::OutputFeedbackSeparate => Some(Box::new(
-                OutputFeedback::new("N").with_separate_numerator(true),
-            )),
-            Self::InputNonlinearity => Some(Box::new(InputNonlinearity::new("N"))),
+            Self::OutputFeedback => Some(LinearStructure::output_feedback("N")),
+            Self::OutputFeedbackSeparate => {
+                Some(LinearStructure::output_feedback("N").with_separate_numerator(true))
+            }
+            Self::InputNonlinearity => Some(LinearStructure::input("N")),
         }
     }
 }
@@ -427,7 +425,7 @@ impl Context<'_> {
                 false,
             )?;
             let disp = dispersion(self.settings, &self.map_input(s), kernel)?;
-            let r = refine(ls.as_ref(), &g0, disp, &self.fit, Some(&self.est), &rs)?;
+            let r = refine(&ls, &g0, disp, &self.fit, Some(&self.est), &rs)?;
             let (v, vc) = self.validation(&Sim::Structured(&r))?;
             Ok((v, vc, r))
         };
@@ -566,7 +564,7 @@ pub fn run(tanks: &CascadedTanks, settings: &TanksSettings) -> Result<TanksResul
                     // record itself (from a zero state) is kept.
                     let rs = refine_settings(settings.max_iterations, 1e-3, 0, ts, false, false)?;
                     let disp = dispersion(settings, &cx.map_input(c.structure), c.kernel)?;
-                    refine(ls.as_ref(), &g0, disp, &cx.est, Some(&cx.est), &rs)?
+                    refine(&ls, &g0, disp, &cx.est, Some(&cx.est), &rs)?
                 } else {
                     fitted[i].take().ok_or_else(|| {
                         Error::InvalidStructure("the chosen candidate has no refinement".into())

@@ -19,8 +19,8 @@ use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
 use structid_io::{
-    BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, OutputGuard,
-    SignalNames, TruthSpec, format_number,
+    BlockSpec, DataTable, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames,
+    TruthSpec, format_number,
 };
 use structid_lti::LinearSystem as _;
 use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
@@ -225,14 +225,12 @@ fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
         )));
     }
     let mut nominal = match &mf.linear {
-        Some(spec) if spec.structure == LinearStructureKind::Lti => {
-            Nominal::from_polynomial(&spec.model)?
-        }
+        Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model)?,
         Some(spec) => {
             return Err(CliError::input(format!(
                 "`{}` has [linear] structure = \"{}\"; discovery needs structure = \"lti\" ({how})",
                 path.display(),
-                spec.structure.name()
+                spec.structure_name()
             )));
         }
         None => Nominal::new(mf.lft.clone())?,
@@ -263,19 +261,19 @@ fn parse_locations(
         let found = nominal
             .locations()
             .into_iter()
-            .find(|l| l.key() == s)
+            .find(|l| nominal.key(*l) == s)
             .or_else(|| {
                 nominal
                     .declared()
                     .iter()
-                    .position(|d| d.name == s)
-                    .map(Location::Declared)
+                    .find(|d| d.name == s)
+                    .map(|d| Location::Declared { z: d.z, w: d.w })
             });
         let Some(location) = found else {
             let mut known: Vec<String> = nominal
                 .locations()
                 .iter()
-                .map(|l| format!("`{}`", l.key()))
+                .map(|l| format!("`{}`", nominal.key(*l)))
                 .collect();
             known.extend(nominal.declared().iter().map(|d| format!("`{}`", d.name)));
             return Err(CliError::input(format!(
@@ -401,40 +399,16 @@ fn augmented_file(
     dispersion: DispersionSpec,
     table_file: &str,
 ) -> Result<(ModelFile, String), CliError> {
+    // Output feedback gets a shared numerator, as `structid linear --structure
+    // output-feedback` writes it: y = B/F·(u − w), i.e. num = [B, −B].
     let linear = match (&nominal_mf.linear, location) {
-        (Some(spec), Location::Input) => Some(LinearSpec {
-            structure: LinearStructureKind::Input,
-            model: spec.model.clone(),
-            separate_numerator: false,
-        }),
-        (Some(spec), Location::OutputFeedback) => {
-            // Shared numerator, as `structid linear --structure output-feedback` writes it:
-            // y = B/F·(u − w), i.e. num = [B, −B].
-            let mut g = spec.model.clone();
-            let bw: Vec<f64> = g.num[0].iter().map(|x| -x).collect();
-            g.num.push(bw);
-            Some(LinearSpec {
-                structure: LinearStructureKind::OutputFeedback,
-                model: g,
-                separate_numerator: false,
-            })
-        }
-        (Some(spec), Location::Output) => Some(LinearSpec {
-            structure: LinearStructureKind::OutputSensor,
-            model: spec.model.clone(),
-            separate_numerator: false,
-        }),
-        (Some(spec), Location::RateFeedback) => Some(LinearSpec {
-            structure: LinearStructureKind::RateFeedback,
-            model: spec.model.clone(),
-            separate_numerator: false,
-        }),
-        _ => None,
+        (_, Location::Declared { .. }) | (None, _) => None,
+        (Some(spec), site) => Some(LinearSpec::from_linear(&spec.model, Some(site))),
     };
     let (lft, form) = match &linear {
         Some(spec) => (
             spec.lft()?,
-            format!("[linear] structure = \"{}\"", spec.structure.name()),
+            format!("[linear] structure = \"{}\"", spec.structure_name()),
         ),
         None => (lft.clone(), "[lft]".to_string()),
     };
@@ -683,12 +657,12 @@ fn z_label(location: Location) -> &'static str {
         Location::Output => "z = G·u",
         Location::OutputFeedback => "z = y",
         Location::RateFeedback => "z = ẏ",
-        Location::Declared(_) => "z",
+        Location::Declared { .. } => "z",
     }
 }
 
 /// The best hypothesis' map with its ±2σ band and points, and the map of the augmented model.
-fn map_svg(h: &HypothesisResult, f: &Finding) -> Result<String, CliError> {
+fn map_svg(nominal: &Nominal, h: &HypothesisResult, f: &Finding) -> Result<String, CliError> {
     let c = &h.curve;
     let band = c.std.as_ref().map(|s| {
         (
@@ -719,7 +693,7 @@ fn map_svg(h: &HypothesisResult, f: &Finding) -> Result<String, CliError> {
     let mut chart = Chart::new(
         format!(
             "Map N {}: {}",
-            f.location.key(),
+            nominal.key(f.location),
             f.classification.describe()
         ),
         z_label(f.location),
@@ -817,7 +791,7 @@ fn cell(s: &str) -> String {
 }
 
 fn location_text(nominal: &Nominal, l: Location) -> String {
-    format!("`{}` ({})", l.key(), nominal.describe(l))
+    format!("`{}` ({})", nominal.key(l), nominal.describe(l))
 }
 
 fn gap_table(s: &mut String, estimation: &Gap, validation: &Gap) {
@@ -1202,11 +1176,11 @@ fn finding_md(s: &mut String, r: &ReportInputs<'_>, f: &Finding) {
         if f.equivalent_locations.len() > 1 {
             f.equivalent_locations
                 .iter()
-                .map(|l| format!("`{}`", l.key()))
+                .map(|l| format!("`{}`", r.nominal.key(*l)))
                 .collect::<Vec<_>>()
                 .join(", ")
         } else {
-            format!("none besides `{}`", f.location.key())
+            format!("none besides `{}`", r.nominal.key(f.location))
         }
     );
     s.push('\n');
@@ -1365,7 +1339,7 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
         .iter()
         .map(|h| {
             json!({
-                "location": h.location.key(),
+                "location": r.nominal.key(h.location),
                 "description": r.nominal.describe(h.location),
                 "dispersion": h.dispersion,
                 "beta": h.beta,
@@ -1403,9 +1377,9 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
                 AugmentedMap::Table { z, .. } => json!({ "table": TABLE_FILE, "points": z.len() }),
             };
             json!({
-                "location": f.location.key(),
+                "location": r.nominal.key(f.location),
                 "description": r.nominal.describe(f.location),
-                "equivalent_locations": f.equivalent_locations.iter().map(|l| l.key()).collect::<Vec<_>>(),
+                "equivalent_locations": f.equivalent_locations.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>(),
                 "classification": { "kind": kind, "description": f.classification.describe() },
                 "named_effect": named,
                 "estimator": f.estimator,
@@ -1459,7 +1433,7 @@ fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError
             "sample_time": r.nominal_mf.lft.sample_time(),
         },
         "settings": {
-            "locations": s.locations().map(|l| l.iter().map(|l| l.key()).collect::<Vec<_>>()),
+            "locations": s.locations().map(|l| l.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>()),
             "total_variation": s.total_variation(),
             "settle": s.settle(),
             "sigma_fraction": s.sigma_fraction(),
@@ -1612,7 +1586,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     if let Some(f) = &d.finding {
         if let Some(h) = Some(&f.hypothesis).filter(|h| !h.curve.z.is_empty()) {
             let path = a.out.join("map.svg");
-            guard.write(&path, map_svg(h, f)?.as_bytes())?;
+            guard.write(&path, map_svg(&nominal, h, f)?.as_bytes())?;
             written_files.push(path);
             figures.push((
                 "map.svg".into(),
@@ -1879,9 +1853,9 @@ mod tests {
                 TABLE_FILE,
             )
             .unwrap();
-            let expect_linear = !matches!(location, Location::Declared(_));
+            let expect_linear = !matches!(location, Location::Declared { .. });
             assert_eq!(form.starts_with("[linear]"), expect_linear, "{form}");
-            let sub = dir.path().join(location.key());
+            let sub = dir.path().join(nominal.key(location));
             std::fs::create_dir_all(&sub).unwrap();
             if let AugmentedMap::Table { z, w } = &map {
                 structid_io::write_csv(

@@ -4,9 +4,9 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use structid_core::Site;
 use structid_io::{
-    BlockSpec, DataTable, DispersionSpec, LinearSpec, LinearStructureKind, ModelFile, OutputGuard,
-    SignalNames,
+    BlockSpec, DataTable, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames,
 };
 use structid_linear::{
     ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx, oe,
@@ -325,25 +325,19 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         }
     };
     let structure = match a.structure {
-        StructureArg::Lti => LinearStructureKind::Lti,
-        StructureArg::OutputFeedback => LinearStructureKind::OutputFeedback,
-        StructureArg::Input => LinearStructureKind::Input,
+        StructureArg::Lti => None,
+        StructureArg::OutputFeedback => Some(Site::OutputFeedback),
+        StructureArg::Input => Some(Site::Input),
     };
-    let mut g = model.clone();
-    if structure == LinearStructureKind::OutputFeedback {
-        // The feedback path starts as the input path: y = G·(u − w).
-        let bw: Vec<f64> = g.num[0].iter().map(|x| -x).collect();
-        g.num.push(bw);
-    }
+    // The feedback path starts as the input path: y = G·(u − w).
     let spec = LinearSpec {
-        structure,
-        model: g,
         separate_numerator: a.separate_numerator,
+        ..LinearSpec::from_linear(&model, structure)
     };
     let lft = spec.lft()?;
     let blocks = match structure {
-        LinearStructureKind::Lti => Vec::new(),
-        _ => vec![BlockSpec {
+        None => Vec::new(),
+        Some(_) => vec![BlockSpec {
             name: a.map.clone(),
             inputs: vec![0],
             output: 0,
@@ -393,8 +387,8 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     );
     println!(
         "structure: {}{}",
-        structure.name(),
-        if structure == LinearStructureKind::Lti {
+        structure.map_or("lti", Site::name),
+        if structure.is_none() {
             String::new()
         } else {
             format!(", map `{}`", a.map)

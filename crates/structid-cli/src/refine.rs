@@ -11,8 +11,7 @@ use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{RefineSettings, refine};
 use structid_core::{Data, IdentifySettings, InitialState};
 use structid_io::{
-    DataTable, LinearStructureKind, ModelFile, OutputGuard, RefinementReport, Report, Reproduction,
-    format_number,
+    DataTable, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
 };
 use structid_linear::OeSettings;
 use structid_plot::{Chart, Series, render_chart_svg};
@@ -103,13 +102,13 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             a.model.display()
         )));
     };
-    if !spec.structure.refinable() && spec.structure != LinearStructureKind::Lti {
+    if !spec.refinable() && spec.structure.is_some() {
         return Err(CliError::input(format!(
             "`{}` has structure = \"{}\", which `structid refine` does not support (it \
              re-estimates G for structure = \"output-feedback\" or \"input\"); identify its map \
              with G fixed by `structid identify`",
             a.model.display(),
-            spec.structure.name()
+            spec.structure_name()
         )));
     }
     if mf.blocks.len() != 1 {
@@ -124,7 +123,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let structure = spec.structure(&block).ok_or_else(|| {
         CliError::input(format!(
             "structure = \"{}\" has no map to refine",
-            spec.structure.name()
+            spec.structure_name()
         ))
     })?;
     if a.iterations == 0 {
@@ -270,7 +269,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         .build()?;
     let dispersion = model.blocks()[0].dispersion.clone();
     let r = refine(
-        structure.as_ref(),
+        &structure,
         &spec.model,
         dispersion,
         &data,

@@ -201,7 +201,7 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
     let path = out.join("augmented.toml");
     let mf = structid_io::ModelFile::from_path(&path).unwrap();
     let lin = mf.linear.as_ref().expect("[linear]");
-    assert_eq!(lin.structure, structid_io::LinearStructureKind::Input);
+    assert_eq!(lin.structure, Some(structid_core::Site::Input));
     assert_eq!(mf.blocks.len(), 1);
     // The block's dispersion is the one its map was estimated with.
     match f["estimator"].as_str().unwrap() {

@@ -79,7 +79,6 @@
 //! assert!(id.diagnostics.feasibility_residual < 1e-9);
 //! ```
 
-pub mod augment;
 pub mod dispersion;
 pub mod error;
 pub mod estimate;
@@ -105,6 +104,7 @@ pub mod residual_tests;
 pub mod scenarios;
 pub mod simulate;
 pub mod solver;
+pub mod structure;
 pub mod sum;
 pub mod total_variation;
 pub mod validation;
@@ -131,6 +131,7 @@ pub use posterior::Posterior;
 pub use problem::{Problem, ProblemBlock};
 pub use simulate::{MapBinding, Simulation};
 pub use structid_lti::Signal;
+pub use structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use sum::{StackedFeatures, SumDispersion};
 pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
 pub use validation::{ValidationInitialState, ValidationReport, ValidationSettings, validate};

@@ -361,7 +361,11 @@ mod tests {
     use crate::lft::LftMatrices;
     use crate::model::{Data, Model, NonlinearBlock};
     use crate::problem::Problem;
-    use crate::refine::rate_feedback_lft;
+    use crate::structure::{Site, polynomial_lft};
+
+    fn rate_feedback_lft(g: &structid_linear::PolynomialModel) -> Result<Lft> {
+        polynomial_lft(g, Some(Site::RateFeedback), false)
+    }
     use crate::simulate::MapBinding;
     use nalgebra::dmatrix;
     use proptest::prelude::*;

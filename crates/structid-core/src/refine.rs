@@ -28,13 +28,12 @@
 //! after both steps so that this can be checked.
 //!
 //! # Structures
-//! * [`OutputFeedback`]: y = G·(u − w) + e with w = N(y) (Silverbox, Duffing oscillators,
-//!   stiffness and friction in a feedback loop). By default the feedback path shares G's
-//!   numerator (the physical structure); [`OutputFeedback::with_separate_numerator`] fits
-//!   y = B_u/F·u + B_w/F·w instead.
-//! * [`InputNonlinearity`]: y = G·N(u) + e (Hammerstein).
-//!
-//! Users implement [`LinearStructure`] for other placements.
+//! A [`LinearStructure`] says where the map sits (a [`Site`]):
+//! * [`LinearStructure::output_feedback`]: y = G·(u − w) + e with w = N(y) (Silverbox, Duffing
+//!   oscillators, stiffness and friction in a feedback loop). By default the feedback path
+//!   shares G's numerator (the physical structure);
+//!   [`LinearStructure::with_separate_numerator`] fits y = B_u/F·u + B_w/F·w instead.
+//! * [`LinearStructure::input`]: y = G·N(u) + e (Hammerstein).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -48,179 +47,17 @@ use crate::error::{Error, Result};
 use crate::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use crate::identify::{Identification, IdentifySettings, InitialState, identify};
 use crate::interpolant::Interpolant;
-use crate::lft::{Lft, LftMatrices};
+use crate::lft::Lft;
 use crate::model::{Data, Model, NonlinearBlock};
 use crate::simulate::MapBinding;
-
-/// Where the uncertain linear block sits in the structure, and how it is re-estimated.
-pub trait LinearStructure: Send + Sync {
-    /// A short description for reports, e.g. `output feedback y = G(u − N(y))`.
-    fn describe(&self) -> String;
-
-    /// The name of the unknown map.
-    fn block_name(&self) -> &str;
-
-    /// The LFT for the linear part `g`: one map reading z\[0\] and writing w\[0\], white output
-    /// noise (y = … + e) so that [`refine`]'s cost decreases.
-    fn lft(&self, g: &PolynomialModel) -> Result<Lft>;
-
-    /// The structured model for the linear part `g`, the map having dispersion `dispersion`.
-    fn model(&self, g: &PolynomialModel, dispersion: Arc<dyn Dispersion>) -> Result<Model> {
-        Model::new(
-            self.lft(g)?,
-            vec![NonlinearBlock::new(
-                self.block_name().to_string(),
-                vec![0],
-                0,
-                dispersion,
-            )],
-        )
-    }
-
-    /// Re-estimates the linear part with the maps' outputs fixed at their sample values
-    /// `w_hat` (L × n_w), starting from `g`; with `free_initial_state` the initial state is
-    /// estimated along with G (see [`output_error_with_state`]).
-    fn estimate_linear(
-        &self,
-        data: &Data,
-        w_hat: &Signal,
-        g: &PolynomialModel,
-        settings: &OeSettings,
-        free_initial_state: bool,
-    ) -> Result<OeFit>;
-
-    /// A starting linear part for the data: the best linear approximation from u to y
-    /// expanded to the structure's inputs, given the BLA `bla` (one output, the data's inputs).
-    fn initial_from_bla(&self, bla: &PolynomialModel) -> Result<PolynomialModel>;
-}
+use crate::structure::{self, Site};
 
 fn linear_error(e: structid_linear::LinearError) -> Error {
     Error::InvalidStructure(format!("linear estimation: {e}"))
 }
 
-/// The LFT of a linear model without maps, y = Σ_i B_i/F·u_i + e (white output noise): the
-/// nominal model of a system before any map is added.
-///
-/// ```
-/// use structid_core::refine::lti_lft;
-/// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = lti_lft(&g).unwrap();
-/// assert_eq!((lft.dims().w, lft.dims().z), (0, 0));
-/// ```
-pub fn lti_lft(g: &PolynomialModel) -> Result<Lft> {
-    polynomial_lft(g, g.num.len(), false)
-}
-
-/// The LFT of a sensor (output) map, y = N(G·u) + e: the linear output G·u = Σ_i B_i/F·u_i is
-/// the map's input z, and the map's output is measured in white noise. z depends on u only, so
-/// it is measurable without being measured (z = L_zu·u). The sample time of `g` is kept.
-///
-/// ```
-/// use structid_core::refine::output_sensor_lft;
-/// use structid_core::{MapBinding, ZSource};
-/// use structid_linear::PolynomialModel;
-/// use structid_lti::Signal;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = output_sensor_lft(&g).unwrap();
-/// assert_eq!((lft.dims().u, lft.dims().w, lft.dims().z), (1, 1, 1));
-/// assert_eq!(lft.measurability().unwrap(), ZSource::InputOnly);
-/// // y = tanh(G·u): with u a unit step, G·u = 0, 1, 1.5, …
-/// let tanh = |z: &[f64]| z[0].tanh();
-/// let u = Signal::from_fn(3, 1, |_, _| 1.0);
-/// let sim = lft.simulate(&[MapBinding { inputs: &[0], output: 0, map: &tanh }], &u, None, None).unwrap();
-/// assert!((sim.y.get(2, 0) - 1.5f64.tanh()).abs() < 1e-12);
-/// ```
-pub fn output_sensor_lft(g: &PolynomialModel) -> Result<Lft> {
-    if g.num.is_empty() {
-        return Err(Error::InvalidStructure(
-            "an output (sensor) map needs a linear part with at least one input".into(),
-        ));
-    }
-    crate::augment::at_output(&lti_lft(g)?)
-}
-
-/// The LFT of rate feedback (friction-like), y = G·(u − N(ẏ)) + e, where the map reads the
-/// measured output's backward difference ẏ_k = (y_k − y_(k−1))/T_s with T_s the sample time of
-/// `g` (1 when it has none) and y_(−1) = 0.
-///
-/// The LFT carries the previous output as an extra state m_k = y_(k−1): with G = (A, B, C)
-///
-/// ```text
-///   x⁺ = A·x + B·u − B·w,   m⁺ = C·x + e,   y = C·x + e,   z = (C·x + e − m)/T_s
-/// ```
-///
-/// z is a *dynamic* function of the measured output, z = Ψ(q)·y with Ψ = (1 − q⁻¹)/T_s (the
-/// paper's Definition 1 with an LTI Ψ_M), which [`Lft::measurability`] recognises as
-/// [`crate::ZSource::Dynamic`]. G must have one input and an input delay (nk ≥ 1, i.e. its
-/// numerator starts with 0); otherwise y_k would depend on N(ẏ_k), an algebraic loop.
-///
-/// ```
-/// use structid_core::refine::rate_feedback_lft;
-/// use structid_core::ZSource;
-/// use structid_linear::PolynomialModel;
-/// use structid_lti::Signal;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
-/// let lft = rate_feedback_lft(&g).unwrap();
-/// assert_eq!(lft.dims().states, 2);
-/// assert!(matches!(lft.measurability().unwrap(), ZSource::Dynamic { .. }));
-/// // z is the measured rate: y = 0, 1, 3 gives z = 0, 10, 20.
-/// let u = Signal::zeros(3, 1);
-/// let y = Signal::new(1, vec![0.0, 1.0, 3.0]).unwrap();
-/// let (z, _) = lft.compute_z(&u, &y).unwrap();
-/// assert!(z.as_slice().iter().zip([0.0, 10.0, 20.0]).all(|(a, b)| (a - b).abs() < 1e-12));
-///
-/// let direct = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![1.0]], sample_time: None };
-/// assert!(rate_feedback_lft(&direct).unwrap_err().to_string().contains("delay"));
-/// ```
-pub fn rate_feedback_lft(g: &PolynomialModel) -> Result<Lft> {
-    if g.num.len() != 1 {
-        return Err(Error::InvalidStructure(format!(
-            "rate feedback y = G·(u − N(ẏ)) + e needs a linear part with exactly one input; \
-             this one has {}",
-            g.num.len()
-        )));
-    }
-    if g.num[0].first().is_some_and(|b| *b != 0.0) {
-        return Err(Error::InvalidStructure(format!(
-            "rate feedback y = G·(u − N(ẏ)) + e needs G to have an input delay (nk ≥ 1, a \
-             numerator starting with 0; it starts with {}); otherwise y_k depends on N(ẏ_k), \
-             an algebraic loop",
-            g.num[0][0]
-        )));
-    }
-    crate::augment::rate_feedback(&lti_lft(g)?)
-}
-
-/// The LFT of y = Σ_i B_i/F·[u; w]_i + e: the first `nu` inputs of `g` are u, the rest w.
-/// `z_from_y` adds z = y (output feedback); otherwise there is no z (a model without maps).
-fn polynomial_lft(g: &PolynomialModel, nu: usize, z_from_y: bool) -> Result<Lft> {
-    let ss = g.to_state_space().map_err(linear_error)?;
-    let n = ss.order();
-    let nw = ss.inputs() - nu;
-    let (b, c, d) = (ss.b(), ss.c(), ss.d());
-    let (ny, nz) = (1, usize::from(z_from_y));
-    let matrices = LftMatrices {
-        a: ss.a().clone(),
-        bu: b.columns(0, nu).into_owned(),
-        be: DMatrix::zeros(n, ny),
-        bw: b.columns(nu, nw).into_owned(),
-        cy: c.clone(),
-        dyu: d.columns(0, nu).into_owned(),
-        dye: DMatrix::identity(ny, ny),
-        dyw: d.columns(nu, nw).into_owned(),
-        // z = y: the same rows as y, noise included (z is the measured output).
-        cz: c.rows(0, nz).into_owned(),
-        dzu: d.view((0, 0), (nz, nu)).into_owned(),
-        dze: DMatrix::identity(nz, ny),
-        dzw: d.view((0, nu), (nz, nw)).into_owned(),
-    };
-    let mut lft = Lft::new(matrices)?;
-    if let Some(ts) = g.sample_time {
-        lft = lft.with_sample_time(ts)?;
-    }
-    Ok(lft)
-}
+/// The LFT of a linear model without maps (white output noise); see [`structure::realise`].
+pub use crate::structure::realise as lti_lft;
 
 /// Output-error estimate of `g` from `inputs` to `y`, optionally with a free initial state.
 ///
@@ -341,44 +178,78 @@ fn one_channel(data: &Data, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// Output feedback: y = G·(u − w) + e with w = N(y), z = y.
+/// Where the uncertain linear block's map sits, and how the linear part is re-estimated:
+/// one of the [`Site`]s refinement supports, with the map's name.
 ///
-/// G has one output and the data's inputs. With a shared numerator (the default) the map acts
-/// at the input of G exactly like u does: G is a SISO model driven by u − w (one u channel).
-/// With a separate numerator, y = B_u/F·u + B_w/F·w with a common F (any number of u
-/// channels), which also absorbs a feedback path that is not exactly the input path.
+/// * [`LinearStructure::output_feedback`]: y = G·(u − w) + e with w = N(y), z = y. G has one
+///   output and the data's inputs. With a shared numerator (the default) the map acts at the
+///   input of G exactly like u does: G is a SISO model driven by u − w (one u channel). With a
+///   separate numerator ([`LinearStructure::with_separate_numerator`]), y = B_u/F·u + B_w/F·w
+///   with a common F (any number of u channels), which also absorbs a feedback path that is
+///   not exactly the input path. The feedback path needs a delay (B_w starting at q⁻¹): with a
+///   direct term, y_k would depend on N(y_k), an algebraic loop.
+/// * [`LinearStructure::input`]: an input nonlinearity (Hammerstein), y = G·N(u) + e, z = u.
 ///
-/// The feedback path needs a delay (B_w starting at q⁻¹): with a direct term, y_k would depend
-/// on N(y_k), an algebraic loop.
+/// In both, G is kept in the structure's form: for output feedback its inputs are [u…, w]
+/// (the last numerator is the path of w, −B for the shared path), for an input map its one
+/// input is w.
 ///
 /// ```
 /// use std::sync::Arc;
-/// use structid_core::{KernelDispersion, refine::{LinearStructure, OutputFeedback}};
+/// use structid_core::{KernelDispersion, refine::LinearStructure};
 /// use structid_linear::PolynomialModel;
 /// let g = PolynomialModel { den: vec![1.0, -1.5, 0.7], num: vec![vec![0.0, 1.0, 0.5]], sample_time: None };
-/// let s = OutputFeedback::new("stiffness");
+/// let s = LinearStructure::output_feedback("stiffness");
 /// let g = s.initial_from_bla(&g).unwrap();
 /// let model = s.model(&g, Arc::new(KernelDispersion::gaussian(0.1).unwrap())).unwrap();
 /// assert_eq!(model.blocks()[0].name, "stiffness");
+///
+/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+/// let model = LinearStructure::input("actuator")
+///     .model(&g, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))
+///     .unwrap();
+/// assert_eq!(model.lft().dims().z, 1);
 /// ```
-#[derive(Clone, Debug)]
-pub struct OutputFeedback {
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LinearStructure {
     name: String,
+    site: Site,
     separate: bool,
 }
 
-impl OutputFeedback {
+impl LinearStructure {
     /// Output feedback through G's own numerator; `name` names the map.
-    pub fn new(name: impl Into<String>) -> Self {
+    pub fn output_feedback(name: impl Into<String>) -> Self {
         Self {
             name: name.into(),
+            site: Site::OutputFeedback,
             separate: false,
         }
     }
 
-    /// Fits the feedback path's numerator separately (y = B_u/F·u + B_w/F·w).
+    /// An input map called `name`.
+    pub fn input(name: impl Into<String>) -> Self {
+        Self {
+            name: name.into(),
+            site: Site::Input,
+            separate: false,
+        }
+    }
+
+    /// The map `name` at `site`; refinement supports [`Site::OutputFeedback`] and
+    /// [`Site::Input`].
+    pub fn new(name: impl Into<String>, site: Site) -> Result<Self> {
+        match site {
+            Site::OutputFeedback => Ok(Self::output_feedback(name)),
+            Site::Input => Ok(Self::input(name)),
+            other => Err(unsupported(other)),
+        }
+    }
+
+    /// Fits the feedback path's numerator separately (y = B_u/F·u + B_w/F·w); only output
+    /// feedback has a feedback path.
     pub fn with_separate_numerator(mut self, separate: bool) -> Self {
-        self.separate = separate;
+        self.separate = separate && self.site == Site::OutputFeedback;
         self
     }
 
@@ -386,39 +257,64 @@ impl OutputFeedback {
     pub fn separate_numerator(&self) -> bool {
         self.separate
     }
-}
 
-impl LinearStructure for OutputFeedback {
-    fn describe(&self) -> String {
-        if self.separate {
-            "output feedback y = B_u/F·u + B_w/F·N(y) + e".into()
-        } else {
-            "output feedback y = G·(u − N(y)) + e".into()
+    /// Where the map sits.
+    pub fn site(&self) -> Site {
+        self.site
+    }
+
+    /// A short description for reports, e.g. `output feedback y = G·(u − N(y)) + e`.
+    pub fn describe(&self) -> String {
+        match (self.site, self.separate) {
+            (Site::OutputFeedback, true) => "output feedback y = B_u/F·u + B_w/F·N(y) + e".into(),
+            (Site::OutputFeedback, false) => "output feedback y = G·(u − N(y)) + e".into(),
+            _ => "input nonlinearity y = G·N(u) + e".into(),
         }
     }
 
-    fn block_name(&self) -> &str {
+    /// The name of the unknown map.
+    pub fn block_name(&self) -> &str {
         &self.name
     }
 
-    fn lft(&self, g: &PolynomialModel) -> Result<Lft> {
-        if g.num.len() < 2 {
-            return Err(Error::InvalidStructure(
-                "an output-feedback linear part needs at least one u input and the w input".into(),
-            ));
+    /// The LFT for the linear part `g` (in the structure's form): one map reading z\[0\] and
+    /// writing w\[0\], white output noise (y = … + e) so that [`refine`]'s cost decreases.
+    pub fn lft(&self, g: &PolynomialModel) -> Result<Lft> {
+        match self.site {
+            Site::OutputFeedback => structure::polynomial_lft(g, Some(Site::OutputFeedback), true)
+                .map_err(|e| match e {
+                    // Name the block in the message, as the model file's users know it.
+                    Error::InvalidStructure(m) if m.starts_with("the feedback path") => {
+                        Error::InvalidStructure(m.replacen(
+                            "the feedback path",
+                            &format!("the feedback path of `{}`", self.name),
+                            1,
+                        ))
+                    }
+                    other => other,
+                }),
+            Site::Input => structure::polynomial_lft(g, Some(Site::Input), false),
+            other => Err(unsupported(other)),
         }
-        let nu = g.num.len() - 1;
-        if g.num[nu].first().is_some_and(|b| *b != 0.0) {
-            return Err(Error::InvalidStructure(format!(
-                "the feedback path of `{}` has a direct term (b_0 = {}); it needs an input delay \
-                 nk ≥ 1, otherwise y_k depends on N(y_k) (an algebraic loop)",
-                self.name, g.num[nu][0]
-            )));
-        }
-        polynomial_lft(g, nu, true)
     }
 
-    fn estimate_linear(
+    /// The structured model for the linear part `g`, the map having dispersion `dispersion`.
+    pub fn model(&self, g: &PolynomialModel, dispersion: Arc<dyn Dispersion>) -> Result<Model> {
+        Model::new(
+            self.lft(g)?,
+            vec![NonlinearBlock::new(
+                self.block_name().to_string(),
+                vec![0],
+                0,
+                dispersion,
+            )],
+        )
+    }
+
+    /// Re-estimates the linear part with the maps' outputs fixed at their sample values
+    /// `w_hat` (L × n_w), starting from `g`; with `free_initial_state` the initial state is
+    /// estimated along with G (see [`output_error_with_state`]).
+    pub fn estimate_linear(
         &self,
         data: &Data,
         w_hat: &Signal,
@@ -426,138 +322,92 @@ impl LinearStructure for OutputFeedback {
         settings: &OeSettings,
         free_initial_state: bool,
     ) -> Result<OeFit> {
-        one_channel(data, "output feedback")?;
-        let (u, len) = (data.u(), data.len());
-        let nu = u.channels();
-        if self.separate {
-            let inputs = Signal::from_fn(len, nu + 1, |k, c| {
-                if c < nu { u.get(k, c) } else { w_hat.get(k, 0) }
-            });
-            return output_error_with_state(&inputs, data.y(), g, settings, free_initial_state);
+        match self.site {
+            Site::OutputFeedback => {
+                one_channel(data, "output feedback")?;
+                let (u, len) = (data.u(), data.len());
+                let nu = u.channels();
+                if self.separate {
+                    let inputs = Signal::from_fn(len, nu + 1, |k, c| {
+                        if c < nu { u.get(k, c) } else { w_hat.get(k, 0) }
+                    });
+                    return output_error_with_state(
+                        &inputs,
+                        data.y(),
+                        g,
+                        settings,
+                        free_initial_state,
+                    );
+                }
+                // Shared numerator: G is SISO from v = u − w; the w column of the result is −B.
+                if nu != 1 {
+                    return Err(Error::InvalidStructure(
+                        "a shared feedback numerator needs exactly one input u; use a separate numerator"
+                            .into(),
+                    ));
+                }
+                let v = Signal::from_fn(len, 1, |k, _| u.get(k, 0) - w_hat.get(k, 0));
+                let siso = PolynomialModel {
+                    den: g.den.clone(),
+                    num: vec![g.num[0].clone()],
+                    sample_time: g.sample_time,
+                };
+                let mut fit =
+                    output_error_with_state(&v, data.y(), &siso, settings, free_initial_state)?;
+                let b = fit.model.num[0].clone();
+                fit.model.num.push(b.iter().map(|x| -x).collect());
+                Ok(fit)
+            }
+            Site::Input => {
+                one_channel(data, "input nonlinearity")?;
+                output_error_with_state(w_hat, data.y(), g, settings, free_initial_state)
+            }
+            other => Err(unsupported(other)),
         }
-        // Shared numerator: G is SISO from v = u − w; the w column of the result is −B.
-        if nu != 1 {
-            return Err(Error::InvalidStructure(
-                "a shared feedback numerator needs exactly one input u; use a separate numerator"
-                    .into(),
-            ));
-        }
-        let v = Signal::from_fn(len, 1, |k, _| u.get(k, 0) - w_hat.get(k, 0));
-        let siso = PolynomialModel {
-            den: g.den.clone(),
-            num: vec![g.num[0].clone()],
-            sample_time: g.sample_time,
-        };
-        let mut fit = output_error_with_state(&v, data.y(), &siso, settings, free_initial_state)?;
-        let b = fit.model.num[0].clone();
-        fit.model.num.push(b.iter().map(|x| -x).collect());
-        Ok(fit)
     }
 
-    fn initial_from_bla(&self, bla: &PolynomialModel) -> Result<PolynomialModel> {
-        if bla.num.is_empty() {
-            return Err(Error::InvalidStructure("the BLA has no inputs".into()));
+    /// A starting linear part for the data: the best linear approximation from u to y
+    /// expanded to the structure's inputs, given the BLA `bla` (one output, the data's inputs).
+    pub fn initial_from_bla(&self, bla: &PolynomialModel) -> Result<PolynomialModel> {
+        match self.site {
+            Site::OutputFeedback => {
+                if bla.num.is_empty() {
+                    return Err(Error::InvalidStructure("the BLA has no inputs".into()));
+                }
+                let mut g = bla.clone();
+                // The feedback path starts as the u path (shared) or as that of the first input.
+                let mut bw: Vec<f64> = bla.num[0].iter().map(|x| -x).collect();
+                if bw.first().is_some_and(|b| *b != 0.0) {
+                    return Err(Error::InvalidStructure(
+                        "the BLA has a direct term; estimate it with an input delay nk ≥ 1 for an \
+                         output-feedback structure"
+                            .into(),
+                    ));
+                }
+                if bw.is_empty() {
+                    bw.push(0.0);
+                }
+                g.num.push(bw);
+                Ok(g)
+            }
+            Site::Input => {
+                if bla.num.len() != 1 {
+                    return Err(Error::InvalidStructure(
+                        "an input nonlinearity needs a BLA with one input".into(),
+                    ));
+                }
+                Ok(bla.clone())
+            }
+            other => Err(unsupported(other)),
         }
-        let mut g = bla.clone();
-        // The feedback path starts as the u path (shared) or as that of the first input.
-        let mut bw: Vec<f64> = bla.num[0].iter().map(|x| -x).collect();
-        if bw.first().is_some_and(|b| *b != 0.0) {
-            return Err(Error::InvalidStructure(
-                "the BLA has a direct term; estimate it with an input delay nk ≥ 1 for an \
-                 output-feedback structure"
-                    .into(),
-            ));
-        }
-        if bw.is_empty() {
-            bw.push(0.0);
-        }
-        g.num.push(bw);
-        Ok(g)
     }
 }
 
-/// An input nonlinearity (Hammerstein): y = G·N(u) + e with z = u.
-///
-/// ```
-/// use std::sync::Arc;
-/// use structid_core::{KernelDispersion, refine::{InputNonlinearity, LinearStructure}};
-/// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
-/// let model = InputNonlinearity::new("actuator")
-///     .model(&g, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))
-///     .unwrap();
-/// assert_eq!(model.lft().dims().z, 1);
-/// ```
-#[derive(Clone, Debug)]
-pub struct InputNonlinearity {
-    name: String,
-}
-
-impl InputNonlinearity {
-    /// An input map called `name`.
-    pub fn new(name: impl Into<String>) -> Self {
-        Self { name: name.into() }
-    }
-}
-
-impl LinearStructure for InputNonlinearity {
-    fn describe(&self) -> String {
-        "input nonlinearity y = G·N(u) + e".into()
-    }
-
-    fn block_name(&self) -> &str {
-        &self.name
-    }
-
-    fn lft(&self, g: &PolynomialModel) -> Result<Lft> {
-        if g.num.len() != 1 {
-            return Err(Error::InvalidStructure(
-                "an input-nonlinearity linear part has exactly one input (the map's output)".into(),
-            ));
-        }
-        // G's only input is w; u reaches y only through the map.
-        let ss = g.to_state_space().map_err(linear_error)?;
-        let n = ss.order();
-        let mut lft = Lft::new(LftMatrices {
-            a: ss.a().clone(),
-            bu: DMatrix::zeros(n, 1),
-            be: DMatrix::zeros(n, 1),
-            bw: ss.b().clone(),
-            cy: ss.c().clone(),
-            dyu: DMatrix::zeros(1, 1),
-            dye: DMatrix::identity(1, 1),
-            dyw: ss.d().clone(),
-            cz: DMatrix::zeros(1, n),
-            dzu: DMatrix::identity(1, 1),
-            dze: DMatrix::zeros(1, 1),
-            dzw: DMatrix::zeros(1, 1),
-        })?;
-        if let Some(ts) = g.sample_time {
-            lft = lft.with_sample_time(ts)?;
-        }
-        Ok(lft)
-    }
-
-    fn estimate_linear(
-        &self,
-        data: &Data,
-        w_hat: &Signal,
-        g: &PolynomialModel,
-        settings: &OeSettings,
-        free_initial_state: bool,
-    ) -> Result<OeFit> {
-        one_channel(data, "input nonlinearity")?;
-        output_error_with_state(w_hat, data.y(), g, settings, free_initial_state)
-    }
-
-    fn initial_from_bla(&self, bla: &PolynomialModel) -> Result<PolynomialModel> {
-        if bla.num.len() != 1 {
-            return Err(Error::InvalidStructure(
-                "an input nonlinearity needs a BLA with one input".into(),
-            ));
-        }
-        Ok(bla.clone())
-    }
+fn unsupported(site: Site) -> Error {
+    Error::InvalidStructure(format!(
+        "refinement re-estimates G for a map in output feedback or at the input, not {}",
+        site.describe()
+    ))
 }
 
 /// Settings of [`refine`]; build with [`RefineSettings::builder`].
@@ -808,7 +658,7 @@ fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize
 /// alternation stops when its simulation error improves by less than the tolerance, and the
 /// best iteration is returned; without one, when J improves by less than the tolerance.
 pub fn refine(
-    structure: &dyn LinearStructure,
+    structure: &LinearStructure,
     initial: &PolynomialModel,
     dispersion: Arc<dyn Dispersion>,
     data: &Data,

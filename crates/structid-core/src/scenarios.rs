@@ -8,8 +8,8 @@ use structid_lti::Signal;
 use crate::dispersion::Dispersion;
 use crate::error::Result;
 use crate::lft::{Lft, LftMatrices};
-use crate::model::{Model, NonlinearBlock};
 use crate::paper::{Experiment, gaussian_noise};
+use crate::structure::Structure;
 
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
 /// (spectral radius 0.9, reproducible from `seed`), N = tanh, u uniform on [−2, 2] and white
@@ -100,9 +100,9 @@ fn build_hammerstein(
     let n = ng + usize::from(coloured);
     let mut a = DMatrix::zeros(n, n);
     a.view_mut((0, 0), (ng, ng)).copy_from(g.a());
+    let mut bu = DMatrix::zeros(n, 1);
+    bu.view_mut((0, 0), (ng, 1)).copy_from(g.b());
     let mut be = DMatrix::zeros(n, 1);
-    let mut bw = DMatrix::zeros(n, 1);
-    bw.view_mut((0, 0), (ng, 1)).copy_from(g.b());
     let mut cy = DMatrix::zeros(1, n);
     cy.view_mut((0, 0), (1, ng)).copy_from(g.c());
     if coloured {
@@ -111,21 +111,22 @@ fn build_hammerstein(
         be[(ng, 0)] = 1.0;
         cy[(0, ng)] = 1.3;
     }
-    let lft = Lft::new(LftMatrices {
+    // The nominal y = G·u + H·e; the map goes ahead of G.
+    let nominal = Lft::new(LftMatrices {
         a,
-        bu: DMatrix::zeros(n, 1),
+        bu,
         be,
-        bw,
+        bw: DMatrix::zeros(n, 0),
         cy,
-        dyu: DMatrix::zeros(1, 1),
+        dyu: g.d().clone(),
         dye: DMatrix::from_element(1, 1, 1.0),
-        dyw: g.d().clone(),
-        cz: DMatrix::zeros(1, n),
-        dzu: DMatrix::from_element(1, 1, 1.0),
-        dze: DMatrix::zeros(1, 1),
-        dzw: DMatrix::zeros(1, 1),
+        dyw: DMatrix::zeros(1, 0),
+        cz: DMatrix::zeros(0, n),
+        dzu: DMatrix::zeros(0, 1),
+        dze: DMatrix::zeros(0, 1),
+        dzw: DMatrix::zeros(0, 0),
     })?;
-    let model = Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, dispersion)])?;
+    let model = Structure::hammerstein(nominal, dispersion).model()?;
     let noise = gaussian_noise(len, 1, noise_std, seed.wrapping_add(1));
     let u = match excitation {
         Excitation::White => {

@@ -8,8 +8,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, RefineSettings, lti_lft,
-    output_error_with_state, refine,
+    LinearStructure, RefineSettings, lti_lft, output_error_with_state, refine,
 };
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
@@ -53,7 +52,7 @@ fn simulate(
     noise: f64,
     seed: u64,
 ) -> Signal {
-    let structure = OutputFeedback::new("N");
+    let structure = LinearStructure::output_feedback("N");
     let lft = structure
         .lft(&structure.initial_from_bla(g).unwrap())
         .unwrap();
@@ -133,7 +132,7 @@ proptest! {
         let u = input(1500, 0.3, seed);
         let y = simulate(&truth(), &stiffness, &u, 0.01, seed);
         let data = Data::new(u, y.clone()).unwrap();
-        let structure = OutputFeedback::new("N").with_separate_numerator(separate);
+        let structure = LinearStructure::output_feedback("N").with_separate_numerator(separate);
         let start = structure
             .initial_from_bla(&second_order(r, std::f64::consts::PI / 7.0, [0.1 * gain, 0.02]))
             .unwrap();
@@ -170,7 +169,7 @@ fn refinement_converges_to_the_true_system_from_a_wrong_linear_part() {
     let u = input(3000, 0.3, 7);
     let y = simulate(&truth(), &stiffness, &u, 0.002, 7);
     let data = Data::new(u, y.clone()).unwrap();
-    let structure = OutputFeedback::new("N");
+    let structure = LinearStructure::output_feedback("N");
     let wrong = second_order(0.8, std::f64::consts::PI / 6.0, [0.14, 0.03]);
     let start = structure.initial_from_bla(&wrong).unwrap();
     let uv = input(2000, 0.3, 99);
@@ -223,7 +222,7 @@ fn refinement_converges_to_the_true_system_from_a_wrong_linear_part() {
 #[test]
 fn input_nonlinearity_refinement_lowers_the_validation_error() {
     let g = second_order(0.9, 0.4, [0.2, 0.1]);
-    let structure = InputNonlinearity::new("actuator");
+    let structure = LinearStructure::input("actuator");
     let lft = structure.lft(&g).unwrap();
     let sat = |z: &[f64]| z[0].tanh();
     let sim = |u: &Signal| {
@@ -271,7 +270,7 @@ fn bad_settings_and_structures_are_errors() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("transient"), "{e}");
-    let structure = OutputFeedback::new("N");
+    let structure = LinearStructure::output_feedback("N");
     // A feedback path without delay is an algebraic loop.
     let direct = PolynomialModel {
         den: vec![1.0, -0.5],
@@ -296,7 +295,7 @@ fn bad_settings_and_structures_are_errors() {
     let w = Signal::zeros(50, 1);
     // A feedback numerator started at zero has no free coefficient (its orders are read
     // from the leading zeros): an error, not a path silently fixed at zero.
-    let separate = OutputFeedback::new("N").with_separate_numerator(true);
+    let separate = LinearStructure::output_feedback("N").with_separate_numerator(true);
     let mut zero_w = g.clone();
     zero_w.num[1] = vec![0.0, 0.0, 0.0];
     let one = Data::new(
@@ -387,7 +386,7 @@ fn free_initial_state_fit_never_ends_above_the_start_with_its_best_state() {
 fn auto_uses_the_feature_solver_when_the_features_are_few() {
     let u = input(1500, 0.3, 11);
     let y = simulate(&truth(), &stiffness, &u, 0.01, 11);
-    let structure = OutputFeedback::new("N");
+    let structure = LinearStructure::output_feedback("N");
     let model = structure
         .model(
             &structure.initial_from_bla(&truth()).unwrap(),

@@ -1295,7 +1295,7 @@ pub fn discover(
                 .filter_map(|h| h
                     .failure
                     .as_ref()
-                    .map(|f| format!("{}: {f}", h.location.key())))
+                    .map(|f| format!("{}: {f}", nominal.key(h.location))))
                 .collect::<Vec<_>>()
                 .join("; ")
         );

@@ -3,7 +3,7 @@
 //! A [`Nominal`] model is an LFT without maps, y = G·u + H·e (one input, one output, any noise
 //! path H), possibly with *declared* injection points and signals: w columns and z rows of its
 //! LFT that the model file names, unused until a block is put there. Each [`Location`] inserts
-//! one unknown static block N (the LFTs are built by [`structid_core::augment`]):
+//! one unknown static block N (the LFTs are built by [`Site::insert`]):
 //!
 //! | location | model | z (measurable because) |
 //! |---|---|---|
@@ -20,61 +20,16 @@
 
 use std::sync::Arc;
 
-use structid_core::refine::lti_lft;
+use structid_core::structure::{realise, without_blocks};
 use structid_core::{
-    Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, NonlinearBlock, Result, Signal,
-    Simulation, augment,
+    Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, Result, Signal, Simulation, Site,
+    Structure,
 };
 use structid_linear::PolynomialModel;
 
-/// Where the unknown block is inserted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-pub enum Location {
-    /// An actuator map ahead of G: y = G·N(u) + H·e.
-    Input,
-    /// A sensor map of the linear output: y = N(G·u) + H·e.
-    Output,
-    /// Stiffness-like feedback from the output: y = G·(u − N(y)) + H·e.
-    OutputFeedback,
-    /// Friction-like feedback from the output's rate: y = G·(u − N(ẏ)) + H·e.
-    RateFeedback,
-    /// The `i`-th location declared with the nominal model ([`Nominal::with_location`]).
-    Declared(usize),
-}
-
-impl Location {
-    /// The four built-in locations, in the order of the table above.
-    pub const ALL: [Location; 4] = [
-        Location::Input,
-        Location::Output,
-        Location::OutputFeedback,
-        Location::RateFeedback,
-    ];
-
-    /// A short description for reports (see [`Nominal::describe`] for declared locations'
-    /// names).
-    pub fn describe(self) -> &'static str {
-        match self {
-            Location::Input => "at the input: y = G·N(u) + e",
-            Location::Output => "at the output (sensor): y = N(G·u) + e",
-            Location::OutputFeedback => "in feedback from the output: y = G·(u − N(y)) + e",
-            Location::RateFeedback => "in feedback from the output rate: y = G·(u − N(ẏ)) + e",
-            Location::Declared(_) => "at a location declared with the nominal model",
-        }
-    }
-
-    /// A short identifier: `input`, `output`, `output-feedback`, `rate-feedback` or
-    /// `declared-i` (the `[linear]` structure names of model files for the first four).
-    pub fn key(self) -> String {
-        match self {
-            Location::Input => "input".into(),
-            Location::Output => "output".into(),
-            Location::OutputFeedback => "output-feedback".into(),
-            Location::RateFeedback => "rate-feedback".into(),
-            Location::Declared(i) => format!("declared-{i}"),
-        }
-    }
-}
+/// Where the unknown block is inserted: structid-core's [`Site`], under the name this crate
+/// has always used.
+pub use structid_core::Site as Location;
 
 /// A location the nominal model declares: the block reads z row `z` and writes w column `w`
 /// of the nominal LFT.
@@ -142,13 +97,13 @@ impl Nominal {
     /// assert_eq!(nominal.locations(), Location::ALL.to_vec());
     /// ```
     pub fn from_polynomial(g: &PolynomialModel) -> Result<Self> {
-        Self::new(lti_lft(g)?)
+        Self::new(realise(g)?)
     }
 
     /// Declares a location: a block reading z row `z` and writing w column `w` of the LFT.
     pub fn with_location(mut self, name: &str, z: usize, w: usize) -> Result<Self> {
         // Fails early when the channels do not exist.
-        augment::declared(&self.lft, z, w)?;
+        Site::Declared { z, w }.insert(&self.lft)?;
         self.declared.push(DeclaredLocation {
             name: name.to_string(),
             z,
@@ -189,26 +144,50 @@ impl Nominal {
 
     /// The nominal model without any block (its declared channels dropped).
     pub fn model(&self) -> Result<Model> {
-        Model::new(augment::without_blocks(&self.lft)?, Vec::new())
+        Model::new(without_blocks(&self.lft)?, Vec::new())
     }
 
     /// Every candidate location: the four built-in ones, then the declared ones.
     pub fn locations(&self) -> Vec<Location> {
         Location::ALL
             .into_iter()
-            .chain((0..self.declared.len()).map(Location::Declared))
+            .chain(
+                self.declared
+                    .iter()
+                    .map(|d| Location::Declared { z: d.z, w: d.w }),
+            )
             .collect()
+    }
+
+    /// The index of the declared location a [`Location::Declared`] reads and writes.
+    fn declared_index(&self, location: Location) -> Option<usize> {
+        match location {
+            Location::Declared { z, w } => self.declared.iter().position(|d| d.z == z && d.w == w),
+            _ => None,
+        }
+    }
+
+    /// A short identifier of `location`: its [`Site::name`] for the built-in ones, `declared-i`
+    /// for the i-th declared one (the names of `--locations` and the reports).
+    pub fn key(&self, location: Location) -> String {
+        match location {
+            Location::Declared { z, w } => match self.declared_index(location) {
+                Some(i) => format!("declared-{i}"),
+                None => format!("declared-z{z}-w{w}"),
+            },
+            other => other.name().to_string(),
+        }
     }
 
     /// A description of `location` for reports.
     pub fn describe(&self, location: Location) -> String {
         match location {
-            Location::Declared(i) => match self.declared.get(i) {
-                Some(d) => format!(
-                    "at the declared location `{}` (z row {}, w column {})",
-                    d.name, d.z, d.w
+            Location::Declared { z, w } => match self.declared_index(location) {
+                Some(i) => format!(
+                    "at the declared location `{}` (z row {z}, w column {w})",
+                    self.declared[i].name
                 ),
-                None => format!("at declared location {i} (not declared)"),
+                None => format!("at z row {z}, w column {w} (not declared)"),
             },
             other => other.describe().to_string(),
         }
@@ -247,25 +226,18 @@ impl Nominal {
         location: Location,
         dispersion: Arc<dyn Dispersion>,
     ) -> Result<Hypothesis> {
-        let base = augment::without_blocks(&self.lft)?;
-        let lft = match location {
-            Location::Input => augment::at_input(&base)?,
-            Location::Output => augment::at_output(&base)?,
-            Location::OutputFeedback => augment::output_feedback(&base)?,
-            Location::RateFeedback => augment::rate_feedback(&base)?,
-            Location::Declared(i) => {
-                let d = self.declared.get(i).ok_or_else(|| {
-                    Error::InvalidStructure(format!(
-                        "location {i} is not declared (the nominal model declares {})",
-                        self.declared.len()
-                    ))
-                })?;
-                augment::declared(&self.lft, d.z, d.w)?
-            }
-        };
+        if let Location::Declared { z, w } = location
+            && self.declared_index(location).is_none()
+        {
+            return Err(Error::InvalidStructure(format!(
+                "z row {z} and w column {w} are not a declared location (the nominal model \
+                 declares {})",
+                self.declared.len()
+            )));
+        }
         Ok(Hypothesis {
             location,
-            model: Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, dispersion)])?,
+            model: Structure::new(&self.lft, location, dispersion).model()?,
             sample_time: self.lft.sample_time().unwrap_or(1.0),
         })
     }

@@ -464,7 +464,7 @@ fn static_trace(
 fn nominal_map(location: Location) -> fn(f64) -> f64 {
     match location {
         Location::Input | Location::Output => |z| z,
-        Location::OutputFeedback | Location::RateFeedback | Location::Declared(_) => |_| 0.0,
+        Location::OutputFeedback | Location::RateFeedback | Location::Declared { .. } => |_| 0.0,
     }
 }
 

@@ -66,7 +66,7 @@ fn static_effects_are_named_located_and_close_the_gap() {
         eprintln!(
             "seed {seed:2}: {:<40} {:<16} θ {:?} → {} at {:?} (named {named}, located {located}, params {within}), shrink {shrink:.1}×, {:.1} s, dir {:?}, {}",
             effect.name(),
-            location.key(),
+            location.name(),
             theta,
             d.finding
                 .as_ref()
@@ -76,7 +76,7 @@ fn static_effects_are_named_located_and_close_the_gap() {
                     other => other.describe(),
                 })
                 .unwrap_or_else(|| "nothing".into()),
-            d.finding.as_ref().map(|f| f.location.key()),
+            d.finding.as_ref().map(|f| f.location.name()),
             d.seconds,
             d.finding
                 .as_ref()
@@ -143,7 +143,7 @@ fn hysteresis_is_reported_as_dynamic() {
             },
             f.map(|f| f.classification.describe())
                 .unwrap_or_else(|| "nothing".into()),
-            f.map(|f| f.location.key()),
+            f.map(|f| f.location.name()),
             f.map(|f| f.direction.explained).unwrap_or(0.0),
             f.map(|f| f.direction.t_statistic).unwrap_or(0.0),
         );

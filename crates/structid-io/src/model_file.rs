@@ -114,14 +114,11 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
-use structid_core::refine::{
-    InputNonlinearity, LinearStructure, OutputFeedback, lti_lft, output_sensor_lft,
-    rate_feedback_lft,
-};
+use structid_core::refine::LinearStructure;
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
     Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
-    NonlinearBlock, PolynomialDispersion, SumDispersion, TotalVariation,
+    NonlinearBlock, PolynomialDispersion, Site, SumDispersion, TotalVariation,
 };
 use structid_linear::PolynomialModel;
 use structid_lti::{ContinuousStateSpace, Signal};
@@ -1074,60 +1071,26 @@ fn parse_lft(
     Ok((lft, dz, dw))
 }
 
-/// The structure a `[linear]` section places its polynomial block in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LinearStructureKind {
-    /// y = G·(u − N(y)) + e: one map in feedback from the measured output (z = y).
-    OutputFeedback,
-    /// y = G·N(u) + e: one map at the input (z = u).
-    Input,
-    /// y = N(G·u) + e: one sensor map at the output of G (z = G·u, which depends on u only);
-    /// see [`output_sensor_lft`].
-    OutputSensor,
-    /// y = G·(u − N(ẏ)) + e with ẏ_k = (y_k − y_(k−1))/T_s: one map in feedback from the rate of
-    /// the measured output (z = Δy/T_s, a dynamic Ψ_M); see [`rate_feedback_lft`].
-    RateFeedback,
-    /// y = G·u + e: no map (a nominal linear model).
-    Lti,
-}
+/// The `[linear] structure` names in the order of the documentation: the sites of
+/// [`Site::name`] and `lti`, a linear model without a map.
+pub const LINEAR_STRUCTURES: [&str; 5] =
+    ["output-feedback", "input", "output", "rate-feedback", "lti"];
 
-impl LinearStructureKind {
-    /// Every structure, in the order of the documentation.
-    pub const ALL: [Self; 5] = [
-        Self::OutputFeedback,
-        Self::Input,
-        Self::OutputSensor,
-        Self::RateFeedback,
-        Self::Lti,
-    ];
-
-    /// The name used in model files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::OutputFeedback => "output-feedback",
-            Self::Input => "input",
-            Self::OutputSensor => "output",
-            Self::RateFeedback => "rate-feedback",
-            Self::Lti => "lti",
-        }
-    }
-
-    /// Whether `structid refine` (a [`LinearStructure`]) supports the structure.
-    pub fn refinable(self) -> bool {
-        matches!(self, Self::OutputFeedback | Self::Input)
-    }
-
-    /// The structure called `name`, if any.
-    pub fn parse(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == name)
+/// The site a `[linear] structure` name places the block at: `Some(None)` for `lti` (no
+/// block), `None` for an unknown name.
+pub fn parse_linear_structure(name: &str) -> Option<Option<Site>> {
+    if name == "lti" {
+        Some(None)
+    } else {
+        Site::parse(name).map(Some)
     }
 }
 
 /// A `[linear]` section: a polynomial linear block G (one output) in a named structure.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearSpec {
-    /// Where G sits.
-    pub structure: LinearStructureKind,
+    /// Where the block sits (`None`: `structure = "lti"`, no block).
+    pub structure: Option<Site>,
     /// G in the structure's form: for output feedback its inputs are [u…, w] (the last
     /// numerator is the effect of w on y, −B_u unless `num_w` was given); for an input map its
     /// one input is w; for an output (sensor) map and rate feedback its one input is u; for
@@ -1138,32 +1101,78 @@ pub struct LinearSpec {
 }
 
 impl LinearSpec {
+    /// The linear model `g` (its inputs are u) in the structure of `site` (`None`: `lti`):
+    /// for output feedback the feedback path starts as the input path, y = G·(u − w), i.e.
+    /// num = [B, −B] with a shared numerator.
+    ///
+    /// ```
+    /// use structid_core::Site;
+    /// use structid_io::LinearSpec;
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+    /// let spec = LinearSpec::from_linear(&g, Some(Site::OutputFeedback));
+    /// assert_eq!(spec.model.num, vec![vec![0.0, 1.0], vec![-0.0, -1.0]]);
+    /// assert_eq!(spec.structure_name(), "output-feedback");
+    /// ```
+    pub fn from_linear(g: &PolynomialModel, site: Option<Site>) -> Self {
+        let mut model = g.clone();
+        if site == Some(Site::OutputFeedback)
+            && let Some(b) = g.num.first()
+        {
+            model.num.push(b.iter().map(|x| -x).collect());
+        }
+        Self {
+            structure: site,
+            model,
+            separate_numerator: false,
+        }
+    }
+
+    /// The `[linear] structure` name: the site's name, or `lti`.
+    pub fn structure_name(&self) -> &'static str {
+        self.structure.map_or("lti", Site::name)
+    }
+
+    /// Whether `structid refine` (a [`LinearStructure`]) supports the structure: output
+    /// feedback and an input map.
+    pub fn refinable(&self) -> bool {
+        matches!(self.structure, Some(Site::OutputFeedback | Site::Input))
+    }
+
     /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`]; `block`
     /// names the map. `None` for `lti` (no map) and for `output` and `rate-feedback`, which
-    /// refinement does not support (see [`LinearStructureKind::refinable`]).
-    pub fn structure(&self, block: &str) -> Option<Box<dyn LinearStructure>> {
-        match self.structure {
-            LinearStructureKind::OutputFeedback => Some(Box::new(
-                OutputFeedback::new(block).with_separate_numerator(self.separate_numerator),
-            )),
-            LinearStructureKind::Input => Some(Box::new(InputNonlinearity::new(block))),
-            LinearStructureKind::OutputSensor
-            | LinearStructureKind::RateFeedback
-            | LinearStructureKind::Lti => None,
-        }
+    /// refinement does not support (see [`LinearSpec::refinable`]).
+    pub fn structure(&self, block: &str) -> Option<LinearStructure> {
+        let site = self.structure.filter(|_| self.refinable())?;
+        LinearStructure::new(block, site)
+            .ok()
+            .map(|s| s.with_separate_numerator(self.separate_numerator))
     }
 
     /// The LFT of this linear block in its structure.
     pub fn lft(&self) -> Result<Lft, IoError> {
         Ok(match self.structure {
-            LinearStructureKind::OutputSensor => output_sensor_lft(&self.model)?,
-            LinearStructureKind::RateFeedback => rate_feedback_lft(&self.model)?,
-            LinearStructureKind::Lti => lti_lft(&self.model)?,
-            LinearStructureKind::OutputFeedback | LinearStructureKind::Input => self
+            Some(Site::OutputFeedback | Site::Input) => self
                 .structure(BLOCK_PLACEHOLDER)
                 .expect("output feedback and input maps are refinable structures")
                 .lft(&self.model)?,
+            // The LFT does not depend on the block's dispersion.
+            _ => self
+                .to_structure(BLOCK_PLACEHOLDER, Arc::new(PolynomialDispersion::new(1)?))
+                .lft()?,
         })
+    }
+
+    /// The [`Structure`](structid_core::Structure) of this block: G in its structure's form,
+    /// the block called `block` at its site with `dispersion`.
+    pub fn to_structure(&self, block: &str, d: Arc<dyn Dispersion>) -> structid_core::Structure {
+        use structid_core::Structure;
+        match self.structure {
+            None => Structure::linear(&self.model),
+            Some(Site::OutputFeedback) => Structure::output_feedback_with_path(&self.model, d),
+            Some(site) => Structure::new(&self.model, site, d),
+        }
+        .named(block)
     }
 }
 
@@ -1179,20 +1188,21 @@ fn parse_linear(
     src: &Source<'_>,
 ) -> Result<(LinearSpec, Lft, Dim, Dim), IoError> {
     let structure_line = src.line(raw.structure.span().start);
-    let Some(structure) = LinearStructureKind::parse(raw.structure.get_ref()) else {
+    let Some(structure) = parse_linear_structure(raw.structure.get_ref()) else {
         return Err(err_at(
             structure_line,
             format!(
                 "[linear] structure = \"{}\" is unknown; supported: {}",
                 raw.structure.get_ref(),
-                LinearStructureKind::ALL
+                LINEAR_STRUCTURES
                     .iter()
-                    .map(|k| format!("\"{}\"", k.name()))
+                    .map(|k| format!("\"{k}\""))
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
         ));
     };
+    let structure_name = structure.map_or("lti", Site::name);
     if y.len() != 1 {
         return Err(err_at(
             line,
@@ -1240,9 +1250,7 @@ fn parse_linear(
     }
     let single_input = matches!(
         structure,
-        LinearStructureKind::Input
-            | LinearStructureKind::OutputSensor
-            | LinearStructureKind::RateFeedback
+        Some(Site::Input | Site::Output | Site::RateFeedback)
     );
     let expected = if single_input { 1 } else { u.len() };
     if single_input && u.len() != 1 {
@@ -1250,7 +1258,7 @@ fn parse_linear(
             line,
             format!(
                 "structure = \"{}\" has one input u, but [signals].u names {}",
-                structure.name(),
+                structure_name,
                 plural(u.len(), "input")
             ),
         ));
@@ -1266,7 +1274,7 @@ fn parse_linear(
     }
     // An all-zero numerator would be read as "no path at all" (the delay is read from the
     // leading zeros), so refinement could never move it.
-    if structure != LinearStructureKind::Lti
+    if structure.is_some()
         && let Some(i) = num.iter().position(|b| b.iter().all(|v| *v == 0.0))
     {
         return Err(err_at(
@@ -1288,7 +1296,7 @@ fn parse_linear(
     }
     let mut separate = false;
     match (&raw.num_w, structure) {
-        (Some(nw), LinearStructureKind::OutputFeedback) => {
+        (Some(nw), Some(Site::OutputFeedback)) => {
             let l = src.line(nw.span().start);
             let nw = nw.get_ref();
             if nw.iter().any(|v| !v.is_finite()) {
@@ -1312,11 +1320,11 @@ fn parse_linear(
                 src.line(nw.span().start),
                 format!(
                     "num_w (a separate feedback numerator) only applies to structure = \"output-feedback\", not \"{}\"",
-                    structure.name()
+                    structure_name
                 ),
             ));
         }
-        (None, LinearStructureKind::OutputFeedback) => {
+        (None, Some(Site::OutputFeedback)) => {
             if u.len() != 1 {
                 return Err(err_at(
                     line,
@@ -1333,7 +1341,7 @@ fn parse_linear(
             let bw: Vec<f64> = num[0].iter().map(|x| -x).collect();
             num.push(if bw.is_empty() { vec![0.0] } else { bw });
         }
-        (None, LinearStructureKind::RateFeedback) => {
+        (None, Some(Site::RateFeedback)) => {
             if num[0].first().is_some_and(|b| *b != 0.0) {
                 return Err(err_at(
                     num_line,
@@ -1356,15 +1364,15 @@ fn parse_linear(
     let lft = spec.lft().map_err(|e| err_at(line, e.to_string()))?;
     let (nz, nw) = (lft.dims().z, lft.dims().w);
     let what = match structure {
-        LinearStructureKind::OutputFeedback => "one map in feedback from y (z = y)",
-        LinearStructureKind::Input => "one map at the input (z = u)",
-        LinearStructureKind::OutputSensor => "one map at the output (z = G·u)",
-        LinearStructureKind::RateFeedback => "one map in feedback from the rate of y (z = Δy/T_s)",
-        LinearStructureKind::Lti => "no map",
+        Some(Site::OutputFeedback) => "one map in feedback from y (z = y)",
+        Some(Site::Input) => "one map at the input (z = u)",
+        Some(Site::Output) => "one map at the output (z = G·u)",
+        Some(Site::RateFeedback) => "one map in feedback from the rate of y (z = Δy/T_s)",
+        Some(Site::Declared { .. }) | None => "no map",
     };
     let dim = |value: usize| Dim {
         value,
-        source: format!("[linear] structure = \"{}\" has {what}", structure.name()),
+        source: format!("[linear] structure = \"{structure_name}\" has {what}"),
         line: Some(structure_line),
     };
     Ok((spec, lft, dim(nz), dim(nw)))
@@ -1943,7 +1951,8 @@ fn parse_discover(
             ));
         }
         // Safety net: the core builds the block's LFT from the same indices.
-        structid_core::augment::declared(lft, z, w)
+        Site::Declared { z, w }
+            .insert(lft)
             .map_err(|e| err_at(entry_line, format!("{owner}: {e}")))?;
         out.locations.push(DeclaredLocationSpec { name, z, w });
         lines.push(entry_line);
@@ -2506,13 +2515,13 @@ fn write_linear(s: &mut String, lin: &LinearSpec) {
         )
     };
     s.push_str("[linear]\n");
-    let _ = writeln!(s, "structure = {}", toml_string(lin.structure.name()));
+    let _ = writeln!(s, "structure = {}", toml_string(lin.structure_name()));
     if let Some(ts) = lin.model.sample_time {
         let _ = writeln!(s, "sample_time = {}", format_number(ts));
     }
     let _ = writeln!(s, "den = {}", list(&lin.model.den));
     let n_u = match lin.structure {
-        LinearStructureKind::OutputFeedback => lin.model.num.len() - 1,
+        Some(Site::OutputFeedback) => lin.model.num.len() - 1,
         _ => lin.model.num.len(),
     };
     let _ = writeln!(

@@ -547,7 +547,7 @@ fn linear_section_is_the_output_feedback_lft_of_its_polynomials() {
     assert_eq!((d.states, d.u, d.w, d.y, d.z), (2, 1, 1, 1, 1));
     assert_eq!(m.lft.sample_time(), Some(0.5));
     let lin = m.linear.as_ref().unwrap();
-    assert_eq!(lin.structure, LinearStructureKind::OutputFeedback);
+    assert_eq!(lin.structure, Some(Site::OutputFeedback));
     assert!(!lin.separate_numerator);
     // The feedback path shares the numerator: w enters exactly like −u.
     let (tu, tw) = (
@@ -719,27 +719,31 @@ fn output_and_rate_feedback_structures_parse_to_the_builders_lfts() {
         num: vec![vec![0.0, 0.1, 0.05]],
         sample_time: Some(0.5),
     };
+    let d: Arc<dyn structid_core::Dispersion> =
+        Arc::new(structid_core::PolynomialDispersion::new(3).unwrap());
     for (name, kind, builder) in [
         (
             "output",
-            LinearStructureKind::OutputSensor,
-            output_sensor_lft as fn(&PolynomialModel) -> structid_core::Result<Lft>,
+            Site::Output,
+            (|g, d| structid_core::Structure::wiener(g, d))
+                as fn(
+                    &PolynomialModel,
+                    Arc<dyn structid_core::Dispersion>,
+                ) -> structid_core::Structure,
         ),
-        (
-            "rate-feedback",
-            LinearStructureKind::RateFeedback,
-            rate_feedback_lft,
-        ),
+        ("rate-feedback", Site::RateFeedback, |g, d| {
+            structid_core::Structure::rate_feedback(g, d)
+        }),
     ] {
         let text = sensor_or_rate(name);
         let m = ModelFile::parse(&text, None).unwrap();
         let lin = m.linear.as_ref().unwrap();
-        assert_eq!(lin.structure, kind);
-        assert_eq!(LinearStructureKind::parse(name), Some(kind));
+        assert_eq!(lin.structure, Some(kind));
+        assert_eq!(parse_linear_structure(name), Some(Some(kind)));
         assert_eq!(lin.model, g, "{name}: num is G's numerator of u");
         assert!(!lin.separate_numerator);
-        assert!(lin.structure("N").is_none() && !kind.refinable());
-        let expected = builder(&g).unwrap();
+        assert!(lin.structure("N").is_none() && !lin.refinable());
+        let expected = builder(&g, Arc::clone(&d)).lft().unwrap();
         assert_eq!(m.lft.dims(), expected.dims(), "{name}");
         assert_eq!(m.lft.sample_time(), Some(0.5));
         let d = markov_distance(&m.lft, &expected, 12);
@@ -750,7 +754,7 @@ fn output_and_rate_feedback_structures_parse_to_the_builders_lfts() {
         // z is computed, never read: G·u for the sensor, a dynamic Ψ for the rate.
         let source = m.lft.measurability().unwrap();
         match kind {
-            LinearStructureKind::OutputSensor => {
+            Site::Output => {
                 assert_eq!(source, structid_core::ZSource::InputOnly)
             }
             _ => assert!(matches!(source, structid_core::ZSource::Dynamic { .. })),
