@@ -54,7 +54,7 @@
 
 use crate::error::LtiError;
 use crate::operator::par_columns;
-use crate::riccati::{CholeskyGain, Overflow, Riccati, dot};
+use crate::riccati::{CholeskyGain, Overflow, Riccati};
 use crate::state_space::StateSpace;
 use faer::prelude::ReborrowMut;
 use faer::{Accum, MatMut, MatRef};
@@ -132,6 +132,24 @@ impl std::fmt::Debug for KalmanWhitener {
             .field("steady_state_filter", &self.steady)
             .finish()
     }
+}
+
+/// What the per-sample recursion writes out: the whitened outputs `w_t` or the innovations
+/// `nu_t`.
+#[derive(Clone, Copy, PartialEq)]
+enum Output {
+    Whitened,
+    Innovations,
+}
+
+/// One time-major signal as a one-column matrix.
+fn column(y: &[f64]) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(y, y.len(), 1)
+}
+
+/// [`column`] of a mutable signal.
+fn column_mut(y: &mut [f64]) -> MatMut<'_, f64> {
+    MatMut::from_column_major_slice_mut(y, y.len(), 1)
 }
 
 /// The LTI filter `y -> w` with the gains `g`:
@@ -369,15 +387,11 @@ impl KalmanWhitener {
         self.check_rows(y.len(), "y");
         self.check_rows(out.len(), "out");
         let (n, p, tl) = (self.n, self.p, self.transient);
-        let pp = p * (p + 1) / 2;
-        let (mut xs, mut xn, mut nu) = (vec![0.0; n], vec![0.0; n], vec![0.0; p]);
-        for t in 0..tl {
-            let g = &self.gains[t * n * p..(t + 1) * n * p];
-            let li = &self.linv[t * pp..(t + 1) * pp];
-            let om = &mut out[t * p..(t + 1) * p];
-            self.filter_step(g, li, &y[t * p..(t + 1) * p], &xs, &mut xn, &mut nu, om);
-            std::mem::swap(&mut xs, &mut xn);
-        }
+        let mut xs = vec![0.0; n];
+        // the steady-state gains are not needed before `transient`
+        let (steady, rows) = ((vec![], vec![]), tl * p);
+        let (ym, om) = (column(&y[..rows]), column_mut(&mut out[..rows]));
+        self.step_columns((0, tl), &steady, ym, om, &mut xs, Output::Whitened);
         self.steady
             .run(&xs, &y[tl * p..], &mut out[tl * p..], self.len - tl, None);
     }
@@ -413,41 +427,10 @@ impl KalmanWhitener {
     pub fn innovations(&self, y: &[f64], out: &mut [f64]) {
         self.check_rows(y.len(), "y");
         self.check_rows(out.len(), "out");
-        let (n, p) = (self.n, self.p);
-        let steady = self.steady_gains();
-        let (mut xs, mut xn, mut om) = (vec![0.0; n], vec![0.0; n], vec![0.0; p]);
-        for t in 0..self.len {
-            let (g, li) = self.gains_at(t, &steady);
-            let nu = &mut out[t * p..(t + 1) * p];
-            self.filter_step(g, li, &y[t * p..(t + 1) * p], &xs, &mut xn, nu, &mut om);
-            std::mem::swap(&mut xs, &mut xn);
-        }
-    }
-
-    /// One step of the filter on one signal with the gains `(G, L^{-1})` of
-    /// [`gains_at`](Self::gains_at): the innovation `nu = y_t - C x^`, the whitened output
-    /// `om = L^{-1} nu` and the next state `xn = A x^ + G om`.
-    #[allow(clippy::too_many_arguments)]
-    fn filter_step(
-        &self,
-        g: &[f64],
-        li: &[f64],
-        yt: &[f64],
-        xs: &[f64],
-        xn: &mut [f64],
-        nu: &mut [f64],
-        om: &mut [f64],
-    ) {
-        let (n, p) = (self.n, self.p);
-        for (c, v) in nu.iter_mut().enumerate() {
-            *v = yt[c] - dot(&self.c[c * n..(c + 1) * n], xs);
-        }
-        for (r, v) in om.iter_mut().enumerate() {
-            *v = dot(&li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1], nu);
-        }
-        for (i, v) in xn.iter_mut().enumerate() {
-            *v = dot(&self.a[i * n..(i + 1) * n], xs) + dot(&g[i * p..(i + 1) * p], om);
-        }
+        let mut xs = vec![0.0; self.n];
+        let (steady, steps) = (self.steady_gains(), (0, self.len));
+        let (y, out) = (column(y), column_mut(out));
+        self.step_columns(steps, &steady, y, out, &mut xs, Output::Innovations);
     }
 
     /// `out = W x` for many signals at once: each column of `x` (`len * p` rows, any
@@ -473,34 +456,23 @@ impl KalmanWhitener {
         let (n, p, tl) = (self.n, self.p, self.transient);
         let rest = self.len - tl;
         let blocked = (n > 0 && rest > 0).then(|| self.steady.blocked(rest, false));
-        let dinv = self.steady.d();
+        let steady = self.steady_gains();
         par_columns(x, out, faer::get_global_parallelism(), &|x, mut out| {
             let w = x.ncols();
-            let xs = self.transient_columns(x, out.rb_mut());
-            if rest == 0 {
-                return;
-            }
-            let xr = x.subrows(tl * p, rest * p);
-            let mut or = out.subrows_mut(tl * p, rest * p);
+            let mut xs = vec![0.0; n * w];
+            let xo = (x.subrows(0, tl * p), out.rb_mut().subrows_mut(0, tl * p));
+            self.step_columns((0, tl), &steady, xo.0, xo.1, &mut xs, Output::Whitened);
+            let (xr, or) = (
+                x.subrows(tl * p, rest * p),
+                out.subrows_mut(tl * p, rest * p),
+            );
             match &blocked {
                 Some(b) => {
                     let s0 = MatRef::from_row_major_slice(&xs, n, w);
                     b.leaf(rest, xr, or, Accum::Replace, 1.0, Some(s0), None);
                 }
-                None => {
-                    // static filter: w_t = L^{-1} y_t
-                    for j in 0..w {
-                        for t in 0..rest {
-                            for r in 0..p {
-                                let mut acc = 0.0;
-                                for k in 0..=r {
-                                    acc += dinv[(r, k)] * xr[(t * p + k, j)];
-                                }
-                                or[(t * p + r, j)] = acc;
-                            }
-                        }
-                    }
-                }
+                // static filter: w_t = L^{-1} y_t
+                None => self.step_columns((tl, rest), &steady, xr, or, &mut xs, Output::Whitened),
             }
         });
     }
@@ -588,27 +560,32 @@ impl KalmanWhitener {
             engine: (n > 0).then(|| self.steady.blocked(usize::MAX / 2, false)),
             steady: self.steady_gains(),
             t: 0,
-            state: faer::Mat::zeros(n, ncols),
-            next: faer::Mat::zeros(n, ncols),
+            ncols,
+            state: vec![0.0; n * ncols],
+            next: vec![0.0; n * ncols],
         }
     }
 
-    /// The time-varying part of [`whiten_columns`](Self::whiten_columns) on a column part;
-    /// returns the filter state at `transient_len` (`n x ncols`, row-major).
-    fn transient_columns(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Vec<f64> {
-        let (n, p, tl) = (self.n, self.p, self.transient);
+    /// `steps` samples of the recursion from sample `t0` on the columns of `x` and `out`
+    /// (`steps * p` rows), vectorised over the columns: `xs` is the filter state
+    /// (`n x ncols`, row-major), updated in place; `out` receives `what`. `steady`: the
+    /// steady-state gains of [`steady_gains`](Self::steady_gains).
+    fn step_columns(
+        &self,
+        (t0, steps): (usize, usize),
+        steady: &(Vec<f64>, Vec<f64>),
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        xs: &mut Vec<f64>,
+        what: Output,
+    ) {
+        let (n, p) = (self.n, self.p);
         let w = x.ncols();
-        let pp = p * (p + 1) / 2;
-        let mut xs = vec![0.0; n * w];
-        if tl == 0 {
-            return xs;
-        }
         let mut xn = vec![0.0; n * w];
         let mut nu = vec![0.0; p * w];
         let mut om = vec![0.0; p * w];
-        for t in 0..tl {
-            let g = &self.gains[t * n * p..(t + 1) * n * p];
-            let li = &self.linv[t * pp..(t + 1) * pp];
+        for t in 0..steps {
+            let (g, li) = self.gains_at(t0 + t, steady);
             // nu = y_t - C x^
             for c in 0..p {
                 let nc = &mut nu[c * w..(c + 1) * w];
@@ -619,6 +596,11 @@ impl KalmanWhitener {
                     let cc = self.c[c * n + i];
                     for (v, s) in nc.iter_mut().zip(&xs[i * w..(i + 1) * w]) {
                         *v -= cc * s;
+                    }
+                }
+                if what == Output::Innovations {
+                    for (j, &v) in nc.iter().enumerate() {
+                        out[(t * p + c, j)] = v;
                     }
                 }
             }
@@ -632,8 +614,10 @@ impl KalmanWhitener {
                         *o += l * v;
                     }
                 }
-                for (j, &v) in orow.iter().enumerate() {
-                    out[(t * p + r, j)] = v;
+                if what == Output::Whitened {
+                    for (j, &v) in orow.iter().enumerate() {
+                        out[(t * p + r, j)] = v;
+                    }
                 }
             }
             // x^+ = A x^ + G w_t
@@ -655,9 +639,8 @@ impl KalmanWhitener {
                     }
                 }
             }
-            std::mem::swap(&mut xs, &mut xn);
+            std::mem::swap(xs, &mut xn);
         }
-        xs
     }
 }
 
@@ -676,8 +659,10 @@ pub struct WhiteningStream<'a> {
     engine: Option<crate::operator::BlockedRecursion>,
     steady: (Vec<f64>, Vec<f64>),
     t: usize,
-    state: faer::Mat<f64>,
-    next: faer::Mat<f64>,
+    ncols: usize,
+    /// the filter state (`n x ncols`, row-major) and a buffer of the same shape
+    state: Vec<f64>,
+    next: Vec<f64>,
 }
 
 impl WhiteningStream<'_> {
@@ -685,7 +670,7 @@ impl WhiteningStream<'_> {
     pub fn push(&mut self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Result<(), LtiError> {
         let w = self.whitener;
         let (n, p) = (w.n, w.p);
-        let ncols = self.state.ncols();
+        let ncols = self.ncols;
         if x.ncols() != ncols
             || out.ncols() != ncols
             || x.nrows() != out.nrows()
@@ -712,32 +697,21 @@ impl WhiteningStream<'_> {
             });
         }
         let b = self.engine.as_ref().map_or(1, |e| e.b);
-        let mut k = 0;
         // Per-sample steps: through the transient, then until a whole number of blocks is left.
-        while k < c && (self.t < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none())
-        {
-            let (g, li) = w.gains_at(self.t, &self.steady);
-            let (mut yt, mut xs, mut xn) = (vec![0.0; p], vec![0.0; n], vec![0.0; n]);
-            let (mut nu, mut om) = (vec![0.0; p], vec![0.0; p]);
-            for j in 0..ncols {
-                for (r, v) in yt.iter_mut().enumerate() {
-                    *v = x[(k * p + r, j)];
-                }
-                for (i, v) in xs.iter_mut().enumerate() {
-                    *v = self.state[(i, j)];
-                }
-                w.filter_step(g, li, &yt, &xs, &mut xn, &mut nu, &mut om);
-                for (r, &v) in om.iter().enumerate() {
-                    out[(k * p + r, j)] = v;
-                }
-                for (i, &v) in xn.iter().enumerate() {
-                    self.next[(i, j)] = v;
-                }
-            }
-            std::mem::swap(&mut self.state, &mut self.next);
-            self.t += 1;
-            k += 1;
-        }
+        let per_sample = |k: usize| {
+            self.t + k < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none()
+        };
+        let k = (0..c).find(|&k| !per_sample(k)).unwrap_or(c);
+        let (xk, ok) = (x.subrows(0, k * p), out.rb_mut().subrows_mut(0, k * p));
+        w.step_columns(
+            (self.t, k),
+            &self.steady,
+            xk,
+            ok,
+            &mut self.state,
+            Output::Whitened,
+        );
+        self.t += k;
         if k < c {
             let e = self.engine.as_ref().expect("per-sample steps cover n = 0");
             let rows = (c - k) * p;
@@ -747,8 +721,8 @@ impl WhiteningStream<'_> {
                 out.rb_mut().subrows_mut(k * p, rows),
                 Accum::Replace,
                 1.0,
-                Some(self.state.as_ref()),
-                Some(self.next.as_mut()),
+                Some(MatRef::from_row_major_slice(&self.state, n, ncols)),
+                Some(MatMut::from_row_major_slice_mut(&mut self.next, n, ncols)),
             );
             std::mem::swap(&mut self.state, &mut self.next);
             self.t += c - k;
