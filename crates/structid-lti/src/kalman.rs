@@ -54,7 +54,7 @@
 
 use crate::error::LtiError;
 use crate::operator::par_columns;
-use crate::riccati::{CholeskyGain, Overflow, Riccati};
+use crate::riccati::{CholeskyGain, Overflow, Riccati, row_major};
 use crate::state_space::StateSpace;
 use faer::prelude::ReborrowMut;
 use faer::{Accum, MatMut, MatRef};
@@ -150,6 +150,13 @@ fn column(y: &[f64]) -> MatRef<'_, f64> {
 /// [`column`] of a mutable signal.
 fn column_mut(y: &mut [f64]) -> MatMut<'_, f64> {
     MatMut::from_column_major_slice_mut(y, y.len(), 1)
+}
+
+/// Appends `G` (row-major) to `gains` and the lower triangle of `L^{-1}` (packed by rows)
+/// to `packed`: the layout of the stored gains.
+fn push_gains(g: &DMatrix<f64>, linv: &DMatrix<f64>, gains: &mut Vec<f64>, packed: &mut Vec<f64>) {
+    gains.extend(row_major(g));
+    packed.extend((0..linv.nrows()).flat_map(|r| (0..=r).map(move |k| linv[(r, k)])));
 }
 
 /// The LTI filter `y -> w` with the gains `g`:
@@ -293,16 +300,7 @@ impl KalmanWhitener {
                     (transient, exact) = (t, true);
                     break;
                 }
-                for i in 0..n {
-                    for r in 0..p {
-                        gains_v.push(g.g[(i, r)]);
-                    }
-                }
-                for i in 0..p {
-                    for j in 0..=i {
-                        linv_v.push(g.linv[(i, j)]);
-                    }
-                }
+                push_gains(&g.g, &g.linv, &mut gains_v, &mut linv_v);
                 log_det += g.log_det;
             }
             let g = eq
@@ -499,25 +497,13 @@ impl KalmanWhitener {
     /// The steady-state gains in the recursion's form: `L⁻¹ = D_f` and `G = K·L = B_f·D_f⁻¹`
     /// of the steady filter x̂⁺ = (A − KC)x̂ + K·y, ω = L⁻¹(y − C·x̂).
     fn steady_gains(&self) -> (Vec<f64>, Vec<f64>) {
-        let (n, p) = (self.n, self.p);
         let dinv = self.steady.d();
         let l = dinv
             .clone()
             .try_inverse()
-            .unwrap_or_else(|| DMatrix::identity(p, p));
-        let g = self.steady.b() * l;
-        let mut gr = Vec::with_capacity(n * p);
-        for i in 0..n {
-            for r in 0..p {
-                gr.push(g[(i, r)]);
-            }
-        }
-        let mut li = Vec::with_capacity(p * (p + 1) / 2);
-        for r in 0..p {
-            for k in 0..=r {
-                li.push(dinv[(r, k)]);
-            }
-        }
+            .unwrap_or_else(|| DMatrix::identity(self.p, self.p));
+        let (mut gr, mut li) = (Vec::new(), Vec::new());
+        push_gains(&(self.steady.b() * l), dinv, &mut gr, &mut li);
         (gr, li)
     }
 

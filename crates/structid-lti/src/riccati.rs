@@ -64,11 +64,7 @@ impl Singular {
     /// The error of a whitener whose innovation covariance is singular `when` (e.g. "at
     /// sample 3").
     pub(crate) fn into_error(self, when: &str) -> LtiError {
-        let Singular {
-            channel: c,
-            pivot,
-            variance,
-        } = self;
+        let (c, pivot, variance) = (self.channel, self.pivot, self.variance);
         let what = if c == 0 || variance.is_nan() || variance <= 0.0 {
             format!("output channel {c} {when} does not depend on the noise")
         } else {
@@ -108,13 +104,14 @@ pub(crate) struct CholeskyGain {
 /// The system with its noise covariances: the coefficients of the Riccati recursion (see the
 /// [module documentation](self)).
 pub(crate) struct Riccati<'a> {
-    sys: &'a StateSpace,
-    /// `Q_v`; `None` for the identity
-    qv: Option<DMatrix<f64>>,
+    /// the system
+    pub(crate) sys: &'a StateSpace,
+    /// `Q_v`
+    qv: DMatrix<f64>,
     /// `Q = B Q_v B^T`
-    q: DMatrix<f64>,
+    pub(crate) q: DMatrix<f64>,
     /// `R = D Q_v D^T` (symmetrised)
-    r: DMatrix<f64>,
+    pub(crate) r: DMatrix<f64>,
     /// `S = B Q_v D^T`
     s: DMatrix<f64>,
     /// `|Q|_F`, the scale of the steady-state test
@@ -126,15 +123,16 @@ impl<'a> Riccati<'a> {
     /// covariance for `None`.
     pub(crate) fn new(sys: &'a StateSpace, variances: Option<&[f64]>) -> Self {
         let (b, d) = (sys.b(), sys.d());
-        let qv = variances.map(|v| DMatrix::from_diagonal(&DVector::from_column_slice(v)));
-        let (q, mut r, s) = match &qv {
-            None => (b * b.transpose(), d * d.transpose(), b * d.transpose()),
-            Some(qv) => (
-                b * qv * b.transpose(),
-                d * qv * d.transpose(),
-                b * qv * d.transpose(),
-            ),
+        // products with the identity are exact: the same values as without `Q_v`
+        let qv = match variances {
+            Some(v) => DMatrix::from_diagonal(&DVector::from_column_slice(v)),
+            None => DMatrix::identity(b.ncols(), b.ncols()),
         };
+        let (q, mut r, s) = (
+            b * &qv * b.transpose(),
+            d * &qv * d.transpose(),
+            b * &qv * d.transpose(),
+        );
         symmetrise(&mut r);
         Riccati {
             sys,
@@ -144,21 +142,6 @@ impl<'a> Riccati<'a> {
             r,
             s,
         }
-    }
-
-    /// The system.
-    pub(crate) fn system(&self) -> &'a StateSpace {
-        self.sys
-    }
-
-    /// `Q = B Q_v B^T`.
-    pub(crate) fn q(&self) -> &DMatrix<f64> {
-        &self.q
-    }
-
-    /// `R = D Q_v D^T`.
-    pub(crate) fn r(&self) -> &DMatrix<f64> {
-        &self.r
     }
 
     /// The innovation covariance `F = C P C^T + R` (symmetrised) and `M = A P C^T + S` at
@@ -192,11 +175,7 @@ impl<'a> Riccati<'a> {
         let sys = self.sys;
         let phi = sys.a() - k * sys.c();
         let e = sys.b() - k * sys.d();
-        let noise = match &self.qv {
-            None => &e * e.transpose(),
-            Some(qv) => &e * qv * e.transpose(),
-        };
-        let mut pn = &phi * p * phi.transpose() + noise;
+        let mut pn = &phi * p * phi.transpose() + &e * &self.qv * e.transpose();
         symmetrise(&mut pn);
         pn
     }
@@ -236,10 +215,7 @@ impl<'a> Riccati<'a> {
         let ld = &l0inv * sys.d(); // L^{-1} D
         let abar = sys.a() - &nl * &lc;
         let e = sys.b() - &nl * &ld;
-        let mut h = match &self.qv {
-            None => &e * e.transpose(),
-            Some(qv) => &e * qv * e.transpose(),
-        };
+        let mut h = &e * &self.qv * e.transpose();
         symmetrise(&mut h);
         let mut g = lc.transpose() * &lc;
         symmetrise(&mut g);

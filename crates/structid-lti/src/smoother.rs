@@ -315,96 +315,81 @@ fn accumulate_free(
     }
 }
 
-/// The smoother's view of the Riccati recursion: the system with the input covariance.
-struct Model<'a> {
-    eq: Riccati<'a>,
-    /// `Q` (`m x m`, diagonal)
-    q: DMatrix<f64>,
-    /// a-priori scale of `F`: `trace(D Q D^T) + |C|_F^2 trace(B Q B^T)` (plus
-    /// `trace(C P_0 C^T)`, added by the caller)
-    scale0: f64,
+/// `F`, its pseudo-inverse and null directions, and `K` for the error covariance `pm` of
+/// the recursion `eq` with input covariance `q`; `scale` is the running scale of the
+/// threshold (updated).
+fn sample_step(
+    eq: &Riccati<'_>,
+    q: &DMatrix<f64>,
+    pm: &DMatrix<f64>,
+    scale: &mut f64,
+) -> (Step, DMatrix<f64>) {
+    let (f, mm) = eq.innovation(pm);
+    *scale = scale.max(f.trace());
+    let (finv, null) = sym_pinv(&f, PINV_TOL * *scale);
+    let k = mm * &finv;
+    let mut null_rows = Vec::with_capacity(null.len() * f.nrows());
+    for v in &null {
+        null_rows.extend(v.iter());
+    }
+    // the packed per-sample maps of `smooth`
+    let sys = eq.sys;
+    let (n, m, p) = (sys.order(), sys.inputs(), sys.outputs());
+    let c = sys.c();
+    let phi = sys.a() - &k * c;
+    let gam = sys.b() - &k * sys.d();
+    let mut fw = DMatrix::<f64>::zeros(p + n, n + m + p);
+    fw.view_mut((0, 0), (p, n)).copy_from(&(-c));
+    fw.view_mut((0, n), (p, m)).copy_from(&(-sys.d()));
+    fw.view_mut((0, n + m), (p, p))
+        .copy_from(&DMatrix::<f64>::identity(p, p));
+    fw.view_mut((p, 0), (n, n)).copy_from(&phi);
+    fw.view_mut((p, n), (n, m)).copy_from(&gam);
+    fw.view_mut((p, n + m), (n, p)).copy_from(&k);
+    let mut bw = DMatrix::<f64>::zeros(m + n, p + n);
+    bw.view_mut((0, 0), (m, p))
+        .copy_from(&(q * sys.d().transpose() * &finv));
+    bw.view_mut((0, p), (m, n))
+        .copy_from(&(q * gam.transpose()));
+    bw.view_mut((m, 0), (n, p))
+        .copy_from(&(c.transpose() * &finv));
+    bw.view_mut((m, p), (n, n)).copy_from(&phi.transpose());
+    (
+        Step {
+            finv: row_major(&finv),
+            gain: row_major(&k),
+            null: null_rows,
+            fw: row_major(&fw),
+            bw: row_major(&bw),
+        },
+        k,
+    )
 }
 
-impl<'a> Model<'a> {
-    fn new(sys: &'a StateSpace, variances: &[f64]) -> Self {
-        let eq = Riccati::new(sys, Some(variances));
-        Model {
-            scale0: eq.r().trace() + sys.c().norm_squared() * eq.q().trace(),
-            q: DMatrix::from_diagonal(&DVector::from_column_slice(variances)),
-            eq,
-        }
+/// The base prior covariance of a free initial state: `s I` with `s` the mean
+/// eigenvalue of the `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (the
+/// state's scale under the input prior) plus `trace(D Q D^T) / |C|_F^2`; 0 when the
+/// inputs move no state.
+fn free_base_prior(eq: &Riccati<'_>) -> DMatrix<f64> {
+    let sys = eq.sys;
+    let a = sys.a();
+    let n = a.nrows();
+    let mut trace = 0.0;
+    let mut term = eq.q.clone();
+    for _ in 0..n {
+        trace += term.trace();
+        term = a * term * a.transpose();
     }
-
-    /// `F`, its pseudo-inverse and null directions, and `K` for the error covariance `pm`;
-    /// `scale` is the running scale of the threshold (updated).
-    fn step(&self, pm: &DMatrix<f64>, scale: &mut f64) -> (Step, DMatrix<f64>) {
-        let (f, mm) = self.eq.innovation(pm);
-        *scale = scale.max(f.trace());
-        let (finv, null) = sym_pinv(&f, PINV_TOL * *scale);
-        let k = mm * &finv;
-        let mut null_rows = Vec::with_capacity(null.len() * f.nrows());
-        for v in &null {
-            null_rows.extend(v.iter());
-        }
-        // the packed per-sample maps of `smooth`
-        let sys = self.eq.system();
-        let (n, m, p) = (sys.order(), sys.inputs(), sys.outputs());
-        let c = sys.c();
-        let phi = sys.a() - &k * c;
-        let gam = sys.b() - &k * sys.d();
-        let mut fw = DMatrix::<f64>::zeros(p + n, n + m + p);
-        fw.view_mut((0, 0), (p, n)).copy_from(&(-c));
-        fw.view_mut((0, n), (p, m)).copy_from(&(-sys.d()));
-        fw.view_mut((0, n + m), (p, p))
-            .copy_from(&DMatrix::<f64>::identity(p, p));
-        fw.view_mut((p, 0), (n, n)).copy_from(&phi);
-        fw.view_mut((p, n), (n, m)).copy_from(&gam);
-        fw.view_mut((p, n + m), (n, p)).copy_from(&k);
-        let mut bw = DMatrix::<f64>::zeros(m + n, p + n);
-        bw.view_mut((0, 0), (m, p))
-            .copy_from(&(&self.q * sys.d().transpose() * &finv));
-        bw.view_mut((0, p), (m, n))
-            .copy_from(&(&self.q * gam.transpose()));
-        bw.view_mut((m, 0), (n, p))
-            .copy_from(&(c.transpose() * &finv));
-        bw.view_mut((m, p), (n, n)).copy_from(&phi.transpose());
-        (
-            Step {
-                finv: row_major(&finv),
-                gain: row_major(&k),
-                null: null_rows,
-                fw: row_major(&fw),
-                bw: row_major(&bw),
-            },
-            k,
-        )
+    let mut s = if n > 0 { trace / n as f64 } else { 0.0 };
+    // When the direct feedthrough dominates, a prior scaled by the Gramian alone makes
+    // `C P_0 C^T` tiny next to `D Q D^T`, so `F_0` is needlessly ill-conditioned when
+    // the columns of `C` and `D` are nearly parallel; scaling `x_0` to move the
+    // outputs as much as the inputs do keeps both parts of `F_0` comparable.
+    let c2 = sys.c().norm_squared();
+    if c2 > 0.0 && s > 0.0 {
+        s += eq.r.trace() / c2;
     }
-
-    /// The base prior covariance of a free initial state: `s I` with `s` the mean
-    /// eigenvalue of the `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (the
-    /// state's scale under the input prior) plus `trace(D Q D^T) / |C|_F^2`; 0 when the
-    /// inputs move no state.
-    fn free_base_prior(&self) -> DMatrix<f64> {
-        let sys = self.eq.system();
-        let a = sys.a();
-        let n = a.nrows();
-        let mut trace = 0.0;
-        let mut term = self.eq.q().clone();
-        for _ in 0..n {
-            trace += term.trace();
-            term = a * term * a.transpose();
-        }
-        let mut s = if n > 0 { trace / n as f64 } else { 0.0 };
-        // When the direct feedthrough dominates, a prior scaled by the Gramian alone makes
-        // `C P_0 C^T` tiny next to `D Q D^T`, so `F_0` is needlessly ill-conditioned when
-        // the columns of `C` and `D` are nearly parallel; scaling `x_0` to move the
-        // outputs as much as the inputs do keeps both parts of `F_0` comparable.
-        let c2 = sys.c().norm_squared();
-        if c2 > 0.0 && s > 0.0 {
-            s += self.eq.r().trace() / c2;
-        }
-        DMatrix::<f64>::identity(n, n) * s
-    }
+    DMatrix::<f64>::identity(n, n) * s
 }
 
 impl DisturbanceSmoother {
@@ -489,7 +474,8 @@ impl DisturbanceSmoother {
                 format!("{len} samples"),
             ));
         }
-        let model = Model::new(system, variances);
+        let eq = Riccati::new(system, Some(variances));
+        let q = DMatrix::from_diagonal(&DVector::from_column_slice(variances));
 
         // Riccati recursion until the steady state (or the end of the record)
         let pp = p * p;
@@ -502,16 +488,17 @@ impl DisturbanceSmoother {
         // base prior covariance of x_0 (see the module documentation)
         let p0 = match initial {
             SmootherInitial::Zero => DMatrix::<f64>::zeros(n, n),
-            SmootherInitial::Free => model.free_base_prior(),
+            SmootherInitial::Free => free_base_prior(&eq),
         };
-        let mut scale = model.scale0 + (system.c() * &p0 * system.c().transpose()).trace();
-        let mut rec = model
-            .eq
-            .recursion(p0.clone(), allow_steady.then_some(STEADY_TOL));
+        // the a-priori scale of F: trace(D Q D^T + C P_0 C^T) + |C|_F^2 trace(B Q B^T)
+        let c = system.c();
+        let mut scale = eq.r.trace() + c.norm_squared() * eq.q.trace();
+        scale += (c * &p0 * c.transpose()).trace();
+        let mut rec = eq.recursion(p0.clone(), allow_steady.then_some(STEADY_TOL));
         let mut steady = Step::default();
         let mut transient = len;
         for k in 0..len {
-            let (st, kmat) = model.step(rec.covariance(), &mut scale);
+            let (st, kmat) = sample_step(&eq, &q, rec.covariance(), &mut scale);
             // no outputs: nothing to filter, the gains are empty and steady from the start
             let is_steady = if p == 0 {
                 allow_steady
