@@ -184,7 +184,10 @@ fn linear_then_refine_then_validate() {
     ]);
     let s = json(&sout.join("validation.json"));
     let stored = s["outputs"][0]["rms"].as_f64().unwrap();
-    assert!((stored - rms).abs() <= 1e-12 * rms, "stored {stored} vs rebuilt {rms}");
+    assert!(
+        (stored - rms).abs() <= 1e-12 * rms,
+        "stored {stored} vs rebuilt {rms}"
+    );
     assert_eq!(s["estimate"]["workflow"], "refine");
 }
 

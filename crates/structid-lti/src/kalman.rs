@@ -54,21 +54,11 @@
 
 use crate::error::LtiError;
 use crate::operator::par_columns;
+use crate::riccati::{CholeskyGain, Overflow, Riccati, row_major};
 use crate::state_space::StateSpace;
 use faer::prelude::ReborrowMut;
 use faer::{Accum, MatMut, MatRef};
 use nalgebra::DMatrix;
-
-/// Relative tolerance on the Cholesky pivots of `S_t`: pivot `c` (the variance of output
-/// channel `c` given channels `0 .. c-1`) must exceed `PIVOT_TOL * S_t[c, c]`. This is
-/// invariant to the scaling of each output channel.
-const PIVOT_TOL: f64 = 1e-12;
-
-/// Doubling iterations before the fall-back to the plain Riccati iteration.
-const MAX_DOUBLING: usize = 100;
-
-/// Riccati iterations of the fall-back DARE solver.
-const MAX_RICCATI: usize = 1_000_000;
 
 /// Settings of [`KalmanWhitener::new`] (a plain struct; start from `Default::default()`).
 #[derive(Clone, Debug, PartialEq)]
@@ -144,257 +134,37 @@ impl std::fmt::Debug for KalmanWhitener {
     }
 }
 
-/// A failed Cholesky pivot of an innovation covariance.
-#[derive(Debug)]
-struct Singular {
-    channel: usize,
-    pivot: f64,
-    variance: f64,
+/// What the per-sample recursion writes out: the whitened outputs `w_t` or the innovations
+/// `nu_t`.
+#[derive(Clone, Copy, PartialEq)]
+enum Output {
+    Whitened,
+    Innovations,
 }
 
-impl Singular {
-    fn into_error(self, when: &str) -> LtiError {
-        let Singular {
-            channel: c,
-            pivot,
-            variance,
-        } = self;
-        let what = if c == 0 || variance.is_nan() || variance <= 0.0 {
-            format!("output channel {c} {when} does not depend on the noise")
-        } else {
-            format!(
-                "output channel {c} {when} does not depend on the noise beyond what output \
-                 channels 0..{c} already carry (its noise is a combination of theirs)"
-            )
-        };
-        LtiError::param(
-            "noise",
-            format!(
-                "{what}; the innovation covariance S = C P C^T + D D^T is singular (conditional \
-                 variance {pivot:.3e} vs variance {variance:.3e}), so the noise covariance T T^T \
-                 is not invertible. Every output needs noise of its own: D D^T must be positive \
-                 definite (D of full row rank)"
-            ),
-        )
-    }
+/// One time-major signal as a one-column matrix.
+fn column(y: &[f64]) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(y, y.len(), 1)
 }
 
-/// Lower Cholesky factor of the symmetric `s`, with the relative pivot test of
-/// [`PIVOT_TOL`]; never produces NaN.
-fn cholesky_checked(s: &DMatrix<f64>) -> Result<DMatrix<f64>, Singular> {
-    let p = s.nrows();
-    let mut l = DMatrix::<f64>::zeros(p, p);
-    for j in 0..p {
-        let variance = s[(j, j)];
-        let mut pivot = variance;
-        for k in 0..j {
-            pivot -= l[(j, k)] * l[(j, k)];
-        }
-        // written so that NaN fails too
-        if !(variance > 0.0 && variance.is_finite() && pivot > PIVOT_TOL * variance) {
-            return Err(Singular {
-                channel: j,
-                pivot,
-                variance,
-            });
-        }
-        let d = pivot.sqrt();
-        l[(j, j)] = d;
-        for i in j + 1..p {
-            let mut v = s[(i, j)];
-            for k in 0..j {
-                v -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = v / d;
-        }
-    }
-    Ok(l)
+/// [`column`] of a mutable signal.
+fn column_mut(y: &mut [f64]) -> MatMut<'_, f64> {
+    MatMut::from_column_major_slice_mut(y, y.len(), 1)
 }
 
-/// Inverse of a lower-triangular matrix with nonzero diagonal.
-fn lower_inverse(l: &DMatrix<f64>) -> DMatrix<f64> {
-    let p = l.nrows();
-    let mut inv = DMatrix::<f64>::zeros(p, p);
-    for j in 0..p {
-        inv[(j, j)] = 1.0 / l[(j, j)];
-        for i in j + 1..p {
-            let mut v = 0.0;
-            for k in j..i {
-                v -= l[(i, k)] * inv[(k, j)];
-            }
-            inv[(i, j)] = v / l[(i, i)];
-        }
-    }
-    inv
+/// Appends `G` (row-major) to `gains` and the lower triangle of `L^{-1}` (packed by rows)
+/// to `packed`: the layout of the stored gains.
+fn push_gains(g: &DMatrix<f64>, linv: &DMatrix<f64>, gains: &mut Vec<f64>, packed: &mut Vec<f64>) {
+    gains.extend(row_major(g));
+    packed.extend((0..linv.nrows()).flat_map(|r| (0..=r).map(move |k| linv[(r, k)])));
 }
 
-fn symmetrise(m: &mut DMatrix<f64>) {
-    let n = m.nrows();
-    for j in 0..n {
-        for i in j + 1..n {
-            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
-        }
-    }
-}
-
-fn all_finite(m: &DMatrix<f64>) -> bool {
-    m.iter().all(|v| v.is_finite())
-}
-
-/// The filter quantities of one time step.
-struct Gains {
-    /// `K = (A P C^T + N) S^{-1}` (`n x p`)
-    k: DMatrix<f64>,
-    /// `G = K L` (`n x p`)
-    g: DMatrix<f64>,
-    /// `L^{-1}` (`p x p`, lower)
-    linv: DMatrix<f64>,
-    /// `log det S`
-    log_det: f64,
-}
-
-/// The noise path and the derived covariances.
-struct Noise<'a> {
-    sys: &'a StateSpace,
-    /// `N = B D^T`
-    nmat: DMatrix<f64>,
-    /// `R = D D^T`
-    r: DMatrix<f64>,
-    /// `|B B^T|_F`, the scale of the steady-state test
-    q_norm: f64,
-}
-
-impl<'a> Noise<'a> {
-    fn new(sys: &'a StateSpace) -> Self {
-        let (b, d) = (sys.b(), sys.d());
-        let mut r = d * d.transpose();
-        symmetrise(&mut r);
-        Noise {
-            sys,
-            nmat: b * d.transpose(),
-            r,
-            q_norm: (b * b.transpose()).norm(),
-        }
-    }
-
-    /// Gains at a time step with error covariance `p`.
-    fn gains(&self, p: &DMatrix<f64>) -> Result<Gains, Singular> {
-        let (a, c) = (self.sys.a(), self.sys.c());
-        let pct = p * c.transpose();
-        let mut s = c * &pct + &self.r;
-        symmetrise(&mut s);
-        let l = cholesky_checked(&s)?;
-        let linv = lower_inverse(&l);
-        let m = a * &pct + &self.nmat;
-        let g = &m * linv.transpose();
-        let k = &g * &linv;
-        let log_det = 2.0 * (0..l.nrows()).map(|i| l[(i, i)].ln()).sum::<f64>();
-        Ok(Gains {
-            k,
-            g,
-            linv,
-            log_det,
-        })
-    }
-
-    /// Joseph-form covariance update `P+ = (A - K C) P (A - K C)^T + (B - K D)(B - K D)^T`.
-    fn next(&self, p: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
-        let sys = self.sys;
-        let phi = sys.a() - k * sys.c();
-        let e = sys.b() - k * sys.d();
-        let mut pn = &phi * p * phi.transpose() + &e * e.transpose();
-        symmetrise(&mut pn);
-        pn
-    }
-
-    fn converged(&self, prev: &DMatrix<f64>, next: &DMatrix<f64>, tol: f64) -> bool {
-        (next - prev).norm() <= tol * (prev.norm() + self.q_norm)
-    }
-
-    /// The LTI filter `y -> w` with the gains `g`.
-    fn filter(&self, g: &Gains) -> Result<StateSpace, LtiError> {
-        let (a, c) = (self.sys.a(), self.sys.c());
-        let lc = &g.linv * c;
-        StateSpace::new(a - &g.k * c, g.k.clone(), -lc, g.linv.clone())
-    }
-
-    /// Solution of the filter DARE reached by the Riccati recursion from `P_0 = 0`.
-    ///
-    /// Structure-preserving doubling (Chu, Fan, Lin 2005) on the equivalent equation
-    /// without cross term, `P = Ab P (I + G P)^{-1} Ab^T + Qb` with `Ab = A - N R^{-1} C`,
-    /// `Qb = E E^T`, `E = B - N R^{-1} D`, `G = C^T R^{-1} C`: its iterate `H_k` equals
-    /// the Riccati iterate `P_{2^k}` from `P_0 = 0`, so it converges to the same limit
-    /// as the time-varying filter, quadratically in general. If doubling overflows
-    /// (unstable modes of `Ab` that the noise does not excite) or stalls, the plain
-    /// recursion is iterated instead.
-    fn dare(&self, tol: f64) -> Result<DMatrix<f64>, LtiError> {
-        let sys = self.sys;
-        let n = sys.order();
-        let l0 = cholesky_checked(&self.r).map_err(|s| s.into_error("(steady state)"))?;
-        let l0inv = lower_inverse(&l0);
-        let nl = &self.nmat * l0inv.transpose(); // N L^{-T}
-        let lc = &l0inv * sys.c(); // L^{-1} C
-        let ld = &l0inv * sys.d(); // L^{-1} D
-        let abar = sys.a() - &nl * &lc;
-        let e = sys.b() - &nl * &ld;
-        let mut h = &e * e.transpose();
-        symmetrise(&mut h);
-        let mut g = lc.transpose() * &lc;
-        symmetrise(&mut g);
-        // control form: A_0 = Ab^T
-        let mut ak = abar.transpose();
-        let eye = DMatrix::<f64>::identity(n, n);
-        for _ in 0..MAX_DOUBLING {
-            let w = &eye + &g * &h;
-            let lu = w.lu();
-            let (Some(x1), Some(x2)) = (lu.solve(&ak), lu.solve(&g)) else {
-                break;
-            };
-            let mut g1 = &g + &ak * x2 * ak.transpose();
-            let mut h1 = &h + ak.transpose() * &h * &x1;
-            symmetrise(&mut g1);
-            symmetrise(&mut h1);
-            let a1 = &ak * &x1;
-            if !(all_finite(&a1) && all_finite(&g1) && all_finite(&h1)) {
-                break;
-            }
-            let done = (&h1 - &h).norm() <= tol * (h.norm() + self.q_norm);
-            h = h1;
-            if done {
-                return Ok(h);
-            }
-            ak = a1;
-            g = g1;
-        }
-        // fall-back: the plain recursion from P_0 = 0
-        let mut p = DMatrix::<f64>::zeros(n, n);
-        for t in 0..MAX_RICCATI {
-            let gains = self
-                .gains(&p)
-                .map_err(|s| s.into_error(&format!("at Riccati iteration {t}")))?;
-            let pn = self.next(&p, &gains.k);
-            if !all_finite(&pn) {
-                return Err(LtiError::param(
-                    "noise",
-                    "the Riccati recursion overflowed: the noise model is unstable in a \
-                     direction the outputs do not observe",
-                ));
-            }
-            if self.converged(&p, &pn, tol) {
-                return Ok(pn);
-            }
-            p = pn;
-        }
-        Err(LtiError::param(
-            "noise",
-            format!(
-                "the Riccati equation did not converge in {MAX_RICCATI} iterations (the noise \
-                 spectrum probably vanishes on the unit circle); use the time-varying filter"
-            ),
-        ))
-    }
+/// The LTI filter `y -> w` with the gains `g`:
+/// `x^+ = (A - K C) x^ + K y`, `w = -L^{-1} C x^ + L^{-1} y`.
+fn steady_filter(sys: &StateSpace, g: &CholeskyGain) -> Result<StateSpace, LtiError> {
+    let (a, c) = (sys.a(), sys.c());
+    let lc = &g.linv * c;
+    StateSpace::new(a - &g.k * c, g.k.clone(), -lc, g.linv.clone())
 }
 
 fn check_tol(tol: f64) -> Result<(), LtiError> {
@@ -431,10 +201,12 @@ fn check_tol(tol: f64) -> Result<(), LtiError> {
 /// ```
 pub fn steady_state_whitening_filter(noise: &StateSpace) -> Result<StateSpace, LtiError> {
     let tol = WhiteningOptions::default().steady_state_tol;
-    let nz = Noise::new(noise);
-    let p = nz.dare(tol)?;
-    let g = nz.gains(&p).map_err(|s| s.into_error("(steady state)"))?;
-    nz.filter(&g)
+    let eq = Riccati::new(noise, None);
+    let p = eq.dare(tol)?;
+    let g = eq
+        .cholesky_gain(&p)
+        .map_err(|s| s.into_error("(steady state)"))?;
+    steady_filter(noise, &g)
 }
 
 impl KalmanWhitener {
@@ -495,72 +267,49 @@ impl KalmanWhitener {
                 format!("{len} samples"),
             ));
         }
-        let nz = Noise::new(noise);
-        let pp = p * (p + 1) / 2;
+        let eq = Riccati::new(noise, None);
         let mut gains_v = Vec::new();
         let mut linv_v = Vec::new();
         let mut log_det = 0.0;
         let (transient, steady_gains, exact) = if opts.steady_state_only {
-            let pinf = nz.dare(opts.steady_state_tol)?;
-            let g = nz
-                .gains(&pinf)
+            let pinf = eq.dare(opts.steady_state_tol)?;
+            let g = eq
+                .cholesky_gain(&pinf)
                 .map_err(|s| s.into_error("(steady state)"))?;
             (0, g, false)
         } else {
             let cap = len.min(opts.max_transient);
-            let mut pcur = DMatrix::<f64>::zeros(n, n);
-            let mut pprev: Option<DMatrix<f64>> = None;
-            let mut last_log_det = 0.0;
-            let mut t = 0;
-            let (transient, exact) = loop {
-                if let Some(prev) = &pprev
-                    && nz.converged(prev, &pcur, opts.steady_state_tol)
-                {
-                    // the gains of step t - 1 equal those of P_t to within the tolerance:
-                    // the steady state starts at t - 1
-                    gains_v.truncate((t - 1) * n * p);
-                    linv_v.truncate((t - 1) * pp);
-                    log_det -= last_log_det;
-                    break (t - 1, true);
-                }
-                if t == cap {
-                    break (t, cap == len);
-                }
-                let g = nz
-                    .gains(&pcur)
+            let mut rec = eq.recursion(DMatrix::zeros(n, n), Some(opts.steady_state_tol));
+            let (mut transient, mut exact) = (cap, cap == len);
+            for t in 0..cap {
+                let g = eq
+                    .cholesky_gain(rec.covariance())
                     .map_err(|s| s.into_error(&format!("at sample {t}")))?;
-                for i in 0..n {
-                    for r in 0..p {
-                        gains_v.push(g.g[(i, r)]);
-                    }
-                }
-                for i in 0..p {
-                    for j in 0..=i {
-                        linv_v.push(g.linv[(i, j)]);
-                    }
-                }
-                log_det += g.log_det;
-                last_log_det = g.log_det;
-                let pn = nz.next(&pcur, &g.k);
-                if !all_finite(&pn) {
-                    return Err(LtiError::param(
+                let steady = rec.advance(&g.k).map_err(|Overflow| {
+                    LtiError::param(
                         "noise",
                         format!(
                             "the Riccati recursion overflowed at sample {t}: the noise model is \
                              unstable in a direction the outputs do not observe"
                         ),
-                    ));
+                    )
+                })?;
+                if steady {
+                    // the gains of step t equal those of P_{t+1} to within the tolerance:
+                    // the steady state starts at t, with the gains of P_{t+1}
+                    (transient, exact) = (t, true);
+                    break;
                 }
-                pprev = Some(std::mem::replace(&mut pcur, pn));
-                t += 1;
-            };
-            let g = nz
-                .gains(&pcur)
+                push_gains(&g.g, &g.linv, &mut gains_v, &mut linv_v);
+                log_det += g.log_det;
+            }
+            let g = eq
+                .cholesky_gain(rec.covariance())
                 .map_err(|s| s.into_error(&format!("at sample {transient}")))?;
             (transient, g, exact)
         };
         log_det += (len - transient) as f64 * steady_gains.log_det;
-        let steady = nz.filter(&steady_gains)?;
+        let steady = steady_filter(noise, &steady_gains)?;
         Ok(KalmanWhitener {
             len,
             n,
@@ -636,40 +385,11 @@ impl KalmanWhitener {
         self.check_rows(y.len(), "y");
         self.check_rows(out.len(), "out");
         let (n, p, tl) = (self.n, self.p, self.transient);
-        let pp = p * (p + 1) / 2;
         let mut xs = vec![0.0; n];
-        let mut xn = vec![0.0; n];
-        let mut nu = vec![0.0; p];
-        for t in 0..tl {
-            let g = &self.gains[t * n * p..(t + 1) * n * p];
-            let li = &self.linv[t * pp..(t + 1) * pp];
-            for c in 0..p {
-                let crow = &self.c[c * n..(c + 1) * n];
-                let mut acc = y[t * p + c];
-                for i in 0..n {
-                    acc -= crow[i] * xs[i];
-                }
-                nu[c] = acc;
-            }
-            let om = &mut out[t * p..(t + 1) * p];
-            for r in 0..p {
-                let row = &li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1];
-                om[r] = row.iter().zip(&nu).map(|(a, b)| a * b).sum();
-            }
-            for i in 0..n {
-                let arow = &self.a[i * n..(i + 1) * n];
-                let grow = &g[i * p..(i + 1) * p];
-                let mut acc = 0.0;
-                for k in 0..n {
-                    acc += arow[k] * xs[k];
-                }
-                for r in 0..p {
-                    acc += grow[r] * om[r];
-                }
-                xn[i] = acc;
-            }
-            std::mem::swap(&mut xs, &mut xn);
-        }
+        // the steady-state gains are not needed before `transient`
+        let (steady, rows) = ((vec![], vec![]), tl * p);
+        let (ym, om) = (column(&y[..rows]), column_mut(&mut out[..rows]));
+        self.step_columns((0, tl), &steady, ym, om, &mut xs, Output::Whitened);
         self.steady
             .run(&xs, &y[tl * p..], &mut out[tl * p..], self.len - tl, None);
     }
@@ -733,36 +453,29 @@ impl KalmanWhitener {
         self.filter(y, out, Some(states));
     }
 
-    fn filter(&self, y: &[f64], out: &mut [f64], mut states: Option<&mut [f64]>) {
+    fn filter(&self, y: &[f64], out: &mut [f64], states: Option<&mut [f64]>) {
         self.check_rows(y.len(), "y");
         self.check_rows(out.len(), "out");
         let (n, p) = (self.n, self.p);
-        let steady = self.steady_gains();
         let mut xs = vec![0.0; n];
-        let mut xn = vec![0.0; n];
-        let mut om = vec![0.0; p];
-        for t in 0..self.len {
-            if let Some(st) = states.as_deref_mut() {
-                st[t * n..(t + 1) * n].copy_from_slice(&xs);
+        let steady = self.steady_gains();
+        let (y, mut out) = (column(y), column_mut(out));
+        match states {
+            None => self.step_columns((0, self.len), &steady, y, out, &mut xs, Output::Innovations),
+            // One sample at a time, so that the state before each sample can be kept.
+            Some(st) => {
+                for t in 0..self.len {
+                    st[t * n..(t + 1) * n].copy_from_slice(&xs);
+                    self.step_columns(
+                        (t, 1),
+                        &steady,
+                        y.subrows(t * p, p),
+                        out.rb_mut().subrows_mut(t * p, p),
+                        &mut xs,
+                        Output::Innovations,
+                    );
+                }
             }
-            let (g, li) = self.gains_at(t, &steady);
-            let nu = &mut out[t * p..(t + 1) * p];
-            for c in 0..p {
-                let crow = &self.c[c * n..(c + 1) * n];
-                nu[c] = y[t * p + c] - crow.iter().zip(&xs).map(|(a, b)| a * b).sum::<f64>();
-            }
-            // The state update needs the normalised innovation: x^+ = A x^ + G L^{-1} nu.
-            for r in 0..p {
-                let row = &li[r * (r + 1) / 2..r * (r + 1) / 2 + r + 1];
-                om[r] = row.iter().zip(nu.iter()).map(|(a, b)| a * b).sum();
-            }
-            for i in 0..n {
-                let arow = &self.a[i * n..(i + 1) * n];
-                let grow = &g[i * p..(i + 1) * p];
-                xn[i] = arow.iter().zip(&xs).map(|(a, b)| a * b).sum::<f64>()
-                    + grow.iter().zip(&om).map(|(a, b)| a * b).sum::<f64>();
-            }
-            std::mem::swap(&mut xs, &mut xn);
         }
     }
 
@@ -789,34 +502,23 @@ impl KalmanWhitener {
         let (n, p, tl) = (self.n, self.p, self.transient);
         let rest = self.len - tl;
         let blocked = (n > 0 && rest > 0).then(|| self.steady.blocked(rest, false));
-        let dinv = self.steady.d();
+        let steady = self.steady_gains();
         par_columns(x, out, faer::get_global_parallelism(), &|x, mut out| {
             let w = x.ncols();
-            let xs = self.transient_columns(x, out.rb_mut());
-            if rest == 0 {
-                return;
-            }
-            let xr = x.subrows(tl * p, rest * p);
-            let mut or = out.subrows_mut(tl * p, rest * p);
+            let mut xs = vec![0.0; n * w];
+            let xo = (x.subrows(0, tl * p), out.rb_mut().subrows_mut(0, tl * p));
+            self.step_columns((0, tl), &steady, xo.0, xo.1, &mut xs, Output::Whitened);
+            let (xr, or) = (
+                x.subrows(tl * p, rest * p),
+                out.subrows_mut(tl * p, rest * p),
+            );
             match &blocked {
                 Some(b) => {
                     let s0 = MatRef::from_row_major_slice(&xs, n, w);
                     b.leaf(rest, xr, or, Accum::Replace, 1.0, Some(s0), None);
                 }
-                None => {
-                    // static filter: w_t = L^{-1} y_t
-                    for j in 0..w {
-                        for t in 0..rest {
-                            for r in 0..p {
-                                let mut acc = 0.0;
-                                for k in 0..=r {
-                                    acc += dinv[(r, k)] * xr[(t * p + k, j)];
-                                }
-                                or[(t * p + r, j)] = acc;
-                            }
-                        }
-                    }
-                }
+                // static filter: w_t = L^{-1} y_t
+                None => self.step_columns((tl, rest), &steady, xr, or, &mut xs, Output::Whitened),
             }
         });
     }
@@ -843,25 +545,13 @@ impl KalmanWhitener {
     /// The steady-state gains in the recursion's form: `L⁻¹ = D_f` and `G = K·L = B_f·D_f⁻¹`
     /// of the steady filter x̂⁺ = (A − KC)x̂ + K·y, ω = L⁻¹(y − C·x̂).
     fn steady_gains(&self) -> (Vec<f64>, Vec<f64>) {
-        let (n, p) = (self.n, self.p);
         let dinv = self.steady.d();
         let l = dinv
             .clone()
             .try_inverse()
-            .unwrap_or_else(|| DMatrix::identity(p, p));
-        let g = self.steady.b() * l;
-        let mut gr = Vec::with_capacity(n * p);
-        for i in 0..n {
-            for r in 0..p {
-                gr.push(g[(i, r)]);
-            }
-        }
-        let mut li = Vec::with_capacity(p * (p + 1) / 2);
-        for r in 0..p {
-            for k in 0..=r {
-                li.push(dinv[(r, k)]);
-            }
-        }
+            .unwrap_or_else(|| DMatrix::identity(self.p, self.p));
+        let (mut gr, mut li) = (Vec::new(), Vec::new());
+        push_gains(&(self.steady.b() * l), dinv, &mut gr, &mut li);
         (gr, li)
     }
 
@@ -904,27 +594,32 @@ impl KalmanWhitener {
             engine: (n > 0).then(|| self.steady.blocked(usize::MAX / 2, false)),
             steady: self.steady_gains(),
             t: 0,
-            state: faer::Mat::zeros(n, ncols),
-            next: faer::Mat::zeros(n, ncols),
+            ncols,
+            state: vec![0.0; n * ncols],
+            next: vec![0.0; n * ncols],
         }
     }
 
-    /// The time-varying part of [`whiten_columns`](Self::whiten_columns) on a column part;
-    /// returns the filter state at `transient_len` (`n x ncols`, row-major).
-    fn transient_columns(&self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Vec<f64> {
-        let (n, p, tl) = (self.n, self.p, self.transient);
+    /// `steps` samples of the recursion from sample `t0` on the columns of `x` and `out`
+    /// (`steps * p` rows), vectorised over the columns: `xs` is the filter state
+    /// (`n x ncols`, row-major), updated in place; `out` receives `what`. `steady`: the
+    /// steady-state gains of [`steady_gains`](Self::steady_gains).
+    fn step_columns(
+        &self,
+        (t0, steps): (usize, usize),
+        steady: &(Vec<f64>, Vec<f64>),
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        xs: &mut Vec<f64>,
+        what: Output,
+    ) {
+        let (n, p) = (self.n, self.p);
         let w = x.ncols();
-        let pp = p * (p + 1) / 2;
-        let mut xs = vec![0.0; n * w];
-        if tl == 0 {
-            return xs;
-        }
         let mut xn = vec![0.0; n * w];
         let mut nu = vec![0.0; p * w];
         let mut om = vec![0.0; p * w];
-        for t in 0..tl {
-            let g = &self.gains[t * n * p..(t + 1) * n * p];
-            let li = &self.linv[t * pp..(t + 1) * pp];
+        for t in 0..steps {
+            let (g, li) = self.gains_at(t0 + t, steady);
             // nu = y_t - C x^
             for c in 0..p {
                 let nc = &mut nu[c * w..(c + 1) * w];
@@ -935,6 +630,11 @@ impl KalmanWhitener {
                     let cc = self.c[c * n + i];
                     for (v, s) in nc.iter_mut().zip(&xs[i * w..(i + 1) * w]) {
                         *v -= cc * s;
+                    }
+                }
+                if what == Output::Innovations {
+                    for (j, &v) in nc.iter().enumerate() {
+                        out[(t * p + c, j)] = v;
                     }
                 }
             }
@@ -948,8 +648,10 @@ impl KalmanWhitener {
                         *o += l * v;
                     }
                 }
-                for (j, &v) in orow.iter().enumerate() {
-                    out[(t * p + r, j)] = v;
+                if what == Output::Whitened {
+                    for (j, &v) in orow.iter().enumerate() {
+                        out[(t * p + r, j)] = v;
+                    }
                 }
             }
             // x^+ = A x^ + G w_t
@@ -971,9 +673,8 @@ impl KalmanWhitener {
                     }
                 }
             }
-            std::mem::swap(&mut xs, &mut xn);
+            std::mem::swap(xs, &mut xn);
         }
-        xs
     }
 }
 
@@ -992,8 +693,10 @@ pub struct WhiteningStream<'a> {
     engine: Option<crate::operator::BlockedRecursion>,
     steady: (Vec<f64>, Vec<f64>),
     t: usize,
-    state: faer::Mat<f64>,
-    next: faer::Mat<f64>,
+    ncols: usize,
+    /// the filter state (`n x ncols`, row-major) and a buffer of the same shape
+    state: Vec<f64>,
+    next: Vec<f64>,
 }
 
 impl WhiteningStream<'_> {
@@ -1001,7 +704,7 @@ impl WhiteningStream<'_> {
     pub fn push(&mut self, x: MatRef<'_, f64>, mut out: MatMut<'_, f64>) -> Result<(), LtiError> {
         let w = self.whitener;
         let (n, p) = (w.n, w.p);
-        let ncols = self.state.ncols();
+        let ncols = self.ncols;
         if x.ncols() != ncols
             || out.ncols() != ncols
             || x.nrows() != out.nrows()
@@ -1028,36 +731,21 @@ impl WhiteningStream<'_> {
             });
         }
         let b = self.engine.as_ref().map_or(1, |e| e.b);
-        let mut k = 0;
         // Per-sample steps: through the transient, then until a whole number of blocks is left.
-        while k < c && (self.t < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none())
-        {
-            let (g, li) = w.gains_at(self.t, &self.steady);
-            let mut nu = vec![0.0; p];
-            let mut om = vec![0.0; p];
-            for j in 0..ncols {
-                for cc in 0..p {
-                    nu[cc] = x[(k * p + cc, j)]
-                        - (0..n)
-                            .map(|i| w.c[cc * n + i] * self.state[(i, j)])
-                            .sum::<f64>();
-                }
-                for r in 0..p {
-                    om[r] = (0..=r).map(|kk| li[r * (r + 1) / 2 + kk] * nu[kk]).sum();
-                    out[(k * p + r, j)] = om[r];
-                }
-                for i in 0..n {
-                    let v: f64 = (0..n)
-                        .map(|kk| w.a[i * n + kk] * self.state[(kk, j)])
-                        .sum::<f64>()
-                        + (0..p).map(|r| g[i * p + r] * om[r]).sum::<f64>();
-                    self.next[(i, j)] = v;
-                }
-            }
-            std::mem::swap(&mut self.state, &mut self.next);
-            self.t += 1;
-            k += 1;
-        }
+        let per_sample = |k: usize| {
+            self.t + k < w.transient || !(c - k).is_multiple_of(b) || self.engine.is_none()
+        };
+        let k = (0..c).find(|&k| !per_sample(k)).unwrap_or(c);
+        let (xk, ok) = (x.subrows(0, k * p), out.rb_mut().subrows_mut(0, k * p));
+        w.step_columns(
+            (self.t, k),
+            &self.steady,
+            xk,
+            ok,
+            &mut self.state,
+            Output::Whitened,
+        );
+        self.t += k;
         if k < c {
             let e = self.engine.as_ref().expect("per-sample steps cover n = 0");
             let rows = (c - k) * p;
@@ -1067,8 +755,8 @@ impl WhiteningStream<'_> {
                 out.rb_mut().subrows_mut(k * p, rows),
                 Accum::Replace,
                 1.0,
-                Some(self.state.as_ref()),
-                Some(self.next.as_mut()),
+                Some(MatRef::from_row_major_slice(&self.state, n, ncols)),
+                Some(MatMut::from_row_major_slice_mut(&mut self.next, n, ncols)),
             );
             std::mem::swap(&mut self.state, &mut self.next);
             self.t += c - k;

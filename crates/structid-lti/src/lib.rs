@@ -44,6 +44,7 @@
 pub mod error;
 pub mod kalman;
 pub mod operator;
+mod riccati;
 pub mod signal;
 pub mod smoother;
 pub mod state_space;

@@ -107,6 +107,10 @@
 //! not stabilise the loop.
 
 use crate::error::LtiError;
+use crate::riccati::{
+    Overflow, Riccati, dot, mat_t_vec_add, mat_vec, mat_vec_add, mat_vec3, row_major, sym_pinv,
+    symmetrise,
+};
 use crate::signal::Signal;
 use crate::state_space::StateSpace;
 use nalgebra::{DMatrix, DVector};
@@ -287,109 +291,6 @@ impl std::fmt::Debug for DisturbanceSmoother {
     }
 }
 
-fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
-    m.transpose().as_slice().to_vec()
-}
-
-fn symmetrise(m: &mut DMatrix<f64>) {
-    let n = m.nrows();
-    for j in 0..n {
-        for i in j + 1..n {
-            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
-        }
-    }
-}
-
-/// Pseudo-inverse of the symmetric `s` through its eigendecomposition, with eigenvalues
-/// `<= tau` treated as zero; also returns the eigenvectors of those (the null directions).
-fn sym_pinv(s: &DMatrix<f64>, tau: f64) -> (DMatrix<f64>, Vec<DVector<f64>>) {
-    let k = s.nrows();
-    let mut pinv = DMatrix::zeros(k, k);
-    let mut null = Vec::new();
-    if k == 0 {
-        return (pinv, null);
-    }
-    let eig = s.clone().symmetric_eigen();
-    for i in 0..k {
-        let v = eig.eigenvectors.column(i);
-        let l = eig.eigenvalues[i];
-        if l > tau {
-            pinv += v * v.transpose() / l;
-        } else {
-            null.push(v.into_owned());
-        }
-    }
-    symmetrise(&mut pinv);
-    (pinv, null)
-}
-
-/// Dot product of two slices of the same length, with straight-line code for the short
-/// lengths of the per-sample recursions (the branch is perfectly predictable there).
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    match (a, b) {
-        ([], _) | (_, []) => 0.0,
-        ([a0], [b0, ..]) => a0 * b0,
-        ([a0, a1], [b0, b1, ..]) => a0 * b0 + a1 * b1,
-        ([a0, a1, a2], [b0, b1, b2, ..]) => a0 * b0 + a1 * b1 + a2 * b2,
-        ([a0, a1, a2, a3], [b0, b1, b2, b3, ..]) => (a0 * b0 + a1 * b1) + (a2 * b2 + a3 * b3),
-        _ => a.iter().zip(b).map(|(x, y)| x * y).sum(),
-    }
-}
-
-/// `out = M x` for a row-major `M` with `out.len()` rows and `x.len()` columns.
-/// (Rows are split off one by one: `chunks_exact` would cost a division per call, which
-/// matters at a few nanoseconds per sample.)
-#[inline(always)]
-fn mat_vec(mat: &[f64], x: &[f64], out: &mut [f64]) {
-    let mut rest = mat;
-    for o in out.iter_mut() {
-        let (row, tail) = rest.split_at(x.len());
-        *o = dot(row, x);
-        rest = tail;
-    }
-}
-
-/// `out = M [x1; x2; x3]` for a row-major `M` with `out.len()` rows (no copy of the
-/// stacked vector).
-#[inline(always)]
-fn mat_vec3(mat: &[f64], x1: &[f64], x2: &[f64], x3: &[f64], out: &mut [f64]) {
-    let mut rest = mat;
-    for o in out.iter_mut() {
-        let (r1, tail) = rest.split_at(x1.len());
-        let (r2, tail) = tail.split_at(x2.len());
-        let (r3, tail) = tail.split_at(x3.len());
-        *o = dot(r1, x1) + dot(r2, x2) + dot(r3, x3);
-        rest = tail;
-    }
-}
-
-/// `out += alpha M x` for a row-major `M` with `out.len()` rows and `x.len()` columns.
-#[inline(always)]
-fn mat_vec_add(mat: &[f64], x: &[f64], alpha: f64, out: &mut [f64]) {
-    let mut rest = mat;
-    for o in out.iter_mut() {
-        let (row, tail) = rest.split_at(x.len());
-        *o += alpha * dot(row, x);
-        rest = tail;
-    }
-}
-
-/// `out += M^T x` for a row-major `M` with `x.len()` rows and `out.len()` columns.
-#[inline(always)]
-fn mat_t_vec_add(mat: &[f64], x: &[f64], out: &mut [f64]) {
-    let mut rest = mat;
-    for &xi in x {
-        let (row, tail) = rest.split_at(out.len());
-        for (o, &mij) in out.iter_mut().zip(row) {
-            *o += mij * xi;
-        }
-        rest = tail;
-    }
-}
-
 /// The contributions of one sample to `b` and `h` of the free initial state:
 /// `b += E^T F^+ e`, `h += E^T N^T N e` (`ek`: `E` row-major `p x n`; `w`: scratch of `p`).
 #[inline(always)]
@@ -414,127 +315,81 @@ fn accumulate_free(
     }
 }
 
-/// The system with the input covariance, for the Riccati recursion.
-struct Model<'a> {
-    sys: &'a StateSpace,
-    /// `Q` (`m x m`, diagonal)
-    q: DMatrix<f64>,
-    /// `B Q D^T`
-    bqdt: DMatrix<f64>,
-    /// `D Q D^T`
-    dqdt: DMatrix<f64>,
-    /// `B Q B^T`
-    bqbt: DMatrix<f64>,
-    /// `|B Q B^T|_F`
-    bqbt_norm: f64,
-    /// a-priori scale of `F`: `trace(D Q D^T) + |C|_F^2 trace(B Q B^T)` (plus
-    /// `trace(C P_0 C^T)`, added by the caller)
-    scale0: f64,
+/// `F`, its pseudo-inverse and null directions, and `K` for the error covariance `pm` of
+/// the recursion `eq` with input covariance `q`; `scale` is the running scale of the
+/// threshold (updated).
+fn sample_step(
+    eq: &Riccati<'_>,
+    q: &DMatrix<f64>,
+    pm: &DMatrix<f64>,
+    scale: &mut f64,
+) -> (Step, DMatrix<f64>) {
+    let (f, mm) = eq.innovation(pm);
+    *scale = scale.max(f.trace());
+    let (finv, null) = sym_pinv(&f, PINV_TOL * *scale);
+    let k = mm * &finv;
+    let mut null_rows = Vec::with_capacity(null.len() * f.nrows());
+    for v in &null {
+        null_rows.extend(v.iter());
+    }
+    // the packed per-sample maps of `smooth`
+    let sys = eq.sys;
+    let (n, m, p) = (sys.order(), sys.inputs(), sys.outputs());
+    let c = sys.c();
+    let phi = sys.a() - &k * c;
+    let gam = sys.b() - &k * sys.d();
+    let mut fw = DMatrix::<f64>::zeros(p + n, n + m + p);
+    fw.view_mut((0, 0), (p, n)).copy_from(&(-c));
+    fw.view_mut((0, n), (p, m)).copy_from(&(-sys.d()));
+    fw.view_mut((0, n + m), (p, p))
+        .copy_from(&DMatrix::<f64>::identity(p, p));
+    fw.view_mut((p, 0), (n, n)).copy_from(&phi);
+    fw.view_mut((p, n), (n, m)).copy_from(&gam);
+    fw.view_mut((p, n + m), (n, p)).copy_from(&k);
+    let mut bw = DMatrix::<f64>::zeros(m + n, p + n);
+    bw.view_mut((0, 0), (m, p))
+        .copy_from(&(q * sys.d().transpose() * &finv));
+    bw.view_mut((0, p), (m, n))
+        .copy_from(&(q * gam.transpose()));
+    bw.view_mut((m, 0), (n, p))
+        .copy_from(&(c.transpose() * &finv));
+    bw.view_mut((m, p), (n, n)).copy_from(&phi.transpose());
+    (
+        Step {
+            finv: row_major(&finv),
+            gain: row_major(&k),
+            null: null_rows,
+            fw: row_major(&fw),
+            bw: row_major(&bw),
+        },
+        k,
+    )
 }
 
-impl<'a> Model<'a> {
-    fn new(sys: &'a StateSpace, variances: &[f64]) -> Self {
-        let q = DMatrix::from_diagonal(&DVector::from_column_slice(variances));
-        let (b, c, d) = (sys.b(), sys.c(), sys.d());
-        let mut dqdt = d * &q * d.transpose();
-        symmetrise(&mut dqdt);
-        let bqbt = b * &q * b.transpose();
-        Model {
-            sys,
-            bqdt: b * &q * d.transpose(),
-            scale0: dqdt.trace() + c.norm_squared() * bqbt.trace(),
-            dqdt,
-            bqbt_norm: bqbt.norm(),
-            bqbt,
-            q,
-        }
+/// The base prior covariance of a free initial state: `s I` with `s` the mean
+/// eigenvalue of the `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (the
+/// state's scale under the input prior) plus `trace(D Q D^T) / |C|_F^2`; 0 when the
+/// inputs move no state.
+fn free_base_prior(eq: &Riccati<'_>) -> DMatrix<f64> {
+    let sys = eq.sys;
+    let a = sys.a();
+    let n = a.nrows();
+    let mut trace = 0.0;
+    let mut term = eq.q.clone();
+    for _ in 0..n {
+        trace += term.trace();
+        term = a * term * a.transpose();
     }
-
-    /// `F`, its pseudo-inverse and null directions, and `K` for the error covariance `pm`;
-    /// `scale` is the running scale of the threshold (updated).
-    fn step(&self, pm: &DMatrix<f64>, scale: &mut f64) -> (Step, DMatrix<f64>) {
-        let (a, c) = (self.sys.a(), self.sys.c());
-        let pct = pm * c.transpose();
-        let mut f = c * &pct + &self.dqdt;
-        symmetrise(&mut f);
-        *scale = scale.max(f.trace());
-        let (finv, null) = sym_pinv(&f, PINV_TOL * *scale);
-        let k = (a * &pct + &self.bqdt) * &finv;
-        let mut null_rows = Vec::with_capacity(null.len() * f.nrows());
-        for v in &null {
-            null_rows.extend(v.iter());
-        }
-        // the packed per-sample maps of `smooth`
-        let sys = self.sys;
-        let (n, m, p) = (sys.order(), sys.inputs(), sys.outputs());
-        let phi = a - &k * c;
-        let gam = sys.b() - &k * sys.d();
-        let mut fw = DMatrix::<f64>::zeros(p + n, n + m + p);
-        fw.view_mut((0, 0), (p, n)).copy_from(&(-c));
-        fw.view_mut((0, n), (p, m)).copy_from(&(-sys.d()));
-        fw.view_mut((0, n + m), (p, p))
-            .copy_from(&DMatrix::<f64>::identity(p, p));
-        fw.view_mut((p, 0), (n, n)).copy_from(&phi);
-        fw.view_mut((p, n), (n, m)).copy_from(&gam);
-        fw.view_mut((p, n + m), (n, p)).copy_from(&k);
-        let mut bw = DMatrix::<f64>::zeros(m + n, p + n);
-        bw.view_mut((0, 0), (m, p))
-            .copy_from(&(&self.q * sys.d().transpose() * &finv));
-        bw.view_mut((0, p), (m, n))
-            .copy_from(&(&self.q * gam.transpose()));
-        bw.view_mut((m, 0), (n, p))
-            .copy_from(&(c.transpose() * &finv));
-        bw.view_mut((m, p), (n, n)).copy_from(&phi.transpose());
-        (
-            Step {
-                finv: row_major(&finv),
-                gain: row_major(&k),
-                null: null_rows,
-                fw: row_major(&fw),
-                bw: row_major(&bw),
-            },
-            k,
-        )
+    let mut s = if n > 0 { trace / n as f64 } else { 0.0 };
+    // When the direct feedthrough dominates, a prior scaled by the Gramian alone makes
+    // `C P_0 C^T` tiny next to `D Q D^T`, so `F_0` is needlessly ill-conditioned when
+    // the columns of `C` and `D` are nearly parallel; scaling `x_0` to move the
+    // outputs as much as the inputs do keeps both parts of `F_0` comparable.
+    let c2 = sys.c().norm_squared();
+    if c2 > 0.0 && s > 0.0 {
+        s += eq.r.trace() / c2;
     }
-
-    /// The base prior covariance of a free initial state: `s I` with `s` the mean
-    /// eigenvalue of the `n`-step reachability Gramian `sum_{j<n} A^j B Q B^T (A^j)^T` (the
-    /// state's scale under the input prior) plus `trace(D Q D^T) / |C|_F^2`; 0 when the
-    /// inputs move no state.
-    fn free_base_prior(&self) -> DMatrix<f64> {
-        let a = self.sys.a();
-        let n = a.nrows();
-        let mut trace = 0.0;
-        let mut term = self.bqbt.clone();
-        for _ in 0..n {
-            trace += term.trace();
-            term = a * term * a.transpose();
-        }
-        let mut s = if n > 0 { trace / n as f64 } else { 0.0 };
-        // When the direct feedthrough dominates, a prior scaled by the Gramian alone makes
-        // `C P_0 C^T` tiny next to `D Q D^T`, so `F_0` is needlessly ill-conditioned when
-        // the columns of `C` and `D` are nearly parallel; scaling `x_0` to move the
-        // outputs as much as the inputs do keeps both parts of `F_0` comparable.
-        let c2 = self.sys.c().norm_squared();
-        if c2 > 0.0 && s > 0.0 {
-            s += self.dqdt.trace() / c2;
-        }
-        DMatrix::<f64>::identity(n, n) * s
-    }
-
-    /// Joseph-form update `P+ = (A - K C) P (A - K C)^T + (B - K D) Q (B - K D)^T`.
-    fn next(&self, pm: &DMatrix<f64>, k: &DMatrix<f64>) -> DMatrix<f64> {
-        let sys = self.sys;
-        let phi = sys.a() - k * sys.c();
-        let e = sys.b() - k * sys.d();
-        let mut pn = &phi * pm * phi.transpose() + &e * &self.q * e.transpose();
-        symmetrise(&mut pn);
-        pn
-    }
-
-    fn converged(&self, prev: &DMatrix<f64>, next: &DMatrix<f64>) -> bool {
-        (next - prev).norm() <= STEADY_TOL * (prev.norm() + self.bqbt_norm)
-    }
+    DMatrix::<f64>::identity(n, n) * s
 }
 
 impl DisturbanceSmoother {
@@ -619,16 +474,8 @@ impl DisturbanceSmoother {
                 format!("{len} samples"),
             ));
         }
-        let model = Model::new(system, variances);
-        let overflow = |k: usize| {
-            LtiError::param(
-                "system",
-                format!(
-                    "the Riccati recursion overflowed at sample {k}: the system has unstable \
-                     modes that the outputs do not observe"
-                ),
-            )
-        };
+        let eq = Riccati::new(system, Some(variances));
+        let q = DMatrix::from_diagonal(&DVector::from_column_slice(variances));
 
         // Riccati recursion until the steady state (or the end of the record)
         let pp = p * p;
@@ -641,24 +488,32 @@ impl DisturbanceSmoother {
         // base prior covariance of x_0 (see the module documentation)
         let p0 = match initial {
             SmootherInitial::Zero => DMatrix::<f64>::zeros(n, n),
-            SmootherInitial::Free => model.free_base_prior(),
+            SmootherInitial::Free => free_base_prior(&eq),
         };
-        let mut scale = model.scale0 + (system.c() * &p0 * system.c().transpose()).trace();
-        let mut pcur = p0.clone();
+        // the a-priori scale of F: trace(D Q D^T + C P_0 C^T) + |C|_F^2 trace(B Q B^T)
+        let c = system.c();
+        let mut scale = eq.r.trace() + c.norm_squared() * eq.q.trace();
+        scale += (c * &p0 * c.transpose()).trace();
+        let mut rec = eq.recursion(p0.clone(), allow_steady.then_some(STEADY_TOL));
         let mut steady = Step::default();
         let mut transient = len;
         for k in 0..len {
-            let (st, kmat) = model.step(&pcur, &mut scale);
-            let pn = if p == 0 {
-                // no outputs: nothing to filter, the gains are empty
-                pcur.clone()
+            let (st, kmat) = sample_step(&eq, &q, rec.covariance(), &mut scale);
+            // no outputs: nothing to filter, the gains are empty and steady from the start
+            let is_steady = if p == 0 {
+                allow_steady
             } else {
-                model.next(&pcur, &kmat)
+                rec.advance(&kmat).map_err(|Overflow| {
+                    LtiError::param(
+                        "system",
+                        format!(
+                            "the Riccati recursion overflowed at sample {k}: the system has \
+                             unstable modes that the outputs do not observe"
+                        ),
+                    )
+                })?
             };
-            if !pn.iter().all(|v| v.is_finite()) {
-                return Err(overflow(k));
-            }
-            if allow_steady && model.converged(&pcur, &pn) {
+            if is_steady {
                 // the gains of P_k are (to within the tolerance) those of every later step
                 transient = k;
                 steady = st;
@@ -673,7 +528,6 @@ impl DisturbanceSmoother {
             slot.resize(pp, 0.0);
             null.extend_from_slice(&slot);
             nnull.push(nn);
-            pcur = pn;
         }
         let steady_nulls = steady.null.len() / p.max(1);
         let null_total = nnull.iter().sum::<usize>() + (len - transient) * steady_nulls;
@@ -845,6 +699,20 @@ impl DisturbanceSmoother {
                 bw: &self.steady.bw,
             }
         }
+    }
+
+    /// `(F_k^+, K_k)` (row-major) used at sample `k`, and the base prior `P_0` of a free
+    /// initial state (row-major): for comparisons with reference recursions.
+    #[cfg(test)]
+    pub(crate) fn gains_at(&self, k: usize) -> (Vec<f64>, Vec<f64>, Option<Vec<f64>>) {
+        let np = self.n * self.p;
+        let gain = if k < self.transient {
+            self.gain[k * np..(k + 1) * np].to_vec()
+        } else {
+            self.steady.gain.clone()
+        };
+        let p0 = self.free.as_ref().map(|f| f.p0.clone());
+        (self.step(k).finv.to_vec(), gain, p0)
     }
 
     /// The record length `L` the smoother was built for.
