@@ -269,7 +269,7 @@ fn predictor_agrees(
         let expected = data.y().get(k, 0) - report.prediction_error.get(k, 0);
         let got = one.predicted.get(k, 0);
         assert!(
-            (expected - got).abs() <= 1e-12 * (1.0 + scale),
+            (expected - got).abs() <= 1e-12 * (1.0 + scale + expected.abs()),
             "k = {k}: {got} vs {expected}"
         );
     }
@@ -343,6 +343,10 @@ proptest! {
     fn prediction_horizons_one_and_beyond_the_record_match_their_closed_forms(
         a in -0.9f64..0.9, c in 0.2f64..1.5, h in -0.8f64..0.8, gain in 0.0f64..0.8, seed in 0u64..1000,
     ) {
+        // A noise model with a zero outside the unit circle (|a − h·c| > 1) is left out: the
+        // predictor started at rest is then exactly H⁻¹, which amplifies rounding without
+        // bound, so two correct orders of summation drift apart.
+        prop_assume!((a - h * c).abs() < 0.95);
         let s = |v: f64| DMatrix::from_element(1, 1, v);
         let lft = Lft::new(LftMatrices {
             a: s(a), bu: s(0.5), be: s(h), bw: s(-0.5), cy: s(c), dyu: s(0.0), dye: s(1.0),
