@@ -151,10 +151,10 @@ pub trait FeatureMap: Send + Sync {
         None
     }
 
-    /// The feature map as plain data ([`crate::estimate::StoredKernel`]), so that a feature
+    /// The feature map as plain data ([`crate::stored::StoredKernel`]), so that a feature
     /// expansion on it can be stored in an [`crate::estimate::Estimate`]; `None` (the default)
     /// for a feature map without a stored form.
-    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_features(&self) -> Option<crate::stored::StoredKernel> {
         None
     }
 }

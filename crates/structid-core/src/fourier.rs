@@ -228,7 +228,7 @@ impl Dispersion for FourierDispersion {
 }
 
 /// The Fourier-series kernel on a fixed domain: a [`Kernel`] with an explicit [`FeatureMap`].
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct FourierKernel {
     /// Per input: (offset, scale) with t = offset + scale·z.
     affine: Vec<(f64, f64)>,
@@ -377,36 +377,53 @@ impl FourierKernel {
         self.affine.len()
     }
 
-    /// Checks that numbers read from a file fit together (every index within the harmonics,
-    /// one weight per feature), so that evaluation cannot index out of range.
-    pub(crate) fn check_stored(&self) -> Result<()> {
-        let p = self.affine.len();
-        let ok = p > 0
-            && self.lambda.len() == p
-            && self.lambda.iter().all(|l| !l.is_empty())
-            && match self.combination {
-                Combination::Tensor => {
-                    self.index.len() == self.weights.len()
-                        && self.index.iter().all(|mi| {
-                            mi.len() == p
-                                && mi
-                                    .iter()
-                                    .zip(&self.lambda)
-                                    .all(|(&(h, kind), l)| h < l.len() && kind < 2)
-                        })
-                }
-                Combination::Additive => {
-                    self.weights.len()
-                        == 1 + self.lambda.iter().map(|l| 2 * (l.len() - 1)).sum::<usize>()
-                }
-            };
-        if ok {
-            Ok(())
-        } else {
-            Err(Error::InvalidStructure(
-                "stored Fourier kernel: its harmonics, feature indices and weights do not fit together".into(),
-            ))
+    pub(crate) fn to_stored(&self) -> crate::stored::FourierStored {
+        crate::stored::FourierStored {
+            affine: self.affine.clone(),
+            lambda: self.lambda.clone(),
+            additive: self.combination == Combination::Additive,
+            weights: self.weights.clone(),
+            index: self.index.clone(),
+            gaussian_like: self.gaussian_like,
         }
+    }
+
+    /// The kernel from its stored numbers, checked to fit together (every index within the
+    /// harmonics, one weight per feature), so that evaluation cannot index out of range.
+    pub(crate) fn from_stored(s: &crate::stored::FourierStored) -> Result<Self> {
+        let p = s.affine.len();
+        let ok = p > 0
+            && s.lambda.len() == p
+            && s.lambda.iter().all(|l| !l.is_empty())
+            && if s.additive {
+                s.weights.len() == 1 + s.lambda.iter().map(|l| 2 * (l.len() - 1)).sum::<usize>()
+            } else {
+                s.index.len() == s.weights.len()
+                    && s.index.iter().all(|mi| {
+                        mi.len() == p
+                            && mi
+                                .iter()
+                                .zip(&s.lambda)
+                                .all(|(&(h, kind), l)| h < l.len() && kind < 2)
+                    })
+            };
+        if !ok {
+            return Err(Error::InvalidStructure(
+                "stored Fourier kernel: its harmonics, feature indices and weights do not fit together".into(),
+            ));
+        }
+        Ok(Self {
+            affine: s.affine.clone(),
+            lambda: s.lambda.clone(),
+            combination: if s.additive {
+                Combination::Additive
+            } else {
+                Combination::Tensor
+            },
+            weights: s.weights.clone(),
+            index: s.index.clone(),
+            gaussian_like: s.gaussian_like,
+        })
     }
 
     /// Number of harmonics N per input.
@@ -421,8 +438,8 @@ impl FourierKernel {
 }
 
 impl Kernel for FourierKernel {
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Fourier(self.clone()))
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Fourier(self.to_stored()))
     }
 
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
@@ -449,8 +466,8 @@ impl Kernel for FourierKernel {
 }
 
 impl FeatureMap for FourierKernel {
-    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Fourier(self.clone()))
+    fn stored_features(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Fourier(self.to_stored()))
     }
 
     fn dim(&self) -> usize {
@@ -649,8 +666,8 @@ impl Interpolant for FeatureExpansion {
         psi.iter().zip(&self.coef).map(|(a, b)| a * b).sum()
     }
 
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
-        Some(crate::estimate::StoredMap::FeatureExpansion {
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::FeatureExpansion {
             features: self.map.stored_features()?,
             coefficients: self.coef.clone(),
         })

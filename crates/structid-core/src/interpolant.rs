@@ -21,11 +21,11 @@ pub trait Interpolant: Send + Sync {
         (0..z.len()).map(|k| self.eval(z.sample(k))).collect()
     }
 
-    /// The map as plain data that serde can write ([`crate::estimate::StoredMap`]), or `None`
+    /// The map as plain data that serde can write ([`crate::stored::StoredMap`]), or `None`
     /// (the default) when it has no stored form, as for a closure. Every map that
     /// identification returns for this crate's dispersions has one, so that an
     /// [`crate::estimate::Estimate`] can be written and read back.
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
         None
     }
 }

@@ -52,10 +52,10 @@ pub trait Kernel: Send + Sync + fmt::Debug {
         None
     }
 
-    /// The kernel as plain data ([`crate::estimate::StoredKernel`]), so that a kernel
+    /// The kernel as plain data ([`crate::stored::StoredKernel`]), so that a kernel
     /// expansion on it can be stored in an [`crate::estimate::Estimate`]; `None` (the
     /// default) for a kernel without a stored form.
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
         None
     }
 
@@ -203,8 +203,8 @@ impl Kernel for GaussianKernel {
         self.normalisation(a.len()) * (-d2 / (2.0 * self.sigma * self.sigma)).exp()
     }
 
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Gaussian { sigma: self.sigma })
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Gaussian { sigma: self.sigma })
     }
 
     fn describe(&self) -> String {
@@ -393,10 +393,10 @@ impl<K: Kernel> Interpolant for KernelExpansion<K> {
             .collect()
     }
 
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
-        Some(crate::estimate::StoredMap::KernelExpansion {
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::KernelExpansion {
             kernel: self.kernel.stored_kernel()?,
-            centres: crate::estimate::StoredPoints::from_signal(&self.centres),
+            centres: crate::stored::StoredPoints::from_signal(&self.centres),
             alpha: self.alpha.clone(),
         })
     }

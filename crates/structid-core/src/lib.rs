@@ -104,6 +104,7 @@ pub mod residual_tests;
 pub mod scenarios;
 pub mod simulate;
 pub mod solver;
+pub mod stored;
 pub mod structure;
 pub mod sum;
 pub mod total_variation;

@@ -176,11 +176,11 @@ impl NystromFeatures {
         self.trace_error
     }
 
-    fn to_stored(&self) -> crate::estimate::StoredKernel {
+    fn to_stored(&self) -> crate::stored::StoredKernel {
         let r = self.l_pp.nrows();
-        crate::estimate::StoredKernel::Nystrom(crate::estimate::NystromStored {
+        crate::stored::StoredKernel::Nystrom(crate::stored::NystromStored {
             sigma: self.kernel.sigma(),
-            centres: crate::estimate::StoredPoints::from_signal(&self.centres),
+            centres: crate::stored::StoredPoints::from_signal(&self.centres),
             l_pp: (0..r * r).map(|i| self.l_pp[(i / r, i % r)]).collect(),
             weights: self.weights.clone(),
             trace_error: self.trace_error,
@@ -188,7 +188,7 @@ impl NystromFeatures {
     }
 
     /// The features from their stored numbers, checked for consistent sizes.
-    pub(crate) fn from_stored(s: &crate::estimate::NystromStored) -> Result<Self> {
+    pub(crate) fn from_stored(s: &crate::stored::NystromStored) -> Result<Self> {
         let r = s.weights.len();
         let centres = s.centres.to_signal()?;
         if centres.len() < r || s.l_pp.len() != r * r || (0..r).any(|i| s.l_pp[i * r + i] == 0.0) {
@@ -209,7 +209,7 @@ impl NystromFeatures {
 }
 
 impl FeatureMap for NystromFeatures {
-    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_features(&self) -> Option<crate::stored::StoredKernel> {
         Some(self.to_stored())
     }
 
@@ -234,7 +234,7 @@ impl FeatureMap for NystromFeatures {
 }
 
 impl Kernel for NystromFeatures {
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
         Some(self.to_stored())
     }
 

@@ -83,8 +83,8 @@ impl Interpolant for ExprMap {
         self.expr.eval(&vars).unwrap_or(f64::NAN)
     }
 
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
-        Some(crate::estimate::StoredMap::Expression {
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::Expression {
             expression: self.text.clone(),
             inputs: self.dim,
         })
@@ -252,8 +252,8 @@ impl LookupTable {
 }
 
 impl Interpolant for LookupTable {
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
-        Some(crate::estimate::StoredMap::Table { rows: self.rows() })
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::Table { rows: self.rows() })
     }
 
     fn eval(&self, z: &[f64]) -> f64 {

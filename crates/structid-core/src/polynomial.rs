@@ -129,7 +129,7 @@ impl Dispersion for PolynomialDispersion {
 /// assert_eq!(psi, [1.0, 2.0, 4.0]);
 /// assert_eq!(f.eval(&[5.0], &[3.0]), 1.0 + 2.0 * 1.0 + 4.0 * 1.0);
 /// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct PolynomialFeatures {
     affine: Vec<(f64, f64)>,
     exponents: Vec<Vec<u32>>,
@@ -180,15 +180,25 @@ impl PolynomialFeatures {
         })
     }
 
-    /// Checks that numbers read from a file fit together (one exponent per input, one weight
-    /// per feature), so that evaluation cannot index out of range.
-    pub(crate) fn check_stored(&self) -> Result<()> {
-        let p = self.affine.len();
-        if p > 0
-            && self.exponents.len() == self.weights.len()
-            && self.exponents.iter().all(|e| e.len() == p)
+    pub(crate) fn to_stored(&self) -> crate::stored::PolynomialStored {
+        crate::stored::PolynomialStored {
+            affine: self.affine.clone(),
+            exponents: self.exponents.clone(),
+            weights: self.weights.clone(),
+        }
+    }
+
+    /// The features from their stored numbers, checked to fit together (one exponent per
+    /// input, one weight per feature), so that evaluation cannot index out of range.
+    pub(crate) fn from_stored(s: &crate::stored::PolynomialStored) -> Result<Self> {
+        let p = s.affine.len();
+        if p > 0 && s.exponents.len() == s.weights.len() && s.exponents.iter().all(|e| e.len() == p)
         {
-            Ok(())
+            Ok(Self {
+                affine: s.affine.clone(),
+                exponents: s.exponents.clone(),
+                weights: s.weights.clone(),
+            })
         } else {
             Err(Error::InvalidStructure(
                 "stored polynomial features: exponents, inputs and weights do not fit together"
@@ -209,8 +219,8 @@ impl PolynomialFeatures {
 }
 
 impl FeatureMap for PolynomialFeatures {
-    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Polynomial(self.clone()))
+    fn stored_features(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Polynomial(self.to_stored()))
     }
 
     fn dim(&self) -> usize {
@@ -244,8 +254,8 @@ impl FeatureMap for PolynomialFeatures {
 }
 
 impl Kernel for PolynomialFeatures {
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Polynomial(self.clone()))
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Polynomial(self.to_stored()))
     }
 
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {

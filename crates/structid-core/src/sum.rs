@@ -166,8 +166,8 @@ impl StackedFeatures {
 }
 
 impl StackedFeatures {
-    fn to_stored(&self) -> Option<crate::estimate::StoredKernel> {
-        Some(crate::estimate::StoredKernel::Stacked {
+    fn to_stored(&self) -> Option<crate::stored::StoredKernel> {
+        Some(crate::stored::StoredKernel::Stacked {
             parts: self
                 .maps
                 .iter()
@@ -179,7 +179,7 @@ impl StackedFeatures {
 }
 
 impl FeatureMap for StackedFeatures {
-    fn stored_features(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_features(&self) -> Option<crate::stored::StoredKernel> {
         self.to_stored()
     }
 
@@ -211,7 +211,7 @@ impl FeatureMap for StackedFeatures {
 }
 
 impl Kernel for StackedFeatures {
-    fn stored_kernel(&self) -> Option<crate::estimate::StoredKernel> {
+    fn stored_kernel(&self) -> Option<crate::stored::StoredKernel> {
         self.to_stored()
     }
 
@@ -245,12 +245,12 @@ impl QuadraticPenalty for SumGram {
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {
         // Σ_k α_k (K₁ + K₂)(z, z_k) = N̂₁(z) + N̂₂(z) with the same α.
-        crate::estimate::stored::sum_of(
+        Box::new(SumInterpolant(
             self.parts
                 .iter()
                 .map(|p| p.interpolant(alpha.clone()))
                 .collect(),
-        )
+        ))
     }
 
     fn cross_columns(&self, points: &Signal, mut out: faer::MatMut<'_, f64>) -> bool {
@@ -275,6 +275,21 @@ impl QuadraticPenalty for SumGram {
                 .for_each(|(a, b)| *a += b);
         }
         Some(d)
+    }
+}
+
+/// N̂ = Σ_i N̂_i: the map of a sum dispersion (the same α on every part's kernel).
+pub(crate) struct SumInterpolant(pub(crate) Vec<Box<dyn Interpolant>>);
+
+impl Interpolant for SumInterpolant {
+    fn eval(&self, z: &[f64]) -> f64 {
+        self.0.iter().map(|f| f.eval(z)).sum()
+    }
+
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::Sum {
+            parts: self.0.iter().map(|m| m.stored()).collect::<Option<_>>()?,
+        })
     }
 }
 

@@ -241,8 +241,8 @@ impl Interpolant for PiecewiseLinearMap {
         self.0.eval(z[0])
     }
 
-    fn stored(&self) -> Option<crate::estimate::StoredMap> {
-        Some(crate::estimate::StoredMap::PiecewiseLinear {
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        Some(crate::stored::StoredMap::PiecewiseLinear {
             knots: self.0.knots().to_vec(),
             values: self.0.values().to_vec(),
         })
@@ -315,11 +315,11 @@ struct GraphNodes {
 
 impl NodeInterpolation for GraphNodes {
     fn interpolant(&self, values: Vec<f64>) -> Box<dyn Interpolant> {
-        Box::new(crate::estimate::stored::ScaledScatteredMap::new(
-            ScatteredInterpolant::new(self.tree.clone(), values, self.weighting),
-            self.lo.clone(),
-            self.scale.clone(),
-        ))
+        Box::new(ScaledScattered {
+            inner: ScatteredInterpolant::new(self.tree.clone(), values, self.weighting),
+            lo: self.lo.clone(),
+            scale: self.scale.clone(),
+        })
     }
 
     fn describe(&self) -> String {
@@ -329,6 +329,43 @@ impl NodeInterpolation for GraphNodes {
                 "inverse squared distance over the {neighbours} nearest nodes (inputs scaled to [0, 1])"
             ),
         }
+    }
+}
+
+/// Scattered interpolation in inputs scaled to \[0, 1\]: q = (z − lo)·scale.
+pub(crate) struct ScaledScattered {
+    pub(crate) inner: ScatteredInterpolant,
+    pub(crate) lo: Vec<f64>,
+    pub(crate) scale: Vec<f64>,
+}
+
+impl Interpolant for ScaledScattered {
+    fn eval(&self, z: &[f64]) -> f64 {
+        let q: Vec<f64> = z
+            .iter()
+            .zip(self.lo.iter().zip(&self.scale))
+            .map(|(v, (l, s))| (v - l) * s)
+            .collect();
+        self.inner.eval(&q)
+    }
+
+    fn stored(&self) -> Option<crate::stored::StoredMap> {
+        let tree = self.inner.tree();
+        let p = tree.dim();
+        let mut data = Vec::with_capacity(tree.len() * p);
+        for i in 0..tree.len() {
+            data.extend_from_slice(tree.point(i));
+        }
+        Some(crate::stored::StoredMap::Scattered {
+            nodes: crate::stored::StoredPoints { channels: p, data },
+            values: self.inner.values().to_vec(),
+            inverse_distance_neighbours: match self.inner.weighting() {
+                Weighting::Nearest => None,
+                Weighting::InverseDistance { neighbours, .. } => Some(neighbours),
+            },
+            lo: self.lo.clone(),
+            scale: self.scale.clone(),
+        })
     }
 }
 

@@ -3,7 +3,7 @@
 //! Identification returns an [`Identification`], full of diagnostics and tied to the [`Model`]
 //! and the record it came from. An `Estimate` is what is kept afterwards: the linear block L
 //! (all twelve LFT matrices and the sample time, so the noise model H = L_ye comes with it),
-//! every block's map in a stored form ([`StoredMap`]: kernel centres and α, feature
+//! every block's map in a stored form ([`StoredMap`], see [`crate::stored`]: kernel centres and α, feature
 //! coefficients, total-variation nodes, …), the estimated x̂₀, the settings and cost terms that
 //! produced it, and a fingerprint of the data it was fitted on. It is plain data for serde, so
 //! it can be written to a file and read back on a machine that has neither the data nor the
@@ -46,7 +46,7 @@
 //! //! ```
 
 pub mod predict;
-pub(crate) mod stored;
+mod rebuild;
 
 use std::sync::Arc;
 
@@ -63,8 +63,10 @@ use crate::model::{Data, Model, NonlinearBlock};
 use crate::simulate::Simulation;
 use crate::validation::{ValidationReport, ValidationSettings, validate};
 
+pub use crate::stored::{
+    FourierStored, NystromStored, PolynomialStored, StoredKernel, StoredMap, StoredPoints,
+};
 pub use predict::{Prediction, PredictionSettings};
-pub use stored::{NystromStored, StoredKernel, StoredMap, StoredPoints};
 
 /// The version of the stored form written by this library; reading refuses newer ones.
 pub const FORMAT_VERSION: u32 = 1;
