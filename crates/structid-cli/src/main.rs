@@ -30,6 +30,7 @@ mod refine;
 mod simulate;
 mod stored;
 mod validate;
+mod validation_files;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

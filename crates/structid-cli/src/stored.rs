@@ -14,7 +14,7 @@ use structid_io::{DataTable, OutputGuard, read_estimate};
 
 use crate::error::CliError;
 use crate::identify::absolute;
-use crate::validate::{
+use crate::validation_files::{
     fmt_pct, outputs_json, pass, residuals_svg, simulation_names, simulation_svg,
 };
 use crate::{InitialStateArg, PredictArgs, SimulateArgs, ValidateArgs};
