@@ -66,6 +66,25 @@
 //! [`validate()`] checks estimated maps on a record: simulation with the maps in the loop (RMS and
 //! fit), one-step-ahead prediction errors (the innovations of the noise path's Kalman
 //! predictor) and their whiteness and input cross-correlation tests; see [`validation`].
+//! [`Model::fit`] returns an [`Estimate`], the fitted model as a value that simulates, predicts k
+//! steps ahead and serialises ([`estimate`]).
+//!
+//! ## Layout
+//!
+//! | module | what lives there |
+//! |---|---|
+//! | [`model`] | the LFT ([`model::lft`]), measurability, simulation with maps in the loop, where blocks sit ([`model::structure`]: [`Site`], [`Structure`]), the `Model` and its `Data`, interpolants, known maps (expressions, tables) |
+//! | [`dispersion`] | the `Dispersion`/`Penalty` vocabulary and every family: kernels, Fourier features, low rank, polynomial, sums, total variation with its graph and scattered interpolants ([`dispersion::neighbours`]) |
+//! | [`identify`] | the executor, its settings and results, the operator-form problem, posterior bands |
+//! | [`solver`] | exact, features, conic (Clarabel), ADMM with its proximal operators |
+//! | [`selection`] | β and σ by marginal likelihood, GCV, cross-validation or a validation record |
+//! | [`validation`] | simulation, one-step prediction, residual tests, metrics |
+//! | [`estimate`], [`stored`] | the fitted model as a value and the stored forms of maps |
+//! | [`refine`] | alternating refinement of an uncertain linear part |
+//! | [`paper`], [`scenarios`] | the paper's examples and test scenarios |
+//!
+//! The flat module paths of earlier versions (`structid_core::kernel`, `::lft`, `::hyperparameters`,
+//! …) remain as aliases of their new homes.
 //!
 //! ## Example
 //! ```
@@ -82,33 +101,23 @@
 pub mod dispersion;
 pub mod error;
 pub mod estimate;
-pub mod fourier;
-pub mod hyperparameters;
 pub mod identify;
-pub mod interpolant;
-pub mod kernel;
-pub mod lft;
-pub mod low_rank;
-pub mod maps;
-pub mod measurability;
-pub mod metrics;
 pub mod model;
-pub mod neighbours;
 pub mod paper;
-pub mod polynomial;
-pub mod posterior;
-pub mod problem;
-pub mod prox;
 pub mod refine;
-pub mod residual_tests;
 pub mod scenarios;
-pub mod simulate;
+pub mod selection;
 pub mod solver;
 pub mod stored;
-pub mod structure;
-pub mod sum;
-pub mod total_variation;
 pub mod validation;
+
+// The module paths of the earlier flat layout (`structid_core::kernel::…`), kept as aliases.
+pub use dispersion::{fourier, kernel, low_rank, neighbours, polynomial, sum, total_variation};
+pub use identify::{posterior, problem};
+pub use model::{interpolant, lft, maps, measurability, simulate, structure};
+pub use selection as hyperparameters;
+pub use solver::prox;
+pub use validation::{metrics, residual_tests};
 
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};

@@ -5,6 +5,7 @@ pub mod admm;
 pub mod conic;
 pub mod exact;
 pub mod features;
+pub mod prox;
 mod realisation;
 
 use std::time::Instant;

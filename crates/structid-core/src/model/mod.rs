@@ -1,5 +1,12 @@
 //! The structured model: the known LFT plus its list of unknown static blocks, and the data.
 
+pub mod interpolant;
+pub mod lft;
+pub mod maps;
+pub mod measurability;
+pub mod simulate;
+pub mod structure;
+
 use std::fmt;
 use std::sync::Arc;
 

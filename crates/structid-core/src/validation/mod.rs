@@ -46,6 +46,9 @@
 //! O) get the minimum-norm value: they reach neither z nor y, so they change no result.
 //! The simulation then starts from x̂₀ and the prediction uses v with O·x̂₀ removed.
 
+pub mod metrics;
+pub mod residual_tests;
+
 use faer::Mat;
 use nalgebra::{DMatrix, DVector};
 use structid_lti::Signal;

@@ -4,6 +4,14 @@
 //! what a solver sees; its kind (quadratic, or graph total variation) decides which
 //! solvers can handle it, so [`crate::identify()`] never needs to know the concrete dispersion type.
 
+pub mod fourier;
+pub mod kernel;
+pub mod low_rank;
+pub mod neighbours;
+pub mod polynomial;
+pub mod sum;
+pub mod total_variation;
+
 use std::fmt;
 use std::ops::Range;
 use std::sync::Arc;

@@ -1,5 +1,8 @@
 //! The `identify` executor: settings in, an [`Identification`] out.
 
+pub mod posterior;
+pub mod problem;
+
 use std::time::Instant;
 
 use structid_lti::Signal;
