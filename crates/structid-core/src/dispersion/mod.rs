@@ -5,6 +5,7 @@
 //! solvers can handle it, so [`crate::identify()`] never needs to know the concrete dispersion type.
 
 pub mod fourier;
+pub mod graph;
 pub mod kernel;
 pub mod low_rank;
 pub mod neighbours;
@@ -18,10 +19,10 @@ use std::sync::Arc;
 
 use structid_lti::Signal;
 
+use crate::dispersion::graph::TvPenalty;
 use crate::error::Result;
 use crate::interpolant::Interpolant;
 use crate::kernel::{GaussianKernel, Kernel, KernelExpansion};
-use crate::total_variation::TvPenalty;
 
 /// A dispersion function D(z, w) for one nonlinear block.
 pub trait Dispersion: Send + Sync + fmt::Debug {
