@@ -25,16 +25,12 @@
 //!
 //! ```
 //! use std::sync::Arc;
-//! use structid::nalgebra::DMatrix;
 //! use structid::prelude::*;
-//! // G: x⁺ = 0.5x + w, y = x + e; the map reads z = u.
-//! let m = |v: f64| DMatrix::from_element(1, 1, v);
-//! let lft = Lft::new(LftMatrices {
-//!     a: m(0.5), bu: m(0.0), be: m(0.0), bw: m(1.0), cy: m(1.0), dyu: m(0.0), dye: m(1.0),
-//!     dyw: m(0.0), cz: m(0.0), dzu: m(1.0), dze: m(0.0), dzw: m(0.0),
-//! }).unwrap();
-//! let n = NonlinearBlock::new("N", vec![0], 0, Arc::new(KernelDispersion::gaussian(0.3).unwrap()));
-//! let model = Model::new(lft, vec![n]).unwrap();
+//! // y = G·N(u) + e with G(q) = q⁻¹/(1 − 0.5q⁻¹): one line for the structure.
+//! let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
+//! let model = Structure::hammerstein(&g, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))
+//!     .model()
+//!     .unwrap();
 //! let u = Signal::from_fn(400, 1, |k, _| 2.0 * (0.37 * k as f64).sin());
 //! let truth = |z: &[f64]| z[0].clamp(-1.0, 1.0);
 //! let y = model.simulate(&[&truth], &u, None, None).unwrap().y;
@@ -59,7 +55,8 @@ pub mod prelude {
     pub use structid_core::{
         Data, Dispersion, FourierDispersion, FourierWeights, GaussianKernel, IdentifySettings,
         Interpolant, KernelDispersion, Lft, LftMatrices, Model, NonlinearBlock,
-        PolynomialDispersion, Signal, SolverChoice, SumDispersion, TotalVariation, identify,
+        PolynomialDispersion, Signal, Site, SolverChoice, Structure, SumDispersion, TotalVariation,
+        identify,
     };
     pub use structid_linear::PolynomialModel;
 }
