@@ -403,9 +403,10 @@ impl FourierKernel {
         if ok {
             Ok(())
         } else {
-            Err(Error::InvalidStructure(
-                "stored Fourier kernel: its harmonics, feature indices and weights do not fit together".into(),
-            ))
+            Err(Error::InconsistentStored {
+                item: "Fourier kernel".into(),
+                detail: "its harmonics, feature indices and weights do not fit together".into(),
+            })
         }
     }
 

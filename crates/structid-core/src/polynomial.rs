@@ -190,10 +190,10 @@ impl PolynomialFeatures {
         {
             Ok(())
         } else {
-            Err(Error::InvalidStructure(
-                "stored polynomial features: exponents, inputs and weights do not fit together"
-                    .into(),
-            ))
+            Err(Error::InconsistentStored {
+                item: "polynomial features".into(),
+                detail: "exponents, inputs and weights do not fit together".into(),
+            })
         }
     }
 

@@ -92,13 +92,16 @@ impl StoredMatrix {
 
     fn to_matrix(&self, name: &str) -> Result<DMatrix<f64>> {
         if self.rows.checked_mul(self.cols) != Some(self.data.len()) {
-            return Err(Error::InvalidStructure(format!(
-                "stored matrix {name}: {} × {} needs {} entries, found {}",
-                self.rows,
-                self.cols,
-                self.rows.saturating_mul(self.cols),
-                self.data.len()
-            )));
+            return Err(Error::InconsistentStored {
+                item: format!("matrix {name}"),
+                detail: format!(
+                    "{} × {} needs {} entries, found {}",
+                    self.rows,
+                    self.cols,
+                    self.rows.saturating_mul(self.cols),
+                    self.data.len()
+                ),
+            });
         }
         Ok(DMatrix::from_row_slice(self.rows, self.cols, &self.data))
     }
@@ -160,7 +163,7 @@ impl StoredLft {
     /// The LFT, checked as [`Lft::new`] checks it.
     ///
     /// # Errors
-    /// As [`Lft::new`], and [`Error::InvalidStructure`] for a matrix whose entries do not fill
+    /// As [`Lft::new`], and [`Error::InconsistentStored`] for a matrix whose entries do not fill
     /// its shape.
     pub fn to_lft(&self) -> Result<Lft> {
         let lft = Lft::new(LftMatrices {

@@ -57,14 +57,17 @@ impl StoredPoints {
     /// The points as a signal.
     ///
     /// # Errors
-    /// [`Error::InvalidStructure`] when the data are not a whole number of points.
+    /// [`Error::InconsistentStored`] when the data are not a whole number of points.
     pub fn to_signal(&self) -> Result<Signal> {
         if self.channels == 0 || self.data.len() % self.channels != 0 {
-            return Err(Error::InvalidStructure(format!(
-                "stored points: {} values are not a whole number of points of {} coordinate(s)",
-                self.data.len(),
-                self.channels
-            )));
+            return Err(Error::InconsistentStored {
+                item: "points".into(),
+                detail: format!(
+                    "{} values are not a whole number of points of {} coordinate(s)",
+                    self.data.len(),
+                    self.channels
+                ),
+            });
         }
         Ok(Signal::new(self.channels, self.data.clone())?)
     }
@@ -178,10 +181,10 @@ impl StoredKernel {
 /// Stacked features rebuilt from their stored parts.
 fn stacked(parts: &[StoredKernel], width_part: Option<usize>) -> Result<StackedFeatures> {
     if parts.is_empty() || width_part.is_some_and(|w| w >= parts.len()) {
-        return Err(Error::InvalidStructure(format!(
-            "stored stacked features: {} part(s) and width part {width_part:?}",
-            parts.len()
-        )));
+        return Err(Error::InconsistentStored {
+            item: "stacked features".into(),
+            detail: format!("{} part(s) and width part {width_part:?}", parts.len()),
+        });
     }
     let maps = parts
         .iter()
@@ -254,7 +257,7 @@ impl StoredMap {
     /// The map as an [`Interpolant`] that evaluates exactly as the one it was stored from.
     ///
     /// # Errors
-    /// [`Error::InvalidStructure`] when the stored numbers are inconsistent (lengths that do
+    /// [`Error::InconsistentStored`] when the stored numbers are inconsistent (lengths that do
     /// not match, knots that are not increasing, …), [`Error::Expression`] for an expression
     /// that does not parse.
     ///
@@ -267,7 +270,10 @@ impl StoredMap {
     /// assert!(bad.interpolant().is_err());
     /// ```
     pub fn interpolant(&self) -> Result<Box<dyn Interpolant>> {
-        let bad = |what: String| Error::InvalidStructure(format!("stored map: {what}"));
+        let bad = |detail: String| Error::InconsistentStored {
+            item: "map".into(),
+            detail,
+        };
         Ok(match self {
             StoredMap::KernelExpansion {
                 kernel,

@@ -384,8 +384,7 @@ pub(crate) fn solve_with(
         tol_feas: conic.tolerance(),
         ..DefaultSettings::default()
     };
-    let mut solver = DefaultSolver::new(&p_mat, &q, &a_mat, &rhs, &cones, cl_settings)
-        .map_err(|e| Error::Numerical(format!("clarabel rejected the problem data: {e:?}")))?;
+    let mut solver = DefaultSolver::new(&p_mat, &q, &a_mat, &rhs, &cones, cl_settings)?;
     let t_assembled = Instant::now();
     solver.solve();
     let t_factored = Instant::now();
