@@ -461,7 +461,7 @@ impl Estimate {
                 workflow: "identify".into(),
                 settings: Some(settings.clone()),
                 cost: Some(id.cost.clone()),
-                solver: Some(id.diagnostics.solver.clone()),
+                solver: Some(id.diagnostics.solver.to_string()),
                 fitted_on: Some(DataFingerprint::of(data)),
                 notes: Vec::new(),
             },

@@ -2,12 +2,15 @@
 //! returns an [`crate::Identification`]; [`crate::identify()`] chooses between them.
 
 pub mod admm;
+pub mod choice;
 pub mod conic;
 pub mod exact;
 pub mod features;
 mod realisation;
 
 use std::time::Instant;
+
+pub use choice::choose_solver;
 
 use structid_lti::Signal;
 
