@@ -35,6 +35,8 @@ pub const CONIC_AUTO_LIMIT: usize = 1000;
 /// assert_eq!(SolverKind::Features { features: 63 }.to_string(), "features (m = 63)");
 /// assert_eq!(SolverKind::Features { features: 63 }.name(), "features");
 /// assert_eq!(SolverKind::Admm, "admm");
+/// assert_eq!(SolverKind::Features { features: 63 }, "features (m = 63)");
+/// assert_ne!(SolverKind::Features { features: 63 }, "features (m = 6)");
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[non_exhaustive]
@@ -95,14 +97,22 @@ impl serde::Serialize for SolverKind {
 impl PartialEq<str> for SolverKind {
     /// Compares the printed form ([`fmt::Display`]).
     fn eq(&self, other: &str) -> bool {
-        self.to_string() == other
+        match self {
+            SolverKind::Features { features } => {
+                other
+                    .strip_prefix("features (m = ")
+                    .and_then(|rest| rest.strip_suffix(')'))
+                    == Some(features.to_string().as_str())
+            }
+            kind => kind.name() == other,
+        }
     }
 }
 
 impl PartialEq<&str> for SolverKind {
     /// Compares the printed form ([`fmt::Display`]).
     fn eq(&self, other: &&str) -> bool {
-        self.to_string() == *other
+        self == *other
     }
 }
 
