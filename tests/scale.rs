@@ -25,7 +25,7 @@ fn feature_solver_error_falls_from_ten_thousand_to_a_million_samples() {
         let exp = scenarios::hammerstein_coloured(len, 4, 0.3, disp.clone(), 11).unwrap();
         let id = identify(&exp.model, &exp.data, &settings).unwrap();
         assert!(id.diagnostics.feasibility_residual < 1e-9);
-        assert!(id.diagnostics.solver.starts_with("features"));
+        assert_eq!(id.diagnostics.solver.name(), "features");
         rms_difference(&id.blocks[0].w_hat, &exp.w_true.channel(0))
     };
     let (small, large) = (err(10_000), err(1_000_000));

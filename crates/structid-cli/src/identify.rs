@@ -264,13 +264,7 @@ fn reproduction(
         sigma,
         solver_requested: value_name(a.solver),
         // `features (m = 63)` → `features`
-        solver: id
-            .diagnostics
-            .solver
-            .split_whitespace()
-            .next()
-            .unwrap_or_default()
-            .to_string(),
+        solver: id.diagnostics.solver.name().to_string(),
         initial_state: value_name(a.initial_state),
         memory_limit_mib: a.memory_limit_mib,
         dispersion: a.dispersion.map(value_name),
@@ -359,6 +353,8 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     } else {
         (identify(&model, &data, &settings)?, settings, None)
     };
+    // An iterate that stopped at a limit is not an estimate to write: a runtime error.
+    let id = id.converged()?;
 
     guard.create_dir(&a.out)?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;

@@ -319,13 +319,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         beta: r.beta,
         sigma: None,
         solver_requested: "auto".into(),
-        solver: id
-            .diagnostics
-            .solver
-            .split_whitespace()
-            .next()
-            .unwrap_or_default()
-            .to_string(),
+        solver: id.diagnostics.solver.name().to_string(),
         initial_state: crate::identify::value_name(a.initial_state),
         memory_limit_mib: None,
         dispersion: None,

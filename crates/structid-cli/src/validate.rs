@@ -261,6 +261,7 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
     let (edata, emodel) = model_and_data(&recorded.model, &recorded.args.data, recorded.sigma)
         .map_err(|e| e.context(context.clone()))?;
     let id = identify(&emodel, &edata, &recorded.id_settings)
+        .and_then(|id| id.converged())
         .map_err(|e| CliError::from(e).context(context))?;
     let w_difference = check_estimate(&recorded.dir, &recorded.model, &id)?;
     Ok(Rebuilt {

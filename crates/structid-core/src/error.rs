@@ -12,6 +12,15 @@ pub enum Error {
     #[error(transparent)]
     Lti(#[from] LtiError),
 
+    /// An error from the linear-model layer (ARX, output error, polynomial models), kept as the
+    /// source.
+    #[error("linear estimation: {0}")]
+    Linear(#[from] structid_linear::LinearError),
+
+    /// The interior-point solver Clarabel refused the conic program's data or settings.
+    #[error("numerical failure: clarabel rejected the problem data: {0}")]
+    Clarabel(#[from] clarabel::solver::SolverError),
+
     /// Two things that must agree in size do not.
     #[error("dimension mismatch in {what}: expected {expected}, found {found}")]
     DimensionMismatch {
@@ -50,6 +59,51 @@ pub enum Error {
     /// The nonlinear blocks do not fit the LFT (indices out of range, a w channel without a block, …).
     #[error("invalid model structure: {0}")]
     InvalidStructure(String),
+
+    /// A block reads a z channel that the LFT does not have.
+    #[error(
+        "invalid model structure: block `{block}` reads z[{index}] but the LFT has only {available} z signal(s)"
+    )]
+    MissingZ {
+        /// Block name.
+        block: String,
+        /// The z index it reads.
+        index: usize,
+        /// How many z signals the LFT has.
+        available: usize,
+    },
+
+    /// A block writes a w channel that the LFT does not have.
+    #[error(
+        "invalid model structure: block `{block}` writes w[{index}] but the LFT has only {available} w signal(s)"
+    )]
+    MissingW {
+        /// Block name.
+        block: String,
+        /// The w index it writes.
+        index: usize,
+        /// How many w signals the LFT has.
+        available: usize,
+    },
+
+    /// The numbers of a stored form (estimate file, stored features or maps) do not fit
+    /// together.
+    #[error("invalid model structure: stored {item}: {detail}")]
+    InconsistentStored {
+        /// What was stored, e.g. `polynomial features`, `matrix A`.
+        item: String,
+        /// Which numbers disagree.
+        detail: String,
+    },
+
+    /// A penalty's internal description (nodes, samples, edges) is inconsistent.
+    #[error("invalid model structure: {penalty} penalty: {detail}")]
+    InconsistentPenalty {
+        /// The kind of penalty, e.g. `total-variation`.
+        penalty: String,
+        /// What is inconsistent.
+        detail: String,
+    },
 
     /// z cannot be computed from u and y (paper, Definition 1).
     #[error("z is not measurable: {explanation}")]
@@ -140,5 +194,61 @@ pub(crate) fn positive_finite(name: &str, value: f64) -> Result<f64> {
             value,
             reason: "must be a finite number greater than zero".into(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::error::Error as _;
+
+    #[test]
+    fn a_linear_error_is_wrapped_with_its_source() {
+        let inner = structid_linear::LinearError::LengthMismatch {
+            input: 10,
+            output: 9,
+        };
+        let e: Error = inner.into();
+        assert!(
+            matches!(
+                &e,
+                Error::Linear(structid_linear::LinearError::LengthMismatch {
+                    input: 10,
+                    output: 9
+                })
+            ),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "linear estimation: the input has 10 samples but the output has 9"
+        );
+        let source = e.source().expect("the linear error is the source");
+        assert!(source.is::<structid_linear::LinearError>());
+        assert_eq!(
+            source.to_string(),
+            "the input has 10 samples but the output has 9"
+        );
+    }
+
+    #[test]
+    fn structured_variants_keep_the_messages() {
+        let e = Error::MissingZ {
+            block: "f".into(),
+            index: 3,
+            available: 1,
+        };
+        assert_eq!(
+            e.to_string(),
+            "invalid model structure: block `f` reads z[3] but the LFT has only 1 z signal(s)"
+        );
+        let e = Error::InconsistentStored {
+            item: "matrix a".into(),
+            detail: "2 × 2 needs 4 entries, found 3".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "invalid model structure: stored matrix a: 2 × 2 needs 4 entries, found 3"
+        );
     }
 }

@@ -59,8 +59,10 @@
 //! | total variation | [`solver::conic`]: sparse conic program in state-space form, Clarabel | super-linear in L |
 //! | total variation | [`solver::admm`]: Kalman smoother + exact TV prox per iteration | O(L·n²) per iteration |
 //!
-//! [`SolverChoice::Auto`] picks by dispersion kind and size and records why in
-//! [`Diagnostics::solver_reason`].
+//! [`SolverChoice::Auto`] picks by dispersion kind and size ([`solver::choose_solver`], the one
+//! home of the rule) and records why in [`Diagnostics::solver_reason`]. An iterative solver that
+//! stops at its iteration or time limit returns its last iterate with a non-converged
+//! [`Diagnostics::status`] and a warning; [`Identification::converged`] makes that an error.
 //!
 //! ## Validation
 //! [`validate()`] checks estimated maps on a record: simulation with the maps in the loop (RMS and
@@ -140,6 +142,7 @@ pub use polynomial::{PolynomialDispersion, PolynomialFeatures};
 pub use posterior::Posterior;
 pub use problem::{Problem, ProblemBlock};
 pub use simulate::{MapBinding, Simulation};
+pub use solver::choice::{SolveStatus, SolverKind, SolverReason};
 pub use structid_lti::Signal;
 pub use structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use sum::{StackedFeatures, SumDispersion};

@@ -691,11 +691,11 @@ pub fn refine(
             let s = select(&model, data, validation, &how, sel)?;
             beta = s.beta;
             dispersion = Arc::clone(&s.model.blocks()[0].dispersion);
-            let id = identify(&s.model, data, &settings.identify.with_beta(beta)?)?;
+            let id = identify(&s.model, data, &settings.identify.with_beta(beta)?)?.converged()?;
             selection = Some(s);
             id
         } else {
-            identify(&model, data, &settings.identify.with_beta(beta)?)?
+            identify(&model, data, &settings.identify.with_beta(beta)?)?.converged()?
         };
         let model = structure.model(&g, Arc::clone(&dispersion))?;
         let estimation_rms = simulation_rms(&model, &id, data, 0)?;

@@ -488,7 +488,7 @@ fn bad_input_gives_typed_errors() {
             lft.clone(),
             vec![NonlinearBlock::new("f", vec![3], 0, disp.clone())]
         ),
-        Err(Error::InvalidStructure(_))
+        Err(Error::MissingZ { index: 3, .. })
     ));
     assert!(matches!(
         Model::new(lft, vec![]),

@@ -399,7 +399,7 @@ fn auto_uses_the_feature_solver_when_the_features_are_few() {
         &IdentifySettings::builder().beta(1e-6).build().unwrap(),
     )
     .unwrap();
-    let reason = &id.diagnostics.solver_reason;
+    let reason = &id.diagnostics.solver_reason.to_string();
     assert!(reason.contains("the feature solver"), "{reason}");
     assert!(!reason.contains("  "), "stray spaces: {reason:?}");
 }

@@ -11,7 +11,7 @@ use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
 use structid_core::{
     Data, Error, Identification, IdentifySettings, InitialState, Lft, LftMatrices, Model,
-    NonlinearBlock, Penalty, Signal, SolverChoice, TotalVariation, identify,
+    NonlinearBlock, Penalty, Signal, SolveStatus, SolverChoice, TotalVariation, identify,
 };
 use structid_lti::LinearSystem;
 
@@ -343,7 +343,12 @@ fn automatic_choice_is_by_size_and_reported() {
     )
     .unwrap();
     assert_eq!(id.diagnostics.solver, "clarabel");
-    assert!(id.diagnostics.solver_reason.contains("automatic"));
+    assert!(
+        id.diagnostics
+            .solver_reason
+            .to_string()
+            .contains("automatic")
+    );
     let large = experiment(
         structid_core::identify::CONIC_AUTO_LIMIT + 1,
         1,
@@ -438,7 +443,11 @@ fn infeasible_data_is_a_clear_error() {
         .admm(AdmmSettings::builder().max_iterations(500).build().unwrap())
         .build()
         .unwrap();
-    let err = identify(&model, &data, &quick).unwrap_err();
+    // The iteration limit gives the last iterate with its status; asked for a converged
+    // estimate, it is the NotConverged error.
+    let id = identify(&model, &data, &quick).unwrap();
+    assert_eq!(id.diagnostics.status, SolveStatus::MaxIterations);
+    let err = id.converged().unwrap_err();
     assert!(matches!(err, Error::NotConverged { .. }), "{err}");
 }
 
@@ -450,7 +459,17 @@ fn iteration_limits_give_not_converged_errors() {
         .conic(ConicSettings::builder().max_iterations(2).build().unwrap())
         .build()
         .unwrap();
-    let err = identify(&exp.model, &exp.data, &conic).unwrap_err();
+    let id = identify(&exp.model, &exp.data, &conic).unwrap();
+    assert_eq!(id.diagnostics.status, SolveStatus::MaxIterations);
+    assert!(
+        id.diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("did not converge")),
+        "{:?}",
+        id.diagnostics.warnings
+    );
+    let err = id.converged().unwrap_err();
     assert!(
         matches!(err, Error::NotConverged { ref solver, .. } if solver == "clarabel"),
         "{err}"
@@ -460,7 +479,10 @@ fn iteration_limits_give_not_converged_errors() {
         .admm(AdmmSettings::builder().max_iterations(3).build().unwrap())
         .build()
         .unwrap();
-    let err = identify(&exp.model, &exp.data, &admm).unwrap_err();
+    let id = identify(&exp.model, &exp.data, &admm).unwrap();
+    assert_eq!(id.diagnostics.status, SolveStatus::MaxIterations);
+    assert_eq!(id.diagnostics.iterations, 3);
+    let err = id.converged().unwrap_err();
     assert!(
         matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"),
         "{err}"
@@ -581,7 +603,10 @@ fn mixed_gaussian_and_total_variation_blocks_are_optimal() {
     let id = identify(&exp.model, &exp.data, &settings(beta, SolverChoice::Auto)).unwrap();
     assert_eq!(id.diagnostics.solver, "clarabel");
     assert!(
-        id.diagnostics.solver_reason.contains("together"),
+        id.diagnostics
+            .solver_reason
+            .to_string()
+            .contains("together"),
         "{}",
         id.diagnostics.solver_reason
     );

@@ -204,7 +204,7 @@ pub fn core_is_input_error(e: &structid_core::Error) -> bool {
     use structid_core::Error as E;
     !matches!(
         e,
-        E::TooLarge { .. } | E::Numerical(_) | E::NotConverged { .. }
+        E::TooLarge { .. } | E::Numerical(_) | E::Clarabel(_) | E::NotConverged { .. }
     )
 }
 

@@ -436,7 +436,7 @@ impl KalmanWhitener {
     /// use structid_lti::StateSpace;
     /// use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
     /// // v_t = e_t + 0.5·e_(t−1): x⁺ = e, v = 0.5·x + e.
-    /// let noise = StateSpace::new(dmatrix![0.0], dmatrix![1.0], dmatrix![0.5], dmatrix![1.0], None).unwrap();
+    /// let noise = StateSpace::new(dmatrix![0.0], dmatrix![1.0], dmatrix![0.5], dmatrix![1.0]).unwrap();
     /// let w = KalmanWhitener::new(&noise, 3, &WhiteningOptions::default()).unwrap();
     /// let (mut nu, mut x) = ([0.0; 3], [0.0; 3]);
     /// w.predicted_states(&[1.0, 0.0, 0.0], &mut nu, &mut x);

@@ -196,7 +196,8 @@ fn execute(ctx: &Context<'_>, case: &Case, rec: &mut CaseRecord) -> Result<(), C
             (sel.identification, sel.model)
         }
     };
-    rec.solver = id.diagnostics.solver.clone();
+    let id = id.converged()?;
+    rec.solver = id.diagnostics.solver.to_string();
     rec.cost = Some(CostRecord {
         noise: id.cost.noise,
         dispersion: id.cost.dispersions.iter().sum(),

@@ -408,9 +408,10 @@ impl FourierKernel {
                     })
             };
         if !ok {
-            return Err(Error::InvalidStructure(
-                "stored Fourier kernel: its harmonics, feature indices and weights do not fit together".into(),
-            ));
+            return Err(Error::InconsistentStored {
+                item: "Fourier kernel".into(),
+                detail: "its harmonics, feature indices and weights do not fit together".into(),
+            });
         }
         Ok(Self {
             affine: s.affine.clone(),

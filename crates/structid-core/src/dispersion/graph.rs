@@ -60,9 +60,21 @@ impl fmt::Debug for TvPenalty {
     }
 }
 
+fn tv_inconsistent(detail: String) -> Error {
+    Error::InconsistentPenalty {
+        penalty: "total-variation".into(),
+        detail,
+    }
+}
+
 impl TvPenalty {
     /// A penalty from the node of each sample, the number of nodes, the edges (a, b, c_ab) with
     /// a ≠ b and c_ab ≥ 0, and the interpolation rule. Every node must have a sample.
+    ///
+    /// # Errors
+    /// [`Error::InconsistentPenalty`] when a sample's node is out of range, a node has no
+    /// sample or an edge does not join two different nodes; [`Error::InvalidParameter`] for a
+    /// negative or non-finite edge weight.
     pub fn new(
         node_of_sample: Vec<usize>,
         nodes: usize,
@@ -74,22 +86,20 @@ impl TvPenalty {
             match counts.get_mut(g) {
                 Some(c) => *c += 1,
                 None => {
-                    return Err(Error::InvalidStructure(format!(
-                        "total-variation penalty: sample {k} belongs to node {g}, but there are only {nodes} nodes"
+                    return Err(tv_inconsistent(format!(
+                        "sample {k} belongs to node {g}, but there are only {nodes} nodes"
                     )));
                 }
             }
         }
         if let Some(g) = counts.iter().position(|&c| c == 0) {
-            return Err(Error::InvalidStructure(format!(
-                "total-variation penalty: node {g} has no sample"
-            )));
+            return Err(tv_inconsistent(format!("node {g} has no sample")));
         }
         let mut edges = edges;
         for e in &mut edges {
             if e.0 >= nodes || e.1 >= nodes || e.0 == e.1 {
-                return Err(Error::InvalidStructure(format!(
-                    "total-variation penalty: edge ({}, {}) must join two different nodes below {nodes}",
+                return Err(tv_inconsistent(format!(
+                    "edge ({}, {}) must join two different nodes below {nodes}",
                     e.0, e.1
                 )));
             }

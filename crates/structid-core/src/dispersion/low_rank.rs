@@ -192,11 +192,14 @@ impl NystromFeatures {
         let r = s.weights.len();
         let centres = s.centres.to_signal()?;
         if centres.len() < r || s.l_pp.len() != r * r || (0..r).any(|i| s.l_pp[i * r + i] == 0.0) {
-            return Err(Error::InvalidStructure(format!(
-                "stored Nyström features: rank {r}, {} centres and a factor of {} values do not fit together",
-                centres.len(),
-                s.l_pp.len()
-            )));
+            return Err(Error::InconsistentStored {
+                item: "Nyström features".into(),
+                detail: format!(
+                    "rank {r}, {} centres and a factor of {} values do not fit together",
+                    centres.len(),
+                    s.l_pp.len()
+                ),
+            });
         }
         Ok(Self {
             kernel: GaussianKernel::new(s.sigma)?,

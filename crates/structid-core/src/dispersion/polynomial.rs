@@ -200,10 +200,10 @@ impl PolynomialFeatures {
                 weights: s.weights.clone(),
             })
         } else {
-            Err(Error::InvalidStructure(
-                "stored polynomial features: exponents, inputs and weights do not fit together"
-                    .into(),
-            ))
+            Err(Error::InconsistentStored {
+                item: "polynomial features".into(),
+                detail: "exponents, inputs and weights do not fit together".into(),
+            })
         }
     }
 

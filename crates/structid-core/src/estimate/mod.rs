@@ -94,13 +94,16 @@ impl StoredMatrix {
 
     fn to_matrix(&self, name: &str) -> Result<DMatrix<f64>> {
         if self.rows.checked_mul(self.cols) != Some(self.data.len()) {
-            return Err(Error::InvalidStructure(format!(
-                "stored matrix {name}: {} × {} needs {} entries, found {}",
-                self.rows,
-                self.cols,
-                self.rows.saturating_mul(self.cols),
-                self.data.len()
-            )));
+            return Err(Error::InconsistentStored {
+                item: format!("matrix {name}"),
+                detail: format!(
+                    "{} × {} needs {} entries, found {}",
+                    self.rows,
+                    self.cols,
+                    self.rows.saturating_mul(self.cols),
+                    self.data.len()
+                ),
+            });
         }
         Ok(DMatrix::from_row_slice(self.rows, self.cols, &self.data))
     }
@@ -162,7 +165,7 @@ impl StoredLft {
     /// The LFT, checked as [`Lft::new`] checks it.
     ///
     /// # Errors
-    /// As [`Lft::new`], and [`Error::InvalidStructure`] for a matrix whose entries do not fill
+    /// As [`Lft::new`], and [`Error::InconsistentStored`] for a matrix whose entries do not fill
     /// its shape.
     pub fn to_lft(&self) -> Result<Lft> {
         let lft = Lft::new(LftMatrices {
@@ -460,7 +463,7 @@ impl Estimate {
                 workflow: "identify".into(),
                 settings: Some(settings.clone()),
                 cost: Some(id.cost.clone()),
-                solver: Some(id.diagnostics.solver.clone()),
+                solver: Some(id.diagnostics.solver.to_string()),
                 fitted_on: Some(DataFingerprint::of(data)),
                 notes: Vec::new(),
             },

@@ -92,7 +92,7 @@ impl StoredMap {
     /// The map as an [`Interpolant`] that evaluates exactly as the one it was stored from.
     ///
     /// # Errors
-    /// [`Error::InvalidStructure`] when the stored numbers are inconsistent (lengths that do
+    /// [`Error::InconsistentStored`] when the stored numbers are inconsistent (lengths that do
     /// not match, knots that are not increasing, …), [`Error::Expression`] for an expression
     /// that does not parse.
     ///
@@ -105,7 +105,10 @@ impl StoredMap {
     /// assert!(bad.interpolant().is_err());
     /// ```
     pub fn interpolant(&self) -> Result<Box<dyn Interpolant>> {
-        let bad = |what: String| Error::InvalidStructure(format!("stored map: {what}"));
+        let bad = |detail: String| Error::InconsistentStored {
+            item: "map".into(),
+            detail,
+        };
         Ok(match self {
             StoredMap::KernelExpansion {
                 kernel,

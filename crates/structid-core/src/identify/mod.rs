@@ -15,7 +15,10 @@ use crate::posterior::Posterior;
 use crate::problem::Problem;
 use crate::solver;
 use crate::solver::admm::AdmmSettings;
+use crate::solver::choice::{SolveStatus, SolverKind, SolverReason, choose_with};
 use crate::solver::conic::ConicSettings;
+
+pub use crate::solver::choice::CONIC_AUTO_LIMIT;
 
 /// Which solver `identify` uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -303,10 +306,18 @@ pub struct Timings {
 /// Solver diagnostics.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Diagnostics {
-    /// Which solver ran.
-    pub solver: String,
-    /// Why it was chosen (the automatic choice's rule, or "requested").
-    pub solver_reason: String,
+    /// Which solver ran (serialised as its printed name, e.g. `features (m = 63)`).
+    pub solver: SolverKind,
+    /// Why it was chosen (the automatic choice's rule, or "requested"; serialised as the
+    /// printed sentence).
+    pub solver_reason: SolverReason,
+    /// How the solver stopped: anything but [`SolveStatus::Solved`] or
+    /// [`SolveStatus::AlmostSolved`] means the estimate is an unconverged iterate (see
+    /// [`Identification::converged`]).
+    pub status: SolveStatus,
+    /// What the solver reported when it stopped early (residuals, what to try); `None` when it
+    /// converged.
+    pub status_detail: Option<String>,
     /// Iterations of an iterative solver (0 for the direct ones).
     pub iterations: usize,
     /// Final primal residual of an iterative solver.
@@ -395,6 +406,38 @@ pub struct Identification {
 }
 
 impl Identification {
+    /// The identification if its solver converged ([`SolveStatus::is_converged`]), else
+    /// [`Error::NotConverged`] with the solver's report: for callers that cannot use an
+    /// unconverged iterate.
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{identify, paper, IdentifySettings, SolveStatus, TotalVariation};
+    /// use structid_core::{SolverChoice, solver::admm::AdmmSettings};
+    /// let exp = paper::spray(300, 0.5, Arc::new(TotalVariation::new()), 2).unwrap();
+    /// let quick = IdentifySettings::builder()
+    ///     .solver(SolverChoice::Admm)
+    ///     .admm(AdmmSettings::builder().max_iterations(2).build().unwrap())
+    ///     .build()
+    ///     .unwrap();
+    /// let id = identify(&exp.model, &exp.data, &quick).unwrap();
+    /// assert_eq!(id.diagnostics.status, SolveStatus::MaxIterations);
+    /// assert!(id.converged().unwrap_err().to_string().contains("did not converge"));
+    /// ```
+    pub fn converged(self) -> Result<Self> {
+        let d = &self.diagnostics;
+        if d.status.is_converged() {
+            Ok(self)
+        } else {
+            Err(crate::solver::choice::not_converged(
+                d.solver,
+                d.iterations,
+                d.status_detail.as_deref(),
+                d.status,
+            ))
+        }
+    }
+
     /// The estimate of the block called `name`.
     pub fn block(&self, name: &str) -> Option<&BlockEstimate> {
         self.blocks.iter().find(|b| b.name == name)
@@ -494,120 +537,36 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
             "the problem has no nonlinear block to identify".into(),
         ));
     }
-    let (mut id, reason) = match settings.solver {
-        SolverChoice::Exact => (solver::exact::solve(problem, settings)?, None),
-        SolverChoice::Features => (solver::features::solve(problem, settings)?, None),
-        SolverChoice::Clarabel => (solver::conic::solve(problem, settings)?, None),
-        SolverChoice::Admm => (solver::admm::solve(problem, settings)?, None),
+    let id = match settings.solver {
+        SolverChoice::Exact => solver::exact::solve(problem, settings)?,
+        SolverChoice::Features => solver::features::solve(problem, settings)?,
+        SolverChoice::Clarabel => solver::conic::solve(problem, settings)?,
+        SolverChoice::Admm => solver::admm::solve(problem, settings)?,
         SolverChoice::Auto => {
             // Build the penalties once: the kind decides the family of solvers.
             let t_start = std::time::Instant::now();
             let penalties = solver::penalties(problem)?;
-            let tv_blocks = penalties
-                .iter()
-                .filter(|p| matches!(p, crate::Penalty::TotalVariation(_)))
-                .count();
-            let size = problem.len() * problem.outputs();
-            if tv_blocks > 0 && tv_blocks < penalties.len() {
-                let reason = "automatic: quadratic and total-variation dispersions together, which only the \
-                              conic solver handles"
-                    .to_string();
-                (
-                    solver::conic::solve_with(problem, settings, penalties, t_start)?,
-                    Some(reason),
-                )
-            } else if tv_blocks > 0 {
-                if problem.held_out().is_some() {
-                    let reason =
-                        "automatic: total variation with held-out samples (cross-validation), which only the conic solver handles"
-                            .to_string();
-                    (
-                        solver::conic::solve_with(problem, settings, penalties, t_start)?,
-                        Some(reason),
-                    )
-                } else if size <= CONIC_AUTO_LIMIT {
-                    let reason = format!(
-                        "automatic: total variation with L·n_y = {size} ≤ {CONIC_AUTO_LIMIT}, the exact conic solver"
-                    );
-                    (
-                        solver::conic::solve_with(problem, settings, penalties, t_start)?,
-                        Some(reason),
-                    )
-                } else {
-                    let tv = solver::tv_from_penalties(problem, penalties, "admm")?;
-                    let reason = format!(
-                        "automatic: total variation with L·n_y = {size} > {CONIC_AUTO_LIMIT}, ADMM (linear in L)"
-                    );
-                    (
-                        solver::admm::solve_with(problem, settings, tv, t_start)?,
-                        Some(reason),
-                    )
+            let (kind, reason) = choose_with(problem, &penalties, settings);
+            let mut id = match kind {
+                SolverKind::Clarabel => {
+                    solver::conic::solve_with(problem, settings, penalties, t_start)?
                 }
-            } else {
-                auto_quadratic(problem, settings, &penalties)?
+                SolverKind::Admm => {
+                    let tv = solver::tv_from_penalties(problem, penalties, "admm")?;
+                    solver::admm::solve_with(problem, settings, tv, t_start)?
+                }
+                SolverKind::Features { .. } => solver::features::solve(problem, settings)?,
+                SolverKind::Exact => solver::exact::solve(problem, settings)?,
+            };
+            if let SolverReason::ExactOverBudget { needed_bytes, .. } = reason {
+                id.diagnostics.warnings.push(format!(
+                    "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
+                    needed_bytes >> 20
+                ));
             }
+            id.diagnostics.solver_reason = reason;
+            id
         }
     };
-    id.diagnostics.solver_reason = reason.unwrap_or_else(|| "requested".into());
     Ok(id)
 }
-
-/// The automatic choice among the quadratic solvers.
-fn auto_quadratic(
-    problem: &Problem,
-    settings: &IdentifySettings,
-    penalties: &[crate::Penalty],
-) -> Result<(Identification, Option<String>)> {
-    // The exact solve unless its M would not fit the memory budget and every block has
-    // finitely many features.
-    let noise = problem.noise();
-    let nx = problem.free_response().map_or(0, |o| o.ncols());
-    let need =
-        solver::exact::peak_memory_bytes(
-            problem.len(),
-            problem.outputs(),
-            noise.inputs(),
-            noise.order() > 0,
-            nx,
-        ) + solver::exact::posterior_memory_bytes(settings, problem.len(), problem.outputs(), nx);
-    let featured = solver::features::unsupported_reason(problem).is_none()
-        && penalties
-            .iter()
-            .all(|p| matches!(p, crate::Penalty::Quadratic(q) if q.features().is_some()));
-    // Both solvers minimise the same J when K = ΨΛΨᵀ; the feature solve costs O(L·m²) against
-    // the exact O((L·n_y)³), so it wins whenever the features are few.
-    let features: usize = penalties
-        .iter()
-        .filter_map(|p| match p {
-            crate::Penalty::Quadratic(q) => q.features().map(|(m, _)| m.dim()),
-            _ => None,
-        })
-        .sum();
-    let rows = problem.len() * problem.outputs();
-    if featured && 4 * (features + nx) <= rows {
-        let id = solver::features::solve(problem, settings)?;
-        let reason = format!(
-            "automatic: every block has finite features ({features} in all, at most a quarter of \
-             the {rows} output samples), the feature solver"
-        );
-        return Ok((id, Some(reason)));
-    }
-    if need > settings.effective_memory_limit() && featured {
-        let mut id = solver::features::solve(problem, settings)?;
-        id.diagnostics.warnings.push(format!(
-            "the exact solver would need {} MiB, more than the memory budget; the feature solver was used",
-            need >> 20
-        ));
-        let reason = "automatic: the exact solver's memory exceeds the budget and every block has finite features".to_string();
-        Ok((id, Some(reason)))
-    } else {
-        let reason = "automatic: quadratic dispersions within the memory budget, the exact solver"
-            .to_string();
-        Ok((solver::exact::solve(problem, settings)?, Some(reason)))
-    }
-}
-
-/// Largest L·n_y for which the automatic choice uses the conic solver for total variation.
-/// Clarabel is exact and takes about 0.4 s at L = 1000 with a white-noise input, but grows like
-/// L³ there (3.5 s at 2000, see `BENCHMARKS.md`), while ADMM takes milliseconds.
-pub const CONIC_AUTO_LIMIT: usize = 1000;

@@ -103,16 +103,18 @@ impl Model {
                 )));
             }
             if let Some(&bad) = b.inputs.iter().find(|&&j| j >= dims.z) {
-                return Err(Error::InvalidStructure(format!(
-                    "block `{}` reads z[{bad}] but the LFT has only {} z signal(s)",
-                    b.name, dims.z
-                )));
+                return Err(Error::MissingZ {
+                    block: b.name.clone(),
+                    index: bad,
+                    available: dims.z,
+                });
             }
             if b.output >= dims.w {
-                return Err(Error::InvalidStructure(format!(
-                    "block `{}` writes w[{}] but the LFT has only {} w signal(s)",
-                    b.name, b.output, dims.w
-                )));
+                return Err(Error::MissingW {
+                    block: b.name.clone(),
+                    index: b.output,
+                    available: dims.w,
+                });
             }
             if let Some(other) = owner[b.output] {
                 return Err(Error::InvalidStructure(format!(

@@ -80,6 +80,7 @@ use crate::identify::{
 use crate::model::{Data, Model};
 use crate::problem::Problem;
 use crate::simulate::MapBinding;
+use crate::solver::choice::{SolverReason, feature_path};
 use crate::solver::exact::{add_noise_term, assemble};
 use crate::solver::features::{FeatureGram, gram};
 
@@ -425,7 +426,7 @@ pub fn select(
                         b.dispersion.describe()
                     )));
                 }
-                if use_feature_path(&problem, settings)? {
+                if feature_path(&problem, settings)? {
                     let f = match features.take().and_then(|f| f.reweighted(&problem)) {
                         Some(f) => f,
                         None => FeatureScore::new(&problem)?,
@@ -508,9 +509,7 @@ pub fn select(
     }
     let mut identification = identify_problem(&problem, &final_settings)?;
     if features.is_some() && settings.solver() == SolverChoice::Auto {
-        identification.diagnostics.solver_reason =
-            "automatic: the hyperparameters were selected in feature space, so the feature solver"
-                .into();
+        identification.diagnostics.solver_reason = SolverReason::FeatureSpaceSelection;
     }
     Ok(Selection {
         beta,
@@ -527,28 +526,6 @@ pub fn select(
         seconds: t0.elapsed().as_secs_f64(),
         identification,
         model: chosen,
-    })
-}
-
-/// Whether marginal likelihood / GCV run in feature space: always when asked for the feature
-/// solver, and for the automatic choice when every block has finitely many features.
-fn use_feature_path(problem: &Problem, settings: &IdentifySettings) -> Result<bool> {
-    let featured = || -> Result<bool> {
-        if crate::solver::features::unsupported_reason(problem).is_some() {
-            return Ok(false);
-        }
-        for p in crate::solver::penalties(problem)? {
-            match p {
-                Penalty::Quadratic(q) if q.features().is_some() => {}
-                _ => return Ok(false),
-            }
-        }
-        Ok(true)
-    };
-    Ok(match settings.solver() {
-        SolverChoice::Features => true,
-        SolverChoice::Auto => featured()?,
-        _ => false,
     })
 }
 
@@ -1162,7 +1139,8 @@ impl BetaScore for FoldScore {
         let (mut sse, mut count) = (0.0, 0usize);
         for mask in &self.masks {
             let p = self.problem.clone().with_held_out(mask.clone())?;
-            let id = identify_problem(&p, &settings)?;
+            // An unconverged trial cannot be scored: the selection stops with its error.
+            let id = identify_problem(&p, &settings)?.converged()?;
             let fit = fitted_residual(&p, &id);
             for (i, &held) in mask.iter().enumerate() {
                 if held {
@@ -1229,7 +1207,7 @@ pub(crate) fn simulation_mse(model: &Model, id: &Identification, data: &Data) ->
 
 impl BetaScore for ValidationScore<'_> {
     fn score(&mut self, beta: f64) -> Result<(f64, Option<f64>)> {
-        let id = identify_problem(&self.problem, &self.settings.with_beta(beta)?)?;
+        let id = identify_problem(&self.problem, &self.settings.with_beta(beta)?)?.converged()?;
         Ok((simulation_mse(&self.model, &id, self.validation)?, None))
     }
 

@@ -44,7 +44,8 @@
 //! ten times the other) during the first iterations. The returned ŵ is d + c (tied samples
 //! share their value exactly) and ê is the least-squares noise that explains r − T_yw·ŵ; the
 //! diagnostics report the
-//! iterations and both residuals. Non-convergence is an error, never a silent result.
+//! iterations and both residuals. At the iteration limit the last iterate is returned with
+//! [`crate::SolveStatus::MaxIterations`], the residuals in a warning: never a silent result.
 
 use std::time::Instant;
 
@@ -54,6 +55,7 @@ use crate::error::{Error, Result, positive_finite};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
+use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples};
 use crate::solver::{finish_tv, tv_parts, tv_penalties};
 use crate::total_variation::TvPenalty;
@@ -365,16 +367,14 @@ pub(crate) fn solve_with(
             }
         }
     }
-    if !converged {
-        return Err(Error::NotConverged {
-            solver: NAME.into(),
-            iterations,
-            detail: format!(
-                "primal residual {r_pri:.3e}, dual residual {r_dual:.3e} (ρ = {rho:.3e}); raise max_iterations, \
-                 loosen the tolerance ({eps_rel:.1e}), or use the clarabel solver for L up to a few thousand"
-            ),
-        });
-    }
+    // The iterate is kept when the limit is reached: ê is recomputed for it below, so the
+    // estimate is feasible and its cost is the cost of a valid (if not optimal) point.
+    let unconverged = (!converged).then(|| {
+        format!(
+            "primal residual {r_pri:.3e}, dual residual {r_dual:.3e} (ρ = {rho:.3e}); raise max_iterations, \
+             loosen the tolerance ({eps_rel:.1e}), or use the clarabel solver for L up to a few thousand"
+        )
+    });
     let t_factored = Instant::now();
 
     // ê: the least-squares noise explaining r − T_yw·ŵ with ŵ = d (w fixed: zero variance).
@@ -402,6 +402,19 @@ pub(crate) fn solve_with(
     let parts = tv_parts(&penalties, d);
     let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
     let mut warnings = out.warnings;
+    let status = if converged {
+        SolveStatus::Solved
+    } else {
+        SolveStatus::MaxIterations
+    };
+    if let Some(detail) = &unconverged {
+        warnings.push(unconverged_warning(
+            SolverKind::Admm,
+            iterations,
+            detail,
+            status,
+        ));
+    }
     if rho_changes > 0 {
         warnings.push(format!(
             "ρ was rebalanced {rho_changes} times (final ρ = {rho:.3e})"
@@ -425,7 +438,9 @@ pub(crate) fn solve_with(
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
-            solver: NAME.into(),
+            solver: SolverKind::Admm,
+            status,
+            status_detail: unconverged,
             system_size: len * nin,
             dropped_samples: out.dropped,
             dropped_max_abs_residual: out.dropped_max,

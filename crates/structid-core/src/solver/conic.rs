@@ -35,6 +35,7 @@ use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result, positive_finite};
 use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
 use crate::problem::Problem;
+use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::realisation::{joint_realisation, unreachable_samples};
 use crate::solver::{BlockPart, finish_tv, penalties, tv_part};
 use crate::total_variation::TvPenalty;
@@ -384,20 +385,48 @@ pub(crate) fn solve_with(
         tol_feas: conic.tolerance(),
         ..DefaultSettings::default()
     };
-    let mut solver = DefaultSolver::new(&p_mat, &q, &a_mat, &rhs, &cones, cl_settings)
-        .map_err(|e| Error::Numerical(format!("clarabel rejected the problem data: {e:?}")))?;
+    let mut solver = DefaultSolver::new(&p_mat, &q, &a_mat, &rhs, &cones, cl_settings)?;
     let t_assembled = Instant::now();
     solver.solve();
     let t_factored = Instant::now();
     let sol = &solver.solution;
     let iterations = sol.iterations as usize;
     let mut warnings = Vec::new();
-    match sol.status {
-        SolverStatus::Solved => {}
-        SolverStatus::AlmostSolved => warnings.push(format!(
-            "clarabel reached only reduced accuracy (primal residual {:.2e}, dual residual {:.2e})",
-            sol.r_prim, sol.r_dual
-        )),
+    let unconverged_detail = |status: SolverStatus| {
+        format!(
+            "status {status:?} (primal residual {:.2e}, dual residual {:.2e}, gap {:.2e}); raise the \
+             iteration or time limit, rescale y and u to order one, or use the admm solver",
+            sol.r_prim,
+            sol.r_dual,
+            (sol.obj_val - sol.obj_val_dual).abs()
+        )
+    };
+    let (status, status_detail) = match sol.status {
+        SolverStatus::Solved => (SolveStatus::Solved, None),
+        SolverStatus::AlmostSolved => {
+            warnings.push(format!(
+                "clarabel reached only reduced accuracy (primal residual {:.2e}, dual residual {:.2e})",
+                sol.r_prim, sol.r_dual
+            ));
+            (SolveStatus::AlmostSolved, None)
+        }
+        // At a limit the last interior-point iterate is kept; its feasibility residual is in
+        // the diagnostics.
+        SolverStatus::MaxIterations | SolverStatus::MaxTime => {
+            let status = if sol.status == SolverStatus::MaxTime {
+                SolveStatus::TimeLimit
+            } else {
+                SolveStatus::MaxIterations
+            };
+            let detail = unconverged_detail(sol.status);
+            warnings.push(unconverged_warning(
+                SolverKind::Clarabel,
+                iterations,
+                &detail,
+                status,
+            ));
+            (status, Some(detail))
+        }
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
             return Err(Error::Infeasible {
                 solver: NAME.into(),
@@ -407,20 +436,15 @@ pub(crate) fn solve_with(
                     .into(),
             });
         }
+        // Numerical trouble or no progress: the iterate is not worth keeping.
         status => {
             return Err(Error::NotConverged {
                 solver: NAME.into(),
                 iterations,
-                detail: format!(
-                    "status {status:?} (primal residual {:.2e}, dual residual {:.2e}, gap {:.2e}); raise the \
-                     iteration or time limit, rescale y and u to order one, or use the admm solver",
-                    sol.r_prim,
-                    sol.r_dual,
-                    (sol.obj_val - sol.obj_val_dual).abs()
-                ),
+                detail: unconverged_detail(status),
             });
         }
-    }
+    };
     let x = &sol.x;
     let parts: Vec<BlockPart> = vars
         .iter()
@@ -456,7 +480,9 @@ pub(crate) fn solve_with(
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
-            solver: NAME.into(),
+            solver: SolverKind::Clarabel,
+            status,
+            status_detail,
             system_size: lay.total + rows,
             dropped_samples: out.dropped,
             dropped_max_abs_residual: out.dropped_max,

@@ -349,7 +349,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
-            solver: solver_name().into(),
+            solver: crate::SolverKind::Exact,
             system_size: nk,
             dropped_samples: dropped,
             dropped_max_abs_residual: dropped_max,

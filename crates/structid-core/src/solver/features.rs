@@ -462,7 +462,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         z_source: problem.z_source().clone(),
         initial_state: x0,
         diagnostics: Diagnostics {
-            solver: format!("features (m = {m})"),
+            solver: crate::SolverKind::Features { features: m },
             system_size: k,
             dropped_samples: Vec::new(),
             dropped_max_abs_residual: 0.0,

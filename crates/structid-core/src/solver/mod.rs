@@ -2,6 +2,7 @@
 //! returns an [`crate::Identification`]; [`crate::identify()`] chooses between them.
 
 pub mod admm;
+pub mod choice;
 pub mod conic;
 pub mod exact;
 pub mod features;
@@ -9,6 +10,8 @@ pub mod prox;
 mod realisation;
 
 use std::time::Instant;
+
+pub use choice::choose_solver;
 
 use structid_lti::Signal;
 
