@@ -799,7 +799,7 @@ pub fn json(
         "command": r.command,
         "inputs": {
             "model_file": r.model_path.display().to_string(),
-            "model_file_absolute": absolute(&r.model_path).display().to_string(),
+            "model_file_absolute": absolute(r.model_path).display().to_string(),
             "data_file": r.estimation.path.display().to_string(),
             "data_file_absolute": absolute(&r.estimation.path).display().to_string(),
             "validation_file": r.validation.path.display().to_string(),
