@@ -1,32 +1,27 @@
 //! `structid discover`: from a nominal linear model that almost fits to a named missing effect,
 //! its place in the structure and an augmented model file (see
-//! `structid_discover::discover`).
+//! `structid_discover::discover`). The workflow, the augmented model and the reports are
+//! `structid_discover`'s; this module parses the arguments, draws the figures and writes the
+//! files.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::Args;
-use serde_json::{Value, json};
-use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
-use structid_core::{Data, Interpolant, Lft, LookupTable};
+use structid_core::estimate::SignalNames;
+use structid_discover::augmented::{self, AugmentedFile, ESTIMATE_FILE, TABLE_FILE};
 use structid_discover::discover::{
-    AugmentedMap, Classification, DiscoverSettings, Discovery, Finding, HypothesisResult,
-    candidate_signals, discover,
+    Classification, DiscoverSettings, Finding, HypothesisResult, candidate_signals, discover,
 };
-use structid_discover::effects::EffectFit;
 use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
-use structid_io::{
-    BlockSpec, DataTable, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames,
-    TruthSpec, format_number,
-};
+use structid_discover::report::{self, Record, ReportContext, TimeAxis};
+use structid_io::{ModelFile, OutputGuard, estimate_json};
 use structid_lti::LinearSystem as _;
 use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
 
 use crate::error::CliError;
-use crate::identify::absolute;
 
 /// Most points per line in the time-series figures (longer records are drawn decimated).
 const MAX_PLOT_POINTS: usize = 4000;
@@ -34,23 +29,12 @@ const MAX_PLOT_POINTS: usize = 4000;
 const MAX_DOTS: usize = 2000;
 /// Bins of the binned residual in regions.svg.
 const REGION_BINS: usize = 20;
-/// Largest relative difference between the validation RMS of augmented.toml read back and that
-/// of the report.
-pub const SELF_CHECK_TOLERANCE: f64 = 1e-6;
-/// The name of the block added to the nominal model.
-const BLOCK: &str = "N";
-/// The file of an unnamed (or dynamic) map's table.
-const TABLE_FILE: &str = "N_table.csv";
-/// Weight of each normalised monomial of the trend: the value `structid_discover` uses, so
-/// that `structid identify` on augmented.toml has the hypothesis' dispersion.
-const TREND_SCALE: f64 = 10.0;
-/// Rows of the window table in report.md per record.
-const MAX_WINDOW_ROWS: usize = 20;
 
 /// Every file `structid discover` may write, in the order of the summary.
-const OUTPUTS: [&str; 8] = [
+const OUTPUTS: [&str; 9] = [
     "augmented.toml",
     TABLE_FILE,
+    ESTIMATE_FILE,
     "report.md",
     "report.json",
     "residual.svg",
@@ -124,70 +108,6 @@ pub struct DiscoverArgs {
     )]
     hysteresis_threshold: f64,
 }
-
-/// The time axis of a record: a `time` (or `t`) column, the model's sample time, or the sample
-/// index.
-struct TimeAxis {
-    values: Vec<f64>,
-    label: &'static str,
-    /// Whether the values are times (not sample indices).
-    is_time: bool,
-}
-
-impl TimeAxis {
-    fn new(table: &DataTable, len: usize, sample_time: Option<f64>) -> Self {
-        for name in ["time", "t"] {
-            if let Some(c) = table.column(name)
-                && c.len() == len
-            {
-                return Self {
-                    values: c.to_vec(),
-                    label: "time",
-                    is_time: true,
-                };
-            }
-        }
-        match sample_time {
-            Some(ts) => Self {
-                values: (0..len).map(|k| k as f64 * ts).collect(),
-                label: "time [s]",
-                is_time: true,
-            },
-            None => Self {
-                values: (0..len).map(|k| k as f64).collect(),
-                label: "sample",
-                is_time: false,
-            },
-        }
-    }
-
-    fn at(&self, k: usize) -> f64 {
-        self.values.get(k).copied().unwrap_or(f64::NAN)
-    }
-}
-
-/// One record as read.
-struct Record {
-    path: PathBuf,
-    table: DataTable,
-    data: Data,
-    time: TimeAxis,
-}
-
-/// What the augmented model file is and how it was checked.
-struct Written {
-    /// `[linear] structure = "…"`, or `[lft]`.
-    form: String,
-    /// The table's file when the map is a table.
-    table: Option<String>,
-    /// The validation RMS of augmented.toml read back.
-    rms: f64,
-    /// Its relative difference from the report's.
-    difference: f64,
-    /// Initial state of the reproduction.
-    initial_state: ValidationInitialState,
-}
-
 // ---------------------------------------------------------------------------------------------
 // Inputs
 
@@ -337,213 +257,6 @@ fn settings(
         b = b.locations(l);
     }
     Ok(b.build()?)
-}
-
-fn read_record(mf: &ModelFile, path: &Path) -> Result<Record, CliError> {
-    let table = DataTable::read(path)?;
-    let data = mf.select_data(&table)?;
-    let time = TimeAxis::new(&table, data.len(), mf.lft.sample_time());
-    Ok(Record {
-        path: path.to_path_buf(),
-        table,
-        data,
-        time,
-    })
-}
-
-// ---------------------------------------------------------------------------------------------
-// The augmented model file
-
-/// How the initial state is treated at `location` (as `structid_discover` does): estimated,
-/// except for the sensor map and the rate, whose z would depend on an unknown x₀.
-fn initial_state(location: Location) -> ValidationInitialState {
-    structid_discover::discover::initial_state(location).1
-}
-
-fn initial_state_name(s: ValidationInitialState) -> &'static str {
-    match s {
-        ValidationInitialState::Zero => "zero",
-        ValidationInitialState::Estimate => "estimate",
-    }
-}
-
-/// The dispersion written for the block: the hypothesis' Fourier kernel (its σ) plus the
-/// polynomial trend, so that `structid identify` re-estimates the map as discovery did.
-fn block_dispersion(sigma: Option<f64>, trend: usize) -> DispersionSpec {
-    let kernel = DispersionSpec::Fourier {
-        sigma,
-        harmonics: None,
-        additive: false,
-    };
-    if trend == 0 {
-        kernel
-    } else {
-        DispersionSpec::WithTrend {
-            kernel: Box::new(kernel),
-            degree: trend,
-            scale: Some(TREND_SCALE),
-        }
-    }
-}
-
-/// The augmented model file: the nominal file's signals, the block `N` at `location` with
-/// `map` as its truth (a table is given as `table_file`, to be written next to the model
-/// file), and the linear part as `[linear]` when the nominal file has one and the location is
-/// a structure `[linear]` knows, otherwise as the hypothesis' `lft`. Returns the file and its
-/// form.
-fn augmented_file(
-    nominal_mf: &ModelFile,
-    location: Location,
-    lft: &Lft,
-    map: &AugmentedMap,
-    dispersion: DispersionSpec,
-    table_file: &str,
-) -> Result<(ModelFile, String), CliError> {
-    // Output feedback gets a shared numerator, as `structid linear --structure
-    // output-feedback` writes it: y = B/F·(u − w), i.e. num = [B, −B].
-    let linear = match (&nominal_mf.linear, location) {
-        (_, Location::Declared { .. }) | (None, _) => None,
-        (Some(spec), site) => Some(LinearSpec::from_linear(&spec.model, Some(site))),
-    };
-    let (lft, form) = match &linear {
-        Some(spec) => (
-            spec.lft()?,
-            format!("[linear] structure = \"{}\"", spec.structure_name()),
-        ),
-        None => (lft.clone(), "[lft]".to_string()),
-    };
-    let truth = match map {
-        AugmentedMap::Expression(e) => TruthSpec::Expression(e.clone()),
-        AugmentedMap::Table { z, w } => TruthSpec::Table {
-            file: table_file.to_string(),
-            table: LookupTable::one_d(z.clone(), w.clone())?,
-        },
-    };
-    let mf = ModelFile {
-        discover: None,
-        lft,
-        linear,
-        signals: SignalNames {
-            u: nominal_mf.signals.u.clone(),
-            y: nominal_mf.signals.y.clone(),
-            z: None,
-        },
-        blocks: vec![BlockSpec {
-            name: BLOCK.into(),
-            inputs: vec![0],
-            output: 0,
-            dispersion,
-            truth: Some(truth),
-        }],
-        path: None,
-    };
-    Ok((mf, form))
-}
-
-/// Reads `path` back and simulates it with its truth map on `val` (columns by the file's own
-/// `[signals]`) as `structid validate --model path` does: the simulation RMS.
-fn simulate_file(
-    path: &Path,
-    val: &DataTable,
-    initial_state: ValidationInitialState,
-    max_lag: usize,
-) -> Result<f64, CliError> {
-    let back = |e: String| {
-        CliError::runtime(format!(
-            "internal error: `{}` does not read back: {e}",
-            path.display()
-        ))
-    };
-    let mf = ModelFile::from_path(path).map_err(|e| back(e.to_string()))?;
-    let maps = mf
-        .truth_maps()
-        .map_err(|e| back(e.to_string()))?
-        .ok_or_else(|| back("its block has no truth".into()))?;
-    let model = mf.to_model(None, None).map_err(|e| back(e.to_string()))?;
-    let data = mf.select_data(val)?;
-    let refs: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
-    let settings = ValidationSettings::builder()
-        .initial_state(initial_state)
-        .max_lag(max_lag)
-        .build()?;
-    let v = validate(&model, &refs, &data, &settings)
-        .map_err(|e| back(format!("its simulation fails: {e}")))?;
-    Ok(v.rms[0])
-}
-
-/// Writes augmented.toml (and the table of an unnamed map), reads it back and checks that it
-/// reproduces the validation RMS of the report.
-fn write_augmented(
-    a: &DiscoverArgs,
-    nominal_mf: &ModelFile,
-    f: &Finding,
-    trend: usize,
-    header: &str,
-    val: &Record,
-    max_lag: usize,
-    guard: &OutputGuard,
-    written: &mut Vec<PathBuf>,
-) -> Result<Written, CliError> {
-    let sigma = f
-        .augmented
-        .model
-        .blocks()
-        .first()
-        .and_then(|b| b.dispersion.width());
-    let (mf, form) = augmented_file(
-        nominal_mf,
-        f.location,
-        f.augmented.model.lft(),
-        &f.augmented.map,
-        match sigma {
-            Some(_) => block_dispersion(sigma, trend),
-            // The map was estimated with total variation, which has no width.
-            None => DispersionSpec::TotalVariation {
-                neighbours: None,
-                interpolation: None,
-            },
-        },
-        TABLE_FILE,
-    )?;
-    let table = match &f.augmented.map {
-        AugmentedMap::Table { z, w } => {
-            let path = a.out.join(TABLE_FILE);
-            guard.write_csv(&path, &["z", "value"], &[z.clone(), w.clone()])?;
-            written.push(path);
-            Some(TABLE_FILE.to_string())
-        }
-        AugmentedMap::Expression(_) => None,
-    };
-    let path = a.out.join("augmented.toml");
-    let mut text = String::from(header);
-    text.push_str(&mf.to_toml_string());
-    guard.write(&path, text.as_bytes())?;
-    written.push(path.clone());
-
-    let initial_state = initial_state(f.location);
-    let expected = f.augmented.validation_gap.rms;
-    let rms = simulate_file(&path, &val.table, initial_state, max_lag)?;
-    let difference = (rms - expected).abs() / expected.abs().max(f64::MIN_POSITIVE);
-    if difference.is_nan() || difference > SELF_CHECK_TOLERANCE {
-        // Never leave a model file behind that does not reproduce the report.
-        let _ = std::fs::remove_file(&path);
-        return Err(CliError::runtime(format!(
-            "internal error: the augmented model file does not reproduce the discovery: read back \
-             and simulated on `{}` (initial state {}), its validation RMS is {rms:.6e}, but the \
-             discovery's is {expected:.6e} (relative difference {difference:.2e} > \
-             {SELF_CHECK_TOLERANCE:e}); `{}` was removed",
-            val.path.display(),
-            initial_state_name(initial_state),
-            path.display()
-        )));
-    }
-    Ok(Written {
-        form,
-        table,
-        rms,
-        difference,
-        initial_state,
-    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -754,712 +467,6 @@ fn before_after_svg(
 }
 
 // ---------------------------------------------------------------------------------------------
-// report.md
-
-fn e(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.4e}")
-    } else if v.is_nan() {
-        "—".into()
-    } else {
-        "∞".into()
-    }
-}
-
-fn pct(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.1} %")
-    } else {
-        "—".into()
-    }
-}
-
-fn g4(v: f64) -> String {
-    if !v.is_finite() {
-        return e(v);
-    }
-    if v == 0.0 || (1e-3..1e5).contains(&v.abs()) {
-        format!("{v:.4}")
-    } else {
-        format!("{v:.3e}")
-    }
-}
-
-/// `|`-safe text for a Markdown table cell.
-fn cell(s: &str) -> String {
-    s.replace('|', "\\|").replace('\n', " ")
-}
-
-fn location_text(nominal: &Nominal, l: Location) -> String {
-    format!("`{}` ({})", nominal.key(l), nominal.describe(l))
-}
-
-fn gap_table(s: &mut String, estimation: &Gap, validation: &Gap) {
-    let _ = writeln!(s, "| | estimation record | validation record |");
-    let _ = writeln!(s, "|---|---|---|");
-    let _ = writeln!(
-        s,
-        "| simulation RMS of y − ŷ | {} | {} |",
-        e(estimation.rms),
-        e(validation.rms)
-    );
-    let _ = writeln!(
-        s,
-        "| one-step prediction RMS of ε | {} | {} |",
-        e(estimation.prediction_rms),
-        e(validation.prediction_rms)
-    );
-    let _ = writeln!(
-        s,
-        "| fit | {} | {} |",
-        pct(estimation.fit_percent),
-        pct(validation.fit_percent)
-    );
-    let _ = writeln!(
-        s,
-        "| noise level σ̂ (MAD of Δε) | {} | {} |",
-        e(estimation.noise_std),
-        e(validation.noise_std)
-    );
-    let _ = writeln!(
-        s,
-        "| RMS(ε) / σ̂ | {:.2} | {:.2} |",
-        estimation.prediction_rms / estimation.noise_std.max(f64::MIN_POSITIVE),
-        validation.prediction_rms / validation.noise_std.max(f64::MIN_POSITIVE)
-    );
-    let _ = writeln!(
-        s,
-        "| missing effect | {} | {} |",
-        if estimation.missing_effect {
-            "yes"
-        } else {
-            "no"
-        },
-        if validation.missing_effect {
-            "yes"
-        } else {
-            "no"
-        }
-    );
-    s.push('\n');
-    let _ = writeln!(
-        s,
-        "Portmanteau tests (the family at the 0.1 % level, Bonferroni; ε are the one-step \
-         prediction errors):\n"
-    );
-    let _ = writeln!(
-        s,
-        "| test | record | statistic | critical value | lags | result |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
-    for (record, g) in [("estimation", estimation), ("validation", validation)] {
-        for t in &g.tests {
-            let _ = writeln!(
-                s,
-                "| {} | {record} | {:.1} | {:.1} | {} | {} |",
-                cell(&t.name),
-                t.statistic,
-                t.critical,
-                t.lags,
-                if t.passes() { "pass" } else { "**FAIL**" }
-            );
-        }
-    }
-    s.push('\n');
-    for (record, g) in [("estimation", estimation), ("validation", validation)] {
-        let _ = writeln!(s, "- {record} record: {}", g.verdict);
-    }
-    s.push('\n');
-}
-
-fn windows_section(s: &mut String, records: [(&str, &Gap, &TimeAxis); 2], band: f64) {
-    for (record, g, time) in records {
-        if g.windows.is_empty() {
-            let _ = writeln!(
-                s,
-                "- {record} record: none; the moving RMS of the residual stays below {band}·σ̂ = {}.",
-                e(band * g.noise_std)
-            );
-            continue;
-        }
-        let samples: usize = g.windows.iter().map(|w| w.len()).sum();
-        let _ = writeln!(
-            s,
-            "- {record} record: {} window(s) above {band}·σ̂ = {}, {samples} of {} samples \
-             ({:.1} %):\n",
-            g.windows.len(),
-            e(band * g.noise_std),
-            g.residual.len(),
-            100.0 * samples as f64 / g.residual.len().max(1) as f64
-        );
-        if time.is_time {
-            let _ = writeln!(s, "  | samples | {} |", time.label);
-            let _ = writeln!(s, "  |---|---|");
-        } else {
-            let _ = writeln!(s, "  | samples |");
-            let _ = writeln!(s, "  |---|");
-        }
-        for w in g.windows.iter().take(MAX_WINDOW_ROWS) {
-            if time.is_time {
-                let _ = writeln!(
-                    s,
-                    "  | {}…{} | {} … {} |",
-                    w.start,
-                    w.end.saturating_sub(1),
-                    g4(time.at(w.start)),
-                    g4(time.at(w.end.saturating_sub(1)))
-                );
-            } else {
-                let _ = writeln!(s, "  | {}…{} |", w.start, w.end.saturating_sub(1));
-            }
-        }
-        if g.windows.len() > MAX_WINDOW_ROWS {
-            let _ = writeln!(
-                s,
-                "\n  … and {} more (all in report.json).",
-                g.windows.len() - MAX_WINDOW_ROWS
-            );
-        }
-        s.push('\n');
-    }
-}
-
-fn regions_section(s: &mut String, estimation: &Gap, validation: &Gap) {
-    let _ = writeln!(
-        s,
-        "For each candidate signal, the region where the residual energy concentrates most \
-         (candidates ranked by η², the share of the variance of ε² that quantile bins of the \
-         signal explain; lift = energy share / sample share):\n"
-    );
-    let _ = writeln!(
-        s,
-        "| record | signal | region | share of samples | share of residual energy | lift | η² |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-    for (record, g) in [("estimation", estimation), ("validation", validation)] {
-        for r in &g.regions {
-            let _ = writeln!(
-                s,
-                "| {record} | {} | `{}` | {:.1} % | {:.1} % | {:.2} | {:.3} |",
-                cell(&r.signal),
-                cell(&r.describe()),
-                100.0 * r.sample_share,
-                100.0 * r.energy_share,
-                r.lift,
-                r.eta_squared
-            );
-        }
-    }
-    s.push('\n');
-}
-
-fn parameters_text(fit: &EffectFit) -> String {
-    fit.parameters
-        .iter()
-        .map(|p| {
-            format!(
-                "{} = {} [{}, {}]",
-                p.name,
-                g4(p.value),
-                g4(p.interval.0),
-                g4(p.interval.1)
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("; ")
-}
-
-struct ReportInputs<'a> {
-    a: &'a DiscoverArgs,
-    nominal_mf: &'a ModelFile,
-    nominal: &'a Nominal,
-    settings: &'a DiscoverSettings,
-    est: &'a Record,
-    val: &'a Record,
-    d: &'a Discovery,
-    written: Option<&'a Written>,
-    figures: &'a [(String, String)],
-    command: &'a str,
-    max_lag: usize,
-}
-
-fn nominal_text(mf: &ModelFile) -> String {
-    let list = |v: &[f64]| {
-        v.iter()
-            .map(|x| format_number(*x))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    match &mf.linear {
-        Some(spec) => format!(
-            "`[linear]` lti, den = [{}], num = [{}]",
-            list(&spec.model.den),
-            list(&spec.model.num[0])
-        ),
-        None => format!("`[lft]` with {} state(s)", mf.lft.dims().states),
-    }
-}
-
-fn validate_command(r: &ReportInputs<'_>, w: &Written) -> String {
-    format!(
-        "structid validate --model {} --data {} --out {} --initial-state {}",
-        r.a.out.join("augmented.toml").display(),
-        r.val.path.display(),
-        r.a.out.join("validation").display(),
-        initial_state_name(w.initial_state)
-    )
-}
-
-fn identify_command(r: &ReportInputs<'_>, f: &Finding) -> String {
-    let beta = f.hypothesis.beta;
-    format!(
-        "structid identify --model {} --data {} --out {} --beta {} --initial-state {}",
-        r.a.out.join("augmented.toml").display(),
-        r.est.path.display(),
-        r.a.out.join("identify").display(),
-        format_number(beta),
-        initial_state_name(initial_state(f.location))
-    )
-}
-
-fn report_md(r: &ReportInputs<'_>) -> String {
-    let d = r.d;
-    let mut s = String::new();
-    let _ = writeln!(s, "# structid discover\n");
-    let _ = writeln!(s, "**Verdict:** {}\n", d.verdict);
-    let _ = writeln!(
-        s,
-        "Nominal model `{}` ({}); estimation record `{}` ({} samples), validation record `{}` \
-         ({} samples); {:.1} s.\n",
-        r.a.model.display(),
-        nominal_text(r.nominal_mf),
-        r.est.path.display(),
-        r.est.data.len(),
-        r.val.path.display(),
-        r.val.data.len(),
-        d.seconds
-    );
-
-    let _ = writeln!(s, "## 1. The gap: nominal model against the records\n");
-    gap_table(&mut s, &d.estimation_gap, &d.validation_gap);
-
-    let band = r.settings.gap().band;
-    let _ = writeln!(s, "## 2. Where in time\n");
-    let _ = writeln!(
-        s,
-        "Windows where the moving RMS of the residual exceeds {band}·σ̂:\n"
-    );
-    windows_section(
-        &mut s,
-        [
-            ("estimation", &d.estimation_gap, &r.est.time),
-            ("validation", &d.validation_gap, &r.val.time),
-        ],
-        band,
-    );
-
-    let _ = writeln!(s, "## 3. Where in operating space\n");
-    regions_section(&mut s, &d.estimation_gap, &d.validation_gap);
-
-    if d.hypotheses.is_empty() {
-        let _ = writeln!(
-            s,
-            "No hypotheses were tried: the nominal model's residual is within {}× its noise \
-             level and passes every test on both records.\n",
-            r.settings.gap().noise_ratio
-        );
-    } else {
-        if !d.missing_effect {
-            let _ = writeln!(
-                s,
-                "A test of the nominal model's gap failed (section 1), so every candidate \
-                 location was tried; none reduces the validation RMS enough to confirm a \
-                 missing effect (see the verdict).\n"
-            );
-        }
-        let _ = writeln!(s, "## 4. Where in the structure: hypotheses\n");
-        let _ = writeln!(
-            s,
-            "One unknown static block N at each candidate location, identified on the \
-             estimation record (Fourier kernel plus polynomial trend, β by marginal likelihood) \
-             and ranked by the simulation RMS on the validation record:\n"
-        );
-        let _ = writeln!(
-            s,
-            "| rank | location | dispersion | β | σ | estimation RMS | validation RMS | seconds | failure |"
-        );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
-        for (i, h) in d.hypotheses.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
-                i + 1,
-                cell(&location_text(r.nominal, h.location)),
-                cell(&h.dispersion),
-                e(h.beta),
-                h.sigma.map(g4).unwrap_or_else(|| "fixed".into()),
-                e(h.estimation_rms),
-                e(h.validation_rms),
-                h.seconds,
-                h.failure.as_deref().map(cell).unwrap_or_default()
-            );
-        }
-        s.push('\n');
-    }
-
-    if let Some(f) = &d.finding {
-        finding_md(&mut s, r, f);
-    } else if d.missing_effect {
-        let _ = writeln!(
-            s,
-            "No hypothesis could be identified and simulated, so no augmented model was written.\n"
-        );
-    }
-
-    let _ = writeln!(s, "## Figures\n");
-    for (file, what) in r.figures {
-        let _ = writeln!(s, "- [{file}]({file}): {what}");
-    }
-    s.push('\n');
-    let _ = writeln!(s, "## Reproduce\n");
-    let _ = writeln!(s, "```sh\n{}", r.command);
-    if let (Some(f), Some(w)) = (&d.finding, r.written) {
-        let _ = writeln!(s, "{}", validate_command(r, w));
-        let _ = writeln!(s, "{}", identify_command(r, f));
-        let _ = writeln!(s, "```\n");
-        let _ = writeln!(
-            s,
-            "The first line reruns the discovery. The second simulates `augmented.toml` with its \
-             map on the validation record (initial state {}, no settling samples): its RMS is \
-             that of the gap after ({}; checked when the file was written, relative difference \
-             {:.1e}). The third re-estimates N nonparametrically with the hypothesis' dispersion \
-             and β.",
-            initial_state_name(w.initial_state),
-            e(w.rms),
-            w.difference
-        );
-    } else {
-        let _ = writeln!(s, "```");
-    }
-    s
-}
-
-fn finding_md(s: &mut String, r: &ReportInputs<'_>, f: &Finding) {
-    let _ = writeln!(s, "## 5. What it is\n");
-    let kind = match &f.classification {
-        Classification::Named(_) => "named",
-        Classification::Unnamed => "unnamed",
-        Classification::Dynamic => "dynamic",
-    };
-    let _ = writeln!(
-        s,
-        "**{}** ({kind}) {}.\n",
-        f.classification.describe(),
-        r.nominal.describe(f.location)
-    );
-    if let Classification::Named(fit) = &f.classification {
-        let _ = writeln!(s, "- map: `{}`", fit.expression);
-        let _ = writeln!(s, "- parameters (95 % intervals): {}", parameters_text(fit));
-    }
-    let _ = writeln!(
-        s,
-        "- named from the {} estimate; its validation RMS {}{}",
-        f.estimator,
-        e(f.nonparametric_rms),
-        f.total_variation_rms
-            .map(|v| format!(" (total variation tried: {})", e(v)))
-            .unwrap_or_default()
-    );
-    let _ = writeln!(
-        s,
-        "- equivalent locations (the same model for a linear G): {}",
-        if f.equivalent_locations.len() > 1 {
-            f.equivalent_locations
-                .iter()
-                .map(|l| format!("`{}`", r.nominal.key(*l)))
-                .collect::<Vec<_>>()
-                .join(", ")
-        } else {
-            format!("none besides `{}`", r.nominal.key(f.location))
-        }
-    );
-    s.push('\n');
-    let _ = writeln!(
-        s,
-        "Families fitted to the points (z_k, ŵ_k), best BIC first (validation RMS for those \
-         simulated; a family is named when it is within {}× the nonparametric map's, or within \
-         1.5 σ̂):\n",
-        r.settings.naming_tolerance()
-    );
-    let _ = writeln!(
-        s,
-        "| rank | family | parameters (95 % interval) | RMS | BIC | validation RMS |"
-    );
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
-    for (i, fit) in f.naming.ranked.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {:.1} | {} |",
-            i + 1,
-            cell(&fit.effect.name()),
-            cell(&parameters_text(fit)),
-            e(fit.rms),
-            fit.bic,
-            f.family_rms
-                .get(i)
-                .copied()
-                .flatten()
-                .map(e)
-                .unwrap_or_else(|| "—".into())
-        );
-    }
-    s.push('\n');
-    let _ = writeln!(
-        s,
-        "Direction test (residual deconvolved to the block's output, split by the direction of \
-         z within z-bins): the direction explains {:.1} % of its energy, t = {:.2}, {} samples; \
-         threshold {:.0} % → {}.\n",
-        100.0 * f.direction.explained,
-        f.direction.t_statistic,
-        f.direction.samples,
-        100.0 * r.settings.hysteresis_threshold(),
-        if f.direction.dynamic {
-            "dynamic (hysteresis or backlash suspected)"
-        } else {
-            "static"
-        }
-    );
-    if !f.remarks.is_empty() {
-        let _ = writeln!(s, "Remarks:\n");
-        for m in &f.remarks {
-            let _ = writeln!(s, "- {m}");
-        }
-        s.push('\n');
-    }
-    let _ = writeln!(s, "## 6. The gap after: augmented model\n");
-    let _ = writeln!(
-        s,
-        "The nominal model with N {} ({}).\n",
-        r.nominal.describe(f.location),
-        match &f.augmented.map {
-            AugmentedMap::Expression(x) => format!("N(z) = `{x}`"),
-            AugmentedMap::Table { z, .. } =>
-                format!("N as a table of {} points in `{TABLE_FILE}`", z.len()),
-        }
-    );
-    gap_table(s, &f.augmented.estimation_gap, &f.augmented.validation_gap);
-    let _ = writeln!(
-        s,
-        "**Shrink factor:** validation RMS {} → {} ({:.2}× smaller); fit {} → {}.\n",
-        e(r.d.validation_gap.rms),
-        e(f.augmented.validation_gap.rms),
-        f.shrink,
-        pct(r.d.validation_gap.fit_percent),
-        pct(f.augmented.validation_gap.fit_percent)
-    );
-    if let Some(w) = r.written {
-        let _ = writeln!(
-            s,
-            "The augmented model is `augmented.toml` ({}{}; block `{BLOCK}` with the map as its \
-             `truth` and the hypothesis' dispersion, so that `structid identify` can re-estimate \
-             it).\n",
-            w.form,
-            w.table
-                .as_ref()
-                .map(|t| format!(", table `{t}`"))
-                .unwrap_or_default()
-        );
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// report.json
-
-fn json_value<T: serde::Serialize>(v: &T) -> Result<Value, CliError> {
-    serde_json::to_value(v)
-        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))
-}
-
-fn gap_json(g: &Gap, time: &TimeAxis) -> Result<Value, CliError> {
-    let regions = g
-        .regions
-        .iter()
-        .map(|r| {
-            let mut v = json_value(r)?;
-            if let Value::Object(m) = &mut v {
-                m.insert("description".into(), json!(r.describe()));
-            }
-            Ok(v)
-        })
-        .collect::<Result<Vec<Value>, CliError>>()?;
-    Ok(json!({
-        "rms": g.rms,
-        "prediction_rms": g.prediction_rms,
-        "fit_percent": g.fit_percent,
-        "noise_std": g.noise_std,
-        "tests": g.tests.iter().map(|t| json!({
-            "name": t.name,
-            "statistic": t.statistic,
-            "critical": t.critical,
-            "lags": t.lags,
-            "passes": t.passes(),
-        })).collect::<Vec<_>>(),
-        "windows": g.windows.iter().map(|w| json!({
-            "start": w.start,
-            "end": w.end,
-            "time_start": time.is_time.then(|| time.at(w.start)),
-            "time_end": time.is_time.then(|| time.at(w.end.saturating_sub(1))),
-        })).collect::<Vec<_>>(),
-        "regions": regions,
-        "missing_effect": g.missing_effect,
-        "verdict": g.verdict,
-    }))
-}
-
-fn fit_json(fit: &EffectFit, validation_rms: Option<f64>) -> Result<Value, CliError> {
-    Ok(json!({
-        "name": fit.effect.name(),
-        "family": json_value(&fit.effect)?,
-        "expression": fit.expression,
-        "parameters": fit.parameters.iter().map(|p| json!({
-            "name": p.name,
-            "value": p.value,
-            "interval": [p.interval.0, p.interval.1],
-        })).collect::<Vec<_>>(),
-        "rms": fit.rms,
-        "bic": fit.bic,
-        "validation_rms": validation_rms,
-    }))
-}
-
-fn report_json(r: &ReportInputs<'_>, files: &[String]) -> Result<Value, CliError> {
-    let d = r.d;
-    let hypotheses: Vec<Value> = d
-        .hypotheses
-        .iter()
-        .map(|h| {
-            json!({
-                "location": r.nominal.key(h.location),
-                "description": r.nominal.describe(h.location),
-                "dispersion": h.dispersion,
-                "beta": h.beta,
-                "sigma": h.sigma,
-                "noise_term": h.noise_term,
-                "dispersion_value": h.dispersion_value,
-                "estimation_rms": h.estimation_rms,
-                "validation_rms": h.validation_rms,
-                "seconds": h.seconds,
-                "failure": h.failure,
-            })
-        })
-        .collect();
-    let finding = match &d.finding {
-        None => Value::Null,
-        Some(f) => {
-            let (kind, named) = match &f.classification {
-                Classification::Named(fit) => (
-                    "named",
-                    fit_json(fit, Some(f.augmented.validation_gap.rms))?,
-                ),
-                Classification::Unnamed => ("unnamed", Value::Null),
-                Classification::Dynamic => ("dynamic", Value::Null),
-            };
-            let families = f
-                .naming
-                .ranked
-                .iter()
-                .enumerate()
-                .map(|(i, fit)| fit_json(fit, f.family_rms.get(i).copied().flatten()))
-                .collect::<Result<Vec<Value>, CliError>>()?;
-            let curve = Some(json_value(&f.hypothesis.curve)?);
-            let map = match &f.augmented.map {
-                AugmentedMap::Expression(x) => json!({ "expression": x }),
-                AugmentedMap::Table { z, .. } => json!({ "table": TABLE_FILE, "points": z.len() }),
-            };
-            json!({
-                "location": r.nominal.key(f.location),
-                "description": r.nominal.describe(f.location),
-                "equivalent_locations": f.equivalent_locations.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>(),
-                "classification": { "kind": kind, "description": f.classification.describe() },
-                "named_effect": named,
-                "estimator": f.estimator,
-                "nonparametric_validation_rms": f.nonparametric_rms,
-                "total_variation_validation_rms": f.total_variation_rms,
-                "families": families,
-                "direction": json_value(&f.direction)?,
-                "remarks": f.remarks,
-                "map": map,
-                "curve": curve,
-                "gap_after": {
-                    "estimation": gap_json(&f.augmented.estimation_gap, &r.est.time)?,
-                    "validation": gap_json(&f.augmented.validation_gap, &r.val.time)?,
-                },
-                "shrink": f.shrink,
-            })
-        }
-    };
-    let augmented = match (r.written, &d.finding) {
-        (Some(w), Some(f)) => json!({
-            "model_file": "augmented.toml",
-            "form": w.form,
-            "table_file": w.table,
-            "block": BLOCK,
-            "initial_state": initial_state_name(w.initial_state),
-            "self_check": {
-                "validation_rms": w.rms,
-                "report_validation_rms": f.augmented.validation_gap.rms,
-                "relative_difference": w.difference,
-                "tolerance": SELF_CHECK_TOLERANCE,
-            },
-            "reproduce": validate_command(r, w),
-            "reestimate": identify_command(r, f),
-        }),
-        _ => Value::Null,
-    };
-    let s = r.settings;
-    Ok(json!({
-        "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
-        "version": env!("CARGO_PKG_VERSION"),
-        "command": r.command,
-        "inputs": {
-            "model_file": r.a.model.display().to_string(),
-            "model_file_absolute": absolute(&r.a.model).display().to_string(),
-            "data_file": r.est.path.display().to_string(),
-            "data_file_absolute": absolute(&r.est.path).display().to_string(),
-            "validation_file": r.val.path.display().to_string(),
-            "validation_file_absolute": absolute(&r.val.path).display().to_string(),
-            "estimation_samples": r.est.data.len(),
-            "validation_samples": r.val.data.len(),
-            "sample_time": r.nominal_mf.lft.sample_time(),
-        },
-        "settings": {
-            "locations": s.locations().map(|l| l.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>()),
-            "total_variation": s.total_variation(),
-            "settle": s.settle(),
-            "sigma_fraction": s.sigma_fraction(),
-            "trend_degree": s.trend_degree(),
-            "tune_sigma": s.tune_sigma(),
-            "naming_tolerance": s.naming_tolerance(),
-            "hysteresis_threshold": s.hysteresis_threshold(),
-            "band": s.gap().band,
-            "noise_ratio": s.gap().noise_ratio,
-            "max_lag": r.max_lag,
-        },
-        "verdict": d.verdict,
-        "missing_effect": d.missing_effect,
-        "seconds": d.seconds,
-        "gap_before": {
-            "estimation": gap_json(&d.estimation_gap, &r.est.time)?,
-            "validation": gap_json(&d.validation_gap, &r.val.time)?,
-        },
-        "hypotheses": hypotheses,
-        "finding": finding,
-        "augmented": augmented,
-        "files": files,
-    }))
-}
-
-// ---------------------------------------------------------------------------------------------
 // Run
 
 /// The command line as typed (arguments with spaces or quotes single-quoted).
@@ -1482,6 +489,41 @@ fn command_line() -> String {
         .join(" ")
 }
 
+/// Writes augmented.toml (and the table of an unnamed map) and estimate.json for the finding
+/// `f`.
+#[allow(clippy::too_many_arguments)]
+fn write_augmented(
+    a: &DiscoverArgs,
+    mf: &ModelFile,
+    nominal: &Nominal,
+    header: &str,
+    f: &Finding,
+    settings: &DiscoverSettings,
+    est: &Record,
+    guard: &OutputGuard,
+    written: &mut Vec<PathBuf>,
+) -> Result<AugmentedFile, CliError> {
+    let file = f.augmented_file(mf, settings.trend_degree())?;
+    if let Some(t) = &file.table {
+        let path = a.out.join(&t.name);
+        guard.write_csv(&path, &["z", "value"], &[t.z.clone(), t.w.clone()])?;
+        written.push(path);
+    }
+    let path = a.out.join("augmented.toml");
+    guard.write(&path, file.text(header).as_bytes())?;
+    written.push(path);
+    let stored = f
+        .estimate(nominal, &est.data)?
+        .with_signal_names(SignalNames {
+            u: mf.signals.u.clone(),
+            y: mf.signals.y.clone(),
+        })?;
+    let path = a.out.join(ESTIMATE_FILE);
+    guard.write(&path, &estimate_json(&stored)?)?;
+    written.push(path);
+    Ok(file)
+}
+
 /// Runs `structid discover`.
 pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
@@ -1498,8 +540,8 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .protect(&a.validate);
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
-    let est = read_record(&mf, &a.data)?;
-    let val = read_record(&mf, &a.validate)?;
+    let est = Record::read(&mf, &a.data)?;
+    let val = Record::read(&mf, &a.validate)?;
     for (flag, r) in [("--data", &est), ("--validate", &val)] {
         if a.settle >= r.data.len() {
             return Err(CliError::input(format!(
@@ -1527,15 +569,15 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     let mut written_files: Vec<PathBuf> = Vec::new();
     let written = match &d.finding {
         Some(f) => {
-            let header = augmented_header(&a, &nominal, &d, f);
+            let header = augmented::header(&a.model, &a.out.join("report.md"), &nominal, &d, f);
             Some(write_augmented(
                 &a,
                 &mf,
-                f,
-                settings.trend_degree(),
+                &nominal,
                 &header,
-                &val,
-                max_lag,
+                f,
+                &settings,
+                &est,
                 &guard,
                 &mut written_files,
             )?)
@@ -1616,21 +658,22 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     }
 
     // Reports.
-    let inputs = ReportInputs {
-        a: &a,
-        nominal_mf: &mf,
+    let context = ReportContext {
+        version: env!("CARGO_PKG_VERSION"),
+        command: &command,
+        model_path: &a.model,
+        out: &a.out,
+        nominal_file: &mf,
         nominal: &nominal,
         settings: &settings,
-        est: &est,
-        val: &val,
-        d: &d,
-        written: written.as_ref(),
+        estimation: &est,
+        validation: &val,
+        augmented: written.as_ref(),
         figures: &figures,
-        command: &command,
         max_lag,
     };
     let md_path = a.out.join("report.md");
-    guard.write(&md_path, report_md(&inputs).as_bytes())?;
+    guard.write(&md_path, report::markdown(&d, &context).as_bytes())?;
     written_files.push(md_path);
     let json_path = a.out.join("report.json");
     let files: Vec<String> = written_files
@@ -1638,8 +681,11 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .chain(std::iter::once(&json_path))
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
-    let mut text = serde_json::to_string_pretty(&report_json(&inputs, &files)?)
-        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
+    let serialise =
+        |e: serde_json::Error| CliError::runtime(format!("cannot serialise the report: {e}"));
+    let mut text =
+        serde_json::to_string_pretty(&report::json(&d, &context, &files).map_err(serialise)?)
+            .map_err(serialise)?;
     text.push('\n');
     guard.write(&json_path, text.as_bytes())?;
     written_files.push(json_path);
@@ -1655,8 +701,9 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
 
     print!(
         "{}",
-        summary(
-            &inputs,
+        report::summary(
+            &d,
+            &context,
             &written_files,
             &removed,
             t0.elapsed().as_secs_f64()
@@ -1665,102 +712,9 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Comment lines at the top of augmented.toml.
-fn augmented_header(a: &DiscoverArgs, nominal: &Nominal, d: &Discovery, f: &Finding) -> String {
-    let what = match &f.classification {
-        Classification::Named(fit) => format!("{} (named)", fit.effect.name()),
-        other => other.describe(),
-    };
-    format!(
-        "# Written by `structid discover`: the nominal model `{}` with the block `{BLOCK}` {}.\n\
-         # Missing effect: {what}; validation RMS {:.6e} (nominal {:.6e}).\n\
-         # `{BLOCK}`'s truth is the map found; its dispersion is the one discovery identified it with.\n\
-         # See {} for the report and how to reproduce it.\n",
-        a.model.display(),
-        nominal.describe(f.location),
-        f.augmented.validation_gap.rms,
-        d.validation_gap.rms,
-        a.out.join("report.md").display()
-    )
-}
-
-fn summary(r: &ReportInputs<'_>, written: &[PathBuf], removed: &[PathBuf], seconds: f64) -> String {
-    let d = r.d;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "discovery on `{}` ({} samples) and `{}` ({} samples), {:.1} s",
-        r.est.path.display(),
-        r.est.data.len(),
-        r.val.path.display(),
-        r.val.data.len(),
-        seconds
-    );
-    let _ = writeln!(s, "verdict: {}", d.verdict);
-    if let Some(f) = &d.finding {
-        let _ = writeln!(
-            s,
-            "best location: {} (of {} hypotheses)",
-            location_text(r.nominal, f.location),
-            d.hypotheses.len()
-        );
-        match &f.classification {
-            Classification::Named(fit) => {
-                let _ = writeln!(
-                    s,
-                    "effect: {} ({}): N(z) = {}",
-                    fit.effect.name(),
-                    fit.parameters
-                        .iter()
-                        .map(|p| format!("{} = {}", p.name, g4(p.value)))
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    fit.expression
-                );
-            }
-            other => {
-                let _ = writeln!(s, "effect: {} (map kept as a table)", other.describe());
-            }
-        }
-        let _ = writeln!(
-            s,
-            "validation RMS: {} → {} ({:.2}× smaller), fit {} → {}",
-            e(d.validation_gap.rms),
-            e(f.augmented.validation_gap.rms),
-            f.shrink,
-            pct(d.validation_gap.fit_percent),
-            pct(f.augmented.validation_gap.fit_percent)
-        );
-        if let Some(w) = r.written {
-            let _ = writeln!(
-                s,
-                "augmented.toml ({}) read back reproduces it (relative difference {:.1e})",
-                w.form, w.difference
-            );
-        }
-    } else {
-        let _ = writeln!(
-            s,
-            "validation RMS {} (fit {}), noise level σ̂ = {}",
-            e(d.validation_gap.rms),
-            pct(d.validation_gap.fit_percent),
-            e(d.validation_gap.noise_std)
-        );
-    }
-    let _ = writeln!(s, "wrote:");
-    for p in written {
-        let _ = writeln!(s, "  {}", p.display());
-    }
-    for p in removed {
-        let _ = writeln!(s, "removed (from an earlier run): {}", p.display());
-    }
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use structid_core::{KernelDispersion, Signal};
     use structid_linear::PolynomialModel;
 
     fn g() -> PolynomialModel {
@@ -1768,113 +722,6 @@ mod tests {
             den: vec![1.0, -1.5, 0.7],
             num: vec![vec![0.0, 0.1, 0.1]],
             sample_time: Some(0.05),
-        }
-    }
-
-    fn nominal_file() -> ModelFile {
-        ModelFile::parse(
-            "[linear]\nstructure = \"lti\"\nsample_time = 0.05\nden = [1.0, -1.5, 0.7]\n\
-             num = [[0.0, 0.1, 0.1]]\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n",
-            None,
-        )
-        .unwrap()
-    }
-
-    /// Every location's augmented file, read back, simulates like the hypothesis' LFT it was
-    /// written from (the self-check of `structid discover`, without a discovery).
-    #[test]
-    fn augmented_files_reproduce_the_hypothesis_at_every_location() {
-        let nominal_mf = nominal_file();
-        let nominal = Nominal::from_polynomial(&g()).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let n = 600;
-        let mut s = 0.0;
-        let u: Vec<f64> = (0..n)
-            .map(|k| {
-                s = 0.8 * s + 0.5 * ((k as f64 * 0.37).sin() + (k as f64 * 0.11).cos());
-                s
-            })
-            .collect();
-        let truth = |z: f64| 0.3 * z + 0.05 * z * z * z;
-        for (location, map) in [
-            (
-                Location::Input,
-                AugmentedMap::Expression("min(max(1.5*z0, -0.8), 0.8)".into()),
-            ),
-            (
-                Location::Output,
-                AugmentedMap::Expression("z0 + 0.2*z0^3".into()),
-            ),
-            (
-                Location::OutputFeedback,
-                AugmentedMap::Table {
-                    z: (0..41).map(|i| -4.0 + 0.2 * i as f64).collect(),
-                    w: (0..41).map(|i| truth(-4.0 + 0.2 * i as f64)).collect(),
-                },
-            ),
-            (
-                Location::RateFeedback,
-                AugmentedMap::Expression("0.01*z0".into()),
-            ),
-        ] {
-            let h = nominal
-                .hypothesis(
-                    location,
-                    std::sync::Arc::new(KernelDispersion::gaussian(0.3).unwrap()),
-                )
-                .unwrap();
-            let interp = map.interpolant().unwrap();
-            let us = Signal::from_fn(n, 1, |k, _| u[k]);
-            let sim = h.simulate(interp.as_ref(), &us, None).unwrap();
-            let y: Vec<f64> = (0..n)
-                .map(|k| sim.y.get(k, 0) + 0.01 * ((k * 7919 % 101) as f64 / 50.0 - 1.0))
-                .collect();
-            let table = DataTable::new(vec!["u".into(), "y".into()], vec![u.clone(), y]).unwrap();
-            let data = nominal_mf.select_data(&table).unwrap();
-            let data_h = h.data(&data).unwrap();
-            let init = initial_state(location);
-            let expected = validate(
-                &h.model,
-                &[interp.as_ref()],
-                &data_h,
-                &ValidationSettings::builder()
-                    .initial_state(init)
-                    .build()
-                    .unwrap(),
-            )
-            .unwrap()
-            .rms[0];
-            let (mf, form) = augmented_file(
-                &nominal_mf,
-                location,
-                h.model.lft(),
-                &map,
-                block_dispersion(Some(0.3), 3),
-                TABLE_FILE,
-            )
-            .unwrap();
-            let expect_linear = !matches!(location, Location::Declared { .. });
-            assert_eq!(form.starts_with("[linear]"), expect_linear, "{form}");
-            let sub = dir.path().join(nominal.key(location));
-            std::fs::create_dir_all(&sub).unwrap();
-            if let AugmentedMap::Table { z, w } = &map {
-                structid_io::write_csv(
-                    &sub.join(TABLE_FILE),
-                    &["z", "value"],
-                    &[z.clone(), w.clone()],
-                )
-                .unwrap();
-            }
-            let path = sub.join("augmented.toml");
-            std::fs::write(&path, mf.to_toml_string()).unwrap();
-            let rms = simulate_file(&path, &table, init, 25).unwrap();
-            assert!(
-                (rms - expected).abs() <= 1e-9 * expected,
-                "{location:?}: {rms} vs {expected}"
-            );
-            let back = ModelFile::from_path(&path).unwrap();
-            assert_eq!(back.blocks[0].dispersion.sigma(), Some(0.3));
-            assert_eq!(back.blocks[0].dispersion.kind(), "fourier");
         }
     }
 

@@ -1,7 +1,6 @@
 //! `structid simulate`.
 
-use structid_core::MapBinding;
-use structid_core::paper::gaussian_noise;
+use structid_core::Interpolant;
 use structid_io::{DataTable, ModelFile, OutputGuard};
 
 use crate::SimulateArgs;
@@ -72,18 +71,8 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::from(e).context("reading the inputs named in [signals].u"))?;
     let len = u.len();
     let dims = lft.dims();
-    let e = (noise_std > 0.0).then(|| gaussian_noise(len, dims.e, noise_std, a.seed));
-    let bindings: Vec<MapBinding<'_>> = mf
-        .blocks
-        .iter()
-        .zip(&maps)
-        .map(|(b, m)| MapBinding {
-            inputs: &b.inputs,
-            output: b.output,
-            map: m.as_ref(),
-        })
-        .collect();
-    let sim = lft.simulate(&bindings, &u, e.as_ref(), None)?;
+    let maps: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
+    let sim = mf.simulate(&maps, &u, noise_std, a.seed)?;
 
     let mut columns: Vec<Vec<f64>> = Vec::with_capacity(names.len());
     columns.extend((0..dims.u).map(|c| u.channel(c)));

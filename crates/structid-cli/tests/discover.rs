@@ -185,10 +185,23 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
     for key in ["input", "output", "output-feedback", "rate-feedback"] {
         assert!(tried.contains(&key), "{}", j["hypotheses"]);
     }
-    let check = &j["augmented"]["self_check"];
+    // augmented.toml, validated with its true map, reproduces the report's validation RMS
+    // after (the initial state the report names).
+    assert_eq!(j["augmented"]["validation_rms"].as_f64(), Some(after_rms));
+    let initial_state = j["augmented"]["initial_state"].as_str().unwrap();
+    let from_model = validation_rms(&[
+        "--model",
+        p(&out.join("augmented.toml")),
+        "--data",
+        p(&val),
+        "--initial-state",
+        initial_state,
+        "--out",
+        p(&d.join("validation-model")),
+    ]);
     assert!(
-        check["relative_difference"].as_f64().unwrap() <= 1e-6,
-        "{check}"
+        (from_model - after_rms).abs() <= 1e-9 * after_rms,
+        "augmented.toml {from_model} vs report {after_rms}"
     );
 
     // The figures.
@@ -232,6 +245,50 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
         (r - after_rms).abs() < 0.1 * after_rms,
         "{r} vs {after_rms}"
     );
+
+    // estimate.json: the augmented model as a stored estimate, which validates as the report
+    // says with the estimation record gone.
+    assert!(
+        j["files"]
+            .as_array()
+            .unwrap()
+            .contains(&"estimate.json".into()),
+        "{j}"
+    );
+    std::fs::remove_file(&est).unwrap();
+    let stored = validation_rms(&[
+        "--estimate",
+        p(&out.join("estimate.json")),
+        "--data",
+        p(&val),
+        "--initial-state",
+        initial_state,
+        "--out",
+        p(&d.join("validation-estimate")),
+    ]);
+    assert!(
+        (stored - after_rms).abs() <= 1e-9 * after_rms,
+        "estimate.json {stored} vs report {after_rms}"
+    );
+    assert!(
+        (stored - from_model).abs() <= 1e-9 * after_rms,
+        "estimate.json {stored} vs augmented.toml {from_model}"
+    );
+    let v = json(&d.join("validation-estimate").join("validation.json"));
+    assert_eq!(v["estimate"]["workflow"], "discover", "{v}");
+}
+
+/// `structid validate` with `args` (which name its --out directory): the simulation RMS of
+/// its validation.json.
+fn validation_rms(args: &[&str]) -> f64 {
+    let mut all = vec!["validate"];
+    all.extend_from_slice(args);
+    ok(&all);
+    let i = args.iter().position(|a| *a == "--out").unwrap();
+    let v = json(&Path::new(args[i + 1]).join("validation.json"));
+    v["outputs"][0]["rms"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{v}"))
 }
 
 #[test]

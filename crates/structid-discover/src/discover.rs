@@ -74,10 +74,10 @@ use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
 use structid_core::{
-    Data, Dispersion, Error, ExprMap, FourierDispersion, FourierWeights, IdentifySettings,
-    InitialState, Interpolant, LookupTable, Model, PolynomialDispersion, Result, Signal,
-    SumDispersion, TotalVariation,
+    Data, Dispersion, Error, ExprMap, IdentifySettings, InitialState, Interpolant, LookupTable,
+    Model, PolynomialDispersion, Result, Signal, TotalVariation,
 };
+use structid_io::{DispersionSpec, IoError};
 use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings};
 use structid_lti::LinearSystem;
 
@@ -602,21 +602,59 @@ fn minmax(v: &[f64]) -> (f64, f64) {
         })
 }
 
-/// The quadratic dispersion of every hypothesis: a Gaussian-like Fourier kernel of width
-/// `fraction`·range(z), plus a polynomial trend so that the map extrapolates.
+/// Weight λ of each normalised monomial of the trend in [`quadratic_dispersion_spec`].
+///
+/// The trend's monomials are normalised to the range; a weight of 10 keeps them nearly
+/// unpenalised relative to the kernel, so the kernel only carries what they cannot.
+pub const TREND_SCALE: f64 = 10.0;
+
+/// The quadratic dispersion of every hypothesis, as a model file writes it: a Gaussian-like
+/// Fourier kernel of width `sigma` plus, for `trend_degree` > 0, a polynomial trend of that
+/// degree weighted [`TREND_SCALE`], so that the map extrapolates.
+///
+/// It is the one definition of discovery's dispersion: the hypotheses are identified with
+/// what this spec builds, and the augmented model file carries it, so that `structid
+/// identify` on that file re-estimates the map as discovery did.
+///
+/// ```
+/// use structid_discover::discover::quadratic_dispersion_spec;
+/// let spec = quadratic_dispersion_spec(Some(0.3), 3);
+/// assert_eq!((spec.kind(), spec.sigma()), ("fourier", Some(0.3)));
+/// assert!(spec.build(None, None).unwrap().describe().contains("polynomial"));
+/// ```
+pub fn quadratic_dispersion_spec(sigma: Option<f64>, trend_degree: usize) -> DispersionSpec {
+    let kernel = DispersionSpec::Fourier {
+        sigma,
+        harmonics: None,
+        additive: false,
+    };
+    if trend_degree == 0 {
+        kernel
+    } else {
+        DispersionSpec::WithTrend {
+            kernel: Box::new(kernel),
+            degree: trend_degree,
+            scale: Some(TREND_SCALE),
+        }
+    }
+}
+
+/// The quadratic dispersion of every hypothesis at σ = `fraction`·range(z)
+/// ([`quadratic_dispersion_spec`]).
 fn quadratic_dispersion(range: f64, settings: &DiscoverSettings) -> Result<Arc<dyn Dispersion>> {
     let sigma = settings.sigma_fraction * range.max(f64::MIN_POSITIVE);
-    let kernel: Arc<dyn Dispersion> =
-        Arc::new(FourierDispersion::new(FourierWeights::GaussianLike {
-            sigma,
-        })?);
-    if settings.trend_degree == 0 {
-        return Ok(kernel);
+    quadratic_dispersion_spec(Some(sigma), settings.trend_degree)
+        .build(None, None)
+        .map_err(core_error)
+}
+
+/// A model-file error as a core one (building a dispersion fails only on invalid parameters,
+/// which are core errors).
+pub(crate) fn core_error(e: IoError) -> Error {
+    match e {
+        IoError::Core(e) => e,
+        other => Error::InvalidStructure(other.to_string()),
     }
-    // The trend's monomials are normalised to the range; a weight of 10 keeps them nearly
-    // unpenalised relative to the kernel, so the kernel only carries what they cannot.
-    let trend = Arc::new(PolynomialDispersion::new(settings.trend_degree)?.with_scale(10.0)?);
-    Ok(Arc::new(SumDispersion::new(vec![kernel, trend])?))
 }
 
 /// z of a hypothesis on a record (measured for the rate, computed otherwise).

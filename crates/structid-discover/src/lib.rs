@@ -24,6 +24,9 @@
 //!   information criterion, and named only when the best fit is within the noise;
 //! * [`hysteresis`]: whether the residual of a static fit depends on the direction of motion
 //!   (hysteresis or backlash: an effect that is not static and must not be forced into a name);
+//! * [`augmented`]: the augmented model of a finding as a model file and as a stored
+//!   estimate;
+//! * [`report`]: the reports of a discovery (Markdown, JSON and the printed summary);
 //! * [`synthetic`]: test cases for the workflow, a random nominal model plus records of a
 //!   system with one hidden effect (a static effect at a location, none, or hysteresis),
 //!   deterministic in a seed.
@@ -39,12 +42,14 @@
 //! println!("{}: {}", best.effect.name(), best.expression);
 //! ```
 
+pub mod augmented;
 pub mod discover;
 pub mod effects;
 pub mod gap;
 pub mod hypotheses;
 pub mod hysteresis;
 pub mod localise;
+pub mod report;
 pub mod synthetic;
 
 pub use discover::{Classification, DiscoverSettings, Discovery, discover};

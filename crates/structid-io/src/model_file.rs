@@ -114,11 +114,12 @@ use std::sync::Arc;
 
 use nalgebra::DMatrix;
 use serde::Deserialize;
+use structid_core::paper::gaussian_noise;
 use structid_core::refine::LinearStructure;
 use structid_core::{
     Combination, Data, Dispersion, ExprMap, FourierDispersion, FourierWeights, GraphInterpolation,
-    Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, Model,
-    NonlinearBlock, PolynomialDispersion, Site, SumDispersion, TotalVariation,
+    Interpolant, KernelDispersion, Lft, LftMatrices, LookupTable, LowRankGaussian, MapBinding,
+    Model, NonlinearBlock, PolynomialDispersion, Simulation, Site, SumDispersion, TotalVariation,
 };
 use structid_linear::PolynomialModel;
 use structid_lti::{ContinuousStateSpace, Signal};
@@ -2311,6 +2312,71 @@ impl ModelFile {
         } else {
             Ok(self.lft.clone())
         }
+    }
+
+    /// Simulates the model from rest with `maps` in the loop (one per block, in file order,
+    /// e.g. [`ModelFile::truth_maps`]) and, when `noise_std` > 0, white Gaussian noise e of
+    /// that standard deviation drawn from `seed` ([`structid_core::paper::gaussian_noise`]):
+    /// the record `structid simulate --noise-std --seed` writes. A nominal model's declared w
+    /// columns carry w = 0 ([`ModelFile::model_lft`]).
+    ///
+    /// # Errors
+    /// A wrong number of maps, an algebraic loop, an input with the wrong number of channels.
+    ///
+    /// ```
+    /// use structid_io::ModelFile;
+    /// use structid_lti::Signal;
+    /// let m = ModelFile::parse(r#"
+    ///     [lft]
+    ///     A = [[0.5]]
+    ///     Bw = [[1.0]]
+    ///     Cy = [[1.0]]
+    ///     Dye = [[1.0]]
+    ///     Dzu = [[1.0]]
+    ///     [signals]
+    ///     u = ["u"]
+    ///     y = ["y"]
+    ///     [[nonlinearity]]
+    ///     name = "N"
+    ///     inputs = [0]
+    ///     output = 0
+    ///     dispersion = { kind = "polynomial", degree = 1 }
+    ///     truth = "2*z0"
+    /// "#, None).unwrap();
+    /// let maps = m.truth_maps().unwrap().unwrap();
+    /// let maps: Vec<_> = maps.iter().map(|m| m.as_ref()).collect();
+    /// let u = Signal::from_fn(3, 1, |_, _| 1.0);
+    /// let sim = m.simulate(&maps, &u, 0.0, 0).unwrap();
+    /// assert_eq!(sim.y.channel(0), vec![0.0, 2.0, 3.0]);
+    /// ```
+    pub fn simulate(
+        &self,
+        maps: &[&dyn Interpolant],
+        u: &Signal,
+        noise_std: f64,
+        seed: u64,
+    ) -> Result<Simulation, IoError> {
+        if maps.len() != self.blocks.len() {
+            return Err(structid_core::Error::DimensionMismatch {
+                what: "number of maps for simulation".into(),
+                expected: self.blocks.len().to_string(),
+                found: maps.len().to_string(),
+            }
+            .into());
+        }
+        let lft = self.model_lft()?;
+        let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), lft.dims().e, noise_std, seed));
+        let bindings: Vec<MapBinding<'_>> = self
+            .blocks
+            .iter()
+            .zip(maps)
+            .map(|(b, m)| MapBinding {
+                inputs: &b.inputs,
+                output: b.output,
+                map: *m,
+            })
+            .collect();
+        Ok(lft.simulate(&bindings, u, e.as_ref(), None)?)
     }
 
     /// Gives every block the dispersion `spec` (as `structid identify --dispersion` does). When

@@ -3,8 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use structid_core::paper::gaussian_noise;
-use structid_core::{Data, Interpolant, MapBinding, Signal};
+use structid_core::{Data, Interpolant, Signal};
 use structid_io::sweep_file::{ExperimentData, SweepExperiment, SweepPath};
 use structid_io::{DataTable, ModelFile, SweepFile, TruthSpec};
 
@@ -111,19 +110,8 @@ fn simulate(
     noise_std: f64,
     seed: u64,
 ) -> Result<Data, CliError> {
-    let dims = mf.lft.dims();
-    let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), dims.e, noise_std, seed));
-    let bindings: Vec<MapBinding<'_>> = mf
-        .blocks
-        .iter()
-        .zip(maps)
-        .map(|(b, m)| MapBinding {
-            inputs: &b.inputs,
-            output: b.output,
-            map: m.as_ref(),
-        })
-        .collect();
-    let sim = mf.lft.simulate(&bindings, u, e.as_ref(), None)?;
+    let maps: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
+    let sim = mf.simulate(&maps, u, noise_std, seed)?;
     let data = Data::new(u.clone(), sim.y)?;
     Ok(match mf.signals.z {
         Some(_) => data.with_z(sim.z)?,

@@ -1,0 +1,390 @@
+//! The augmented model of a [`Finding`] as files: the model file (`augmented.toml`, with the
+//! table of an unnamed map next to it) and the stored estimate (`estimate.json`).
+//!
+//! The model file carries the map found as its block's `truth` and the dispersion discovery
+//! identified it with ([`quadratic_dispersion_spec`], or total variation), so that `structid
+//! validate --model` simulates what the report says and `structid identify` re-estimates the
+//! map as discovery did. The estimate carries the augmented LFT and map exactly as discovery
+//! simulated them, so that `structid validate --estimate` needs neither the model file nor
+//! the records.
+
+use std::path::Path;
+
+use structid_core::estimate::{DataFingerprint, Provenance};
+use structid_core::validation::ValidationInitialState;
+use structid_core::{Data, Estimate, Lft, LookupTable, Result};
+use structid_io::{
+    BlockSpec, DispersionSpec, IoError, LinearSpec, ModelFile, SignalNames, TruthSpec,
+};
+
+use crate::discover::{
+    AugmentedMap, Classification, Discovery, Finding, initial_state, quadratic_dispersion_spec,
+};
+use crate::hypotheses::{Location, Nominal};
+
+/// The name of the block added to the nominal model.
+pub const BLOCK: &str = "N";
+/// The file of an unnamed (or dynamic) map's table, next to the model file.
+pub const TABLE_FILE: &str = "N_table.csv";
+/// The file of the augmented model as a stored estimate ([`Finding::estimate`]).
+pub const ESTIMATE_FILE: &str = "estimate.json";
+
+/// The table of a map kept as a table: its file name and columns `z`, `value`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableFile {
+    /// File name, relative to the model file ([`TABLE_FILE`]).
+    pub name: String,
+    /// Breakpoints.
+    pub z: Vec<f64>,
+    /// Values.
+    pub w: Vec<f64>,
+}
+
+/// The augmented model file of a finding ([`Finding::augmented_file`]).
+#[derive(Clone, Debug)]
+pub struct AugmentedFile {
+    /// The model file (its table, if any, is [`AugmentedFile::table`]).
+    pub model: ModelFile,
+    /// Its form: `[linear] structure = "…"`, or `[lft]`.
+    pub form: String,
+    /// The table to write next to it when the map is a table.
+    pub table: Option<TableFile>,
+    /// The initial state under which it reproduces the report's validation RMS.
+    pub initial_state: ValidationInitialState,
+}
+
+impl AugmentedFile {
+    /// The file's text: `header` (comment lines) followed by the model.
+    pub fn text(&self, header: &str) -> String {
+        let mut text = String::from(header);
+        text.push_str(&self.model.to_toml_string());
+        text
+    }
+}
+
+/// The name of an initial-state treatment as `structid validate --initial-state` takes it.
+pub fn initial_state_name(s: ValidationInitialState) -> &'static str {
+    match s {
+        ValidationInitialState::Zero => "zero",
+        ValidationInitialState::Estimate => "estimate",
+    }
+}
+
+/// The augmented model file: the nominal file's signals, the block [`BLOCK`] at `location`
+/// with `map` as its truth (a table is given as `table_file`, to be written next to the model
+/// file) and `dispersion`, and the linear part as `[linear]` when the nominal file has one and
+/// the location is a structure `[linear]` knows, otherwise as the hypothesis' `lft`. Returns
+/// the file and its form.
+///
+/// # Errors
+/// A table that is not a valid lookup table, a linear part that has no LFT.
+pub fn model_file(
+    nominal_file: &ModelFile,
+    location: Location,
+    lft: &Lft,
+    map: &AugmentedMap,
+    dispersion: DispersionSpec,
+    table_file: &str,
+) -> std::result::Result<(ModelFile, String), IoError> {
+    // Output feedback gets a shared numerator, as `structid linear --structure
+    // output-feedback` writes it: y = B/F·(u − w), i.e. num = [B, −B].
+    let linear = match (&nominal_file.linear, location) {
+        (_, Location::Declared { .. }) | (None, _) => None,
+        (Some(spec), site) => Some(LinearSpec::from_linear(&spec.model, Some(site))),
+    };
+    let (lft, form) = match &linear {
+        Some(spec) => (
+            spec.lft()?,
+            format!("[linear] structure = \"{}\"", spec.structure_name()),
+        ),
+        None => (lft.clone(), "[lft]".to_string()),
+    };
+    let truth = match map {
+        AugmentedMap::Expression(e) => TruthSpec::Expression(e.clone()),
+        AugmentedMap::Table { z, w } => TruthSpec::Table {
+            file: table_file.to_string(),
+            table: LookupTable::one_d(z.clone(), w.clone())?,
+        },
+    };
+    let mf = ModelFile {
+        discover: None,
+        lft,
+        linear,
+        signals: SignalNames {
+            u: nominal_file.signals.u.clone(),
+            y: nominal_file.signals.y.clone(),
+            z: None,
+        },
+        blocks: vec![BlockSpec {
+            name: BLOCK.into(),
+            inputs: vec![0],
+            output: 0,
+            dispersion,
+            truth: Some(truth),
+        }],
+        path: None,
+    };
+    Ok((mf, form))
+}
+
+impl Finding {
+    /// The augmented model as a model file next to which its table ([`TABLE_FILE`]) is
+    /// written: see [`model_file`]. The block's dispersion is the one its map was estimated
+    /// with: [`quadratic_dispersion_spec`] at the hypothesis' σ with `trend_degree`
+    /// ([`crate::DiscoverSettings::trend_degree`]), or total variation.
+    ///
+    /// # Errors
+    /// As [`model_file`].
+    pub fn augmented_file(
+        &self,
+        nominal_file: &ModelFile,
+        trend_degree: usize,
+    ) -> std::result::Result<AugmentedFile, IoError> {
+        let sigma = self
+            .augmented
+            .model
+            .blocks()
+            .first()
+            .and_then(|b| b.dispersion.width());
+        let dispersion = match sigma {
+            Some(_) => quadratic_dispersion_spec(sigma, trend_degree),
+            // The map was estimated with total variation, which has no width.
+            None => DispersionSpec::TotalVariation {
+                neighbours: None,
+                interpolation: None,
+            },
+        };
+        let (model, form) = model_file(
+            nominal_file,
+            self.location,
+            self.augmented.model.lft(),
+            &self.augmented.map,
+            dispersion,
+            TABLE_FILE,
+        )?;
+        let table = match &self.augmented.map {
+            AugmentedMap::Table { z, w } => Some(TableFile {
+                name: TABLE_FILE.to_string(),
+                z: z.clone(),
+                w: w.clone(),
+            }),
+            AugmentedMap::Expression(_) => None,
+        };
+        Ok(AugmentedFile {
+            model,
+            form,
+            table,
+            initial_state: initial_state(self.location).1,
+        })
+    }
+
+    /// The augmented model as a stored estimate (workflow `discover`): the augmented LFT and
+    /// its map exactly as discovery simulated them, fingerprinted with the `estimation`
+    /// record. Its notes give the location, the effect and the initial state under which it
+    /// reproduces the report's validation RMS. No x̂₀ is stored (the map is not fitted jointly
+    /// with one).
+    ///
+    /// # Errors
+    /// A map without a stored form (never for an expression or a table).
+    pub fn estimate(&self, nominal: &Nominal, estimation: &Data) -> Result<Estimate> {
+        let map = self.augmented.map.interpolant()?;
+        let kind = match &self.classification {
+            Classification::Named(_) => "named",
+            Classification::Unnamed => "unnamed",
+            Classification::Dynamic => "dynamic",
+        };
+        let notes = vec![
+            ("location".to_string(), nominal.key(self.location)),
+            (
+                "effect".to_string(),
+                format!("{} ({kind})", self.classification.describe()),
+            ),
+            (
+                "initial_state".to_string(),
+                initial_state_name(initial_state(self.location).1).to_string(),
+            ),
+        ];
+        Estimate::from_maps(
+            &self.augmented.model,
+            &[map.as_ref()],
+            None,
+            Provenance {
+                workflow: "discover".into(),
+                fitted_on: Some(DataFingerprint::of(estimation)),
+                notes,
+                ..Provenance::default()
+            },
+        )
+    }
+}
+
+/// Comment lines at the top of the augmented model file of `d`'s finding `f`: where it comes
+/// from (`model_path`, the nominal model file) and where its report is (`report_path`).
+pub fn header(
+    model_path: &Path,
+    report_path: &Path,
+    nominal: &Nominal,
+    d: &Discovery,
+    f: &Finding,
+) -> String {
+    let what = match &f.classification {
+        Classification::Named(fit) => format!("{} (named)", fit.effect.name()),
+        other => other.describe(),
+    };
+    format!(
+        "# Written by `structid discover`: the nominal model `{}` with the block `{BLOCK}` {}.\n\
+         # Missing effect: {what}; validation RMS {:.6e} (nominal {:.6e}).\n\
+         # `{BLOCK}`'s truth is the map found; its dispersion is the one discovery identified it with.\n\
+         # See {} for the report and how to reproduce it.\n",
+        model_path.display(),
+        nominal.describe(f.location),
+        f.augmented.validation_gap.rms,
+        d.validation_gap.rms,
+        report_path.display()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use structid_core::validation::{ValidationSettings, validate};
+    use structid_core::{Interpolant, KernelDispersion, Signal};
+    use structid_io::DataTable;
+    use structid_linear::PolynomialModel;
+
+    fn g() -> PolynomialModel {
+        PolynomialModel {
+            den: vec![1.0, -1.5, 0.7],
+            num: vec![vec![0.0, 0.1, 0.1]],
+            sample_time: Some(0.05),
+        }
+    }
+
+    fn nominal_file() -> ModelFile {
+        ModelFile::parse(
+            "[linear]\nstructure = \"lti\"\nsample_time = 0.05\nden = [1.0, -1.5, 0.7]\n\
+             num = [[0.0, 0.1, 0.1]]\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n",
+            None,
+        )
+        .unwrap()
+    }
+
+    /// Reads `path` back and simulates it with its truth map on `val` (columns by the file's
+    /// own `[signals]`) as `structid validate --model path` does: the simulation RMS.
+    fn simulate_file(
+        path: &Path,
+        val: &DataTable,
+        initial_state: ValidationInitialState,
+        max_lag: usize,
+    ) -> f64 {
+        let mf = ModelFile::from_path(path).unwrap();
+        let maps = mf.truth_maps().unwrap().unwrap();
+        let model = mf.to_model(None, None).unwrap();
+        let data = mf.select_data(val).unwrap();
+        let refs: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
+        let settings = ValidationSettings::builder()
+            .initial_state(initial_state)
+            .max_lag(max_lag)
+            .build()
+            .unwrap();
+        validate(&model, &refs, &data, &settings).unwrap().rms[0]
+    }
+
+    /// Every location's augmented file, read back, simulates like the hypothesis' LFT it was
+    /// written from.
+    #[test]
+    fn augmented_files_reproduce_the_hypothesis_at_every_location() {
+        let nominal_mf = nominal_file();
+        let nominal = Nominal::from_polynomial(&g()).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let n = 600;
+        let mut s = 0.0;
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                s = 0.8 * s + 0.5 * ((k as f64 * 0.37).sin() + (k as f64 * 0.11).cos());
+                s
+            })
+            .collect();
+        let truth = |z: f64| 0.3 * z + 0.05 * z * z * z;
+        for (location, map) in [
+            (
+                Location::Input,
+                AugmentedMap::Expression("min(max(1.5*z0, -0.8), 0.8)".into()),
+            ),
+            (
+                Location::Output,
+                AugmentedMap::Expression("z0 + 0.2*z0^3".into()),
+            ),
+            (
+                Location::OutputFeedback,
+                AugmentedMap::Table {
+                    z: (0..41).map(|i| -4.0 + 0.2 * i as f64).collect(),
+                    w: (0..41).map(|i| truth(-4.0 + 0.2 * i as f64)).collect(),
+                },
+            ),
+            (
+                Location::RateFeedback,
+                AugmentedMap::Expression("0.01*z0".into()),
+            ),
+        ] {
+            let h = nominal
+                .hypothesis(
+                    location,
+                    std::sync::Arc::new(KernelDispersion::gaussian(0.3).unwrap()),
+                )
+                .unwrap();
+            let interp = map.interpolant().unwrap();
+            let us = Signal::from_fn(n, 1, |k, _| u[k]);
+            let sim = h.simulate(interp.as_ref(), &us, None).unwrap();
+            let y: Vec<f64> = (0..n)
+                .map(|k| sim.y.get(k, 0) + 0.01 * ((k * 7919 % 101) as f64 / 50.0 - 1.0))
+                .collect();
+            let table = DataTable::new(vec!["u".into(), "y".into()], vec![u.clone(), y]).unwrap();
+            let data = nominal_mf.select_data(&table).unwrap();
+            let data_h = h.data(&data).unwrap();
+            let init = initial_state(location).1;
+            let expected = validate(
+                &h.model,
+                &[interp.as_ref()],
+                &data_h,
+                &ValidationSettings::builder()
+                    .initial_state(init)
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap()
+            .rms[0];
+            let (mf, form) = model_file(
+                &nominal_mf,
+                location,
+                h.model.lft(),
+                &map,
+                quadratic_dispersion_spec(Some(0.3), 3),
+                TABLE_FILE,
+            )
+            .unwrap();
+            let expect_linear = !matches!(location, Location::Declared { .. });
+            assert_eq!(form.starts_with("[linear]"), expect_linear, "{form}");
+            let sub = dir.path().join(nominal.key(location));
+            std::fs::create_dir_all(&sub).unwrap();
+            if let AugmentedMap::Table { z, w } = &map {
+                structid_io::write_csv(
+                    &sub.join(TABLE_FILE),
+                    &["z", "value"],
+                    &[z.clone(), w.clone()],
+                )
+                .unwrap();
+            }
+            let path = sub.join("augmented.toml");
+            std::fs::write(&path, mf.to_toml_string()).unwrap();
+            let rms = simulate_file(&path, &table, init, 25);
+            assert!(
+                (rms - expected).abs() <= 1e-9 * expected,
+                "{location:?}: {rms} vs {expected}"
+            );
+            let back = ModelFile::from_path(&path).unwrap();
+            assert_eq!(back.blocks[0].dispersion.sigma(), Some(0.3));
+            assert_eq!(back.blocks[0].dispersion.kind(), "fourier");
+        }
+    }
+}
