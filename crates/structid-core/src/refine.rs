@@ -198,13 +198,13 @@ fn one_channel(data: &Data, what: &str) -> Result<()> {
 /// use std::sync::Arc;
 /// use structid_core::{KernelDispersion, refine::LinearStructure};
 /// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -1.5, 0.7], num: vec![vec![0.0, 1.0, 0.5]], sample_time: None };
+/// let g = PolynomialModel { num: vec![vec![0.0, 1.0, 0.5]], den: vec![1.0, -1.5, 0.7], sample_time: None };
 /// let s = LinearStructure::output_feedback("stiffness");
 /// let g = s.initial_from_bla(&g).unwrap();
 /// let model = s.model(&g, Arc::new(KernelDispersion::gaussian(0.1).unwrap())).unwrap();
 /// assert_eq!(model.blocks()[0].name, "stiffness");
 ///
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+/// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
 /// let model = LinearStructure::input("actuator")
 ///     .model(&g, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))
 ///     .unwrap();
@@ -348,8 +348,8 @@ impl LinearStructure {
                 }
                 let v = Signal::from_fn(len, 1, |k, _| u.get(k, 0) - w_hat.get(k, 0));
                 let siso = PolynomialModel {
-                    den: g.den.clone(),
                     num: vec![g.num[0].clone()],
+                    den: g.den.clone(),
                     sample_time: g.sample_time,
                 };
                 let mut fit =
