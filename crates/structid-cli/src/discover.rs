@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use clap::Args;
 use serde_json::{Value, json};
-use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
-use structid_core::{Data, Interpolant, Lft, LookupTable};
+use structid_core::validation::{ValidationSettings, validate};
+use structid_core::{Data, InitialState, Interpolant, Lft, LookupTable};
 use structid_discover::discover::{
     AugmentedMap, Classification, DiscoverSettings, Discovery, Finding, HypothesisResult,
     candidate_signals, discover,
@@ -185,7 +185,7 @@ struct Written {
     /// Its relative difference from the report's.
     difference: f64,
     /// Initial state of the reproduction.
-    initial_state: ValidationInitialState,
+    initial_state: InitialState,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -356,14 +356,14 @@ fn read_record(mf: &ModelFile, path: &Path) -> Result<Record, CliError> {
 
 /// How the initial state is treated at `location` (as `structid_discover` does): estimated,
 /// except for the sensor map and the rate, whose z would depend on an unknown x₀.
-fn initial_state(location: Location) -> ValidationInitialState {
+fn initial_state(location: Location) -> InitialState {
     structid_discover::discover::initial_state(location).1
 }
 
-fn initial_state_name(s: ValidationInitialState) -> &'static str {
+fn initial_state_name(s: InitialState) -> &'static str {
     match s {
-        ValidationInitialState::Zero => "zero",
-        ValidationInitialState::Estimate => "estimate",
+        InitialState::Zero => "zero",
+        InitialState::Estimate => "estimate",
     }
 }
 
@@ -445,7 +445,7 @@ fn augmented_file(
 fn simulate_file(
     path: &Path,
     val: &DataTable,
-    initial_state: ValidationInitialState,
+    initial_state: InitialState,
     max_lag: usize,
 ) -> Result<f64, CliError> {
     let back = |e: String| {

@@ -7,10 +7,8 @@ use std::time::Instant;
 use clap::Parser;
 use serde_json::{Value, json};
 use structid_core::residual_tests::CorrelationTest;
-use structid_core::validation::{
-    ValidationInitialState, ValidationReport, ValidationSettings, validate,
-};
-use structid_core::{Identification, Interpolant, identify};
+use structid_core::validation::{ValidationReport, ValidationSettings, validate};
+use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, render_grid_svg};
 
@@ -550,8 +548,8 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         })
         .collect::<Result<_, _>>()?;
     let initial_state = match a.initial_state {
-        InitialStateArg::Zero => ValidationInitialState::Zero,
-        InitialStateArg::Estimate => ValidationInitialState::Estimate,
+        InitialStateArg::Zero => InitialState::Zero,
+        InitialStateArg::Estimate => InitialState::Estimate,
     };
     let settings = ValidationSettings::builder()
         .initial_state(initial_state)

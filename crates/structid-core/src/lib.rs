@@ -85,6 +85,7 @@ pub mod estimate;
 pub mod fourier;
 pub mod hyperparameters;
 pub mod identify;
+pub mod initial_state;
 pub mod interpolant;
 pub mod kernel;
 pub mod lft;
@@ -134,4 +135,6 @@ pub use structid_lti::Signal;
 pub use structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use sum::{StackedFeatures, SumDispersion};
 pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
-pub use validation::{ValidationInitialState, ValidationReport, ValidationSettings, validate};
+#[allow(deprecated)]
+pub use validation::ValidationInitialState;
+pub use validation::{ValidationReport, ValidationSettings, validate};
