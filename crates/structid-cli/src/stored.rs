@@ -8,8 +8,8 @@ use std::time::Instant;
 use serde_json::json;
 use structid_core::estimate::PredictionSettings;
 use structid_core::paper::gaussian_noise;
-use structid_core::validation::{ValidationInitialState, ValidationSettings};
-use structid_core::{Data, Estimate};
+use structid_core::validation::ValidationSettings;
+use structid_core::{Data, Estimate, InitialState};
 use structid_io::{DataTable, OutputGuard, read_estimate};
 
 use crate::error::CliError;
@@ -44,10 +44,10 @@ fn record(path: &Path, u: &[String], y: &[String]) -> Result<Data, CliError> {
     Ok(Data::new(us, ys)?)
 }
 
-fn initial(a: InitialStateArg) -> ValidationInitialState {
+fn initial(a: InitialStateArg) -> InitialState {
     match a {
-        InitialStateArg::Zero => ValidationInitialState::Zero,
-        InitialStateArg::Estimate => ValidationInitialState::Estimate,
+        InitialStateArg::Zero => InitialState::Zero,
+        InitialStateArg::Estimate => InitialState::Estimate,
     }
 }
 

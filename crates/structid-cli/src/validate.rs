@@ -6,10 +6,8 @@ use std::time::Instant;
 
 use clap::Parser;
 use serde_json::{Value, json};
-use structid_core::validation::{
-    ValidationInitialState, ValidationReport, ValidationSettings, validate,
-};
-use structid_core::{Identification, Interpolant, identify};
+use structid_core::validation::{ValidationReport, ValidationSettings, validate};
+use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
@@ -405,8 +403,8 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         })
         .collect::<Result<_, _>>()?;
     let initial_state = match a.initial_state {
-        InitialStateArg::Zero => ValidationInitialState::Zero,
-        InitialStateArg::Estimate => ValidationInitialState::Estimate,
+        InitialStateArg::Zero => InitialState::Zero,
+        InitialStateArg::Estimate => InitialState::Estimate,
     };
     let settings = ValidationSettings::builder()
         .initial_state(initial_state)

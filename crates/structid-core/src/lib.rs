@@ -104,6 +104,7 @@ pub mod dispersion;
 pub mod error;
 pub mod estimate;
 pub mod identify;
+pub mod initial_state;
 pub mod model;
 pub mod paper;
 pub mod refine;
@@ -147,4 +148,6 @@ pub use structid_lti::Signal;
 pub use structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use sum::{StackedFeatures, SumDispersion};
 pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
-pub use validation::{ValidationInitialState, ValidationReport, ValidationSettings, validate};
+#[allow(deprecated)]
+pub use validation::ValidationInitialState;
+pub use validation::{ValidationReport, ValidationSettings, validate};

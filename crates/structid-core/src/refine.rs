@@ -38,7 +38,6 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use nalgebra::DMatrix;
 use structid_linear::{OeFit, OeSettings, PolynomialModel, output_error};
 use structid_lti::Signal;
 
@@ -46,6 +45,7 @@ use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
 use crate::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use crate::identify::{Identification, IdentifySettings, InitialState, identify};
+use crate::initial_state::estimate_initial_state;
 use crate::interpolant::Interpolant;
 use crate::lft::Lft;
 use crate::model::{Data, Model, NonlinearBlock};
@@ -143,27 +143,14 @@ fn best_impulse_numerator(
     let sim = g.simulate(inputs).map_err(linear_error)?;
     // The impulse response h of 1/F; column j of the regressors is h delayed by j.
     let a0 = g.den[0];
+    let den: Vec<f64> = g.den.iter().map(|a| a / a0).collect();
     let mut h = vec![0.0; len];
-    for k in 0..len {
-        let mut v = if k == 0 { 1.0 / a0 } else { 0.0 };
-        for (j, a) in g.den.iter().enumerate().skip(1) {
-            if j <= k {
-                v -= a / a0 * h[k - j];
-            }
-        }
-        h[k] = v;
-    }
-    let phi = DMatrix::from_fn(len, order, |k, j| if k >= j { h[k - j] } else { 0.0 });
-    let r = nalgebra::DVector::from_fn(len, |k, _| y.get(k, 0) - sim[k]);
-    if phi.iter().chain(r.iter()).any(|v| !v.is_finite()) {
-        return Ok(vec![1e-12; order]);
-    }
-    let svd = phi.svd(true, true);
-    let eps = 1e-12 * svd.singular_values.max();
-    let c = svd
-        .solve(&r, eps)
-        .map(|c| c.iter().copied().collect())
-        .unwrap_or_else(|_| vec![0.0; order]);
+    structid_lti::filter_row(&[[1.0 / a0]], &den, &[[1.0]], &mut h);
+    let phi = faer::Mat::from_fn(len, order, |k, j| if k >= j { h[k - j] } else { 0.0 });
+    let r: Vec<f64> = (0..len).map(|k| y.get(k, 0) - sim[k]).collect();
+    // The plain least-squares x₀ of validation: a non-finite or failed problem starts the
+    // impulse numerator from the tiny default instead of failing the fit.
+    let c = estimate_initial_state(phi.as_ref(), &r, None).unwrap_or_else(|_| vec![0.0; order]);
     Ok(tiny(c))
 }
 
@@ -198,13 +185,13 @@ fn one_channel(data: &Data, what: &str) -> Result<()> {
 /// use std::sync::Arc;
 /// use structid_core::{KernelDispersion, refine::LinearStructure};
 /// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -1.5, 0.7], num: vec![vec![0.0, 1.0, 0.5]], sample_time: None };
+/// let g = PolynomialModel { num: vec![vec![0.0, 1.0, 0.5]], den: vec![1.0, -1.5, 0.7], sample_time: None };
 /// let s = LinearStructure::output_feedback("stiffness");
 /// let g = s.initial_from_bla(&g).unwrap();
 /// let model = s.model(&g, Arc::new(KernelDispersion::gaussian(0.1).unwrap())).unwrap();
 /// assert_eq!(model.blocks()[0].name, "stiffness");
 ///
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+/// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
 /// let model = LinearStructure::input("actuator")
 ///     .model(&g, Arc::new(KernelDispersion::gaussian(0.3).unwrap()))
 ///     .unwrap();
@@ -348,8 +335,8 @@ impl LinearStructure {
                 }
                 let v = Signal::from_fn(len, 1, |k, _| u.get(k, 0) - w_hat.get(k, 0));
                 let siso = PolynomialModel {
-                    den: g.den.clone(),
                     num: vec![g.num[0].clone()],
+                    den: g.den.clone(),
                     sample_time: g.sample_time,
                 };
                 let mut fit =

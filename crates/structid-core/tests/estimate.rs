@@ -6,7 +6,7 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 use structid_core::estimate::{Estimate, PredictionSettings, StoredMap};
-use structid_core::validation::{ValidationInitialState, ValidationSettings};
+use structid_core::validation::ValidationSettings;
 use structid_core::*;
 
 /// x⁺ = 0.6x + 0.3·x_e + w, y = x + 0.5·x_e + e with a coloured noise state x_e⁺ = 0.7x_e + e,
@@ -238,12 +238,7 @@ fn malformed_stored_estimates_are_errors_not_panics() {
 }
 
 /// ŷ(1) from `predict` against y − ε from `validate`, and ŷ(k > L) against the simulation.
-fn predictor_agrees(
-    model: &Model,
-    maps: &[&dyn Interpolant],
-    data: &Data,
-    initial: ValidationInitialState,
-) {
+fn predictor_agrees(model: &Model, maps: &[&dyn Interpolant], data: &Data, initial: InitialState) {
     let vs = ValidationSettings::builder()
         .initial_state(initial)
         .build()
@@ -310,10 +305,7 @@ fn predictor_agrees(
 #[test]
 fn one_step_prediction_equals_validate_and_long_horizons_equal_simulation() {
     let sat = |z: &[f64]| z[0].clamp(-0.7, 0.7);
-    for initial in [
-        ValidationInitialState::Zero,
-        ValidationInitialState::Estimate,
-    ] {
+    for initial in [InitialState::Zero, InitialState::Estimate] {
         let (model, data) = record(
             &hammerstein(1),
             vec![block(1, Arc::new(KernelDispersion::gaussian(0.5).unwrap()))],
@@ -354,7 +346,7 @@ proptest! {
         }).unwrap();
         let map = move |z: &[f64]| gain * z[0].tanh();
         let (model, data) = record(&lft, vec![block(1, Arc::new(KernelDispersion::gaussian(0.5).unwrap()))], &map, 120, seed);
-        predictor_agrees(&model, &[&map], &data, ValidationInitialState::Zero);
+        predictor_agrees(&model, &[&map], &data, InitialState::Zero);
     }
 }
 

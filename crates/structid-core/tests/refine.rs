@@ -19,8 +19,8 @@ use structid_linear::{OeSettings, PolynomialModel};
 /// G(q) = (b₁q⁻¹ + b₂q⁻²)/(1 + a₁q⁻¹ + a₂q⁻²) with poles r·e^{±jθ}.
 fn second_order(r: f64, theta: f64, b: [f64; 2]) -> PolynomialModel {
     PolynomialModel {
-        den: vec![1.0, -2.0 * r * theta.cos(), r * r],
         num: vec![vec![0.0, b[0], b[1]]],
+        den: vec![1.0, -2.0 * r * theta.cos(), r * r],
         sample_time: None,
     }
 }
@@ -273,15 +273,15 @@ fn bad_settings_and_structures_are_errors() {
     let structure = LinearStructure::output_feedback("N");
     // A feedback path without delay is an algebraic loop.
     let direct = PolynomialModel {
-        den: vec![1.0, -0.5],
         num: vec![vec![1.0, 0.2], vec![0.5, 0.0]],
+        den: vec![1.0, -0.5],
         sample_time: None,
     };
     let e = structure.lft(&direct).unwrap_err().to_string();
     assert!(e.contains("algebraic loop"), "{e}");
     let bla = PolynomialModel {
-        den: vec![1.0, -0.5],
         num: vec![vec![1.0, 0.2]],
+        den: vec![1.0, -0.5],
         sample_time: None,
     };
     assert!(structure.initial_from_bla(&bla).is_err());
@@ -330,8 +330,8 @@ fn best_initial_state_cost(g: &PolynomialModel, u: &Signal, y: &Signal) -> f64 {
             let mut b = vec![0.0; j];
             b.push(1.0);
             let m = PolynomialModel {
-                den: g.den.clone(),
                 num: vec![b],
+                den: g.den.clone(),
                 sample_time: None,
             };
             m.simulate(&delta).unwrap()
@@ -351,8 +351,8 @@ fn free_initial_state_fit_never_ends_above_the_start_with_its_best_state() {
     let len = 300;
     let u = input(len, 0.3, 5);
     let free = PolynomialModel {
-        den: g.den.clone(),
         num: vec![vec![5.0, -3.0]],
+        den: g.den.clone(),
         sample_time: None,
     };
     let delta = Signal::from_fn(len, 1, |k, _| if k == 0 { 1.0 } else { 0.0 });

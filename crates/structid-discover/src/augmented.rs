@@ -10,8 +10,8 @@
 
 use std::path::Path;
 
+use structid_core::InitialState;
 use structid_core::estimate::{DataFingerprint, Provenance};
-use structid_core::validation::ValidationInitialState;
 use structid_core::{Data, Estimate, Lft, LookupTable, Result};
 use structid_io::{
     BlockSpec, DispersionSpec, IoError, LinearSpec, ModelFile, SignalNames, TruthSpec,
@@ -50,7 +50,7 @@ pub struct AugmentedFile {
     /// The table to write next to it when the map is a table.
     pub table: Option<TableFile>,
     /// The initial state under which it reproduces the report's validation RMS.
-    pub initial_state: ValidationInitialState,
+    pub initial_state: InitialState,
 }
 
 impl AugmentedFile {
@@ -63,10 +63,10 @@ impl AugmentedFile {
 }
 
 /// The name of an initial-state treatment as `structid validate --initial-state` takes it.
-pub fn initial_state_name(s: ValidationInitialState) -> &'static str {
+pub fn initial_state_name(s: InitialState) -> &'static str {
     match s {
-        ValidationInitialState::Zero => "zero",
-        ValidationInitialState::Estimate => "estimate",
+        InitialState::Zero => "zero",
+        InitialState::Estimate => "estimate",
     }
 }
 
@@ -274,7 +274,7 @@ mod tests {
     fn simulate_file(
         path: &Path,
         val: &DataTable,
-        initial_state: ValidationInitialState,
+        initial_state: InitialState,
         max_lag: usize,
     ) -> f64 {
         let mf = ModelFile::from_path(path).unwrap();

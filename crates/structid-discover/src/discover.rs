@@ -72,7 +72,7 @@ use nalgebra::{DMatrix, DVector};
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
-use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
+use structid_core::validation::{ValidationSettings, validate};
 use structid_core::{
     Data, Dispersion, Error, ExprMap, IdentifySettings, InitialState, Interpolant, LookupTable,
     Model, PolynomialDispersion, Result, Signal, TotalVariation,
@@ -671,18 +671,16 @@ fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
 /// is taken to start at rest there.
 ///
 /// ```
-/// use structid_core::ValidationInitialState;
+/// use structid_core::InitialState;
 /// use structid_discover::discover::initial_state;
 /// use structid_discover::hypotheses::Location;
-/// assert_eq!(initial_state(Location::Input).1, ValidationInitialState::Estimate);
-/// assert_eq!(initial_state(Location::Output).1, ValidationInitialState::Zero);
+/// assert_eq!(initial_state(Location::Input).1, InitialState::Estimate);
+/// assert_eq!(initial_state(Location::Output).1, InitialState::Zero);
 /// ```
-pub fn initial_state(location: Location) -> (InitialState, ValidationInitialState) {
+pub fn initial_state(location: Location) -> (InitialState, InitialState) {
     match location {
-        Location::Output | Location::RateFeedback => {
-            (InitialState::Zero, ValidationInitialState::Zero)
-        }
-        _ => (InitialState::Estimate, ValidationInitialState::Estimate),
+        Location::Output | Location::RateFeedback => (InitialState::Zero, InitialState::Zero),
+        _ => (InitialState::Estimate, InitialState::Estimate),
     }
 }
 

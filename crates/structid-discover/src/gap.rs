@@ -3,7 +3,7 @@
 //!
 //! [`gap`] simulates the model (with its maps, if any) on the record from u alone with the
 //! initial state estimated (`structid_core::validate` with
-//! [`ValidationInitialState::Estimate`]) and examines the simulation residual y − ŷ and the
+//! [`InitialState::Estimate`]) and examines the simulation residual y − ŷ and the
 //! one-step prediction errors ε of the model's noise path (for an output-error model, whose
 //! noise is white at the output, the two are the same signal; a model with a noise model is
 //! judged by its innovations, so that coloured noise it explains is not taken for a missing
@@ -31,8 +31,8 @@
 use std::ops::Range;
 
 use structid_core::residual_tests::{autocorrelation, cross_correlation};
-use structid_core::validation::{ValidationInitialState, ValidationSettings, validate};
-use structid_core::{Data, Interpolant, Model, Result};
+use structid_core::validation::{ValidationSettings, validate};
+use structid_core::{Data, InitialState, Interpolant, Model, Result};
 
 use crate::localise::{Region, exceedance_windows, operating_regions};
 
@@ -51,7 +51,7 @@ pub struct GapSettings {
     pub min_region_share: f64,
     /// The initial state of the simulation (default: estimated; a record that starts at rest
     /// can use zero, and a model whose x₀ reaches z differently from y must).
-    pub initial_state: ValidationInitialState,
+    pub initial_state: InitialState,
 }
 
 impl Default for GapSettings {
@@ -62,7 +62,7 @@ impl Default for GapSettings {
             band: 3.0,
             noise_ratio: 1.5,
             min_region_share: 0.05,
-            initial_state: ValidationInitialState::Estimate,
+            initial_state: InitialState::Estimate,
         }
     }
 }

@@ -1110,7 +1110,7 @@ impl LinearSpec {
     /// use structid_core::Site;
     /// use structid_io::LinearSpec;
     /// use structid_linear::PolynomialModel;
-    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+    /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
     /// let spec = LinearSpec::from_linear(&g, Some(Site::OutputFeedback));
     /// assert_eq!(spec.model.num, vec![vec![0.0, 1.0], vec![-0.0, -1.0]]);
     /// assert_eq!(spec.structure_name(), "output-feedback");
@@ -1356,8 +1356,8 @@ fn parse_linear(
     let spec = LinearSpec {
         structure,
         model: PolynomialModel {
-            den,
             num,
+            den,
             sample_time,
         },
         separate_numerator: separate,

@@ -184,7 +184,7 @@ pub struct ArxFit {
 /// ```
 /// use structid_linear::{arx, ArxSettings, Orders, PolynomialModel};
 /// use structid_lti::Signal;
-/// let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
 /// let u = Signal::from_fn(200, 1, |k, _| ((k * k) as f64 * 0.37).sin());
 /// let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
 /// let fit = arx(&u, &y, &Orders::siso(2, 2, 1), &ArxSettings::default()).unwrap();
@@ -375,7 +375,7 @@ mod tests {
     #[test]
     fn recovers_second_order_exactly() {
         let truth =
-            PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], Some(0.1))
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], Some(0.1))
                 .unwrap();
         let u = white(1, 500, 1.0, 1);
         let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
@@ -393,7 +393,7 @@ mod tests {
         for nk in [2usize, 3] {
             let mut num = vec![0.0; nk];
             num.extend([1.0, 0.5]);
-            let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![num], None).unwrap();
+            let truth = PolynomialModel::new(vec![num], vec![1.0, -1.5, 0.7], None).unwrap();
             let u = white(2 + nk as u64, 400, 1.0, 1);
             let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
             let fit = arx(&u, &y, &Orders::siso(2, 2, nk), &ArxSettings::default()).unwrap();
@@ -405,11 +405,11 @@ mod tests {
     #[test]
     fn equation_error_noise_within_a_few_std() {
         let truth =
-            PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
         let u = white(11, 3000, 1.0, 1);
         let e = white(12, 3000, 0.3, 1);
         // A y = B u + e  <=>  y = B/A u + 1/A e
-        let noise = PolynomialModel::new(truth.den.clone(), vec![vec![1.0]], None).unwrap();
+        let noise = PolynomialModel::new(vec![vec![1.0]], truth.den.clone(), None).unwrap();
         let y0 = truth.simulate(&u).unwrap();
         let v = noise.simulate(&e).unwrap();
         let y = Signal::new(1, y0.iter().zip(&v).map(|(a, b)| a + b).collect()).unwrap();
@@ -433,8 +433,8 @@ mod tests {
     #[test]
     fn miso_and_ridge() {
         let truth = PolynomialModel::new(
-            vec![1.0, -0.6],
             vec![vec![0.5, 0.2], vec![0.0, 0.0, -1.0]],
+            vec![1.0, -0.6],
             None,
         )
         .unwrap();

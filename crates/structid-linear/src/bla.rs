@@ -318,7 +318,7 @@ mod tests {
     }
 
     fn system() -> PolynomialModel {
-        PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap()
+        PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap()
     }
 
     #[test]

@@ -71,7 +71,7 @@
 //! ```
 //! use structid_linear::{oe, OeSettings, Orders, PolynomialModel};
 //! use structid_lti::{LinearSystem, Signal};
-//! let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None)?;
+//! let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None)?;
 //! let u = Signal::from_fn(500, 1, |k, _| ((k * k) as f64 * 0.37).sin());
 //! let y = Signal::new(1, truth.simulate(&u)?)?;
 //! let settings = OeSettings::builder().sample_time(0.01).build()?;

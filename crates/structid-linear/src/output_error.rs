@@ -1,13 +1,13 @@
 //! Output-error (simulation-error) refinement by Levenberg–Marquardt.
 
 use nalgebra::{DMatrix, DVector};
-use structid_lti::Signal;
+use structid_lti::{Signal, filter_row};
 
 use crate::arx::{ArxSettings, fit_arx, prepare_data};
 use crate::error::{LinearError, check_sample_time};
 use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
 use crate::orders::Orders;
-use crate::polynomial::{PolynomialModel, all_pole, root_radius, schur_stable, simulate_monic};
+use crate::polynomial::{PolynomialModel, root_radius, schur_stable};
 
 /// Settings of [`output_error`] and [`oe`] (build with [`OeSettings::builder`];
 /// [`Default`] is valid).
@@ -281,10 +281,10 @@ pub struct OeFit {
 /// ```
 /// use structid_linear::{output_error, OeSettings, PolynomialModel};
 /// use structid_lti::Signal;
-/// let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
 /// let u = Signal::from_fn(300, 1, |k, _| ((k * k) as f64 * 0.37).sin());
 /// let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
-/// let start = PolynomialModel::new(vec![1.0, -1.4, 0.6], vec![vec![0.0, 0.9, 0.6]], None).unwrap();
+/// let start = PolynomialModel::new(vec![vec![0.0, 0.9, 0.6]], vec![1.0, -1.4, 0.6], None).unwrap();
 /// let fit = output_error(&u, &y, &start, &OeSettings::default()).unwrap();
 /// assert!(fit.converged && fit.cost < 1e-20 && fit.cost < fit.initial_cost);
 /// assert!((fit.model.den[2] - 0.7).abs() < 1e-8);
@@ -377,7 +377,7 @@ fn refine(
 /// ```
 /// use structid_linear::{oe, OeSettings, Orders, PolynomialModel};
 /// use structid_lti::Signal;
-/// let truth = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
 /// let u = Signal::from_fn(300, 1, |k, _| ((k * k) as f64 * 0.37).sin());
 /// let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
 /// let fit = oe(&u, &y, &Orders::siso(2, 2, 1), &OeSettings::default()).unwrap();
@@ -504,7 +504,9 @@ impl Problem<'_> {
 
     fn simulate(&self, theta: &[f64]) -> Vec<f64> {
         let (den, num) = self.split(theta);
-        simulate_monic(&den, &num, self.u, self.y.len())
+        let mut y = vec![0.0; self.y.len()];
+        filter_row(&num, &den, self.u, &mut y);
+        y
     }
 
     /// Makes `last` the simulation at θ (simulating only when it is not).
@@ -529,7 +531,7 @@ impl Problem<'_> {
                 continue;
             }
             let mut w = vec![0.0; len];
-            all_pole(&den, &self.u[i], &mut w);
+            filter_row(&[[1.0]], &den, &[&self.u[i]], &mut w);
             filtered.push(w);
             for j in 0..nb {
                 cols.push((filtered.len() - 1, nk + j, 1.0));
@@ -537,7 +539,7 @@ impl Problem<'_> {
         }
         if self.orders.na > 0 {
             let mut v = vec![0.0; len];
-            all_pole(&den, yhat, &mut v);
+            filter_row(&[[1.0]], &den, &[yhat], &mut v);
             filtered.push(v);
             for j in 1..=self.orders.na {
                 cols.push((filtered.len() - 1, j, -1.0));
@@ -587,7 +589,7 @@ mod tests {
     use crate::testutil::*;
 
     fn truth() -> PolynomialModel {
-        PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], Some(0.1)).unwrap()
+        PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], Some(0.1)).unwrap()
     }
 
     #[test]
@@ -646,16 +648,16 @@ mod tests {
     #[test]
     fn far_start_transient_and_miso() {
         let g = PolynomialModel::new(
-            vec![1.0, -1.2, 0.5],
             vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+            vec![1.0, -1.2, 0.5],
             None,
         )
         .unwrap();
         let u = white(31, 800, 1.0, 2);
         let y = Signal::new(1, g.simulate(&u).unwrap()).unwrap();
         let start = PolynomialModel::new(
-            vec![1.0, 0.3, 0.0],
             vec![vec![1.0, 0.0], vec![0.0, 0.0, 1.0]],
+            vec![1.0, 0.3, 0.0],
             None,
         )
         .unwrap();
@@ -680,8 +682,8 @@ mod tests {
     #[test]
     fn accumulated_normal_equations_equal_those_of_the_jacobian() {
         let g = PolynomialModel::new(
-            vec![1.0, -1.2, 0.5],
             vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+            vec![1.0, -1.2, 0.5],
             None,
         )
         .unwrap();
@@ -722,7 +724,7 @@ mod tests {
         let u = white(41, 100, 1.0, 1);
         let y = Signal::new(1, g.simulate(&u).unwrap()).unwrap();
         let unstable =
-            PolynomialModel::new(vec![1.0, -2.0, 1.05], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -2.0, 1.05], None).unwrap();
         let e = output_error(&u, &y, &unstable, &OeSettings::default()).unwrap_err();
         match &e {
             LinearError::UnstableInitialModel { spectral_radius } => {

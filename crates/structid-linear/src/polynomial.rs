@@ -2,7 +2,7 @@
 //! state-space realisation.
 
 use nalgebra::DMatrix;
-use structid_lti::{Signal, StateSpace};
+use structid_lti::{Signal, StateSpace, filter_row};
 
 use crate::error::{LinearError, check_finite, check_sample_time};
 use crate::orders::Orders;
@@ -22,37 +22,39 @@ use crate::orders::Orders;
 /// use structid_linear::PolynomialModel;
 /// use structid_lti::Signal;
 /// // y_k = 0.5 y_{k-1} + u_{k-1}
-/// let m = PolynomialModel::new(vec![1.0, -0.5], vec![vec![0.0, 1.0]], None).unwrap();
+/// let m = PolynomialModel::new(vec![vec![0.0, 1.0]], vec![1.0, -0.5], None).unwrap();
 /// let y = m.simulate(&Signal::new(1, vec![1.0, 0.0, 0.0, 0.0]).unwrap()).unwrap();
 /// assert_eq!(y, vec![0.0, 1.0, 0.5, 0.25]);
 /// assert_eq!(m.orders(), structid_linear::Orders::siso(1, 1, 1));
 /// ```
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PolynomialModel {
-    /// Denominator `1, a_1, …, a_na` (for OE this is `F`).
-    pub den: Vec<f64>,
     /// Per input: numerator coefficients of `1, q⁻¹, …`, including the `nk` leading zeros.
     pub num: Vec<Vec<f64>>,
+    /// Denominator `1, a_1, …, a_na` (for OE this is `F`).
+    pub den: Vec<f64>,
     /// Sample time in seconds, if known.
     pub sample_time: Option<f64>,
 }
 
 impl PolynomialModel {
-    /// A validated model (see [`validate`](Self::validate)).
+    /// A validated model (see [`validate`](Self::validate)): numerators first, then the
+    /// common denominator, as [`TransferFunction::siso`](structid_lti::TransferFunction::siso)
+    /// (and MATLAB's `tf(num, den)`).
     ///
     /// ```
     /// use structid_linear::PolynomialModel;
-    /// assert!(PolynomialModel::new(vec![1.0, -0.9], vec![vec![1.0]], Some(0.01)).is_ok());
-    /// assert!(PolynomialModel::new(vec![0.0, 1.0], vec![vec![1.0]], None).is_err());
+    /// assert!(PolynomialModel::new(vec![vec![1.0]], vec![1.0, -0.9], Some(0.01)).is_ok());
+    /// assert!(PolynomialModel::new(vec![vec![1.0]], vec![0.0, 1.0], None).is_err());
     /// ```
     pub fn new(
-        den: Vec<f64>,
         num: Vec<Vec<f64>>,
+        den: Vec<f64>,
         sample_time: Option<f64>,
     ) -> Result<Self, LinearError> {
         let m = PolynomialModel {
-            den,
             num,
+            den,
             sample_time,
         };
         m.validate()?;
@@ -94,7 +96,7 @@ impl PolynomialModel {
         }
         let mut den = vec![1.0];
         den.extend_from_slice(&theta[off..]);
-        Self::new(den, num, sample_time)
+        Self::new(num, den, sample_time)
     }
 
     /// The parameter vector `θ = (b…, a…)` of this model for its [`orders`](Self::orders)
@@ -102,7 +104,7 @@ impl PolynomialModel {
     ///
     /// ```
     /// use structid_linear::PolynomialModel;
-    /// let m = PolynomialModel::new(vec![2.0, 1.0], vec![vec![0.0, 4.0]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![0.0, 4.0]], vec![2.0, 1.0], None).unwrap();
     /// assert_eq!(m.parameters(), vec![2.0, 0.5]);
     /// ```
     pub fn parameters(&self) -> Vec<f64> {
@@ -121,7 +123,7 @@ impl PolynomialModel {
     ///
     /// ```
     /// use structid_linear::PolynomialModel;
-    /// let m = PolynomialModel { den: vec![1.0], num: vec![vec![f64::NAN]], sample_time: None };
+    /// let m = PolynomialModel { num: vec![vec![f64::NAN]], den: vec![1.0], sample_time: None };
     /// assert!(m.validate().is_err());
     /// ```
     pub fn validate(&self) -> Result<(), LinearError> {
@@ -159,7 +161,7 @@ impl PolynomialModel {
     ///
     /// ```
     /// use structid_linear::PolynomialModel;
-    /// let m = PolynomialModel::new(vec![1.0], vec![vec![1.0], vec![0.0, 2.0]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![1.0], vec![0.0, 2.0]], vec![1.0], None).unwrap();
     /// assert_eq!(m.inputs(), 2);
     /// ```
     pub fn inputs(&self) -> usize {
@@ -172,7 +174,7 @@ impl PolynomialModel {
     ///
     /// ```
     /// use structid_linear::{Orders, PolynomialModel};
-    /// let m = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 0.0, 1.0, 0.5]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![0.0, 0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
     /// assert_eq!(m.orders(), Orders::siso(2, 2, 2));
     /// ```
     pub fn orders(&self) -> Orders {
@@ -195,8 +197,8 @@ impl PolynomialModel {
     ///
     /// ```
     /// use structid_linear::PolynomialModel;
-    /// let stable = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![1.0]], None).unwrap();
-    /// let unstable = PolynomialModel::new(vec![1.0, -2.1, 1.1], vec![vec![1.0]], None).unwrap();
+    /// let stable = PolynomialModel::new(vec![vec![1.0]], vec![1.0, -1.5, 0.7], None).unwrap();
+    /// let unstable = PolynomialModel::new(vec![vec![1.0]], vec![1.0, -2.1, 1.1], None).unwrap();
     /// assert!(stable.is_stable() && !unstable.is_stable());
     /// ```
     pub fn is_stable(&self) -> bool {
@@ -209,7 +211,7 @@ impl PolynomialModel {
     /// ```
     /// use structid_linear::PolynomialModel;
     /// // (1 - 0.5 q^-1)(1 - 0.8 q^-1)
-    /// let m = PolynomialModel::new(vec![1.0, -1.3, 0.4], vec![vec![1.0]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![1.0]], vec![1.0, -1.3, 0.4], None).unwrap();
     /// assert!((m.spectral_radius() - 0.8).abs() < 1e-12);
     /// ```
     pub fn spectral_radius(&self) -> f64 {
@@ -223,7 +225,7 @@ impl PolynomialModel {
     /// ```
     /// use structid_linear::PolynomialModel;
     /// // y_k = u_{k-1}: a pure delay, G = e^{-jω}
-    /// let m = PolynomialModel::new(vec![1.0], vec![vec![0.0, 1.0]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![0.0, 1.0]], vec![1.0], None).unwrap();
     /// let (re, im) = m.frequency_response(0, 0.25).unwrap();
     /// assert!(re.abs() < 1e-15 && (im + 1.0).abs() < 1e-15);
     /// ```
@@ -252,7 +254,7 @@ impl PolynomialModel {
     /// ```
     /// use structid_linear::PolynomialModel;
     /// use structid_lti::LinearSystem;
-    /// let m = PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], Some(0.1)).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], Some(0.1)).unwrap();
     /// let ss = m.to_state_space().unwrap();
     /// assert_eq!((ss.order(), ss.inputs(), ss.outputs()), (2, 1, 1));
     /// assert_eq!(ss.sample_time(), Some(0.1));
@@ -263,35 +265,7 @@ impl PolynomialModel {
     /// ```
     pub fn to_state_space(&self) -> Result<StateSpace, LinearError> {
         self.validate()?;
-        let a0 = self.den[0];
-        let m = self.num.len();
-        let n = self
-            .num
-            .iter()
-            .map(|b| b.len().saturating_sub(1))
-            .fold(self.den.len() - 1, usize::max);
-        let a = |j: usize| self.den.get(j).map_or(0.0, |v| v / a0);
-        let b = |i: usize, j: usize| self.num[i].get(j).map_or(0.0, |v| v / a0);
-        let mut am = DMatrix::zeros(n, n);
-        let mut bm = DMatrix::zeros(n, m);
-        let mut cm = DMatrix::zeros(1, n);
-        let mut dm = DMatrix::zeros(1, m);
-        for r in 0..n {
-            am[(r, 0)] = -a(r + 1);
-            if r + 1 < n {
-                am[(r, r + 1)] = 1.0;
-            }
-            for i in 0..m {
-                bm[(r, i)] = b(i, r + 1) - b(i, 0) * a(r + 1);
-            }
-        }
-        if n > 0 {
-            cm[(0, 0)] = 1.0;
-        }
-        for i in 0..m {
-            dm[(0, i)] = b(i, 0);
-        }
-        let ss = StateSpace::new(am, bm, cm, dm)?;
+        let ss = structid_lti::realise_row(&self.num, &self.den)?;
         Ok(match self.sample_time {
             Some(ts) => ss.with_sample_time(ts)?,
             None => ss,
@@ -305,7 +279,7 @@ impl PolynomialModel {
     /// ```
     /// use structid_linear::PolynomialModel;
     /// use structid_lti::Signal;
-    /// let m = PolynomialModel::new(vec![1.0], vec![vec![1.0], vec![0.0, 2.0]], None).unwrap();
+    /// let m = PolynomialModel::new(vec![vec![1.0], vec![0.0, 2.0]], vec![1.0], None).unwrap();
     /// let u = Signal::new(2, vec![1.0, 1.0, 0.0, 0.0]).unwrap();
     /// assert_eq!(m.simulate(&u).unwrap(), vec![1.0, 2.0]);
     /// ```
@@ -327,41 +301,9 @@ impl PolynomialModel {
             .iter()
             .map(|b| b.iter().map(|v| v / a0).collect())
             .collect();
-        Ok(simulate_monic(&den, &num, &cols, u.len()))
-    }
-}
-
-/// `y = Σ_i num_i/den · u_i` from zero initial conditions, `den[0] == 1`.
-pub(crate) fn simulate_monic(
-    den: &[f64],
-    num: &[Vec<f64>],
-    u: &[Vec<f64>],
-    len: usize,
-) -> Vec<f64> {
-    let mut y = vec![0.0; len];
-    for k in 0..len {
-        let mut acc = 0.0;
-        for (b, ui) in num.iter().zip(u) {
-            for (j, bj) in b.iter().enumerate().take(k + 1) {
-                acc += bj * ui[k - j];
-            }
-        }
-        for (j, aj) in den.iter().enumerate().skip(1).take(k) {
-            acc -= aj * y[k - j];
-        }
-        y[k] = acc;
-    }
-    y
-}
-
-/// `out = x / den` (all-pole filter, zero initial conditions), `den[0] == 1`.
-pub(crate) fn all_pole(den: &[f64], x: &[f64], out: &mut [f64]) {
-    for k in 0..x.len() {
-        let mut acc = x[k];
-        for (j, aj) in den.iter().enumerate().skip(1).take(k) {
-            acc -= aj * out[k - j];
-        }
-        out[k] = acc;
+        let mut y = vec![0.0; u.len()];
+        filter_row(&num, &den, &cols, &mut y);
+        Ok(y)
     }
 }
 
@@ -463,8 +405,8 @@ mod tests {
     #[test]
     fn state_space_matches_simulation_miso_with_feedthrough() {
         let m = PolynomialModel::new(
-            vec![2.0, -1.0, 0.3],
             vec![vec![1.0, 0.5], vec![0.0, 0.0, 0.0, 1.0, -0.4]],
+            vec![2.0, -1.0, 0.3],
             None,
         )
         .unwrap();
@@ -478,7 +420,7 @@ mod tests {
         }
         assert_eq!(m.orders(), Orders::new(2, vec![2, 2], vec![0, 3]).unwrap());
         // static model
-        let g = PolynomialModel::new(vec![1.0], vec![vec![3.0]], None).unwrap();
+        let g = PolynomialModel::new(vec![vec![3.0]], vec![1.0], None).unwrap();
         assert_eq!(g.to_state_space().unwrap().order(), 0);
     }
 
@@ -497,7 +439,7 @@ mod tests {
 
     #[test]
     fn simulate_checks_inputs() {
-        let m = PolynomialModel::new(vec![1.0, -0.5], vec![vec![1.0]], None).unwrap();
+        let m = PolynomialModel::new(vec![vec![1.0]], vec![1.0, -0.5], None).unwrap();
         assert!(matches!(
             m.simulate(&Signal::zeros(5, 2)),
             Err(LinearError::DimensionMismatch { .. })
@@ -508,8 +450,8 @@ mod tests {
             Err(LinearError::NonFinite { sample: 1, .. })
         ));
         let bad = PolynomialModel {
-            den: vec![],
             num: vec![vec![1.0]],
+            den: vec![],
             sample_time: None,
         };
         assert!(!bad.is_stable());

@@ -7,7 +7,8 @@ use structid_lti::Signal;
 use crate::arx::{ArxSettings, fit_arx, prepare_data};
 use crate::error::LinearError;
 use crate::orders::Orders;
-use crate::polynomial::{PolynomialModel, simulate_monic};
+use crate::polynomial::PolynomialModel;
+use structid_lti::filter_row;
 
 /// How [`select_orders`] scores a fitted ARX model (`V` = mean squared equation error over
 /// the `N` equations, `d` = number of parameters; smaller is better).
@@ -253,7 +254,8 @@ fn validation_error(model: &PolynomialModel, u: &[Vec<f64>], y: &[f64]) -> (f64,
         .iter()
         .map(|b| b.iter().map(|v| v / a0).collect())
         .collect();
-    let yhat = simulate_monic(&den, &num, u, y.len());
+    let mut yhat = vec![0.0; y.len()];
+    filter_row(&num, &den, u, &mut yhat);
     let n = y.len() as f64;
     let sq: Vec<f64> = y.iter().zip(&yhat).map(|(a, b)| (a - b).powi(2)).collect();
     let mse = sq.iter().sum::<f64>() / n;
@@ -272,7 +274,7 @@ mod tests {
     /// `A y = B u + e` with `A = 1 − 1.5q⁻¹ + 0.7q⁻²`, `B = q⁻¹(1 + 0.5q⁻¹)`.
     fn record(seed: u64, len: usize, noise: f64) -> (Signal, Signal) {
         let truth =
-            PolynomialModel::new(vec![1.0, -1.5, 0.7], vec![vec![0.0, 1.0, 0.5]], None).unwrap();
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
         let u = white(seed, len, 1.0, 1);
         let e = white(seed + 1000, len, noise, 1);
         let two = PolynomialModel {

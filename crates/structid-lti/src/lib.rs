@@ -32,7 +32,9 @@
 //! # Contents
 //! - [`Signal`]: multichannel sampled signals (time-major);
 //! - [`StateSpace`], [`ContinuousStateSpace`] (with zero-order-hold discretisation);
-//! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1` and their realisation;
+//! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1`, their realisation and
+//!   simulation; [`realise_row`] / [`filter_row`]: the same for a common-denominator row
+//!   (the polynomial models of `structid-linear`);
 //! - [`LinearSystem`]: the operator trait used by the solvers;
 //! - [`DisturbanceSmoother`] (module [`smoother`]): the posterior mean of the inputs of a
 //!   system given exact outputs (disturbance smoother, zero or free initial state);
@@ -61,7 +63,7 @@ pub use signal::Signal;
 pub use smoother::{DisturbanceSmoother, SmoothReport, SmootherInitial};
 pub use state_space::{ContinuousStateSpace, StateSpace};
 pub use stream::ColumnStream;
-pub use transfer_function::{Siso, TransferFunction};
+pub use transfer_function::{Siso, TransferFunction, filter_row, realise_row};
 
 #[cfg(test)]
 mod tests;

@@ -43,31 +43,127 @@ impl Siso {
     /// Observable canonical form `(A, B, C, D)` of this entry, normalised by `den[0]`;
     /// trailing exact zeros of `num`/`den` are dropped first.
     fn realise(&self) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, f64) {
-        let a0 = self.den[0];
         let trim = |v: &[f64]| -> Vec<f64> {
             let end = v.iter().rposition(|&x| x != 0.0).map_or(0, |k| k + 1);
-            v[..end].iter().map(|x| x / a0).collect()
+            v[..end].to_vec()
         };
-        let mut num = trim(&self.num);
-        let mut den = trim(&self.den);
-        let order = num.len().max(den.len()).saturating_sub(1);
-        num.resize(order + 1, 0.0);
-        den.resize(order + 1, 0.0);
-        let b0 = num[0];
-        let mut a = DMatrix::zeros(order, order);
-        let mut b = DMatrix::zeros(order, 1);
-        let mut c = DMatrix::zeros(1, order);
-        for i in 0..order {
-            a[(i, 0)] = -den[i + 1];
-            if i + 1 < order {
-                a[(i, i + 1)] = 1.0;
+        let num = trim(&self.num);
+        // `den[0] != 0`, so the trimmed denominator keeps it.
+        let den = trim(&self.den);
+        let (a, b, c, d) = observable_canonical(std::slice::from_ref(&num), &den);
+        (a, b, c, d[(0, 0)])
+    }
+}
+
+/// Observable canonical form of the common-denominator row `y = Σ_i num[i]/den · u_i`,
+/// normalised by `den[0]` (nonzero, checked by the callers), of order
+/// `n = max(den.len() − 1, max_i num[i].len() − 1)`: `A` has `−a_1 … −a_n` in its first
+/// column and ones on the superdiagonal, `B[r, i] = b_{i,r+1} − b_{i,0} a_{r+1}`,
+/// `C = e_1ᵀ`, `D[0, i] = b_{i,0}` (missing coefficients are 0).
+fn observable_canonical<N: AsRef<[f64]>>(
+    num: &[N],
+    den: &[f64],
+) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let a0 = den[0];
+    let m = num.len();
+    let n = num
+        .iter()
+        .map(|b| b.as_ref().len().saturating_sub(1))
+        .fold(den.len() - 1, usize::max);
+    let a = |j: usize| den.get(j).map_or(0.0, |v| v / a0);
+    let b = |i: usize, j: usize| num[i].as_ref().get(j).map_or(0.0, |v| v / a0);
+    let mut am = DMatrix::zeros(n, n);
+    let mut bm = DMatrix::zeros(n, m);
+    let mut cm = DMatrix::zeros(1, n);
+    let mut dm = DMatrix::zeros(1, m);
+    for r in 0..n {
+        am[(r, 0)] = -a(r + 1);
+        if r + 1 < n {
+            am[(r, r + 1)] = 1.0;
+        }
+        for i in 0..m {
+            bm[(r, i)] = b(i, r + 1) - b(i, 0) * a(r + 1);
+        }
+    }
+    if n > 0 {
+        cm[(0, 0)] = 1.0;
+    }
+    for i in 0..m {
+        dm[(0, i)] = b(i, 0);
+    }
+    (am, bm, cm, dm)
+}
+
+/// State-space realisation of a multi-input, single-output row `y = Σ_i num[i]/den · u_i`
+/// whose entries share the denominator `den` (coefficients of `1, q^-1, q^-2, …`).
+///
+/// Unlike [`TransferFunction::to_state_space`], which realises every entry separately, the
+/// row is realised jointly in observable canonical form (see [`TransferFunction`]'s
+/// realisation for the matrices), so the order is that of the common denominator:
+/// `n = max(den.len() − 1, max_i num[i].len() − 1)`. No coefficient is trimmed, so the
+/// order follows the given lengths. Errors when `den` is empty, starts with 0, when there
+/// is no numerator, or when a coefficient is not finite.
+///
+/// ```
+/// use structid_lti::transfer_function::realise_row;
+/// // y = (u_1 + q^-2 u_2) / (1 - 0.5 q^-1)
+/// let ss = realise_row(&[vec![1.0], vec![0.0, 0.0, 1.0]], &[1.0, -0.5]).unwrap();
+/// assert_eq!((ss.order(), ss.inputs(), ss.outputs()), (2, 2, 1));
+/// ```
+pub fn realise_row<N: AsRef<[f64]>>(num: &[N], den: &[f64]) -> Result<StateSpace, LtiError> {
+    if num.is_empty() {
+        return Err(LtiError::InvalidTransferFunction(
+            "a row needs at least one numerator (one input)".into(),
+        ));
+    }
+    for (j, b) in num.iter().enumerate() {
+        Siso {
+            num: b.as_ref().to_vec(),
+            den: den.to_vec(),
+        }
+        .validate(0, j)?;
+    }
+    let (a, b, c, d) = observable_canonical(num, den);
+    StateSpace::new(a, b, c, d)
+}
+
+/// The zero-initial-condition response of a common-denominator row,
+/// `y_k = Σ_i Σ_j b_{i,j} u_{i,k−j} − Σ_{j≥1} a_j y_{k−j}`, by direct recursion
+/// (`O(len·(na + Σ nb))`), written to `y` (`y.len()` samples).
+///
+/// `den` must be monic: `den[0]` is taken as 1 and not read, because the callers normalise
+/// once and then filter many signals. `num[i]` filters `u[i]`; samples past the end of a
+/// `u[i]` count as zero, and extra numerators or inputs (beyond the shorter of the two)
+/// are ignored. Nothing is checked: an unstable or non-finite filter propagates
+/// infinities or NaNs.
+///
+/// ```
+/// use structid_lti::transfer_function::filter_row;
+/// // y_k = 0.5 y_{k-1} + u_{k-1}
+/// let mut y = vec![0.0; 4];
+/// filter_row(&[vec![0.0, 1.0]], &[1.0, -0.5], &[vec![1.0, 0.0, 0.0, 0.0]], &mut y);
+/// assert_eq!(y, vec![0.0, 1.0, 0.5, 0.25]);
+/// ```
+pub fn filter_row<N: AsRef<[f64]>, U: AsRef<[f64]>>(
+    num: &[N],
+    den: &[f64],
+    u: &[U],
+    y: &mut [f64],
+) {
+    for k in 0..y.len() {
+        let mut acc = 0.0;
+        for (b, ui) in num.iter().zip(u) {
+            let ui = ui.as_ref();
+            for (j, bj) in b.as_ref().iter().enumerate().take(k + 1) {
+                if let Some(x) = ui.get(k - j) {
+                    acc += bj * x;
+                }
             }
-            b[(i, 0)] = num[i + 1] - b0 * den[i + 1];
         }
-        if order > 0 {
-            c[(0, 0)] = 1.0;
+        for (j, aj) in den.iter().enumerate().skip(1).take(k) {
+            acc -= aj * y[k - j];
         }
-        (a, b, c, b0)
+        y[k] = acc;
     }
 }
 
@@ -161,6 +257,50 @@ impl TransferFunction {
     /// Number of inputs (columns).
     pub fn inputs(&self) -> usize {
         self.entries[0].len()
+    }
+
+    /// Simulates the transfer matrix from zero initial conditions, entry by entry with the
+    /// difference-equation recursion of [`filter_row`] (each entry normalised by its
+    /// `den[0]`), summing the entries of a row. `u` needs [`inputs`](Self::inputs)
+    /// channels; the result has [`outputs`](Self::outputs) channels and `u.len()` samples.
+    ///
+    /// ```
+    /// use structid_lti::{Signal, TransferFunction};
+    /// // y_k = 0.5 y_{k-1} + u_{k-1}
+    /// let tf = TransferFunction::siso(vec![0.0, 1.0], vec![1.0, -0.5]).unwrap();
+    /// let y = tf.simulate(&Signal::new(1, vec![1.0, 0.0, 0.0, 0.0]).unwrap()).unwrap();
+    /// assert_eq!(y.channel(0), vec![0.0, 1.0, 0.5, 0.25]);
+    /// ```
+    pub fn simulate(&self, u: &crate::Signal) -> Result<crate::Signal, LtiError> {
+        if u.channels() != self.inputs() {
+            return Err(LtiError::dims(
+                "input channels of the simulated signal",
+                self.inputs(),
+                u.channels(),
+            ));
+        }
+        let len = u.len();
+        let cols: Vec<Vec<f64>> = (0..u.channels()).map(|c| u.channel(c)).collect();
+        let p = self.outputs();
+        let mut out = vec![0.0; len * p];
+        let mut y = vec![0.0; len];
+        for (i, row) in self.entries.iter().enumerate() {
+            for (e, col) in row.iter().zip(&cols) {
+                let a0 = e.den[0];
+                let den: Vec<f64> = e.den.iter().map(|v| v / a0).collect();
+                let num: Vec<f64> = e.num.iter().map(|v| v / a0).collect();
+                filter_row(
+                    std::slice::from_ref(&num),
+                    &den,
+                    std::slice::from_ref(col),
+                    &mut y,
+                );
+                for (k, v) in y.iter().enumerate() {
+                    out[k * p + i] += v;
+                }
+            }
+        }
+        crate::Signal::new(p, out)
     }
 
     /// State-space realisation.

@@ -20,10 +20,11 @@ use serde::{Deserialize, Serialize};
 use structid_lti::Signal;
 
 use crate::error::{Error, Result};
+use crate::initial_state::InitialState;
 use crate::interpolant::Interpolant;
 use crate::metrics::{fit_percent, rms_difference};
 use crate::model::{Data, Model};
-use crate::validation::{ValidationInitialState, measured_residual};
+use crate::validation::measured_residual;
 
 /// Settings of [`predict`]; build them with [`PredictionSettings::builder`].
 ///
@@ -36,7 +37,7 @@ use crate::validation::{ValidationInitialState, measured_residual};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PredictionSettings {
     horizon: usize,
-    initial_state: ValidationInitialState,
+    initial_state: InitialState,
     settle: usize,
 }
 
@@ -45,7 +46,7 @@ impl Default for PredictionSettings {
     fn default() -> Self {
         Self {
             horizon: 1,
-            initial_state: ValidationInitialState::Zero,
+            initial_state: InitialState::Zero,
             settle: 0,
         }
     }
@@ -63,7 +64,7 @@ impl PredictionSettings {
     }
 
     /// How the initial state is treated (as in [`crate::validate`]).
-    pub fn initial_state(&self) -> ValidationInitialState {
+    pub fn initial_state(&self) -> InitialState {
         self.initial_state
     }
 
@@ -85,7 +86,7 @@ impl PredictionSettingsBuilder {
     }
 
     /// Zero or estimated initial state (default zero).
-    pub fn initial_state(mut self, initial_state: ValidationInitialState) -> Self {
+    pub fn initial_state(mut self, initial_state: InitialState) -> Self {
         self.0.initial_state = initial_state;
         self
     }

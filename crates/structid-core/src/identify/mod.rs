@@ -73,15 +73,7 @@ pub struct IdentifySettings {
     posterior: bool,
 }
 
-/// How the LFT's initial state is treated.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum InitialState {
-    /// The system starts at rest, x₀ = 0 (the paper's assumption).
-    #[default]
-    Zero,
-    /// x₀ is estimated as unpenalised parameters (real records rarely start at rest).
-    Estimate,
-}
+pub use crate::initial_state::InitialState;
 
 impl Default for IdentifySettings {
     /// β = 0.01 (the middle of the paper's range 0.001–0.1), automatic solver, memory limit

@@ -400,12 +400,12 @@ mod tests {
             // A random stable second-order G with one sample of delay.
             let (p1, p2) = (rng.uniform_in(-0.9, 0.9), rng.uniform_in(-0.9, 0.9));
             let g = PolynomialModel {
-                den: vec![1.0, -(p1 + p2), p1 * p2],
                 num: vec![vec![
                     0.0,
                     rng.uniform_in(0.2, 1.0),
                     rng.uniform_in(-0.5, 0.5),
                 ]],
+                den: vec![1.0, -(p1 + p2), p1 * p2],
                 sample_time: Some(rng.uniform_in(0.05, 1.0)),
             };
             let lft = rate_feedback_lft(&g).unwrap();
@@ -535,8 +535,8 @@ mod tests {
     #[test]
     fn dynamic_z_with_an_estimated_initial_state_is_not_measurable() {
         let g = PolynomialModel {
-            den: vec![1.0, -0.5],
             num: vec![vec![0.0, 1.0]],
+            den: vec![1.0, -0.5],
             sample_time: None,
         };
         let lft = rate_feedback_lft(&g).unwrap();

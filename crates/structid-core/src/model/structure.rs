@@ -145,7 +145,7 @@ impl Site {
 /// ```
 /// use structid_core::structure::realise;
 /// use structid_linear::PolynomialModel;
-/// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
+/// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: Some(0.1) };
 /// let lft = realise(&g).unwrap();
 /// assert_eq!((lft.dims().w, lft.dims().z), (0, 0));
 /// ```
@@ -288,7 +288,7 @@ impl Structure {
     /// use std::sync::Arc;
     /// use structid_core::{Data, IdentifySettings, KernelDispersion, Signal, Structure, identify};
     /// use structid_linear::PolynomialModel;
-    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
+    /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
     /// let model = Structure::hammerstein(&g, Arc::new(KernelDispersion::gaussian(0.5).unwrap()))
     ///     .model()
     ///     .unwrap();
@@ -312,7 +312,7 @@ impl Structure {
     /// use structid_core::{MapBinding, PolynomialDispersion, Structure, ZSource};
     /// use structid_linear::PolynomialModel;
     /// use structid_lti::Signal;
-    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
+    /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: Some(0.1) };
     /// let lft = Structure::wiener(&g, Arc::new(PolynomialDispersion::new(3).unwrap())).lft().unwrap();
     /// assert_eq!((lft.dims().u, lft.dims().w, lft.dims().z), (1, 1, 1));
     /// assert_eq!(lft.measurability().unwrap(), ZSource::InputOnly);
@@ -362,7 +362,7 @@ impl Structure {
     /// use structid_linear::PolynomialModel;
     /// use structid_lti::Signal;
     /// let d = Arc::new(PolynomialDispersion::new(3).unwrap());
-    /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: Some(0.1) };
+    /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: Some(0.1) };
     /// let lft = Structure::rate_feedback(&g, d.clone()).lft().unwrap();
     /// assert_eq!(lft.dims().states, 2);
     /// assert!(matches!(lft.measurability().unwrap(), ZSource::Dynamic { .. }));
@@ -372,7 +372,7 @@ impl Structure {
     /// let (z, _) = lft.compute_z(&u, &y).unwrap();
     /// assert!(z.as_slice().iter().zip([0.0, 10.0, 20.0]).all(|(a, b)| (a - b).abs() < 1e-12));
     ///
-    /// let direct = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![1.0]], sample_time: None };
+    /// let direct = PolynomialModel { num: vec![vec![1.0]], den: vec![1.0, -0.5], sample_time: None };
     /// assert!(Structure::rate_feedback(&direct, d).lft().unwrap_err().to_string().contains("delay"));
     /// ```
     pub fn rate_feedback(g: impl Into<LinearPart>, dispersion: Arc<dyn Dispersion>) -> Self {

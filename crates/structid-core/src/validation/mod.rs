@@ -35,8 +35,8 @@
 //!    If the maps and the noise model are right, ε is white and uncorrelated with past inputs;
 //!    the residual tests of [`crate::residual_tests`] check both with 99 % bands.
 //!
-//! **Initial state.** [`ValidationInitialState::Zero`] assumes the record starts at rest.
-//! [`ValidationInitialState::Estimate`] estimates x₀ by generalised least squares from the
+//! **Initial state.** [`InitialState::Zero`] assumes the record starts at rest.
+//! [`InitialState::Estimate`] estimates x₀ by generalised least squares from the
 //! one-step residual: with the maps fixed, r − T_yw·ŵ = O·x₀ + T_ye·e, so
 //! x̂₀ = argmin ‖W·(r − T_yw·ŵ − O·x₀)‖² with W the Kalman whitening operator of T_ye
 //! (WᵀW = (T_ye·T_yeᵀ)⁻¹; ordinary least squares when a static noise path leaves some output
@@ -49,42 +49,36 @@
 pub mod metrics;
 pub mod residual_tests;
 
-use faer::Mat;
-use nalgebra::{DMatrix, DVector};
 use structid_lti::Signal;
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 
 use crate::error::{Error, Result};
+use crate::initial_state::{InitialState, estimate_initial_state};
 use crate::interpolant::Interpolant;
 use crate::metrics::{fit_percent, rms, rms_difference};
 use crate::model::{Data, Model};
 use crate::problem::Problem;
 use crate::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
 
-/// How [`validate`] treats the initial state of the linear block.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum ValidationInitialState {
-    /// The record starts at rest, x₀ = 0.
-    #[default]
-    Zero,
-    /// x₀ is estimated by generalised least squares from the one-step residual (see the
-    /// [module documentation](self)).
-    Estimate,
-}
+/// How [`validate`] treated the initial state of the linear block: now the one
+/// [`InitialState`] of identification, validation and prediction.
+#[deprecated(note = "use structid_core::InitialState (the same enum)")]
+pub type ValidationInitialState = InitialState;
 
 /// Settings of [`validate`]; build them with [`ValidationSettings::builder`].
 ///
 /// ```
-/// use structid_core::validation::{ValidationInitialState, ValidationSettings};
+/// use structid_core::InitialState;
+/// use structid_core::validation::ValidationSettings;
 /// let s = ValidationSettings::default();
-/// assert_eq!((s.initial_state(), s.max_lag()), (ValidationInitialState::Zero, 25));
-/// let s = ValidationSettings::builder().max_lag(10).initial_state(ValidationInitialState::Estimate).build().unwrap();
+/// assert_eq!((s.initial_state(), s.max_lag()), (InitialState::Zero, 25));
+/// let s = ValidationSettings::builder().max_lag(10).initial_state(InitialState::Estimate).build().unwrap();
 /// assert_eq!(s.max_lag(), 10);
 /// assert!(ValidationSettings::builder().max_lag(0).build().is_err());
 /// ```
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ValidationSettings {
-    initial_state: ValidationInitialState,
+    initial_state: InitialState,
     max_lag: usize,
     settle: usize,
 }
@@ -93,7 +87,7 @@ impl Default for ValidationSettings {
     /// A record at rest and correlation lags up to 25 (MATLAB's `resid` default).
     fn default() -> Self {
         Self {
-            initial_state: ValidationInitialState::Zero,
+            initial_state: InitialState::Zero,
             max_lag: 25,
             settle: 0,
         }
@@ -109,7 +103,7 @@ impl ValidationSettings {
     }
 
     /// How the initial state is treated.
-    pub fn initial_state(&self) -> ValidationInitialState {
+    pub fn initial_state(&self) -> InitialState {
         self.initial_state
     }
 
@@ -133,7 +127,7 @@ pub struct ValidationSettingsBuilder {
 
 impl ValidationSettingsBuilder {
     /// Zero or estimated initial state.
-    pub fn initial_state(mut self, initial_state: ValidationInitialState) -> Self {
+    pub fn initial_state(mut self, initial_state: InitialState) -> Self {
         self.inner.initial_state = initial_state;
         self
     }
@@ -187,7 +181,7 @@ pub struct ValidationReport {
     /// `[output][input]`: the cross-correlation of ε with u at lags −max_lag…max_lag (a
     /// positive lag pairs ε with past inputs).
     pub input_correlation: Vec<Vec<CorrelationTest>>,
-    /// The estimated x₀ ([`ValidationInitialState::Estimate`]), otherwise `None`.
+    /// The estimated x₀ ([`InitialState::Estimate`]), otherwise `None`.
     pub initial_state: Option<Vec<f64>>,
     /// Number of samples L.
     pub samples: usize,
@@ -383,13 +377,13 @@ pub(crate) fn measured_residual(
     model: &Model,
     maps: &[&dyn Interpolant],
     data: &Data,
-    initial_state: ValidationInitialState,
+    initial_state: InitialState,
 ) -> Result<MeasuredResidual> {
     let lft = model.lft();
     let len = data.len();
     let problem = match initial_state {
-        ValidationInitialState::Zero => Problem::from_model(model, data)?,
-        ValidationInitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
+        InitialState::Zero => Problem::from_model(model, data)?,
+        InitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,
     };
     let ny = problem.outputs();
 
@@ -431,7 +425,7 @@ pub(crate) fn measured_residual(
 
     let x0 = match problem.free_response() {
         Some(o) if o.ncols() > 0 => {
-            let x0 = estimate_initial_state(o, &v, whitener.as_ref())?;
+            let x0 = estimate_initial_state(o.as_ref(), &v, whitener.as_ref())?;
             for (i, vi) in v.iter_mut().enumerate() {
                 *vi -= (0..o.ncols()).map(|j| o[(i, j)] * x0[j]).sum::<f64>();
             }
@@ -465,44 +459,6 @@ fn non_negative_lags(t: CorrelationTest) -> CorrelationTest {
         values: keep.iter().map(|&i| t.values[i]).collect(),
         ..t
     }
-}
-
-/// x̂₀ = argmin ‖W·(v − O·x₀)‖² (W = I without a whitener), minimum norm on the directions
-/// that O does not resolve.
-fn estimate_initial_state(
-    o: &Mat<f64>,
-    v: &[f64],
-    whitener: Option<&KalmanWhitener>,
-) -> Result<Vec<f64>> {
-    let (rows, n) = (o.nrows(), o.ncols());
-    let (ow, vw) = match whitener {
-        Some(w) => {
-            let mut ow = Mat::<f64>::zeros(rows, n);
-            w.whiten_columns(o.as_ref(), ow.as_mut());
-            let mut vw = vec![0.0; rows];
-            w.whiten(v, &mut vw);
-            (ow, vw)
-        }
-        None => (o.clone(), v.to_vec()),
-    };
-    let a = DMatrix::from_fn(rows, n, |i, j| ow[(i, j)]);
-    if a.iter().chain(&vw).any(|x| !x.is_finite()) {
-        return Err(Error::Numerical(
-            "the whitened free response is not finite; the initial state cannot be estimated on this \
-             record (is the noise model's predictor unstable?)"
-                .into(),
-        ));
-    }
-    let svd = a.svd(true, true);
-    let smax = svd.singular_values.max();
-    if smax == 0.0 {
-        // No state reaches y: x₀ is irrelevant.
-        return Ok(vec![0.0; n]);
-    }
-    let x = svd
-        .solve(&DVector::from_vec(vw), 1e-12 * smax)
-        .map_err(|e| Error::Numerical(format!("least squares for the initial state: {e}")))?;
-    Ok(x.iter().copied().collect())
 }
 
 #[cfg(test)]

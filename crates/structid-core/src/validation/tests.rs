@@ -14,7 +14,7 @@ fn tanh_map(z: &[f64]) -> f64 {
     z[0].tanh()
 }
 
-fn settings(initial_state: ValidationInitialState) -> ValidationSettings {
+fn settings(initial_state: InitialState) -> ValidationSettings {
     ValidationSettings::builder()
         .initial_state(initial_state)
         .build()
@@ -57,10 +57,7 @@ fn true_maps_on_noise_free_data_reproduce_the_record() {
     let u = gaussian_noise(400, 1, 1.0, 9);
     let fb = Experiment::simulate(fb_model, &[&tanh_map], u, Signal::zeros(400, 1)).unwrap();
     for exp in [ham, fb] {
-        for init in [
-            ValidationInitialState::Zero,
-            ValidationInitialState::Estimate,
-        ] {
+        for init in [InitialState::Zero, InitialState::Estimate] {
             let r = validate(&exp.model, &[&tanh_map], &exp.data, &settings(init)).unwrap();
             assert_eq!(r.samples, 400);
             let scale = exp
@@ -82,8 +79,8 @@ fn true_maps_on_noise_free_data_reproduce_the_record() {
             );
             assert!(max_abs_diff(r.simulated.as_slice(), exp.data.y().as_slice()) < 1e-12 * scale);
             match init {
-                ValidationInitialState::Zero => assert!(r.initial_state.is_none()),
-                ValidationInitialState::Estimate => {
+                InitialState::Zero => assert!(r.initial_state.is_none()),
+                InitialState::Estimate => {
                     let x0 = r.initial_state.unwrap();
                     assert!(x0.iter().all(|v| v.abs() < 1e-9), "{x0:?}");
                 }
@@ -239,7 +236,7 @@ fn estimate_recovers_a_nonzero_initial_state_and_zero_does_not() {
             &exp.model,
             &[&tanh_map],
             &data,
-            &settings(ValidationInitialState::Estimate),
+            &settings(InitialState::Estimate),
         )
         .unwrap();
         let got = est.initial_state.clone().unwrap();
@@ -252,7 +249,7 @@ fn estimate_recovers_a_nonzero_initial_state_and_zero_does_not() {
             &exp.model,
             &[&tanh_map],
             &data,
-            &settings(ValidationInitialState::Zero),
+            &settings(InitialState::Zero),
         )
         .unwrap();
         assert!(zero.initial_state.is_none());
@@ -377,7 +374,7 @@ proptest! {
         let exp = scenarios::hammerstein(120, 2, 0.0, gaussian(0.3).unwrap(), seed).unwrap();
         let y = exp.model.simulate(&[&tanh_map], exp.data.u(), None, Some(&x0)).unwrap().y;
         let data = Data::new(exp.data.u().clone(), y).unwrap();
-        let s = settings(ValidationInitialState::Estimate);
+        let s = settings(InitialState::Estimate);
         let r = validate(&exp.model, &[&tanh_map], &data, &s).unwrap();
         let got = r.initial_state.unwrap();
         // x₀ is resolved as far as y reveals it: compare the free responses over the record.

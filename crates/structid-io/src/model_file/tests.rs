@@ -715,8 +715,8 @@ fn markov_distance(a: &Lft, b: &Lft, count: usize) -> f64 {
 #[test]
 fn output_and_rate_feedback_structures_parse_to_the_builders_lfts() {
     let g = PolynomialModel {
-        den: vec![1.0, -1.6, 0.8],
         num: vec![vec![0.0, 0.1, 0.05]],
+        den: vec![1.0, -1.6, 0.8],
         sample_time: Some(0.5),
     };
     let d: Arc<dyn structid_core::Dispersion> =

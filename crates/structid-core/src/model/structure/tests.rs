@@ -110,8 +110,8 @@ fn every_site_simulates_its_equation_with_the_noise_path_kept() {
 /// path, B_w = −0.25q⁻¹ + 0.1q⁻².
 fn polynomial() -> PolynomialModel {
     PolynomialModel {
-        den: vec![1.0, -1.2, 0.5],
         num: vec![vec![0.0, 0.3, 0.2]],
+        den: vec![1.0, -1.2, 0.5],
         sample_time: Some(0.1),
     }
 }
@@ -240,8 +240,8 @@ fn feedback_needs_a_delay_and_declared_channels_must_exist() {
     assert!(Site::Declared { z: 0, w: 0 }.insert(&nominal()).is_err());
     let d: Arc<dyn Dispersion> = Arc::new(crate::PolynomialDispersion::new(2).unwrap());
     let g = PolynomialModel {
-        den: vec![1.0, -0.5],
         num: vec![vec![1.0, 0.2]],
+        den: vec![1.0, -0.5],
         sample_time: None,
     };
     for s in [
