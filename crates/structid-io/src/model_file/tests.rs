@@ -1,3 +1,8 @@
+use std::sync::Arc;
+
+use structid_core::{GraphInterpolation, Site};
+use structid_linear::PolynomialModel;
+
 use super::*;
 
 /// The canonical block of the specification, verbatim.
