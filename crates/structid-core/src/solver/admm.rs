@@ -51,8 +51,9 @@ use std::time::Instant;
 
 use structid_lti::{DisturbanceSmoother, Signal, SmootherInitial, StateSpace};
 
-use crate::error::{Error, Result, positive_finite};
-use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::error::{Error, Result};
+use crate::identify::result::{Diagnostics, Identification, Timings};
+use crate::identify::settings::IdentifySettings;
 use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
@@ -61,115 +62,9 @@ use crate::solver::{finish_tv, tv_parts, tv_penalties};
 use crate::total_variation::TvPenalty;
 
 /// The solver's name in reports.
-pub const NAME: &str = "admm";
+pub const NAME: &str = crate::solver::settings::ADMM_NAME;
 
-/// Settings of the ADMM solver.
-///
-/// ```
-/// use structid_core::solver::admm::AdmmSettings;
-/// let s = AdmmSettings::builder().tolerance(1e-8).max_iterations(50_000).build().unwrap();
-/// assert_eq!(s.max_iterations(), 50_000);
-/// assert!(AdmmSettings::builder().relaxation(2.5).build().is_err());
-/// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AdmmSettings {
-    tolerance: f64,
-    max_iterations: usize,
-    rho: Option<f64>,
-    relaxation: f64,
-    adaptive: bool,
-}
-
-impl Default for AdmmSettings {
-    /// Tolerance 1e-7, 20 000 iterations, ρ from the frequency responses without balancing
-    /// (see the module documentation), over-relaxation 1.6.
-    fn default() -> Self {
-        Self {
-            tolerance: 1e-7,
-            max_iterations: 20_000,
-            rho: None,
-            relaxation: 1.6,
-            adaptive: false,
-        }
-    }
-}
-
-impl AdmmSettings {
-    /// A builder from the defaults.
-    pub fn builder() -> AdmmSettingsBuilder {
-        AdmmSettingsBuilder(Self::default())
-    }
-    /// The relative tolerance ε_rel (ε_abs = ε_rel × RMS of r).
-    pub fn tolerance(&self) -> f64 {
-        self.tolerance
-    }
-    /// The iteration limit.
-    pub fn max_iterations(&self) -> usize {
-        self.max_iterations
-    }
-    /// The initial penalty ρ (`None`: from the paths' gains).
-    pub fn rho(&self) -> Option<f64> {
-        self.rho
-    }
-    /// The over-relaxation factor α ∈ (0, 2).
-    pub fn relaxation(&self) -> f64 {
-        self.relaxation
-    }
-    /// Whether ρ is balanced against the residuals (off by default: the frequency-response ρ₀
-    /// is optimal for the quadratic part, and balancing was measured to multiply the iterations
-    /// by 20–150; it is switched on automatically when ρ₀ falls back to the gain heuristic).
-    pub fn adaptive(&self) -> bool {
-        self.adaptive
-    }
-}
-
-/// Builder for [`AdmmSettings`].
-#[derive(Clone, Debug)]
-pub struct AdmmSettingsBuilder(AdmmSettings);
-
-impl AdmmSettingsBuilder {
-    /// Relative tolerance (> 0).
-    pub fn tolerance(mut self, tol: f64) -> Self {
-        self.0.tolerance = tol;
-        self
-    }
-    /// Iteration limit (≥ 1).
-    pub fn max_iterations(mut self, n: usize) -> Self {
-        self.0.max_iterations = n;
-        self
-    }
-    /// Initial ρ (> 0).
-    pub fn rho(mut self, rho: f64) -> Self {
-        self.0.rho = Some(rho);
-        self
-    }
-    /// Over-relaxation α ∈ (0, 2); 1 is plain ADMM.
-    pub fn relaxation(mut self, alpha: f64) -> Self {
-        self.0.relaxation = alpha;
-        self
-    }
-    /// Whether ρ adapts to the residuals.
-    pub fn adaptive(mut self, adaptive: bool) -> Self {
-        self.0.adaptive = adaptive;
-        self
-    }
-    /// Validates.
-    pub fn build(self) -> Result<AdmmSettings> {
-        super::check_iterative(NAME, self.0.tolerance, self.0.max_iterations)?;
-        if let Some(rho) = self.0.rho {
-            positive_finite("admm rho", rho)?;
-        }
-        let a = self.0.relaxation;
-        if !(a > 0.0 && a < 2.0) {
-            return Err(Error::InvalidParameter {
-                name: "admm relaxation".into(),
-                value: a,
-                reason: "over-relaxation must lie in (0, 2)".into(),
-            });
-        }
-        Ok(self.0)
-    }
-}
+pub use crate::solver::settings::{AdmmSettings, AdmmSettingsBuilder};
 
 /// Iterations during which ρ may be rebalanced (after that it is frozen so that the standard
 /// convergence theory applies).

@@ -32,92 +32,19 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
-use crate::error::{Error, Result, positive_finite};
-use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::error::{Error, Result};
+use crate::identify::result::{Diagnostics, Identification, Timings};
+use crate::identify::settings::IdentifySettings;
 use crate::problem::Problem;
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::realisation::{joint_realisation, unreachable_samples};
 use crate::solver::{BlockPart, finish_tv, penalties, tv_part};
 use crate::total_variation::TvPenalty;
 
-/// Settings of the conic (Clarabel) solver.
-///
-/// ```
-/// use structid_core::solver::conic::ConicSettings;
-/// let s = ConicSettings::builder().tolerance(1e-9).max_iterations(300).build().unwrap();
-/// assert_eq!(s.tolerance(), 1e-9);
-/// assert!(ConicSettings::builder().tolerance(0.0).build().is_err());
-/// ```
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ConicSettings {
-    tolerance: f64,
-    max_iterations: u32,
-    time_limit: Option<f64>,
-}
-
-impl Default for ConicSettings {
-    /// Tolerance 1e-8 (Clarabel's default, for the duality gap and feasibility), 200
-    /// iterations, no time limit.
-    fn default() -> Self {
-        Self {
-            tolerance: 1e-8,
-            max_iterations: 200,
-            time_limit: None,
-        }
-    }
-}
-
-impl ConicSettings {
-    /// A builder from the defaults.
-    pub fn builder() -> ConicSettingsBuilder {
-        ConicSettingsBuilder(Self::default())
-    }
-    /// Relative and absolute tolerance on the duality gap and the residuals.
-    pub fn tolerance(&self) -> f64 {
-        self.tolerance
-    }
-    /// The iteration limit.
-    pub fn max_iterations(&self) -> u32 {
-        self.max_iterations
-    }
-    /// The time limit in seconds, if any.
-    pub fn time_limit(&self) -> Option<f64> {
-        self.time_limit
-    }
-}
-
-/// Builder for [`ConicSettings`].
-#[derive(Clone, Debug)]
-pub struct ConicSettingsBuilder(ConicSettings);
-
-impl ConicSettingsBuilder {
-    /// Tolerance (> 0).
-    pub fn tolerance(mut self, tol: f64) -> Self {
-        self.0.tolerance = tol;
-        self
-    }
-    /// Iteration limit (≥ 1).
-    pub fn max_iterations(mut self, n: u32) -> Self {
-        self.0.max_iterations = n;
-        self
-    }
-    /// Time limit in seconds (> 0).
-    pub fn time_limit(mut self, seconds: f64) -> Self {
-        self.0.time_limit = Some(seconds);
-        self
-    }
-    /// Validates.
-    pub fn build(self) -> Result<ConicSettings> {
-        super::check_iterative(NAME, self.0.tolerance, self.0.max_iterations as usize)?;
-        if let Some(t) = self.0.time_limit {
-            positive_finite("conic time_limit", t)?;
-        }
-        Ok(self.0)
-    }
-}
+pub use crate::solver::settings::{ConicSettings, ConicSettingsBuilder};
 
 /// The solver's name in reports.
-pub const NAME: &str = "clarabel";
+pub const NAME: &str = crate::solver::settings::CONIC_NAME;
 
 /// Column layout of the conic program's variables.
 struct Layout {

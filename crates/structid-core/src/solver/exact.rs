@@ -30,7 +30,8 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::QuadraticPenalty;
 use crate::error::{Error, Result};
-use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::identify::result::{Diagnostics, Identification, Timings};
+use crate::identify::settings::IdentifySettings;
 use crate::posterior::{DenseBlock as DensePosteriorBlock, Posterior};
 use crate::problem::Problem;
 use crate::solver::{BlockPart, assemble_blocks, cost_terms};

@@ -33,7 +33,8 @@ use structid_lti::{
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
-use crate::identify::{Diagnostics, Identification, IdentifySettings, Timings};
+use crate::identify::result::{Diagnostics, Identification, Timings};
+use crate::identify::settings::IdentifySettings;
 use crate::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
 use crate::problem::Problem;
 use crate::solver::{BlockPart, assemble_blocks, cost_terms};

@@ -8,6 +8,8 @@ pub mod exact;
 pub mod features;
 pub mod prox;
 mod realisation;
+pub mod settings;
+pub mod status;
 
 use std::time::Instant;
 
@@ -17,7 +19,7 @@ use structid_lti::Signal;
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::identify::{BlockEstimate, CostTerms, Timings};
+use crate::identify::result::{BlockEstimate, CostTerms, Timings};
 use crate::interpolant::Interpolant;
 use crate::problem::{Problem, ProblemBlock};
 use crate::total_variation::TvPenalty;
@@ -269,17 +271,4 @@ pub(crate) fn finish_tv(
         dropped_max,
         warnings,
     })
-}
-
-/// Validates the tolerance and iteration limit shared by the iterative solvers' settings.
-pub(crate) fn check_iterative(solver: &str, tolerance: f64, max_iterations: usize) -> Result<()> {
-    crate::error::positive_finite(&format!("{solver} tolerance"), tolerance)?;
-    if max_iterations == 0 {
-        return Err(Error::InvalidParameter {
-            name: format!("{solver} max_iterations"),
-            value: 0.0,
-            reason: "must be at least 1".into(),
-        });
-    }
-    Ok(())
 }
