@@ -24,7 +24,7 @@ use crate::initial_state::InitialState;
 use crate::interpolant::Interpolant;
 use crate::metrics::{fit_percent, rms_difference};
 use crate::model::{Data, Model};
-use crate::validation::measured_residual;
+use crate::validation::{check_record, measured_residual};
 
 /// Settings of [`predict`]; build them with [`PredictionSettings::builder`].
 ///
@@ -200,27 +200,11 @@ pub fn predict(
     data: &Data,
     settings: &PredictionSettings,
 ) -> Result<Prediction> {
-    let blocks = model.blocks();
-    if maps.len() != blocks.len() {
-        return Err(Error::DimensionMismatch {
-            what: "number of maps for prediction (one per block, in model order)".into(),
-            expected: blocks.len().to_string(),
-            found: maps.len().to_string(),
-        });
-    }
+    check_record(model, maps, data, settings.settle, "prediction")?;
     let lft = model.lft();
-    data.check_against(lft)?;
     lft.check_no_algebraic_loop()?;
+    let blocks = model.blocks();
     let len = data.len();
-    if settings.settle >= len {
-        return Err(Error::InvalidParameter {
-            name: "settle".into(),
-            value: settings.settle as f64,
-            reason: format!(
-                "must be less than the number of samples ({len}); nothing would be scored"
-            ),
-        });
-    }
     let m = lft.matrices();
     let d = lft.dims();
     let st = Stepper {

@@ -246,27 +246,10 @@ pub fn validate(
     data: &Data,
     settings: &ValidationSettings,
 ) -> Result<ValidationReport> {
-    let blocks = model.blocks();
-    if maps.len() != blocks.len() {
-        return Err(Error::DimensionMismatch {
-            what: "number of maps for validation (one per block, in model order)".into(),
-            expected: blocks.len().to_string(),
-            found: maps.len().to_string(),
-        });
-    }
+    check_record(model, maps, data, settings.settle, "validation")?;
     let lft = model.lft();
-    data.check_against(lft)?;
     let len = data.len();
     let max_lag = settings.max_lag;
-    if settings.settle >= len {
-        return Err(Error::InvalidParameter {
-            name: "settle".into(),
-            value: settings.settle as f64,
-            reason: format!(
-                "must be less than the number of samples ({len}); nothing would be scored"
-            ),
-        });
-    }
     if max_lag == 0 || max_lag >= len {
         return Err(Error::InvalidParameter {
             name: "max_lag".into(),
@@ -353,6 +336,37 @@ pub fn validate(
         initial_state: x0,
         samples: len,
     })
+}
+
+/// The checks every evaluation of maps on a record starts with: one map per block, a record
+/// that fits the LFT, and fewer settling samples than samples.
+pub(crate) fn check_record(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settle: usize,
+    what: &str,
+) -> Result<()> {
+    let blocks = model.blocks();
+    if maps.len() != blocks.len() {
+        return Err(Error::DimensionMismatch {
+            what: format!("number of maps for {what} (one per block, in model order)"),
+            expected: blocks.len().to_string(),
+            found: maps.len().to_string(),
+        });
+    }
+    data.check_against(model.lft())?;
+    let len = data.len();
+    if settle >= len {
+        return Err(Error::InvalidParameter {
+            name: "settle".into(),
+            value: settle as f64,
+            reason: format!(
+                "must be less than the number of samples ({len}); nothing would be scored"
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// What the one-step predictor and the k-step predictor share: the measured residual
