@@ -2,12 +2,12 @@
 //! stored estimate: simulation.csv's columns, the simulation and residual figures, the per-output
 //! part of validation.json and the summary's wording.
 
-use serde_json::{Value, json};
 use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::ValidationReport;
 use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, render_grid_svg};
 
 use crate::error::CliError;
+pub(crate) use structid_io::validation_report::outputs_json;
 
 /// Most points per line in simulation.svg (longer records are drawn decimated).
 const MAX_PLOT_POINTS: usize = 5000;
@@ -125,16 +125,6 @@ pub(crate) fn residuals_svg(
     )?)
 }
 
-pub(crate) fn test_json(t: &CorrelationTest) -> Result<Value, CliError> {
-    let mut v = serde_json::to_value(t)
-        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
-    if let Value::Object(m) = &mut v {
-        m.insert("passes".into(), json!(t.passes()));
-        m.insert("lags_outside".into(), json!(t.outside()));
-    }
-    Ok(v)
-}
-
 pub(crate) fn fmt_pct(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.2} %")
@@ -154,37 +144,6 @@ pub(crate) fn pass(t: &CorrelationTest) -> String {
         "{} ({n} of {tested} lags outside the 99 % band)",
         if n == 0 { "pass" } else { "FAIL" }
     )
-}
-
-/// Per output: RMS, fit, prediction RMS and the residual tests, as validation.json lists them.
-pub(crate) fn outputs_json(
-    report: &ValidationReport,
-    y_names: &[String],
-    u_names: &[String],
-) -> Result<Vec<Value>, CliError> {
-    let mut outputs = Vec::new();
-    for (c, name) in y_names.iter().enumerate() {
-        let cross = u_names
-            .iter()
-            .zip(&report.input_correlation[c])
-            .map(|(u, t)| {
-                let mut v = test_json(t)?;
-                if let Value::Object(m) = &mut v {
-                    m.insert("input".into(), json!(u));
-                }
-                Ok(v)
-            })
-            .collect::<Result<Vec<Value>, CliError>>()?;
-        outputs.push(json!({
-            "name": name,
-            "rms": report.rms[c],
-            "fit_percent": report.fit_percent[c],
-            "prediction_rms": report.prediction_rms[c],
-            "whiteness": test_json(&report.whiteness[c])?,
-            "input_correlation": cross,
-        }));
-    }
-    Ok(outputs)
 }
 
 #[cfg(test)]

@@ -52,6 +52,7 @@ pub mod model_file;
 pub mod output;
 pub mod report;
 pub mod sweep_file;
+pub mod validation_report;
 
 pub use benchmarks::{CascadedTanks, Record, Silverbox, SilverboxSplit, TanksSplit};
 pub use data_file::{
