@@ -1,0 +1,115 @@
+//! Is it static? The direction test on the residual deconvolved to the block's output.
+
+use structid_core::validation::{ValidationSettings, validate};
+use structid_core::{Data, Interpolant, Model, Result, Signal};
+use structid_lti::LinearSystem;
+
+use crate::hypotheses::{Hypothesis, Location};
+use crate::hysteresis::{DirectionTest, direction_dependence};
+
+use super::DiscoverSettings;
+use super::fit::Fitted;
+use super::fit::initial_state;
+
+/// The direction test of a fit: its noise estimate ê (what the static map leaves
+/// unexplained), through the noise path to the output and deconvolved to the block's output,
+/// split by the direction of z.
+pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<DirectionTest> {
+    // The model's output residual is L_ye·ê = L_yw·δ: filter ê through the noise path first
+    // (the identity for an output-error model), then invert L_yw.
+    let e = Signal::from_fn(f.e_hat.len(), 1, |k, _| f.e_hat[k]);
+    let r = f.hypothesis.model.lft().t_ye().simulate(&e)?.channel(0);
+    let delta = deconvolve(&f.hypothesis, &r)?;
+    let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+    Ok(direction_dependence(
+        &f.z[skip..],
+        &delta[skip..],
+        settings.hysteresis_threshold,
+    ))
+}
+
+/// The simulation residual y − ŷ of `model` with `map` on `data` after `settle` samples (x₀
+/// as at `location`), or `None` when the simulation fails.
+pub(super) fn simulation_residual(
+    model: &Model,
+    location: Location,
+    map: &dyn Interpolant,
+    data: &Data,
+    settle: usize,
+) -> Option<Vec<f64>> {
+    let settings = ValidationSettings::builder()
+        .initial_state(initial_state(location).1)
+        .settle(settle)
+        .build()
+        .ok()?;
+    let v = validate(model, &[map], data, &settings).ok()?;
+    let y = data.y().channel(0);
+    let r: Vec<f64> = (settle.min(y.len())..y.len())
+        .map(|k| y[k] - v.simulated.get(k, 0))
+        .collect();
+    r.iter().all(|v| v.is_finite()).then_some(r)
+}
+
+/// Ridge deconvolution of `r` through the SISO operator T = L_yw: argmin ‖r − T·δ‖² + λ‖δ‖²
+/// by conjugate gradients on (TᵀT + λI)·δ = Tᵀ·r, with Tᵀ applied as time reversal around T.
+pub(super) fn deconvolve(h: &Hypothesis, r: &[f64]) -> Result<Vec<f64>> {
+    let t = h.model.lft().t_yw();
+    let n = r.len();
+    let apply = |v: &[f64]| -> Result<Vec<f64>> {
+        let s = Signal::from_fn(n, 1, |k, _| v[k]);
+        Ok(t.simulate(&s)?.channel(0))
+    };
+    let adjoint = |v: &[f64]| -> Result<Vec<f64>> {
+        let rev: Vec<f64> = v.iter().rev().copied().collect();
+        let mut out = apply(&rev)?;
+        out.reverse();
+        Ok(out)
+    };
+    // λ = 1 % of the operator's largest gain² (estimated by power iteration), so that only the
+    // frequencies T passes at least a tenth of its peak gain are recovered.
+    let mut v: Vec<f64> = (0..n).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
+    let mut gain2 = 1.0;
+    for _ in 0..20 {
+        let tv = adjoint(&apply(&v)?)?;
+        let norm = tv.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let vn = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm == 0.0 || vn == 0.0 {
+            break;
+        }
+        gain2 = norm / vn;
+        v = tv.iter().map(|x| x / norm).collect();
+    }
+    let lambda = 0.01 * gain2;
+    let normal = |x: &[f64]| -> Result<Vec<f64>> {
+        let ttx = adjoint(&apply(x)?)?;
+        Ok(ttx.iter().zip(x).map(|(a, b)| a + lambda * b).collect())
+    };
+    let b = adjoint(r)?;
+    let mut x = vec![0.0; n];
+    let mut res = b.clone();
+    let mut p = res.clone();
+    let mut rr: f64 = res.iter().map(|v| v * v).sum();
+    let stop = 1e-8 * rr.max(f64::MIN_POSITIVE);
+    for _ in 0..100 {
+        if rr <= stop {
+            break;
+        }
+        let ap = normal(&p)?;
+        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
+        if pap <= 0.0 {
+            break;
+        }
+        let alpha = rr / pap;
+        for k in 0..n {
+            x[k] += alpha * p[k];
+            res[k] -= alpha * ap[k];
+        }
+        let rr_new: f64 = res.iter().map(|v| v * v).sum();
+        let beta = rr_new / rr;
+        rr = rr_new;
+        for k in 0..n {
+            p[k] = res[k] + beta * p[k];
+        }
+    }
+    Ok(x)
+}

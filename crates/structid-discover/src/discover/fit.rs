@@ -1,0 +1,383 @@
+//! Identifying one hypothesis: records and stability checks, the quadratic dispersion, the
+//! initial state and simulation RMS of a location, and the fit with its estimates.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::validation::{ValidationSettings, validate};
+use structid_core::{
+    Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, Model,
+    PolynomialDispersion, Result, Signal,
+};
+use structid_io::{DispersionSpec, IoError};
+
+use crate::hypotheses::{Hypothesis, Location, Nominal};
+
+use super::{DiscoverSettings, HypothesisResult, MapCurve};
+
+/// The candidate signals for localisation: u, y, their rates, and the simulated linear output.
+pub fn candidate_signals(data: &Data, linear_output: &[f64], ts: f64) -> Vec<(String, Vec<f64>)> {
+    let rate = |s: &[f64]| -> Vec<f64> {
+        (0..s.len())
+            .map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / ts })
+            .collect()
+    };
+    let u = data.u().channel(0);
+    let y = data.y().channel(0);
+    vec![
+        ("u".to_string(), u.clone()),
+        ("y".to_string(), y.clone()),
+        ("du/dt".to_string(), rate(&u)),
+        ("dy/dt".to_string(), rate(&y)),
+        (
+            "G·u (simulated linear output)".to_string(),
+            linear_output.to_vec(),
+        ),
+    ]
+}
+
+pub(super) fn check_records(est: &Data, val: &Data) -> Result<()> {
+    for (what, d) in [("estimation", est), ("validation", val)] {
+        if d.u().channels() != 1 || d.y().channels() != 1 {
+            return Err(Error::DimensionMismatch {
+                what: format!("channels of the {what} record"),
+                expected: "one input u and one output y".into(),
+                found: format!(
+                    "{} input(s) and {} output(s)",
+                    d.u().channels(),
+                    d.y().channels()
+                ),
+            });
+        }
+        let u = d.u().channel(0);
+        let mean = u.iter().sum::<f64>() / u.len().max(1) as f64;
+        let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / u.len().max(1) as f64;
+        if var <= 1e-20 * mean.powi(2).max(f64::MIN_POSITIVE) {
+            return Err(Error::InvalidParameter {
+                name: format!("input of the {what} record"),
+                value: mean,
+                reason: "u is constant: a record without excitation cannot show what the \
+                         model is missing"
+                    .into(),
+            });
+        }
+        if d.u().len() < 100 {
+            return Err(Error::InvalidParameter {
+                name: format!("length of the {what} record"),
+                value: d.u().len() as f64,
+                reason: "discovery needs at least 100 samples per record".into(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A nominal model whose simulation from u diverges cannot be compared with data: its poles
+/// must lie inside the unit circle.
+pub(super) fn check_stable(nominal: &Nominal) -> Result<()> {
+    let a = &nominal.lft().matrices().a;
+    if a.nrows() == 0 {
+        return Ok(());
+    }
+    let radius = a
+        .complex_eigenvalues()
+        .iter()
+        .map(|l| l.norm())
+        .fold(0.0, f64::max);
+    if radius.is_nan() || radius >= 1.0 {
+        return Err(Error::InvalidStructure(format!(
+            "the nominal model is not stable (spectral radius {radius:.6} ≥ 1): its simulation \
+             from u diverges, so its gap to the data means nothing; re-estimate it (e.g. \
+             `structid linear --method oe`)"
+        )));
+    }
+    Ok(())
+}
+
+pub(super) fn minmax(v: &[f64]) -> (f64, f64) {
+    v.iter()
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        })
+}
+
+/// Weight λ of each normalised monomial of the trend in [`quadratic_dispersion_spec`].
+///
+/// The trend's monomials are normalised to the range; a weight of 10 keeps them nearly
+/// unpenalised relative to the kernel, so the kernel only carries what they cannot.
+pub const TREND_SCALE: f64 = 10.0;
+
+/// The quadratic dispersion of every hypothesis, as a model file writes it: a Gaussian-like
+/// Fourier kernel of width `sigma` plus, for `trend_degree` > 0, a polynomial trend of that
+/// degree weighted [`TREND_SCALE`], so that the map extrapolates.
+///
+/// It is the one definition of discovery's dispersion: the hypotheses are identified with
+/// what this spec builds, and the augmented model file carries it, so that `structid
+/// identify` on that file re-estimates the map as discovery did.
+///
+/// ```
+/// use structid_discover::discover::quadratic_dispersion_spec;
+/// let spec = quadratic_dispersion_spec(Some(0.3), 3);
+/// assert_eq!((spec.kind(), spec.sigma()), ("fourier", Some(0.3)));
+/// assert!(spec.build(None, None).unwrap().describe().contains("polynomial"));
+/// ```
+pub fn quadratic_dispersion_spec(sigma: Option<f64>, trend_degree: usize) -> DispersionSpec {
+    let kernel = DispersionSpec::Fourier {
+        sigma,
+        harmonics: None,
+        additive: false,
+    };
+    if trend_degree == 0 {
+        kernel
+    } else {
+        DispersionSpec::WithTrend {
+            kernel: Box::new(kernel),
+            degree: trend_degree,
+            scale: Some(TREND_SCALE),
+        }
+    }
+}
+
+/// The quadratic dispersion of every hypothesis at σ = `fraction`·range(z)
+/// ([`quadratic_dispersion_spec`]).
+pub(super) fn quadratic_dispersion(
+    range: f64,
+    settings: &DiscoverSettings,
+) -> Result<Arc<dyn Dispersion>> {
+    let sigma = settings.sigma_fraction * range.max(f64::MIN_POSITIVE);
+    quadratic_dispersion_spec(Some(sigma), settings.trend_degree)
+        .build(None, None)
+        .map_err(core_error)
+}
+
+/// A model-file error as a core one (building a dispersion fails only on invalid parameters,
+/// which are core errors).
+pub(crate) fn core_error(e: IoError) -> Error {
+    match e {
+        IoError::Core(e) => e,
+        other => Error::InvalidStructure(other.to_string()),
+    }
+}
+
+/// z of a hypothesis on a record (measured for the rate, computed otherwise).
+pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
+    match data.z() {
+        Some(z) => Ok(z.channel(0)),
+        None => Ok(h.model.lft().compute_z(data.u(), data.y())?.0.channel(0)),
+    }
+}
+
+/// How the initial state is treated at `location` (in identification, and in simulation):
+/// estimated, except for the sensor map and the rate, whose z (G·u, and Ψ's memory of the
+/// previous output) would depend on an unknown x₀ and no longer be measurable, so the record
+/// is taken to start at rest there.
+///
+/// ```
+/// use structid_core::InitialState;
+/// use structid_discover::discover::initial_state;
+/// use structid_discover::hypotheses::Location;
+/// assert_eq!(initial_state(Location::Input).1, InitialState::Estimate);
+/// assert_eq!(initial_state(Location::Output).1, InitialState::Zero);
+/// ```
+pub fn initial_state(location: Location) -> (InitialState, InitialState) {
+    match location {
+        Location::Output | Location::RateFeedback => (InitialState::Zero, InitialState::Zero),
+        _ => (InitialState::Estimate, InitialState::Estimate),
+    }
+}
+
+/// Simulation RMS of `model` (block at `location`) with `map` on `data` (infinite when the
+/// simulation fails).
+pub(super) fn simulation_rms(
+    model: &Model,
+    location: Location,
+    map: &dyn Interpolant,
+    data: &Data,
+    settle: usize,
+) -> f64 {
+    let settings = ValidationSettings::builder()
+        .initial_state(initial_state(location).1)
+        .settle(settle)
+        .build()
+        .unwrap_or_default();
+    match validate(model, &[map], data, &settings) {
+        Ok(v) if v.rms[0].is_finite() => v.rms[0],
+        _ => f64::INFINITY,
+    }
+}
+
+pub(super) fn even_indices(len: usize, max: usize) -> Vec<usize> {
+    let step = len.div_ceil(max).max(1);
+    (0..len).step_by(step).collect()
+}
+
+/// An identified hypothesis with the objects later steps need.
+pub(super) struct Fitted {
+    pub(super) result: HypothesisResult,
+    pub(super) hypothesis: Hypothesis,
+    pub(super) map: Box<dyn Interpolant>,
+    pub(super) z: Vec<f64>,
+    pub(super) w_hat: Vec<f64>,
+    pub(super) e_hat: Vec<f64>,
+    /// `quadratic` or `total variation`.
+    pub(super) estimator: &'static str,
+}
+
+/// The parts of a fit every estimator shares: simulation RMS on both records, the map on a
+/// grid, and the naming points.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn finish_fit(
+    location: Location,
+    estimator: &'static str,
+    h: Hypothesis,
+    id: structid_core::Identification,
+    beta: f64,
+    sigma: Option<f64>,
+    est_h: &Data,
+    val_h: &Data,
+    settings: &DiscoverSettings,
+    t0: Instant,
+) -> Result<Fitted> {
+    let block = &id.blocks[0];
+    let zk = block.z.channel(0);
+    let (lo, hi) = minmax(&zk);
+    // Outside the estimation range a map is an extrapolation (a kernel reverts to zero, a
+    // trend runs away): a hypothesis is ranked by the better of its map as estimated and the
+    // map held at its edge values there, so that the location, not the extrapolation, decides.
+    let held = |z: &[f64]| block.map.eval(&[z[0].clamp(lo, hi)]);
+    let validation_rms = simulation_rms(
+        &h.model,
+        location,
+        block.map.as_ref(),
+        val_h,
+        settings.settle,
+    )
+    .min(simulation_rms(
+        &h.model,
+        location,
+        &held,
+        val_h,
+        settings.settle,
+    ));
+    let estimation_rms = simulation_rms(
+        &h.model,
+        location,
+        block.map.as_ref(),
+        est_h,
+        settings.settle,
+    );
+    let grid: Vec<f64> = (0..101)
+        .map(|i| lo + (hi - lo) * i as f64 / 100.0)
+        .collect();
+    let grid_signal = Signal::from_fn(grid.len(), 1, |k, _| grid[k]);
+    let w_grid: Vec<f64> = grid.iter().map(|z| block.predict(&[*z])).collect();
+    let std = id.posterior_std(0, &grid_signal).ok().flatten();
+    let idx = even_indices(zk.len(), settings.naming_points);
+    let points = (
+        idx.iter().map(|&k| zk[k]).collect(),
+        idx.iter().map(|&k| block.w_hat[k]).collect(),
+    );
+    let result = HypothesisResult {
+        location,
+        dispersion: block.dispersion.clone(),
+        beta,
+        sigma,
+        noise_term: id.cost.noise,
+        dispersion_value: block.dispersion_value,
+        estimation_rms,
+        validation_rms,
+        curve: MapCurve {
+            z: grid,
+            w: w_grid,
+            std,
+        },
+        points,
+        seconds: t0.elapsed().as_secs_f64(),
+        failure: None,
+    };
+    let w_hat = block.w_hat.clone();
+    let e_hat = id.e_hat.channel(0);
+    let map = id
+        .blocks
+        .into_iter()
+        .next()
+        .map(|b| b.map)
+        .ok_or_else(|| Error::Numerical("identification returned no block".into()))?;
+    Ok(Fitted {
+        result,
+        hypothesis: h,
+        map,
+        z: zk,
+        w_hat,
+        e_hat,
+        estimator,
+    })
+}
+
+/// The quadratic estimate at `location`: Fourier kernel plus trend, β by marginal likelihood.
+pub(super) fn identify_hypothesis(
+    nominal: &Nominal,
+    location: Location,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Fitted> {
+    let t0 = Instant::now();
+    // A first hypothesis only to compute z; the dispersion's width depends on its range.
+    let probe = nominal.hypothesis(location, Arc::new(PolynomialDispersion::new(1)?))?;
+    let est_h = probe.data(est)?;
+    let z = z_of(&probe, &est_h)?;
+    let (lo, hi) = minmax(&z);
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return Err(Error::InvalidStructure(format!(
+            "z {} is constant on the estimation record",
+            nominal.describe(location)
+        )));
+    }
+    let dispersion = quadratic_dispersion(hi - lo, settings)?;
+    let h = nominal.hypothesis(location, dispersion)?;
+    // Marginal likelihood is defined for x₀ = 0: β and σ are chosen so, and the map is then
+    // identified at the chosen values with x₀ estimated.
+    let x0 = initial_state(location).0;
+    let identify = IdentifySettings::builder()
+        .initial_state(InitialState::Zero)
+        .posterior(true)
+        .build()?;
+    let selection = SelectionSettings::builder()
+        .criterion(Criterion::MarginalLikelihood)
+        .tune_sigma(settings.tune_sigma)
+        .build()?;
+    let sel = select(&h.model, &est_h, None, &identify, &selection)?;
+    let id = if x0 == InitialState::Zero {
+        sel.identification
+    } else {
+        structid_core::identify(
+            &sel.model,
+            &est_h,
+            &identify.with_initial_state(x0).with_beta(sel.beta)?,
+        )?
+    };
+    let h = Hypothesis {
+        model: sel.model,
+        ..h
+    };
+    let val_h = h.data(val)?;
+    // The width used: the tuned one, or the fixed fraction of the range.
+    let sigma = sel.sigma.or(Some(
+        settings.sigma_fraction * (hi - lo).max(f64::MIN_POSITIVE),
+    ));
+    finish_fit(
+        location,
+        "quadratic",
+        h,
+        id,
+        sel.beta,
+        sigma,
+        &est_h,
+        &val_h,
+        settings,
+        t0,
+    )
+}

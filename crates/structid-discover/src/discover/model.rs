@@ -1,0 +1,111 @@
+//! What discovery reports per hypothesis and about the effect: map curves, hypothesis
+//! results, the classification and the augmented model.
+
+use structid_core::{ExprMap, Interpolant, LookupTable, Model, Result};
+
+use crate::effects::EffectFit;
+use crate::gap::Gap;
+use crate::hypotheses::Location;
+
+/// A map estimate drawn for reports: values (and, when available, the ±2σ posterior band) on
+/// a grid over the range of z seen in the estimation record.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MapCurve {
+    /// Grid of z.
+    pub z: Vec<f64>,
+    /// N̂(z) on the grid.
+    pub w: Vec<f64>,
+    /// Posterior standard deviation on the grid, when the solver kept the posterior.
+    pub std: Option<Vec<f64>>,
+}
+
+/// One identified hypothesis.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HypothesisResult {
+    /// Where the block was put.
+    pub location: Location,
+    /// The dispersion used, e.g. `sum(fourier(sigma=0.1), polynomial(3))`.
+    pub dispersion: String,
+    /// β chosen.
+    pub beta: f64,
+    /// The kernel width used (tuned or fixed; `None` for total variation).
+    pub sigma: Option<f64>,
+    /// The cost terms at the estimate: μ = (1/L)·Σ|ê_k|² and D(z, ŵ).
+    pub noise_term: f64,
+    /// D(z, ŵ) at the estimate.
+    pub dispersion_value: f64,
+    /// Simulation RMS on the estimation record (x₀ estimated).
+    pub estimation_rms: f64,
+    /// Simulation RMS on the validation record (x₀ estimated); infinite when the simulation
+    /// diverged.
+    pub validation_rms: f64,
+    /// The estimated map.
+    pub curve: MapCurve,
+    /// Points (z_k, ŵ_k), at most [`DiscoverSettings::naming_points`], evenly spaced in time.
+    pub points: (Vec<f64>, Vec<f64>),
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Why the hypothesis could not be identified or simulated, if so.
+    pub failure: Option<String>,
+}
+
+/// What the missing effect was found to be.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum Classification {
+    /// A family of the library fits within the noise.
+    Named(EffectFit),
+    /// A static effect no family fits: the nonparametric map is kept.
+    Unnamed,
+    /// The effect depends on the direction of z: "dynamic: hysteresis or backlash suspected".
+    Dynamic,
+}
+
+impl Classification {
+    /// The name for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Classification::Named(fit) => fit.effect.name(),
+            Classification::Unnamed => "unnamed static effect".into(),
+            Classification::Dynamic => "dynamic: hysteresis or backlash suspected".into(),
+        }
+    }
+}
+
+/// The map the augmented model carries.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum AugmentedMap {
+    /// A named family: its expression in `z0` (model-file `truth` syntax).
+    Expression(String),
+    /// The nonparametric estimate sampled on a grid (piecewise linear, edge values held).
+    Table {
+        /// Breakpoints.
+        z: Vec<f64>,
+        /// Values.
+        w: Vec<f64>,
+    },
+}
+
+impl AugmentedMap {
+    /// The map as an [`Interpolant`] (what `structid simulate` and `validate` will use).
+    pub fn interpolant(&self) -> Result<Box<dyn Interpolant>> {
+        Ok(match self {
+            AugmentedMap::Expression(e) => Box::new(ExprMap::parse(e, 1)?),
+            AugmentedMap::Table { z, w } => Box::new(LookupTable::one_d(z.clone(), w.clone())?),
+        })
+    }
+}
+
+/// The nominal model with the found effect added.
+#[derive(Clone, Debug)]
+pub struct Augmented {
+    /// Where the block sits.
+    pub location: Location,
+    /// The augmented LFT with its block `N`.
+    pub model: Model,
+    /// Its map.
+    pub map: AugmentedMap,
+    /// The gap of the augmented model on the estimation record.
+    pub estimation_gap: Gap,
+    /// The gap of the augmented model on the validation record.
+    pub validation_gap: Gap,
+}

@@ -1,0 +1,277 @@
+//! Settings of [`discover`](super::discover) and their builder.
+
+use structid_core::{Error, Result};
+
+use crate::effects::Effect;
+use crate::gap::GapSettings;
+use crate::hypotheses::Location;
+
+/// Settings of [`discover`]; build them with [`DiscoverSettings::builder`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiscoverSettings {
+    pub(super) locations: Option<Vec<Location>>,
+    pub(super) library: Vec<Effect>,
+    pub(super) gap: GapSettings,
+    pub(super) sigma_fraction: f64,
+    pub(super) trend_degree: usize,
+    pub(super) tune_sigma: bool,
+    pub(super) total_variation: bool,
+    pub(super) naming_tolerance: f64,
+    pub(super) naming_points: usize,
+    pub(super) hysteresis_threshold: f64,
+    pub(super) table_points: usize,
+    pub(super) settle: usize,
+}
+
+impl Default for DiscoverSettings {
+    /// Every location of the nominal model, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
+    /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, naming
+    /// tolerance 1.15, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
+    /// settling samples.
+    fn default() -> Self {
+        Self {
+            locations: None,
+            library: Effect::LIBRARY.to_vec(),
+            gap: GapSettings::default(),
+            sigma_fraction: 0.1,
+            trend_degree: 3,
+            tune_sigma: false,
+            total_variation: true,
+            naming_tolerance: 1.15,
+            naming_points: 3000,
+            hysteresis_threshold: 0.1,
+            table_points: 201,
+            settle: 0,
+        }
+    }
+}
+
+impl DiscoverSettings {
+    /// A builder starting from the defaults.
+    ///
+    /// ```
+    /// use structid_discover::discover::DiscoverSettings;
+    /// use structid_discover::hypotheses::Location;
+    /// let s = DiscoverSettings::builder()
+    ///     .locations(vec![Location::Input, Location::OutputFeedback])
+    ///     .total_variation(false)
+    ///     .build()
+    ///     .unwrap();
+    /// assert_eq!(s.locations().unwrap().len(), 2);
+    /// assert!(DiscoverSettings::builder().sigma_fraction(0.0).build().is_err());
+    /// ```
+    pub fn builder() -> DiscoverSettingsBuilder {
+        DiscoverSettingsBuilder {
+            inner: Self::default(),
+        }
+    }
+
+    /// The candidate locations (`None`: every location of the nominal model).
+    pub fn locations(&self) -> Option<&[Location]> {
+        self.locations.as_deref()
+    }
+
+    /// The families tried when naming.
+    pub fn library(&self) -> &[Effect] {
+        &self.library
+    }
+
+    /// Settings of the gap analysis.
+    pub fn gap(&self) -> &GapSettings {
+        &self.gap
+    }
+
+    /// The Fourier kernel's starting width as a fraction of the range of z.
+    pub fn sigma_fraction(&self) -> f64 {
+        self.sigma_fraction
+    }
+
+    /// Degree of the polynomial trend added to the kernel (0: none).
+    pub fn trend_degree(&self) -> usize {
+        self.trend_degree
+    }
+
+    /// Whether σ is tuned with β by marginal likelihood.
+    pub fn tune_sigma(&self) -> bool {
+        self.tune_sigma
+    }
+
+    /// Whether total variation is tried when the estimate looks non-smooth.
+    pub fn total_variation(&self) -> bool {
+        self.total_variation
+    }
+
+    /// A family is named when the validation RMS with its parametric map is at most this
+    /// factor times that with the nonparametric map (or within 1.5 × the noise level).
+    pub fn naming_tolerance(&self) -> f64 {
+        self.naming_tolerance
+    }
+
+    /// Largest number of points (z_k, ŵ_k) the families are fitted to (evenly spaced in time).
+    pub fn naming_points(&self) -> usize {
+        self.naming_points
+    }
+
+    /// Share of the deconvolved residual energy that the direction of z must explain for the
+    /// effect to be called dynamic.
+    pub fn hysteresis_threshold(&self) -> f64 {
+        self.hysteresis_threshold
+    }
+
+    /// Number of breakpoints of the table written for an unnamed map.
+    pub fn table_points(&self) -> usize {
+        self.table_points
+    }
+
+    /// Samples at the start of each record left out of the simulation RMS that ranks the
+    /// hypotheses, refines and checks the named families (the gaps before and after are over
+    /// the whole records).
+    pub fn settle(&self) -> usize {
+        self.settle
+    }
+}
+
+/// Builder of [`DiscoverSettings`].
+#[derive(Clone, Debug)]
+pub struct DiscoverSettingsBuilder {
+    inner: DiscoverSettings,
+}
+
+impl DiscoverSettingsBuilder {
+    /// The candidate locations (default: the four built-in ones and those the nominal model
+    /// declares).
+    pub fn locations(mut self, locations: Vec<Location>) -> Self {
+        self.inner.locations = Some(locations);
+        self
+    }
+
+    /// The families tried when naming (default: [`Effect::LIBRARY`]).
+    pub fn library(mut self, library: Vec<Effect>) -> Self {
+        self.inner.library = library;
+        self
+    }
+
+    /// Settings of the gap analysis.
+    pub fn gap(mut self, gap: GapSettings) -> Self {
+        self.inner.gap = gap;
+        self
+    }
+
+    /// The kernel's starting width as a fraction of the range of z (default 0.1).
+    pub fn sigma_fraction(mut self, f: f64) -> Self {
+        self.inner.sigma_fraction = f;
+        self
+    }
+
+    /// Degree of the polynomial trend (default 3; 0 for none).
+    pub fn trend_degree(mut self, d: usize) -> Self {
+        self.inner.trend_degree = d;
+        self
+    }
+
+    /// Whether σ is tuned by marginal likelihood too (default off: the feedback hypotheses
+    /// that do not hold drive σ, and with it the number of features, to its limit).
+    pub fn tune_sigma(mut self, on: bool) -> Self {
+        self.inner.tune_sigma = on;
+        self
+    }
+
+    /// Whether total variation is tried for non-smooth estimates (default on).
+    pub fn total_variation(mut self, on: bool) -> Self {
+        self.inner.total_variation = on;
+        self
+    }
+
+    /// Naming tolerance on the validation RMS (default 1.15).
+    pub fn naming_tolerance(mut self, t: f64) -> Self {
+        self.inner.naming_tolerance = t;
+        self
+    }
+
+    /// Largest number of naming points (default 3000).
+    pub fn naming_points(mut self, n: usize) -> Self {
+        self.inner.naming_points = n;
+        self
+    }
+
+    /// The hysteresis threshold (default 0.1).
+    pub fn hysteresis_threshold(mut self, t: f64) -> Self {
+        self.inner.hysteresis_threshold = t;
+        self
+    }
+
+    /// Breakpoints of a written table (default 201).
+    pub fn table_points(mut self, n: usize) -> Self {
+        self.inner.table_points = n;
+        self
+    }
+
+    /// Settling samples left out of the ranking and naming RMS (default 0).
+    pub fn settle(mut self, n: usize) -> Self {
+        self.inner.settle = n;
+        self
+    }
+
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<DiscoverSettings> {
+        let s = self.inner;
+        let bad = |name: &str, value: f64, reason: &str| Error::InvalidParameter {
+            name: name.into(),
+            value,
+            reason: reason.into(),
+        };
+        if s.locations.as_ref().is_some_and(Vec::is_empty) {
+            return Err(Error::InvalidStructure(
+                "discovery needs at least one candidate location".into(),
+            ));
+        }
+        if s.library.is_empty() {
+            return Err(Error::InvalidStructure(
+                "discovery needs at least one effect family to name".into(),
+            ));
+        }
+        if !(s.sigma_fraction.is_finite() && s.sigma_fraction > 0.0) {
+            return Err(bad(
+                "sigma_fraction",
+                s.sigma_fraction,
+                "must be a positive fraction of the range of z",
+            ));
+        }
+        if !(s.naming_tolerance.is_finite() && s.naming_tolerance >= 1.0) {
+            return Err(bad(
+                "naming_tolerance",
+                s.naming_tolerance,
+                "must be at least 1 (a ratio of validation RMS values)",
+            ));
+        }
+        if s.naming_points < 20 {
+            return Err(bad(
+                "naming_points",
+                s.naming_points as f64,
+                "must be at least 20",
+            ));
+        }
+        if !(s.hysteresis_threshold > 0.0 && s.hysteresis_threshold < 1.0) {
+            return Err(bad(
+                "hysteresis_threshold",
+                s.hysteresis_threshold,
+                "must be a share between 0 and 1",
+            ));
+        }
+        if s.table_points < 2 {
+            return Err(bad(
+                "table_points",
+                s.table_points as f64,
+                "must be at least 2",
+            ));
+        }
+        if s.trend_degree > 64 {
+            return Err(bad(
+                "trend_degree",
+                s.trend_degree as f64,
+                "must be at most 64",
+            ));
+        }
+        Ok(s)
+    }
+}
