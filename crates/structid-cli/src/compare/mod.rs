@@ -16,6 +16,7 @@
 pub mod cases;
 pub mod config;
 pub mod figures;
+pub mod merge;
 pub mod results;
 pub mod run;
 
@@ -76,7 +77,7 @@ fn parse_shard(s: &str) -> Result<Shard, String> {
 /// Runs `structid compare` or `structid compare merge`.
 pub fn run(a: CompareArgs) -> Result<(), CliError> {
     match a.command {
-        Some(CompareCommand::Merge(m)) => results::merge(&m.dirs, &m.out),
+        Some(CompareCommand::Merge(m)) => merge::merge(&m.dirs, &m.out),
         None => {
             let (Some(config), Some(out)) = (a.config, a.out) else {
                 return Err(CliError::input(

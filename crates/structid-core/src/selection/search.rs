@@ -1,0 +1,348 @@
+//! The search over β (and the common width factor of σ): bracketing golden sections on log₁₀.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::dispersion::{Dispersion, Penalty};
+use crate::error::{Error, Result, positive_finite};
+use crate::identify::{IdentifySettings, InitialState, SolverChoice, identify_problem};
+use crate::model::{Data, Model};
+use crate::problem::Problem;
+use crate::solver::choice::{SolverReason, feature_path};
+
+use super::cross_validation::FoldScore;
+use super::dense::DenseScore;
+use super::features::{FeatureRef, FeatureScore};
+use super::report::{BetaSelection, Selection, Trial};
+use super::score::BetaScore;
+use super::settings::{Criterion, SelectionSettings};
+use super::validation::ValidationScore;
+
+/// Chooses β (and, if asked, σ) for `model` on `data` by `selection`'s criterion, then
+/// identifies with the chosen values; see the [module documentation](super). `settings` gives
+/// the solver, the initial-state treatment and, when β is not tuned, β. `validation` is
+/// required by [`Criterion::Validation`] and ignored otherwise.
+pub fn select(
+    model: &Model,
+    data: &Data,
+    validation: Option<&Data>,
+    settings: &IdentifySettings,
+    selection: &SelectionSettings,
+) -> Result<Selection> {
+    let t0 = Instant::now();
+    let criterion = selection.criterion;
+    let validation = match (criterion, validation) {
+        (Criterion::Validation, None) => {
+            return Err(Error::InvalidStructure(
+                "validation selection needs a validation record".into(),
+            ));
+        }
+        (Criterion::Validation, Some(v)) => {
+            v.check_against(model.lft())?;
+            Some(v)
+        }
+        _ => None,
+    };
+    if model.blocks().is_empty() {
+        return Err(Error::InvalidStructure(
+            "the model has no nonlinear block: there is nothing to select β for".into(),
+        ));
+    }
+    let widths0: Vec<Option<f64>> = model
+        .blocks()
+        .iter()
+        .map(|b| b.dispersion.width())
+        .collect();
+    if selection.tune_sigma && widths0.iter().all(Option::is_none) {
+        return Err(Error::Unsupported(
+            "σ cannot be selected: no block's dispersion has a width (σ)".into(),
+        ));
+    }
+    let widths_at = |log_factor: f64| -> Vec<Option<f64>> {
+        widths0
+            .iter()
+            .map(|w| w.map(|w| w * 10f64.powf(log_factor)))
+            .collect()
+    };
+    let model_at = |widths: &[Option<f64>]| -> Result<Model> {
+        let mut disp: Vec<Arc<dyn Dispersion>> = Vec::with_capacity(widths.len());
+        for (b, w) in model.blocks().iter().zip(widths) {
+            disp.push(match w.and_then(|w| b.dispersion.with_width(w)) {
+                Some(d) => d?,
+                None => Arc::clone(&b.dispersion),
+            });
+        }
+        let mut i = 0;
+        Ok(model.with_dispersions(|_| {
+            i += 1;
+            Arc::clone(&disp[i - 1])
+        }))
+    };
+    let problem_of = |m: &Model| -> Result<Problem> {
+        match settings.initial_state() {
+            InitialState::Zero => Problem::from_model(m, data),
+            InitialState::Estimate => Problem::from_model_with_initial_state(m, data),
+        }
+    };
+    let first_width = |w: &[Option<f64>]| w.iter().flatten().next().copied();
+
+    let mut curve = Vec::new();
+    let method: String;
+    let mut features: Option<FeatureScore> = None;
+    // The best β (and its value and s²) for the given widths.
+    let mut best_beta = |widths: &[Option<f64>],
+                         curve: &mut Vec<Trial>|
+     -> Result<(f64, f64, Option<f64>, String)> {
+        let m = model_at(widths)?;
+        let problem = problem_of(&m)?;
+        let sigma = if selection.tune_sigma {
+            first_width(widths)
+        } else {
+            None
+        };
+        let mut score: Box<dyn BetaScore + '_> = match criterion {
+            Criterion::MarginalLikelihood | Criterion::Gcv => {
+                let penalties = crate::solver::penalties(&problem)?;
+                if let Some(b) = problem
+                    .blocks()
+                    .iter()
+                    .zip(&penalties)
+                    .find_map(|(b, p)| (!matches!(p, Penalty::Quadratic(_))).then_some(b))
+                {
+                    return Err(Error::Unsupported(format!(
+                        "{} needs quadratic dispersions (a Gaussian-process model), but block `{}` has {}; \
+                             choose β by cross-validation or validation error instead",
+                        criterion.describe(),
+                        b.name,
+                        b.dispersion.describe()
+                    )));
+                }
+                if feature_path(&problem, settings)? {
+                    let f = match features.take().and_then(|f| f.reweighted(&problem)) {
+                        Some(f) => f,
+                        None => FeatureScore::new(&problem)?,
+                    };
+                    features = Some(f);
+                    Box::new(FeatureRef {
+                        score: features.as_mut().expect("just set"),
+                        criterion,
+                    })
+                } else {
+                    Box::new(DenseScore::new(&problem, criterion)?)
+                }
+            }
+            // the trial fits need no posterior: keeping one would cost memory (and sway the
+            // automatic solver choice) for nothing
+            Criterion::CrossValidation { folds } => Box::new(FoldScore::new(
+                problem,
+                settings.with_posterior(false),
+                folds,
+            )?),
+            Criterion::Validation => Box::new(ValidationScore {
+                problem,
+                model: m,
+                validation: validation.expect("checked above"),
+                settings: settings.with_posterior(false),
+            }),
+        };
+        // s² of every trial, so the choice needs no further evaluation (a CV trial is K fits)
+        let mut noise = Vec::new();
+        let mut eval = |lg: f64| -> Result<f64> {
+            let beta = 10f64.powf(lg);
+            let (value, s2) = score.score(beta)?;
+            curve.push(Trial { beta, sigma, value });
+            noise.push((lg, s2));
+            Ok(value)
+        };
+        let (lg, value) = if selection.tune_beta {
+            let (lo, hi) = selection.beta_bounds;
+            minimise_log10(
+                &mut eval,
+                selection.beta_start.log10(),
+                (lo.log10(), hi.log10()),
+                selection.tolerance,
+            )?
+        } else {
+            let lg = settings.beta().log10();
+            (lg, eval(lg)?)
+        };
+        let beta = 10f64.powf(lg);
+        let s2 = noise.iter().find(|t| t.0 == lg).and_then(|t| t.1);
+        Ok((beta, value, s2, score.method()))
+    };
+
+    let (widths, beta, noise_variance) = if selection.tune_sigma {
+        let d = selection.sigma_decades;
+        let mut best: Option<(f64, f64, Option<f64>, f64, String)> = None;
+        let mut outer = |lf: f64| -> Result<f64> {
+            let (beta, value, s2, how) = best_beta(&widths_at(lf), &mut curve)?;
+            if best.as_ref().is_none_or(|b| value < b.1) {
+                best = Some((beta, value, s2, lf, how));
+            }
+            Ok(value)
+        };
+        minimise_log10(&mut outer, 0.0, (-d, d), selection.tolerance.max(0.01))?;
+        let (beta, _, s2, lf, how) = best.expect("at least one trial");
+        method = how;
+        (widths_at(lf), beta, s2)
+    } else {
+        let (beta, _, s2, how) = best_beta(&widths0, &mut curve)?;
+        method = how;
+        (widths0.clone(), beta, s2)
+    };
+    let chosen = model_at(&widths)?;
+    let problem = problem_of(&chosen)?;
+    // After a feature-space selection the automatic solver choice follows it: the feature
+    // solver costs O(L·m²) where the exact one would cost O(L³) for the same kernel.
+    let mut final_settings = settings.with_beta(beta)?;
+    if features.is_some() && settings.solver() == SolverChoice::Auto {
+        final_settings = final_settings.with_solver(SolverChoice::Features);
+    }
+    let mut identification = identify_problem(&problem, &final_settings)?;
+    if features.is_some() && settings.solver() == SolverChoice::Auto {
+        identification.diagnostics.solver_reason = SolverReason::FeatureSpaceSelection;
+    }
+    Ok(Selection {
+        beta,
+        sigma: if selection.tune_sigma {
+            first_width(&widths)
+        } else {
+            None
+        },
+        widths,
+        criterion,
+        method,
+        curve,
+        noise_variance,
+        seconds: t0.elapsed().as_secs_f64(),
+        identification,
+        model: chosen,
+    })
+}
+
+/// Minimises `f` over x = log₁₀(·) in `bounds`: walks downhill by decades from `start` until
+/// the value rises (or a bound is reached), then narrows the bracket by golden sections to
+/// `tol`. Returns the best point evaluated and its value.
+fn minimise_log10(
+    f: &mut dyn FnMut(f64) -> Result<f64>,
+    start: f64,
+    bounds: (f64, f64),
+    tol: f64,
+) -> Result<(f64, f64)> {
+    let (lo_lim, hi_lim) = bounds;
+    let mut best = (f64::NAN, f64::INFINITY);
+    let mut eval = |x: f64| -> Result<f64> {
+        let v = f(x)?;
+        if v < best.1 {
+            best = (x, v);
+        }
+        Ok(v)
+    };
+    let step = 1.0f64.min(hi_lim - lo_lim);
+    let mut x1 = start.clamp(lo_lim, hi_lim);
+    let mut f1 = eval(x1)?;
+    let (mut x0, mut x2);
+    let right = (x1 + step).min(hi_lim);
+    let fr = if right > x1 {
+        eval(right)?
+    } else {
+        f64::INFINITY
+    };
+    if fr < f1 {
+        x0 = x1;
+        x1 = right;
+        f1 = fr;
+        loop {
+            x2 = (x1 + step).min(hi_lim);
+            if x2 <= x1 {
+                break;
+            }
+            let f2 = eval(x2)?;
+            if f2 >= f1 {
+                break;
+            }
+            x0 = x1;
+            x1 = x2;
+            f1 = f2;
+        }
+    } else {
+        x2 = right.max(x1);
+        loop {
+            x0 = (x1 - step).max(lo_lim);
+            if x0 >= x1 {
+                break;
+            }
+            let f0 = eval(x0)?;
+            if f0 >= f1 {
+                break;
+            }
+            x2 = x1;
+            x1 = x0;
+            f1 = f0;
+        }
+    }
+    let _ = f1;
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = (x0.min(x2), x0.max(x2));
+    if b - a > tol {
+        let mut c = b - g * (b - a);
+        let mut d = a + g * (b - a);
+        let (mut fc, mut fd) = (eval(c)?, eval(d)?);
+        while b - a > tol {
+            if fc < fd {
+                b = d;
+                d = c;
+                fd = fc;
+                c = b - g * (b - a);
+                fc = eval(c)?;
+            } else {
+                a = c;
+                c = d;
+                fc = fd;
+                d = a + g * (b - a);
+                fd = eval(d)?;
+            }
+        }
+    }
+    Ok(best)
+}
+
+/// Chooses β for a problem in operator form whose blocks all have quadratic dispersions, by
+/// marginal likelihood or GCV on the dense matrices (see the [module documentation](super)),
+/// starting the search at `start` within [1e-10, 1e4].
+///
+/// ```
+/// use std::sync::Arc;
+/// use structid_core::hyperparameters::{select_beta, Criterion};
+/// use structid_core::{paper, KernelDispersion, Problem};
+/// let exp = paper::spray(300, 1.0, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 3).unwrap();
+/// let problem = Problem::from_model(&exp.model, &exp.data).unwrap();
+/// let sel = select_beta(&problem, Criterion::MarginalLikelihood, 0.01).unwrap();
+/// assert!(sel.beta > 0.0 && sel.curve.len() >= 5);
+/// ```
+pub fn select_beta(problem: &Problem, criterion: Criterion, start: f64) -> Result<BetaSelection> {
+    positive_finite("start of the β search", start)?;
+    if !matches!(criterion, Criterion::MarginalLikelihood | Criterion::Gcv) {
+        return Err(Error::Unsupported(
+            "select_beta takes marginal likelihood or GCV; use `select` for the refitting criteria"
+                .into(),
+        ));
+    }
+    let mut score = DenseScore::new(problem, criterion)?;
+    let mut curve = Vec::new();
+    let mut eval = |lg: f64| -> Result<f64> {
+        let beta = 10f64.powf(lg);
+        let (v, _) = score.score(beta)?;
+        curve.push((beta, v));
+        Ok(v)
+    };
+    let (lg, _) = minimise_log10(&mut eval, start.log10(), (-10.0, 4.0), 0.02)?;
+    let beta = 10f64.powf(lg);
+    let (_, s2) = score.score(beta)?;
+    Ok(BetaSelection {
+        beta,
+        criterion,
+        curve,
+        noise_variance: s2.unwrap_or(f64::NAN),
+    })
+}
