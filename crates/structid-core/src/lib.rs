@@ -77,7 +77,7 @@
 //! |---|---|
 //! | [`model`] | the LFT ([`model::lft`]), measurability, simulation with maps in the loop, where blocks sit ([`model::structure`]: [`Site`], [`Structure`]), the `Model` and its `Data`, interpolants, known maps (expressions, tables) |
 //! | [`dispersion`] | the `Dispersion`/`Penalty` vocabulary and every family: kernels, Fourier features, low rank, polynomial, sums, total variation with its graph and scattered interpolants ([`dispersion::neighbours`]) |
-//! | [`identify`] | the executor, its settings and results, the operator-form problem, posterior bands |
+//! | [`identify`](mod@identify) | the executor, its settings and results, the operator-form problem, posterior bands |
 //! | [`solver`] | exact, features, conic (Clarabel), ADMM with its proximal operators |
 //! | [`selection`] | β and σ by marginal likelihood, GCV, cross-validation or a validation record |
 //! | [`validation`] | simulation, one-step prediction, residual tests, metrics |

@@ -1,6 +1,6 @@
 //! Serialisable forms of estimated maps and of the kernels and feature maps they are built on.
 //!
-//! An estimated map is an [`Interpolant`] (a trait object); [`crate::Interpolant::stored`] turns the
+//! An estimated map is an [`Interpolant`](crate::Interpolant) (a trait object); [`crate::Interpolant::stored`] turns the
 //! maps of this crate into a [`StoredMap`], plain data that serde writes and reads, and
 //! `StoredMap::interpolant` (in [`crate::estimate`]) turns it back into a map that evaluates to the same floating-point
 //! numbers: the stored form holds every number the evaluation uses (centres, coefficients,

@@ -116,7 +116,7 @@ impl std::fmt::Debug for BlockEstimate {
     }
 }
 
-/// The result of [`identify()`].
+/// The result of [`identify()`](crate::identify()).
 #[derive(Debug)]
 pub struct Identification {
     /// ŵ (L × n_w), channel c from the block with `output == c`.
@@ -134,14 +134,14 @@ pub struct Identification {
     /// Diagnostics.
     pub diagnostics: Diagnostics,
     /// The posterior of the maps, kept by the exact and feature solvers when
-    /// [`IdentifySettingsBuilder::posterior`] is on (`None` otherwise, and always for the
+    /// [`IdentifySettingsBuilder::posterior`](crate::IdentifySettingsBuilder::posterior) is on (`None` otherwise, and always for the
     /// iterative solvers); see [`Identification::posterior_std`].
     pub posterior: Option<Posterior>,
 }
 
 impl Identification {
     /// The identification if its solver converged ([`SolveStatus::is_converged`]), else
-    /// [`Error::NotConverged`] with the solver's report: for callers that cannot use an
+    /// [`Error::NotConverged`](crate::Error::NotConverged) with the solver's report: for callers that cannot use an
     /// unconverged iterate.
     ///
     /// ```
@@ -177,7 +177,7 @@ impl Identification {
         self.blocks.iter().find(|b| b.name == name)
     }
 
-    /// The estimated maps, in block order, ready for [`Model::simulate`].
+    /// The estimated maps, in block order, ready for [`Model::simulate`](crate::Model::simulate).
     pub fn maps(&self) -> Vec<&dyn Interpolant> {
         self.blocks.iter().map(|b| b.map.as_ref()).collect()
     }
@@ -187,13 +187,13 @@ impl Identification {
     /// channels as the block has inputs): N̂ ± 1.96·std is the 95 % band. See
     /// [`crate::posterior`] for the formula, the noise level ŝ² it uses and the cost.
     ///
-    /// `Ok(None)` when no posterior was kept: [`IdentifySettingsBuilder::posterior`] off, an
+    /// `Ok(None)` when no posterior was kept: [`IdentifySettingsBuilder::posterior`](crate::IdentifySettingsBuilder::posterior) off, an
     /// iterative solver (total variation, Clarabel, ADMM), or a user-defined penalty that
     /// cannot evaluate its kernel at new points.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] when `block` is out of range, [`Error::DimensionMismatch`]
-    /// when `points` has the wrong number of channels, [`Error::NonFiniteData`] for NaN or
+    /// [`Error::InvalidParameter`](crate::Error::InvalidParameter) when `block` is out of range, [`Error::DimensionMismatch`](crate::Error::DimensionMismatch)
+    /// when `points` has the wrong number of channels, [`Error::NonFiniteData`](crate::Error::NonFiniteData) for NaN or
     /// infinite coordinates (checked whether or not a posterior was kept).
     ///
     /// ```

@@ -39,7 +39,7 @@ impl SolverChoice {
     }
 }
 
-/// Settings of [`identify()`]; build them with [`IdentifySettings::builder`].
+/// Settings of [`identify()`](crate::identify()); build them with [`IdentifySettings::builder`].
 ///
 /// ```
 /// use structid_core::IdentifySettings;
@@ -159,7 +159,7 @@ impl IdentifySettings {
     }
 
     /// Whether the exact and feature solvers keep what the posterior bands need
-    /// ([`Identification::posterior`]).
+    /// ([`Identification::posterior`](crate::Identification::posterior)).
     pub fn posterior(&self) -> bool {
         self.posterior
     }
@@ -217,8 +217,8 @@ impl IdentifySettingsBuilder {
         self
     }
     /// Keep the posterior of the maps (default `false`): the exact and feature solvers then
-    /// store their Cholesky factor and the noise level in [`Identification::posterior`], and
-    /// [`Identification::posterior_std`] gives pointwise standard deviations (uncertainty
+    /// store their Cholesky factor and the noise level in [`Identification::posterior`](crate::Identification::posterior), and
+    /// [`Identification::posterior_std`](crate::Identification::posterior_std) gives pointwise standard deviations (uncertainty
     /// bands; see [`crate::posterior`]). The exact solver's factor is n×n f64 (n = L·n_y),
     /// kept as long as the identification; its memory estimate includes it.
     ///

@@ -2,7 +2,7 @@
 //!
 //! The rule ([`choose_solver`]) is the one place that decides, for [`SolverChoice::Auto`],
 //! between the four solvers; [`crate::identify_problem`] runs its choice and
-//! [`crate::hyperparameters::select`] uses [`feature_path`] to decide whether β is selected in
+//! [`crate::hyperparameters::select`] uses `feature_path` to decide whether β is selected in
 //! feature space. In order:
 //!
 //! 1. quadratic and total-variation blocks together → Clarabel (the only solver for both);
