@@ -18,6 +18,25 @@ pub struct MapBinding<'a> {
     pub map: &'a dyn Interpolant,
 }
 
+impl<'a> MapBinding<'a> {
+    /// One binding per block place (z channels read, w channel written) and map, in order:
+    /// how a model's blocks and their maps are put in the loop.
+    pub fn zip(
+        places: impl IntoIterator<Item = (&'a [usize], usize)>,
+        maps: &[&'a dyn Interpolant],
+    ) -> Vec<Self> {
+        places
+            .into_iter()
+            .zip(maps)
+            .map(|((inputs, output), map)| MapBinding {
+                inputs,
+                output,
+                map: *map,
+            })
+            .collect()
+    }
+}
+
 /// Everything a simulation produced.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Simulation {
@@ -212,16 +231,11 @@ impl Model {
                 found: maps.len().to_string(),
             });
         }
-        let bindings: Vec<MapBinding<'_>> = self
+        let places = self
             .blocks()
             .iter()
-            .zip(maps)
-            .map(|(b, m)| MapBinding {
-                inputs: &b.inputs,
-                output: b.output,
-                map: *m,
-            })
-            .collect();
-        self.lft().simulate(&bindings, u, e, x0)
+            .map(|b| (b.inputs.as_slice(), b.output));
+        self.lft()
+            .simulate(&MapBinding::zip(places, maps), u, e, x0)
     }
 }

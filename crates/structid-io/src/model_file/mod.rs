@@ -521,17 +521,8 @@ impl ModelFile {
         }
         let lft = self.model_lft()?;
         let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), lft.dims().e, noise_std, seed));
-        let bindings: Vec<MapBinding<'_>> = self
-            .blocks
-            .iter()
-            .zip(maps)
-            .map(|(b, m)| MapBinding {
-                inputs: &b.inputs,
-                output: b.output,
-                map: *m,
-            })
-            .collect();
-        Ok(lft.simulate(&bindings, u, e.as_ref(), None)?)
+        let places = self.blocks.iter().map(|b| (b.inputs.as_slice(), b.output));
+        Ok(lft.simulate(&MapBinding::zip(places, maps), u, e.as_ref(), None)?)
     }
 
     /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a
