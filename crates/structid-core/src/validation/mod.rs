@@ -48,6 +48,9 @@
 
 pub mod metrics;
 pub mod residual_tests;
+pub mod windows;
+
+pub use windows::{ScoredSimulation, Scoring, Windows, simulate_scored};
 
 use structid_lti::Signal;
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
@@ -55,7 +58,7 @@ use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 use crate::error::{Error, Result};
 use crate::initial_state::{InitialState, estimate_initial_state};
 use crate::interpolant::Interpolant;
-use crate::metrics::{fit_percent, rms, rms_difference};
+use crate::metrics::rms;
 use crate::model::{Data, Model};
 use crate::problem::Problem;
 use crate::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
@@ -81,6 +84,7 @@ pub struct ValidationSettings {
     initial_state: InitialState,
     max_lag: usize,
     settle: usize,
+    scoring: Scoring,
 }
 
 impl Default for ValidationSettings {
@@ -90,6 +94,7 @@ impl Default for ValidationSettings {
             initial_state: InitialState::Zero,
             max_lag: 25,
             settle: 0,
+            scoring: Scoring::Free,
         }
     }
 }
@@ -117,6 +122,12 @@ impl ValidationSettings {
     pub fn settle(&self) -> usize {
         self.settle
     }
+
+    /// How the simulation is scored: one free run (the default) or windows, each from a state
+    /// fitted to its first samples ([`windows`]; for plants with integrators).
+    pub fn scoring(&self) -> Scoring {
+        self.scoring
+    }
 }
 
 /// Builder for [`ValidationSettings`]; [`ValidationSettingsBuilder::build`] validates.
@@ -142,6 +153,12 @@ impl ValidationSettingsBuilder {
     /// record length).
     pub fn settle(mut self, samples: usize) -> Self {
         self.inner.settle = samples;
+        self
+    }
+
+    /// Free-run (default) or windowed scoring of the simulation (see [`windows`]).
+    pub fn scoring(mut self, scoring: Scoring) -> Self {
+        self.inner.scoring = scoring;
         self
     }
 
@@ -185,6 +202,10 @@ pub struct ValidationReport {
     pub initial_state: Option<Vec<f64>>,
     /// Number of samples L.
     pub samples: usize,
+    /// How the simulation was scored.
+    pub scoring: Scoring,
+    /// The sample ranges the simulation RMS and fit are over.
+    pub scored: Vec<std::ops::Range<usize>>,
 }
 
 impl ValidationReport {
@@ -267,7 +288,7 @@ pub fn validate(
         whitener,
         dynamic_noise,
         x0,
-        ..
+        w_hat,
     } = measured_residual(model, maps, data, settings.initial_state)?;
     let ny = lft.dims().y;
 
@@ -289,16 +310,26 @@ pub fn validate(
     }
     let prediction_error = Signal::new(ny, eps)?;
 
-    let sim = model.simulate(maps, data.u(), None, x0.as_deref())?;
-    let simulated = sim.y;
-    if let Some(i) = simulated.as_slice().iter().position(|x| !x.is_finite()) {
-        return Err(Error::Numerical(format!(
-            "the simulation with the maps in the loop diverged (output {} is not finite at sample {})",
-            i % ny,
-            i / ny
-        )));
-    }
-
+    // The GLS x̂₀ fits y; the directions of x₀ that y does not see with the maps' outputs
+    // fixed (a rate's memory of the previous output) are fitted to the measured z, so that the
+    // simulation does not start with a spurious jump.
+    let x0 = match x0 {
+        Some(x) if !x.is_empty() => {
+            let z = windows::measured_z(model, data)?;
+            let head = 0..len.min(x.len().max(1) * 50).max(1);
+            Some(windows::window_state(model, data, &z, &w_hat, head, Some(&x))?)
+        }
+        other => other,
+    };
+    let scored = simulate_scored(
+        model,
+        maps,
+        data,
+        settings.scoring,
+        x0.as_deref(),
+        settings.settle,
+    )?;
+    let simulated = scored.simulated.clone();
     let mut rms_sim = Vec::with_capacity(ny);
     let mut fit = Vec::with_capacity(ny);
     let mut prediction_rms = Vec::with_capacity(ny);
@@ -307,15 +338,10 @@ pub fn validate(
     let inputs: Vec<Vec<f64>> = (0..data.u().channels())
         .map(|j| data.u().channel(j))
         .collect();
-    let settle = settings.settle;
     for c in 0..ny {
-        let (y, ys, e) = (
-            data.y().channel(c),
-            simulated.channel(c),
-            prediction_error.channel(c),
-        );
-        rms_sim.push(rms_difference(&y[settle..], &ys[settle..]));
-        fit.push(fit_or_nan(&y[settle..], &ys[settle..]));
+        let e = prediction_error.channel(c);
+        rms_sim.push(scored.rms(data.y(), c));
+        fit.push(scored.fit_percent(data.y(), c));
         prediction_rms.push(rms(&e));
         whiteness.push(non_negative_lags(autocorrelation(&e, max_lag)));
         input_correlation.push(
@@ -335,6 +361,8 @@ pub fn validate(
         input_correlation,
         initial_state: x0,
         samples: len,
+        scoring: settings.scoring,
+        scored: scored.scored,
     })
 }
 
@@ -456,12 +484,6 @@ pub(crate) fn measured_residual(
         x0,
         w_hat: Signal::new(nw, w_hat)?,
     })
-}
-
-/// The fit in percent, NaN when the measured output is constant (the fit is undefined then).
-fn fit_or_nan(measured: &[f64], simulated: &[f64]) -> f64 {
-    let f = fit_percent(measured, simulated);
-    if f.is_finite() { f } else { f64::NAN }
 }
 
 /// An autocorrelation keeps its lags 0…max_lag: it is symmetric, so the negative lags repeat the
