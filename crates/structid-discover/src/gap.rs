@@ -31,7 +31,7 @@
 use std::ops::Range;
 
 use structid_core::residual_tests::{autocorrelation, cross_correlation};
-use structid_core::validation::{ValidationSettings, validate};
+use structid_core::validation::{Scoring, ValidationSettings, validate};
 use structid_core::{Data, InitialState, Interpolant, Model, Result};
 
 use crate::localise::{Region, exceedance_windows, operating_regions};
@@ -52,6 +52,9 @@ pub struct GapSettings {
     /// The initial state of the simulation (default: estimated; a record that starts at rest
     /// can use zero, and a model whose x₀ reaches z differently from y must).
     pub initial_state: InitialState,
+    /// How the simulation is scored (default: one free run; windows for a model with
+    /// integrators, see [`structid_core::validation::windows`]).
+    pub scoring: Scoring,
 }
 
 impl Default for GapSettings {
@@ -63,6 +66,7 @@ impl Default for GapSettings {
             noise_ratio: 1.5,
             min_region_share: 0.05,
             initial_state: InitialState::Estimate,
+            scoring: Scoring::Free,
         }
     }
 }
@@ -282,14 +286,28 @@ pub fn gap(
         data,
         &ValidationSettings::builder()
             .initial_state(settings.initial_state)
+            .scoring(settings.scoring)
             .max_lag(settings.max_lag)
             .build()?,
     )?;
     let y = data.y().channel(0);
     let simulated = v.simulated.channel(0);
     let residual: Vec<f64> = y.iter().zip(&simulated).map(|(a, b)| a - b).collect();
-    let innovations = v.prediction_error.channel(0);
-    let n = residual.len();
+    // Without a noise model (output error), the one-step prediction error is the free-run
+    // simulation error, which drifts for a model with integrators; the tests then run on the
+    // windowed simulation residual at its scored samples instead.
+    let tested: Vec<usize> = match settings.scoring {
+        Scoring::Windowed(_) if model.lft().t_ye().order() == 0 => {
+            v.scored.iter().flat_map(|r| r.clone()).collect()
+        }
+        _ => (0..residual.len()).collect(),
+    };
+    let innovations: Vec<f64> = if tested.len() == residual.len() {
+        v.prediction_error.channel(0)
+    } else {
+        tested.iter().map(|&k| residual[k]).collect()
+    };
+    let n = innovations.len();
     // A quantised output (few distinct values) makes most differences exactly zero and the
     // MAD collapse; the quantisation error q/√12 is a floor for the noise level.
     let noise_std = noise_level(&innovations).max(quantisation_floor(&y));
@@ -319,7 +337,7 @@ pub fn gap(
     };
     let e2 = centred_square(&innovations);
     for c in 0..data.u().channels() {
-        let u = data.u().channel(c);
+        let u: Vec<f64> = tested.iter().map(|&k| data.u().get(k, c)).collect();
         let u2 = centred_square(&u);
         tests.push(portmanteau_cross(
             format!("ε against u{c}"),
@@ -355,7 +373,7 @@ pub fn gap(
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let rms = v.rms[0];
     let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
-    let prediction_rms = v.prediction_rms[0];
+    let prediction_rms = structid_core::metrics::rms(&innovations);
     let too_large = prediction_rms > settings.noise_ratio * noise_std;
     let missing_effect = too_large || !failing.is_empty();
     let verdict = if missing_effect {

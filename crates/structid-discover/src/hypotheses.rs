@@ -100,6 +100,47 @@ impl Nominal {
         Self::new(realise(g)?)
     }
 
+    /// The nominal model with a second noise source acting where u acts: y = G·(u + λ·v) + H·e
+    /// with v white and independent of e (a force disturbance, in the units of u per unit of
+    /// the output noise). For a plant with integrators this is the physical noise model:
+    /// unmodelled forces make the position wander, and without it identification would have to
+    /// explain that wander by the map. The new noise channel is appended after the existing ones.
+    ///
+    /// ```
+    /// use structid_discover::hypotheses::Nominal;
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -1.0], num: vec![vec![0.0, 0.1]], sample_time: Some(0.1) };
+    /// let n = Nominal::from_polynomial(&g).unwrap().with_input_noise(50.0).unwrap();
+    /// assert_eq!(n.lft().dims().e, 2);
+    /// assert!(Nominal::from_polynomial(&g).unwrap().with_input_noise(-1.0).is_err());
+    /// ```
+    pub fn with_input_noise(mut self, ratio: f64) -> Result<Self> {
+        if !(ratio.is_finite() && ratio > 0.0) {
+            return Err(Error::InvalidParameter {
+                name: "input noise ratio".into(),
+                value: ratio,
+                reason: "must be positive and finite".into(),
+            });
+        }
+        let m = self.lft.matrices();
+        let append = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>| {
+            let mut out = nalgebra::DMatrix::zeros(a.nrows(), a.ncols() + 1);
+            out.columns_mut(0, a.ncols()).copy_from(a);
+            out.column_mut(a.ncols()).copy_from(&(b.column(0) * ratio));
+            out
+        };
+        let mut next = m.clone();
+        next.be = append(&m.be, &m.bu);
+        next.dye = append(&m.dye, &m.dyu);
+        next.dze = append(&m.dze, &m.dzu);
+        let mut lft = Lft::new(next)?;
+        if let Some(ts) = self.lft.sample_time() {
+            lft = lft.with_sample_time(ts)?;
+        }
+        self.lft = lft;
+        Ok(self)
+    }
+
     /// Declares a location: a block reading z row `z` and writing w column `w` of the LFT.
     pub fn with_location(mut self, name: &str, z: usize, w: usize) -> Result<Self> {
         // Fails early when the channels do not exist.

@@ -248,6 +248,55 @@ impl StateSpace {
         out
     }
 
+    /// The spectral radius of A restricted to the states its inputs reach: the subspace
+    /// spanned by B, AB, A²B, … (an orthonormal Krylov basis Q, rank by SVD at 10⁻¹⁰ of the
+    /// largest singular value; then the radius of QᵀAQ). Modes that no input excites (e.g. a
+    /// plant's integrator in a noise path that only drives a sensor) never grow from a zero
+    /// state, so a recursion driven by the inputs is stable when this radius is below 1 even
+    /// if [`spectral_radius`](Self::spectral_radius) is not. 0 for a system without reachable
+    /// states.
+    ///
+    /// ```
+    /// use nalgebra::dmatrix;
+    /// use structid_lti::StateSpace;
+    /// // An integrator that the input does not reach, and a reachable pole at 0.5.
+    /// let s = StateSpace::new(dmatrix![1.0, 0.0; 0.0, 0.5], dmatrix![0.0; 1.0], dmatrix![1.0, 1.0], dmatrix![0.0]).unwrap();
+    /// assert_eq!(s.spectral_radius(), 1.0);
+    /// assert!((s.reachable_spectral_radius() - 0.5).abs() < 1e-12);
+    /// ```
+    pub fn reachable_spectral_radius(&self) -> f64 {
+        let n = self.order();
+        if n == 0 || self.b.ncols() == 0 {
+            return 0.0;
+        }
+        let mut krylov = DMatrix::zeros(n, n * self.b.ncols());
+        let mut block = self.b.clone();
+        for i in 0..n {
+            krylov
+                .view_mut((0, i * self.b.ncols()), (n, self.b.ncols()))
+                .copy_from(&block);
+            block = &self.a * block;
+        }
+        let svd = krylov.svd(true, false);
+        let smax = svd.singular_values.max();
+        if smax == 0.0 || !smax.is_finite() {
+            return if smax == 0.0 { 0.0 } else { f64::NAN };
+        }
+        let u = svd.u.as_ref().expect("SVD computed with U");
+        let rank = svd
+            .singular_values
+            .iter()
+            .filter(|s| **s > 1e-10 * smax)
+            .count();
+        let q = u.columns(0, rank).into_owned();
+        let reduced = q.transpose() * &self.a * &q;
+        reduced
+            .complex_eigenvalues()
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max)
+    }
+
     /// Spectral radius of `A` (largest eigenvalue modulus); 0 for `n = 0`.
     pub fn spectral_radius(&self) -> f64 {
         if self.order() == 0 {

@@ -219,19 +219,29 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     });
     let x0 = match free {
         Some(o) if nx > 0 => {
-            let h = nalgebra::DMatrix::from_fn(nx, nx, |a, b| {
+            let h = nalgebra::DMatrix::<f64>::from_fn(nx, nx, |a, b| {
                 (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 1 + b)]).sum()
             });
             let g = nalgebra::DVector::from_fn(nx, |a, _| {
                 (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 0)]).sum()
             });
-            let x0 = h.cholesky().map(|c| c.solve(&g)).ok_or_else(|| {
-                Error::Numerical(
-                    "the initial state is not identifiable from this record (OᵀM⁻¹O is singular): \
-                     the free response of some state does not reach y"
+            // Directions of x₀ that do not reach y get their minimum-norm value 0 (SVD at
+            // 10⁻¹² of the largest singular value): they change neither y nor the fit.
+            let svd = h.svd(true, true);
+            let smax = svd.singular_values.max();
+            if !smax.is_finite() {
+                return Err(Error::Numerical(
+                    "the initial state is not identifiable from this record (OᵀM⁻¹O is not finite)"
                         .into(),
-                )
-            })?;
+                ));
+            }
+            let x0 = if smax == 0.0 {
+                nalgebra::DVector::zeros(nx)
+            } else {
+                svd.solve(&g, 1e-12 * smax).map_err(|e| {
+                    Error::Numerical(format!("the initial state's least squares failed: {e}"))
+                })?
+            };
             for i in 0..nk {
                 let corr: f64 = (0..nx).map(|j| rhs[(i, 1 + j)] * x0[j]).sum();
                 rhs[(i, 0)] -= corr;

@@ -147,7 +147,9 @@ pub(crate) fn gram(
             // A noise model whose zeros lie on or outside the unit circle has an unstable
             // whitening filter (e.g. W = T_ye⁻¹ for square D_ye): the whitened record grows
             // geometrically. The exact (dual) solver does not whiten and is unaffected.
-            let radius = k.steady_state_filter().spectral_radius();
+            // Only the modes the measurements drive through the gain can grow; a plant's
+            // integrator that the noise does not reach stays at its zero state.
+            let radius = k.steady_state_filter().reachable_spectral_radius();
             if radius >= 1.0 - 1e-9 {
                 return Err(Error::Unsupported(format!(
                     "the noise model is not minimum phase: its whitening filter has spectral radius {radius:.4} ≥ 1, \
@@ -328,12 +330,25 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         h[(i, i)] += lb;
     }
     let rhs = nalgebra::DVector::<f64>::from_fn(k, |i, _| g[(i, k)]);
-    let chol = h.clone().cholesky().ok_or_else(|| {
-        Error::Numerical(
-            "the feature-space normal equations are singular: the initial state is not identifiable from this record"
-                .into(),
-        )
-    })?;
+    // Directions of x₀ that do not reach y (a rate's memory of the previous output, with the
+    // maps' outputs as parameters) make the x₀ block singular; a ridge of 10⁻¹⁰ of its largest
+    // diagonal gives them their minimum-norm value 0 and leaves resolved directions as they are.
+    let chol = match h.clone().cholesky() {
+        Some(c) => c,
+        None => {
+            let scale = (m..k).map(|i| h[(i, i)]).fold(0.0f64, f64::max);
+            let mut ridged = h.clone();
+            for i in m..k {
+                ridged[(i, i)] += 1e-10 * scale.max(f64::MIN_POSITIVE);
+            }
+            ridged.cholesky().ok_or_else(|| {
+                Error::Numerical(
+                    "the feature-space normal equations are singular: the initial state is not identifiable from this record"
+                        .into(),
+                )
+            })?
+        }
+    };
     let v = chol.solve(&rhs);
     let t_factored = Instant::now();
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);

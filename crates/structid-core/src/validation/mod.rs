@@ -317,7 +317,14 @@ pub fn validate(
         Some(x) if !x.is_empty() => {
             let z = windows::measured_z(model, data)?;
             let head = 0..len.min(x.len().max(1) * 50).max(1);
-            Some(windows::window_state(model, data, &z, &w_hat, head, Some(&x))?)
+            Some(windows::window_state(
+                model,
+                data,
+                &z,
+                &w_hat,
+                head,
+                Some(&x),
+            )?)
         }
         other => other,
     };

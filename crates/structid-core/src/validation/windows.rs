@@ -170,7 +170,11 @@ impl ScoredSimulation {
                 n += 1;
             }
         }
-        if n == 0 { f64::NAN } else { (sum / n as f64).sqrt() }
+        if n == 0 {
+            f64::NAN
+        } else {
+            (sum / n as f64).sqrt()
+        }
     }
 
     /// MATLAB's `compare` fit in percent over the scored samples, output `c`.
@@ -294,7 +298,11 @@ pub(crate) fn window_state(
     if oy.nrows() < n {
         oy = oy.resize_vertically(n, 0.0);
     }
-    let vy = if vy.len() < n { vy.resize_vertically(n, 0.0) } else { vy };
+    let vy = if vy.len() < n {
+        vy.resize_vertically(n, 0.0)
+    } else {
+        vy
+    };
     let svd = oy.svd(true, true);
     let smax = svd.singular_values.max();
     let tol = 1e-9 * smax.max(f64::MIN_POSITIVE);
@@ -410,11 +418,7 @@ pub fn simulate_scored(
     let (simulated, scored, states) = match scoring {
         Scoring::Free => {
             let sim = model.simulate(maps, data.u(), None, x0)?;
-            (
-                sim.y,
-                vec![settle..len],
-                vec![x0.map(<[f64]>::to_vec)],
-            )
+            (sim.y, vec![settle..len], vec![x0.map(<[f64]>::to_vec)])
         }
         Scoring::Windowed(windows) => {
             let z = measured_z(model, data)?;
@@ -533,15 +537,19 @@ mod tests {
         use structid_linear::PolynomialModel;
         let ts = 0.01;
         // Position from force: a pole at 1 (integrator) and one at 0.9.
-        let g = PolynomialModel::new(vec![vec![0.0, 0.004, 0.0038]], vec![1.0, -1.9, 0.9], Some(ts)).unwrap();
-        let model = Structure::rate_feedback(
-            g,
-            Arc::new(PolynomialDispersion::new(1).unwrap()),
+        let g = PolynomialModel::new(
+            vec![vec![0.0, 0.004, 0.0038]],
+            vec![1.0, -1.9, 0.9],
+            Some(ts),
         )
-        .model()
         .unwrap();
+        let model = Structure::rate_feedback(g, Arc::new(PolynomialDispersion::new(1).unwrap()))
+            .model()
+            .unwrap();
         let friction = |z: &[f64]| 0.3 * (z[0] / 0.05).tanh() + 0.2 * z[0];
-        let u = Signal::from_fn(3000, 1, |k, _| 2.0 * (0.004 * k as f64).sin() + 0.5 * (0.031 * k as f64).sin());
+        let u = Signal::from_fn(3000, 1, |k, _| {
+            2.0 * (0.004 * k as f64).sin() + 0.5 * (0.031 * k as f64).sin()
+        });
         let n = model.lft().dims().states;
         // Start away from rest: a position of 5 and its memory consistent with it.
         let x0: Vec<f64> = (0..n).map(|i| if i + 1 == n { 5.0 } else { 0.0 }).collect();
@@ -555,6 +563,10 @@ mod tests {
         let s = Scoring::Windowed(Windows::new(300, 20).unwrap());
         let win = simulate_scored(&model, &[&friction], &data, s, None, 0).unwrap();
         let scale = crate::metrics::rms(&data.y().channel(0));
-        assert!(win.rms(data.y(), 0) < 1e-8 * scale, "{}", win.rms(data.y(), 0));
+        assert!(
+            win.rms(data.y(), 0) < 1e-8 * scale,
+            "{}",
+            win.rms(data.y(), 0)
+        );
     }
 }

@@ -1,6 +1,6 @@
 //! Is it static? The direction test on the residual deconvolved to the block's output.
 
-use structid_core::validation::{ValidationSettings, validate};
+use structid_core::validation::validate;
 use structid_core::{Data, Interpolant, Model, Result, Signal};
 use structid_lti::LinearSystem;
 
@@ -9,7 +9,7 @@ use crate::hysteresis::{DirectionTest, direction_dependence};
 
 use super::DiscoverSettings;
 use super::fit::Fitted;
-use super::fit::initial_state;
+use super::fit::scoring_settings;
 
 /// The direction test of a fit: its noise estimate ê (what the static map leaves
 /// unexplained), through the noise path to the output and deconvolved to the block's output,
@@ -28,23 +28,23 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
     ))
 }
 
-/// The simulation residual y − ŷ of `model` with `map` on `data` after `settle` samples (x₀
-/// as at `location`), or `None` when the simulation fails.
+/// The simulation residual y − ŷ of `model` with `map` on `data` at the scored samples (as
+/// every simulation of the workflow is scored, [`scoring_settings`]), or `None` when the
+/// simulation fails.
 pub(super) fn simulation_residual(
     model: &Model,
     location: Location,
     map: &dyn Interpolant,
     data: &Data,
-    settle: usize,
+    settings: &DiscoverSettings,
 ) -> Option<Vec<f64>> {
-    let settings = ValidationSettings::builder()
-        .initial_state(initial_state(location).1)
-        .settle(settle)
-        .build()
-        .ok()?;
+    let settings = scoring_settings(location, settings);
     let v = validate(model, &[map], data, &settings).ok()?;
     let y = data.y().channel(0);
-    let r: Vec<f64> = (settle.min(y.len())..y.len())
+    let r: Vec<f64> = v
+        .scored
+        .iter()
+        .flat_map(|r| r.clone())
         .map(|k| y[k] - v.simulated.get(k, 0))
         .collect();
     r.iter().all(|v| v.is_finite()).then_some(r)

@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
-use structid_core::validation::{ValidationSettings, validate};
+use structid_core::validation::{Scoring, ValidationSettings, Windows, validate};
 use structid_core::{
     Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, Model,
     PolynomialDispersion, Result, Signal,
@@ -75,24 +75,62 @@ pub(super) fn check_records(est: &Data, val: &Data) -> Result<()> {
 
 /// A nominal model whose simulation from u diverges cannot be compared with data: its poles
 /// must lie inside the unit circle.
-pub(super) fn check_stable(nominal: &Nominal) -> Result<()> {
+/// The scoring of every simulation in the workflow: the user's, or chosen from the nominal
+/// model's poles. A pole on or within 10⁻³ of the unit circle (an integrator: a position from a
+/// force, a level from a flow) makes a free-run simulation drift with any offset or error in
+/// the first state, so the record is scored in windows, each from a state fitted to its first
+/// samples; a stable model gets one free run. A pole further outside is an error: even a
+/// window's simulation would diverge.
+pub(super) fn resolve_scoring(
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Scoring> {
     let a = &nominal.lft().matrices().a;
-    if a.nrows() == 0 {
-        return Ok(());
-    }
-    let radius = a
-        .complex_eigenvalues()
-        .iter()
-        .map(|l| l.norm())
-        .fold(0.0, f64::max);
-    if radius.is_nan() || radius >= 1.0 {
+    let radius = if a.nrows() == 0 {
+        0.0
+    } else {
+        a.complex_eigenvalues()
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+    };
+    if radius.is_nan() || radius > 1.0 + MARGINAL {
         return Err(Error::InvalidStructure(format!(
-            "the nominal model is not stable (spectral radius {radius:.6} ≥ 1): its simulation \
-             from u diverges, so its gap to the data means nothing; re-estimate it (e.g. \
-             `structid linear --method oe`)"
+            "the nominal model is unstable (spectral radius {radius:.6} > 1): its simulation \
+             diverges even over a short window, so its gap to the data means nothing. If the \
+             plant integrates (a position from a force), fix the integrators at 1 \
+             (`structid linear --integrators 1`); otherwise re-estimate it (e.g. `structid \
+             linear --method oe`)"
         )));
     }
-    Ok(())
+    if let Some(s) = settings.scoring {
+        return Ok(s);
+    }
+    Ok(if radius >= 1.0 - MARGINAL {
+        // Two states more than the nominal: the rate's memory and a spare.
+        Scoring::Windowed(Windows::for_record(est.len(), a.nrows() + 2))
+    } else {
+        Scoring::Free
+    })
+}
+
+/// Poles within this distance of the unit circle count as on it (integrators).
+const MARGINAL: f64 = 1e-3;
+
+/// The validation settings every simulation of hypothesis at `location` is scored with.
+pub(super) fn scoring_settings(
+    location: Location,
+    settings: &DiscoverSettings,
+) -> ValidationSettings {
+    // Windows fit their own states; the record's x₀ is the free run's start and the one-step
+    // predictor's.
+    ValidationSettings::builder()
+        .initial_state(initial_state(location).1)
+        .settle(settings.settle)
+        .scoring(settings.scoring.unwrap_or_default())
+        .build()
+        .unwrap_or_default()
 }
 
 pub(super) fn minmax(v: &[f64]) -> (f64, f64) {
@@ -169,10 +207,10 @@ pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
     }
 }
 
-/// How the initial state is treated at `location` (in identification, and in simulation):
-/// estimated, except for the sensor map and the rate, whose z (G·u, and Ψ's memory of the
-/// previous output) would depend on an unknown x₀ and no longer be measurable, so the record
-/// is taken to start at rest there.
+/// How the initial state is treated at `location` (in identification, and in a free-run
+/// simulation): estimated, except for the sensor map, whose z = G·u would depend on an unknown
+/// x₀ and no longer be measurable, so the record is taken to start at rest there. (The rate
+/// is measured from y, and its memory of the previous output is fitted to it.)
 ///
 /// ```
 /// use structid_core::InitialState;
@@ -180,10 +218,11 @@ pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
 /// use structid_discover::hypotheses::Location;
 /// assert_eq!(initial_state(Location::Input).1, InitialState::Estimate);
 /// assert_eq!(initial_state(Location::Output).1, InitialState::Zero);
+/// assert_eq!(initial_state(Location::RateFeedback).1, InitialState::Estimate);
 /// ```
 pub fn initial_state(location: Location) -> (InitialState, InitialState) {
     match location {
-        Location::Output | Location::RateFeedback => (InitialState::Zero, InitialState::Zero),
+        Location::Output => (InitialState::Zero, InitialState::Zero),
         _ => (InitialState::Estimate, InitialState::Estimate),
     }
 }
@@ -195,13 +234,9 @@ pub(super) fn simulation_rms(
     location: Location,
     map: &dyn Interpolant,
     data: &Data,
-    settle: usize,
+    settings: &DiscoverSettings,
 ) -> f64 {
-    let settings = ValidationSettings::builder()
-        .initial_state(initial_state(location).1)
-        .settle(settle)
-        .build()
-        .unwrap_or_default();
+    let settings = scoring_settings(location, settings);
     match validate(model, &[map], data, &settings) {
         Ok(v) if v.rms[0].is_finite() => v.rms[0],
         _ => f64::INFINITY,
@@ -247,27 +282,9 @@ pub(super) fn finish_fit(
     // trend runs away): a hypothesis is ranked by the better of its map as estimated and the
     // map held at its edge values there, so that the location, not the extrapolation, decides.
     let held = |z: &[f64]| block.map.eval(&[z[0].clamp(lo, hi)]);
-    let validation_rms = simulation_rms(
-        &h.model,
-        location,
-        block.map.as_ref(),
-        val_h,
-        settings.settle,
-    )
-    .min(simulation_rms(
-        &h.model,
-        location,
-        &held,
-        val_h,
-        settings.settle,
-    ));
-    let estimation_rms = simulation_rms(
-        &h.model,
-        location,
-        block.map.as_ref(),
-        est_h,
-        settings.settle,
-    );
+    let validation_rms = simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings)
+        .min(simulation_rms(&h.model, location, &held, val_h, settings));
+    let estimation_rms = simulation_rms(&h.model, location, block.map.as_ref(), est_h, settings);
     let grid: Vec<f64> = (0..101)
         .map(|i| lo + (hi - lo) * i as f64 / 100.0)
         .collect();

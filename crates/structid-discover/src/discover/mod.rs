@@ -69,6 +69,7 @@ mod direction;
 mod fit;
 mod model;
 mod naming;
+mod noise;
 mod polish;
 mod settings;
 mod total_variation;
@@ -80,6 +81,7 @@ pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
 
 use std::time::Instant;
 
+use structid_core::validation::Scoring;
 use structid_core::{Data, Error, Result};
 use structid_lti::LinearSystem;
 
@@ -89,7 +91,7 @@ use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use direction::direction_test;
-use fit::{Fitted, check_records, check_stable, identify_hypothesis};
+use fit::{Fitted, check_records, identify_hypothesis, resolve_scoring};
 use naming::{name_and_add, naming_settings, non_smooth, subsample, verdict_text};
 use total_variation::total_variation_fit;
 
@@ -168,7 +170,27 @@ pub fn discover(
 ) -> Result<Discovery> {
     let t0 = Instant::now();
     check_records(est, val)?;
-    check_stable(nominal)?;
+    let scoring = resolve_scoring(nominal, est, settings)?;
+    let settings = &DiscoverSettings {
+        scoring: Some(scoring),
+        ..settings.clone()
+    };
+    // A plant with integrators gets a disturbance where its input acts, when the data say so
+    // (see `noise`); its hypotheses inherit it.
+    let with_noise;
+    let input_noise = match scoring {
+        Scoring::Windowed(_) if nominal.lft().t_ye().order() == 0 => {
+            noise::input_noise_ratio(nominal, est)?
+        }
+        _ => None,
+    };
+    let nominal = match input_noise {
+        Some(ratio) => {
+            with_noise = nominal.clone().with_input_noise(ratio)?;
+            &with_noise
+        }
+        None => nominal,
+    };
     let ts = nominal.lft().sample_time().unwrap_or(1.0);
     let nominal_model = nominal.model()?;
     let linear_output = |d: &Data| -> Result<Vec<f64>> {
@@ -179,6 +201,7 @@ pub fn discover(
     let mut val_candidates = candidate_signals(val, &linear_output(val)?, ts);
     val_candidates.extend(nominal.state_signals(val)?);
     let mut gap_settings = settings.gap.clone();
+    gap_settings.scoring = scoring;
     gap_settings.max_lag = gap_settings.max_lag.min(est.u().len() / 4).max(1);
     let estimation_gap = gap(&nominal_model, &[], est, &est_candidates, &gap_settings)?;
     let validation_gap = gap(&nominal_model, &[], val, &val_candidates, &gap_settings)?;

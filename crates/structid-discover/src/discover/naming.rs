@@ -9,7 +9,7 @@ use crate::hypotheses::{Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use super::fit::{Fitted, simulation_rms};
-use super::fit::{even_indices, initial_state, minmax};
+use super::fit::{even_indices, minmax, scoring_settings};
 use super::polish::polish;
 use super::{Augmented, AugmentedMap, Classification, DiscoverSettings, Finding};
 
@@ -177,12 +177,12 @@ pub(super) fn name_and_add(
         // plus something the data can see).
         let mut chosen: Option<(usize, f64)> = None;
         for i in 0..naming.ranked.len().min(3) {
-            let fit = polish(&naming.ranked[i], &h, &est_h, settings.settle);
+            let fit = polish(&naming.ranked[i], &h, &est_h, settings);
             naming.ranked[i] = fit.clone();
             let Ok(m) = ExprMap::parse(&fit.expression, 1) else {
                 continue;
             };
-            let rms = simulation_rms(&h.model, location, &m, &val_h, settings.settle);
+            let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
             family_rms[i] = Some(rms);
             let passes = rms <= settings.naming_tolerance * nonparametric_rms || rms <= 1.5 * noise;
             chosen = match chosen {
@@ -235,7 +235,7 @@ pub(super) fn name_and_add(
     };
     let interp = augmented_map.interpolant()?;
     let gap_settings = &GapSettings {
-        initial_state: initial_state(location).1,
+        initial_state: scoring_settings(location, settings).initial_state(),
         ..gap_settings.clone()
     };
     let estimation_gap = gap(

@@ -8,6 +8,7 @@ use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquar
 use crate::effects::{Effect, EffectFit};
 use crate::hypotheses::Hypothesis;
 
+use super::DiscoverSettings;
 use super::direction::simulation_residual;
 
 /// Refines a named family's parameters by output error: Levenberg–Marquardt on the
@@ -17,12 +18,17 @@ use super::direction::simulation_residual;
 /// how much the data say about it. The 95 % intervals come from s²·(JᵀJ)⁻¹ at the optimum.
 /// A family whose parameters move a quantiser's steps is left as fitted (its simulation
 /// error is piecewise constant in the step).
-pub(super) fn polish(fit: &EffectFit, h: &Hypothesis, est_h: &Data, settle: usize) -> EffectFit {
+pub(super) fn polish(
+    fit: &EffectFit,
+    h: &Hypothesis,
+    est_h: &Data,
+    settings: &DiscoverSettings,
+) -> EffectFit {
     if fit.effect == Effect::Quantisation {
         return fit.clone();
     }
     let effect = fit.effect;
-    let settings = LmSettings::builder()
+    let lm_settings = LmSettings::builder()
         .max_iterations(30)
         .tolerance(1e-10)
         .initial_damping(1e-3)
@@ -36,11 +42,11 @@ pub(super) fn polish(fit: &EffectFit, h: &Hypothesis, est_h: &Data, settle: usiz
         effect,
         h,
         est_h,
-        settle,
+        settings,
     };
     // A start whose simulation fails leaves the map fit as it is.
     let Ok(lm) =
-        settings.and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, &fit.values()))
+        lm_settings.and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, &fit.values()))
     else {
         return fit.clone();
     };
@@ -76,7 +82,7 @@ pub(super) struct PolishProblem<'a> {
     effect: Effect,
     h: &'a Hypothesis,
     est_h: &'a Data,
-    settle: usize,
+    settings: &'a DiscoverSettings,
 }
 
 impl LeastSquaresProblem for PolishProblem<'_> {
@@ -88,7 +94,7 @@ impl LeastSquaresProblem for PolishProblem<'_> {
             self.h.location,
             &map,
             self.est_h,
-            self.settle,
+            self.settings,
         )
         .map(DVector::from_vec)
     }

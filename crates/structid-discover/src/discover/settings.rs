@@ -1,5 +1,6 @@
 //! Settings of [`discover`](super::discover) and their builder.
 
+use structid_core::validation::Scoring;
 use structid_core::{Error, Result};
 
 use crate::effects::Effect;
@@ -21,13 +22,14 @@ pub struct DiscoverSettings {
     pub(super) hysteresis_threshold: f64,
     pub(super) table_points: usize,
     pub(super) settle: usize,
+    pub(super) scoring: Option<Scoring>,
 }
 
 impl Default for DiscoverSettings {
     /// Every location of the nominal model, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
     /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, naming
     /// tolerance 1.15, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
-    /// settling samples.
+    /// settling samples, the scoring chosen from the nominal model (windows for integrators).
     fn default() -> Self {
         Self {
             locations: None,
@@ -42,6 +44,7 @@ impl Default for DiscoverSettings {
             hysteresis_threshold: 0.1,
             table_points: 201,
             settle: 0,
+            scoring: None,
         }
     }
 }
@@ -131,6 +134,14 @@ impl DiscoverSettings {
     }
 }
 
+impl DiscoverSettings {
+    /// How simulations are scored (`None`: chosen from the nominal model, see
+    /// [`DiscoverSettingsBuilder::scoring`]).
+    pub fn scoring(&self) -> Option<Scoring> {
+        self.scoring
+    }
+}
+
 /// Builder of [`DiscoverSettings`].
 #[derive(Clone, Debug)]
 pub struct DiscoverSettingsBuilder {
@@ -209,6 +220,16 @@ impl DiscoverSettingsBuilder {
     /// Settling samples left out of the ranking and naming RMS (default 0).
     pub fn settle(mut self, n: usize) -> Self {
         self.inner.settle = n;
+        self
+    }
+
+    /// How every simulation of the workflow is scored: the gaps before and after, the ranking
+    /// of the hypotheses, the naming and the polish of the families (default: chosen from the
+    /// nominal model: windows, [`Scoring::Windowed`] with
+    /// [`structid_core::validation::Windows::for_record`], when it has a pole on or within
+    /// 10⁻³ of the unit circle, whose free-run simulation drifts; one free run otherwise).
+    pub fn scoring(mut self, scoring: Scoring) -> Self {
+        self.inner.scoring = Some(scoring);
         self
     }
 

@@ -1,0 +1,59 @@
+//! The noise model of a nominal model with integrators: how much of the output's wander is a
+//! disturbance acting where the input acts.
+
+use structid_core::{Data, Result};
+use structid_lti::LinearSystem;
+use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
+
+use crate::hypotheses::Nominal;
+
+/// The maximum-likelihood ratio λ of an input disturbance to the output noise
+/// ([`Nominal::with_input_noise`]) on the residual r = y − G·u of the nominal model, or `None`
+/// when white output noise alone (λ = 0) is at least as likely.
+///
+/// Gaussian negative log-likelihood of r under y = G·(u + λ·v) + e with v, e white and of one
+/// variance s² (profiled out): L·ln(‖W_λ·r‖²/L) + ln det(T_λ·T_λᵀ), W_λ the Kalman whitener of
+/// the noise path T_λ = [1, λ·G]. λ is searched on half decades over ten decades around the
+/// ratio of the input's to the output's standard deviation. A nominal model with integrators
+/// needs this: without it, the output-error criterion makes the map explain the slow wander
+/// that every unmodelled force leaves in a position.
+pub(super) fn input_noise_ratio(nominal: &Nominal, est: &Data) -> Result<Option<f64>> {
+    let lft = nominal.lft();
+    let u = est.u();
+    let len = est.len();
+    let r: Vec<f64> = {
+        let yu = lft.t_yu().simulate(u)?;
+        (0..len).map(|k| est.y().get(k, 0) - yu.get(k, 0)).collect()
+    };
+    let nll = |n: &Nominal| -> Option<f64> {
+        let noise = n.lft().t_ye();
+        let w = KalmanWhitener::new(&noise, len, &WhiteningOptions::default()).ok()?;
+        let mut out = vec![0.0; len];
+        w.whiten(&r, &mut out);
+        let sse: f64 = out.iter().map(|v| v * v).sum();
+        let v = len as f64 * (sse / len as f64).ln() + w.log_det();
+        v.is_finite().then_some(v)
+    };
+    let base = nll(nominal);
+    let std = |s: &[f64]| {
+        let m = s.iter().sum::<f64>() / s.len() as f64;
+        (s.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / s.len() as f64).sqrt()
+    };
+    let scale = std(&u.channel(0)) / std(&est.y().channel(0)).max(f64::MIN_POSITIVE);
+    if !(scale.is_finite() && scale > 0.0) {
+        return Ok(None);
+    }
+    let mut best: Option<(f64, f64)> = base.map(|b| (0.0, b));
+    for k in -4..=16 {
+        let ratio = scale * 10f64.powf(k as f64 / 2.0);
+        let Ok(candidate) = nominal.clone().with_input_noise(ratio) else {
+            continue;
+        };
+        if let Some(v) = nll(&candidate)
+            && best.is_none_or(|(_, b)| v < b)
+        {
+            best = Some((ratio, v));
+        }
+    }
+    Ok(best.and_then(|(ratio, _)| (ratio > 0.0).then_some(ratio)))
+}
