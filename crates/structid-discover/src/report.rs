@@ -100,13 +100,7 @@ impl Record {
 // report.md
 
 fn e(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.4e}")
-    } else if v.is_nan() {
-        "—".into()
-    } else {
-        "∞".into()
-    }
+    crate::discover::rms_text(v)
 }
 
 fn pct(v: f64) -> String {
@@ -397,7 +391,23 @@ fn identify_command(r: &ReportContext<'_>, f: &Finding) -> String {
 pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# structid discover\n");
-    let _ = writeln!(s, "**Verdict:** {}\n", d.verdict);
+    let _ = writeln!(
+        s,
+        "**Verdict ({}):** {}\n",
+        d.verdict_kind.describe(),
+        d.verdict
+    );
+    let _ = writeln!(
+        s,
+        "Every simulation is scored by {}{}.\n",
+        d.scoring.describe(),
+        d.input_noise
+            .map(|l| format!(
+                "; the nominal model's noise path has an input disturbance of {l:.4e} per unit \
+                 of output noise (maximum likelihood: the plant integrates)"
+            ))
+            .unwrap_or_default()
+    );
     let _ = writeln!(
         s,
         "Nominal model `{}` ({}); estimation record `{}` ({} samples), validation record `{}` \
@@ -440,7 +450,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
             r.settings.gap().noise_ratio
         );
     } else {
-        if !d.missing_effect {
+        if d.finding.is_none() {
             let _ = writeln!(
                 s,
                 "A test of the nominal model's gap failed (section 1), so every candidate \
@@ -822,7 +832,10 @@ pub fn json(
             "max_lag": r.max_lag,
         },
         "verdict": d.verdict,
+        "verdict_kind": d.verdict_kind,
         "missing_effect": d.missing_effect,
+        "scoring": d.scoring.describe(),
+        "input_noise_ratio": d.input_noise,
         "seconds": d.seconds,
         "gap_before": {
             "estimation": gap_json(&d.estimation_gap, &r.estimation.time)?,

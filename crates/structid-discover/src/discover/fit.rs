@@ -227,8 +227,9 @@ pub fn initial_state(location: Location) -> (InitialState, InitialState) {
     }
 }
 
-/// Simulation RMS of `model` (block at `location`) with `map` on `data` (infinite when the
-/// simulation fails).
+/// Simulation RMS of `model` (block at `location`) with `map` on `data`, scored as every
+/// simulation of the workflow ([`scoring_settings`]); infinite when the simulation fails or
+/// diverges.
 pub(super) fn simulation_rms(
     model: &Model,
     location: Location,
@@ -237,8 +238,11 @@ pub(super) fn simulation_rms(
     settings: &DiscoverSettings,
 ) -> f64 {
     let settings = scoring_settings(location, settings);
+    // A simulation that runs a million times beyond the output's size has diverged, even if
+    // its numbers are still finite.
+    let limit = 1e6 * structid_core::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
     match validate(model, &[map], data, &settings) {
-        Ok(v) if v.rms[0].is_finite() => v.rms[0],
+        Ok(v) if v.rms[0].is_finite() && v.rms[0] < limit => v.rms[0],
         _ => f64::INFINITY,
     }
 }
@@ -255,7 +259,8 @@ pub(super) struct Fitted {
     pub(super) map: Box<dyn Interpolant>,
     pub(super) z: Vec<f64>,
     pub(super) w_hat: Vec<f64>,
-    pub(super) e_hat: Vec<f64>,
+    /// The noise estimate ê, every noise channel.
+    pub(super) e_hat: Signal,
     /// `quadratic` or `total variation`.
     pub(super) estimator: &'static str,
 }
@@ -285,6 +290,13 @@ pub(super) fn finish_fit(
     let validation_rms = simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings)
         .min(simulation_rms(&h.model, location, &held, val_h, settings));
     let estimation_rms = simulation_rms(&h.model, location, block.map.as_ref(), est_h, settings);
+    // A map whose simulation diverges on its own estimation record is not a candidate,
+    // whatever it does on the validation record.
+    let validation_rms = if estimation_rms.is_finite() {
+        validation_rms
+    } else {
+        f64::INFINITY
+    };
     let grid: Vec<f64> = (0..101)
         .map(|i| lo + (hi - lo) * i as f64 / 100.0)
         .collect();
@@ -315,7 +327,7 @@ pub(super) fn finish_fit(
         failure: None,
     };
     let w_hat = block.w_hat.clone();
-    let e_hat = id.e_hat.channel(0);
+    let e_hat = id.e_hat.clone();
     let map = id
         .blocks
         .into_iter()
