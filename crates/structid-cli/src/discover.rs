@@ -75,6 +75,11 @@ pub struct DiscoverArgs {
     /// name the effect (the state settles).
     #[arg(long, value_name = "N", default_value_t = 0)]
     settle: usize,
+    /// How every simulation is scored: `auto` (windows when the nominal model has a pole on
+    /// the unit circle, an integrator, whose free run drifts; one free run otherwise), `free`,
+    /// or windows `LENGTH:INIT` (each simulated from a state fitted to its first INIT samples).
+    #[arg(long, value_name = "auto|free|LENGTH:INIT", default_value = "auto")]
+    scoring: String,
     /// Width σ of each hypothesis' Fourier kernel as a fraction of the range of its z.
     #[arg(
         long,
@@ -255,6 +260,12 @@ fn settings(
         .hysteresis_threshold(a.hysteresis_threshold);
     if let Some(l) = locations {
         b = b.locations(l);
+    }
+    if a.scoring != "auto" {
+        b = b.scoring(
+            crate::parse_scoring(&a.scoring)
+                .map_err(|e| CliError::input(format!("invalid value for --scoring: {e}")))?,
+        );
     }
     Ok(b.build()?)
 }

@@ -95,6 +95,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
         .initial_state(initial(a.initial_state))
         .max_lag(a.max_lag)
         .settle(a.settle)
+        .scoring(a.scoring)
         .build()?;
     let report = estimate.validate(&data, &settings)?;
 

@@ -410,6 +410,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         .initial_state(initial_state)
         .max_lag(a.max_lag)
         .settle(a.settle)
+        .scoring(a.scoring)
         .build()?;
     let report = validate(&vmodel, &maps, &vdata, &settings)?;
 

@@ -8,6 +8,8 @@ use serde_json::{Value, json};
 use structid_core::Data;
 use structid_io::{DataTable, IoError, ModelFile, format_number};
 
+use structid_core::validation::Scoring;
+
 use crate::augmented::{AugmentedFile, BLOCK, ESTIMATE_FILE, TABLE_FILE, initial_state_name};
 use crate::discover::{
     AugmentedMap, Classification, DiscoverSettings, Discovery, Finding, initial_state,
@@ -354,23 +356,33 @@ fn nominal_text(mf: &ModelFile) -> String {
     }
 }
 
-fn validate_command(r: &ReportContext<'_>, w: &AugmentedFile) -> String {
+/// The `--scoring` argument that reproduces `scoring` (empty for a free run, the default).
+fn scoring_argument(scoring: Scoring) -> String {
+    match scoring {
+        Scoring::Free => String::new(),
+        Scoring::Windowed(w) => format!(" --scoring {}:{}", w.length(), w.init()),
+    }
+}
+
+fn validate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: Scoring) -> String {
     format!(
-        "structid validate --model {} --data {} --out {} --initial-state {}",
+        "structid validate --model {} --data {} --out {} --initial-state {}{}",
         r.out.join("augmented.toml").display(),
         r.validation.path.display(),
         r.out.join("validation").display(),
-        initial_state_name(w.initial_state)
+        initial_state_name(w.initial_state),
+        scoring_argument(scoring)
     )
 }
 
-fn validate_estimate_command(r: &ReportContext<'_>, w: &AugmentedFile) -> String {
+fn validate_estimate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: Scoring) -> String {
     format!(
-        "structid validate --estimate {} --data {} --out {} --initial-state {}",
+        "structid validate --estimate {} --data {} --out {} --initial-state {}{}",
         r.out.join(ESTIMATE_FILE).display(),
         r.validation.path.display(),
         r.out.join("validation-estimate").display(),
-        initial_state_name(w.initial_state)
+        initial_state_name(w.initial_state),
+        scoring_argument(scoring)
     )
 }
 
@@ -505,8 +517,8 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     let _ = writeln!(s, "## Reproduce\n");
     let _ = writeln!(s, "```sh\n{}", r.command);
     if let (Some(f), Some(w)) = (&d.finding, r.augmented) {
-        let _ = writeln!(s, "{}", validate_command(r, w));
-        let _ = writeln!(s, "{}", validate_estimate_command(r, w));
+        let _ = writeln!(s, "{}", validate_command(r, w, d.scoring));
+        let _ = writeln!(s, "{}", validate_estimate_command(r, w, d.scoring));
         let _ = writeln!(s, "{}", identify_command(r, f));
         let _ = writeln!(s, "```\n");
         let _ = writeln!(
@@ -796,8 +808,8 @@ pub fn json(
             "initial_state": initial_state_name(w.initial_state),
             "estimate_file": ESTIMATE_FILE,
             "validation_rms": f.augmented.validation_gap.rms,
-            "reproduce": validate_command(r, w),
-            "reproduce_estimate": validate_estimate_command(r, w),
+            "reproduce": validate_command(r, w, d.scoring),
+            "reproduce_estimate": validate_estimate_command(r, w, d.scoring),
             "reestimate": identify_command(r, f),
         }),
         _ => Value::Null,

@@ -430,6 +430,18 @@ pub(crate) fn measured_residual(
 ) -> Result<MeasuredResidual> {
     let lft = model.lft();
     let len = data.len();
+    // A z filtered from y through a dynamic Ψ(q) with states of its own (a measured rate's
+    // memory of the previous output) would depend on the unknown x₀; it is computed from the
+    // record with Ψ at rest instead, i.e. taken as measured, as identification takes it.
+    let with_z;
+    let data = match (initial_state, data.z()) {
+        (InitialState::Estimate, None) if matches!(lft.measurability(), Ok(crate::ZSource::Dynamic { ref system }) if system.order() > 0) =>
+        {
+            with_z = data.clone().with_z(lft.compute_z(data.u(), data.y())?.0)?;
+            &with_z
+        }
+        _ => data,
+    };
     let problem = match initial_state {
         InitialState::Zero => Problem::from_model(model, data)?,
         InitialState::Estimate => Problem::from_model_with_initial_state(model, data)?,

@@ -223,6 +223,7 @@ pub fn discover(
         }
         _ => None,
     };
+    let given = nominal;
     let nominal = match input_noise {
         Some(ratio) => {
             with_noise = nominal.clone().with_input_noise(ratio)?;
@@ -382,7 +383,7 @@ pub fn discover(
         .clone()
         .unwrap_or_else(DirectionTest::none);
     let best = fitted.swap_remove(chosen);
-    let finding = name_and_add(
+    let mut finding = name_and_add(
         best,
         direction,
         tv_rms,
@@ -394,6 +395,13 @@ pub fn discover(
         &validation_gap,
         settings,
     )?;
+    // The input disturbance was the identification's noise model; the model handed on keeps
+    // the nominal model's own noise path, so that files written from it read back with the
+    // same measurable z (the simulations, and so every RMS above, do not depend on it).
+    if input_noise.is_some() {
+        let dispersion = std::sync::Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
+        finding.augmented.model = given.hypothesis(finding.location, dispersion)?.model;
+    }
     // Confirmation: a failed test that no static block at any candidate location can act on
     // is not reported as a missing effect. The portmanteau family errs 0.1 % of the time on
     // stationary inputs, more on strongly non-stationary ones such as chirps, whose squares a
