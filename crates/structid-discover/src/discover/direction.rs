@@ -26,27 +26,43 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         .channel(0);
     let delta = deconvolve(&f.hypothesis, &r)?;
     let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
-    let mut test =
-        direction_dependence(&f.z[skip..], &delta[skip..], settings.hysteresis_threshold);
-    // A force acting in continuous time on a fed-back signal differs from the held N(z_k) by
-    // about N'(z)·ż·T_s/2, which changes sign with the direction of motion: after any discrete
-    // static fit it is a direction effect of its own. Its size is that of the half-sample
-    // shift a_k = N̂'(z_k)·(z_(k+1) − z_(k−1))/4; a direction effect within four times its
-    // energy (twice its amplitude) is sampling, not hysteresis. Actuator and sensor maps act on
-    // held or sampled signals and have no such artefact.
+    // Actuator and sensor maps act on held or sampled signals and have no sampling artefact.
     let feedback = matches!(
         f.result.location,
         Location::OutputFeedback | Location::RateFeedback | Location::Declared { .. }
     );
-    if feedback && test.dynamic {
-        let artefact = half_sample_artefact(f.map.as_ref(), &f.z);
-        let sampling = direction_dependence(&f.z[skip..], &artefact[skip..], 1.0);
-        test.sampling_energy = sampling.direction_energy;
-        if test.direction_energy <= 4.0 * sampling.direction_energy {
+    Ok(direction_beyond_sampling(
+        &f.z[skip..],
+        &delta[skip..],
+        feedback.then_some(f.map.as_ref()),
+        settings.hysteresis_threshold,
+    ))
+}
+
+/// The direction test of the residual `r` against `z`, and for a map acting in continuous time
+/// on a fed-back signal (`map` given) measured against what sampling alone leaves: such a
+/// force differs from the held N(z_k) by about N'(z)·ż·T_s/2, which changes sign with the
+/// direction of motion, so after any discrete static fit it is a direction effect of its own.
+/// Its size is that of the half-sample shift a_k = N̂'(z_k)·(z_(k+1) − z_(k−1))/4; a
+/// direction effect within four times its energy (twice its amplitude) is sampling, not
+/// hysteresis.
+pub(super) fn direction_beyond_sampling(
+    z: &[f64],
+    r: &[f64],
+    map: Option<&dyn Interpolant>,
+    threshold: f64,
+) -> DirectionTest {
+    let mut test = direction_dependence(z, r, threshold);
+    if let Some(map) = map
+        && test.dynamic
+    {
+        let artefact = half_sample_artefact(map, z);
+        test.sampling_energy = direction_dependence(z, &artefact, 1.0).direction_energy;
+        if test.direction_energy <= 4.0 * test.sampling_energy {
             test.dynamic = false;
         }
     }
-    Ok(test)
+    test
 }
 
 /// a_k = N̂'(z_k)·(z_(k+1) − z_(k−1))/4: what evaluating the map half a sample later changes
@@ -154,4 +170,52 @@ pub(super) fn deconvolve(h: &Hypothesis, r: &[f64]) -> Result<Vec<f64>> {
         }
     }
     Ok(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sine(n: usize, w: f64) -> Vec<f64> {
+        (0..n)
+            .map(|k| (w * k as f64).sin() + 0.3 * (2.7 * w * k as f64).sin())
+            .collect()
+    }
+
+    /// The residual a continuous-time map leaves after a discrete static fit is the
+    /// half-sample artefact: direction dependent, but not hysteresis; a backlash of a width
+    /// many samples of motion wide stays dynamic.
+    #[test]
+    fn sampling_artefacts_are_static_and_backlash_is_not() {
+        let z = sine(4000, 0.05);
+        let cubic = |v: &[f64]| v[0] + 2.0 * v[0].powi(3);
+        // The map evaluated half a sample later, minus the held value.
+        let r: Vec<f64> = (0..z.len())
+            .map(|k| {
+                if k == 0 || k + 1 == z.len() {
+                    return 0.0;
+                }
+                let half = z[k] + 0.25 * (z[k + 1] - z[k - 1]);
+                cubic(&[half]) - cubic(&[z[k]])
+            })
+            .collect();
+        let plain = direction_dependence(&z, &r, 0.1);
+        assert!(plain.dynamic, "the artefact alone is direction dependent");
+        let aware = direction_beyond_sampling(&z, &r, Some(&cubic), 0.1);
+        assert!(!aware.dynamic && aware.sampling_energy > 0.0);
+        // Backlash of half-width 0.2 on the same motion, against the static fit w = z.
+        let mut w = vec![0.0; z.len()];
+        for k in 1..z.len() {
+            w[k] = if z[k] - w[k - 1] > 0.2 {
+                z[k] - 0.2
+            } else if z[k] - w[k - 1] < -0.2 {
+                z[k] + 0.2
+            } else {
+                w[k - 1]
+            };
+        }
+        let rb: Vec<f64> = w.iter().zip(&z).map(|(w, z)| w - z).collect();
+        let identity = |v: &[f64]| v[0];
+        assert!(direction_beyond_sampling(&z, &rb, Some(&identity), 0.1).dynamic);
+    }
 }
