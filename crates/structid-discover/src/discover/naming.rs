@@ -159,13 +159,23 @@ pub(super) fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>
 }
 
 /// The families of `naming` in the order they are offered for naming: those whose map fit is within 25 %
-/// of the best family's RMS, fewest parameters first, then the rest by BIC.
+/// of the best family's RMS, fewest parameters first (the offset counts), among as many
+/// parameters the exact forms before the approximate ones (the power law without a linear
+/// term and the tanh saturation, which bend to a cubic's or a saturation's shape), then the
+/// rest by BIC.
 ///
 /// The points (z_k, ŵ_k) are a smoothed estimate, not independent noisy samples, so BIC alone
 /// rewards families that bend to the estimate's artefacts (a Stribeck curve for a gain, an
 /// asymmetric saturation for a symmetric one). A family with fewer parameters that fits
 /// about as well is the better name.
 pub fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
+    let count = |f: &EffectFit| f.parameters.len() + usize::from(f.offset.is_some());
+    let approximate = |f: &EffectFit| {
+        matches!(
+            f.effect,
+            Effect::SmoothSaturation | Effect::PowerLaw { linear: false }
+        )
+    };
     let best = naming
         .ranked
         .iter()
@@ -174,9 +184,9 @@ pub fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
     let near = |f: &EffectFit| f.rms <= 1.25 * best + 1e-12;
     let mut first: Vec<EffectFit> = naming.ranked.iter().filter(|f| near(f)).cloned().collect();
     first.sort_by(|a, b| {
-        a.parameters
-            .len()
-            .cmp(&b.parameters.len())
+        count(a)
+            .cmp(&count(b))
+            .then(approximate(a).cmp(&approximate(b)))
             .then(a.rms.total_cmp(&b.rms))
     });
     first.extend(naming.ranked.iter().filter(|f| !near(f)).cloned());

@@ -27,7 +27,7 @@ pub(super) fn polish(fit: &EffectFit, h: &Hypothesis, est_h: &Data, settle: usiz
 }
 
 /// The iteration limit of [`polish`].
-const POLISH_ITERATIONS: usize = 30;
+const POLISH_ITERATIONS: usize = 100;
 
 /// [`polish`] with an iteration limit.
 pub(super) fn polish_with(

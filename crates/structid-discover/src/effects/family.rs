@@ -115,9 +115,16 @@ fn sign(z: f64) -> f64 {
     }
 }
 
-/// `format!("{v:?}")`: the shortest representation that reads back to the same f64.
-fn n(v: f64) -> String {
-    format!("{v:?}")
+/// The shortest representation that reads back to the same f64 (`{v:?}`), written out in
+/// positional notation when that one has an exponent (`1e-5`), which the expression parser
+/// does not read.
+pub(crate) fn n(v: f64) -> String {
+    let short = format!("{v:?}");
+    if short.contains('e') {
+        format!("{v}")
+    } else {
+        short
+    }
 }
 
 impl Effect {
@@ -606,6 +613,15 @@ mod tests {
                 let (a, b) = (effect.eval(&th, z), m.eval(&[z]));
                 assert!((a - b).abs() < 1e-12, "{effect:?} at {z}: {a} vs {b}");
             }
+        }
+    }
+
+    #[test]
+    fn tiny_and_huge_numbers_print_in_a_form_the_parser_reads() {
+        for v in [8.69e-5, -2.06e-5, 1e-300, 2.87e52, 0.5, -3.0] {
+            let m = ExprMap::parse(&format!("{}*z0 + {}", n(v), n(-v)), 1).unwrap();
+            assert_eq!(m.eval(&[1.0]), v - v, "{}", n(v));
+            assert_eq!(n(v).parse::<f64>().unwrap(), v);
         }
     }
 

@@ -60,8 +60,11 @@ impl Parameter {
 /// How the output-error refit of a family (discovery's polish) ended.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Refit {
-    /// Whether Levenberg–Marquardt met its convergence test. The intervals of a refit that
-    /// did not are not trusted and the family is not named.
+    /// Whether Levenberg–Marquardt ended at a minimum: its relative-decrease test was met, or
+    /// no damped step lowered the cost any more (a local minimum to working precision; the
+    /// simulation error of a family with a kink is not smooth there, and this is how a search
+    /// on it ends). A refit stopped by the iteration limit, or whose simulation failed, did
+    /// not converge: its intervals are not trusted and the family is not named.
     pub converged: bool,
     /// How the search ended, in words.
     pub status: String,
@@ -84,7 +87,7 @@ impl Refit {
             _ => "stopped",
         };
         Self {
-            converged: status.is_converged(),
+            converged: status.is_converged() || status == LmStatus::NoProgress,
             status: words.into(),
             iterations,
             initial_cost,
@@ -230,8 +233,8 @@ fn expression_full(effect: Effect, theta_all: &[f64], offset: bool) -> String {
     let family = &theta_all[..theta_all.len() - usize::from(offset)];
     let e = effect.expression(family);
     match offset.then(|| theta_all[theta_all.len() - 1]) {
-        Some(c) if c < 0.0 => format!("{e} - {:?}", -c),
-        Some(c) => format!("{e} + {c:?}"),
+        Some(c) if c < 0.0 => format!("{e} - {}", super::family::n(-c)),
+        Some(c) => format!("{e} + {}", super::family::n(c)),
         None => e,
     }
 }

@@ -9,8 +9,10 @@
 //!   points say "relay": [`Effect::Coulomb`] describes them with one parameter that is
 //!   determined (the same for the asymmetric and the smooth saturation);
 //! * a **Stribeck curve whose hump is unresolved**: the Stribeck velocity outside
-//!   [[`RELAY_FRACTION`], 1] × the range of |z|, or a static level not distinguishable from
-//!   the Coulomb level (|s − c| ≤ 1.96·sd(s − c)): the family collapses to Coulomb + viscous;
+//!   [[`RELAY_FRACTION`], 1] × the range of |z|, a static level not distinguishable from
+//!   the Coulomb level (|s − c| ≤ 1.96·sd(s − c)), or one below it (a dip near z = 0 is not
+//!   Stribeck friction; it is what a nonparametric estimate that smooths a Coulomb jump
+//!   through zero looks like): the family collapses to Coulomb + viscous;
 //! * a **power law with its exponent on a bound** (1 or
 //!   [`POWER_LAW_MAX_EXPONENT`](super::POWER_LAW_MAX_EXPONENT)).
 
@@ -75,6 +77,16 @@ pub(crate) fn flags(fit: &EffectFit, cov: Option<&DMatrix<f64>>) -> Vec<String> 
                  curve collapses to Coulomb + viscous"
             ));
         }
+        if pairs
+            .iter()
+            .any(|&(s, c)| v[s].abs() <= v[c].abs() || v[s] * v[c] < 0.0)
+        {
+            out.push(
+                "a static level is not above its Coulomb level (a dip, not a Stribeck hump: \
+                 what a smoothed estimate of a Coulomb jump looks like)"
+                    .into(),
+            );
+        }
         if pairs.iter().any(|&(s, c)| unresolved_difference(s, c)) {
             out.push(
                 "a static level is not resolved from its Coulomb level: the curve collapses \
@@ -138,6 +150,25 @@ mod tests {
         let w = noisy(|z| Effect::Stribeck.eval(&truth, z), &z, 0.01, 35);
         let fit = fit_effect(Effect::Stribeck, &z, &w).unwrap();
         assert!(fit.nameable(), "{:?}", fit.flags);
+    }
+
+    #[test]
+    fn a_smoothed_coulomb_jump_is_not_a_stribeck_dip() {
+        // 0.4·tanh(z/0.1) + 0.1·z: a relay smoothed through zero, as a kernel estimate shows
+        // it. A Stribeck fit bends its static level below the Coulomb level to follow it.
+        let z = points(400, 40);
+        let w = noisy(|z| 0.4 * (z / 0.1).tanh() + 0.1 * z, &z, 0.002, 41);
+        let fit = fit_effect_with(Effect::Stribeck, false, &z, &w).unwrap();
+        assert!(
+            fit.values()[1].abs() < fit.values()[0].abs(),
+            "{:?}",
+            fit.values()
+        );
+        assert!(
+            fit.flags.iter().any(|f| f.contains("dip")),
+            "{:?}",
+            fit.flags
+        );
     }
 
     #[test]
