@@ -402,7 +402,7 @@ mod tests {
     fn an_unconverged_refit_is_not_named_even_when_it_validates() {
         let good = gain_fit();
         let mut stuck = gain_fit();
-        stuck.refit = Some(Refit::failed("stopped at the iteration limit"));
+        stuck.refit = Some(Box::new(Refit::failed("stopped at the iteration limit")));
         // The unconverged family is the simplest and validates best, yet the next is named.
         let refined = [(0, &stuck, 0.010), (1, &good, 0.011)];
         assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(1));

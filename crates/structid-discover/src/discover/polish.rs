@@ -63,7 +63,9 @@ pub(super) fn polish_with(
         Ok(lm) => lm,
         Err(e) => {
             let mut out = fit.clone();
-            out.refit = Some(Refit::failed(&format!("the refit could not start: {e}")));
+            out.refit = Some(Box::new(Refit::failed(&format!(
+                "the refit could not start: {e}"
+            ))));
             out.flags = crate::effects::identifiability::flags(&out, None);
             return out;
         }
@@ -80,12 +82,12 @@ pub(super) fn polish_with(
     let pf = fit.parameters.len();
     let family_cov = cov.as_ref().map(|c| c.view((0, 0), (pf, pf)).into_owned());
     let mut with_refit = fit.clone();
-    with_refit.refit = Some(Refit::from_status(
+    with_refit.refit = Some(Box::new(Refit::from_status(
         lm.status,
         lm.iterations,
         lm.initial_cost,
         lm.cost,
-    ));
+    )));
     with_refit.at(&lm.theta, &se, family_cov.as_ref())
 }
 
@@ -127,6 +129,9 @@ impl LeastSquaresProblem for PolishProblem<'_> {
         Some(j)
     }
 }
+
+/// The relative step of [`PolishProblem`]'s forward differences.
+const JACOBIAN_STEP: f64 = 1e-6;
 
 #[cfg(test)]
 mod tests {
@@ -213,6 +218,3 @@ mod tests {
         assert!(fit.flags.iter().any(|f| f.contains("did not converge")));
     }
 }
-
-/// The relative step of [`PolishProblem`]'s forward differences.
-const JACOBIAN_STEP: f64 = 1e-6;

@@ -128,7 +128,7 @@ pub struct EffectFit {
     /// The range (min, max) of z the family was fitted on.
     pub support: (f64, f64),
     /// The output-error refit, when there was one (`None`: the map fit only).
-    pub refit: Option<Refit>,
+    pub refit: Option<Box<Refit>>,
     /// Why the family must not name the effect: an unidentifiable parameter (a saturation
     /// whose slope is a relay's, a Stribeck hump the data do not resolve, an exponent on its
     /// bound, a key parameter whose interval is not finite or wider than its value), or a

@@ -49,7 +49,7 @@ pub(crate) fn flags(fit: &EffectFit, cov: Option<&DMatrix<f64>>) -> Vec<String> 
         _ => None,
     };
     if let Some(width) = linear_width
-        && !(width >= RELAY_FRACTION * span)
+        && (width.is_nan() || width < RELAY_FRACTION * span)
     {
         out.push(format!(
             "the slope is not identifiable: the level is reached within {:.2} % of the range \
