@@ -14,7 +14,7 @@
 //!   Stribeck friction; it is what a nonparametric estimate that smooths a Coulomb jump
 //!   through zero looks like): the family collapses to Coulomb + viscous;
 //! * a **power law with its exponent on a bound** (1 or
-//!   [`POWER_LAW_MAX_EXPONENT`](super::POWER_LAW_MAX_EXPONENT)).
+//!   [`POWER_LAW_MAX_EXPONENT`]).
 
 use nalgebra::DMatrix;
 
