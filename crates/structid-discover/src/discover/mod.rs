@@ -711,10 +711,14 @@ mod tests {
                     interval: (0.9, 1.1),
                 })
                 .collect(),
+            offset: None,
             rss: rms * rms,
             rms,
             bic,
             expression: String::new(),
+            support: (-1.0, 1.0),
+            refit: None,
+            flags: Vec::new(),
         }
     }
 

@@ -5,7 +5,7 @@ use nalgebra::{DMatrix, DVector};
 use structid_core::Data;
 use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings};
 
-use crate::effects::{Effect, EffectFit};
+use crate::effects::{Effect, EffectFit, Refit};
 use crate::hypotheses::Hypothesis;
 
 use super::DiscoverSettings;
@@ -13,23 +13,41 @@ use super::direction::simulation_residual;
 
 /// Refines a named family's parameters by output error: Levenberg–Marquardt on the
 /// estimation record's simulation error with the parametric map in the loop, from the map
-/// fit's values, with forward-difference derivatives (a family has at most four parameters).
-/// The map fit is to a smoothed estimate; the simulation error weighs each part of the map by
-/// how much the data say about it. The 95 % intervals come from s²·(JᵀJ)⁻¹ at the optimum.
-/// A family whose parameters move a quantiser's steps is left as fitted (its simulation
-/// error is piecewise constant in the step).
+/// fit's values (the offset included when the fit carries one), with forward-difference
+/// derivatives (a family has at most seven parameters). The map fit is to a smoothed
+/// estimate; the simulation error weighs each part of the map by how much the data say about
+/// it. The 95 % intervals come from s²·(JᵀJ)⁻¹ at the optimum.
+///
+/// The result records how the search ended ([`EffectFit::refit`]) and carries the flags of
+/// [`crate::effects::identifiability`] at the refitted values; a refit that did not converge
+/// is flagged, so the family is not named by it (its intervals are not trusted). A family
+/// whose parameters move a quantiser's steps is left as fitted, without a refit record (its
+/// simulation error is piecewise constant in the step).
 pub(super) fn polish(
     fit: &EffectFit,
     h: &Hypothesis,
     est_h: &Data,
     settings: &DiscoverSettings,
 ) -> EffectFit {
+    polish_with(fit, h, est_h, settings, POLISH_ITERATIONS)
+}
+
+/// The iteration limit of [`polish`].
+const POLISH_ITERATIONS: usize = 100;
+
+/// [`polish`] with an iteration limit.
+pub(super) fn polish_with(
+    fit: &EffectFit,
+    h: &Hypothesis,
+    est_h: &Data,
+    discover: &DiscoverSettings,
+    max_iterations: usize,
+) -> EffectFit {
     if fit.effect == Effect::Quantisation {
         return fit.clone();
     }
-    let effect = fit.effect;
-    let lm_settings = LmSettings::builder()
-        .max_iterations(30)
+    let settings = LmSettings::builder()
+        .max_iterations(max_iterations)
         .tolerance(1e-10)
         .initial_damping(1e-3)
         .damping_increase(4.0)
@@ -39,47 +57,50 @@ pub(super) fn polish(
         .max_step_attempts(10)
         .build();
     let mut problem = PolishProblem {
-        effect,
+        fit,
         h,
         est_h,
-        settings,
+        settings: discover,
     };
-    // A start whose simulation fails leaves the map fit as it is.
-    let Ok(lm) =
-        lm_settings.and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, &fit.values()))
-    else {
-        return fit.clone();
+    // A start whose simulation fails leaves the map fit as it is, flagged.
+    let lm = match settings
+        .and_then(|s| LevenbergMarquardt::new(s).minimize(&mut problem, &fit.all_values()))
+    {
+        Ok(lm) => lm,
+        Err(e) => {
+            let mut out = fit.clone();
+            out.refit = Some(Box::new(Refit::failed(&format!(
+                "the refit could not start: {e}"
+            ))));
+            out.flags = crate::effects::identifiability::flags(&out, None);
+            return out;
+        }
     };
     let cov = lm.covariance(&mut problem);
-    let names = effect.parameter_names();
-    let parameters = lm
-        .theta
-        .iter()
-        .enumerate()
-        .map(|(i, &value)| {
-            let half = cov
-                .as_ref()
-                .map(|cv| 1.96 * cv[(i, i)].max(0.0).sqrt())
-                .unwrap_or(f64::INFINITY);
-            crate::effects::Parameter {
-                name: names[i].clone(),
-                value,
-                interval: (value - half, value + half),
-            }
+    let se: Vec<f64> = (0..lm.theta.len())
+        .map(|i| {
+            cov.as_ref()
+                .map(|cv| cv[(i, i)].max(0.0).sqrt())
+                .filter(|s| s.is_finite())
+                .unwrap_or(f64::INFINITY)
         })
         .collect();
-    EffectFit {
-        effect,
-        parameters,
-        expression: effect.expression(&lm.theta),
-        ..fit.clone()
-    }
+    let pf = fit.parameters.len();
+    let family_cov = cov.as_ref().map(|c| c.view((0, 0), (pf, pf)).into_owned());
+    let mut with_refit = fit.clone();
+    with_refit.refit = Some(Box::new(Refit::from_status(
+        lm.status,
+        lm.iterations,
+        lm.initial_cost,
+        lm.cost,
+    )));
+    with_refit.at(&lm.theta, &se, family_cov.as_ref())
 }
 
 /// The output-error problem of [`polish`]: the simulation residual of the estimation record
 /// with the family's map in the loop; a θ whose simulation fails is rejected.
 pub(super) struct PolishProblem<'a> {
-    effect: Effect,
+    fit: &'a EffectFit,
     h: &'a Hypothesis,
     est_h: &'a Data,
     settings: &'a DiscoverSettings,
@@ -87,8 +108,8 @@ pub(super) struct PolishProblem<'a> {
 
 impl LeastSquaresProblem for PolishProblem<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
-        let effect = self.effect;
-        let map = |z: &[f64]| effect.eval(theta, z[0]);
+        let fit = self.fit;
+        let map = |z: &[f64]| fit.eval_with(theta, z[0]);
         simulation_residual(
             &self.h.model,
             self.h.location,
@@ -99,11 +120,11 @@ impl LeastSquaresProblem for PolishProblem<'_> {
         .map(DVector::from_vec)
     }
 
-    /// Forward differences (a family has at most four parameters, each costs a simulation).
+    /// Forward differences (each parameter costs a simulation).
     fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
         let mut j = DMatrix::zeros(r.len(), theta.len());
         for i in 0..theta.len() {
-            let step = 1e-6 * theta[i].abs().max(1e-3);
+            let step = JACOBIAN_STEP * theta[i].abs().max(1e-3);
             let mut t = theta.to_vec();
             t[i] += step;
             let ri = self.residuals(&t)?;
@@ -112,5 +133,94 @@ impl LeastSquaresProblem for PolishProblem<'_> {
             }
         }
         Some(j)
+    }
+}
+
+/// The relative step of [`PolishProblem`]'s forward differences.
+const JACOBIAN_STEP: f64 = 1e-6;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::fit_effect_with;
+    use crate::hypotheses::{Location, hypothesis};
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, Normal};
+    use std::sync::Arc;
+    use structid_core::{PolynomialDispersion, Signal};
+    use structid_linear::PolynomialModel;
+
+    const CUBIC: Effect = Effect::OddPolynomial { degree: 3 };
+
+    /// A noise-free record of y = N(G·u) with a cubic sensor distortion plus a bias,
+    /// N(z) = a1·z + a3·z³ + c, the hypothesis at the output, and the truth (a1, a3, c).
+    fn sensor_case() -> (Hypothesis, Data, [f64; 3]) {
+        let g = PolynomialModel {
+            den: vec![1.0, -1.5, 0.7],
+            num: vec![vec![0.0, 0.1, 0.1]],
+            sample_time: Some(0.05),
+        };
+        let h = hypothesis(
+            &g,
+            Location::Output,
+            Arc::new(PolynomialDispersion::new(1).unwrap()),
+        )
+        .unwrap();
+        let truth = [0.3, 0.5, -0.2];
+        let mut rng = StdRng::seed_from_u64(7);
+        let norm = Normal::new(0.0, 1.0).unwrap();
+        let mut s = 0.0;
+        let u = Signal::from_fn(1500, 1, |_, _| {
+            s = 0.8 * s + 0.6 * norm.sample(&mut rng);
+            s
+        });
+        let f = |z: &[f64]| truth[0] * z[0] + truth[1] * z[0].powi(3) + truth[2];
+        let y = h.simulate(&f, &u, None).unwrap().y;
+        assert!(y.channel(0).iter().all(|v| v.is_finite()));
+        let data = h.data(&Data::new(u, y).unwrap()).unwrap();
+        (h, data, truth)
+    }
+
+    /// A map fit 20 % off the truth, with the offset.
+    fn start(truth: [f64; 3]) -> EffectFit {
+        let z: Vec<f64> = (0..200).map(|k| -1.0 + k as f64 / 99.5).collect();
+        let w: Vec<f64> = z
+            .iter()
+            .map(|z| 1.2 * truth[0] * z + 0.8 * truth[1] * z.powi(3) + 1.2 * truth[2])
+            .collect();
+        fit_effect_with(CUBIC, true, &z, &w).unwrap()
+    }
+
+    #[test]
+    fn a_converged_refit_recovers_the_map_and_its_offset_with_its_sign() {
+        let (h, data, truth) = sensor_case();
+        let fit = polish(&start(truth), &h, &data, &DiscoverSettings::default());
+        let refit = fit.refit.as_ref().unwrap();
+        assert!(refit.converged, "{refit:?}");
+        assert!(refit.cost < 0.05 * refit.initial_cost, "{refit:?}");
+        let v = fit.all_values();
+        for (i, t) in truth.iter().enumerate() {
+            assert!((v[i] - t).abs() < 0.03 * t.abs(), "{v:?} vs {truth:?}");
+        }
+        assert!(fit.nameable(), "{:?}", fit.flags);
+        // The intervals come from the converged refit and hold the truth.
+        for (p, t) in fit.parameters.iter().chain(fit.offset.as_ref()).zip(truth) {
+            assert!(
+                p.interval.0 <= t + 1e-9 && t - 1e-9 <= p.interval.1,
+                "{p:?} vs {t}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_unconverged_refit_is_flagged_and_not_nameable() {
+        let (h, data, truth) = sensor_case();
+        // One iteration from 20 % off cannot meet a relative-decrease test of 1e-10.
+        let fit = polish_with(&start(truth), &h, &data, &DiscoverSettings::default(), 1);
+        let refit = fit.refit.as_ref().unwrap();
+        assert!(!refit.converged, "{refit:?}");
+        assert!(!fit.nameable());
+        assert!(fit.flags.iter().any(|f| f.contains("did not converge")));
     }
 }
