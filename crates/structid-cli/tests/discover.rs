@@ -135,7 +135,9 @@ fn a_hidden_input_saturation_is_found_named_and_added() {
     // report.md: verdict first, then the gap, the hypotheses, the effect and the gap after.
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("saturation") && md.contains("input"), "{md}");
-    let verdict = md.find("**Verdict (missing effect):** missing effect").expect("verdict");
+    let verdict = md
+        .find("**Verdict (missing effect):** missing effect")
+        .expect("verdict");
     let hypotheses = md.find("hypotheses").expect("hypotheses");
     let after = md.find("The gap after").expect("gap after");
     assert!(verdict < hypotheses && hypotheses < after, "{md}");

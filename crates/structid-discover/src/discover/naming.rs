@@ -3,7 +3,7 @@
 
 use structid_core::{Data, Error, ExprMap, Result};
 
-use crate::effects::{Effect, EffectFit, Naming, NamingSettings, name_effect};
+use crate::effects::{Effect, EffectFit, Naming, NamingSettings, fit_effect_with, name_effect};
 use crate::gap::{Gap, GapSettings, gap};
 use crate::hypotheses::{Location, Nominal};
 use crate::hysteresis::DirectionTest;
@@ -108,6 +108,25 @@ pub(super) fn naming_settings_at(
 /// How many families (in parsimonious order, skipping those whose map fit is flagged) are
 /// refined by output error and simulated.
 const REFINED_FAMILIES: usize = 3;
+
+/// The relay a saturation-like fit flagged as one describes: its level c and offset, for a
+/// Coulomb start (an asymmetric saturation's half span and centre).
+fn relay_start(fit: &EffectFit) -> Option<(f64, f64)> {
+    if !fit.flags.iter().any(|f| f.contains("relay")) {
+        return None;
+    }
+    let v = fit.values();
+    let off = fit.offset.as_ref().map_or(0.0, |o| o.value);
+    let (level, offset) = match fit.effect {
+        Effect::Saturation | Effect::SmoothSaturation => (v.get(1)?.abs(), off),
+        Effect::AsymmetricSaturation => {
+            let (lower, upper) = (*v.get(1)?, *v.get(2)?);
+            (0.5 * (upper - lower), off + 0.5 * (upper + lower))
+        }
+        _ => return None,
+    };
+    (level.is_finite() && offset.is_finite() && level > 0.0).then_some((level, offset))
+}
 
 /// The cap of the noise escape of [`validates`]: a family within 1.5·σ̂ is accepted only
 /// when its validation RMS is also within this factor of the nonparametric map's.
@@ -274,6 +293,34 @@ pub(super) fn name_and_add(
             let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
             family_rms[i] = Some(rms);
             simulated.push((i, rms));
+        }
+        // A saturation flagged as a relay says "Coulomb" with its level and offset: refine
+        // the relay itself from there (its map fit to a smoothed jump is poor, its refit is
+        // not).
+        let relay = targets
+            .iter()
+            .chain(simulated.iter().map(|(i, _)| i))
+            .find_map(|&i| relay_start(&naming.ranked[i]))
+            .or_else(|| naming.ranked.iter().find_map(relay_start));
+        if let Some((level, offset)) = relay
+            && let Some(i) = naming
+                .ranked
+                .iter()
+                .position(|f| f.effect == Effect::Coulomb)
+            && family_rms[i].is_none()
+            && let Ok(mut start) = fit_effect_with(Effect::Coulomb, true, &zs, &ws)
+        {
+            start.parameters[0].value = level;
+            if let Some(o) = start.offset.as_mut() {
+                o.value = offset;
+            }
+            let fit = polish(&start, &h, &est_h, settings);
+            if let Ok(m) = ExprMap::parse(&fit.expression, 1) {
+                let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
+                naming.ranked[i] = fit;
+                family_rms[i] = Some(rms);
+                simulated.push((i, rms));
+            }
         }
         let refined: Vec<(usize, &EffectFit, f64)> = simulated
             .iter()
