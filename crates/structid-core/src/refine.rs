@@ -242,10 +242,14 @@ fn one_channel(data: &Data, what: &str) -> Result<()> {
 ///   not exactly the input path. The feedback path needs a delay (B_w starting at q⁻¹): with a
 ///   direct term, y_k would depend on N(y_k), an algebraic loop.
 /// * [`LinearStructure::input`]: an input nonlinearity (Hammerstein), y = G·N(u) + e, z = u.
+/// * [`LinearStructure::rate_feedback`]: y = G·(u − N(ẏ)) + e, z = (y_k − y_(k−1))/T_s. G
+///   is SISO from u with an input delay (as for a shared feedback numerator).
+/// * [`LinearStructure::output`]: a sensor map, y = N(G·u) + e, z = G·u.
 ///
-/// In both, G is kept in the structure's form: for output feedback its inputs are [u…, w]
-/// (the last numerator is the path of w, −B for the shared path), for an input map its one
-/// input is w.
+/// G is kept in the structure's form: for output feedback its inputs are [u…, w] (the last
+/// numerator is the path of w, −B for the shared path), for an input map its one input is
+/// w, for rate feedback and a sensor map its inputs are u. A location declared in a nominal
+/// LFT is refined through [`LinearStructure::from_lft`].
 ///
 /// ```
 /// use std::sync::Arc;
@@ -1111,7 +1115,7 @@ fn map_simulation_rms(lft: &Lft, map: &dyn Interpolant, data: &Data) -> Result<f
 /// // y = G·(u − N(y)), N(y) = 0.5·y³, G = 0.2/(q − 0.7); refined from a pole at 0.5.
 /// let truth = PolynomialModel { num: vec![vec![0.0, 0.2]], den: vec![1.0, -0.7], sample_time: None };
 /// let u = Signal::from_fn(400, 1, |k, _| ((k * k) as f64 * 0.37).sin());
-/// let mut y = vec![0.0; 400];
+/// let mut y = vec![0.0f64; 400];
 /// for k in 1..400 { y[k] = 0.7 * y[k - 1] + 0.2 * (u.get(k - 1, 0) - 0.5 * y[k - 1].powi(3)); }
 /// let data = Data::new(u, Signal::new(1, y).unwrap()).unwrap();
 /// let s = LinearStructure::output_feedback("N");
