@@ -1140,7 +1140,7 @@ pub fn refine_linear(
         Ok(lft) => map_simulation_rms(&lft, map, data)?,
         Err(_) => f64::INFINITY,
     };
-    let status = if !(after < before) {
+    let status = if after.is_nan() || after >= before {
         LinearRefineStatus::SimulationWorse
     } else if fit.converged {
         LinearRefineStatus::Improved
