@@ -504,3 +504,89 @@ fn unsupported_requests_say_what_is_wrong() {
         .to_string();
     assert!(e.contains("pole(s) at z = 1"), "{e}");
 }
+
+/// A record cut from a longer run of a plant with an integrator starts away from rest: with
+/// the integrator held and the initial state free, output error finds the other pole, keeps
+/// F(1) = 0, and ends below the start's cost with its own best initial state.
+#[test]
+fn integrator_with_a_free_initial_state() {
+    use structid_core::refine::output_error_with_integrators;
+    let ts = 0.01;
+    let truth = mass(4.0, ts, 1.0);
+    let u = input(1700, 1.0, 41);
+    let y = truth.simulate(&u).unwrap();
+    let (u, y) = (
+        Signal::from_fn(1500, 1, |k, _| u.get(k + 200, 0)),
+        Signal::from_fn(1500, 1, |k, _| {
+            y[k + 200] + 1e-4 * ((k * k) as f64 * 0.37).sin()
+        }),
+    );
+    assert!(
+        y.get(0, 0).abs() > 1e-3,
+        "the record should start away from rest"
+    );
+    let start = mass(4.0 * 1.2, ts, 1.2);
+    let s = OeSettings::builder().tolerance(1e-12).build().unwrap();
+    let fit = output_error_with_integrators(&u, &y, &start, &s, true, 1).unwrap();
+    let at_one: f64 = fit.model.den.iter().sum();
+    assert!(at_one.abs() < 1e-12, "F(1) = {at_one}");
+    let p = fit.model.den[2];
+    assert!(
+        (p - truth.den[2]).abs() < 1e-3,
+        "pole {p} vs {}",
+        truth.den[2]
+    );
+    assert!(
+        fit.cost < 1e-3 * fit.initial_cost,
+        "{} → {}",
+        fit.initial_cost,
+        fit.cost
+    );
+    // From rest the same fit cannot explain the start of the record.
+    let rest = output_error_with_integrators(&u, &y, &start, &s, false, 1).unwrap();
+    assert!(
+        fit.cost < 0.01 * rest.cost,
+        "free {} vs rest {}",
+        fit.cost,
+        rest.cost
+    );
+}
+
+/// A sensor map's linear step with a free initial state on a record that does not start at
+/// rest: the state enters z through the impulse input, and the fit reaches the noise level.
+#[test]
+fn sensor_map_linear_step_with_a_free_initial_state() {
+    let truth = second_order(0.9, 0.3, [0.2, 0.1], None);
+    let structure = LinearStructure::output("sensor");
+    let lft = structure.lft(&truth).unwrap();
+    let sensor = |z: f64| z + 0.2 * z * z * z;
+    let u = input(1700, 0.5, 43);
+    let y = simulate(&lft, &sensor, &u, 0.001, 43);
+    let cut = |s: &Signal| Signal::from_fn(1500, 1, |k, _| s.get(k + 200, 0));
+    let data = Data::new(cut(&u), cut(&y)).unwrap();
+    let start = off_by_20_percent(&truth);
+    let f = |z: &[f64]| sensor(z[0]);
+    let free = RefineSettings::builder()
+        .identify(
+            IdentifySettings::builder()
+                .initial_state(InitialState::Estimate)
+                .build()
+                .unwrap(),
+        )
+        .build()
+        .unwrap();
+    let r = refine_linear(&structure, &start, &f, &data, &free).unwrap();
+    let rest = refine_linear(&structure, &start, &f, &data, &settings(1e-7, 1)).unwrap();
+    eprintln!(
+        "sensor, free state: J {} → {} (from rest {})",
+        r.cost_before, r.cost_after, rest.cost_after
+    );
+    assert!(
+        r.cost_after < 2e-6,
+        "J {} → {}",
+        r.cost_before,
+        r.cost_after
+    );
+    assert!(r.cost_after < 0.5 * rest.cost_after);
+    assert!(pole_error(&r.after.den, &truth.den) < 0.01, "{:?}", r.after);
+}
