@@ -562,3 +562,54 @@ fn refine_lft_model_file_as_the_structure_it_declares() {
         "refined F = {den:?} (start 1 − 1.1q⁻¹ + 0.4q⁻²)"
     );
 }
+
+/// A `[linear]` rate-feedback model of a mass with viscous damping (position from force,
+/// zero-order hold, T = 0.01 s): its integrator stays at z = 1 through refinement while the
+/// other pole moves from 20 % off (in the damping) to the truth.
+#[test]
+fn refine_keeps_the_integrator_of_a_rate_feedback_nominal() {
+    let ts = 0.01;
+    let mass = |a: f64, gain: f64| {
+        let p = (-a * ts).exp();
+        let b1 = gain * (a * ts - 1.0 + p) / (a * a);
+        let b2 = gain * (1.0 - p - a * ts * p) / (a * a);
+        format!(
+            "[linear]\nstructure = \"rate-feedback\"\nsample_time = {ts}\n\
+             den = [1.0, {}, {p}]\nnum = [[0.0, {b1}, {b2}]]\n\n\
+             [signals]\nu = [\"u\"]\ny = [\"y\"]\n\n\
+             [[nonlinearity]]\nname = \"friction\"\ninputs = [0]\noutput = 0\n\
+             dispersion = {{ kind = \"fourier\", trend = 1 }}\ntruth = \"0.3*tanh(z0/0.02)\"\n",
+            -(1.0 + p)
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (truth, start) = (d.join("truth.toml"), d.join("start.toml"));
+    std::fs::write(&truth, mass(4.0, 1.0)).unwrap();
+    std::fs::write(&start, mass(4.8, 1.2)).unwrap();
+    let est = simulate_record(d, &truth, "est", 3000, 31, 3.0);
+    let out = d.join("refined");
+    ok(&[
+        "refine",
+        "--model",
+        p(&start),
+        "--data",
+        p(&est),
+        "--beta",
+        "1e-8",
+        "--out",
+        p(&out),
+    ]);
+    assert_monotone(&json(&out.join("report.json")));
+    let refined = structid_io::ModelFile::from_path(&out.join("model.toml")).unwrap();
+    let den = &refined.linear.as_ref().unwrap().model.den;
+    let at_one: f64 = den.iter().sum();
+    assert!(at_one.abs() < 1e-9, "F(1) = {at_one}: {den:?}");
+    let (p_true, p_start) = ((-4.0 * ts).exp(), (-4.8 * ts).exp());
+    eprintln!("integrator: pole {} vs {p_true} (start {p_start})", den[2]);
+    assert!(
+        (den[2] - p_true).abs() < 0.1 * (p_start - p_true).abs(),
+        "pole {} vs {p_true} (start {p_start})",
+        den[2]
+    );
+}

@@ -57,6 +57,13 @@
 //! number of factors (1 − q⁻¹) of the starting denominator
 //! ([`LinearStructure::with_integrators`]).
 //!
+//! # Initial state
+//! With [`InitialState::Estimate`] the initial state is estimated in both steps for output
+//! feedback and input maps. At the rate and sensor sites z itself depends on x₀ (the previous
+//! output, or G·u), and [`identify()`] refuses a free x₀ there, so [`refine`] does too;
+//! [`refine_linear`], which holds the map as a function, estimates G's x₀ at every site (at
+//! the rate site the first rate is computed with y₋₁ = 0).
+//!
 //! # Joint refinement with a fitted map
 //! [`refine`] alternates a nonparametric map with G; [`Refinement::linear_before`],
 //! [`Refinement::cost_before`] and [`Refinement::cost_after`] give what changed.
