@@ -106,7 +106,10 @@ enum Command {
     /// Refine an uncertain linear part: alternate between identifying the map with G fixed and
     /// re-estimating G (output error) with the map fixed.
     ///
-    /// Needs a model file with a `[linear]` section (see `structid linear`). β (and σ) are
+    /// Needs a model file with a `[linear]` section with a map (structure output-feedback,
+    /// rate-feedback, input or output; see `structid linear`), or an `[lft]` whose one map
+    /// sits at the input or output of a linear block G or in feedback from its output or its
+    /// rate, which is then written back as `[linear]`. Poles of G at z = 1 (integrators) stay there. β (and σ) are
     /// chosen on the first pass; the alternation stops when the validation simulation error
     /// stops improving. Writes DIR/model.toml (the refined linear part; `structid validate
     /// --model DIR/model.toml --estimate DIR` reproduces the estimate), DIR/refine.csv and

@@ -8,10 +8,11 @@ use structid_core::estimate::{Estimate, Provenance};
 
 use clap::Args;
 use structid_core::hyperparameters::{Criterion, SelectionSettings};
-use structid_core::refine::{RefineSettings, refine};
+use structid_core::refine::{LinearStructure, RefineSettings, refine};
 use structid_core::{Data, IdentifySettings, InitialState};
 use structid_io::{
-    DataTable, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
+    DataTable, LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction,
+    format_number,
 };
 use structid_linear::OeSettings;
 use structid_plot::{Chart, Series, render_chart_svg};
@@ -23,8 +24,11 @@ use crate::{AutoOr, InitialStateArg};
 /// Arguments of `structid refine`.
 #[derive(Debug, Args)]
 pub struct RefineArgs {
-    /// The model file: a `[linear]` section with structure "output-feedback" or "input" (the
-    /// starting linear part, e.g. from `structid linear`) and the map's `[[nonlinearity]]`.
+    /// The model file: a `[linear]` section with a structure ("output-feedback",
+    /// "rate-feedback", "input" or "output": the starting linear part, e.g. from `structid
+    /// linear`) and the map's `[[nonlinearity]]`; or an `[lft]` whose one map sits at a
+    /// declared location that is one of those structures around a linear block G (the
+    /// refined model is then written as `[linear]`).
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
     /// The estimation data (CSV with the columns of `[signals]`).
@@ -91,30 +95,79 @@ fn split(data: &Data, at: usize) -> Result<(Data, Data), CliError> {
     Ok((part(0..at)?, part(at..data.len())?))
 }
 
+/// An `[lft]` model file as the `[linear]` one it is: the structure and G that its one map's
+/// declared location puts the map around ([`LinearStructure::from_lft`]), the block reading
+/// z 0 and writing w 0. Returns the file, its `[linear]` section and a sentence saying what
+/// was recognised.
+fn as_linear(
+    mf: ModelFile,
+    path: &std::path::Path,
+) -> Result<(ModelFile, LinearSpec, Option<String>), CliError> {
+    let [block] = mf.blocks.as_slice() else {
+        return Err(CliError::input(format!(
+            "`{}` has {} maps; refinement of an [lft] model needs exactly one",
+            path.display(),
+            mf.blocks.len()
+        )));
+    };
+    let [z] = block.inputs.as_slice() else {
+        return Err(CliError::input(format!(
+            "the map `{}` of `{}` reads {} z channels; refinement re-estimates G around a map \
+             of one input",
+            block.name,
+            path.display(),
+            block.inputs.len()
+        )));
+    };
+    let (structure, g) = LinearStructure::from_lft(&block.name, &mf.lft, *z, block.output)
+        .map_err(|e| {
+            CliError::input(format!(
+                "`{}` cannot be refined: {}",
+                path.display(),
+                e.to_string()
+                    .trim_start_matches("invalid model structure: ")
+            ))
+        })?;
+    let spec = LinearSpec {
+        structure: Some(structure.site()),
+        model: g,
+        separate_numerator: structure.separate_numerator(),
+    };
+    let mut out = mf.clone();
+    out.lft = spec.lft()?;
+    out.linear = Some(spec.clone());
+    out.signals.z = None;
+    out.blocks[0].inputs = vec![0];
+    out.blocks[0].output = 0;
+    out.discover = None;
+    let note = format!(
+        "the [lft] location of `{}` (z {z}, w {}) is {}; model.toml is written as [linear]",
+        block.name,
+        block.output,
+        structure.describe()
+    );
+    Ok((out, spec, Some(note)))
+}
+
 /// Runs `structid refine`.
 pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
-    let mf = ModelFile::from_path(&a.model)?;
-    let Some(spec) = mf.linear.clone() else {
-        return Err(CliError::input(format!(
-            "`{}` gives its linear block as [lft]; refinement needs a [linear] section with a \
-             structure (write one with `structid linear --structure output-feedback …`)",
-            a.model.display()
-        )));
+    let read = ModelFile::from_path(&a.model)?;
+    let (mf, spec, recognised) = match read.linear.clone() {
+        Some(spec) => (read, spec, None),
+        None => as_linear(read, &a.model)?,
     };
-    if !spec.refinable() && spec.structure.is_some() {
+    if spec.structure.is_none() {
         return Err(CliError::input(format!(
-            "`{}` has structure = \"{}\", which `structid refine` does not support (it \
-             re-estimates G for structure = \"output-feedback\" or \"input\"); identify its map \
-             with G fixed by `structid identify`",
-            a.model.display(),
-            spec.structure_name()
+            "`{}` has structure = \"lti\", a linear model without a map; refinement \
+             re-estimates G around a map (structure = \"output-feedback\", \"rate-feedback\", \
+             \"input\" or \"output\")",
+            a.model.display()
         )));
     }
     if mf.blocks.len() != 1 {
         return Err(CliError::input(format!(
-            "`{}` has {} maps; refinement needs a structure with exactly one (structure = \
-             \"output-feedback\" or \"input\")",
+            "`{}` has {} maps; refinement needs a structure with exactly one",
             a.model.display(),
             mf.blocks.len()
         )));
@@ -403,6 +456,9 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     written.splice(0..0, [model_path, csv_path, svg_path]);
     if let Some(p) = estimation_file {
         written.insert(1, p);
+    }
+    if let Some(note) = recognised {
+        println!("{note}");
     }
     print!("{}", summary(&r, &written, t0.elapsed().as_secs_f64()));
     Ok(())

@@ -25,6 +25,52 @@ dispersion = { kind = "polynomial", degree = 3 }
 truth = "0.5*z0*z0*z0"
 "#;
 
+/// y = G·u + N(u) + e: a map in a path parallel to G, which no structure of refinement has.
+const PARALLEL: &str = r#"[lft]
+A = [[0.5]]
+Bu = [[1.0]]
+Be = [[0.0]]
+Bw = [[0.0]]
+Cy = [[1.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[1.0]]
+Cz = [[0.0]]
+Dzu = [[1.0]]
+Dze = [[0.0]]
+Dzw = [[0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "N"
+inputs = [0]
+output = 0
+dispersion = { kind = "polynomial", degree = 3 }
+"#;
+
+/// Rate feedback (friction) y = G·(u − N(ẏ)) + e with G = (0.10q⁻¹ + 0.06q⁻²)/(1 −
+/// 1.84093q⁻¹ + 0.9025q⁻²) (poles 0.95·e^{±0.25j}).
+const TRUE_RATE: &str = r#"[linear]
+structure = "rate-feedback"
+sample_time = 1.0
+den = [1.0, -1.8409336, 0.9025]
+num = [[0.0, 0.10, 0.06]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "friction"
+inputs = [0]
+output = 0
+dispersion = { kind = "fourier", trend = 1 }
+truth = "0.1*tanh(z0/0.3) + 0.05*z0"
+"#;
+
 /// Low-pass filtered pseudo-random input, RMS about 0.3.
 fn write_input(path: &Path, len: usize, seed: u64) {
     let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
@@ -209,18 +255,40 @@ fn refine_and_linear_reject_bad_input() {
         "--out",
         p(&data),
     ]);
-    let hammerstein = common::example_model("hammerstein.toml");
     let out = d.join("out");
+    // An [lft] whose map is not at one of the structures around a linear block G: here
+    // y = G·u + N(u) + e, a parallel path.
+    let parallel = d.join("parallel.toml");
+    std::fs::write(&parallel, PARALLEL).unwrap();
     let e = input_error(&[
         "refine",
         "--model",
-        p(&hammerstein),
+        p(&parallel),
         "--data",
         p(&data),
         "--out",
         p(&out),
     ]);
-    assert!(e.contains("[linear]"), "{e}");
+    assert!(e.contains("does not say which"), "{e}");
+    assert!(!e.contains("not supported"), "{e}");
+    // A linear model without a map has nothing to refine around.
+    let lti = d.join("lti.toml");
+    std::fs::write(
+        &lti,
+        "[linear]\nstructure = \"lti\"\nden = [1.0, -0.5]\nnum = [[0.0, 1.0]]\n\n\
+         [signals]\nu = [\"u\"]\ny = [\"y\"]\n",
+    )
+    .unwrap();
+    let e = input_error(&[
+        "refine",
+        "--model",
+        p(&lti),
+        "--data",
+        p(&data),
+        "--out",
+        p(&out),
+    ]);
+    assert!(e.contains("lti"), "{e}");
     let e = input_error(&[
         "refine",
         "--model",
@@ -313,4 +381,235 @@ fn refine_and_linear_reject_bad_input() {
         p(&data),
     ]);
     assert!(e.contains("input"), "{e}");
+}
+
+/// Simulates `model` on a fresh input of `len` samples (seed `seed`, RMS scaled by `gain`).
+fn simulate_record(
+    d: &Path,
+    model: &Path,
+    name: &str,
+    len: usize,
+    seed: u64,
+    gain: f64,
+) -> std::path::PathBuf {
+    let u = d.join(format!("u_{name}.csv"));
+    write_input(&u, len, seed);
+    if gain != 1.0 {
+        let text = std::fs::read_to_string(&u).unwrap();
+        let mut lines = text.lines();
+        let mut out = format!("{}\n", lines.next().unwrap());
+        for l in lines {
+            out.push_str(&format!("{}\n", l.parse::<f64>().unwrap() * gain));
+        }
+        std::fs::write(&u, out).unwrap();
+    }
+    let data = d.join(format!("{name}.csv"));
+    ok(&[
+        "simulate",
+        "--model",
+        p(model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.002",
+        "--seed",
+        &seed.to_string(),
+    ]);
+    data
+}
+
+/// J never increases through the alternation recorded in report.json.
+fn assert_monotone(report: &serde_json::Value) {
+    let its = report["refinement"]["iterations"].as_array().unwrap();
+    for (k, it) in its.iter().enumerate() {
+        if let Some(after) = it["cost_after_linear"].as_f64() {
+            assert!(
+                after <= it["cost_after_maps"].as_f64().unwrap() * (1.0 + 1e-9),
+                "{report}"
+            );
+            if let Some(next) = its.get(k + 1) {
+                assert!(
+                    next["cost_after_maps"].as_f64().unwrap() <= after * (1.0 + 1e-9),
+                    "{report}"
+                );
+            }
+        }
+    }
+}
+
+/// `structid refine` on a rate-feedback model file started 20 % off: the refined model is
+/// written as rate feedback, J never increases, and it simulates a fresh record at the noise
+/// level through `structid validate`.
+#[test]
+fn refine_rate_feedback_model_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = d.join("truth.toml");
+    std::fs::write(&truth, TRUE_RATE).unwrap();
+    let est = simulate_record(d, &truth, "est", 2000, 11, 3.0);
+    let val = simulate_record(d, &truth, "val", 1000, 12, 3.0);
+    // Both continuous-time poles 20 % larger, the numerator 20 % larger.
+    let (r, th) = (0.95f64.powf(1.2), 0.25f64 * 1.2);
+    let start = d.join("start.toml");
+    std::fs::write(
+        &start,
+        TRUE_RATE
+            .replace(
+                "den = [1.0, -1.8409336, 0.9025]",
+                &format!("den = [1.0, {}, {}]", -2.0 * r * th.cos(), r * r),
+            )
+            .replace("num = [[0.0, 0.10, 0.06]]", "num = [[0.0, 0.12, 0.072]]"),
+    )
+    .unwrap();
+    let out = d.join("refined");
+    let o = ok(&[
+        "refine",
+        "--model",
+        p(&start),
+        "--data",
+        p(&est),
+        "--validation-data",
+        p(&val),
+        "--beta",
+        "1e-6",
+        "--out",
+        p(&out),
+    ]);
+    assert!(o.stdout.contains("refinement:"), "{}", o.stdout);
+    let report = json(&out.join("report.json"));
+    assert_monotone(&report);
+    assert!(
+        report["refinement"]["structure"]
+            .as_str()
+            .unwrap()
+            .contains("rate feedback"),
+        "{report}"
+    );
+    let its = report["refinement"]["iterations"].as_array().unwrap();
+    let best = report["refinement"]["best"].as_u64().unwrap() as usize;
+    let first = its[0]["validation_rms"].as_f64().unwrap();
+    let kept = its[best]["validation_rms"].as_f64().unwrap();
+    assert!(kept < 0.2 * first, "validation RMS {first} → {kept}");
+    let refined = structid_io::ModelFile::from_path(&out.join("model.toml")).unwrap();
+    let lin = refined.linear.as_ref().unwrap();
+    assert_eq!(lin.structure_name(), "rate-feedback");
+    let vout = d.join("validation");
+    ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--estimate",
+        p(&out),
+        "--data",
+        p(&val),
+        "--out",
+        p(&vout),
+    ]);
+    let v = json(&vout.join("validation.json"));
+    let rms = v["outputs"][0]["rms"].as_f64().unwrap();
+    eprintln!("rate feedback: validation RMS {first} → {kept}, validate {rms}");
+    assert!(
+        rms < 0.004,
+        "validation simulation RMS {rms} (first iteration {first})"
+    );
+}
+
+/// An `[lft]` model (the Hammerstein example, with its poles and gain moved) is recognised as
+/// an input map around G, refined, and written as `[linear]` with structure "input".
+#[test]
+fn refine_lft_model_file_as_the_structure_it_declares() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = common::example_model("hammerstein.toml");
+    let est = simulate_record(d, &truth, "est", 800, 21, 3.0);
+    let text = std::fs::read_to_string(&truth).unwrap();
+    let wrong = text
+        .replace("[1.2, -0.5],", "[1.1, -0.4],")
+        .replace("Cy = [[0.5, 0.3]]", "Cy = [[0.6, 0.36]]");
+    assert_ne!(wrong, text);
+    let start = d.join("start.toml");
+    std::fs::write(&start, wrong).unwrap();
+    let out = d.join("refined");
+    let o = ok(&[
+        "refine",
+        "--model",
+        p(&start),
+        "--data",
+        p(&est),
+        "--validation-fraction",
+        "0.25",
+        "--out",
+        p(&out),
+    ]);
+    assert!(o.stdout.contains("is input nonlinearity"), "{}", o.stdout);
+    let report = json(&out.join("report.json"));
+    assert_monotone(&report);
+    let its = report["refinement"]["iterations"].as_array().unwrap();
+    let best = report["refinement"]["best"].as_u64().unwrap() as usize;
+    let first = its[0]["validation_rms"].as_f64().unwrap();
+    let kept = its[best]["validation_rms"].as_f64().unwrap();
+    assert!(kept < 0.5 * first, "validation RMS {first} → {kept}");
+    let refined = structid_io::ModelFile::from_path(&out.join("model.toml")).unwrap();
+    let lin = refined.linear.as_ref().unwrap();
+    assert_eq!(lin.structure_name(), "input");
+    // The true poles 0.6 ± 0.37i: F = 1 − 1.2q⁻¹ + 0.5q⁻².
+    let den = &lin.model.den;
+    eprintln!("[lft] input map: validation RMS {first} → {kept}, F = {den:?}");
+    assert!(
+        (den[1] + 1.2).abs() < 0.01 && (den[2] - 0.5).abs() < 0.01,
+        "refined F = {den:?} (start 1 − 1.1q⁻¹ + 0.4q⁻²)"
+    );
+}
+
+/// A `[linear]` rate-feedback model of a mass with viscous damping (position from force,
+/// zero-order hold, T = 0.01 s): its integrator stays at z = 1 through refinement while the
+/// other pole moves from 20 % off (in the damping) to the truth.
+#[test]
+fn refine_keeps_the_integrator_of_a_rate_feedback_nominal() {
+    let ts = 0.01;
+    let mass = |a: f64, gain: f64| {
+        let p = (-a * ts).exp();
+        let b1 = gain * (a * ts - 1.0 + p) / (a * a);
+        let b2 = gain * (1.0 - p - a * ts * p) / (a * a);
+        format!(
+            "[linear]\nstructure = \"rate-feedback\"\nsample_time = {ts}\n\
+             den = [1.0, {}, {p}]\nnum = [[0.0, {b1}, {b2}]]\n\n\
+             [signals]\nu = [\"u\"]\ny = [\"y\"]\n\n\
+             [[nonlinearity]]\nname = \"friction\"\ninputs = [0]\noutput = 0\n\
+             dispersion = {{ kind = \"fourier\", trend = 1 }}\ntruth = \"0.3*tanh(z0/0.02)\"\n",
+            -(1.0 + p)
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (truth, start) = (d.join("truth.toml"), d.join("start.toml"));
+    std::fs::write(&truth, mass(4.0, 1.0)).unwrap();
+    std::fs::write(&start, mass(4.8, 1.2)).unwrap();
+    let est = simulate_record(d, &truth, "est", 3000, 31, 3.0);
+    let out = d.join("refined");
+    ok(&[
+        "refine",
+        "--model",
+        p(&start),
+        "--data",
+        p(&est),
+        "--beta",
+        "1e-8",
+        "--out",
+        p(&out),
+    ]);
+    assert_monotone(&json(&out.join("report.json")));
+    let refined = structid_io::ModelFile::from_path(&out.join("model.toml")).unwrap();
+    let den = &refined.linear.as_ref().unwrap().model.den;
+    let at_one: f64 = den.iter().sum();
+    assert!(at_one.abs() < 1e-9, "F(1) = {at_one}: {den:?}");
+    let (p_true, p_start) = ((-4.0 * ts).exp(), (-4.8 * ts).exp());
+    eprintln!("integrator: pole {} vs {p_true} (start {p_start})", den[2]);
+    assert!(
+        (den[2] - p_true).abs() < 0.1 * (p_start - p_true).abs(),
+        "pole {} vs {p_true} (start {p_start})",
+        den[2]
+    );
 }

@@ -33,7 +33,42 @@
 //!   oscillators, stiffness and friction in a feedback loop). By default the feedback path
 //!   shares G's numerator (the physical structure);
 //!   [`LinearStructure::with_separate_numerator`] fits y = B_u/F·u + B_w/F·w instead.
+//! * [`LinearStructure::rate_feedback`]: y = G·(u − w) + e with w = N(ẏ), ẏ_k = (y_k −
+//!   y_(k−1))/T_s (friction). z is a fixed filter of the measured y, so D does not depend
+//!   on G and the linear step is the one of output feedback: output error from u − ŵ.
 //! * [`LinearStructure::input`]: y = G·N(u) + e (Hammerstein).
+//! * [`LinearStructure::output`]: y = N(G·u) + e (a sensor map, Wiener). Here z = G·u moves
+//!   with G, so the linear step holds the *map* N̂ fixed, not its sample values, and minimises
+//!   (1/L)·‖y − N̂(G·u)‖² (output error through the map). The map's penalty then changes with
+//!   z: `cost_after_linear` is that noise term plus the previous β·D. For a dispersion whose
+//!   D(z, w) is the smallest penalty of a function through the points (kernels, feature
+//!   bases), the map already found passes through (z_new, N̂(z_new)), so it bounds J at the
+//!   new G from above and the next map step cannot end above it. G's gain is not identifiable
+//!   at this site (N(z/k) with k·G is the same system); its poles are.
+//! * A location declared in a nominal LFT ([`Site::Declared`], an `[lft]` model) has no G of
+//!   its own. [`LinearStructure::from_lft`] recognises when the LFT at that location is one
+//!   of the structures above around a polynomial block, and returns that structure and G;
+//!   otherwise it says why it cannot (noise dynamics, or a location of no such form).
+//!
+//! # Integrators
+//! A nominal with poles at z = 1 (a position driven by a force) is refined with those poles
+//! held: G = B/(F′·(1 − q⁻¹)ⁿ), and the linear step fits B/F′ to the input summed n times
+//! (the same output-error cost; see [`output_error_with_integrators`]). By default n is the
+//! number of factors (1 − q⁻¹) of the starting denominator
+//! ([`LinearStructure::with_integrators`]).
+//!
+//! # Initial state
+//! With [`InitialState::Estimate`] the initial state is estimated in both steps for output
+//! feedback and input maps. At the rate and sensor sites z itself depends on x₀ (the previous
+//! output, or G·u), and [`identify()`] refuses a free x₀ there, so [`refine`] does too;
+//! [`refine_linear`], which holds the map as a function, estimates G's x₀ at every site (at
+//! the rate site the first rate is computed with y₋₁ = 0).
+//!
+//! # Joint refinement with a fitted map
+//! [`refine`] alternates a nonparametric map with G; [`Refinement::linear_before`],
+//! [`Refinement::cost_before`] and [`Refinement::cost_after`] give what changed.
+//! [`refine_linear`] is the linear step alone with a map already fitted (a named family, or
+//! any closure), reporting G and the costs before and after in a [`LinearRefinement`].
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -51,6 +86,10 @@ use crate::lft::Lft;
 use crate::model::{Data, Model, NonlinearBlock};
 use crate::simulate::MapBinding;
 use crate::structure::{self, Site};
+
+mod integrators;
+mod recognise;
+mod through_map;
 
 fn linear_error(e: structid_linear::LinearError) -> Error {
     Error::InvalidStructure(format!("linear estimation: {e}"))
@@ -74,6 +113,35 @@ pub fn output_error_with_state(
     settings: &OeSettings,
     free_initial_state: bool,
 ) -> Result<OeFit> {
+    oe_fit(inputs, y, g, settings, free_initial_state, 0)
+}
+
+/// [`output_error_with_state`] with `integrators` poles of `g` held at z = 1.
+///
+/// G = B/(F′·(1 − q⁻¹)ⁿ) applied to v is B/F′ applied to ṽ = v/(1 − q⁻¹)ⁿ (v summed n times
+/// from zero), so the fit is an ordinary output-error fit of the stable B/F′ from ṽ to y with
+/// the same cost. Filtering y by (1 − q⁻¹)ⁿ instead would colour the noise and change the
+/// criterion. With a free initial state the impulse input is summed too: I/F′ on the summed
+/// impulse is I/F on the impulse, the free response of all n + deg F′ states.
+pub fn output_error_with_integrators(
+    inputs: &Signal,
+    y: &Signal,
+    g: &PolynomialModel,
+    settings: &OeSettings,
+    free_initial_state: bool,
+    integrators: usize,
+) -> Result<OeFit> {
+    oe_fit(inputs, y, g, settings, free_initial_state, integrators)
+}
+
+fn oe_fit(
+    inputs: &Signal,
+    y: &Signal,
+    g: &PolynomialModel,
+    settings: &OeSettings,
+    free_initial_state: bool,
+    integrators: usize,
+) -> Result<OeFit> {
     // The output-error orders are read from the numerators (nk = leading zeros): an all-zero
     // numerator would have no free coefficient and its path would silently stay at zero.
     if let Some(i) = g
@@ -87,9 +155,6 @@ pub fn output_error_with_state(
              after the delay (e.g. [0.0, 1e-6, 1e-6] for a delay of one sample)"
         )));
     }
-    if !free_initial_state {
-        return output_error(inputs, y, g, settings).map_err(linear_error);
-    }
     let order = g
         .num
         .iter()
@@ -97,26 +162,34 @@ pub fn output_error_with_state(
         .chain([g.den.len().saturating_sub(1)])
         .max()
         .unwrap_or(0);
-    if order == 0 {
-        return output_error(inputs, y, g, settings).map_err(linear_error);
-    }
     let m = inputs.channels();
-    let with_impulse = Signal::from_fn(inputs.len(), m + 1, |k, c| {
-        if c < m {
-            inputs.get(k, c)
-        } else if k == 0 {
-            1.0
-        } else {
-            0.0
-        }
-    });
     let mut start = g.clone();
-    // Start the impulse numerator at the best initial state for `g` (a linear least-squares
-    // problem once F is fixed), so that the fit begins at the cost identify() reaches with
-    // InitialState::Estimate and can only go below it, however early the iteration stops.
-    start.num.push(best_impulse_numerator(inputs, y, g, order)?);
-    let mut fit = output_error(&with_impulse, y, &start, settings).map_err(linear_error)?;
+    let mut columns = inputs.clone();
+    if free_initial_state && order > 0 {
+        columns = Signal::from_fn(inputs.len(), m + 1, |k, c| {
+            if c < m {
+                inputs.get(k, c)
+            } else if k == 0 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        // Start the impulse numerator at the best initial state for `g` (a linear
+        // least-squares problem once F is fixed), so that the fit begins at the cost
+        // identify() reaches with InitialState::Estimate and can only go below it, however
+        // early the iteration stops.
+        start.num.push(best_impulse_numerator(inputs, y, g, order)?);
+    }
+    if integrators > 0 {
+        start.den = integrators::deflate(&g.den, integrators)?;
+        columns = integrators::sum(&columns, integrators)?;
+    }
+    let mut fit = output_error(&columns, y, &start, settings).map_err(linear_error)?;
     fit.model.num.truncate(m);
+    if integrators > 0 {
+        fit.model.den = integrators::inflate(&fit.model.den, integrators);
+    }
     Ok(fit)
 }
 
@@ -176,10 +249,14 @@ fn one_channel(data: &Data, what: &str) -> Result<()> {
 ///   not exactly the input path. The feedback path needs a delay (B_w starting at q⁻¹): with a
 ///   direct term, y_k would depend on N(y_k), an algebraic loop.
 /// * [`LinearStructure::input`]: an input nonlinearity (Hammerstein), y = G·N(u) + e, z = u.
+/// * [`LinearStructure::rate_feedback`]: y = G·(u − N(ẏ)) + e, z = (y_k − y_(k−1))/T_s. G
+///   is SISO from u with an input delay (as for a shared feedback numerator).
+/// * [`LinearStructure::output`]: a sensor map, y = N(G·u) + e, z = G·u.
 ///
-/// In both, G is kept in the structure's form: for output feedback its inputs are [u…, w]
-/// (the last numerator is the path of w, −B for the shared path), for an input map its one
-/// input is w.
+/// G is kept in the structure's form: for output feedback its inputs are [u…, w] (the last
+/// numerator is the path of w, −B for the shared path), for an input map its one input is
+/// w, for rate feedback and a sensor map its inputs are u. A location declared in a nominal
+/// LFT is refined through [`LinearStructure::from_lft`].
 ///
 /// ```
 /// use std::sync::Arc;
@@ -202,35 +279,101 @@ pub struct LinearStructure {
     name: String,
     site: Site,
     separate: bool,
+    integrators: Option<usize>,
 }
 
 impl LinearStructure {
     /// Output feedback through G's own numerator; `name` names the map.
     pub fn output_feedback(name: impl Into<String>) -> Self {
-        Self {
-            name: name.into(),
-            site: Site::OutputFeedback,
-            separate: false,
-        }
+        Self::at(name, Site::OutputFeedback)
     }
 
     /// An input map called `name`.
     pub fn input(name: impl Into<String>) -> Self {
+        Self::at(name, Site::Input)
+    }
+
+    /// Rate feedback y = G·(u − N(ẏ)) + e with ẏ_k = (y_k − y_(k−1))/T_s (friction); `name`
+    /// names the map. G has one input and an input delay.
+    pub fn rate_feedback(name: impl Into<String>) -> Self {
+        Self::at(name, Site::RateFeedback)
+    }
+
+    /// A sensor map y = N(G·u) + e called `name` (Wiener). G's gain is not identifiable from
+    /// this structure (N(z/k) with k·G is the same system): the linear step keeps the map
+    /// fixed, which pins it, and its poles are what the data determine.
+    pub fn output(name: impl Into<String>) -> Self {
+        Self::at(name, Site::Output)
+    }
+
+    fn at(name: impl Into<String>, site: Site) -> Self {
         Self {
             name: name.into(),
-            site: Site::Input,
+            site,
             separate: false,
+            integrators: None,
         }
     }
 
-    /// The map `name` at `site`; refinement supports [`Site::OutputFeedback`] and
-    /// [`Site::Input`].
+    /// The map `name` at a built-in `site`: [`Site::Input`], [`Site::Output`],
+    /// [`Site::OutputFeedback`] or [`Site::RateFeedback`]. A [`Site::Declared`] location
+    /// belongs to a nominal LFT, not to a polynomial G: [`LinearStructure::from_lft`] finds
+    /// the G that such an LFT puts its map around.
     pub fn new(name: impl Into<String>, site: Site) -> Result<Self> {
         match site {
-            Site::OutputFeedback => Ok(Self::output_feedback(name)),
-            Site::Input => Ok(Self::input(name)),
-            other => Err(unsupported(other)),
+            Site::Declared { z, w } => Err(Error::InvalidStructure(format!(
+                "a declared location (z row {z}, w column {w}) is a channel of a nominal LFT, \
+                 not a place in a polynomial G; refine it with LinearStructure::from_lft, \
+                 which finds the G that the LFT puts its map around"
+            ))),
+            site => Ok(Self::at(name, site)),
         }
+    }
+
+    /// The structure in which the declared location (z row `z`, w column `w`) of `nominal`
+    /// puts its map, and the linear part G in that structure's form.
+    ///
+    /// A general LFT does not say which of its coefficients are "G": refinement re-estimates
+    /// G only when the LFT restricted to that location *is* one of the built-in structures
+    /// around a single polynomial block. The transfers from (u, w, e) to (y, z) are compared,
+    /// by their Markov parameters, with those of output feedback (shared and separate
+    /// numerator), rate feedback, an input map and an output map built from the transfer
+    /// that plays G's part (u → y, w → y or u → z, read off the LFT as B/F with
+    /// F = det(I − A·q⁻¹)); the first that agrees is returned. Otherwise, and when the noise
+    /// path has dynamics (refinement re-estimates G by output error, under white output
+    /// noise), the error says why. G keeps the LFT's sample time; modes that the transfer
+    /// does not see are dropped only when they are at the origin (e.g. the rate site's
+    /// previous-output state).
+    ///
+    /// ```
+    /// use structid_core::{Site, refine::LinearStructure, structure::realise};
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { num: vec![vec![0.0, 0.5]], den: vec![1.0, -0.8], sample_time: Some(0.1) };
+    /// let lft = Site::RateFeedback.insert(&realise(&g).unwrap()).unwrap();
+    /// let (s, found) = LinearStructure::from_lft("friction", &lft, 0, 0).unwrap();
+    /// assert_eq!(s.site(), Site::RateFeedback);
+    /// assert!((found.den[1] + 0.8).abs() < 1e-12 && (found.num[0][1] - 0.5).abs() < 1e-12);
+    /// ```
+    pub fn from_lft(
+        name: impl Into<String>,
+        nominal: &Lft,
+        z: usize,
+        w: usize,
+    ) -> Result<(Self, PolynomialModel)> {
+        recognise::from_lft(name.into(), nominal, z, w)
+    }
+
+    /// Holds `n` poles of G at z = 1 (integrators) fixed in the linear step: G = B/(F′·(1 −
+    /// q⁻¹)ⁿ) and only B and F′ are re-estimated. `None` (the default) holds as many as the
+    /// starting G has (factors (1 − q⁻¹) of its denominator, to a relative 1e-8).
+    pub fn with_integrators(mut self, n: Option<usize>) -> Self {
+        self.integrators = n;
+        self
+    }
+
+    /// The number of integrators held fixed (`None`: those of the starting G).
+    pub fn integrators(&self) -> Option<usize> {
+        self.integrators
     }
 
     /// Fits the feedback path's numerator separately (y = B_u/F·u + B_w/F·w); only output
@@ -255,6 +398,8 @@ impl LinearStructure {
         match (self.site, self.separate) {
             (Site::OutputFeedback, true) => "output feedback y = B_u/F·u + B_w/F·N(y) + e".into(),
             (Site::OutputFeedback, false) => "output feedback y = G·(u − N(y)) + e".into(),
+            (Site::RateFeedback, _) => "rate feedback y = G·(u − N(ẏ)) + e".into(),
+            (Site::Output, _) => "output (sensor) map y = N(G·u) + e".into(),
             _ => "input nonlinearity y = G·N(u) + e".into(),
         }
     }
@@ -280,8 +425,7 @@ impl LinearStructure {
                     }
                     other => other,
                 }),
-            Site::Input => structure::polynomial_lft(g, Some(Site::Input), false),
-            other => Err(unsupported(other)),
+            site => structure::polynomial_lft(g, Some(site), false),
         }
     }
 
@@ -300,7 +444,12 @@ impl LinearStructure {
 
     /// Re-estimates the linear part with the maps' outputs fixed at their sample values
     /// `w_hat` (L × n_w), starting from `g`; with `free_initial_state` the initial state is
-    /// estimated along with G (see [`output_error_with_state`]).
+    /// estimated along with G (see [`output_error_with_state`]). The integrators of
+    /// [`LinearStructure::with_integrators`] stay at z = 1.
+    ///
+    /// For output and rate feedback (shared numerator) G is SISO from v = u − ŵ; for an input
+    /// map from ŵ. A sensor map ([`Site::Output`]) reads z = G·u, which moves with G, so its
+    /// linear step needs the map itself: use [`LinearStructure::estimate_linear_with_map`].
     pub fn estimate_linear(
         &self,
         data: &Data,
@@ -309,29 +458,44 @@ impl LinearStructure {
         settings: &OeSettings,
         free_initial_state: bool,
     ) -> Result<OeFit> {
+        let integrators = self.integrators_of(g)?;
+        let fit = |inputs: &Signal, g: &PolynomialModel| {
+            oe_fit(
+                inputs,
+                data.y(),
+                g,
+                settings,
+                free_initial_state,
+                integrators,
+            )
+        };
         match self.site {
-            Site::OutputFeedback => {
-                one_channel(data, "output feedback")?;
+            Site::OutputFeedback | Site::RateFeedback => {
+                let what = if self.site == Site::RateFeedback {
+                    "rate feedback"
+                } else {
+                    "output feedback"
+                };
+                one_channel(data, what)?;
                 let (u, len) = (data.u(), data.len());
                 let nu = u.channels();
                 if self.separate {
                     let inputs = Signal::from_fn(len, nu + 1, |k, c| {
                         if c < nu { u.get(k, c) } else { w_hat.get(k, 0) }
                     });
-                    return output_error_with_state(
-                        &inputs,
-                        data.y(),
-                        g,
-                        settings,
-                        free_initial_state,
-                    );
+                    return fit(&inputs, g);
                 }
-                // Shared numerator: G is SISO from v = u − w; the w column of the result is −B.
+                // Shared numerator: G is SISO from v = u − w; for output feedback the w column
+                // of the result is −B.
                 if nu != 1 {
-                    return Err(Error::InvalidStructure(
-                        "a shared feedback numerator needs exactly one input u; use a separate numerator"
-                            .into(),
-                    ));
+                    return Err(Error::InvalidStructure(format!(
+                        "{what} through G's own numerator needs exactly one input u, not {nu}{}",
+                        if self.site == Site::OutputFeedback {
+                            "; use a separate numerator"
+                        } else {
+                            ""
+                        }
+                    )));
                 }
                 let v = Signal::from_fn(len, 1, |k, _| u.get(k, 0) - w_hat.get(k, 0));
                 let siso = PolynomialModel {
@@ -339,22 +503,89 @@ impl LinearStructure {
                     den: g.den.clone(),
                     sample_time: g.sample_time,
                 };
-                let mut fit =
-                    output_error_with_state(&v, data.y(), &siso, settings, free_initial_state)?;
-                let b = fit.model.num[0].clone();
-                fit.model.num.push(b.iter().map(|x| -x).collect());
+                let mut fit = fit(&v, &siso)?;
+                if self.site == Site::OutputFeedback {
+                    let b = fit.model.num[0].clone();
+                    fit.model.num.push(b.iter().map(|x| -x).collect());
+                }
                 Ok(fit)
             }
             Site::Input => {
                 one_channel(data, "input nonlinearity")?;
-                output_error_with_state(w_hat, data.y(), g, settings, free_initial_state)
+                fit(w_hat, g)
             }
-            other => Err(unsupported(other)),
+            Site::Output => Err(Error::InvalidStructure(
+                "a sensor map y = N(G·u) + e reads z = G·u, which moves with G, so its linear \
+                 step needs the map itself, not its sample values: use \
+                 LinearStructure::estimate_linear_with_map"
+                    .into(),
+            )),
+            Site::Declared { .. } => unreachable!("LinearStructure::new refuses declared sites"),
+        }
+    }
+
+    /// Re-estimates the linear part with the map `map` fixed as a function, starting from
+    /// `g`: what [`refine_linear`] does. For the feedback sites and an input map the map's
+    /// input z is measured (y, its rate, or u), so this is [`LinearStructure::estimate_linear`]
+    /// with ŵ = N̂(z). For a sensor map it minimises (1/L)·‖y − N̂(G·u)‖² over G by
+    /// Levenberg–Marquardt, with the Jacobian N̂′(z)·∂z/∂θ (N̂′ by a central difference); the
+    /// free initial state there enters z (an impulse input with its own numerator, started at
+    /// zero).
+    pub fn estimate_linear_with_map(
+        &self,
+        data: &Data,
+        map: &dyn Interpolant,
+        g: &PolynomialModel,
+        settings: &OeSettings,
+        free_initial_state: bool,
+    ) -> Result<OeFit> {
+        one_channel(data, self.site.name())?;
+        let z = match self.site {
+            Site::Output => {
+                let integrators = self.integrators_of(g)?;
+                return through_map::fit(data, map, g, settings, free_initial_state, integrators);
+            }
+            Site::Input => {
+                if data.u().channels() != 1 {
+                    return Err(Error::DimensionMismatch {
+                        what: "input nonlinearity: inputs u".into(),
+                        expected: "1".into(),
+                        found: data.u().channels().to_string(),
+                    });
+                }
+                data.u().clone()
+            }
+            Site::OutputFeedback => data.y().clone(),
+            Site::RateFeedback => {
+                let ts = g.sample_time.unwrap_or(1.0);
+                let y = data.y();
+                Signal::from_fn(data.len(), 1, |k, _| {
+                    (y.get(k, 0) - if k == 0 { 0.0 } else { y.get(k - 1, 0) }) / ts
+                })
+            }
+            Site::Declared { .. } => unreachable!("LinearStructure::new refuses declared sites"),
+        };
+        let w_hat = Signal::new(1, map.eval_many(&z))?;
+        self.estimate_linear(data, &w_hat, g, settings, free_initial_state)
+    }
+
+    /// The integrators held fixed for the linear part `g`: the structure's number, or those
+    /// of `g` (checked to be there).
+    fn integrators_of(&self, g: &PolynomialModel) -> Result<usize> {
+        match self.integrators {
+            None => Ok(integrators::count(&g.den)),
+            Some(n) => {
+                integrators::deflate(&g.den, n)?;
+                Ok(n)
+            }
         }
     }
 
     /// A starting linear part for the data: the best linear approximation from u to y
     /// expanded to the structure's inputs, given the BLA `bla` (one output, the data's inputs).
+    /// This is also how a nominal G (u → y) becomes the structure's G: for output feedback
+    /// the feedback path is −B; for rate feedback, an input and an output map G is the
+    /// nominal itself.
     pub fn initial_from_bla(&self, bla: &PolynomialModel) -> Result<PolynomialModel> {
         match self.site {
             Site::OutputFeedback => {
@@ -377,24 +608,35 @@ impl LinearStructure {
                 g.num.push(bw);
                 Ok(g)
             }
-            Site::Input => {
+            Site::Input | Site::RateFeedback => {
                 if bla.num.len() != 1 {
+                    return Err(Error::InvalidStructure(format!(
+                        "{} needs a linear part with one input, not {}",
+                        self.describe(),
+                        bla.num.len()
+                    )));
+                }
+                if self.site == Site::RateFeedback && bla.num[0].first().is_some_and(|b| *b != 0.0)
+                {
                     return Err(Error::InvalidStructure(
-                        "an input nonlinearity needs a BLA with one input".into(),
+                        "the linear part has a direct term; rate feedback needs an input delay \
+                         nk ≥ 1 (otherwise y_k depends on N(ẏ_k), an algebraic loop)"
+                            .into(),
                     ));
                 }
                 Ok(bla.clone())
             }
-            other => Err(unsupported(other)),
+            Site::Output => {
+                if bla.num.is_empty() {
+                    return Err(Error::InvalidStructure(
+                        "the linear part has no inputs".into(),
+                    ));
+                }
+                Ok(bla.clone())
+            }
+            Site::Declared { .. } => unreachable!("LinearStructure::new refuses declared sites"),
         }
     }
-}
-
-fn unsupported(site: Site) -> Error {
-    Error::InvalidStructure(format!(
-        "refinement re-estimates G for a map in output feedback or at the input, not {}",
-        site.describe()
-    ))
 }
 
 /// Settings of [`refine`]; build with [`RefineSettings::builder`].
@@ -653,6 +895,10 @@ pub fn refine(
     settings: &RefineSettings,
 ) -> Result<Refinement> {
     let t0 = Instant::now();
+    // The integrators are those of the start for the whole alternation.
+    let structure = &structure
+        .clone()
+        .with_integrators(Some(structure.integrators_of(initial)?));
     let mut g = initial.clone();
     let mut dispersion = dispersion;
     let mut beta = settings.identify.beta();
@@ -726,7 +972,17 @@ pub fn refine(
             break;
         }
         let free = settings.identify.initial_state() == InitialState::Estimate;
-        let fit = structure.estimate_linear(data, &id.w_hat, &g, &settings.oe, free)?;
+        let fit = if structure.site == Site::Output {
+            structure.estimate_linear_with_map(
+                data,
+                id.blocks[0].map.as_ref(),
+                &g,
+                &settings.oe,
+                free,
+            )?
+        } else {
+            structure.estimate_linear(data, &id.w_hat, &g, &settings.oe, free)?
+        };
         record.cost_after_linear = Some(fit.cost + record.dispersion_term);
         record.oe_iterations = fit.iterations;
         record.seconds = ti.elapsed().as_secs_f64();
@@ -747,6 +1003,167 @@ pub fn refine(
         beta,
         selection,
         stop_reason,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+impl Refinement {
+    /// G before refinement: the linear part the first map step used.
+    pub fn linear_before(&self) -> &PolynomialModel {
+        &self.iterations[0].linear
+    }
+
+    /// J = (1/L)·‖ê‖² + β·D after the first map step (G before refinement).
+    pub fn cost_before(&self) -> f64 {
+        self.iterations[0].cost_after_maps
+    }
+
+    /// J after the map step of the returned iteration (G after refinement).
+    pub fn cost_after(&self) -> f64 {
+        self.iterations[self.best].cost_after_maps
+    }
+}
+
+/// How a [`refine_linear`] ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearRefineStatus {
+    /// The linear step converged and the simulation error with the map in the loop fell.
+    Improved,
+    /// The iteration limit stopped the linear step; the simulation error fell.
+    IterationLimit,
+    /// The linear step lowered its criterion, but the simulation error with the map in the
+    /// loop did not fall (or the simulation diverged): keep G before.
+    SimulationWorse,
+}
+
+/// The result of [`refine_linear`]: G before and after, and what changed.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LinearRefinement {
+    /// G before, in the structure's form.
+    pub before: PolynomialModel,
+    /// G re-estimated with the map in the loop (returned whatever the status; see
+    /// [`LinearRefinement::linear`] for the one to use).
+    pub after: PolynomialModel,
+    /// The criterion of the linear step at G before: (1/L)·‖y − ŷ‖² with the map's input
+    /// measured (feedback and input sites) or simulated through G (sensor map).
+    pub cost_before: f64,
+    /// The same criterion at G after (≤ `cost_before`).
+    pub cost_after: f64,
+    /// The criterion after each accepted Levenberg–Marquardt step (decreasing).
+    pub costs: Vec<f64>,
+    /// RMS simulation error with the map in the loop (zero initial state) at G before;
+    /// infinite when the simulation diverges.
+    pub simulation_rms_before: f64,
+    /// The same at G after.
+    pub simulation_rms_after: f64,
+    /// Accepted Levenberg–Marquardt steps.
+    pub iterations: usize,
+    /// How it ended.
+    pub status: LinearRefineStatus,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+impl LinearRefinement {
+    /// The G to use: `after`, unless the simulation error did not fall.
+    pub fn linear(&self) -> &PolynomialModel {
+        match self.status {
+            LinearRefineStatus::SimulationWorse => &self.before,
+            _ => &self.after,
+        }
+    }
+}
+
+/// RMS of y − simulation of `lft` with `map` in the loop (zero state), ∞ on divergence.
+fn map_simulation_rms(lft: &Lft, map: &dyn Interpolant, data: &Data) -> Result<f64> {
+    let sim = match lft.simulate(
+        &[MapBinding {
+            inputs: &[0],
+            output: 0,
+            map,
+        }],
+        data.u(),
+        None,
+        None,
+    ) {
+        Ok(sim) => sim,
+        Err(Error::Numerical(_)) => return Ok(f64::INFINITY),
+        Err(e) => return Err(e),
+    };
+    let y = data.y();
+    let n = y.len().max(1) as f64;
+    let s: f64 = (0..y.len())
+        .map(|k| (y.get(k, 0) - sim.y.get(k, 0)).powi(2))
+        .sum();
+    let rms = (s / n).sqrt();
+    Ok(if rms.is_finite() { rms } else { f64::INFINITY })
+}
+
+/// Joint refinement with a fitted map: re-estimates G with the map `map` (a nonparametric
+/// estimate, a named parametric family, or any closure `|z: &[f64]| …`) held fixed in the
+/// loop, and reports G and the costs before and after.
+///
+/// This is the linear step of [`refine`] on its own
+/// ([`LinearStructure::estimate_linear_with_map`]): for the feedback sites and an input map
+/// the map's input is measured, so G is an output-error fit from u − N̂(z) (or N̂(u)) to y;
+/// for a sensor map it is output error through the map. `g` is in the structure's form
+/// ([`LinearStructure::initial_from_bla`] turns a nominal u → y model into it). The
+/// initial-state treatment is that of `settings.identify()`, the fit's settings
+/// `settings.oe()`; integrators of `g` stay at z = 1 (see
+/// [`LinearStructure::with_integrators`]). The simulation error with the map in the loop is
+/// reported before and after, and [`LinearRefinement::linear`] keeps G before when it did
+/// not fall. To re-estimate the map too, alternate with [`refine`].
+///
+/// ```
+/// use structid_core::refine::{LinearStructure, RefineSettings, refine_linear};
+/// use structid_core::{Data, Signal};
+/// use structid_linear::PolynomialModel;
+/// // y = G·(u − N(y)), N(y) = 0.5·y³, G = 0.2/(q − 0.7); refined from a pole at 0.5.
+/// let truth = PolynomialModel { num: vec![vec![0.0, 0.2]], den: vec![1.0, -0.7], sample_time: None };
+/// let u = Signal::from_fn(400, 1, |k, _| ((k * k) as f64 * 0.37).sin());
+/// let mut y = vec![0.0f64; 400];
+/// for k in 1..400 { y[k] = 0.7 * y[k - 1] + 0.2 * (u.get(k - 1, 0) - 0.5 * y[k - 1].powi(3)); }
+/// let data = Data::new(u, Signal::new(1, y).unwrap()).unwrap();
+/// let s = LinearStructure::output_feedback("N");
+/// let start = s.initial_from_bla(&PolynomialModel { den: vec![1.0, -0.5], ..truth }).unwrap();
+/// let map = |z: &[f64]| 0.5 * z[0].powi(3);
+/// let r = refine_linear(&s, &start, &map, &data, &RefineSettings::default()).unwrap();
+/// assert!((r.linear().den[1] + 0.7).abs() < 1e-6 && r.cost_after < r.cost_before);
+/// assert!(r.simulation_rms_after < 1e-6 * r.simulation_rms_before.max(1.0));
+/// ```
+pub fn refine_linear(
+    structure: &LinearStructure,
+    g: &PolynomialModel,
+    map: &dyn Interpolant,
+    data: &Data,
+    settings: &RefineSettings,
+) -> Result<LinearRefinement> {
+    let t0 = Instant::now();
+    let free = settings.identify.initial_state() == InitialState::Estimate;
+    let fit = structure.estimate_linear_with_map(data, map, g, &settings.oe, free)?;
+    let before = map_simulation_rms(&structure.lft(g)?, map, data)?;
+    let after = match structure.lft(&fit.model) {
+        Ok(lft) => map_simulation_rms(&lft, map, data)?,
+        Err(_) => f64::INFINITY,
+    };
+    let status = if after.is_nan() || after >= before {
+        LinearRefineStatus::SimulationWorse
+    } else if fit.converged {
+        LinearRefineStatus::Improved
+    } else {
+        LinearRefineStatus::IterationLimit
+    };
+    Ok(LinearRefinement {
+        before: g.clone(),
+        after: fit.model,
+        cost_before: fit.initial_cost,
+        cost_after: fit.cost,
+        costs: fit.costs,
+        simulation_rms_before: before,
+        simulation_rms_after: after,
+        iterations: fit.iterations,
+        status,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

@@ -190,8 +190,20 @@ impl Lft {
 
     fn subsystem(&self, b: &DMatrix<f64>, c: &DMatrix<f64>, d: &DMatrix<f64>) -> StateSpace {
         // A path with no input or no output coupling through the states is a static gain; giving
-        // it order 0 lets solvers use the cheap static route.
-        let sys = if b.iter().all(|v| *v == 0.0) || c.iter().all(|v| *v == 0.0) {
+        // it order 0 lets solvers use the cheap static route. That includes a path whose
+        // Markov parameters C·Aᵏ·B are all exactly zero (e.g. the noise of rate feedback,
+        // which reaches only the stored previous output that y does not read): its states
+        // are unreachable or unobservable, and keeping them would give the whitening filter
+        // the plant's poles, an integrator's among them.
+        let static_path = b.iter().all(|v| *v == 0.0) || c.iter().all(|v| *v == 0.0) || {
+            let mut ab = b.clone();
+            (0..self.m.a.nrows()).all(|_| {
+                let zero = (c * &ab).iter().all(|v| *v == 0.0);
+                ab = &self.m.a * &ab;
+                zero
+            })
+        };
+        let sys = if static_path {
             StateSpace::static_gain(d.clone())
         } else {
             StateSpace::new(self.m.a.clone(), b.clone(), c.clone(), d.clone())

@@ -84,17 +84,17 @@ impl LinearSpec {
         self.structure.map_or("lti", Site::name)
     }
 
-    /// Whether `structid refine` (a [`LinearStructure`]) supports the structure: output
-    /// feedback and an input map.
+    /// Whether `structid refine` (a [`LinearStructure`]) supports the structure: every
+    /// structure with a map (output feedback, rate feedback, an input and an output map);
+    /// not `lti`, which has none.
     pub fn refinable(&self) -> bool {
-        matches!(self.structure, Some(Site::OutputFeedback | Site::Input))
+        self.structure.is_some()
     }
 
     /// The structure as a [`LinearStructure`] for [`structid_core::refine::refine`]; `block`
-    /// names the map. `None` for `lti` (no map) and for `output` and `rate-feedback`, which
-    /// refinement does not support (see [`LinearSpec::refinable`]).
+    /// names the map. `None` for `lti` (no map).
     pub fn structure(&self, block: &str) -> Option<LinearStructure> {
-        let site = self.structure.filter(|_| self.refinable())?;
+        let site = self.structure?;
         LinearStructure::new(block, site)
             .ok()
             .map(|s| s.with_separate_numerator(self.separate_numerator))

@@ -68,8 +68,9 @@
 //! `num` has one numerator per input u; `input`, `output` and `rate-feedback` take exactly one
 //! input. The feedback structures need a delay in G (num starting with 0), otherwise y_k would
 //! depend on N(y_k) or N(ẏ_k); `num_w` applies to `output-feedback` only. Every structure but
-//! `lti` has one map (`inputs = [0]`, `output = 0`); `[signals].z` is not used. Only
-//! `output-feedback` and `input` can be refined by `structid refine`.
+//! `lti` has one map (`inputs = [0]`, `output = 0`); `[signals].z` is not used. Every
+//! structure with a map can be refined by `structid refine` (and an `[lft]` whose one map
+//! sits at a location that is one of them; see `structid_core::refine::LinearStructure::from_lft`).
 //!
 //! ## `[[nonlinearity]]`
 //! One table per unknown static map: a unique `name`, the z channels it reads (`inputs`, indices

@@ -747,7 +747,8 @@ fn output_and_rate_feedback_structures_parse_to_the_builders_lfts() {
         assert_eq!(parse_linear_structure(name), Some(Some(kind)));
         assert_eq!(lin.model, g, "{name}: num is G's numerator of u");
         assert!(!lin.separate_numerator);
-        assert!(lin.structure("N").is_none() && !lin.refinable());
+        assert!(lin.refinable());
+        assert_eq!(lin.structure("N").map(|s| s.site()), Some(kind));
         let expected = builder(&g, Arc::clone(&d)).lft().unwrap();
         assert_eq!(m.lft.dims(), expected.dims(), "{name}");
         assert_eq!(m.lft.sample_time(), Some(0.5));
