@@ -80,6 +80,11 @@ pub struct DiscoverArgs {
     /// or windows `LENGTH:INIT` (each simulated from a state fitted to its first INIT samples).
     #[arg(long, value_name = "auto|free|LENGTH:INIT", default_value = "auto")]
     scoring: String,
+    /// Re-estimate G with the found map in the loop (output error) and keep the new G when the
+    /// validation RMS falls: for a nominal model estimated from data (`structid linear`), whose
+    /// bias the map alone cannot absorb. The report shows G before and after.
+    #[arg(long)]
+    refine_nominal: bool,
     /// Width σ of each hypothesis' Fourier kernel as a fraction of the range of its z.
     #[arg(
         long,
@@ -257,7 +262,8 @@ fn settings(
         .trend_degree(a.trend)
         .tune_sigma(a.tune_sigma)
         .naming_tolerance(a.naming_tolerance)
-        .hysteresis_threshold(a.hysteresis_threshold);
+        .hysteresis_threshold(a.hysteresis_threshold)
+        .refine_nominal(a.refine_nominal);
     if let Some(l) = locations {
         b = b.locations(l);
     }

@@ -154,6 +154,23 @@ impl Finding {
                 interpolation: None,
             },
         };
+        // With G re-estimated, the file carries the new G: as `[linear]` where the structure's
+        // G is the nominal form (input, output, rate feedback), else as the exact `[lft]`.
+        let refined;
+        let nominal_file = match &self.nominal_refinement {
+            Some(r) if r.adopted => {
+                let mut f = nominal_file.clone();
+                match (&mut f.linear, self.location) {
+                    (Some(spec), Location::Input | Location::Output | Location::RateFeedback) => {
+                        spec.model = r.after.clone();
+                    }
+                    _ => f.linear = None,
+                }
+                refined = f;
+                &refined
+            }
+            _ => nominal_file,
+        };
         let (model, form) = model_file(
             nominal_file,
             self.location,

@@ -58,6 +58,7 @@ pub struct Nominal {
     lft: Lft,
     declared: Vec<DeclaredLocation>,
     states: Vec<NamedState>,
+    polynomial: Option<PolynomialModel>,
 }
 
 impl Nominal {
@@ -84,6 +85,7 @@ impl Nominal {
             lft,
             declared: Vec::new(),
             states: Vec::new(),
+            polynomial: None,
         })
     }
 
@@ -97,7 +99,15 @@ impl Nominal {
     /// assert_eq!(nominal.locations(), Location::ALL.to_vec());
     /// ```
     pub fn from_polynomial(g: &PolynomialModel) -> Result<Self> {
-        Self::new(realise(g)?)
+        let mut n = Self::new(realise(g)?)?;
+        n.polynomial = Some(g.clone());
+        Ok(n)
+    }
+
+    /// G as a polynomial model when the nominal model was given as one
+    /// ([`Nominal::from_polynomial`]): what a re-estimation of G starts from.
+    pub fn polynomial(&self) -> Option<&PolynomialModel> {
+        self.polynomial.as_ref()
     }
 
     /// The nominal model with a second noise source acting where u acts: y = G·(u + λ·v) + H·e

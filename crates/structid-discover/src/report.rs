@@ -538,6 +538,24 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
 }
 
 fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding) {
+    if let Some(n) = &f.nominal_refinement {
+        let _ = writeln!(
+            s,
+            "**G re-estimated with the map in the loop** ({}): F = {:?}, B = {:?} → F = {:?}, \
+             B = {:?}; validation RMS {} → {}.\n",
+            if n.adopted {
+                "kept"
+            } else {
+                "not kept: no better"
+            },
+            n.before.den,
+            n.before.num,
+            n.after.den,
+            n.after.num,
+            e(n.validation_rms_before),
+            e(n.validation_rms_after)
+        );
+    }
     let _ = writeln!(s, "## 5. What it is\n");
     let kind = match &f.classification {
         Classification::Named(_) => "named",
@@ -808,6 +826,7 @@ pub fn json(
             "initial_state": initial_state_name(w.initial_state),
             "estimate_file": ESTIMATE_FILE,
             "validation_rms": f.augmented.validation_gap.rms,
+            "nominal_refinement": f.nominal_refinement,
             "reproduce": validate_command(r, w, d.scoring),
             "reproduce_estimate": validate_estimate_command(r, w, d.scoring),
             "reestimate": identify_command(r, f),

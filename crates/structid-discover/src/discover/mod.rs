@@ -71,6 +71,7 @@ mod model;
 mod naming;
 mod noise;
 mod polish;
+mod refine;
 mod settings;
 mod total_variation;
 
@@ -130,6 +131,24 @@ pub struct Finding {
     pub augmented: Augmented,
     /// RMS of the validation gap before / after (≥ 1 when the effect helps).
     pub shrink: f64,
+    /// G re-estimated with the map in the loop
+    /// ([`DiscoverSettingsBuilder::refine_nominal`]), when it was tried.
+    pub nominal_refinement: Option<NominalRefinement>,
+}
+
+/// G before and after its re-estimation with the found map in the loop.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NominalRefinement {
+    /// G as given, in the structure's form.
+    pub before: structid_linear::PolynomialModel,
+    /// G re-estimated by output error with the map held fixed.
+    pub after: structid_linear::PolynomialModel,
+    /// Validation RMS of the augmented model with G before.
+    pub validation_rms_before: f64,
+    /// The same with G after.
+    pub validation_rms_after: f64,
+    /// Whether the augmented model was kept with G after (its validation RMS fell).
+    pub adopted: bool,
 }
 
 /// What a discovery concludes: one of three verdicts.
@@ -395,10 +414,30 @@ pub fn discover(
         &validation_gap,
         settings,
     )?;
+    if settings.refine_nominal
+        && let Some(g) = given.polynomial()
+    {
+        refine::refine_nominal(
+            g,
+            &mut finding,
+            est,
+            val,
+            &est_candidates,
+            &val_candidates,
+            &gap_settings,
+            &validation_gap,
+            settings,
+        )?;
+    }
     // The input disturbance was the identification's noise model; the model handed on keeps
     // the nominal model's own noise path, so that files written from it read back with the
     // same measurable z (the simulations, and so every RMS above, do not depend on it).
-    if input_noise.is_some() {
+    if input_noise.is_some()
+        && !finding
+            .nominal_refinement
+            .as_ref()
+            .is_some_and(|r| r.adopted)
+    {
         let dispersion = std::sync::Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
         finding.augmented.model = given.hypothesis(finding.location, dispersion)?.model;
     }

@@ -416,6 +416,7 @@ pub(super) fn name_and_add(
             validation_gap,
         },
         shrink,
+        nominal_refinement: None,
     })
 }
 

@@ -23,6 +23,7 @@ pub struct DiscoverSettings {
     pub(super) table_points: usize,
     pub(super) settle: usize,
     pub(super) scoring: Option<Scoring>,
+    pub(super) refine_nominal: bool,
 }
 
 impl Default for DiscoverSettings {
@@ -45,6 +46,7 @@ impl Default for DiscoverSettings {
             table_points: 201,
             settle: 0,
             scoring: None,
+            refine_nominal: false,
         }
     }
 }
@@ -135,6 +137,12 @@ impl DiscoverSettings {
 }
 
 impl DiscoverSettings {
+    /// Whether G is re-estimated with the found map in the loop (see
+    /// [`DiscoverSettingsBuilder::refine_nominal`]).
+    pub fn refine_nominal(&self) -> bool {
+        self.refine_nominal
+    }
+
     /// How simulations are scored (`None`: chosen from the nominal model, see
     /// [`DiscoverSettingsBuilder::scoring`]).
     pub fn scoring(&self) -> Option<Scoring> {
@@ -230,6 +238,17 @@ impl DiscoverSettingsBuilder {
     /// 10⁻³ of the unit circle, whose free-run simulation drifts; one free run otherwise).
     pub fn scoring(mut self, scoring: Scoring) -> Self {
         self.inner.scoring = Some(scoring);
+        self
+    }
+
+    /// Re-estimate G with the found map held in the loop (default off). For a nominal model
+    /// estimated from data (a best linear approximation is biased by the very effect that is
+    /// missing), the map alone cannot absorb G's dynamic error; G is then refitted by output
+    /// error from u and the map's output ([`structid_core::refine::refine_linear`]) and the
+    /// augmented model is kept with the new G when its validation RMS falls. The finding
+    /// reports G before and after ([`crate::discover::NominalRefinement`]).
+    pub fn refine_nominal(mut self, on: bool) -> Self {
+        self.inner.refine_nominal = on;
         self
     }
 
