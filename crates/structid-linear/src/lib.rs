@@ -86,6 +86,7 @@
 pub mod arx;
 pub mod bla;
 pub mod error;
+pub mod integrators;
 pub mod levenberg_marquardt;
 pub mod orders;
 pub mod output_error;
@@ -95,12 +96,13 @@ pub mod selection;
 pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx};
 pub use bla::{FrequencyResponse, bla_periodic};
 pub use error::LinearError;
+pub use integrators::Stability;
 pub use levenberg_marquardt::{
     LeastSquaresProblem, LevenbergMarquardt, LmConvergence, LmFit, LmSettings, LmSettingsBuilder,
     LmStatus, covariance_from_normal,
 };
 pub use orders::Orders;
-pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, oe, output_error};
+pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, output_error};
 pub use polynomial::PolynomialModel;
 pub use selection::{OrderCriterion, OrderGrid, OrderSelection, select_orders};
 

@@ -181,7 +181,7 @@ pub fn select_orders(
                     continue;
                 }
                 let fit = match fit_arx(&uc, &yv, &orders, settings, start) {
-                    Ok(f) => f,
+                    Ok((f, _)) => f,
                     Err(e) => {
                         last_error = Some(e);
                         continue;
