@@ -103,7 +103,7 @@ pub fn deflate(den: &[f64], n: usize) -> Option<Vec<f64>> {
             r.push(acc);
         }
         let rem = acc + p[p.len() - 1];
-        if !(rem.abs() <= 1e-9 * scale.max(f64::MIN_POSITIVE)) {
+        if rem.is_nan() || rem.abs() > 1e-9 * scale.max(f64::MIN_POSITIVE) {
             return None;
         }
         p = r;
