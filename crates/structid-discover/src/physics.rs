@@ -910,6 +910,12 @@ fn noise(rng: &mut StdRng, len: usize, std: f64, ar: Option<f64>) -> Vec<f64> {
     }
 }
 
+/// `100 (1 − ‖y − ŷ‖/‖y − ȳ‖)` per cent.
+fn simulation_fit(y: &[f64], sim: &[f64]) -> f64 {
+    let err: Vec<f64> = y.iter().zip(sim).map(|(a, b)| a - b).collect();
+    100.0 * (1.0 - rms(&err) / std_dev(y).max(f64::MIN_POSITIVE))
+}
+
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
@@ -1563,7 +1569,8 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
 }
 
 /// A nominal estimated from a record with the true orders and the true integrators fixed:
-/// output error, ARX when OE fails or ends degenerate, the exact model when both fail.
+/// output error, ARX when OE fails or ends degenerate (worse than a constant, output near
+/// zero), the exact model when both fail or ARX also simulates worse than a constant.
 pub fn estimate_nominal(
     truth: &PolynomialModel,
     plant: &Plant,
@@ -1594,6 +1601,12 @@ pub fn estimate_nominal(
         .build()
         && let Ok(fit) = arx(&us, &ys, &orders, &settings)
         && fit.model.stability().is_acceptable()
+        // kept only when it simulates the record better than a constant: an engineer would
+        // not use one that does not
+        && fit
+            .model
+            .simulate(&us)
+            .is_ok_and(|sim| simulation_fit(y, &sim) > 0.0)
     {
         return (fit.model, NominalSource::EstimatedArx);
     }
