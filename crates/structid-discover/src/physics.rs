@@ -1646,6 +1646,28 @@ pub struct PositioningAxis {
     pub noise_std: f64,
 }
 
+impl PositioningAxis {
+    /// The nominal an engineer would estimate from the estimation record: output error with
+    /// the integrator fixed (`structid linear --integrators 1 --orders 1,2,1`), ARX or the
+    /// physical nominal as in [`estimate_nominal`].
+    pub fn estimated_nominal(&self) -> (PolynomialModel, NominalSource) {
+        let plant = axis_plant(1.0, self.mass, self.viscous);
+        estimate_nominal(
+            &self.nominal,
+            &plant,
+            &self.estimation.u().channel(0),
+            &self.estimation.y().channel(0),
+        )
+    }
+}
+
+impl PhysicsCase {
+    /// The nominal given to the workflow, as the discovery workflow takes it.
+    pub fn discover_nominal(&self) -> structid_core::Result<crate::hypotheses::Nominal> {
+        crate::hypotheses::Nominal::from_polynomial(&self.nominal)
+    }
+}
+
 /// Simulates [`PositioningAxis`] deterministically from `seed`: M = 2, Fv = 4, Fc = 1.5,
 /// offset = 0.6 (force units), a PD with closed-loop bandwidth 25 rad/s, moves of ±0.5 over
 /// 0.4–0.8 s with 0.2–0.4 s dwell, position noise std 2e-5.
@@ -1827,6 +1849,26 @@ mod tests {
         // the truth as a map: friction opposes the motion, offset in force units
         assert_eq!(ax.truth.eval(1.0), Some(ax.offset + ax.coulomb));
         assert_eq!(ax.truth.eval(-1.0), Some(ax.offset - ax.coulomb));
+    }
+
+    #[test]
+    fn the_axis_nominal_estimated_with_its_integrator_keeps_it() {
+        let ax = positioning_axis(1);
+        let (g, source) = ax.estimated_nominal();
+        assert_ne!(source, NominalSource::Exact);
+        assert_eq!(
+            structid_linear::integrators::count_integrators(&g.den),
+            1,
+            "{:?}",
+            g.den
+        );
+        assert!(g.stability().is_acceptable());
+        let p_true = (-ax.viscous / ax.mass * 1e-3f64).exp();
+        let free = structid_linear::integrators::deflate(&g.den, 1).unwrap();
+        eprintln!(
+            "estimated axis nominal {source:?}: other pole {} (true {p_true})",
+            -free[1]
+        );
     }
 
     fn check_case(c: &PhysicsCase) {
