@@ -52,6 +52,11 @@ pub struct LinearArgs {
     /// Levenberg–Marquardt: the simulation error is minimised).
     #[arg(long, value_name = "arx|oe", default_value = "oe")]
     method: MethodArg,
+    /// Integrators to fix at z = 1 (0, 1 or 2): the model from the input to (1 − q⁻¹)ᴺ·y is
+    /// fitted and its denominator multiplied by (1 − q⁻¹)ᴺ. NA of --orders then counts the
+    /// free poles only (the model has NA + N). Use 1 for a position driven by a force.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    integrators: usize,
     /// Leading samples left out of the output-error cost (the unknown initial state).
     #[arg(long, value_name = "N", default_value_t = 0)]
     transient: usize,
@@ -82,6 +87,18 @@ pub struct LinearArgs {
     /// The model file to write (never one of the inputs).
     #[arg(long, short = 'o', value_name = "MODEL.toml")]
     out: PathBuf,
+}
+
+/// `(1 − q⁻¹)ᴺ y` (its first N samples set to 0: the order selection starts after the lags).
+fn differenced(y: &Signal, n: usize) -> Result<Signal, CliError> {
+    if n == 0 {
+        return Ok(y.clone());
+    }
+    Signal::new(
+        1,
+        structid_linear::integrators::difference(&y.channel(0), n),
+    )
+    .map_err(|e| CliError::runtime(format!("internal error: differencing the output: {e}")))
 }
 
 /// `NA,NB,NK` as three whole numbers.
@@ -241,9 +258,23 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
              an ARX fit ignores them",
         ));
     }
+    if a.integrators > structid_linear::integrators::MAX_INTEGRATORS {
+        return Err(CliError::input(format!(
+            "invalid value {} for --integrators: give 0, 1 or 2",
+            a.integrators
+        )));
+    }
+    if a.integrators > 0 && matches!(a.initial_state, crate::InitialStateArg::Estimate) {
+        return Err(CliError::input(
+            "--integrators with --initial-state estimate is not supported; use --transient to \
+             leave the start of the record out of the cost",
+        ));
+    }
     let (u, y) = read_signals(&a.data, &a)?;
-    let mut arx_settings = ArxSettings::builder();
-    let mut oe_settings = OeSettings::builder().transient(a.transient);
+    let mut arx_settings = ArxSettings::builder().integrators(a.integrators);
+    let mut oe_settings = OeSettings::builder()
+        .transient(a.transient)
+        .integrators(a.integrators);
     if let Some(ts) = a.sample_time {
         arx_settings = arx_settings.sample_time(ts);
         oe_settings = oe_settings.sample_time(ts);
@@ -272,7 +303,10 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                         CliError::input("--select validation needs --validation-data V.csv")
                     })?;
                     let (u, y) = read_signals(path, &a)?;
-                    OrderCriterion::Validation { u, y }
+                    OrderCriterion::Validation {
+                        u,
+                        y: differenced(&y, a.integrators)?,
+                    }
                 }
             };
             let grid = OrderGrid {
@@ -280,7 +314,14 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                 nb: 1..=a.max_order,
                 nk: a.min_delay..=a.max_delay,
             };
-            let sel = select_orders(&u, &y, &grid, &criterion, &arx_settings)?;
+            // The free part is selected on the differenced output.
+            let sel = select_orders(
+                &u,
+                &differenced(&y, a.integrators)?,
+                &grid,
+                &criterion,
+                &arx_settings,
+            )?;
             let note = format!(
                 "orders selected by {} over {} candidates",
                 criterion.name(),
@@ -294,6 +335,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             "an output-feedback structure needs an input delay NK ≥ 1 (otherwise y_k depends on N(y_k))",
         ));
     }
+    let mut warning = None;
     let (model, cost, what): (PolynomialModel, f64, String) = match a.method {
         MethodArg::Arx => {
             let fit = arx(&u, &y, &orders, &arx_settings)?;
@@ -321,6 +363,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                     fit.iterations
                 )
             };
+            warning = fit.warning.as_ref().map(ToString::to_string);
             (fit.model, fit.cost, note)
         }
     };
@@ -379,12 +422,26 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     );
     println!(
         "fitted by {what}: mean squared error {cost:.4e}; simulation fit on the data {fit:.2} % ({})",
-        if model.is_stable() {
-            "stable"
-        } else {
-            "UNSTABLE"
-        }
+        model.stability()
     );
+    if a.integrators > 0 {
+        println!(
+            "fixed: {} integrator{} at z = 1 (denominator order {} = {} free + {})",
+            a.integrators,
+            if a.integrators == 1 { "" } else { "s" },
+            model.den.len() - 1,
+            orders.na,
+            a.integrators
+        );
+    }
+    if let Some(w) = warning {
+        println!("warning: {w}");
+    } else if fit < 0.0 {
+        println!(
+            "warning: the simulation fit ({fit:.1} %) is worse than a constant (0 %); if the plant \
+             integrates, fix the integrator with --integrators 1"
+        );
+    }
     println!(
         "structure: {}{}",
         structure.map_or("lti", Site::name),

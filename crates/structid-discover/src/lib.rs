@@ -49,6 +49,7 @@ pub mod gap;
 pub mod hypotheses;
 pub mod hysteresis;
 pub mod localise;
+pub mod physics;
 pub mod report;
 pub mod synthetic;
 

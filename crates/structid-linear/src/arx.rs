@@ -5,6 +5,9 @@ use nalgebra::DMatrix;
 use structid_lti::Signal;
 
 use crate::error::{LinearError, check_finite, check_sample_time};
+use crate::integrators::{
+    MAX_INTEGRATORS, convolve, difference, full_covariance, integrator_polynomial,
+};
 use crate::orders::Orders;
 use crate::polynomial::PolynomialModel;
 
@@ -28,15 +31,17 @@ pub struct ArxSettings {
     pub(crate) sample_time: Option<f64>,
     ridge: f64,
     max_condition: f64,
+    integrators: usize,
 }
 
 impl Default for ArxSettings {
-    /// No sample time, no ridge, maximum condition number 1e12.
+    /// No sample time, no ridge, maximum condition number 1e12, no fixed integrator.
     fn default() -> Self {
         ArxSettings {
             sample_time: None,
             ridge: 0.0,
             max_condition: DEFAULT_MAX_CONDITION,
+            integrators: 0,
         }
     }
 }
@@ -78,6 +83,17 @@ impl ArxSettings {
     /// ```
     pub fn max_condition(&self) -> f64 {
         self.max_condition
+    }
+    /// Number `N` of integrators fixed at `z = 1` (0 by default): the fit regresses
+    /// `(1 − q⁻¹)ᴺ y` on the input with the given orders (`na` counts the free poles) and
+    /// returns `A = A'(1 − q⁻¹)ᴺ`, of order `na + N` (see [`crate::integrators`]).
+    ///
+    /// ```
+    /// use structid_linear::ArxSettings;
+    /// assert_eq!(ArxSettings::default().integrators(), 0);
+    /// ```
+    pub fn integrators(&self) -> usize {
+        self.integrators
     }
 }
 
@@ -122,6 +138,17 @@ impl ArxSettingsBuilder {
         self.0.max_condition = limit;
         self
     }
+    /// Integrators fixed at `z = 1` (at most [`MAX_INTEGRATORS`](crate::integrators::MAX_INTEGRATORS)).
+    ///
+    /// ```
+    /// use structid_linear::ArxSettings;
+    /// assert_eq!(ArxSettings::builder().integrators(1).build().unwrap().integrators(), 1);
+    /// assert!(ArxSettings::builder().integrators(3).build().is_err());
+    /// ```
+    pub fn integrators(mut self, n: usize) -> Self {
+        self.0.integrators = n;
+        self
+    }
     /// Validates.
     ///
     /// ```
@@ -144,6 +171,7 @@ impl ArxSettingsBuilder {
                 format!("must exceed 1, got {c}"),
             ));
         }
+        check_integrators(self.0.integrators)?;
         Ok(self.0)
     }
 }
@@ -171,8 +199,12 @@ pub struct ArxFit {
     pub parameter_std: Vec<f64>,
     /// 2-norm condition number of the column-scaled regressor matrix (with the ridge rows).
     pub condition: f64,
-    /// Number of equations (samples after the first `max_lag`).
+    /// Number of equations (samples after the first `max_lag`, and after the `N` samples
+    /// the differencing needs when integrators are fixed).
     pub samples: usize,
+    /// Integrators fixed at `z = 1` ([`ArxSettings::integrators`]); the denominator
+    /// contains `(1 − q⁻¹)ᴺ` exactly and those coefficients have no uncertainty of their own.
+    pub integrators: usize,
 }
 
 /// Fits an ARX model `A(q) y_k = Σ_i B_i(q) u_{i,k} + e_k` by least squares.
@@ -199,7 +231,40 @@ pub fn arx(
 ) -> Result<ArxFit, LinearError> {
     orders.validate()?;
     let (uc, yv) = prepare_data(u, y, orders.inputs(), "")?;
-    fit_arx(&uc, &yv, orders, settings, orders.max_lag())
+    let n = settings.integrators;
+    if n == 0 {
+        return fit_arx(&uc, &yv, orders, settings, orders.max_lag()).map(|(fit, _)| fit);
+    }
+    // A'(q) (1 − q⁻¹)ᴺ y = B u + e is an ARX model of the differenced output.
+    let yd = difference(&yv, n);
+    let (free, cov) = fit_arx(&uc, &yd, orders, settings, orders.max_lag() + n)?;
+    let den = convolve(&free.model.den, &integrator_polynomial(n));
+    let model = PolynomialModel::new(free.model.num, den, free.model.sample_time)?;
+    let parameter_std = std_from(&full_covariance(&cov, orders.nb.iter().sum(), orders.na, n));
+    Ok(ArxFit {
+        model,
+        parameter_std,
+        integrators: n,
+        ..free
+    })
+}
+
+/// Checks a number of fixed integrators.
+pub(crate) fn check_integrators(n: usize) -> Result<(), LinearError> {
+    if n > MAX_INTEGRATORS {
+        return Err(LinearError::param(
+            "integrators",
+            format!("at most {MAX_INTEGRATORS} integrators can be fixed, got {n}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Square roots of the diagonal (negative rounding clipped to 0).
+pub(crate) fn std_from(cov: &DMatrix<f64>) -> Vec<f64> {
+    (0..cov.nrows())
+        .map(|i| cov[(i, i)].max(0.0).sqrt())
+        .collect()
 }
 
 /// Checks an input/output record and returns the input channels and the output.
@@ -271,14 +336,16 @@ impl<'a> Regressors<'a> {
     }
 }
 
-/// ARX least squares over the equations `k = start … L−1` (`start ≥ orders.max_lag()`).
+/// ARX least squares over the equations `k = start … L−1` (`start ≥ orders.max_lag()`),
+/// with no integrator (`settings.integrators` is ignored: callers difference the output
+/// themselves), and the covariance of `θ`.
 pub(crate) fn fit_arx(
     u: &[Vec<f64>],
     y: &[f64],
     orders: &Orders,
     settings: &ArxSettings,
     start: usize,
-) -> Result<ArxFit, LinearError> {
+) -> Result<(ArxFit, DMatrix<f64>), LinearError> {
     let len = y.len();
     let d = orders.parameters();
     let needed = start + d + 1;
@@ -354,17 +421,20 @@ pub(crate) fn fit_arx(
     } else {
         &g * g.transpose()
     };
-    let parameter_std = (0..d)
-        .map(|p| (sigma2 * cov_s[(p, p)].max(0.0)).sqrt() / scale[p])
-        .collect();
+    let cov = DMatrix::from_fn(d, d, |p, q| sigma2 * cov_s[(p, q)] / (scale[p] * scale[q]));
+    let parameter_std = std_from(&cov);
     let model = PolynomialModel::from_parameters(orders, &theta, settings.sample_time())?;
-    Ok(ArxFit {
-        model,
-        cost: rss / n as f64,
-        parameter_std,
-        condition,
-        samples: n,
-    })
+    Ok((
+        ArxFit {
+            model,
+            cost: rss / n as f64,
+            parameter_std,
+            condition,
+            samples: n,
+            integrators: 0,
+        },
+        cov,
+    ))
 }
 
 #[cfg(test)]

@@ -61,6 +61,14 @@
 //! ([`LevenbergMarquardt`] on a [`LeastSquaresProblem`]), which other crates use for their
 //! own nonlinear least-squares fits.
 //!
+//! # Known integrators ([`integrators`])
+//! A pole known to lie at `z = 1` (a position driven by a force) is fixed rather than
+//! estimated: with [`ArxSettings::integrators`] / [`OeSettings::integrators`] `= N` the fit
+//! estimates `A'` in `A = A'(1 − q⁻¹)ᴺ` (ARX on `(1 − q⁻¹)ᴺ y`; output error with the factor
+//! held in the simulation). Only `A'` must be stable; the result is classified by
+//! [`PolynomialModel::stability`] as marginally stable, not unstable. An output-error fit that
+//! ends worse than a constant or with an output near zero carries an [`OeWarning`].
+//!
 //! # Order selection ([`select_orders`]) and nonparametric BLA ([`bla_periodic`])
 //! ARX fits over a grid of `(na, nb, nk)` scored by AIC `ln V + 2d/N`, BIC `ln V + d ln N/N`,
 //! FPE `V (N+d)/(N−d)` or the simulation error on a validation record; and the frequency
@@ -86,6 +94,7 @@
 pub mod arx;
 pub mod bla;
 pub mod error;
+pub mod integrators;
 pub mod levenberg_marquardt;
 pub mod orders;
 pub mod output_error;
@@ -95,12 +104,13 @@ pub mod selection;
 pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx};
 pub use bla::{FrequencyResponse, bla_periodic};
 pub use error::LinearError;
+pub use integrators::Stability;
 pub use levenberg_marquardt::{
     LeastSquaresProblem, LevenbergMarquardt, LmConvergence, LmFit, LmSettings, LmSettingsBuilder,
     LmStatus, covariance_from_normal,
 };
 pub use orders::Orders;
-pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, oe, output_error};
+pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, output_error};
 pub use polynomial::PolynomialModel;
 pub use selection::{OrderCriterion, OrderGrid, OrderSelection, select_orders};
 

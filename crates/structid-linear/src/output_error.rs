@@ -3,8 +3,9 @@
 use nalgebra::{DMatrix, DVector};
 use structid_lti::{Signal, filter_row};
 
-use crate::arx::{ArxSettings, fit_arx, prepare_data};
+use crate::arx::{ArxSettings, check_integrators, fit_arx, prepare_data, std_from};
 use crate::error::{LinearError, check_sample_time};
+use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
 use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
 use crate::orders::Orders;
 use crate::polynomial::{PolynomialModel, root_radius, schur_stable};
@@ -26,6 +27,7 @@ pub struct OeSettings {
     sample_time: Option<f64>,
     initial_damping: f64,
     arx: ArxSettings,
+    integrators: usize,
 }
 
 impl Default for OeSettings {
@@ -39,6 +41,7 @@ impl Default for OeSettings {
             sample_time: None,
             initial_damping: 1e-3,
             arx: ArxSettings::default(),
+            integrators: 0,
         }
     }
 }
@@ -108,6 +111,18 @@ impl OeSettings {
     /// ```
     pub fn arx(&self) -> &ArxSettings {
         &self.arx
+    }
+    /// Number `N` of integrators fixed at `z = 1` (0 by default). [`oe`] then fits `na` free
+    /// poles and returns `F = F'(1 − q⁻¹)ᴺ`, of order `na + N`; [`output_error()`] expects an
+    /// initial denominator with `N` roots at `z = 1` and keeps them. Only `F'` must be stable
+    /// (see [`crate::integrators`]). This count overrides that of [`arx`](Self::arx).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::default().integrators(), 0);
+    /// ```
+    pub fn integrators(&self) -> usize {
+        self.integrators
     }
 
     /// The solver settings of the refinement: these limits with damping × 10 after a failed
@@ -204,6 +219,18 @@ impl OeSettingsBuilder {
         self.0.arx = arx;
         self
     }
+    /// Integrators fixed at `z = 1` (at most
+    /// [`MAX_INTEGRATORS`](crate::integrators::MAX_INTEGRATORS)).
+    ///
+    /// ```
+    /// use structid_linear::OeSettings;
+    /// assert_eq!(OeSettings::builder().integrators(2).build().unwrap().integrators(), 2);
+    /// assert!(OeSettings::builder().integrators(3).build().is_err());
+    /// ```
+    pub fn integrators(mut self, n: usize) -> Self {
+        self.0.integrators = n;
+        self
+    }
     /// Validates.
     ///
     /// ```
@@ -228,6 +255,7 @@ impl OeSettingsBuilder {
             ));
         }
         check_sample_time(s.sample_time)?;
+        check_integrators(s.integrators)?;
         Ok(s)
     }
 }
@@ -267,6 +295,90 @@ pub struct OeFit {
     /// could lower the cost any more (a stationary point to working precision); `false` when
     /// the iteration limit stopped the search.
     pub converged: bool,
+    /// Integrators fixed at `z = 1` ([`OeSettings::integrators`]).
+    pub integrators: usize,
+    /// Simulation fit after the transient, `100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)` % (0 % is the fit
+    /// of the constant ȳ; −∞ when the output is constant and not matched).
+    pub fit_percent: f64,
+    /// Set when the fit is degenerate: worse than a constant, or an output near zero. A fit
+    /// that ends there must not be used as a nominal model without a look.
+    pub warning: Option<OeWarning>,
+}
+
+/// A degenerate output-error fit, reported by [`OeFit::warning`].
+///
+/// ```
+/// use structid_linear::output_error::OeWarning;
+/// let w = OeWarning::WorseThanConstant { fit_percent: -77.0 };
+/// assert!(w.to_string().contains("worse than a constant"));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub enum OeWarning {
+    /// The simulated output stays near zero: `‖ŷ‖ < 0.01 ‖y‖`. Typical of an integrating
+    /// plant fitted with free (stable) poles, or of an input that does not excite the output.
+    OutputNearZero {
+        /// `‖ŷ‖ / ‖y‖`.
+        ratio: f64,
+        /// The fit, per cent.
+        fit_percent: f64,
+    },
+    /// The fit is below 0 %: the constant mean of the output simulates it better.
+    WorseThanConstant {
+        /// The fit, per cent.
+        fit_percent: f64,
+    },
+}
+
+impl std::fmt::Display for OeWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let hint = "if the plant integrates (a position driven by a force, a level driven by a \
+                    flow), fix the integrator (OeSettings::integrators, `--integrators 1`)";
+        match self {
+            OeWarning::OutputNearZero { ratio, fit_percent } => write!(
+                f,
+                "the output-error fit simulates an output near zero ({:.2} % of the data's size; \
+                 fit {fit_percent:.1} %): the model explains nothing; {hint}",
+                100.0 * ratio
+            ),
+            OeWarning::WorseThanConstant { fit_percent } => write!(
+                f,
+                "the output-error fit ({fit_percent:.1} %) is worse than a constant (0 %); {hint}"
+            ),
+        }
+    }
+}
+
+/// The fit per cent and the warning of a simulation `ŷ` of `y` over `k ≥ transient`.
+pub(crate) fn judge_fit(y: &[f64], yhat: &[f64], transient: usize) -> (f64, Option<OeWarning>) {
+    let (y, yhat) = (
+        &y[transient.min(y.len())..],
+        &yhat[transient.min(yhat.len())..],
+    );
+    let n = y.len().max(1) as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let err: f64 = y.iter().zip(yhat).map(|(a, b)| (a - b).powi(2)).sum();
+    let spread: f64 = y.iter().map(|a| (a - mean).powi(2)).sum();
+    let fit = if spread > 0.0 {
+        100.0 * (1.0 - (err / spread).sqrt())
+    } else if err == 0.0 {
+        100.0
+    } else {
+        f64::NEG_INFINITY
+    };
+    let size: f64 = y.iter().map(|a| a * a).sum();
+    let out: f64 = yhat.iter().map(|a| a * a).sum();
+    let ratio = if size > 0.0 { (out / size).sqrt() } else { 1.0 };
+    let warning = if ratio < 0.01 {
+        Some(OeWarning::OutputNearZero {
+            ratio,
+            fit_percent: fit,
+        })
+    } else if fit < 0.0 || fit.is_nan() {
+        Some(OeWarning::WorseThanConstant { fit_percent: fit })
+    } else {
+        None
+    };
+    (fit, warning)
 }
 
 /// Output-error refinement by Levenberg–Marquardt starting from `initial` (e.g. an ARX fit,
@@ -296,14 +408,28 @@ pub fn output_error(
     settings: &OeSettings,
 ) -> Result<OeFit, LinearError> {
     initial.validate()?;
-    let orders = initial.orders();
+    let n = settings.integrators;
+    let free = if n == 0 {
+        initial.clone()
+    } else {
+        let den = deflate(&initial.den, n).ok_or_else(|| {
+            LinearError::InvalidModel(format!(
+                "the initial denominator does not have the {n} root(s) at z = 1 that \
+                 OeSettings::integrators fixes"
+            ))
+        })?;
+        PolynomialModel::new(initial.num.clone(), den, initial.sample_time)?
+    };
+    let orders = free.orders();
     orders.validate()?;
     let (uc, yv) = prepare_data(u, y, initial.inputs(), "")?;
-    refine(&uc, &yv, initial, &orders, settings)
+    refine(&uc, &yv, &free, &orders, settings)
 }
 
 /// The Levenberg–Marquardt iteration of [`output_error()`] on checked data, with the orders
 /// given explicitly (they are not re-read from the leading zeros of `initial.num`).
+/// `initial` and `orders` are those of the free part: `settings.integrators` poles at
+/// `z = 1` are multiplied onto its denominator.
 fn refine(
     uc: &[Vec<f64>],
     yv: &[f64],
@@ -329,11 +455,13 @@ fn refine(
             spectral_radius: root_radius(&initial.den),
         });
     }
+    let n_int = settings.integrators;
     let mut problem = Problem {
         u: uc,
         y: yv,
         orders,
         transient: settings.transient,
+        fixed: integrator_polynomial(n_int),
         last: None,
     };
     let fit = LevenbergMarquardt::new(settings.lm()?)
@@ -346,13 +474,21 @@ fn refine(
             other => other,
         })?;
     let n = (len - settings.transient) as f64;
+    let nb_total: usize = orders.nb.iter().sum();
     let parameter_std = fit
         .covariance(&mut problem)
-        .map(|c| (0..d).map(|i| c[(i, i)].max(0.0).sqrt()).collect())
-        .unwrap_or_else(|| vec![f64::INFINITY; d]);
+        .map(|c| std_from(&full_covariance(&c, nb_total, orders.na, n_int)))
+        .unwrap_or_else(|| vec![f64::INFINITY; d + n_int]);
     let theta = &fit.theta;
     let sample_time = settings.sample_time.or(initial.sample_time);
-    let model = PolynomialModel::from_parameters(orders, theta, sample_time)?;
+    let free = PolynomialModel::from_parameters(orders, theta, sample_time)?;
+    let den = convolve(&free.den, &problem.fixed);
+    let model = PolynomialModel::new(free.num, den, sample_time)?;
+    problem.simulate_at(theta);
+    let (fit_percent, warning) = match &problem.last {
+        Some((_, yhat)) => judge_fit(yv, yhat, settings.transient),
+        None => (f64::NAN, None),
+    };
     // The solver minimises the sum of squares; the reported cost is its mean.
     Ok(OeFit {
         model,
@@ -364,6 +500,9 @@ fn refine(
         // No damped step lowering the cost is a stationary point to working precision,
         // which this fit has always reported as converged.
         converged: matches!(fit.status, LmStatus::Converged(_) | LmStatus::NoProgress),
+        integrators: n_int,
+        fit_percent,
+        warning,
     })
 }
 
@@ -372,7 +511,9 @@ fn refine(
 ///
 /// If the ARX denominator happens to be unstable, its roots are first pulled radially
 /// inside the unit circle (`a_j ← a_j c^j` with `c = 0.95 / max|root|`), which keeps the
-/// shape of the model and makes it a valid starting point.
+/// shape of the model and makes it a valid starting point. With
+/// [`OeSettings::integrators`] `N > 0`, the ARX fit is that of `(1 − q⁻¹)ᴺ y` and `orders.na`
+/// counts the free poles only.
 ///
 /// ```
 /// use structid_linear::{oe, OeSettings, Orders, PolynomialModel};
@@ -395,7 +536,12 @@ pub fn oe(
     if settings.sample_time.is_some() {
         arx_settings.sample_time = settings.sample_time;
     }
-    let mut initial = fit_arx(&uc, &yv, orders, &arx_settings, orders.max_lag())?.model;
+    // The free part A' of an ARX fit of the differenced output starts the search.
+    let n = settings.integrators;
+    let yd = difference(&yv, n);
+    let mut initial = fit_arx(&uc, &yd, orders, &arx_settings, orders.max_lag() + n)?
+        .0
+        .model;
     if !schur_stable(&initial.den) {
         let r = root_radius(&initial.den);
         let c = 0.95 / r;
@@ -428,6 +574,8 @@ struct Problem<'a> {
     y: &'a [f64],
     orders: &'a Orders,
     transient: usize,
+    /// The fixed denominator factor `(1 − q⁻¹)ᴺ` (`[1]` without integrators).
+    fixed: Vec<f64>,
     /// The last simulation `(θ, ŷ)`: the sensitivities filter all of ŷ (the transient
     /// included), so the normal equations at an accepted θ reuse it instead of simulating
     /// again.
@@ -504,6 +652,7 @@ impl Problem<'_> {
 
     fn simulate(&self, theta: &[f64]) -> Vec<f64> {
         let (den, num) = self.split(theta);
+        let den = convolve(&den, &self.fixed);
         let mut y = vec![0.0; self.y.len()];
         filter_row(&num, &den, self.u, &mut y);
         y
@@ -516,11 +665,12 @@ impl Problem<'_> {
         }
     }
 
-    /// The sensitivities `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/F · u_i` and
-    /// `∂ŷ/∂f_j = −q^{−j}/F · ŷ` as `n_u + 1` all-pole filtered signals and, per parameter,
-    /// (filtered signal, lag, sign).
+    /// The sensitivities `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/(F'Δ) · u_i` and
+    /// `∂ŷ/∂f'_j = −q^{−j}/F' · ŷ` (`Δ` the fixed factor, `F = F'Δ`) as `n_u + 1` all-pole
+    /// filtered signals and, per parameter, (filtered signal, lag, sign).
     fn sensitivities(&self, theta: &[f64], yhat: &[f64]) -> Sensitivities {
-        let (den, _) = self.split(theta);
+        let (free, _) = self.split(theta);
+        let den = convolve(&free, &self.fixed);
         let len = self.y.len();
         let d = theta.len();
         // (filtered signal, lag, sign) per parameter
@@ -539,7 +689,7 @@ impl Problem<'_> {
         }
         if self.orders.na > 0 {
             let mut v = vec![0.0; len];
-            filter_row(&[[1.0]], &den, &[yhat], &mut v);
+            filter_row(&[[1.0]], &free, &[yhat], &mut v);
             filtered.push(v);
             for j in 1..=self.orders.na {
                 cols.push((filtered.len() - 1, j, -1.0));
@@ -681,41 +831,46 @@ mod tests {
 
     #[test]
     fn accumulated_normal_equations_equal_those_of_the_jacobian() {
-        let g = PolynomialModel::new(
-            vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
-            vec![1.0, -1.2, 0.5],
-            None,
-        )
-        .unwrap();
-        let u = white(51, 300, 1.0, 2);
-        let y = white(52, 300, 1.0, 1);
-        let orders = g.orders();
-        let (uc, yv) = prepare_data(&u, &y, 2, "").unwrap();
-        let mut p = Problem {
-            u: &uc,
-            y: &yv,
-            orders: &orders,
-            transient: 20,
-            last: None,
-        };
-        let theta = parameters_for(&g, &orders);
-        let r = p.residuals(&theta).unwrap();
-        let j = p.jacobian(&theta, &r).unwrap();
-        let (h, jtr) = p.normal_equations(&theta, &r).unwrap();
-        let h_ref = j.transpose() * &j;
-        let jtr_ref = j.transpose() * &r;
-        assert!((&h - &h_ref).norm() <= 1e-12 * h_ref.norm());
-        assert!((&jtr - &jtr_ref).norm() <= 1e-12 * jtr_ref.norm());
-        // J = −∂ŷ/∂θ: a finite difference of the residuals
-        let step = 1e-7;
-        let mut t = theta.clone();
-        t[4] += step;
-        let fd = (p.residuals(&t).unwrap() - &r) / step;
-        assert!((fd - j.column(4)).norm() <= 1e-5 * j.column(4).norm());
-        // unstable denominators are rejected
-        let mut bad = theta.clone();
-        bad[4] = 1.5;
-        assert!(p.residuals(&bad).is_none());
+        // with no fixed factor, and with a fixed integrator (the sensitivities then use F'Δ
+        // for the inputs and F' alone for ŷ)
+        for fixed in [vec![1.0], vec![1.0, -1.0]] {
+            let g = PolynomialModel::new(
+                vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+                vec![1.0, -1.2, 0.5],
+                None,
+            )
+            .unwrap();
+            let u = white(51, 300, 1.0, 2);
+            let y = white(52, 300, 1.0, 1);
+            let orders = g.orders();
+            let (uc, yv) = prepare_data(&u, &y, 2, "").unwrap();
+            let mut p = Problem {
+                u: &uc,
+                y: &yv,
+                orders: &orders,
+                transient: 20,
+                fixed: fixed.clone(),
+                last: None,
+            };
+            let theta = parameters_for(&g, &orders);
+            let r = p.residuals(&theta).unwrap();
+            let j = p.jacobian(&theta, &r).unwrap();
+            let (h, jtr) = p.normal_equations(&theta, &r).unwrap();
+            let h_ref = j.transpose() * &j;
+            let jtr_ref = j.transpose() * &r;
+            assert!((&h - &h_ref).norm() <= 1e-12 * h_ref.norm());
+            assert!((&jtr - &jtr_ref).norm() <= 1e-12 * jtr_ref.norm());
+            // J = −∂ŷ/∂θ: a finite difference of the residuals
+            let step = 1e-7;
+            let mut t = theta.clone();
+            t[4] += step;
+            let fd = (p.residuals(&t).unwrap() - &r) / step;
+            assert!((fd - j.column(4)).norm() <= 1e-5 * j.column(4).norm());
+            // unstable denominators are rejected
+            let mut bad = theta.clone();
+            bad[4] = 1.5;
+            assert!(p.residuals(&bad).is_none());
+        }
     }
 
     #[test]

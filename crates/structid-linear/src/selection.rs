@@ -128,6 +128,11 @@ pub struct OrderSelection {
 /// All fits use the same equations `k = K … L−1`, `K` the largest lag in the grid, so the
 /// criteria compare like with like.
 ///
+/// [`ArxSettings::integrators`] is not applied here: to select the free part of a model with
+/// `N` known integrators, pass the differenced output
+/// [`integrators::difference`](crate::integrators::difference)`(y, N)` (as `structid linear
+/// --integrators` does).
+///
 /// ```
 /// use structid_linear::{select_orders, ArxSettings, OrderCriterion, OrderGrid, Orders};
 /// use structid_lti::{testing::SplitMix64, Signal};
@@ -181,7 +186,7 @@ pub fn select_orders(
                     continue;
                 }
                 let fit = match fit_arx(&uc, &yv, &orders, settings, start) {
-                    Ok(f) => f,
+                    Ok((f, _)) => f,
                     Err(e) => {
                         last_error = Some(e);
                         continue;
