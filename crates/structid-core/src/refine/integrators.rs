@@ -4,76 +4,28 @@ use structid_lti::Signal;
 
 use crate::error::{Error, Result};
 
-/// Relative size of F(1) below which (1 − q⁻¹) is taken to divide F.
-const TOLERANCE: f64 = 1e-8;
+use structid_linear::integrators::{convolve, count_integrators, integrator_polynomial};
 
-/// F divided by (1 − q⁻¹) once: the quotient and the remainder F(1).
-fn divide(den: &[f64]) -> (Vec<f64>, f64) {
-    // F(q⁻¹) = (1 − q⁻¹)·Q(q⁻¹) + r: q_0 = f_0, q_k = f_k + q_(k−1), r = f_n + q_(n−1).
-    let n = den.len() - 1;
-    let mut q = Vec::with_capacity(n);
-    let mut acc = 0.0;
-    for &f in &den[..n] {
-        acc += f;
-        q.push(acc);
-    }
-    (q, acc + den[n])
-}
-
-fn scale(den: &[f64]) -> f64 {
-    den.iter().map(|v| v.abs()).sum::<f64>()
-}
-
-/// How many factors (1 − q⁻¹) divide `den` (to a relative 1e-8).
+/// How many factors (1 − q⁻¹) divide `den` ([`structid_linear::integrators`]).
 pub(super) fn count(den: &[f64]) -> usize {
-    let mut d = den.to_vec();
-    let mut n = 0;
-    while d.len() > 1 {
-        let (q, r) = divide(&d);
-        if r.abs() > TOLERANCE * scale(&d) {
-            break;
-        }
-        d = q;
-        n += 1;
-    }
-    n
+    count_integrators(den)
 }
 
 /// F′ = F/(1 − q⁻¹)ⁿ, or an error when F has fewer than n poles at 1.
 pub(super) fn deflate(den: &[f64], n: usize) -> Result<Vec<f64>> {
-    let mut d = den.to_vec();
-    for i in 0..n {
-        if d.len() < 2 {
-            return Err(Error::InvalidStructure(format!(
-                "the linear part's denominator has degree {}, too low to hold {n} \
-                 integrator(s) fixed",
-                den.len() - 1
-            )));
-        }
-        let (q, r) = divide(&d);
-        if r.abs() > TOLERANCE * scale(&d) {
-            return Err(Error::InvalidStructure(format!(
-                "the linear part has {i} pole(s) at z = 1, not the {n} integrator(s) to hold \
-                 fixed (its denominator at z = 1 is {r:e} after removing {i})"
-            )));
-        }
-        d = q;
-    }
-    Ok(d)
+    structid_linear::integrators::deflate(den, n).ok_or_else(|| {
+        Error::InvalidStructure(format!(
+            "the linear part has {} pole(s) at z = 1 (denominator of degree {}), not the {n} \
+             integrator(s) to hold fixed",
+            count(den),
+            den.len().saturating_sub(1)
+        ))
+    })
 }
 
 /// F′·(1 − q⁻¹)ⁿ.
 pub(super) fn inflate(den: &[f64], n: usize) -> Vec<f64> {
-    let mut d = den.to_vec();
-    for _ in 0..n {
-        let mut next = vec![0.0; d.len() + 1];
-        for (k, &v) in d.iter().enumerate() {
-            next[k] += v;
-            next[k + 1] -= v;
-        }
-        d = next;
-    }
-    d
+    convolve(den, &integrator_polynomial(n))
 }
 
 /// Every channel of `s` summed n times from zero: s/(1 − q⁻¹)ⁿ.

@@ -206,6 +206,11 @@ pub(super) fn fit(
         iterations: fit.costs.len(),
         costs: fit.costs.iter().map(|c| c / n).collect(),
         parameter_std: vec![f64::NAN; fit.theta.len()],
+        integrators: n_integrators,
+        // The fit is through the map (y ≈ N̂(G·u)), not G's own simulation: no linear fit
+        // percentage or degeneracy warning applies.
+        fit_percent: f64::NAN,
+        warning: None,
         converged: fit.status.is_converged()
             || matches!(
                 fit.status,

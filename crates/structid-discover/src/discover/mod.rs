@@ -391,29 +391,52 @@ pub fn discover(
             seconds: t0.elapsed().as_secs_f64(),
         });
     }
-    let tv_rms = {
-        let loc = fitted[chosen].result.location;
+    let tv_rms = |fitted: &[Fitted], i: usize| {
+        let loc = fitted[i].result.location;
         fitted
             .iter()
             .find(|f| f.result.location == loc && f.estimator == "total variation")
             .map(|f| f.result.validation_rms)
     };
-    let direction = directions[chosen]
-        .clone()
-        .unwrap_or_else(DirectionTest::none);
-    let best = fitted.swap_remove(chosen);
-    let mut finding = name_and_add(
-        best,
-        direction,
-        tv_rms,
-        est,
-        val,
-        &est_candidates,
-        &val_candidates,
-        &gap_settings,
-        &validation_gap,
-        settings,
-    )?;
+    let direction_of = |i: usize| directions[i].clone().unwrap_or_else(DirectionTest::none);
+    let add = |best: Fitted, direction: DirectionTest, tv: Option<f64>| {
+        name_and_add(
+            best,
+            direction,
+            tv,
+            est,
+            val,
+            &est_candidates,
+            &val_candidates,
+            &gap_settings,
+            &validation_gap,
+            settings,
+        )
+    };
+    let mut finding = if chosen != 0 {
+        // A dynamic fit at one location competes with the best static fit at another: a
+        // force that depends on the direction of motion (friction) is hysteresis seen from the
+        // position, and static at the rate. The static explanation wins when a family names
+        // it and validates better than the dynamic fit's best static approximation.
+        let (tv_dynamic, tv_static) = (tv_rms(&fitted, chosen), tv_rms(&fitted, 0));
+        let (dir_dynamic, dir_static) = (direction_of(chosen), direction_of(0));
+        let dynamic_fit = fitted.swap_remove(chosen);
+        let static_fit = fitted.swap_remove(0);
+        let dynamic_finding = add(dynamic_fit, dir_dynamic, tv_dynamic)?;
+        match add(static_fit, dir_static, tv_static) {
+            Ok(f)
+                if matches!(f.classification, Classification::Named(_))
+                    && f.augmented.validation_gap.rms
+                        < dynamic_finding.augmented.validation_gap.rms =>
+            {
+                f
+            }
+            _ => dynamic_finding,
+        }
+    } else {
+        let tv = tv_rms(&fitted, 0);
+        add(fitted.swap_remove(0), direction_of(0), tv)?
+    };
     if settings.refine_nominal
         && let Some(g) = given.polynomial()
     {
