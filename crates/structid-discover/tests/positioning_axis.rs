@@ -1,0 +1,53 @@
+//! The closed-loop positioning axis of `structid_discover::physics::positioning_axis`:
+//! M·q̈ + Fv·q̇ + Fc·sign(q̇) + offset = τ, simulated in continuous time (RK4, 20 steps per
+//! sample) under a PD position controller on point-to-point moves, sampled at 1 kHz. The
+//! workflow sees the recorded force τ and position q and the physical nominal M·q̈ + Fv·q̇ = τ
+//! (an integrator: its free-run simulation drifts). It must score in windows, name Coulomb
+//! friction in feedback from the rate with Fc within 15 % (the constant force offset may be
+//! carried as the family's offset or as the difference of asymmetric Coulomb levels), and
+//! shrink the windowed validation gap at least 5×.
+
+use structid_core::validation::Scoring;
+use structid_discover::discover::{Classification, DiscoverSettings, Verdict, discover};
+use structid_discover::effects::Effect;
+use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::physics::positioning_axis;
+
+#[test]
+fn coulomb_friction_of_a_closed_loop_axis_is_named_in_rate_feedback() {
+    let axis = positioning_axis(1);
+    let nominal = Nominal::from_polynomial(&axis.nominal).unwrap();
+    let d = discover(
+        &nominal,
+        &axis.estimation,
+        &axis.validation,
+        &DiscoverSettings::default(),
+    )
+    .unwrap();
+    assert!(matches!(d.scoring, Scoring::Windowed(_)), "{:?}", d.scoring);
+    assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
+    let f = d.finding.as_ref().unwrap();
+    assert_eq!(f.location, Location::RateFeedback, "{}", d.verdict);
+    let Classification::Named(fit) = &f.classification else {
+        panic!("not named: {}", d.verdict)
+    };
+    let v = fit.values();
+    let offset = fit.offset.as_ref().map_or(0.0, |o| o.value);
+    // (Coulomb level, force offset) in the family's own parameters.
+    let (fc, off) = match fit.effect {
+        Effect::Coulomb | Effect::CoulombViscous | Effect::Stribeck => (v[0], offset),
+        Effect::AsymmetricCoulombViscous => (0.5 * (v[0] + v[1]), offset + 0.5 * (v[0] - v[1])),
+        other => panic!("named {}: {}", other.name(), d.verdict),
+    };
+    assert!(
+        (fc - axis.coulomb).abs() <= 0.15 * axis.coulomb,
+        "Fc {fc} against {}",
+        axis.coulomb
+    );
+    assert!(
+        (off - axis.offset).abs() <= 0.15 * axis.offset,
+        "offset {off} against {}",
+        axis.offset
+    );
+    assert!(f.shrink >= 5.0, "shrink {}: {}", f.shrink, d.verdict);
+}
