@@ -39,7 +39,7 @@ pub(super) fn total_variation_fit(
     // a coarser β search keep this step at a fraction of a second per fit.
     let identify = IdentifySettings::builder()
         .initial_state(initial_state(hyp.location).0)
-        .admm(AdmmSettings::builder().tolerance(1e-5).build()?)
+        .admm(AdmmSettings::builder().tolerance(1e-4).build()?)
         .build()?;
     let selection = SelectionSettings::builder()
         .criterion(Criterion::Validation)
