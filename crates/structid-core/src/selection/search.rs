@@ -18,6 +18,10 @@ use super::score::BetaScore;
 use super::settings::{Criterion, SelectionSettings};
 use super::validation::ValidationScore;
 
+/// The best β for given widths: β, the criterion there, s², how it was evaluated, and the bound
+/// it lies on.
+type BetaChoice = (f64, f64, Option<f64>, String, Option<Bound>);
+
 /// Chooses β (and, if asked, σ) for `model` on `data` by `selection`'s criterion, then
 /// identifies with the chosen values; see the [module documentation](super). `settings` gives
 /// the solver, the initial-state treatment and, when β is not tuned, β. `validation` is
@@ -90,9 +94,7 @@ pub fn select(
     let method: String;
     let mut features: Option<FeatureScore> = None;
     // The best β (and its value and s²) for the given widths.
-    let mut best_beta = |widths: &[Option<f64>],
-                         curve: &mut Vec<Trial>|
-     -> Result<(f64, f64, Option<f64>, String, Option<Bound>)> {
+    let mut best_beta = |widths: &[Option<f64>], curve: &mut Vec<Trial>| -> Result<BetaChoice> {
         let m = model_at(widths)?;
         let problem = problem_of(&m)?;
         let sigma = if selection.tune_sigma {

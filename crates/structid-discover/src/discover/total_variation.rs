@@ -101,8 +101,10 @@ fn failure_reason(sel: &Selection, selection: &SelectionSettings) -> Option<Erro
             ),
         };
         Error::Numerical(format!(
-            "total variation: the validation selection of β ran to the {bound} bound of its \
-             search, β = {value:.0e}: {meaning}"
+            "total variation: the validation selection of β hit the {bound} bound of its search \
+             ({value:.0e}; selected β = {:.3e}, on the bound or on a plateau of the validation \
+             error reaching it): {meaning}",
+            sel.beta
         ))
     })
 }
