@@ -487,6 +487,16 @@ fn iteration_limits_give_not_converged_errors() {
         matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"),
         "{err}"
     );
+    // The reason is in words: which residual, against which tolerance, and where ρ stood.
+    let text = err.to_string();
+    for part in [
+        "limit of 3 iterations",
+        "primal residual",
+        "its tolerance",
+        "ρ = ",
+    ] {
+        assert!(text.contains(part), "`{part}` missing from: {text}");
+    }
 }
 
 #[test]
