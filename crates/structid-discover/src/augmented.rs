@@ -399,7 +399,11 @@ mod tests {
             // hypothesis takes it as 0 (a record rarely starts at y = 0); with x₀ estimated
             // that one sample moves the least-squares x̂₀ by O(1/L). Every other location
             // reproduces to rounding.
-            let tolerance = if location == Location::RateFeedback { 1e-3 } else { 1e-9 };
+            let tolerance = if location == Location::RateFeedback {
+                1e-3
+            } else {
+                1e-9
+            };
             assert!(
                 (rms - expected).abs() <= tolerance * expected,
                 "{location:?}: {rms} vs {expected}"

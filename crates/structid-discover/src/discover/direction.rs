@@ -26,10 +26,13 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         .channel(0);
     let delta = deconvolve(&f.hypothesis, &r)?;
     let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
-    // Actuator and sensor maps act on held or sampled signals and have no sampling artefact.
+    // Actuator and sensor maps act on held or sampled signals and have no sampling artefact;
+    // nor does a map of the measured rate, whose backward difference already sits half a
+    // sample back (and whose steep static fits, relays, would call any direction effect an
+    // artefact).
     let feedback = matches!(
         f.result.location,
-        Location::OutputFeedback | Location::RateFeedback | Location::Declared { .. }
+        Location::OutputFeedback | Location::Declared { .. }
     );
     Ok(direction_beyond_sampling(
         &f.z[skip..],
@@ -38,6 +41,10 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         settings.hysteresis_threshold,
     ))
 }
+
+/// A direction effect of at most this many times the energy of the half-sample artefact is
+/// taken for sampling (see [`direction_beyond_sampling`]).
+const SAMPLING_SHARE: f64 = 4.0;
 
 /// The direction test of the residual `r` against `z`, and for a map acting in continuous time
 /// on a fed-back signal (`map` given) measured against what sampling alone leaves: such a
@@ -58,7 +65,7 @@ pub(super) fn direction_beyond_sampling(
     {
         let artefact = half_sample_artefact(map, z);
         test.sampling_energy = direction_dependence(z, &artefact, 1.0).direction_energy;
-        if test.direction_energy <= 4.0 * test.sampling_energy {
+        if test.direction_energy <= SAMPLING_SHARE * test.sampling_energy {
             test.dynamic = false;
         }
     }

@@ -151,6 +151,16 @@ pub struct NominalRefinement {
     pub adopted: bool,
 }
 
+/// Fits within this factor of the best validation RMS get the direction test: a hysteresis
+/// is approximated statically at other locations too, and a total-variation estimate there
+/// can approximate it better than any estimate at its own location.
+pub const DIRECTION_WITHIN: f64 = 1.5;
+
+/// A static named fit in rate feedback must leave at most this share of the validation RMS
+/// that a dynamic fit in feedback from the output leaves, to be preferred to it (see
+/// [`discover`]).
+pub const STATIC_OVER_DYNAMIC: f64 = 0.25;
+
 /// What a discovery concludes: one of three verdicts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -348,7 +358,7 @@ pub fn discover(
         .unwrap_or(f64::INFINITY);
     let mut directions: Vec<Option<DirectionTest>> = Vec::with_capacity(fitted.len());
     for f in &fitted {
-        directions.push(if f.result.validation_rms <= 1.5 * best_rms {
+        directions.push(if f.result.validation_rms <= DIRECTION_WITHIN * best_rms {
             direction_test(f, settings).ok()
         } else {
             None
@@ -413,11 +423,16 @@ pub fn discover(
             settings,
         )
     };
-    let mut finding = if chosen != 0 {
-        // A dynamic fit at one location competes with the best static fit at another: a
-        // force that depends on the direction of motion (friction) is hysteresis seen from the
-        // position, and static at the rate. The static explanation wins when a family names
-        // it and validates better than the dynamic fit's best static approximation.
+    // A direction-dependent force seen from the position (a dynamic fit in feedback from y)
+    // is static seen from the rate: a map of ẏ is the simplest map of y that depends on the
+    // direction of motion (friction). When the best static fit is in rate feedback, is named,
+    // and leaves at most a quarter of what the dynamic fit's static approximation leaves, it
+    // is the explanation. Hysteresis elsewhere (backlash at the input, a sensor) keeps its
+    // verdict: no static map of a measured signal explains it.
+    let position_vs_rate = chosen != 0
+        && fitted[chosen].result.location == Location::OutputFeedback
+        && fitted[0].result.location == Location::RateFeedback;
+    let mut finding = if position_vs_rate {
         let (tv_dynamic, tv_static) = (tv_rms(&fitted, chosen), tv_rms(&fitted, 0));
         let (dir_dynamic, dir_static) = (direction_of(chosen), direction_of(0));
         let dynamic_fit = fitted.swap_remove(chosen);
@@ -434,8 +449,8 @@ pub fn discover(
             _ => dynamic_finding,
         }
     } else {
-        let tv = tv_rms(&fitted, 0);
-        add(fitted.swap_remove(0), direction_of(0), tv)?
+        let tv = tv_rms(&fitted, chosen);
+        add(fitted.swap_remove(chosen), direction_of(chosen), tv)?
     };
     if settings.refine_nominal
         && let Some(g) = given.polynomial()
