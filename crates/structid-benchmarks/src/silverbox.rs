@@ -10,7 +10,7 @@
 //!    part (the rest). Nothing below looks at the test splits.
 //! 2. For each candidate order n (na = nb = n, nk = 1): the best linear approximation (BLA) by
 //!    ARX and then output error with a free initial state on the fitting part; then
-//!    [`refine`]: the map by [`identify()`](crate::identify()) (β and σ by marginal likelihood on the
+//!    [`refine`]: the map by [`identify()`](structid_core::identify()) (β and σ by marginal likelihood on the
 //!    first pass), G by output error, in turn, with the initial state estimated in both steps,
 //!    until the validation error stops improving. The validation error is the simulation
 //!    error on the validation part, simulated from the start of the estimation split so that
@@ -24,7 +24,7 @@
 //!
 //! The map's dispersion is a cubic polynomial (ridge regression on 1, y, y², y³, the physics'
 //! stiffness with an even term) or that polynomial plus a Gaussian-like Fourier kernel
-//! ([`SumDispersion`](crate::SumDispersion)). The validation part has the estimation amplitudes, so it cannot judge
+//! ([`SumDispersion`](structid_core::SumDispersion)). The validation part has the estimation amplitudes, so it cannot judge
 //! extrapolation (the last part of the arrow test reaches 40 % beyond them): the kernel is kept
 //! only when it lowers the validation error by more than `kernel_margin` (5 %), and otherwise
 //! the simpler map wins. Outside the data, the kernel part of a sum reverts towards zero with

@@ -16,13 +16,13 @@
 //! 3. For each candidate order n (na = nb = n, nk = 1): the project's best linear
 //!    approximation (ARX, then output error with a free initial state) on the fitting part, and
 //!    for each structure of [`TanksStructure`] the alternating [`refine`]ment (maps by
-//!    [`identify()`](crate::identify()) with an estimated initial state and β by marginal
+//!    [`identify()`](structid_core::identify()) with an estimated initial state and β by marginal
 //!    likelihood, G by output error with a free initial state). Each candidate is scored by
 //!    its simulation error on the validation part, simulated from the start of the
 //!    estimation record (from a zero state; the transient has died out long before the
 //!    validation part starts), with and without the overflow clip (see below).
 //! 4. For the best order of each structure with a map, a Fourier kernel plus the polynomial
-//!    trend ([`SumDispersion`](crate::SumDispersion)) replaces the plain polynomial when it lowers the validation
+//!    trend ([`SumDispersion`](structid_core::SumDispersion)) replaces the plain polynomial when it lowers the validation
 //!    error by more than `kernel_margin`.
 //! 5. The best candidate of each structure is simulated on the test record from u alone. By
 //!    default it is the model fitted on the fitting part, i.e. exactly the model the
@@ -36,7 +36,7 @@
 //! **Initial state.** The records do not start at rest, and the benchmark scores all 1024 test
 //! samples. The benchmark's description says that both records start from the same unknown
 //! state, so the test simulation starts from the initial state estimated on the estimation
-//! record: by [`identify()`](crate::identify()) with [`InitialState::Estimate`](crate::InitialState::Estimate) for a
+//! record: by [`identify()`](structid_core::identify()) with [`InitialState::Estimate`](structid_core::InitialState::Estimate) for a
 //! structured model, by least squares on the free response for a linear one. The scores from a
 //! zero (deviation) state are reported too ([`TanksModel::test_rms_zero_state`]).
 

@@ -17,8 +17,10 @@
 //!   dynamic Ψ_M in the paper's Definition 1), or at a declared location;
 //! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
 //!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
-//! * [`effects`]: a library of named static effects (saturation, dead zone, Coulomb and
-//!   Stribeck friction, odd and even polynomial stiffness, quantisation, offset, gain error),
+//! * [`effects`]: a library of named static effects (saturation, smooth and one-sided
+//!   saturation, rectification, dead zone, gap spring, Coulomb, Coulomb + viscous and Stribeck
+//!   friction, symmetric and asymmetric, odd and even polynomial and power-law stiffness,
+//!   quantisation, offset, gain error; every family may carry an offset),
 //!   each a parametric family with documented parameters, fitted to the points (z_k, ŵ_k) of a
 //!   nonparametric estimate by least squares with 95 % intervals, ranked by the Bayesian
 //!   information criterion, and named only when the best fit is within the noise;
@@ -29,7 +31,10 @@
 //! * [`report`]: the reports of a discovery (Markdown, JSON and the printed summary);
 //! * [`synthetic`]: test cases for the workflow, a random nominal model plus records of a
 //!   system with one hidden effect (a static effect at a location, none, or hysteresis),
-//!   deterministic in a seed.
+//!   deterministic in a seed;
+//! * [`physics`]: test cases from continuous-time physics (integrators in closed loop,
+//!   two-mass plants, delays, coloured noise, estimated nominals), and the closed-loop
+//!   positioning axis.
 //!
 //! ```
 //! use structid_discover::effects::{Effect, NamingSettings, name_effect};

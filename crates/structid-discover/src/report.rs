@@ -1,4 +1,4 @@
-//! The reports of a discovery: `report.md` ([`markdown`]), `report.json` ([`json`]) and the
+//! The reports of a discovery: `report.md` ([`markdown`]), `report.json` ([`json()`]) and the
 //! summary a run prints ([`summary`]), with the records they describe ([`Record`]).
 
 use std::fmt::Write as _;

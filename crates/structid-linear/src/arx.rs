@@ -138,7 +138,7 @@ impl ArxSettingsBuilder {
         self.0.max_condition = limit;
         self
     }
-    /// Integrators fixed at `z = 1` (at most [`MAX_INTEGRATORS`](crate::integrators::MAX_INTEGRATORS)).
+    /// Integrators fixed at `z = 1` (at most [`MAX_INTEGRATORS`]).
     ///
     /// ```
     /// use structid_linear::ArxSettings;

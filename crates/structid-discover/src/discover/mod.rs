@@ -10,11 +10,17 @@
 //!    (whiteness; ε against u, against u², and ε² against u², together at the 0.1 % level).
 //!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
 //!    effect detected" with the statistics behind it, and the workflow stops there.
+//!    A nominal model with a pole on the unit circle (an integrator) is scored in windows
+//!    ([`structid_core::validation::windows`]) in this step and in every later one, and gets a
+//!    disturbance where its input acts, sized by maximum likelihood
+//!    ([`Nominal::with_input_noise`]); [`Discovery::scoring`] and [`Discovery::input_noise`]
+//!    say so. There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
+//!    a gap larger than the noise that no candidate block closes.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
 //!    output G·u and the named states where the residual energy concentrates, e.g. `|u| > 0.8`).
 //! 3. **Where in the structure does it act?** Each [`Location`] inserts one unknown static
-//!    block ([`crate::hypotheses`], [`structid_core::augment`]). Its map is identified by
+//!    block ([`crate::hypotheses`], [`structid_core::Site::insert`]). Its map is identified by
 //!    structid's `identify` with a quadratic dispersion (a Gaussian-like Fourier kernel of width
 //!    σ = 0.1 × the range of z plus a cubic polynomial trend: finitely many features, so
 //!    O(L·m²)), β by maximum marginal likelihood (σ too, optionally), the initial state
@@ -39,7 +45,8 @@
 //!    error (Levenberg–Marquardt on the estimation record's simulation error with the
 //!    parametric map in the loop; 95 % intervals from s²·(JᵀJ)⁻¹) and simulated on the
 //!    validation record. The simplest that validates within
-//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂) is
+//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂ and
+//!    1.5× the nonparametric RMS) is
 //!    *named*, unless a richer one that also does is a fifth better. Otherwise the effect is an
 //!    "unnamed static effect" and the nonparametric map is kept as a table.
 //! 6. **How much better is the model with it?** The augmented model (named expression or

@@ -41,7 +41,7 @@ pub struct HypothesisResult {
     pub validation_rms: f64,
     /// The estimated map.
     pub curve: MapCurve,
-    /// Points (z_k, ŵ_k), at most [`DiscoverSettings::naming_points`], evenly spaced in time.
+    /// Points (z_k, ŵ_k), at most [`super::DiscoverSettings::naming_points`], evenly spaced in time.
     pub points: (Vec<f64>, Vec<f64>),
     /// Wall-clock seconds.
     pub seconds: f64,

@@ -7,7 +7,7 @@ use crate::effects::Effect;
 use crate::gap::GapSettings;
 use crate::hypotheses::Location;
 
-/// Settings of [`discover`]; build them with [`DiscoverSettings::builder`].
+/// Settings of [`discover`](super::discover); build them with [`DiscoverSettings::builder`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiscoverSettings {
     pub(super) locations: Option<Vec<Location>>,
