@@ -418,3 +418,36 @@ fn held_out_rows_give_the_same_fit_in_the_feature_and_exact_solvers() {
     );
     assert!((a.curve[0].value - b.curve[0].value).abs() < 1e-6 * a.curve[0].value);
 }
+
+#[test]
+fn a_beta_on_a_search_bound_is_flagged() {
+    use structid_core::hyperparameters::Bound;
+    let (beta0, sigma, s2) = (1e-4, 0.1, 0.01);
+    let ml = |lo: f64, hi: f64| {
+        SelectionSettings::builder()
+            .criterion(Criterion::MarginalLikelihood)
+            .beta_bounds(lo, hi)
+            .build()
+            .unwrap()
+    };
+    let settings = IdentifySettings::default();
+    let exp = gp_experiment(600, beta0, sigma, s2, 21);
+    // Interior: the likelihood's maximiser near β₀ = 1e-4 lies well inside [1e-10, 1e4].
+    let sel = select(&exp.model, &exp.data, None, &settings, &ml(1e-10, 1e4)).unwrap();
+    assert!(sel.beta > 1e-6 && sel.beta < 1e-2, "β = {}", sel.beta);
+    assert_eq!(sel.beta_at_bound, None, "β = {}", sel.beta);
+    assert_eq!(sel.sigma_at_bound, None);
+    // The same data with the search confined above the maximiser: it ends on the floor.
+    let sel = select(&exp.model, &exp.data, None, &settings, &ml(1e-2, 1e2)).unwrap();
+    assert_eq!(sel.beta_at_bound, Some(Bound::Lower), "β = {}", sel.beta);
+    assert!((sel.beta - 1e-2).abs() < 1e-12);
+    // Pure noise (the map is zero): the likelihood grows without bound with β (the prior
+    // variance of the map shrinks to zero), so β runs to the top of its interval.
+    let base = gp_experiment(600, beta0, sigma, s2, 22);
+    let z = base.data.u().clone();
+    let noise = gaussian_noise(600, 1, s2.sqrt(), 23);
+    let zero = |_: &[f64]| 0.0;
+    let exp = Experiment::simulate(base.model, &[&zero], z, noise).unwrap();
+    let sel = select(&exp.model, &exp.data, None, &settings, &ml(1e-10, 1e4)).unwrap();
+    assert_eq!(sel.beta_at_bound, Some(Bound::Upper), "β = {}", sel.beta);
+}

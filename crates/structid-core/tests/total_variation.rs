@@ -487,6 +487,16 @@ fn iteration_limits_give_not_converged_errors() {
         matches!(err, Error::NotConverged { ref solver, iterations: 3, .. } if solver == "admm"),
         "{err}"
     );
+    // The reason is in words: which residual, against which tolerance, and where ρ stood.
+    let text = err.to_string();
+    for part in [
+        "limit of 3 iterations",
+        "primal residual",
+        "its tolerance",
+        "ρ = ",
+    ] {
+        assert!(text.contains(part), "`{part}` missing from: {text}");
+    }
 }
 
 #[test]
@@ -769,5 +779,129 @@ fn admm_converges_on_the_spray_example_where_two_blocks_share_z() {
             level(&a),
             level(&c)
         );
+    }
+}
+
+/// A Hammerstein system w = N(u) (a Coulomb + viscous map) through a nearly integrating plant
+/// G(q) = a·b·(q + 1)/((q − 0.999)(q − 0.95)) with a = `gain`, y = G·w + e, with y and e
+/// scaled by `s` (the map by s/a):
+/// G/H vanishes at ω = π and its gain reaches ~10⁴·a² at ω = 0, the shape that gave ADMM a
+/// penalty ρ ≈ 10⁻⁶ and 20 000 iterations before its curvature was floored.
+fn slow_plant(len: usize, gain: f64, s: f64, seed: u64) -> Experiment {
+    let (p1, p2, b) = (0.999, 0.95, 0.005 * gain);
+    let lft = Lft::new(LftMatrices {
+        a: DMatrix::from_row_slice(2, 2, &[p1 + p2, -p1 * p2, 1.0, 0.0]),
+        bu: DMatrix::zeros(2, 1),
+        be: DMatrix::zeros(2, 1),
+        bw: DMatrix::from_row_slice(2, 1, &[1.0, 0.0]),
+        cy: DMatrix::from_row_slice(1, 2, &[b, b]),
+        dyu: DMatrix::zeros(1, 1),
+        dye: DMatrix::from_element(1, 1, 1.0),
+        dyw: DMatrix::zeros(1, 1),
+        cz: DMatrix::zeros(1, 2),
+        dzu: DMatrix::from_element(1, 1, 1.0),
+        dze: DMatrix::zeros(1, 1),
+        dzw: DMatrix::zeros(1, 1),
+    })
+    .unwrap();
+    let model = Model::new(lft, vec![NonlinearBlock::new("N", vec![0], 0, tv())]).unwrap();
+    let mut rng = structid_lti::testing::SplitMix64::new(seed);
+    let mut normal = || {
+        let (u1, u2) = (rng.uniform().max(1e-300), rng.uniform());
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    };
+    let mut x = 0.0;
+    let u: Vec<f64> = (0..len)
+        .map(|_| {
+            x = 0.9 * x + 0.4 * normal();
+            x
+        })
+        .collect();
+    let e: Vec<f64> = (0..len).map(|_| 0.01 * s * normal()).collect();
+    // The map scales with s/gain, so that y (and the noise's share of it) scales with s only.
+    let map = move |z: &[f64]| s / gain * (0.3 * z[0].signum() + 0.05 * z[0]);
+    Experiment::simulate(
+        model,
+        &[&map],
+        Signal::new(1, u).unwrap(),
+        Signal::new(1, e).unwrap(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn admm_agrees_with_clarabel_on_a_nearly_integrating_plant() {
+    let exp = slow_plant(500, 1.0, 1.0, 5);
+    for beta in [1e-2, 1e-1] {
+        let mk = |solver| {
+            IdentifySettings::builder()
+                .beta(beta)
+                .solver(solver)
+                .admm(
+                    AdmmSettings::builder()
+                        .tolerance(1e-7)
+                        .max_iterations(200_000)
+                        .build()
+                        .unwrap(),
+                )
+                .build()
+                .unwrap()
+        };
+        let a = identify(&exp.model, &exp.data, &mk(SolverChoice::Admm)).unwrap();
+        let c = identify(&exp.model, &exp.data, &mk(SolverChoice::Clarabel)).unwrap();
+        // Slow here (~10⁴ iterations at L = 500: the curvature spans 10⁹ and ρ₀ sits well above
+        // the best ρ ≈ 10⁻³, which balancing does not detect), but it converges to the optimum.
+        eprintln!("β = {beta}: {} iterations", a.diagnostics.iterations);
+        assert_eq!(
+            a.diagnostics.status,
+            SolveStatus::Solved,
+            "{:?}",
+            a.diagnostics.status_detail
+        );
+        // J is convex: an ADMM point within its tolerance has (nearly) Clarabel's cost.
+        let dj = (a.cost.total - c.cost.total) / c.cost.total;
+        assert!(
+            dj.abs() < 1e-4,
+            "β = {beta}: relative J difference {dj:.3e}"
+        );
+        let w_rel = rel_diff(&centred(&a.blocks[0].w_hat), &centred(&c.blocks[0].w_hat));
+        assert!(
+            w_rel < 2e-2,
+            "β = {beta}: ŵ relative difference {w_rel:.3e}"
+        );
+    }
+}
+
+#[test]
+fn admm_iterations_do_not_depend_on_the_units() {
+    // Scaling the data by s (u's map, y and e) scales the optimal ŵ by s when β scales by s
+    // (J = (1/L)Σ|e|² + β·TV(w) becomes s²·J); scaling the plant's gain by a scales ŵ by 1/a
+    // when β scales by a. A unit-free solver takes the same path in every case.
+    let beta = 1e-3;
+    let run = |gain: f64, s: f64| {
+        let exp = slow_plant(3000, gain, s, 9);
+        let settings = IdentifySettings::builder()
+            .beta(beta * s * gain)
+            .solver(SolverChoice::Admm)
+            .admm(AdmmSettings::builder().tolerance(1e-6).build().unwrap())
+            .build()
+            .unwrap();
+        let id = identify(&exp.model, &exp.data, &settings).unwrap();
+        assert_eq!(id.diagnostics.status, SolveStatus::Solved);
+        let w: Vec<f64> = centred(&id.blocks[0].w_hat)
+            .iter()
+            .map(|v| v * gain / s)
+            .collect();
+        (id.diagnostics.iterations, w)
+    };
+    let (n0, w0) = run(1.0, 1.0);
+    for (gain, s) in [(1.0, 1e-3), (1.0, 1e3), (1e-3, 1.0), (1e3, 1.0)] {
+        let (n, w) = run(gain, s);
+        assert!(
+            (n as f64) <= 1.2 * n0 as f64 + 5.0 && (n as f64) >= n0 as f64 / 1.2 - 5.0,
+            "gain {gain}, scale {s}: {n} iterations against {n0}"
+        );
+        let d = rel_diff(&w, &w0);
+        assert!(d < 1e-3, "gain {gain}, scale {s}: ŵ differs by {d:.3e}");
     }
 }

@@ -74,7 +74,7 @@ mod search;
 mod settings;
 mod validation;
 
-pub use report::{BetaSelection, Selection, Trial};
+pub use report::{BetaSelection, Bound, Selection, Trial};
 pub use search::{select, select_beta};
 pub use settings::{Criterion, SelectionSettings, SelectionSettingsBuilder};
 

@@ -13,10 +13,14 @@ use crate::solver::choice::{SolverReason, feature_path};
 use super::cross_validation::FoldScore;
 use super::dense::DenseScore;
 use super::features::{FeatureRef, FeatureScore};
-use super::report::{BetaSelection, Selection, Trial};
+use super::report::{BetaSelection, Bound, Selection, Trial};
 use super::score::BetaScore;
 use super::settings::{Criterion, SelectionSettings};
 use super::validation::ValidationScore;
+
+/// The best β for given widths: β, the criterion there, s², how it was evaluated, and the bound
+/// it lies on.
+type BetaChoice = (f64, f64, Option<f64>, String, Option<Bound>);
 
 /// Chooses β (and, if asked, σ) for `model` on `data` by `selection`'s criterion, then
 /// identifies with the chosen values; see the [module documentation](super). `settings` gives
@@ -90,9 +94,7 @@ pub fn select(
     let method: String;
     let mut features: Option<FeatureScore> = None;
     // The best β (and its value and s²) for the given widths.
-    let mut best_beta = |widths: &[Option<f64>],
-                         curve: &mut Vec<Trial>|
-     -> Result<(f64, f64, Option<f64>, String)> {
+    let mut best_beta = |widths: &[Option<f64>], curve: &mut Vec<Trial>| -> Result<BetaChoice> {
         let m = model_at(widths)?;
         let problem = problem_of(&m)?;
         let sigma = if selection.tune_sigma {
@@ -147,6 +149,7 @@ pub fn select(
         };
         // s² of every trial, so the choice needs no further evaluation (a CV trial is K fits)
         let mut noise = Vec::new();
+        let first_trial = curve.len();
         let mut eval = |lg: f64| -> Result<f64> {
             let beta = 10f64.powf(lg);
             let (value, s2) = score.score(beta)?;
@@ -154,41 +157,45 @@ pub fn select(
             noise.push((lg, s2));
             Ok(value)
         };
-        let (lg, value) = if selection.tune_beta {
+        let (lg, value, at_bound) = if selection.tune_beta {
             let (lo, hi) = selection.beta_bounds;
-            minimise_log10(
+            let bounds = (lo.log10(), hi.log10());
+            let (lg, value) = minimise_log10(
                 &mut eval,
                 selection.beta_start.log10(),
-                (lo.log10(), hi.log10()),
+                bounds,
                 selection.tolerance,
-            )?
+            )?;
+            let at = Bound::of(lg, bounds).or_else(|| plateau(&curve[first_trial..], lg, value));
+            (lg, value, at)
         } else {
             let lg = settings.beta().log10();
-            (lg, eval(lg)?)
+            (lg, eval(lg)?, None)
         };
         let beta = 10f64.powf(lg);
         let s2 = noise.iter().find(|t| t.0 == lg).and_then(|t| t.1);
-        Ok((beta, value, s2, score.method()))
+        Ok((beta, value, s2, score.method(), at_bound))
     };
 
-    let (widths, beta, noise_variance) = if selection.tune_sigma {
+    type Best = (f64, f64, Option<f64>, f64, String, Option<Bound>);
+    let (widths, beta, noise_variance, beta_at_bound, sigma_at_bound) = if selection.tune_sigma {
         let d = selection.sigma_decades;
-        let mut best: Option<(f64, f64, Option<f64>, f64, String)> = None;
+        let mut best: Option<Best> = None;
         let mut outer = |lf: f64| -> Result<f64> {
-            let (beta, value, s2, how) = best_beta(&widths_at(lf), &mut curve)?;
+            let (beta, value, s2, how, at) = best_beta(&widths_at(lf), &mut curve)?;
             if best.as_ref().is_none_or(|b| value < b.1) {
-                best = Some((beta, value, s2, lf, how));
+                best = Some((beta, value, s2, lf, how, at));
             }
             Ok(value)
         };
         minimise_log10(&mut outer, 0.0, (-d, d), selection.tolerance.max(0.01))?;
-        let (beta, _, s2, lf, how) = best.expect("at least one trial");
+        let (beta, _, s2, lf, how, at) = best.expect("at least one trial");
         method = how;
-        (widths_at(lf), beta, s2)
+        (widths_at(lf), beta, s2, at, Bound::of(lf, (-d, d)))
     } else {
-        let (beta, _, s2, how) = best_beta(&widths0, &mut curve)?;
+        let (beta, _, s2, how, at) = best_beta(&widths0, &mut curve)?;
         method = how;
-        (widths0.clone(), beta, s2)
+        (widths0.clone(), beta, s2, at, None)
     };
     let chosen = model_at(&widths)?;
     let problem = problem_of(&chosen)?;
@@ -204,6 +211,8 @@ pub fn select(
     }
     Ok(Selection {
         beta,
+        beta_at_bound,
+        sigma_at_bound,
         sigma: if selection.tune_sigma {
             first_width(&widths)
         } else {
@@ -218,6 +227,26 @@ pub fn select(
         identification,
         model: chosen,
     })
+}
+
+/// The end of the search that a flat criterion runs to: when the largest (smallest) β tried
+/// scores the same as the best (relative 10⁻⁶) and is not the best itself, the criterion is
+/// flat from the choice to that end (e.g. the map is already constant there), the search
+/// stopped on the plateau, and the choice does not determine β any more than the bound would.
+fn plateau(trials: &[Trial], best_lg: f64, best: f64) -> Option<Bound> {
+    let same = |v: f64| (v - best).abs() <= 1e-6 * best.abs().max(f64::MIN_POSITIVE);
+    let by_beta = |a: &&Trial, b: &&Trial| a.beta.total_cmp(&b.beta);
+    let top = trials.iter().max_by(by_beta)?;
+    let bottom = trials.iter().min_by(by_beta)?;
+    let best_beta = 10f64.powf(best_lg);
+    let is_best = |t: &Trial| (t.beta / best_beta - 1.0).abs() < 1e-12;
+    if !is_best(top) && same(top.value) {
+        Some(Bound::Upper)
+    } else if !is_best(bottom) && same(bottom.value) {
+        Some(Bound::Lower)
+    } else {
+        None
+    }
 }
 
 /// Minimises `f` over x = log₁₀(·) in `bounds`: walks downhill by decades from `start` until

@@ -25,27 +25,39 @@
 //!   O(G) dynamic programme [`crate::prox::tv1d`]; on a k-NN graph (p > 1) a warm-started dual
 //!   FISTA ([`crate::prox::GraphTv`]) run to a duality gap below a tenth of the outer tolerance.
 //!
-//! Stopping follows Boyd et al. (2011, §3.3): primal residual ‖w − d‖ ≤ √N·ε_abs + ε_rel·max(‖w‖, ‖d‖)
-//! and dual residual ρ·‖d − d_prev‖ ≤ √N·ε_abs + ε_rel·ρ·‖u‖, with ε_rel = tolerance and ε_abs =
-//! tolerance × RMS(r), so the tolerance is unit-free.
+//! Stopping follows Boyd et al. (2011, §3.3): primal residual ‖w − d‖ ≤ √N·ε_pri + ε_rel·max(‖w‖, ‖d‖)
+//! and dual residual ρ·‖d − d_prev‖ ≤ √N·ε_dual + ε_rel·ρ·‖u‖, with ε_rel = tolerance and the
+//! absolute parts in each residual's own units, so that the test is unit-free: ε_pri =
+//! tolerance × RMS(r)/g in w's units and ε_dual = tolerance × (2/L)·g·RMS(r) in the units of a
+//! gradient of (1/L)·Σ|e_k|², with g = (L·q_max/2)^½ the largest gain |G/H| (q_max below). One
+//! absolute ε for both, in w's units from a gain-ratio ρ, let ADMM stop 30 % (at ρ = 10·ρ*:
+//! 100×) above the optimal J on a nearly integrating plant.
 //!
-//! The penalty is ρ = √(λ_min·λ_max) of the w-step's curvature, read off the frequency
+//! The initial penalty is ρ₀ = √(λ_lo·λ_max) of the w-step's curvature, read off the frequency
 //! responses: per frequency the curvature is (2/L)·eig(Φ), Φ = Gᴴ(H·Hᴴ)⁻¹G, with G the map
-//! paths and H the noise path. This is Giselsson and Boyd's optimal ρ for a strongly convex
-//! quadratic plus any convex term (IEEE TAC 2017), and with it the iteration count does not grow
-//! with L (14 iterations from L = 2000 to 30 000 on the benchmark problem, against 240–2300 with
-//! residual balancing from a gain-ratio ρ). When Φ is singular (λ_min = 0 up to rounding, e.g.
-//! at every frequency when two blocks drive one output) the quadratic is not strongly convex,
-//! its null space is left to the total variation, and ρ is the geometric mean of the range of
-//! the blocks' own curvatures Φ_ii instead, again without balancing (the spray example:
-//! 60 iterations at L = 2000 and 37 at L = 8000; balancing from the gain ratio took ρ 64-fold
-//! higher and 1180 iterations at L = 2000). When H·Hᴴ is singular or a block's Φ_ii vanishes at
-//! some frequency, the gain ratio is used and ρ is balanced (×2 or ÷2 when one residual exceeds
-//! ten times the other) during the first iterations. The returned ŵ is d + c (tied samples
-//! share their value exactly) and ê is the least-squares noise that explains r − T_yw·ŵ; the
-//! diagnostics report the
+//! paths and H the noise path, and q_max = (2/L)·max λ_max. With λ_lo = λ_min this is
+//! Giselsson and Boyd's optimal ρ for a strongly convex quadratic plus any convex term (IEEE
+//! TAC 2017), with which the iteration count does not grow with L (14 iterations from
+//! L = 2000 to 30 000 on the benchmark problem). λ_lo is floored at 10⁻⁴·λ_max: a sampled
+//! plant of relative degree two has a zero near z = −1 where Φ nearly vanishes, and a pole
+//! near 1 makes λ_max large, so that √(λ_min·λ_max) was ~10⁻⁶ on rate-feedback hypotheses of
+//! a nearly integrating plant, and ADMM ran into its 20 000-iteration limit (the frequencies
+//! where Φ is tiny are set by the total variation, not the data). Frequencies where zI − A or
+//! H·Hᴴ is singular (an exact integrator at ω = 0) are skipped. When Φ is singular at every
+//! frequency (two blocks driving one output) its null space is left to the total variation,
+//! and ρ₀ comes from the range of the blocks' own curvatures Φ_ii instead (the spray example:
+//! 60 iterations at L = 2000). Only when no frequency can be used is the H₂-gain ratio taken.
+//!
+//! ρ is then balanced against the residuals (each relative to its tolerance; ρ·√(r_pri/r_dual)
+//! every 10 iterations when that moves ρ more than 5-fold, during the first 2000 iterations),
+//! within [10⁻⁶, 10]·q_max: the best ρ grows with β (where the total variation makes the map
+//! flat it is above q_max, at small β orders below ρ₀), and the bounds, relative to the
+//! problem's own curvature, keep ρ from running away in either direction. The returned ŵ is
+//! d + c (tied samples share their value exactly) and ê is the least-squares noise that
+//! explains r − T_yw·ŵ; the diagnostics report the
 //! iterations and both residuals. At the iteration limit the last iterate is returned with
-//! [`crate::SolveStatus::MaxIterations`], the residuals in a warning: never a silent result.
+//! [`crate::SolveStatus::MaxIterations`] and a status detail that says in words which residual
+//! was above its tolerance, by how much, and where ρ stood: never a silent result.
 
 use std::time::Instant;
 
@@ -69,6 +81,11 @@ pub use crate::solver::settings::{AdmmSettings, AdmmSettingsBuilder};
 /// Iterations during which ρ may be rebalanced (after that it is frozen so that the standard
 /// convergence theory applies).
 const ADAPT_ITERATIONS: usize = 2000;
+/// Balancing looks at the residuals every this many iterations (each change of ρ costs a new
+/// smoother, about n_b + 2 iterations' worth).
+const ADAPT_EVERY: usize = 10;
+/// Balancing changes ρ only when the balanced value differs by more than this factor.
+const ADAPT_FACTOR: f64 = 5.0;
 
 /// The proximal step of one block.
 enum Prox {
@@ -117,14 +134,21 @@ pub(crate) fn solve_with(
         .sqrt()
         .max(1e-300);
     let eps_rel = opts.tolerance();
-    let (rho0, optimal) = default_rho(&real, &w_cols, len);
-    // The residuals are in the units of w: r scaled by the typical gain |G/H| = (L·ρ₀/2)^½.
-    let gain = (len as f64 * rho0 / 2.0).sqrt().max(1e-300);
-    let eps_abs = eps_rel * r_rms / gain;
+    let scale = default_rho(&real, &w_cols, len);
+    let rho0 = scale.rho0;
+    // Tolerances in the units of each residual, so that the test reads the same in any units
+    // of r and w: the primal residual w − d is in w's units, r/g with g = (L·q_max/2)^½ the
+    // largest gain |G/H|, so that a w within it moves the fit by at most tolerance × RMS(r);
+    // the dual residual ρ·(d − d_prev) is a gradient of (1/L)·Σ|e_k|², in units of
+    // (2/L)·g·r.
+    let g_max = (len as f64 * scale.q_max / 2.0).sqrt().max(1e-300);
+    let eps_abs_pri = eps_rel * r_rms / g_max;
+    let eps_abs_dual = eps_rel * r_rms * g_max * 2.0 / len.max(1) as f64;
+    let (rho_lo, rho_hi) = scale.bounds();
     let t_prepared = Instant::now();
 
     let mut rho = opts.rho().unwrap_or(rho0);
-    let adaptive = opts.adaptive() || (opts.rho().is_none() && !optimal);
+    let adaptive = opts.adaptive();
     let variances = |rho: f64| -> Vec<f64> {
         let mut v = vec![len as f64 / 2.0; nin];
         for &c in &w_cols {
@@ -167,6 +191,7 @@ pub(crate) fn solve_with(
     let mut prox_unconverged = 0usize;
     let mut rho_changes = 0usize;
     let (mut iterations, mut r_pri, mut r_dual) = (0, f64::INFINITY, f64::INFINITY);
+    let (mut eps_pri, mut eps_dual) = (f64::NAN, f64::NAN);
     let mut converged = false;
     let mut offsets = vec![0.0; nb];
     while iterations < opts.max_iterations() {
@@ -238,24 +263,21 @@ pub(crate) fn solve_with(
         }
         r_pri = pri2.sqrt();
         r_dual = rho * dual2.sqrt();
-        let eps_pri = sqrt_n * eps_abs + eps_rel * w_norm2.sqrt().max(d_norm2.sqrt());
-        let eps_dual = sqrt_n * eps_abs + eps_rel * rho * u_norm2.sqrt();
+        eps_pri = sqrt_n * eps_abs_pri + eps_rel * w_norm2.sqrt().max(d_norm2.sqrt());
+        eps_dual = sqrt_n * eps_abs_dual + eps_rel * rho * u_norm2.sqrt();
         if r_pri <= eps_pri && r_dual <= eps_dual {
             converged = true;
             break;
         }
-        if adaptive && iterations <= ADAPT_ITERATIONS {
-            // Residual balancing on residuals relative to their tolerances.
-            let (rp, rd) = (r_pri / eps_pri, r_dual / eps_dual);
-            let factor = if rp > 10.0 * rd {
-                2.0
-            } else if rd > 10.0 * rp {
-                0.5
-            } else {
-                1.0
-            };
-            if factor != 1.0 {
-                rho *= factor;
+        if adaptive && iterations <= ADAPT_ITERATIONS && iterations % ADAPT_EVERY == 0 {
+            // Residual balancing on the residuals relative to their tolerances (OSQP's rule):
+            // ρ·√(r_pri/r_dual), applied when it moves ρ by more than ADAPT_FACTOR, within
+            // the bounds.
+            let ratio = ((r_pri / eps_pri) / (r_dual / eps_dual).max(1e-300)).sqrt();
+            let target = (rho * ratio).clamp(rho_lo, rho_hi);
+            if target.is_finite() && (target > ADAPT_FACTOR * rho || target * ADAPT_FACTOR < rho) {
+                let factor = target / rho;
+                rho = target;
                 u.iter_mut().flatten().for_each(|v| *v /= factor);
                 wstep = WStep::new(&real.ss, &variances(rho), &w_cols, len, initial)?;
                 rho_changes += 1;
@@ -265,10 +287,19 @@ pub(crate) fn solve_with(
     // The iterate is kept when the limit is reached: ê is recomputed for it below, so the
     // estimate is feasible and its cost is the cost of a valid (if not optimal) point.
     let unconverged = (!converged).then(|| {
-        format!(
-            "primal residual {r_pri:.3e}, dual residual {r_dual:.3e} (ρ = {rho:.3e}); raise max_iterations, \
-             loosen the tolerance ({eps_rel:.1e}), or use the clarabel solver for L up to a few thousand"
-        )
+        stop_reason(&StopState {
+            max_iterations: opts.max_iterations(),
+            r_pri,
+            eps_pri,
+            r_dual,
+            eps_dual,
+            rho,
+            rho0,
+            bounds: adaptive.then_some((rho_lo, rho_hi)),
+            rho_changes,
+            tolerance: eps_rel,
+            from_frequency: scale.from_frequency,
+        })
     });
     let t_factored = Instant::now();
 
@@ -310,11 +341,6 @@ pub(crate) fn solve_with(
             status,
         ));
     }
-    if rho_changes > 0 {
-        warnings.push(format!(
-            "ρ was rebalanced {rho_changes} times (final ρ = {rho:.3e})"
-        ));
-    }
     if prox_unconverged > 0 {
         warnings.push(format!(
             "{prox_unconverged} graph proximal steps stopped at their iteration limit before their duality-gap \
@@ -350,6 +376,67 @@ pub(crate) fn solve_with(
             ..Diagnostics::default()
         },
     })
+}
+
+/// Where ADMM stood when it reached its iteration limit.
+struct StopState {
+    max_iterations: usize,
+    r_pri: f64,
+    eps_pri: f64,
+    r_dual: f64,
+    eps_dual: f64,
+    rho: f64,
+    rho0: f64,
+    /// The bounds of ρ when it was balanced.
+    bounds: Option<(f64, f64)>,
+    rho_changes: usize,
+    tolerance: f64,
+    /// Whether ρ₀ came from the frequency responses.
+    from_frequency: bool,
+}
+
+/// Why ADMM did not converge, in words: which residual was above its tolerance and by how
+/// much, where ρ stood, and what to try.
+fn stop_reason(s: &StopState) -> String {
+    let over = |r: f64, eps: f64| r / eps.max(f64::MIN_POSITIVE);
+    let (p, d) = (over(s.r_pri, s.eps_pri), over(s.r_dual, s.eps_dual));
+    let which = match (p > 1.0, d > 1.0) {
+        (true, true) => "both residuals were above their tolerances",
+        (true, false) => {
+            "the primal residual ‖w − d‖ was above its tolerance (w and its copy d still disagree)"
+        }
+        (false, true) => {
+            "the dual residual ρ·‖Δd‖ was above its tolerance (the estimate was still moving)"
+        }
+        (false, false) => "the residuals were at their tolerances",
+    };
+    let rho = match s.bounds {
+        Some((lo, hi)) => {
+            let at = if s.rho <= lo * (1.0 + 1e-12) {
+                ", at its lower bound"
+            } else if s.rho >= hi * (1.0 - 1e-12) {
+                ", at its upper bound"
+            } else {
+                ""
+            };
+            format!(
+                "ρ = {:.3e}{at} (from ρ₀ = {:.3e}, rebalanced {} times within [{lo:.3e}, {hi:.3e}])",
+                s.rho, s.rho0, s.rho_changes
+            )
+        }
+        None => format!("ρ = {:.3e} fixed (balancing off)", s.rho),
+    };
+    let origin = if s.from_frequency {
+        ""
+    } else {
+        " (ρ₀ from the H₂-gain ratio: no frequency response of the w-step was usable)"
+    };
+    format!(
+        "it stopped at its limit of {} iterations, where {which}: primal residual {:.3e} ({p:.1}× its tolerance \
+         {:.3e}), dual residual {:.3e} ({d:.1}× its tolerance {:.3e}); {rho}{origin}; raise max_iterations, \
+         loosen the tolerance ({:.1e}), or use the clarabel solver for L up to a few thousand",
+        s.max_iterations, s.r_pri, s.eps_pri, s.r_dual, s.eps_dual, s.tolerance
+    )
 }
 
 /// The w-step with the blocks' constant offsets solved exactly.
@@ -457,13 +544,50 @@ impl WStep {
     }
 }
 
-/// ρ₀ = √(λ_min·λ_max) of the w-step's curvature (Giselsson & Boyd's optimal penalty for a
+/// The penalty's scale read off the w-step's curvature: the initial ρ₀, the bounds within
+/// which residual balancing may move it, and the gain used to put the tolerances in units.
+#[derive(Clone, Copy, Debug)]
+struct RhoScale {
+    /// The initial penalty.
+    rho0: f64,
+    /// The largest curvature q_max = (2/L)·max_ω λ_max(Φ(ω)) (from the gain ratio when the
+    /// frequency responses could not be used).
+    q_max: f64,
+    /// Whether ρ₀ came from the frequency responses (else from the H₂-gain ratio).
+    from_frequency: bool,
+}
+
+impl RhoScale {
+    /// The interval [q_max·10⁻⁶, q_max·10] that balancing keeps ρ in: relative to the
+    /// problem's own curvature, so the same in any units of w and r. Above 10·q_max the w-step
+    /// is pinned to d and the iteration only crawls; 10⁻⁶·q_max is below any curvature that
+    /// the data resolve in 32-bit-like precision, where the TV prox alone sets the iterate.
+    fn bounds(&self) -> (f64, f64) {
+        (self.q_max * RHO_RANGE_BELOW, self.q_max * RHO_RANGE_ABOVE)
+    }
+}
+
+/// Lower bound of ρ relative to q_max (see [`RhoScale::bounds`]).
+const RHO_RANGE_BELOW: f64 = 1e-6;
+/// Upper bound of ρ relative to q_max (see [`RhoScale::bounds`]).
+const RHO_RANGE_ABOVE: f64 = 10.0;
+/// The smallest curvature ratio λ_lo/λ_max that ρ₀ uses (see [`default_rho`]).
+const CURVATURE_FLOOR: f64 = 1e-4;
+
+/// ρ₀ ≈ √(λ_min·λ_max) of the w-step's curvature (Giselsson & Boyd's optimal penalty for a
 /// strongly convex quadratic): per frequency the curvature is (2/L)·eig(Φ), Φ = Gᴴ(H·Hᴴ)⁻¹G with
 /// G the map paths and H the noise path. When Φ is singular (λ_min at rounding level, relative
-/// 1e-10), from the range of its diagonal Φ_ii (each block's own curvature) instead. Falls back
-/// to the H₂-gain ratio (second value `false`: ρ is then balanced) when H·Hᴴ is singular or a
-/// block's Φ_ii vanishes.
-fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) {
+/// 1e-10), from the range of its diagonal Φ_ii (each block's own curvature) instead.
+///
+/// λ_min is floored at [`CURVATURE_FLOOR`]·λ_max: a sampled plant of relative degree two has
+/// a zero near z = −1, where Φ nearly vanishes, and a pole near 1 (an integrator) makes λ_max
+/// large, so √(λ_min·λ_max) would be orders of magnitude below any curvature that matters
+/// (the frequencies where Φ is tiny are the ones the total variation sets, not the data). It
+/// was this ρ ≈ 10⁻⁶ that ran ADMM into its iteration limit on rate-feedback hypotheses.
+/// Frequencies at which zI − A or H·Hᴴ is singular (a pole or a noise zero on the unit
+/// circle, e.g. an exact integrator at ω = 0) are skipped. Falls back to the H₂-gain ratio
+/// (`from_frequency` false) when no frequency can be used or every Φ_ii vanishes.
+fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> RhoScale {
     use nalgebra::{Complex, DMatrix as M};
     let ss = &real.ss;
     let (n, ne, ny) = (ss.order(), real.noise_inputs, ss.outputs());
@@ -471,9 +595,11 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
     let (a, b, c, d) = (to_c(ss.a()), to_c(ss.b()), to_c(ss.c()), to_c(ss.d()));
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     let (mut diag_lo, mut diag_hi) = (f64::INFINITY, 0.0f64);
-    let mut ok = ne > 0;
+    let mut used = 0usize;
+    // Frequencies at which Φ is non-singular (λ_min above rounding relative to λ_max there).
+    let mut regular = 0usize;
     for i in 0..=256 {
-        if !ok {
+        if ne == 0 {
             break;
         }
         let om = std::f64::consts::PI * i as f64 / 256.0;
@@ -482,10 +608,7 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
             let zi_a = M::<Complex<f64>>::identity(n, n) * z - &a;
             match zi_a.lu().solve(&b) {
                 Some(x) => &d + &c * x,
-                None => {
-                    ok = false;
-                    break;
-                }
+                None => continue,
             }
         } else {
             d.clone()
@@ -494,13 +617,17 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
         let g = M::from_fn(ny, w_cols.len(), |r, j| resp[(r, w_cols[j])]);
         let hh = &h * h.adjoint();
         let Some(hh_inv) = hh.try_inverse() else {
-            ok = false;
-            break;
+            continue;
         };
         let phi = g.adjoint() * hh_inv * &g;
         // Φ is Hermitian: its eigenvalues are real (those of Re Φ alone would lie strictly inside).
         let herm = (&phi + phi.adjoint()) * Complex::new(0.5, 0.0);
         let eig = herm.symmetric_eigenvalues();
+        if !(eig.min().is_finite() && eig.max().is_finite()) {
+            continue;
+        }
+        used += 1;
+        regular += usize::from(eig.min() > 1e-10 * eig.max());
         lo = lo.min(eig.min());
         hi = hi.max(eig.max());
         for j in 0..w_cols.len() {
@@ -509,19 +636,32 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
         }
     }
     let scale = 2.0 / len.max(1) as f64;
-    if ok && hi.is_finite() && hi > 0.0 {
-        // Eigenvalues at rounding level are zeros: Φ is singular (more blocks than the outputs
-        // can tell apart, e.g. two blocks reading the same z into one output).
+    if used > 0 && hi.is_finite() && hi > 0.0 {
+        let q_max = scale * hi;
+        // Φ singular at every frequency (eigenvalues at rounding level are zeros) means more
+        // blocks than the outputs can tell apart, e.g. two blocks reading the same z into one
+        // output. Φ nearly zero at some frequencies only (a zero of G/H near the unit circle)
+        // is the floored case.
         let tiny = 1e-10 * hi;
-        if lo > tiny {
-            return (scale * (lo * hi).sqrt(), true);
+        if regular > 0 {
+            let lo = lo.max(CURVATURE_FLOOR * hi);
+            return RhoScale {
+                rho0: scale * (lo * hi).sqrt(),
+                q_max,
+                from_frequency: true,
+            };
         }
         // The curvature has a null space there, which the total variation alone resolves, so
         // √(λ_min·λ_max) would be 0. Each block on its own (the others fixed) sees the
-        // curvature Φ_ii: take the geometric mean of its range. Residual balancing is not used
-        // here either: it was measured to multiply the iterations by ~20 on the spray example.
-        if diag_lo > tiny && diag_hi.is_finite() {
-            return (scale * (diag_lo * diag_hi).sqrt(), true);
+        // curvature Φ_ii: take the geometric mean of its range (measured ~20 times fewer
+        // iterations than balancing from the gain ratio on the spray example).
+        if diag_hi > tiny && diag_hi.is_finite() {
+            let dlo = diag_lo.max(CURVATURE_FLOOR * diag_hi);
+            return RhoScale {
+                rho0: scale * (dlo * diag_hi).sqrt(),
+                q_max,
+                from_frequency: true,
+            };
         }
     }
     let markov = ss.markov_parameters(200.min(len.max(1)));
@@ -539,5 +679,11 @@ fn default_rho(real: &Realisation, w_cols: &[usize], len: usize) -> (f64, bool) 
     let gw = h2(w_cols) / w_cols.len().max(1) as f64;
     let ge = h2(&e_cols) / ne.max(1) as f64;
     let ratio = if ge > 0.0 && gw > 0.0 { gw / ge } else { 1.0 };
-    (scale * ratio, false)
+    // The gain ratio is a rough guess (truncated Markov parameters of a slow plant can be off
+    // by orders of magnitude): balancing gets the wider range [10⁻⁴, 10³]·ρ₀.
+    RhoScale {
+        rho0: scale * ratio,
+        q_max: scale * ratio * 100.0,
+        from_frequency: false,
+    }
 }

@@ -115,15 +115,15 @@ pub struct AdmmSettings {
 }
 
 impl Default for AdmmSettings {
-    /// Tolerance 1e-7, 20 000 iterations, ρ from the frequency responses without balancing
-    /// (see the module documentation), over-relaxation 1.6.
+    /// Tolerance 1e-7, 20 000 iterations, ρ₀ from the frequency responses with bounded
+    /// residual balancing (see the module documentation), over-relaxation 1.6.
     fn default() -> Self {
         Self {
             tolerance: 1e-7,
             max_iterations: 20_000,
             rho: None,
             relaxation: 1.6,
-            adaptive: false,
+            adaptive: true,
         }
     }
 }
@@ -149,9 +149,11 @@ impl AdmmSettings {
     pub fn relaxation(&self) -> f64 {
         self.relaxation
     }
-    /// Whether ρ is balanced against the residuals (off by default: the frequency-response ρ₀
-    /// is optimal for the quadratic part, and balancing was measured to multiply the iterations
-    /// by 20–150; it is switched on automatically when ρ₀ falls back to the gain heuristic).
+    /// Whether ρ is balanced against the residuals (on by default), within bounds relative to
+    /// the w-step's largest curvature: the frequency-response ρ₀ is optimal for the quadratic
+    /// part alone, but where the total variation dominates (large β, a flat map) the best ρ
+    /// is orders of magnitude above it, and at small β below. Off, ρ stays at its initial
+    /// value (given, or ρ₀).
     pub fn adaptive(&self) -> bool {
         self.adaptive
     }

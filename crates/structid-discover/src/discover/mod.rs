@@ -593,6 +593,7 @@ fn failure(location: Location, t: Instant, e: &Error) -> HypothesisResult {
         location,
         dispersion: String::new(),
         beta: f64::NAN,
+        beta_at_bound: None,
         sigma: None,
         noise_term: f64::NAN,
         dispersion_value: f64::NAN,

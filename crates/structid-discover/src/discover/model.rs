@@ -1,6 +1,7 @@
 //! What discovery reports per hypothesis and about the effect: map curves, hypothesis
 //! results, the classification and the augmented model.
 
+use structid_core::hyperparameters::Bound;
 use structid_core::{ExprMap, Interpolant, LookupTable, Model, Result};
 
 use crate::effects::EffectFit;
@@ -28,6 +29,10 @@ pub struct HypothesisResult {
     pub dispersion: String,
     /// β chosen.
     pub beta: f64,
+    /// The bound of its search interval that β was selected on, if any: a failed selection
+    /// (at the lower bound the map follows the noise, at the upper bound the data support no
+    /// map beyond the dispersion's null space), which the hypothesis should not be ranked on.
+    pub beta_at_bound: Option<Bound>,
     /// The kernel width used (tuned or fixed; `None` for total variation).
     pub sigma: Option<f64>,
     /// The cost terms at the estimate: μ = (1/L)·Σ|ê_k|² and D(z, ŵ).
