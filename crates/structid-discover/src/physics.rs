@@ -135,7 +135,9 @@ impl Plant {
         }
         let den = if self.integrators > 0 {
             let free = deflate(&den, self.integrators)
-                .or_else(|| deflate_loose(&den, self.integrators))
+                .or_else(|| {
+                    structid_linear::integrators::deflate_within(&den, self.integrators, 1e-6)
+                })
                 .expect("an integrating plant's discretisation has its roots at z = 1");
             convolve(&free, &integrator_polynomial(self.integrators))
         } else {
@@ -149,25 +151,6 @@ impl Plant {
             sample_time: Some(ts),
         }
     }
-}
-
-/// Deflation by `(1 − q⁻¹)ᴺ` dropping the (rounding-sized) remainder.
-fn deflate_loose(den: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut p = den.to_vec();
-    for _ in 0..n {
-        let mut r = Vec::with_capacity(p.len() - 1);
-        let mut acc = 0.0;
-        for v in &p[..p.len() - 1] {
-            acc += v;
-            r.push(acc);
-        }
-        let rem = acc + p[p.len() - 1];
-        if rem.abs() > 1e-6 * p.iter().map(|v| v.abs()).sum::<f64>() {
-            return None;
-        }
-        p = r;
-    }
-    Some(p)
 }
 
 /// `(A_d, b_d)` of the zero-order hold from the matrix exponential of the augmented matrix.

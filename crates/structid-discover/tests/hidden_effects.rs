@@ -148,6 +148,18 @@ fn hysteresis_is_reported_as_dynamic() {
             f.map(|f| f.direction.t_statistic).unwrap_or(0.0),
         );
         dynamic += usize::from(is_dynamic);
+        // A map written as a table (dynamic or unnamed) extrapolates as its hypothesis was
+        // scored, so the augmented model validates as well as the hypothesis it came from (up
+        // to the table's interpolation).
+        if let Some(f) = f
+            && !matches!(f.classification, Classification::Named(_))
+        {
+            let (after, nonparametric) = (f.augmented.validation_gap.rms, f.nonparametric_rms);
+            assert!(
+                after <= 1.05 * nonparametric,
+                "seed {seed}: the table validates at {after:.4e}, its hypothesis at {nonparametric:.4e}"
+            );
+        }
     }
     eprintln!("hysteresis: dynamic in {dynamic}/{cases}");
     assert!(dynamic as f64 >= 0.8 * cases as f64, "{dynamic}/{cases}");

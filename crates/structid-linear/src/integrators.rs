@@ -89,6 +89,19 @@ pub fn difference(x: &[f64], n: usize) -> Vec<f64> {
 /// assert!(deflate(&[1.0, -0.5], 1).is_none());
 /// ```
 pub fn deflate(den: &[f64], n: usize) -> Option<Vec<f64>> {
+    deflate_within(den, n, 1e-9)
+}
+
+/// [`deflate`] accepting a remainder F(1) up to `tolerance` times Σ|f_i| at each step (a
+/// denominator computed in floating point, e.g. a discretised plant, has its roots at 1 only
+/// to rounding).
+///
+/// ```
+/// use structid_linear::integrators::deflate_within;
+/// assert_eq!(deflate_within(&[1.0, -1.5, 0.5 + 1e-8], 1, 1e-6).map(|p| p.len()), Some(2));
+/// assert!(deflate_within(&[1.0, -1.5, 0.5 + 1e-8], 1, 1e-12).is_none());
+/// ```
+pub fn deflate_within(den: &[f64], n: usize, tolerance: f64) -> Option<Vec<f64>> {
     let mut p = den.to_vec();
     for _ in 0..n {
         if p.len() < 2 {
@@ -103,7 +116,7 @@ pub fn deflate(den: &[f64], n: usize) -> Option<Vec<f64>> {
             r.push(acc);
         }
         let rem = acc + p[p.len() - 1];
-        if rem.is_nan() || rem.abs() > 1e-9 * scale.max(f64::MIN_POSITIVE) {
+        if rem.is_nan() || rem.abs() > tolerance * scale.max(f64::MIN_POSITIVE) {
             return None;
         }
         p = r;

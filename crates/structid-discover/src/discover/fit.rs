@@ -263,6 +263,9 @@ pub(super) struct Fitted {
     pub(super) e_hat: Signal,
     /// `quadratic` or `total variation`.
     pub(super) estimator: &'static str,
+    /// Whether the map validated better held at its edge values outside the estimation range
+    /// than extrapolated as estimated (its validation RMS is the better of the two).
+    pub(super) hold_edges: bool,
 }
 
 /// The parts of a fit every estimator shares: simulation RMS on both records, the map on a
@@ -287,9 +290,12 @@ pub(super) fn finish_fit(
     // Outside the estimation range a map is an extrapolation (a kernel reverts to zero, a
     // trend runs away): a hypothesis is ranked by the better of its map as estimated and the
     // map held at its edge values there, so that the location, not the extrapolation, decides.
+    // The augmented model is then written with the extrapolation that won (`held`).
     let held = |z: &[f64]| block.map.eval(&[z[0].clamp(lo, hi)]);
-    let validation_rms = simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings)
-        .min(simulation_rms(&h.model, location, &held, val_h, settings));
+    let as_estimated = simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings);
+    let held_rms = simulation_rms(&h.model, location, &held, val_h, settings);
+    let hold_edges = held_rms < as_estimated;
+    let validation_rms = as_estimated.min(held_rms);
     let estimation_rms = simulation_rms(&h.model, location, block.map.as_ref(), est_h, settings);
     // A map whose simulation diverges on its own estimation record is not a candidate,
     // whatever it does on the validation record.
@@ -344,6 +350,7 @@ pub(super) fn finish_fit(
         w_hat,
         e_hat,
         estimator,
+        hold_edges,
     })
 }
 

@@ -366,8 +366,11 @@ pub(super) fn name_and_add(
     let augmented_map = match &classification {
         Classification::Named(fit) => AugmentedMap::Expression(fit.expression.clone()),
         _ => {
+            // The table extrapolates as the hypothesis was scored: held at the edges of the
+            // estimation range, or following the map as estimated over a range as wide again
+            // on each side (beyond which any table holds its last value).
             let (lo, hi) = minmax(&best.z);
-            let pad = 0.25 * (hi - lo);
+            let pad = if best.hold_edges { 0.0 } else { hi - lo };
             let n = settings.table_points;
             let z: Vec<f64> = (0..n)
                 .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
