@@ -141,6 +141,24 @@ pub fn count_integrators(den: &[f64]) -> usize {
     n
 }
 
+// The model's class lives here, beside the classes, so that `polynomial` need not know them.
+impl crate::PolynomialModel {
+    /// Stability class of the denominator: strictly stable, marginally stable (integrators at
+    /// `z = 1` or other poles on the unit circle) or unstable; displayed as "stable",
+    /// "marginally stable (1 integrator)", "UNSTABLE (spectral radius …)".
+    ///
+    /// ```
+    /// use structid_linear::{PolynomialModel, Stability};
+    /// // (1 − q⁻¹)(1 − 0.9 q⁻¹): a position driven by a force
+    /// let m = PolynomialModel::new(vec![vec![0.0, 1.0]], vec![1.0, -1.9, 0.9], None).unwrap();
+    /// assert_eq!(m.stability(), Stability::MarginallyStable { integrators: 1, other_unit_circle: 0 });
+    /// assert_eq!(m.stability().to_string(), "marginally stable (1 integrator)");
+    /// ```
+    pub fn stability(&self) -> Stability {
+        Stability::of(&self.den)
+    }
+}
+
 /// Stability class of a discrete-time denominator.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Stability {

@@ -218,21 +218,6 @@ impl PolynomialModel {
         root_radius(&self.den)
     }
 
-    /// Stability class of the denominator: strictly stable, marginally stable (integrators at
-    /// `z = 1` or other poles on the unit circle) or unstable; displayed as "stable",
-    /// "marginally stable (1 integrator)", "UNSTABLE (spectral radius …)".
-    ///
-    /// ```
-    /// use structid_linear::{PolynomialModel, Stability};
-    /// // (1 − q⁻¹)(1 − 0.9 q⁻¹): a position driven by a force
-    /// let m = PolynomialModel::new(vec![vec![0.0, 1.0]], vec![1.0, -1.9, 0.9], None).unwrap();
-    /// assert_eq!(m.stability(), Stability::MarginallyStable { integrators: 1, other_unit_circle: 0 });
-    /// assert_eq!(m.stability().to_string(), "marginally stable (1 integrator)");
-    /// ```
-    pub fn stability(&self) -> crate::integrators::Stability {
-        crate::integrators::Stability::of(&self.den)
-    }
-
     /// Frequency response `G_i(e^{jω}) = B_i(e^{−jω}) / A(e^{−jω})` of input `input` at the
     /// normalised frequency `f` in cycles per sample (`ω = 2π f`), as `(re, im)`.
     /// Returns `None` when `input` is out of range.
