@@ -47,7 +47,7 @@ impl StoredPoints {
     /// # Errors
     /// [`Error::InvalidStructure`] when the data are not a whole number of points.
     pub fn to_signal(&self) -> Result<Signal> {
-        if self.channels == 0 || self.data.len() % self.channels != 0 {
+        if self.channels == 0 || !self.data.len().is_multiple_of(self.channels) {
             return Err(Error::InvalidStructure(format!(
                 "stored points: {} values are not a whole number of points of {} coordinate(s)",
                 self.data.len(),

@@ -164,7 +164,10 @@ impl StoredMap {
                         values.len()
                     )));
                 }
-                if knots.windows(2).any(|w| !(w[0] < w[1])) {
+                if knots
+                    .windows(2)
+                    .any(|w| w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less))
+                {
                     return Err(bad("the knots must be strictly increasing".into()));
                 }
                 Box::new(PiecewiseLinearMap(PiecewiseLinear::new(

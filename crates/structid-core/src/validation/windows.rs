@@ -418,7 +418,10 @@ pub fn simulate_scored(
     let (simulated, scored, states) = match scoring {
         Scoring::Free => {
             let sim = model.simulate(maps, data.u(), None, x0)?;
-            (sim.y, vec![settle..len], vec![x0.map(<[f64]>::to_vec)])
+            // A free run is one segment, scored after the settling samples.
+            #[allow(clippy::single_range_in_vec_init)]
+            let scored = vec![settle..len];
+            (sim.y, scored, vec![x0.map(<[f64]>::to_vec)])
         }
         Scoring::Windowed(windows) => {
             let z = measured_z(model, data)?;
