@@ -19,7 +19,7 @@
 use nalgebra::DMatrix;
 
 use super::family::{Effect, POWER_LAW_MAX_EXPONENT};
-use super::fit::EffectFit;
+use super::result::EffectFit;
 
 /// The fraction of the range of z within which a saturation's level must not be reached for
 /// its slope to count as identified (1 %: with a few thousand points spread over the range,

@@ -69,9 +69,11 @@
 mod family;
 mod fit;
 pub mod identifiability;
+mod result;
 
 pub use family::{Effect, POWER_LAW_MAX_EXPONENT};
-pub use fit::{EffectError, EffectFit, Parameter, Refit, fit_effect, fit_effect_with};
+pub use fit::{fit_effect, fit_effect_with};
+pub use result::{EffectError, EffectFit, Parameter, Refit};
 
 /// Settings of [`name_effect`].
 #[derive(Clone, Debug, PartialEq)]
