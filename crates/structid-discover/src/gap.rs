@@ -17,7 +17,8 @@
 //! * portmanteau tests, together at the 0.1 % level (Bonferroni over the tests), so that the whole
 //!   family of lags has one error rate (a lag-by-lag band would flag a correct model about
 //!   40 % of the time over 50 lags): the
-//!   Ljung–Box statistic of ε (whiteness), the Box–Jenkins statistic N·Σ_τ r²_εu(τ) for each
+//!   Ljung–Box statistic of ε (whiteness), the Box–Jenkins statistic N·Σ_τ r²_εu(τ) over the lags τ ≥ 1 at which the input leads
+//!   (τ ≥ 0 for a model with direct feedthrough; in closed loop the input follows the noise) for each
 //!   input with u prewhitened by an AR(10) fit (so that the lags are independent under the null
 //!   hypothesis; a coloured input would inflate the statistic), and the same for ε against
 //!   u² − mean(u²) and ε² against u² (the nonlinear correlation tests of Billings and Voon,
@@ -47,6 +48,10 @@ pub struct GapSettings {
     pub band: f64,
     /// The gap counts as noise only when RMS(ε) ≤ `noise_ratio`·σ̂ (default 1.5).
     pub noise_ratio: f64,
+    /// For an output-error model, whose noise may be coloured, the gap counts as noise up to
+    /// `coloured_ratio`·σ̂ (default 4: AR(1) noise with lag-one correlation φ has RMS
+    /// 1/√(1 − φ) times the difference-based σ̂, 3.2× at φ = 0.9, 4× at φ ≈ 0.94).
+    pub coloured_ratio: f64,
     /// Smallest share of the samples an operating region may hold (default 0.05).
     pub min_region_share: f64,
     /// The initial state of the simulation (default: estimated; a record that starts at rest
@@ -64,6 +69,7 @@ impl Default for GapSettings {
             window: None,
             band: 3.0,
             noise_ratio: 1.5,
+            coloured_ratio: 4.0,
             min_region_share: 0.05,
             initial_state: InitialState::Estimate,
             scoring: Scoring::Free,
@@ -113,6 +119,11 @@ pub struct Gap {
     pub windows: Vec<Range<usize>>,
     /// Operating regions, best first.
     pub regions: Vec<Region>,
+    /// Whether the gap is larger than noise: RMS(ε) above `noise_ratio`·σ̂, or for an
+    /// output-error model, whose noise may be coloured, above `coloured_ratio`·σ̂ (see
+    /// [`GapSettings`]). A gap that fails a test but is not above noise, and that no candidate
+    /// block explains, is noise.
+    pub above_noise: bool,
     /// Whether a missing effect was detected.
     pub missing_effect: bool,
     /// The verdict in words, with the statistics behind it.
@@ -239,18 +250,37 @@ fn prewhiten(s: &[f64], order: usize) -> Vec<f64> {
     out
 }
 
-/// N·Σ_τ r²(ε, s_w)(τ) with s prewhitened: χ² with 2·max_lag + 1 degrees of freedom when ε is
-/// white and independent of s.
-fn portmanteau_cross(name: String, e: &[f64], s: &[f64], max_lag: usize) -> Portmanteau {
+/// N·Σ_τ r²(ε_k, s_w,(k−τ)) over τ = `first_lag`…max_lag with s prewhitened: χ² with that
+/// many degrees of freedom when ε is white and independent of the past of s.
+///
+/// Only the lags at which s leads ε are tested: a missing effect acts from the input to the
+/// output, while in closed loop the input follows the output's noise through the controller,
+/// so that ε correlates with the *future* input of a perfect model, and with the present one
+/// when the controller reads the sample it acts on (`first_lag` = 1 for a strictly proper
+/// model, whose output does not see the present input).
+fn portmanteau_cross(
+    name: String,
+    e: &[f64],
+    s: &[f64],
+    first_lag: usize,
+    max_lag: usize,
+) -> Portmanteau {
     let sw = prewhiten(s, 10.min(s.len() / 20));
     let c = cross_correlation(e, &sw, max_lag);
     let n = e.len() as f64;
-    let statistic = n * c.values.iter().map(|v| v * v).sum::<f64>();
+    let causal: Vec<f64> = c
+        .lags
+        .iter()
+        .zip(&c.values)
+        .filter(|(lag, _)| **lag >= first_lag as isize)
+        .map(|(_, v)| *v)
+        .collect();
+    let statistic = n * causal.iter().map(|v| v * v).sum::<f64>();
     Portmanteau {
         name,
         statistic,
         critical: f64::NAN,
-        lags: c.values.len(),
+        lags: causal.len(),
     }
 }
 
@@ -335,26 +365,41 @@ pub fn gap(
         let m = s.iter().map(|v| v * v).sum::<f64>() / s.len() as f64;
         s.iter().map(|v| v * v - m).collect::<Vec<f64>>()
     };
-    let e2 = centred_square(&innovations);
+    // An output-error residual may be coloured noise; its cross-correlations with a
+    // prewhitened input then have the χ² null distribution only if it is prewhitened too (the
+    // double prewhitening of Haugh's test). A residual the input predicts stays correlated
+    // with it through any fixed filter.
+    let whitened;
+    let innovations: &[f64] = if model.lft().t_ye().order() == 0 {
+        whitened = prewhiten(&innovations, 10.min(n / 20));
+        &whitened
+    } else {
+        &innovations
+    };
+    let e2 = centred_square(innovations);
+    let first_lag = usize::from(model.lft().matrices().dyu.iter().all(|d| *d == 0.0));
     for c in 0..data.u().channels() {
         let u: Vec<f64> = tested.iter().map(|&k| data.u().get(k, c)).collect();
         let u2 = centred_square(&u);
         tests.push(portmanteau_cross(
             format!("ε against u{c}"),
-            &innovations,
+            innovations,
             &u,
+            first_lag,
             max_lag,
         ));
         tests.push(portmanteau_cross(
             format!("ε against u{c}²"),
-            &innovations,
+            innovations,
             &u2,
+            first_lag,
             max_lag,
         ));
         tests.push(portmanteau_cross(
             format!("ε² against u{c}²"),
             &e2,
             &u2,
+            first_lag,
             max_lag,
         ));
     }
@@ -372,10 +417,22 @@ pub fn gap(
         .collect();
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let rms = v.rms[0];
-    let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
     let prediction_rms = structid_core::metrics::rms(&innovations);
     let too_large = prediction_rms > settings.noise_ratio * noise_std;
+    let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
     let missing_effect = too_large || !failing.is_empty();
+    // An output-error model says nothing of the noise's colour, and coloured noise makes its
+    // residual fail whiteness and exceed a noise level taken from first differences without
+    // any effect missing. Such a gap is worth examining (a candidate block may explain it),
+    // but it is larger than noise only beyond what coloured noise plausibly gives.
+    let output_error = model.lft().t_ye().order() == 0;
+    let above_noise = prediction_rms
+        > noise_std
+            * if output_error {
+                settings.coloured_ratio
+            } else {
+                settings.noise_ratio
+            };
     let verdict = if missing_effect {
         let mut why: Vec<String> = failing
             .iter()
@@ -408,6 +465,7 @@ pub fn gap(
         tests,
         windows,
         regions,
+        above_noise,
         missing_effect,
         verdict,
     })

@@ -69,6 +69,7 @@ use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
+use structid_core::validation::windows::{Scoring, Windows, simulate_scored};
 use structid_core::{Data, Signal, Site};
 use structid_linear::integrators::{convolve, deflate, integrator_polynomial};
 use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx, oe};
@@ -421,17 +422,84 @@ pub struct Expected {
     /// The site (an Input effect with a linear plant may also be accepted at the output for a
     /// gain-like map; only this one is listed).
     pub site: Site,
-    /// The family's name: [`Effect::name`] when the library has the family, otherwise a
-    /// description (e.g. "asymmetric Coulomb + viscous friction"). "dynamic" for backlash and
-    /// Bouc–Wen.
+    /// What the truth is, in words: the library family's [`Effect::name`] when one describes
+    /// it exactly, otherwise a description (e.g. "Coulomb friction with offset"); "dynamic"
+    /// for backlash and Bouc–Wen.
     pub family: String,
     /// The library family and its parameters in [`Effect::parameter_names`] order, when one
     /// describes the truth exactly.
     pub effect: Option<(Effect, Vec<f64>)>,
-    /// Key parameters by name (in the site's map units).
+    /// The families that name the truth correctly, the closest first, each with the key
+    /// parameters it must recover (empty for the dynamic effects).
+    pub accepted: Vec<Accepted>,
+}
+
+/// A library family that names a case's effect correctly, and what its fit must recover.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Accepted {
+    /// The family.
+    pub effect: Effect,
+    /// Key parameters by [`Effect::parameter_names`] name (`offset` is the family's constant
+    /// offset), in the site's map units. Empty when the family only approximates the truth
+    /// and no parameter of it corresponds to a physical one (e.g. a hard saturation fitted
+    /// to a `tanh`).
     pub key: Vec<(String, f64)>,
-    /// Families that are accepted too (near families), by name.
-    pub near: Vec<String>,
+}
+
+/// How a named fit compares with a case's truth ([`Expected::judge`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Judgement {
+    /// The fit's family is one of the accepted ones.
+    pub named: bool,
+    /// Every key parameter of that family is within the tolerance; `None` when it is not
+    /// named or the accepted family has no key parameter.
+    pub parameters: Option<bool>,
+}
+
+impl Expected {
+    /// Whether `fit` names the effect by an accepted family, and whether its key parameters
+    /// are within `tolerance` (relative) of the truth.
+    ///
+    /// ```
+    /// use structid_core::Site;
+    /// use structid_discover::effects::{Effect, fit_effect};
+    /// use structid_discover::physics::{Accepted, Expected};
+    /// let z: Vec<f64> = (0..200).map(|k| -2.0 + k as f64 / 50.0).collect();
+    /// let w: Vec<f64> = z.iter().map(|z| z.clamp(-0.9, 0.9)).collect();
+    /// let fit = fit_effect(Effect::Saturation, &z, &w).unwrap();
+    /// let truth = Expected {
+    ///     site: Site::Input,
+    ///     family: "saturation".into(),
+    ///     effect: None,
+    ///     accepted: vec![Accepted { effect: Effect::Saturation, key: vec![("level".into(), 1.0)] }],
+    /// };
+    /// let j = truth.judge(&fit, 0.2);
+    /// assert!(j.named && j.parameters == Some(true));
+    /// assert_eq!(truth.judge(&fit, 0.05).parameters, Some(false));
+    /// ```
+    pub fn judge(&self, fit: &crate::effects::EffectFit, tolerance: f64) -> Judgement {
+        let Some(accepted) = self.accepted.iter().find(|a| a.effect == fit.effect) else {
+            return Judgement {
+                named: false,
+                parameters: None,
+            };
+        };
+        let parameters = (!accepted.key.is_empty()).then(|| {
+            accepted.key.iter().all(|(name, truth)| {
+                fit.parameter(name)
+                    .is_some_and(|p| (p.value - truth).abs() <= tolerance * truth.abs())
+            })
+        });
+        Judgement {
+            named: true,
+            parameters,
+        }
+    }
+
+    /// Whether the truth is a dynamic effect (backlash, Bouc–Wen).
+    pub fn is_dynamic(&self) -> bool {
+        self.family == "dynamic"
+    }
 }
 
 /// How the nominal given to the workflow was obtained.
@@ -1095,35 +1163,43 @@ struct Ranges {
     v_peak: f64,
 }
 
-fn names(v: &[&str]) -> Vec<String> {
-    v.iter().map(|s| s.to_string()).collect()
+/// An accepted family with its key parameters.
+fn ok(effect: Effect, key: &[(&str, f64)]) -> Accepted {
+    Accepted {
+        effect,
+        key: key.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+    }
 }
 
 /// The effect's parameters relative to the pilot's ranges, and what to expect.
 fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (PhysicalEffect, Expected) {
     use Choice as C;
+    use Effect as E;
     use PhysicalEffect as P;
     let site = site_of(c);
-    let exp = |family: String,
-               effect: Option<(Effect, Vec<f64>)>,
-               key: Vec<(&str, f64)>,
-               near: Vec<String>| Expected {
-        site,
-        family,
-        effect,
-        key: key.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
-        near,
-    };
+    let exp =
+        |family: String, effect: Option<(Effect, Vec<f64>)>, accepted: Vec<Accepted>| Expected {
+            site,
+            family,
+            effect,
+            accepted,
+        };
     match c {
         C::Sat => {
             let level = uniform(rng, 0.3, 0.7) * r.u_peak;
             (
                 P::Saturation { level },
                 exp(
-                    Effect::Saturation.name(),
-                    Some((Effect::Saturation, vec![1.0, level])),
-                    vec![("level", level)],
-                    names(&["smooth saturation (tanh)", "asymmetric saturation"]),
+                    E::Saturation.name(),
+                    Some((E::Saturation, vec![1.0, level])),
+                    vec![
+                        ok(E::Saturation, &[("level", level)]),
+                        ok(
+                            E::AsymmetricSaturation,
+                            &[("lower", -level), ("upper", level)],
+                        ),
+                        ok(E::SmoothSaturation, &[]),
+                    ],
                 ),
             )
         }
@@ -1132,10 +1208,12 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::DeadZone { width },
                 exp(
-                    Effect::DeadZone.name(),
-                    Some((Effect::DeadZone, vec![1.0, width])),
-                    vec![("width", width)],
-                    vec![],
+                    E::DeadZone.name(),
+                    Some((E::DeadZone, vec![1.0, width])),
+                    vec![
+                        ok(E::DeadZone, &[("width", width)]),
+                        ok(E::GapSpring, &[("gap", width)]),
+                    ],
                 ),
             )
         }
@@ -1144,10 +1222,12 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::OneSidedClip { level },
                 exp(
-                    "one-sided clip".into(),
-                    None,
-                    vec![("level", level)],
-                    names(&["asymmetric saturation"]),
+                    E::ClipAbove.name(),
+                    Some((E::ClipAbove, vec![1.0, level])),
+                    vec![
+                        ok(E::ClipAbove, &[("level", level)]),
+                        ok(E::AsymmetricSaturation, &[("upper", level)]),
+                    ],
                 ),
             )
         }
@@ -1156,10 +1236,13 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::TanhSaturation { level },
                 exp(
-                    "smooth saturation (tanh)".into(),
-                    None,
-                    vec![("level", level)],
-                    names(&["saturation"]),
+                    E::SmoothSaturation.name(),
+                    Some((E::SmoothSaturation, vec![1.0, level])),
+                    vec![
+                        ok(E::SmoothSaturation, &[("level", level)]),
+                        ok(E::Saturation, &[]),
+                        ok(E::AsymmetricSaturation, &[]),
+                    ],
                 ),
             )
         }
@@ -1169,10 +1252,15 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::SensorClip { lower, upper },
                 exp(
-                    Effect::AsymmetricSaturation.name(),
-                    Some((Effect::AsymmetricSaturation, vec![1.0, lower, upper])),
-                    vec![("lower", lower), ("upper", upper)],
-                    names(&["saturation"]),
+                    E::AsymmetricSaturation.name(),
+                    Some((E::AsymmetricSaturation, vec![1.0, lower, upper])),
+                    vec![
+                        ok(
+                            E::AsymmetricSaturation,
+                            &[("lower", lower), ("upper", upper)],
+                        ),
+                        ok(E::Saturation, &[]),
+                    ],
                 ),
             )
         }
@@ -1181,10 +1269,13 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::Rectification { level },
                 exp(
-                    "one-sided clip (rectification)".into(),
-                    None,
-                    vec![("level", level)],
-                    names(&["one-sided clip", "asymmetric saturation"]),
+                    E::ClipBelow.name(),
+                    Some((E::ClipBelow, vec![1.0, level])),
+                    vec![
+                        ok(E::ClipBelow, &[("level", level)]),
+                        ok(E::AsymmetricSaturation, &[("lower", level)]),
+                        ok(E::Rectification { positive: true }, &[]),
+                    ],
                 ),
             )
         }
@@ -1193,10 +1284,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::Quantisation { step },
                 exp(
-                    Effect::Quantisation.name(),
-                    Some((Effect::Quantisation, vec![step])),
-                    vec![("step", step)],
-                    vec![],
+                    E::Quantisation.name(),
+                    Some((E::Quantisation, vec![step])),
+                    vec![ok(E::Quantisation, &[("step", step)])],
                 ),
             )
         }
@@ -1206,43 +1296,53 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             (
                 P::GapSpring { stiffness: k, gap },
                 exp(
-                    "gap spring (contact)".into(),
-                    Some((Effect::DeadZone, vec![k, gap])),
-                    vec![("stiffness", k), ("gap", gap)],
-                    names(&[&Effect::DeadZone.name()]),
+                    E::GapSpring.name(),
+                    Some((E::GapSpring, vec![k, gap])),
+                    vec![
+                        ok(E::GapSpring, &[("stiffness", k), ("gap", gap)]),
+                        ok(E::DeadZone, &[("gain", k), ("width", gap)]),
+                    ],
                 ),
             )
         }
         C::Hard => {
             let power = uniform(rng, 1.5, 3.0);
             let k = uniform(rng, 0.3, 1.0) * stiff * r.y_peak / r.y_peak.powf(power);
-            let mut near = vec![];
+            let law = E::PowerLaw { linear: false };
+            let mut accepted = vec![
+                ok(law, &[("stiffness", k), ("exponent", power)]),
+                ok(
+                    E::PowerLaw { linear: true },
+                    &[("stiffness", k), ("exponent", power)],
+                ),
+            ];
             if power > 2.5 {
-                near.push(Effect::OddPolynomial { degree: 3 }.name());
+                accepted.push(ok(E::OddPolynomial { degree: 3 }, &[]));
             }
             (
                 P::HardeningSpring {
                     stiffness: k,
                     power,
                 },
-                exp(
-                    "hardening power law".into(),
-                    None,
-                    vec![("stiffness", k), ("power", power)],
-                    near,
-                ),
+                exp(law.name(), Some((law, vec![k, power])), accepted),
             )
         }
         C::Cubic => {
             let a3 = uniform(rng, 0.3, 1.0) * stiff / (r.y_peak * r.y_peak);
             let a1 = uniform(rng, -0.2, 0.3) * stiff;
+            let cubic = E::OddPolynomial { degree: 3 };
             (
                 P::CubicSpring { a1, a3 },
                 exp(
-                    Effect::OddPolynomial { degree: 3 }.name(),
-                    Some((Effect::OddPolynomial { degree: 3 }, vec![a1, a3])),
-                    vec![("a3", a3)],
-                    names(&["hardening power law"]),
+                    cubic.name(),
+                    Some((cubic, vec![a1, a3])),
+                    vec![
+                        ok(cubic, &[("a3", a3)]),
+                        ok(
+                            E::PowerLaw { linear: true },
+                            &[("stiffness", a3), ("exponent", 3.0)],
+                        ),
+                    ],
                 ),
             )
         }
@@ -1257,13 +1357,21 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     fv_neg: fv,
                 },
                 exp(
-                    Effect::CoulombViscous.name(),
-                    Some((Effect::CoulombViscous, vec![fc, fv])),
-                    vec![("coulomb", fc)],
-                    names(&[
-                        "asymmetric Coulomb + viscous friction",
-                        &Effect::Stribeck.name(),
-                    ]),
+                    E::CoulombViscous.name(),
+                    Some((E::CoulombViscous, vec![fc, fv])),
+                    vec![
+                        ok(E::CoulombViscous, &[("coulomb", fc)]),
+                        ok(E::Coulomb, &[("coulomb", fc)]),
+                        ok(
+                            E::AsymmetricCoulombViscous,
+                            &[("coulomb_pos", fc), ("coulomb_neg", fc)],
+                        ),
+                        ok(E::Stribeck, &[("coulomb", fc)]),
+                        ok(
+                            E::AsymmetricStribeck,
+                            &[("coulomb_pos", fc), ("coulomb_neg", fc)],
+                        ),
+                    ],
                 ),
             )
         }
@@ -1277,6 +1385,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             };
             let fv = uniform(rng, 0.0, 0.3) * r.u_rms / r.v_peak;
             let fv2 = fv * uniform(rng, 0.5, 1.5);
+            // A symmetric family with an offset is the same map when the viscous slopes agree:
+            // level (Fc⁺ + Fc⁻)/2, offset (Fc⁺ − Fc⁻)/2.
+            let (mean, offset) = (0.5 * (fp + fn_), 0.5 * (fp - fn_));
             (
                 P::CoulombViscous {
                     fc_pos: fp,
@@ -1285,10 +1396,20 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     fv_neg: fv2,
                 },
                 exp(
-                    "asymmetric Coulomb + viscous friction".into(),
-                    None,
-                    vec![("coulomb+", fp), ("coulomb-", fn_)],
-                    names(&["Coulomb + viscous friction with offset"]),
+                    E::AsymmetricCoulombViscous.name(),
+                    Some((E::AsymmetricCoulombViscous, vec![fp, fn_, fv, fv2])),
+                    vec![
+                        ok(
+                            E::AsymmetricCoulombViscous,
+                            &[("coulomb_pos", fp), ("coulomb_neg", fn_)],
+                        ),
+                        ok(E::CoulombViscous, &[("coulomb", mean), ("offset", offset)]),
+                        ok(E::Coulomb, &[("coulomb", mean), ("offset", offset)]),
+                        ok(
+                            E::AsymmetricStribeck,
+                            &[("coulomb_pos", fp), ("coulomb_neg", fn_)],
+                        ),
+                    ],
                 ),
             )
         }
@@ -1313,18 +1434,23 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     fv,
                 },
                 exp(
-                    "asymmetric Stribeck friction".into(),
-                    None,
+                    E::AsymmetricStribeck.name(),
+                    Some((
+                        E::AsymmetricStribeck,
+                        vec![fp, fn_, s * fp, s * fn_, vs, fv],
+                    )),
                     vec![
-                        ("coulomb+", fp),
-                        ("coulomb-", fn_),
-                        ("static+", s * fp),
-                        ("static-", s * fn_),
+                        ok(
+                            E::AsymmetricStribeck,
+                            &[("coulomb_pos", fp), ("coulomb_neg", fn_)],
+                        ),
+                        ok(
+                            E::Stribeck,
+                            &[("coulomb", 0.5 * (fp + fn_)), ("offset", 0.5 * (fp - fn_))],
+                        ),
+                        // Coulomb levels fitted across the hump lie between Fc and Fs.
+                        ok(E::AsymmetricCoulombViscous, &[]),
                     ],
-                    names(&[
-                        &Effect::Stribeck.name(),
-                        "asymmetric Coulomb + viscous friction",
-                    ]),
                 ),
             )
         }
@@ -1337,8 +1463,19 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                 exp(
                     "Coulomb friction with offset".into(),
                     None,
-                    vec![("coulomb", fc), ("offset", offset)],
-                    names(&["asymmetric Coulomb + viscous friction"]),
+                    vec![
+                        ok(E::Coulomb, &[("coulomb", fc), ("offset", offset)]),
+                        ok(E::CoulombViscous, &[("coulomb", fc), ("offset", offset)]),
+                        ok(
+                            E::AsymmetricCoulombViscous,
+                            &[("coulomb_pos", fc + offset), ("coulomb_neg", fc - offset)],
+                        ),
+                        ok(E::Stribeck, &[("coulomb", fc), ("offset", offset)]),
+                        ok(
+                            E::AsymmetricStribeck,
+                            &[("coulomb_pos", fc + offset), ("coulomb_neg", fc - offset)],
+                        ),
+                    ],
                 ),
             )
         }
@@ -1356,7 +1493,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     width,
                     stiffness: k,
                 },
-                exp("dynamic".into(), None, vec![("width", width)], vec![]),
+                exp("dynamic".into(), None, vec![]),
             )
         }
         C::BwIn | C::BwOut | C::BwFb => {
@@ -1379,7 +1516,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     gamma: beta / 2.0,
                     n,
                 },
-                exp("dynamic".into(), None, vec![("yield", hmax)], vec![]),
+                exp("dynamic".into(), None, vec![]),
             )
         }
     }
@@ -1482,10 +1619,30 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
         None
     };
     let mut noise_std = uniform(rng, 0.003, 0.02) * std_dev(&clean.y_clean);
+    // The effect's size in the measure the workflow scores it by: a free run of an
+    // integrating nominal drifts, so that its free-run gap grows with the record and says
+    // nothing of the effect; such plants are measured over windows, each from a state fitted
+    // to its first samples (as `discover` scores them).
+    let windowed = match s.plant.integrators {
+        0 => None,
+        _ => {
+            let model = crate::hypotheses::Nominal::from_polynomial(&g)
+                .ok()?
+                .model()
+                .ok()?;
+            let states = model.lft().dims().states;
+            Some((model, Windows::for_record(LENGTH, states + 2)))
+        }
+    };
     let gap = |rec: &Record| -> Option<f64> {
-        let gu = g
-            .simulate(&Signal::from_fn(LENGTH, 1, |k, _| rec.u[k]))
-            .ok()?;
+        let u = Signal::from_fn(LENGTH, 1, |k, _| rec.u[k]);
+        if let Some((model, windows)) = &windowed {
+            let data = Data::new(u, Signal::from_fn(LENGTH, 1, |k, _| rec.y_clean[k])).ok()?;
+            let sim =
+                simulate_scored(model, &[], &data, Scoring::Windowed(*windows), None, 0).ok()?;
+            return Some(sim.rms(data.y(), 0));
+        }
+        let gu = g.simulate(&u).ok()?;
         Some(rms(&rec
             .y_clean
             .iter()

@@ -4,15 +4,22 @@
 //! A free-run simulation from one x̂₀ means nothing for a plant with poles on the unit circle
 //! (an integrating axis, a double integrator): any force offset or small error in the first
 //! state makes the simulation drift without bound, and its RMS measures the drift, not the
-//! model. The benchmarks' answer is an *initialisation window*: the state is estimated on the
-//! first samples and the simulation scored after them. [`Windows`] applies it throughout a
-//! record: the record is cut into consecutive windows of `length` samples (the last one takes
-//! the remainder); in each, the state x̂_s at its first sample s is fitted to the first `init`
+//! model. The benchmarks' answer is an *initialisation window*: the state is estimated and
+//! the simulation scored after the first samples. [`Windows`] applies it throughout a record:
+//! the record is cut into consecutive windows of `length` samples (the last one takes the
+//! remainder); in each, the state x̂_s at its first sample s is fitted to the window's
 //! samples, the model is simulated over the window from x̂_s with the maps in the loop, and the
-//! samples after `init` are scored.
+//! samples after the first `init` are scored.
+//!
+//! The state is fitted to the whole window, not to its first `init` samples alone: a state
+//! fitted to a few noisy samples carries their noise through the window (an integrator turns
+//! a velocity error into a drift), which both inflates the window's RMS and colours its
+//! residual, so that the residual tests take the exact model for a wrong one. Fitted to the
+//! whole window it only removes the few directions of the window's free response (`n_x` of
+//! `length` samples) from the residual.
 //!
 //! **The window's state.** With the maps' outputs fixed at their values at the measured z,
-//! ŵ = N̂(z), the LFT is linear in its state, and over the first `init` samples of a window
+//! ŵ = N̂(z), the LFT is linear in its state, and over the samples of a window
 //!
 //! ```text
 //!   y_k = (O_y·x_s)_k + (L_yu·u + L_yw·ŵ)_k + noise,    z_k = (O_z·x_s)_k + (L_zu·u + L_zw·ŵ)_k
@@ -39,8 +46,8 @@ use crate::interpolant::Interpolant;
 use crate::metrics::fit_percent;
 use crate::model::{Data, Model};
 
-/// Windows of a windowed simulation: `length` samples each, the state fitted on the first
-/// `init` of them and the rest scored. Build with [`Windows::new`] or [`Windows::for_record`].
+/// Windows of a windowed simulation: `length` samples each, the state fitted on them and
+/// all but the first `init` scored. Build with [`Windows::new`] or [`Windows::for_record`].
 ///
 /// ```
 /// use structid_core::validation::Windows;
@@ -56,7 +63,7 @@ pub struct Windows {
 }
 
 impl Windows {
-    /// Windows of `length` samples whose first `init` samples fit the state (1 ≤ `init` <
+    /// Windows of `length` samples whose first `init` samples are not scored (1 ≤ `init` <
     /// `length`).
     pub fn new(length: usize, init: usize) -> Result<Self> {
         if init == 0 || init >= length {
@@ -73,7 +80,7 @@ impl Windows {
     }
 
     /// The default windows for a record of `len` samples and a model of `states` states: the
-    /// state fitted on max(4·states, 25) samples, windows of max(len/20, 8·init) samples (at
+    /// first max(4·states, 25) samples of each not scored, windows of max(len/20, 8·init) samples (at
     /// most the record), so that a record gives about twenty windows and each scores most of
     /// its samples.
     ///
@@ -96,7 +103,7 @@ impl Windows {
         self.length
     }
 
-    /// Samples at the start of each window that fit its state (not scored).
+    /// Samples at the start of each window that are not scored.
     pub fn init(&self) -> usize {
         self.init
     }
@@ -339,7 +346,8 @@ pub(crate) fn window_state(
     Ok(x.iter().copied().collect())
 }
 
-/// The state at the first sample of `data` fitted to its first `init` samples with the maps
+/// The state at the first sample of `data` fitted to its first `init` samples (a window's
+/// whole length in [`simulate_scored`]) with the maps
 /// in `maps` fixed at the measured z (see the [module documentation](self)).
 ///
 /// ```
@@ -431,7 +439,7 @@ pub fn simulate_scored(
             let mut states = Vec::new();
             for range in windows.ranges(len) {
                 let init = windows.init.min(range.len().saturating_sub(1)).max(1);
-                let x = window_state(model, data, &z, &w, range.start..range.start + init, None)?;
+                let x = window_state(model, data, &z, &w, range.clone(), None)?;
                 let u = data.u().slice(range.clone());
                 let sim = model.simulate(maps, &u, None, Some(&x))?;
                 for k in 0..range.len() {

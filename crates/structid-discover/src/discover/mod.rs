@@ -173,8 +173,10 @@ pub const STATIC_OVER_DYNAMIC: f64 = 0.25;
 #[serde(rename_all = "kebab-case")]
 pub enum Verdict {
     /// The nominal model's gap is noise: within the noise level and passing the residual
-    /// tests on both records (or a test failed, the gap is within the noise level, and no
-    /// candidate block improves on it).
+    /// tests on both records (or a test failed, the gap is within the noise level, for an
+    /// output-error nominal within what coloured noise gives, see
+    /// [`Gap::above_noise`](crate::gap::Gap::above_noise), and no candidate block improves on
+    /// it).
     NoMissingEffect,
     /// A missing effect was found, placed and added ([`Discovery::finding`]).
     MissingEffect,
@@ -494,8 +496,7 @@ pub fn discover(
         // The gap is noise-sized and only a test failed: a false alarm of the test family
         // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
         // is real and unexplained, and the verdict says so.
-        let above_noise = |g: &Gap| g.prediction_rms > settings.gap.noise_ratio * g.noise_std;
-        let real = above_noise(&estimation_gap) || above_noise(&validation_gap);
+        let real = estimation_gap.above_noise || validation_gap.above_noise;
         let tried = hypotheses
             .iter()
             .map(|h| {
@@ -536,7 +537,8 @@ pub fn discover(
                 Verdict::NoMissingEffect,
                 format!(
                     "no missing effect detected: the nominal model's gap is within the noise \
-                     level but failed a test (estimation record: {}; validation record: {}), \
+                     level (for an output-error nominal, within what coloured noise gives) but \
+                     failed a test (estimation record: {}; validation record: {}), \
                      and the best candidate block reduces the validation RMS by less than \
                      {:.0} % ({} {}, RMS {} → {})",
                     estimation_gap.verdict,

@@ -1,0 +1,205 @@
+//! The discovery workflow's goals on plants as engineers meet them
+//! (`structid_discover::physics`): continuous-time physics integrated by RK4 and sampled, so
+//! that no discrete LFT is exact; integrating axes in open and closed loop, double
+//! integrators, two-mass resonances, input delays, non-minimum-phase zeros, white and coloured
+//! noise, validation records up to 20 % larger than the estimation record, and in about half
+//! of the cases a nominal estimated from the (effect-laden) estimation record by
+//! `structid linear` instead of the true G.
+//!
+//! Per case the workflow sees only the nominal and the two records. The goals (issue 14):
+//!
+//! | goal | over | at least |
+//! |---|---|---|
+//! | located (the true site, or a site the finding reports as equivalent) | static | 90 % |
+//! | named by the truth's family or a listed near family ([`Expected::accepted`]) | static | 85 % |
+//! | key parameters within 20 % | named static with key parameters | 80 % |
+//! | reported as dynamic | backlash, Bouc–Wen | 80 % |
+//! | no false alarm | LTI + noise | 14 of 15 |
+//! | median validation shrink | static | 10× |
+//!
+//! Each case prints one line, so a failure shows which cases fell short and why.
+
+use structid_discover::discover::{Classification, DiscoverSettings, Discovery, Verdict, discover};
+use structid_discover::hypotheses::Nominal;
+use structid_discover::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
+
+fn run(case: &PhysicsCase) -> Discovery {
+    let nominal = Nominal::from_polynomial(&case.nominal).unwrap();
+    discover(
+        &nominal,
+        &case.estimation,
+        &case.validation,
+        &DiscoverSettings::default(),
+    )
+    .unwrap_or_else(|e| panic!("seed {}: discover failed: {e}", case.seed))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// One line describing a case and what the workflow reported.
+fn line(case: &PhysicsCase, d: &Discovery) -> String {
+    let truth = case
+        .expected
+        .as_ref()
+        .map(|e| format!("{} at {}", e.family, e.site.name()))
+        .unwrap_or_else(|| "none".into());
+    let found = d
+        .finding
+        .as_ref()
+        .map(|f| {
+            let what = match &f.classification {
+                Classification::Named(fit) => {
+                    format!("{} {:.3?}", fit.effect.name(), fit.all_values())
+                }
+                other => other.describe(),
+            };
+            format!("{what} at {} (shrink {:.1}×)", f.location.name(), f.shrink)
+        })
+        .unwrap_or_else(|| "nothing".into());
+    format!(
+        "seed {:2} [{:?} {:?} delay {} {:?} {} noise{}]: {truth} → {:?}: {found}, {:.1} s",
+        case.seed,
+        case.plant.kind,
+        case.control,
+        case.plant.delay,
+        case.nominal_source,
+        if case.validation_scale > 1.0 {
+            "larger val,"
+        } else {
+            ""
+        },
+        if case.noise_ar.is_some() {
+            " coloured"
+        } else {
+            ""
+        },
+        d.verdict_kind,
+        d.seconds
+    )
+}
+
+struct Tally {
+    cases: usize,
+    estimated: usize,
+    located: usize,
+    named: usize,
+    with_keys: usize,
+    within: usize,
+    shrinks: Vec<f64>,
+}
+
+fn static_tally(seeds: std::ops::Range<u64>) -> Tally {
+    let mut t = Tally {
+        cases: 0,
+        estimated: 0,
+        located: 0,
+        named: 0,
+        with_keys: 0,
+        within: 0,
+        shrinks: Vec::new(),
+    };
+    for seed in seeds {
+        let case = generate(PhysicsKind::Static, seed);
+        let expected: &Expected = case.expected.as_ref().unwrap();
+        let d = run(&case);
+        t.cases += 1;
+        t.estimated += usize::from(case.nominal_source != NominalSource::Exact);
+        let (mut located, mut named, mut within) = (false, false, None);
+        let mut shrink = 1.0;
+        if let Some(f) = &d.finding {
+            located =
+                f.location == expected.site || f.equivalent_locations.contains(&expected.site);
+            if let Classification::Named(fit) = &f.classification {
+                let j = expected.judge(fit, 0.2);
+                named = j.named;
+                within = j.parameters;
+            }
+            shrink = f.shrink;
+        }
+        t.located += usize::from(located);
+        t.named += usize::from(named && located);
+        t.with_keys += usize::from(named && located && within.is_some());
+        t.within += usize::from(named && located && within == Some(true));
+        t.shrinks.push(shrink);
+        eprintln!(
+            "{} | located {located} named {named} params {within:?}",
+            line(&case, &d)
+        );
+    }
+    t
+}
+
+#[test]
+#[ignore = "the goals are not met yet (issue 14): run with --ignored to measure"]
+fn static_effects_on_physical_plants_meet_the_goals() {
+    let t = static_tally(0..60);
+    let n = t.cases as f64;
+    let m = median(t.shrinks.clone());
+    eprintln!(
+        "static: {} cases ({} estimated nominals): located {}, named {}, parameters within 20 % {}/{}, median shrink {m:.1}×",
+        t.cases, t.estimated, t.located, t.named, t.within, t.with_keys
+    );
+    assert!(
+        (0.35..=0.65).contains(&(t.estimated as f64 / n)),
+        "{} estimated nominals of {}",
+        t.estimated,
+        t.cases
+    );
+    assert!(
+        t.located as f64 >= 0.9 * n,
+        "located {}/{}",
+        t.located,
+        t.cases
+    );
+    assert!(t.named as f64 >= 0.85 * n, "named {}/{}", t.named, t.cases);
+    assert!(
+        t.within as f64 >= 0.8 * t.with_keys as f64,
+        "parameters within 20 % {}/{}",
+        t.within,
+        t.with_keys
+    );
+    assert!(m >= 10.0, "median shrink {m:.2}×");
+}
+
+#[test]
+#[ignore = "the goals are not met yet (issue 14): run with --ignored to measure"]
+fn hysteresis_on_physical_plants_is_reported_as_dynamic() {
+    let cases = 15;
+    let mut dynamic = 0;
+    for seed in 0..cases {
+        let case = generate(PhysicsKind::Dynamic, seed);
+        assert!(case.expected.as_ref().unwrap().is_dynamic());
+        let d = run(&case);
+        let is_dynamic = d
+            .finding
+            .as_ref()
+            .is_some_and(|f| f.classification == Classification::Dynamic);
+        eprintln!("{} | dynamic {is_dynamic}", line(&case, &d));
+        dynamic += usize::from(is_dynamic);
+    }
+    eprintln!("dynamic: {dynamic}/{cases}");
+    assert!(dynamic as f64 >= 0.8 * cases as f64, "{dynamic}/{cases}");
+}
+
+#[test]
+fn lti_physical_plants_raise_no_false_alarm() {
+    let cases = 15;
+    let mut alarms = 0;
+    for seed in 0..cases {
+        let case = generate(PhysicsKind::None, seed);
+        let d = run(&case);
+        let alarm = d.verdict_kind != Verdict::NoMissingEffect;
+        eprintln!("{} | alarm {alarm}", line(&case, &d));
+        alarms += usize::from(alarm);
+    }
+    eprintln!("LTI: {alarms} false alarms in {cases}");
+    assert!(alarms <= 1, "{alarms} false alarms in {cases}");
+}
