@@ -77,7 +77,7 @@ pub struct DiscoverArgs {
     settle: usize,
     /// How every simulation is scored: `auto` (windows when the nominal model has a pole on
     /// the unit circle, an integrator, whose free run drifts; one free run otherwise), `free`,
-    /// or windows `LENGTH:INIT` (each simulated from a state fitted to the window, scored after its first INIT samples).
+    /// or windows `LENGTH:INIT` (each simulated from a state fitted to its first half, scored after its first INIT samples).
     #[arg(long, value_name = "auto|free|LENGTH:INIT", default_value = "auto")]
     scoring: String,
     /// Re-estimate G with the found map in the loop (output error) and keep the new G when the

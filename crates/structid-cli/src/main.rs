@@ -365,7 +365,7 @@ struct ValidateArgs {
     #[arg(long, value_name = "N", default_value_t = 0)]
     settle: usize,
     /// How the simulation is scored: `free` (one run from x₀, the default) or `LENGTH:INIT`,
-    /// windows of LENGTH samples, each simulated from a state fitted to the window
+    /// windows of LENGTH samples, each simulated from a state fitted to its first half
     /// and scored after its first INIT samples (for plants with integrators, whose free run drifts; `discover`
     /// reports the windows it used).
     #[arg(long, value_name = "free|LENGTH:INIT", value_parser = parse_scoring, default_value = "free")]

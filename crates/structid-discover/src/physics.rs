@@ -430,7 +430,9 @@ pub struct Expected {
     /// describes the truth exactly.
     pub effect: Option<(Effect, Vec<f64>)>,
     /// The families that name the truth correctly, the closest first, each with the key
-    /// parameters it must recover (empty for the dynamic effects).
+    /// parameters it must recover (empty for the dynamic effects). A friction in rate
+    /// feedback is also named correctly by a `tanh` saturation of the velocity, the usual
+    /// regularised Coulomb model, whose level is the Coulomb level.
     pub accepted: Vec<Accepted>,
 }
 
@@ -1362,6 +1364,8 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     vec![
                         ok(E::CoulombViscous, &[("coulomb", fc)]),
                         ok(E::Coulomb, &[("coulomb", fc)]),
+                        // tanh-regularised Coulomb friction (see `discover`'s remark)
+                        ok(E::SmoothSaturation, &[("level", fc)]),
                         ok(
                             E::AsymmetricCoulombViscous,
                             &[("coulomb_pos", fc), ("coulomb_neg", fc)],
@@ -1405,6 +1409,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                         ),
                         ok(E::CoulombViscous, &[("coulomb", mean), ("offset", offset)]),
                         ok(E::Coulomb, &[("coulomb", mean), ("offset", offset)]),
+                        ok(E::SmoothSaturation, &[("level", mean), ("offset", offset)]),
                         ok(
                             E::AsymmetricStribeck,
                             &[("coulomb_pos", fp), ("coulomb_neg", fn_)],
@@ -1450,6 +1455,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                         ),
                         // Coulomb levels fitted across the hump lie between Fc and Fs.
                         ok(E::AsymmetricCoulombViscous, &[]),
+                        ok(E::CoulombViscous, &[]),
+                        ok(E::Coulomb, &[]),
+                        ok(E::SmoothSaturation, &[]),
                     ],
                 ),
             )
@@ -1466,6 +1474,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     vec![
                         ok(E::Coulomb, &[("coulomb", fc), ("offset", offset)]),
                         ok(E::CoulombViscous, &[("coulomb", fc), ("offset", offset)]),
+                        ok(E::SmoothSaturation, &[("level", fc), ("offset", offset)]),
                         ok(
                             E::AsymmetricCoulombViscous,
                             &[("coulomb_pos", fc + offset), ("coulomb_neg", fc - offset)],

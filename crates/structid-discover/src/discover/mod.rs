@@ -168,6 +168,16 @@ pub const DIRECTION_WITHIN: f64 = 1.5;
 /// [`discover`]).
 pub const STATIC_OVER_DYNAMIC: f64 = 0.25;
 
+/// When the best nonparametric fit names nothing, at most this many other locations (in
+/// order of validation RMS) are named too, and the named map among them that validates best,
+/// if clearly better than the best fit's table ([`ALTERNATIVE_FACTOR`]), is the finding.
+const ALTERNATIVE_LOCATIONS: usize = 3;
+
+/// A named map at another location replaces a finding that names nothing only when its
+/// validation RMS is at most this share of the finding's: a hysteresis is approximated about
+/// as well by static maps at several locations, and a small gain is no evidence.
+const ALTERNATIVE_FACTOR: f64 = 0.5;
+
 /// What a discovery concludes: one of three verdicts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -461,6 +471,61 @@ pub fn discover(
         let tv = tv_rms(&fitted, chosen);
         add(fitted.swap_remove(chosen), direction_of(chosen), tv)?
     };
+    // The best nonparametric fit names nothing (dynamic, or no family validates): a named
+    // family elsewhere may still explain the data better than that fit's table. A
+    // nonparametric estimate in a feedback loop (a spring seen from the noisy measured
+    // position under a controller) can validate worse than the parametric map refined by
+    // output error from it; a static map there that validates better is the explanation.
+    if !matches!(finding.classification, Classification::Named(_)) {
+        by_validation(&mut fitted);
+        let mut tried = vec![finding.location];
+        let mut best_alternative: Option<Finding> = None;
+        let mut attempts = 0;
+        let mut i = 0;
+        while i < fitted.len() && attempts < ALTERNATIVE_LOCATIONS {
+            let location = fitted[i].result.location;
+            // A map of the rate depends on the direction of motion and so imitates
+            // hysteresis; a dynamic finding yields to it only through the position-vs-rate
+            // rule above.
+            let rate_for_dynamic = location == Location::RateFeedback
+                && finding.classification == Classification::Dynamic;
+            if tried.contains(&location)
+                || rate_for_dynamic
+                || !fitted[i].result.validation_rms.is_finite()
+            {
+                i += 1;
+                continue;
+            }
+            tried.push(location);
+            attempts += 1;
+            let tv = tv_rms(&fitted, i);
+            let alternative = fitted.remove(i);
+            let direction = direction_test(&alternative, settings)
+                .ok()
+                .unwrap_or_else(DirectionTest::none);
+            if let Ok(alt) = add(alternative, direction, tv)
+                && matches!(alt.classification, Classification::Named(_))
+                && alt.augmented.validation_gap.rms
+                    < best_alternative.as_ref().map_or(
+                        ALTERNATIVE_FACTOR * finding.augmented.validation_gap.rms,
+                        |b: &Finding| b.augmented.validation_gap.rms,
+                    )
+            {
+                best_alternative = Some(alt);
+            }
+        }
+        if let Some(mut alt) = best_alternative {
+            alt.remarks.push(format!(
+                "the best nonparametric fit was at {} ({}, validation RMS {}); this named map \
+                 validates better ({})",
+                nominal.key(finding.location),
+                finding.classification.describe(),
+                rms_text(finding.augmented.validation_gap.rms),
+                rms_text(alt.augmented.validation_gap.rms)
+            ));
+            finding = alt;
+        }
+    }
     if settings.refine_nominal
         && let Some(g) = given.polynomial()
     {

@@ -38,6 +38,17 @@ pub(super) fn structural_remarks(
                     equivalent = vec![Location::Input, Location::Output];
                 }
             }
+            Effect::SmoothSaturation if location == Location::RateFeedback => {
+                let v = fit.values();
+                remarks.push(format!(
+                    "a tanh saturation of the velocity is Coulomb friction regularised over a \
+                     transition velocity: Fc = level = {:.4e}, transition level/gain = {:.4e}; \
+                     the sampled model (a force held over a sample, the rate a backward \
+                     difference) simulates a sharp Coulomb jump less well than this smoothed one",
+                    v[1],
+                    (v[1] / v[0]).abs()
+                ));
+            }
             Effect::Offset if io => {
                 remarks.push(
                     "an offset at the input and one at the output are the same model up to \
@@ -109,10 +120,14 @@ pub(super) fn naming_settings_at(
 /// refined by output error and simulated.
 const REFINED_FAMILIES: usize = 3;
 
-/// The relay a saturation-like fit flagged as one describes: its level c and offset, for a
-/// Coulomb start (an asymmetric saturation's half span and centre).
-fn relay_start(fit: &EffectFit) -> Option<(f64, f64)> {
-    if !fit.flags.iter().any(|f| f.contains("relay")) {
+/// The relay a saturation-like fit describes: its level c and offset, for a Coulomb start (an
+/// asymmetric saturation's half span and centre). Elsewhere only a fit flagged as a relay
+/// (an unidentifiable slope) says so; in rate feedback any saturation of the velocity does:
+/// the estimate sees a Coulomb jump blurred by the measured rate's noise (the rate is a
+/// difference of noisy positions) and by the half sample the rate lags, so its steep but
+/// finite slope is the blur, not a physical velocity scale.
+fn relay_start(fit: &EffectFit, location: Location) -> Option<(f64, f64)> {
+    if location != Location::RateFeedback && !fit.flags.iter().any(|f| f.contains("relay")) {
         return None;
     }
     let v = fit.values();
@@ -177,6 +192,19 @@ pub(super) fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>
     )
 }
 
+/// A family's place in parsimonious order: its parameter count (the offset counts), and
+/// among as many parameters the exact forms before the approximate ones.
+fn parsimony(f: &EffectFit) -> (usize, bool) {
+    let approximate = matches!(
+        f.effect,
+        Effect::SmoothSaturation | Effect::PowerLaw { linear: false }
+    );
+    (
+        f.parameters.len() + usize::from(f.offset.is_some()),
+        approximate,
+    )
+}
+
 /// The families of `naming` in the order they are offered for naming: those whose map fit is within 25 %
 /// of the best family's RMS, fewest parameters first (the offset counts), among as many
 /// parameters the exact forms before the approximate ones (the power law without a linear
@@ -188,13 +216,6 @@ pub(super) fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>
 /// asymmetric saturation for a symmetric one). A family with fewer parameters that fits
 /// about as well is the better name.
 pub fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
-    let count = |f: &EffectFit| f.parameters.len() + usize::from(f.offset.is_some());
-    let approximate = |f: &EffectFit| {
-        matches!(
-            f.effect,
-            Effect::SmoothSaturation | Effect::PowerLaw { linear: false }
-        )
-    };
     let best = naming
         .ranked
         .iter()
@@ -203,9 +224,8 @@ pub fn parsimonious(naming: &Naming) -> Vec<EffectFit> {
     let near = |f: &EffectFit| f.rms <= 1.25 * best + 1e-12;
     let mut first: Vec<EffectFit> = naming.ranked.iter().filter(|f| near(f)).cloned().collect();
     first.sort_by(|a, b| {
-        count(a)
-            .cmp(&count(b))
-            .then(approximate(a).cmp(&approximate(b)))
+        parsimony(a)
+            .cmp(&parsimony(b))
             .then(a.rms.total_cmp(&b.rms))
     });
     first.extend(naming.ranked.iter().filter(|f| !near(f)).cloned());
@@ -300,8 +320,8 @@ pub(super) fn name_and_add(
         let relay = targets
             .iter()
             .chain(simulated.iter().map(|(i, _)| i))
-            .find_map(|&i| relay_start(&naming.ranked[i]))
-            .or_else(|| naming.ranked.iter().find_map(relay_start));
+            .find_map(|&i| relay_start(&naming.ranked[i], location))
+            .or_else(|| naming.ranked.iter().find_map(|f| relay_start(f, location)));
         if let Some((level, offset)) = relay
             && let Some(i) = naming
                 .ranked
@@ -319,7 +339,14 @@ pub(super) fn name_and_add(
                 let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
                 naming.ranked[i] = fit;
                 family_rms[i] = Some(rms);
-                simulated.push((i, rms));
+                // In rate feedback the relay is the simplest friction and is offered first;
+                // a relay met elsewhere (a flagged saturation) only wins by validating
+                // clearly better than the families before it.
+                if location == Location::RateFeedback {
+                    simulated.insert(0, (i, rms));
+                } else {
+                    simulated.push((i, rms));
+                }
             }
         }
         let refined: Vec<(usize, &EffectFit, f64)> = simulated
