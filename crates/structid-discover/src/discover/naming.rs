@@ -290,7 +290,7 @@ pub(super) fn name_and_add(
             let Ok(m) = ExprMap::parse(&naming.ranked[i].expression, 1) else {
                 continue;
             };
-            let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
+            let rms = simulation_rms(&h, &m, &val_h, settings);
             family_rms[i] = Some(rms);
             simulated.push((i, rms));
         }
@@ -316,7 +316,7 @@ pub(super) fn name_and_add(
             }
             let fit = polish(&start, &h, &est_h, settings);
             if let Ok(m) = ExprMap::parse(&fit.expression, 1) {
-                let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
+                let rms = simulation_rms(&h, &m, &val_h, settings);
                 naming.ranked[i] = fit;
                 family_rms[i] = Some(rms);
                 simulated.push((i, rms));
@@ -386,14 +386,14 @@ pub(super) fn name_and_add(
     };
     let estimation_gap = gap(
         &h.model,
-        &[interp.as_ref()],
+        &h.maps(interp.as_ref()),
         &est_h,
         est_candidates,
         gap_settings,
     )?;
     let validation_gap = gap(
         &h.model,
-        &[interp.as_ref()],
+        &h.maps(interp.as_ref()),
         &val_h,
         val_candidates,
         gap_settings,
@@ -415,6 +415,7 @@ pub(super) fn name_and_add(
             location,
             model: h.model.clone(),
             map: augmented_map,
+            known: h.known.clone(),
             estimation_gap,
             validation_gap,
         },

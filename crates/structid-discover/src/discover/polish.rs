@@ -110,13 +110,7 @@ impl LeastSquaresProblem for PolishProblem<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let fit = self.fit;
         let map = |z: &[f64]| fit.eval_with(theta, z[0]);
-        simulation_residual(
-            &self.h.model,
-            self.h.location,
-            &map,
-            self.est_h,
-            self.settings,
-        )
+        simulation_residual(self.h, &map, self.est_h, self.settings)
         .map(DVector::from_vec)
     }
 
