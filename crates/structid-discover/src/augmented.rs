@@ -238,7 +238,7 @@ impl Finding {
             _ => nominal_file,
         };
         let table_name = table_file_name(&next_block_name(nominal_file));
-        let (model, form) = model_file(
+        let (mut model, form) = model_file(
             nominal_file,
             self.location,
             self.augmented.model.lft(),
@@ -246,6 +246,13 @@ impl Finding {
             dispersion,
             &table_name,
         )?;
+        // The known maps as the augmented model simulates them: refitted jointly with the new
+        // one when they were named by an earlier step.
+        for (block, known) in model.blocks.iter_mut().skip(1).zip(&self.augmented.known) {
+            if let Some(fit) = &known.fit {
+                block.truth = Some(TruthSpec::Expression(fit.expression.clone()));
+            }
+        }
         let table = match &self.augmented.map {
             AugmentedMap::Table { z, w } => Some(TableFile {
                 name: table_name,

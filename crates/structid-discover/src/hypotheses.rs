@@ -35,8 +35,8 @@ use structid_core::{
     Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, NonlinearBlock,
     PolynomialDispersion, Result, Signal, Simulation, Site, Structure,
 };
-use structid_lti::LinearSystem as _;
 use structid_linear::PolynomialModel;
+use structid_lti::LinearSystem as _;
 
 /// Where the unknown block is inserted: structid-core's [`Site`], under the name this crate
 /// has always used.
@@ -71,6 +71,10 @@ pub struct KnownMap {
     pub name: String,
     /// The map.
     pub map: Arc<dyn Interpolant>,
+    /// The named family it is, when it was found by discovery in this process: its parameters
+    /// are refitted jointly with the next effect's (a map found first carries the bias of the
+    /// effects not yet modelled).
+    pub fit: Option<crate::effects::EffectFit>,
 }
 
 impl std::fmt::Debug for KnownMap {
@@ -181,12 +185,27 @@ impl Nominal {
     /// A channel that does not exist, a channel already used by another known map, a name
     /// already used.
     pub fn with_known_map(
-        mut self,
+        self,
         name: &str,
         z: usize,
         w: usize,
         map: Arc<dyn Interpolant>,
     ) -> Result<Self> {
+        self.with_known(
+            z,
+            w,
+            KnownMap {
+                name: name.to_string(),
+                map,
+                fit: None,
+            },
+        )
+    }
+
+    /// [`Nominal::with_known_map`] with the map as a [`KnownMap`] (which may carry its named
+    /// family).
+    pub fn with_known(mut self, z: usize, w: usize, known: KnownMap) -> Result<Self> {
+        let name = known.name.as_str();
         let d = self.lft.dims();
         if z >= d.z || w >= d.w {
             return Err(Error::InvalidStructure(format!(
@@ -195,24 +214,13 @@ impl Nominal {
                 d.z, d.w
             )));
         }
-        if let Some(other) = self
-            .known
-            .iter()
-            .find(|k| k.w == w || k.known.name == name)
-        {
+        if let Some(other) = self.known.iter().find(|k| k.w == w || k.known.name == name) {
             return Err(Error::InvalidStructure(format!(
                 "known map `{name}` (w column {w}) clashes with `{}` (w column {})",
                 other.known.name, other.w
             )));
         }
-        self.known.push(KnownBlock {
-            known: KnownMap {
-                name: name.to_string(),
-                map,
-            },
-            z,
-            w,
-        });
+        self.known.push(KnownBlock { known, z, w });
         // Fails early when the maps make an algebraic loop.
         self.known_lft()?.check_no_algebraic_loop()?;
         Ok(self)
@@ -377,7 +385,11 @@ impl Nominal {
         if self.known.is_empty() {
             return Ok(without_blocks(&self.lft)?.t_yu().simulate(u)?.channel(0));
         }
-        Ok(self.model()?.simulate(&self.maps(), u, None, None)?.y.channel(0))
+        Ok(self
+            .model()?
+            .simulate(&self.maps(), u, None, None)?
+            .y
+            .channel(0))
     }
 
     /// Every candidate location: the four built-in ones, then the declared ones.
@@ -526,7 +538,11 @@ impl Hypothesis {
     /// known maps (what every simulation of the hypothesis binds).
     pub fn maps<'a>(&'a self, map: &'a dyn Interpolant) -> Vec<&'a dyn Interpolant> {
         std::iter::once(map)
-            .chain(self.known.iter().map(|k| k.map.as_ref() as &dyn Interpolant))
+            .chain(
+                self.known
+                    .iter()
+                    .map(|k| k.map.as_ref() as &dyn Interpolant),
+            )
             .collect()
     }
 
@@ -646,7 +662,9 @@ impl Hypothesis {
                     (y.get(k, 0) - prev) / ts
                 };
                 if self.known.is_empty() {
-                    return data.clone().with_z(Signal::from_fn(y.len(), 1, |k, _| rate(k)));
+                    return data
+                        .clone()
+                        .with_z(Signal::from_fn(y.len(), 1, |k, _| rate(k)));
                 }
                 // Every z row is attached: the known maps' as the LFT computes them from the
                 // record, the new block's as the measured rate.

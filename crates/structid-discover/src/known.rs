@@ -15,9 +15,14 @@
 //! |---|---|---|
 //! | input | P driven by v = N(u) | every column of u becomes N's w column; z₀ = u |
 //! | output | y = N(ŷ) + D_ye·e, ŷ = C_y·x + D_yu·u + D_yw·w_k | y reads w₀; z₀ = ŷ (P's noise path must be static) |
-//! | output feedback | P driven by v = u − N(y) | B_w gets −B_u, z₀ = y (needs D_yu = 0) |
-//! | rate feedback | P driven by v = u − N(ẏ) | as output feedback, plus the state m = y_(k−1), z₀ = (y − m)/T_s |
+//! | output feedback | y = G·(u − N(y)) with P's maps | N's w column is −(the input path of G), z₀ = y (needs a delay) |
+//! | rate feedback | y = G·(u − N(ẏ)) with P's maps | as output feedback, plus the state m = y_(k−1), z₀ = (y − m)/T_s |
 //! | declared | P's own declared w column and z row | the declared channels are kept with the known ones |
+//!
+//! The input path of G, where feedback enters, is B_u when u reaches the dynamics directly;
+//! when u enters only through a known actuator map (a block reading u alone, e.g. the input
+//! saturation of an earlier discovery), it is that map's w column: a spring or a friction
+//! force acts after the actuator, y = G·(sat(u) − N(y)).
 //!
 //! Without known channels these are the LFTs of [`structid_core::Site::insert`] (which the
 //! callers then use, so that a nominal model without maps is handled exactly as before).
@@ -117,7 +122,18 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
     let (n, nk, ne) = (d.states, d.w, d.e);
     let zeros = DMatrix::<f64>::zeros;
     let one = DMatrix::<f64>::identity(1, 1);
-    let direct = m.dyu.iter().any(|v| *v != 0.0);
+    // Feedback enters where u enters G: through B_u when u reaches the dynamics directly,
+    // else after a known actuator map (a block that reads u alone), as a spring or a friction
+    // force acts after the actuator that saturates.
+    let (entry_b, entry_dy, entry_dz) = match actuator(p) {
+        Some(a) if m.bu.iter().chain(m.dyu.iter()).all(|v| *v == 0.0) => (
+            m.bw.columns(a, 1).into_owned(),
+            m.dyw.columns(a, 1).into_owned(),
+            m.dzw.columns(a, 1).into_owned(),
+        ),
+        _ => (m.bu.clone(), m.dyu.clone(), m.dzu.clone()),
+    };
+    let direct = entry_dy.iter().any(|v| *v != 0.0);
     let feedback_needs_delay = |what: &str| {
         Error::InvalidStructure(format!(
             "a block {what} needs G to have an input delay (D_yu = 0); otherwise y_k depends on \
@@ -137,13 +153,7 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
             cz: vstack(&[&zeros(1, n), &m.cz], n),
             dzu: vstack(&[&one, &zeros(nk, 1)], 1),
             dze: vstack(&[&zeros(1, ne), &m.dze], ne),
-            dzw: vstack(
-                &[
-                    &zeros(1, 1 + nk),
-                    &hstack(&[&m.dzu, &m.dzw], nk),
-                ],
-                1 + nk,
-            ),
+            dzw: vstack(&[&zeros(1, 1 + nk), &hstack(&[&m.dzu, &m.dzw], nk)], 1 + nk),
         },
         Site::Output => {
             if m.be.iter().any(|v| *v != 0.0) {
@@ -183,18 +193,18 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
                 a: m.a.clone(),
                 bu: m.bu.clone(),
                 be: m.be.clone(),
-                bw: hstack(&[&(-&m.bu), &m.bw], n),
+                bw: hstack(&[&(-&entry_b), &m.bw], n),
                 cy: m.cy.clone(),
                 dyu: m.dyu.clone(),
                 dye: m.dye.clone(),
-                dyw: hstack(&[&(-&m.dyu), &m.dyw], 1),
+                dyw: hstack(&[&(-&entry_dy), &m.dyw], 1),
                 cz: vstack(&[&m.cy, &m.cz], n),
                 dzu: vstack(&[&m.dyu, &m.dzu], 1),
                 dze: vstack(&[&m.dye, &m.dze], ne),
                 dzw: vstack(
                     &[
-                        &hstack(&[&(-&m.dyu), &m.dyw], 1),
-                        &hstack(&[&(-&m.dzu), &m.dzw], nk),
+                        &hstack(&[&(-&entry_dy), &m.dyw], 1),
+                        &hstack(&[&(-&entry_dz), &m.dzw], nk),
                     ],
                     1 + nk,
                 ),
@@ -213,8 +223,8 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
             let be = vstack(&[&m.be, &m.dye], ne);
             let bw = vstack(
                 &[
-                    &hstack(&[&(-&m.bu), &m.bw], n),
-                    &hstack(&[&(-&m.dyu), &m.dyw], 1),
+                    &hstack(&[&(-&entry_b), &m.bw], n),
+                    &hstack(&[&(-&entry_dy), &m.dyw], 1),
                 ],
                 1 + nk,
             );
@@ -230,14 +240,14 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
                 cy,
                 dyu: m.dyu.clone(),
                 dye: m.dye.clone(),
-                dyw: hstack(&[&(-&m.dyu), &m.dyw], 1),
+                dyw: hstack(&[&(-&entry_dy), &m.dyw], 1),
                 cz,
                 dzu: vstack(&[&(&m.dyu / ts), &m.dzu], 1),
                 dze: vstack(&[&(&m.dye / ts), &m.dze], ne),
                 dzw: vstack(
                     &[
-                        &hstack(&[&(-&m.dyu / ts), &(&m.dyw / ts)], 1),
-                        &hstack(&[&(-&m.dzu), &m.dzw], nk),
+                        &hstack(&[&(-&entry_dy / ts), &(&m.dyw / ts)], 1),
+                        &hstack(&[&(-&entry_dz), &m.dzw], nk),
                     ],
                     1 + nk,
                 ),
@@ -253,6 +263,24 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
     let lft = with_time(p, matrices)?;
     lft.check_no_algebraic_loop()?;
     Ok(lft)
+}
+
+/// The known block that is an actuator map, if exactly one is: its z row reads u alone
+/// (C_z, D_ze and D_zw zero on the row, D_zu not).
+fn actuator(p: &Lft) -> Option<usize> {
+    let m = p.matrices();
+    let zero_row = |a: &DMatrix<f64>, r: usize| a.row(r).iter().all(|v| *v == 0.0);
+    let reads_u_alone = |r: usize| {
+        zero_row(&m.cz, r) && zero_row(&m.dze, r) && zero_row(&m.dzw, r) && !zero_row(&m.dzu, r)
+    };
+    // Known block i reads z row i and writes w column i (see `wrap`).
+    let found: Vec<usize> = (0..p.dims().w.min(p.dims().z))
+        .filter(|&i| reads_u_alone(i))
+        .collect();
+    match found[..] {
+        [a] => Some(a),
+        _ => None,
+    }
 }
 
 /// The LFT of block 0 alone, with the w columns `1..` (the known blocks' outputs) turned into

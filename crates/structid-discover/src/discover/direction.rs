@@ -102,8 +102,18 @@ pub(super) fn simulation_residual(
     data: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Vec<f64>> {
+    simulation_residual_of(h, &h.maps(map), data, settings)
+}
+
+/// [`simulation_residual`] with every block's map given (`maps`, in the model's block order).
+pub(super) fn simulation_residual_of(
+    h: &Hypothesis,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> Option<Vec<f64>> {
     let settings = scoring_settings(h.location, settings);
-    let v = validate(&h.model, &h.maps(map), data, &settings).ok()?;
+    let v = validate(&h.model, maps, data, &settings).ok()?;
     let y = data.y().channel(0);
     let r: Vec<f64> = v
         .scored

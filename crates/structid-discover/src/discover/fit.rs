@@ -7,8 +7,8 @@ use std::time::Instant;
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::validation::{Scoring, ValidationSettings, Windows, validate};
 use structid_core::{
-    Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant,
-    PolynomialDispersion, Result, Signal,
+    Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, PolynomialDispersion,
+    Result, Signal,
 };
 use structid_io::{DispersionSpec, IoError};
 

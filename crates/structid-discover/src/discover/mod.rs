@@ -90,8 +90,8 @@ mod refine;
 mod settings;
 mod total_variation;
 
-pub use iterate::{Effects, EffectsSettings, Step, StopReason, discover_effects};
 pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersion_spec};
+pub use iterate::{Effects, EffectsSettings, Step, StopReason, discover_effects};
 pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCurve};
 pub use naming::parsimonious;
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};

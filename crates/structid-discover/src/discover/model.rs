@@ -1,8 +1,8 @@
 //! What discovery reports per hypothesis and about the effect: map curves, hypothesis
 //! results, the classification and the augmented model.
 
-use structid_core::hyperparameters::Bound;
 use std::sync::Arc;
+use structid_core::hyperparameters::Bound;
 
 use structid_core::{ExprMap, Interpolant, LookupTable, Model, Result};
 
@@ -112,6 +112,8 @@ pub struct Augmented {
     pub model: Model,
     /// The new block's map.
     pub map: AugmentedMap,
+    /// The new block's named family, when it was named.
+    pub fit: Option<EffectFit>,
     /// The nominal model's known maps, blocks `1..` of `model` (empty for a linear nominal).
     pub known: Vec<KnownMap>,
     /// The gap of the augmented model on the estimation record.
@@ -134,7 +136,20 @@ impl Augmented {
     /// fixed ([`Nominal::from_model`]), and the named states of `given` (the nominal model it
     /// was found on) that its states keep.
     pub fn as_nominal(&self, given: &Nominal) -> Result<Nominal> {
-        let mut next = Nominal::from_model(&self.model, self.maps()?)?;
+        let mut next = Nominal::new(self.model.lft().clone())?;
+        let fits =
+            std::iter::once(self.fit.clone()).chain(self.known.iter().map(|k| k.fit.clone()));
+        for ((block, map), fit) in self.model.blocks().iter().zip(self.maps()?).zip(fits) {
+            next = next.with_known(
+                block.inputs[0],
+                block.output,
+                KnownMap {
+                    name: block.name.clone(),
+                    map,
+                    fit,
+                },
+            )?;
+        }
         let states = self.model.lft().dims().states;
         for s in given.states() {
             if s.state < states {

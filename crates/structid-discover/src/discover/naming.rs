@@ -5,12 +5,12 @@ use structid_core::{Data, Error, ExprMap, Result};
 
 use crate::effects::{Effect, EffectFit, Naming, NamingSettings, fit_effect_with, name_effect};
 use crate::gap::{Gap, GapSettings, gap};
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use super::fit::{Fitted, simulation_rms};
 use super::fit::{even_indices, minmax, scoring_settings};
-use super::polish::polish;
+use super::polish::{polish, polish_jointly};
 use super::{Augmented, AugmentedMap, Classification, DiscoverSettings, Finding};
 
 /// Remarks and equivalent locations for a named effect.
@@ -248,6 +248,36 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
     )
 }
 
+/// The family `fit` refitted jointly with the named known maps of `h`
+/// ([`polish_jointly`]): the refitted family, the hypothesis with the refitted known maps, and
+/// the validation RMS; `None` when `h` has no named known map or the refit failed.
+fn refit_with_known(
+    fit: &EffectFit,
+    h: &Hypothesis,
+    est_h: &Data,
+    val_h: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(EffectFit, Hypothesis, f64)> {
+    if !h.known.iter().any(|k| k.fit.is_some()) {
+        return None;
+    }
+    let known: Vec<Option<EffectFit>> = h.known.iter().map(|k| k.fit.clone()).collect();
+    let (new_fit, refitted) = polish_jointly(fit, &known, h, est_h, settings)?;
+    if !new_fit.nameable() {
+        return None;
+    }
+    let mut joint = h.clone();
+    for (k, f) in joint.known.iter_mut().zip(refitted) {
+        if let Some(f) = f {
+            k.map = std::sync::Arc::new(ExprMap::parse(&f.expression, 1).ok()?);
+            k.fit = Some(f);
+        }
+    }
+    let m = ExprMap::parse(&new_fit.expression, 1).ok()?;
+    let rms = simulation_rms(&joint, &m, val_h, settings);
+    Some((new_fit, joint, rms))
+}
+
 #[allow(clippy::too_many_arguments)]
 pub(super) fn name_and_add(
     best: Fitted,
@@ -273,7 +303,10 @@ pub(super) fn name_and_add(
 
     let noise = before.noise_std;
     let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
+    // The known maps refitted jointly with family i, when that validated better.
+    let mut joint_known: Vec<Option<Hypothesis>> = vec![None; naming.ranked.len()];
     let mut classification = Classification::Unnamed;
+    let mut chosen_joint: Option<Hypothesis> = None;
     if direction.dynamic {
         classification = Classification::Dynamic;
     } else {
@@ -290,7 +323,17 @@ pub(super) fn name_and_add(
             let Ok(m) = ExprMap::parse(&naming.ranked[i].expression, 1) else {
                 continue;
             };
-            let rms = simulation_rms(&h, &m, &val_h, settings);
+            let mut rms = simulation_rms(&h, &m, &val_h, settings);
+            // With maps named by earlier steps, each family is also refitted together with
+            // them, so that the families are compared without the earlier maps' bias.
+            if let Some((fit, known, joint_rms)) =
+                refit_with_known(&naming.ranked[i], &h, &est_h, &val_h, settings)
+                && joint_rms < rms
+            {
+                naming.ranked[i] = fit;
+                rms = joint_rms;
+                joint_known[i] = Some(known);
+            }
             family_rms[i] = Some(rms);
             simulated.push((i, rms));
         }
@@ -333,13 +376,35 @@ pub(super) fn name_and_add(
             settings.naming_tolerance,
         ) {
             classification = Classification::Named(naming.ranked[i].clone());
+            chosen_joint = joint_known[i].take();
         }
+    }
+    // The maps found by earlier steps were fitted while this effect was unmodelled: when the
+    // named family was refitted together with them, the augmented model carries them so.
+    let mut h = h;
+    let mut joint_remark = None;
+    if let Some(joint) = chosen_joint {
+        joint_remark = Some(format!(
+            "the maps of the earlier steps were refitted jointly with this one (output error, \
+             every map in the loop): {}",
+            joint
+                .known
+                .iter()
+                .filter_map(|k| k
+                    .fit
+                    .as_ref()
+                    .map(|f| format!("`{}` = {}", k.name, f.expression)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        h = joint;
     }
     naming.named = match &classification {
         Classification::Named(fit) => Some(fit.clone()),
         _ => None,
     };
     let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
+    remarks.extend(joint_remark);
     match &classification {
         Classification::Named(_) => {}
         Classification::Unnamed => {
@@ -399,6 +464,7 @@ pub(super) fn name_and_add(
         gap_settings,
     )?;
     let shrink = before.rms / validation_gap.rms;
+    let named = naming.named.clone();
     Ok(Finding {
         location,
         hypothesis: best.result.clone(),
@@ -415,6 +481,7 @@ pub(super) fn name_and_add(
             location,
             model: h.model.clone(),
             map: augmented_map,
+            fit: named,
             known: h.known.clone(),
             estimation_gap,
             validation_gap,
