@@ -226,6 +226,17 @@ impl Nominal {
         Ok(self)
     }
 
+    /// The nominal model with the known maps' named families set to `fits` (one per known
+    /// map, in their order; `None` leaves a map as it is).
+    pub fn with_known_fits(mut self, fits: Vec<Option<crate::effects::EffectFit>>) -> Self {
+        for (k, fit) in self.known.iter_mut().zip(fits) {
+            if fit.is_some() {
+                k.known.fit = fit;
+            }
+        }
+        self
+    }
+
     /// The known maps, in the order of their blocks.
     pub fn known_maps(&self) -> Vec<KnownMap> {
         self.known.iter().map(|k| k.known.clone()).collect()

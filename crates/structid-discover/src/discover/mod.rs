@@ -253,6 +253,9 @@ pub fn discover(
 ) -> Result<Discovery> {
     let t0 = Instant::now();
     check_records(est, val)?;
+    // Known maps given as functions: the families they are exactly, for the joint refit.
+    let recovered = naming::recover_families(nominal, est, settings)?;
+    let nominal = recovered.as_ref().unwrap_or(nominal);
     let scoring = resolve_scoring(nominal, est, settings)?;
     let settings = &DiscoverSettings {
         scoring: Some(scoring),

@@ -248,6 +248,60 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
     )
 }
 
+/// A known map of a nominal model read from a file is only a function (an expression or a
+/// table); when it is exactly a family of the library (a map found and named by an earlier
+/// run), that family is recovered, so that its parameters can be refitted jointly with the
+/// next effect's. Each known map without a family is sampled at 400 points over the range of
+/// its z on `est`, and every family (with and without offset) is fitted to the points; the one
+/// with fewest parameters that reproduces them to 10⁻⁶ of their RMS is taken. Returns the
+/// nominal model with the families found, or `None` when nothing was to be recovered.
+pub(super) fn recover_families(
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Option<Nominal>> {
+    let known = nominal.known_maps();
+    if known.iter().all(|k| k.fit.is_some()) {
+        return Ok(None);
+    }
+    let z = nominal.model()?.lft().compute_z(est.u(), est.y())?.0;
+    let count = |f: &EffectFit| f.parameters.len() + usize::from(f.offset.is_some());
+    let fits = known
+        .iter()
+        .enumerate()
+        .map(|(i, k)| {
+            if k.fit.is_some() {
+                return None;
+            }
+            let (lo, hi) = minmax(&z.channel(i));
+            if !(hi > lo) {
+                return None;
+            }
+            let zs: Vec<f64> = (0..400)
+                .map(|j| lo + (hi - lo) * j as f64 / 399.0)
+                .collect();
+            let ws: Vec<f64> = zs.iter().map(|v| k.map.eval(&[*v])).collect();
+            let scale = (ws.iter().map(|w| w * w).sum::<f64>() / ws.len() as f64).sqrt();
+            if !(scale.is_finite() && scale > 0.0) {
+                return None;
+            }
+            let mut best: Option<EffectFit> = None;
+            for &effect in &settings.library {
+                for offset in [false, true] {
+                    if let Ok(f) = fit_effect_with(effect, offset, &zs, &ws)
+                        && f.rms <= 1e-6 * scale
+                        && best.as_ref().is_none_or(|b| count(&f) < count(b))
+                    {
+                        best = Some(f);
+                    }
+                }
+            }
+            best
+        })
+        .collect();
+    Ok(Some(nominal.clone().with_known_fits(fits)))
+}
+
 /// The family `fit` refitted jointly with the named known maps of `h`
 /// ([`polish_jointly`]): the refitted family, the hypothesis with the refitted known maps, and
 /// the validation RMS; `None` when `h` has no named known map or the refit failed.
