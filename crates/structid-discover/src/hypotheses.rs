@@ -449,12 +449,36 @@ impl Nominal {
         }
     }
 
-    /// The named states simulated from u (nominal model, zero initial state), by name.
+    /// The named states simulated from u (nominal model with its known maps, zero initial
+    /// state, no noise), by name.
     pub fn state_signals(&self, data: &Data) -> Result<Vec<(String, Vec<f64>)>> {
         if self.states.is_empty() {
             return Ok(Vec::new());
         }
         let n = self.lft.dims().states;
+        if !self.known.is_empty() {
+            // The maps' outputs of the noise-free simulation drive the states with u:
+            // x⁺ = A·x + B_u·u + B_w·w.
+            let model = self.model()?;
+            let w = model.simulate(&self.maps(), data.u(), None, None)?.w;
+            let m = model.lft().matrices();
+            let mut x = nalgebra::DVector::zeros(n);
+            let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(data.len()); self.states.len()];
+            for k in 0..data.len() {
+                for (o, s) in out.iter_mut().zip(&self.states) {
+                    o.push(x[s.state]);
+                }
+                let u = nalgebra::DVector::from_column_slice(data.u().sample(k));
+                let wk = nalgebra::DVector::from_column_slice(w.sample(k));
+                x = &m.a * &x + &m.bu * u + &m.bw * wk;
+            }
+            return Ok(self
+                .states
+                .iter()
+                .map(|s| s.name.clone())
+                .zip(out)
+                .collect());
+        }
         let (_, x) = self.lft.t_yu().simulate_states(&vec![0.0; n], data.u())?;
         Ok(self
             .states

@@ -331,6 +331,95 @@ mod tests {
         .unwrap()
     }
 
+    /// x_k = 1.5·x_(k−1) − 0.7·x_(k−2) + 0.1·(f_(k−1) + f_(k−2)) from rest, with the force
+    /// f_k = force(k, u_k, y_k, y_(k−1)) and y_k = sensor(x_k): the plant written out, to
+    /// compare the wrapped LFTs with.
+    fn plant(
+        u: &[f64],
+        force: impl Fn(f64, f64, f64) -> f64,
+        sensor: impl Fn(f64) -> f64,
+    ) -> Vec<f64> {
+        let n = u.len();
+        let (mut x, mut f, mut y) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for k in 0..n {
+            let at = |v: &[f64], lag: usize| if k >= lag { v[k - lag] } else { 0.0 };
+            x[k] = 1.5 * at(&x, 1) - 0.7 * at(&x, 2) + 0.1 * (at(&f, 1) + at(&f, 2));
+            y[k] = sensor(x[k]);
+            f[k] = force(u[k], y[k], at(&y, 1));
+        }
+        y
+    }
+
+    /// Each site around a nominal model with a known map simulates as the plant it stands
+    /// for: feedback after the known actuator, an actuator ahead of the known feedback, a
+    /// sensor after both.
+    #[test]
+    fn wrapped_sites_simulate_as_the_plant() {
+        use crate::hypotheses::{Location, Nominal, hypothesis};
+        use std::sync::Arc;
+        use structid_core::{Interpolant, PolynomialDispersion, Signal};
+        let g = PolynomialModel {
+            den: vec![1.0, -1.5, 0.7],
+            num: vec![vec![0.0, 0.1, 0.1]],
+            sample_time: Some(0.05),
+        };
+        let d = || Arc::new(PolynomialDispersion::new(1).unwrap());
+        let sat = |v: f64| (1.5 * v).clamp(-0.8, 0.8);
+        let cubic = |v: f64| 0.2 * v.powi(3);
+        let friction = |v: f64| 0.01 * v + 0.02 * v.signum();
+        let u: Vec<f64> = (0..400)
+            .map(|k| 1.2 * (0.07 * k as f64).sin() + 0.5 * (0.31 * k as f64).cos())
+            .collect();
+        let us = Signal::from_fn(u.len(), 1, |k, _| u[k]);
+        let known = |location: Location, map: fn(f64) -> f64| {
+            let first = hypothesis(&g, location, d()).unwrap();
+            let m: Arc<dyn Interpolant> = Arc::new(move |z: &[f64]| map(z[0]));
+            Nominal::from_model(&first.model, vec![m]).unwrap()
+        };
+        let ts = 0.05;
+        let cases: Vec<(Nominal, Location, fn(f64) -> f64, Vec<f64>)> = vec![
+            (
+                known(Location::Input, sat),
+                Location::OutputFeedback,
+                cubic,
+                plant(&u, |u, y, _| sat(u) - cubic(y), |x| x),
+            ),
+            (
+                known(Location::Input, sat),
+                Location::RateFeedback,
+                friction,
+                plant(&u, |u, y, y1| sat(u) - friction((y - y1) / ts), |x| x),
+            ),
+            (
+                known(Location::OutputFeedback, cubic),
+                Location::Input,
+                sat,
+                plant(&u, |u, y, _| sat(u) - cubic(y), |x| x),
+            ),
+            (
+                known(Location::Input, sat),
+                Location::Output,
+                cubic,
+                plant(&u, |u, _, _| sat(u), cubic),
+            ),
+        ];
+        for (nominal, location, map, expected) in cases {
+            let h = nominal.hypothesis(location, d()).unwrap();
+            let f = move |z: &[f64]| map(z[0]);
+            let y = h.simulate(&f, &us, None).unwrap().y.channel(0);
+            let worst = y
+                .iter()
+                .zip(&expected)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            let scale = expected.iter().map(|v| v.abs()).fold(0.0, f64::max);
+            assert!(
+                scale > 0.1 && worst < 1e-12 * scale.max(1.0),
+                "{location:?}: {worst}"
+            );
+        }
+    }
+
     /// Around a nominal model with no known channels, every built-in site gives the LFT of
     /// [`Site::insert`] (the one construction the single-effect workflow uses).
     #[test]

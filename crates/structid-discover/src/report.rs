@@ -347,13 +347,26 @@ fn nominal_text(mf: &ModelFile) -> String {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    let maps = if mf.blocks.is_empty() {
+        String::new()
+    } else {
+        format!(
+            ", with the known map(s) {}",
+            mf.blocks
+                .iter()
+                .map(|b| format!("`{}`", b.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    };
     match &mf.linear {
         Some(spec) => format!(
-            "`[linear]` lti, den = [{}], num = [{}]",
+            "`[linear]` {}, den = [{}], num = [{}]{maps}",
+            spec.structure_name(),
             list(&spec.model.den),
             list(&spec.model.num[0])
         ),
-        None => format!("`[lft]` with {} state(s)", mf.lft.dims().states),
+        None => format!("`[lft]` with {} state(s){maps}", mf.lft.dims().states),
     }
 }
 
