@@ -377,7 +377,8 @@ mod tests {
             Nominal::from_model(&first.model, vec![m]).unwrap()
         };
         let ts = 0.05;
-        let cases: Vec<(Nominal, Location, fn(f64) -> f64, Vec<f64>)> = vec![
+        type Case = (Nominal, Location, fn(f64) -> f64, Vec<f64>);
+        let cases: Vec<Case> = vec![
             (
                 known(Location::Input, sat),
                 Location::OutputFeedback,

@@ -213,7 +213,7 @@ pub fn discover_effects(
                 let ratio = f.augmented.validation_gap.rms / d.validation_gap.rms;
                 if matches!(f.classification, Classification::Dynamic) {
                     Err(StopReason::Dynamic)
-                } else if !(ratio <= 1.0 - effects.min_improvement) {
+                } else if ratio.is_nan() || ratio > 1.0 - effects.min_improvement {
                     Err(StopReason::NoImprovement { ratio })
                 } else {
                     Ok(f.augmented.as_nominal(&current)?)

@@ -274,7 +274,7 @@ pub(super) fn recover_families(
                 return None;
             }
             let (lo, hi) = minmax(&z.channel(i));
-            if !(hi > lo) {
+            if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
                 return None;
             }
             let zs: Vec<f64> = (0..400)
