@@ -29,7 +29,7 @@
 //!
 //! For identification the known maps are *inputs*: every z_k is measurable (z is computed from
 //! u and y, or measured), so w_k = N_k(z_k) is a known signal on a record, and the LFT of N
-//! alone sees it as extra input columns ([`with_known_inputs`]). That is exact for a
+//! alone sees it as extra input columns ([`crate::hypotheses::Hypothesis::block_lft`]). That is exact for a
 //! one-step-ahead (equation-error) criterion, which is what identification minimises; the
 //! simulations that rank and name hypotheses use the full LFT with every map in the loop.
 
