@@ -406,6 +406,51 @@ mod tests {
         validate(&model, &refs, &data, &settings).unwrap().rms[0]
     }
 
+    /// A nominal file with a map gives an `[lft]` file with the new block `N2` first and the
+    /// nominal block after it, its table truth renamed for its block.
+    #[test]
+    fn a_nominal_file_with_a_map_keeps_it_after_the_new_block() {
+        let mut nominal_mf = ModelFile::parse(
+            "[linear]\nstructure = \"input\"\nsample_time = 0.05\nden = [1.0, -1.5, 0.7]\n\
+             num = [[0.0, 0.1, 0.1]]\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n\
+             [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n\
+             dispersion = { kind = \"polynomial\", degree = 1 }\ntruth = \"z0\"\n",
+            None,
+        )
+        .unwrap();
+        let table = LookupTable::one_d(vec![-1.0, 0.0, 1.0], vec![-0.5, 0.0, 0.5]).unwrap();
+        nominal_mf.blocks[0].truth = Some(TruthSpec::Table {
+            file: "../elsewhere/old.csv".into(),
+            table: table.clone(),
+        });
+        let lft = nominal_mf.lft.clone();
+        let (mf, form) = model_file(
+            &nominal_mf,
+            Location::OutputFeedback,
+            &lft,
+            &AugmentedMap::Expression("0.2*z0^3".into()),
+            quadratic_dispersion_spec(Some(0.3), 3),
+            "N2_table.csv",
+        )
+        .unwrap();
+        assert_eq!(form, "[lft]");
+        assert!(mf.linear.is_none());
+        let names: Vec<&str> = mf.blocks.iter().map(|b| b.name.as_str()).collect();
+        assert_eq!(names, ["N2", "N"]);
+        assert_eq!(
+            (mf.blocks[1].inputs.clone(), mf.blocks[1].output),
+            (vec![1], 1)
+        );
+        assert_eq!(
+            mf.blocks[1].truth,
+            Some(TruthSpec::Table {
+                file: table_file_name("N"),
+                table
+            })
+        );
+        assert_eq!(next_block_name(&mf), "N3");
+    }
+
     /// Every location's augmented file, read back, simulates like the hypothesis' LFT it was
     /// written from.
     #[test]
