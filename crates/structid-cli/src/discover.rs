@@ -11,14 +11,14 @@ use clap::Args;
 use structid_core::estimate::SignalNames;
 use structid_discover::augmented::{self, AugmentedFile, ESTIMATE_FILE, TABLE_FILE};
 use structid_discover::discover::{
-    Classification, DiscoverSettings, Finding, HypothesisResult, candidate_signals, discover,
+    Classification, DiscoverSettings, EffectsSettings, Finding, HypothesisResult,
+    candidate_signals, discover, discover_effects,
 };
 use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
 use structid_discover::report::{self, Record, ReportContext, TimeAxis};
 use structid_io::{ModelFile, OutputGuard, estimate_json};
-use structid_lti::LinearSystem as _;
 use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
 
 use crate::error::CliError;
@@ -30,7 +30,12 @@ const MAX_DOTS: usize = 2000;
 /// Bins of the binned residual in regions.svg.
 const REGION_BINS: usize = 20;
 
-/// Every file `structid discover` may write, in the order of the summary.
+/// The tables of blocks `N2` … `N{MAX_TABLE_BLOCKS}` (second and later effects) that an
+/// earlier run may have left are removed like the other outputs.
+const MAX_TABLE_BLOCKS: usize = 9;
+
+/// Every file `structid discover` may write, in the order of the summary (and the tables of
+/// later effects' blocks, `N2_table.csv`, …).
 const OUTPUTS: [&str; 9] = [
     "augmented.toml",
     TABLE_FILE,
@@ -46,9 +51,11 @@ const OUTPUTS: [&str; 9] = [
 /// Arguments of `structid discover`.
 #[derive(Debug, Args)]
 pub struct DiscoverArgs {
-    /// The nominal model file: one input, one output, no `[[nonlinearity]]`, its linear block as
-    /// `[linear]` with structure = "lti" (write one with `structid linear --structure lti`) or
-    /// as `[lft]`.
+    /// The nominal model file: one input, one output, its linear block as `[linear]` with
+    /// structure = "lti" (write one with `structid linear --structure lti`) or as `[lft]`; or a
+    /// model that already has maps (every `[[nonlinearity]]` with a `truth`, e.g. the
+    /// `augmented.toml` of an earlier run), whose maps are kept fixed while the next effect is
+    /// found around it.
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
     /// The estimation record (CSV with the columns named in the model's `[signals]`): every
@@ -117,26 +124,41 @@ pub struct DiscoverArgs {
         default_value_t = DiscoverSettings::default().hysteresis_threshold()
     )]
     hysteresis_threshold: f64,
+    /// Look for up to N effects, one at a time: each step adopts the augmented model of the
+    /// one before as its nominal model (its maps fixed in the loop), and the iteration stops
+    /// when the gap is noise, when no block explains it, or when a step cuts the validation
+    /// RMS by less than 10 %. The files are those of the last adopted step; the report lists
+    /// every step.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    effects: usize,
 }
 // ---------------------------------------------------------------------------------------------
 // Inputs
 
-/// The nominal model of a model file, or a clear input error.
+/// The nominal model of a model file, or a clear input error. A file with
+/// `[[nonlinearity]]` blocks (e.g. the `augmented.toml` of an earlier run) is a nominal model
+/// that carries maps: every block needs a `truth` (the known map, kept fixed) and one z input.
 fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
     let how = "write one with `structid linear --data EST.csv --structure lti --out MODEL.toml`, \
                or give the linear block as [lft] without [[nonlinearity]]";
-    if !mf.blocks.is_empty() {
-        return Err(CliError::input(format!(
-            "`{}` has {} [[nonlinearity]] block(s) ({}); discovery starts from a nominal linear \
-             model without maps ({how})",
-            path.display(),
-            mf.blocks.len(),
-            mf.blocks
-                .iter()
-                .map(|b| format!("`{}`", b.name))
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
+    for b in &mf.blocks {
+        if b.truth.is_none() {
+            return Err(CliError::input(format!(
+                "`{}`: block `{}` has no `truth`: a nominal model's maps must be known (give the \
+                 map as `truth = \"expression in z0\"` or a table, as `structid discover` writes \
+                 augmented.toml), or remove the block",
+                path.display(),
+                b.name
+            )));
+        }
+        if b.inputs.len() != 1 {
+            return Err(CliError::input(format!(
+                "`{}`: block `{}` reads {} z signals; a map of a nominal model reads one",
+                path.display(),
+                b.name,
+                b.inputs.len()
+            )));
+        }
     }
     if mf.signals.u.len() != 1 || mf.signals.y.len() != 1 {
         return Err(CliError::input(format!(
@@ -155,6 +177,7 @@ fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
         )));
     }
     let mut nominal = match &mf.linear {
+        _ if !mf.blocks.is_empty() => known_maps_nominal(mf, path)?,
         Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model)?,
         Some(spec) => {
             return Err(CliError::input(format!(
@@ -175,6 +198,41 @@ fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
         }
     }
     Ok(nominal)
+}
+
+/// The nominal model of a file with `[[nonlinearity]]` blocks: its LFT with every block's
+/// truth as a fixed map.
+fn known_maps_nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
+    let context = |e: String| {
+        CliError::input(format!(
+            "`{}` cannot be a nominal model with maps: {e}",
+            path.display()
+        ))
+    };
+    let maps = mf
+        .truth_maps()
+        .map_err(|e| context(e.to_string()))?
+        .ok_or_else(|| context("a block has no truth".into()))?;
+    // The dispersions are not used (the maps are fixed): placeholders keep the model valid.
+    let placeholder: std::sync::Arc<dyn structid_core::Dispersion> = std::sync::Arc::new(
+        structid_core::PolynomialDispersion::new(1).map_err(|e| context(e.to_string()))?,
+    );
+    let blocks = mf
+        .blocks
+        .iter()
+        .map(|b| {
+            structid_core::NonlinearBlock::new(
+                b.name.clone(),
+                b.inputs.clone(),
+                b.output,
+                std::sync::Arc::clone(&placeholder),
+            )
+        })
+        .collect();
+    let model =
+        structid_core::Model::new(mf.lft.clone(), blocks).map_err(|e| context(e.to_string()))?;
+    Nominal::from_model(&model, maps.into_iter().map(std::sync::Arc::from).collect())
+        .map_err(|e| context(e.to_string()))
 }
 
 /// `--locations`: keys of the built-in locations, `declared-i`, or names of declared ones.
@@ -521,7 +579,7 @@ fn write_augmented(
     written: &mut Vec<PathBuf>,
 ) -> Result<AugmentedFile, CliError> {
     let file = f.augmented_file(mf, settings.trend_degree())?;
-    if let Some(t) = &file.table {
+    for t in file.table.iter().chain(&file.known_tables) {
         let path = a.out.join(&t.name);
         guard.write_csv(&path, &["z", "value"], &[t.z.clone(), t.w.clone()])?;
         written.push(path);
@@ -569,7 +627,39 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
             )));
         }
     }
-    let d = discover(&nominal, &est.data, &val.data, &settings)?;
+    if a.effects == 0 {
+        return Err(CliError::input(
+            "invalid value 0 for --effects: at least one effect must be looked for",
+        ));
+    }
+    // One effect: the discovery itself. Several: the iteration, reported through its last
+    // adopted step (whose nominal model carries the effects of the steps before it).
+    let (d, effects) = if a.effects == 1 {
+        (discover(&nominal, &est.data, &val.data, &settings)?, None)
+    } else {
+        let effects = discover_effects(
+            &nominal,
+            &est.data,
+            &val.data,
+            &settings,
+            &EffectsSettings::default().with_max_effects(a.effects)?,
+        )?;
+        let at = effects.steps.iter().rposition(|s| s.adopted).unwrap_or(0);
+        (effects.steps[at].discovery.clone(), Some((effects, at)))
+    };
+    // The nominal model and file of the reported step: the given ones, or those of the
+    // augmented model of the step before it.
+    let mut step_file = mf.clone();
+    let mut step_nominal = nominal.clone();
+    if let Some((effects, at)) = &effects {
+        for step in &effects.steps[..*at] {
+            if let Some(f) = &step.discovery.finding {
+                step_file = f.augmented_file(&step_file, settings.trend_degree())?.model;
+            }
+        }
+        step_nominal = effects.steps[*at].nominal.clone();
+    }
+    let (mf, nominal) = (step_file, step_nominal);
     // Said after the run, so that an input error is the first line of stderr.
     if std::fs::canonicalize(&a.data).ok() == std::fs::canonicalize(&a.validate).ok() {
         eprintln!(
@@ -616,13 +706,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
              windows above it shaded"
         ),
     ));
-    let linear = nominal
-        .model()?
-        .lft()
-        .t_yu()
-        .simulate(est.data.u())
-        .map_err(structid_core::Error::from)?
-        .channel(0);
+    let linear = nominal.simulate_output(est.data.u())?;
     let mut candidates = candidate_signals(
         &est.data,
         &linear,
@@ -690,7 +774,13 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         max_lag,
     };
     let md_path = a.out.join("report.md");
-    guard.write(&md_path, report::markdown(&d, &context).as_bytes())?;
+    let mut markdown = report::markdown(&d, &context);
+    if let Some((effects, _)) = &effects {
+        // The iteration's section right after the title and before the reported step's.
+        let at = markdown.find("\n\n").map_or(0, |i| i + 2);
+        markdown.insert_str(at, &report::effects_markdown(effects));
+    }
+    guard.write(&md_path, markdown.as_bytes())?;
     written_files.push(md_path);
     let json_path = a.out.join("report.json");
     let files: Vec<String> = written_files
@@ -700,22 +790,37 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .collect();
     let serialise =
         |e: serde_json::Error| CliError::runtime(format!("cannot serialise the report: {e}"));
-    let mut text =
-        serde_json::to_string_pretty(&report::json(&d, &context, &files).map_err(serialise)?)
-            .map_err(serialise)?;
+    let mut value = report::json(&d, &context, &files).map_err(serialise)?;
+    if let (Some((effects, _)), Some(object)) = (&effects, value.as_object_mut()) {
+        object.insert(
+            "effects".into(),
+            report::effects_json(effects).map_err(serialise)?,
+        );
+    }
+    let mut text = serde_json::to_string_pretty(&value).map_err(serialise)?;
     text.push('\n');
     guard.write(&json_path, text.as_bytes())?;
     written_files.push(json_path);
 
     // Outputs of an earlier run that this one did not write would contradict the report.
     let mut removed = Vec::new();
-    for f in OUTPUTS {
+    let tables: Vec<String> = (2..=MAX_TABLE_BLOCKS)
+        .map(|i| augmented::table_file_name(&format!("{}{i}", augmented::BLOCK)))
+        .collect();
+    for f in OUTPUTS
+        .iter()
+        .copied()
+        .chain(tables.iter().map(String::as_str))
+    {
         let p = a.out.join(f);
         if p.is_file() && !written_files.contains(&p) && std::fs::remove_file(&p).is_ok() {
             removed.push(p);
         }
     }
 
+    if let Some((effects, _)) = &effects {
+        print!("{}", report::effects_summary(effects));
+    }
     print!(
         "{}",
         report::summary(

@@ -355,14 +355,15 @@ fn bad_models_and_arguments_are_input_errors() {
         input_error(&args)
     };
 
-    // A model that already has a map.
+    // A model with a map that is not known (no truth) cannot be a nominal model.
     let mapped = d.join("mapped.toml");
-    std::fs::write(&mapped, SATURATED).unwrap();
+    std::fs::write(
+        &mapped,
+        SATURATED.replace("truth = \"min(max(1.5*z0, -0.8), 0.8)\"\n", ""),
+    )
+    .unwrap();
     let e = run(&mapped, &est, &[]);
-    assert!(
-        e.contains("[[nonlinearity]]") && e.contains("structid linear") && e.contains("lti"),
-        "{e}"
-    );
+    assert!(e.contains("actuator") && e.contains("truth"), "{e}");
 
     // Missing files.
     let e = run(&d.join("nowhere.toml"), &est, &[]);

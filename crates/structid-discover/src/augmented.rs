@@ -40,6 +40,12 @@ pub struct TableFile {
     pub w: Vec<f64>,
 }
 
+/// The file of the table of block `block`'s map, next to the model file: [`TABLE_FILE`] for
+/// the block [`BLOCK`], `N2_table.csv` for a second effect's block `N2`, ….
+pub fn table_file_name(block: &str) -> String {
+    format!("{block}_table.csv")
+}
+
 /// The augmented model file of a finding ([`Finding::augmented_file`]).
 #[derive(Clone, Debug)]
 pub struct AugmentedFile {
@@ -47,8 +53,11 @@ pub struct AugmentedFile {
     pub model: ModelFile,
     /// Its form: `[linear] structure = "…"`, or `[lft]`.
     pub form: String,
-    /// The table to write next to it when the map is a table.
+    /// The table to write next to it when the new block's map is a table.
     pub table: Option<TableFile>,
+    /// The tables of the nominal model's known maps that are tables, to write next to it too
+    /// (each renamed [`table_file_name`] of its block).
+    pub known_tables: Vec<TableFile>,
     /// The initial state under which it reproduces the report's validation RMS.
     pub initial_state: InitialState,
 }
@@ -76,8 +85,15 @@ pub fn initial_state_name(s: InitialState) -> &'static str {
 /// the location is a structure `[linear]` knows, otherwise as the hypothesis' `lft`. Returns
 /// the file and its form.
 ///
+/// A nominal file with `[[nonlinearity]]` blocks (known maps) gives an `[lft]` file with the
+/// hypothesis' `lft`: the new block first (named `N`, else `N2`, … so that names stay unique,
+/// at z row 0 and w column 0), then the nominal file's blocks in their order at rows and
+/// columns 1, 2, … with their truth and dispersion (a table truth renamed
+/// [`table_file_name`] of its block).
+///
 /// # Errors
-/// A table that is not a valid lookup table, a linear part that has no LFT.
+/// A table that is not a valid lookup table, a linear part that has no LFT, a nominal block
+/// without a truth.
 pub fn model_file(
     nominal_file: &ModelFile,
     location: Location,
@@ -88,7 +104,9 @@ pub fn model_file(
 ) -> std::result::Result<(ModelFile, String), IoError> {
     // Output feedback gets a shared numerator, as `structid linear --structure
     // output-feedback` writes it: y = B/F·(u − w), i.e. num = [B, −B].
+    let with_maps = !nominal_file.blocks.is_empty();
     let linear = match (&nominal_file.linear, location) {
+        _ if with_maps => None,
         (_, Location::Declared { .. }) | (None, _) => None,
         (Some(spec), site) => Some(LinearSpec::from_linear(&spec.model, Some(site))),
     };
@@ -115,16 +133,64 @@ pub fn model_file(
             y: nominal_file.signals.y.clone(),
             z: None,
         },
-        blocks: vec![BlockSpec {
-            name: BLOCK.into(),
+        blocks: std::iter::once(BlockSpec {
+            name: next_block_name(nominal_file),
             inputs: vec![0],
             output: 0,
             dispersion,
             truth: Some(truth),
-        }],
+        })
+        .chain(known_blocks(nominal_file)?)
+        .collect(),
         path: None,
     };
     Ok((mf, form))
+}
+
+/// The name of the block a discovery adds to `nominal_file`: [`BLOCK`], else `N2`, `N3`, …
+/// (the rule of [`Nominal::next_block_name`]).
+pub fn next_block_name(nominal_file: &ModelFile) -> String {
+    let used = |n: &str| nominal_file.blocks.iter().any(|b| b.name == n);
+    if !used(BLOCK) {
+        return BLOCK.into();
+    }
+    (2..)
+        .map(|i| format!("{BLOCK}{i}"))
+        .find(|n| !used(n))
+        .unwrap_or_else(|| BLOCK.into())
+}
+
+/// The nominal file's blocks as the augmented file carries them: at rows and columns 1, 2, …
+/// after the new block, a table truth renamed [`table_file_name`].
+fn known_blocks(nominal_file: &ModelFile) -> std::result::Result<Vec<BlockSpec>, IoError> {
+    nominal_file
+        .blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let truth = match &b.truth {
+                Some(TruthSpec::Table { table, .. }) => TruthSpec::Table {
+                    file: table_file_name(&b.name),
+                    table: table.clone(),
+                },
+                Some(t) => t.clone(),
+                None => {
+                    return Err(IoError::InvalidArgument(format!(
+                        "block `{}` of the nominal model has no truth: a nominal model's maps \
+                         must be known",
+                        b.name
+                    )));
+                }
+            };
+            Ok(BlockSpec {
+                name: b.name.clone(),
+                inputs: vec![i + 1],
+                output: i + 1,
+                dispersion: b.dispersion.clone(),
+                truth: Some(truth),
+            })
+        })
+        .collect()
 }
 
 impl Finding {
@@ -171,26 +237,51 @@ impl Finding {
             }
             _ => nominal_file,
         };
-        let (model, form) = model_file(
+        let table_name = table_file_name(&next_block_name(nominal_file));
+        let (mut model, form) = model_file(
             nominal_file,
             self.location,
             self.augmented.model.lft(),
             &self.augmented.map,
             dispersion,
-            TABLE_FILE,
+            &table_name,
         )?;
+        // The known maps as the augmented model simulates them: refitted jointly with the new
+        // one when they were named by an earlier step.
+        for (block, known) in model.blocks.iter_mut().skip(1).zip(&self.augmented.known) {
+            if let Some(fit) = &known.fit {
+                block.truth = Some(TruthSpec::Expression(fit.expression.clone()));
+            }
+        }
         let table = match &self.augmented.map {
             AugmentedMap::Table { z, w } => Some(TableFile {
-                name: TABLE_FILE.to_string(),
+                name: table_name,
                 z: z.clone(),
                 w: w.clone(),
             }),
             AugmentedMap::Expression(_) => None,
         };
+        let known_tables = model
+            .blocks
+            .iter()
+            .skip(1)
+            .filter_map(|b| match &b.truth {
+                Some(TruthSpec::Table {
+                    file,
+                    table: LookupTable::OneD { x, v },
+                }) => Some(TableFile {
+                    name: file.clone(),
+                    z: x.clone(),
+                    w: v.clone(),
+                }),
+                _ => None,
+            })
+            .collect();
         Ok(AugmentedFile {
             model,
             form,
             table,
+            known_tables,
             initial_state: initial_state(self.location).1,
         })
     }
@@ -204,7 +295,9 @@ impl Finding {
     /// # Errors
     /// A map without a stored form (never for an expression or a table).
     pub fn estimate(&self, nominal: &Nominal, estimation: &Data) -> Result<Estimate> {
-        let map = self.augmented.map.interpolant()?;
+        let maps = self.augmented.maps()?;
+        let map_refs: Vec<&dyn structid_core::Interpolant> =
+            maps.iter().map(|m| m.as_ref()).collect();
         let kind = match &self.classification {
             Classification::Named(_) => "named",
             Classification::Unnamed => "unnamed",
@@ -223,7 +316,7 @@ impl Finding {
         ];
         Estimate::from_maps(
             &self.augmented.model,
-            &[map.as_ref()],
+            &map_refs,
             None,
             Provenance {
                 workflow: "discover".into(),
@@ -248,10 +341,16 @@ pub fn header(
         Classification::Named(fit) => format!("{} (named)", fit.effect.name()),
         other => other.describe(),
     };
+    let block = f
+        .augmented
+        .model
+        .blocks()
+        .first()
+        .map_or(BLOCK, |b| b.name.as_str());
     format!(
-        "# Written by `structid discover`: the nominal model `{}` with the block `{BLOCK}` {}.\n\
+        "# Written by `structid discover`: the nominal model `{}` with the block `{block}` {}.\n\
          # Missing effect: {what}; validation RMS {:.6e} (nominal {:.6e}).\n\
-         # `{BLOCK}`'s truth is the map found; its dispersion is the one discovery identified it with.\n\
+         # `{block}`'s truth is the map found; its dispersion is the one discovery identified it with.\n\
          # See {} for the report and how to reproduce it.\n",
         model_path.display(),
         nominal.describe(f.location),
@@ -305,6 +404,51 @@ mod tests {
             .build()
             .unwrap();
         validate(&model, &refs, &data, &settings).unwrap().rms[0]
+    }
+
+    /// A nominal file with a map gives an `[lft]` file with the new block `N2` first and the
+    /// nominal block after it, its table truth renamed for its block.
+    #[test]
+    fn a_nominal_file_with_a_map_keeps_it_after_the_new_block() {
+        let mut nominal_mf = ModelFile::parse(
+            "[linear]\nstructure = \"input\"\nsample_time = 0.05\nden = [1.0, -1.5, 0.7]\n\
+             num = [[0.0, 0.1, 0.1]]\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n\
+             [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n\
+             dispersion = { kind = \"polynomial\", degree = 1 }\ntruth = \"z0\"\n",
+            None,
+        )
+        .unwrap();
+        let table = LookupTable::one_d(vec![-1.0, 0.0, 1.0], vec![-0.5, 0.0, 0.5]).unwrap();
+        nominal_mf.blocks[0].truth = Some(TruthSpec::Table {
+            file: "../elsewhere/old.csv".into(),
+            table: table.clone(),
+        });
+        let lft = nominal_mf.lft.clone();
+        let (mf, form) = model_file(
+            &nominal_mf,
+            Location::OutputFeedback,
+            &lft,
+            &AugmentedMap::Expression("0.2*z0^3".into()),
+            quadratic_dispersion_spec(Some(0.3), 3),
+            "N2_table.csv",
+        )
+        .unwrap();
+        assert_eq!(form, "[lft]");
+        assert!(mf.linear.is_none());
+        let names: Vec<&str> = mf.blocks.iter().map(|b| b.name.as_str()).collect();
+        assert_eq!(names, ["N2", "N"]);
+        assert_eq!(
+            (mf.blocks[1].inputs.clone(), mf.blocks[1].output),
+            (vec![1], 1)
+        );
+        assert_eq!(
+            mf.blocks[1].truth,
+            Some(TruthSpec::Table {
+                file: table_file_name("N"),
+                table
+            })
+        );
+        assert_eq!(next_block_name(&mf), "N3");
     }
 
     /// Every location's augmented file, read back, simulates like the hypothesis' LFT it was

@@ -17,15 +17,26 @@
 //! with an LTI Ψ_M): the LFT carries Ψ's state (the previous output), and
 //! [`Hypothesis::data`] attaches the measured z to the record. The feedback locations need one
 //! sample of delay in G (D_yu = 0).
+//!
+//! **A nominal model with maps.** A nominal model may already carry static maps, e.g. the
+//! augmented model of an earlier discovery ([`Nominal::with_known_map`],
+//! [`Nominal::from_model`]): they stay fixed while the next block is identified. The new block
+//! is then put *around* the whole nominal model, its maps kept inside (the input location
+//! drives the nominal model, maps included, through N(u); feedback locations subtract N(y) or
+//! N(ẏ) from its input; the output location maps its noise-free output), see
+//! [`crate::known`]. Every simulation of a [`Hypothesis`] binds its known maps
+//! ([`Hypothesis::maps`]); identification sees them as known inputs, w_k = N_k(z_k) at the
+//! record's z ([`Hypothesis::identification`]).
 
 use std::sync::Arc;
 
 use structid_core::structure::{realise, without_blocks};
 use structid_core::{
-    Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, Result, Signal, Simulation, Site,
-    Structure,
+    Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, NonlinearBlock,
+    PolynomialDispersion, Result, Signal, Simulation, Site, Structure,
 };
 use structid_linear::PolynomialModel;
+use structid_lti::LinearSystem as _;
 
 /// Where the unknown block is inserted: structid-core's [`Site`], under the name this crate
 /// has always used.
@@ -52,13 +63,45 @@ pub struct NamedState {
     pub state: usize,
 }
 
-/// A nominal model: an LFT without maps, with its declared locations and named states.
+/// A static map that a nominal model already carries: fixed while the next block is
+/// identified.
+#[derive(Clone)]
+pub struct KnownMap {
+    /// The block's name (unique in the model).
+    pub name: String,
+    /// The map.
+    pub map: Arc<dyn Interpolant>,
+    /// The named family it is, when it was found by discovery in this process: its parameters
+    /// are refitted jointly with the next effect's (a map found first carries the bias of the
+    /// effects not yet modelled).
+    pub fit: Option<crate::effects::EffectFit>,
+}
+
+impl std::fmt::Debug for KnownMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KnownMap")
+            .field("name", &self.name)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A known map of a nominal model with the channels of its LFT it reads and writes.
+#[derive(Clone, Debug)]
+struct KnownBlock {
+    known: KnownMap,
+    z: usize,
+    w: usize,
+}
+
+/// A nominal model: an LFT, with its declared locations, named states and the known maps it
+/// already carries (none for a linear nominal model).
 #[derive(Clone, Debug)]
 pub struct Nominal {
     lft: Lft,
     declared: Vec<DeclaredLocation>,
     states: Vec<NamedState>,
     polynomial: Option<PolynomialModel>,
+    known: Vec<KnownBlock>,
 }
 
 impl Nominal {
@@ -86,7 +129,136 @@ impl Nominal {
             declared: Vec::new(),
             states: Vec::new(),
             polynomial: None,
+            known: Vec::new(),
         })
+    }
+
+    /// A nominal model that already carries maps: `model`'s LFT with every block's map fixed to
+    /// `maps` (one per block, in block order, each reading one z channel). The next block is
+    /// found around it, with these maps in the loop (see the [module documentation](self)).
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{Interpolant, PolynomialDispersion};
+    /// use structid_discover::hypotheses::{Location, Nominal, hypothesis};
+    /// use structid_linear::PolynomialModel;
+    /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
+    /// // The augmented model of a first discovery: a saturation at the input.
+    /// let first = hypothesis(&g, Location::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
+    /// let sat: Arc<dyn Interpolant> = Arc::new(|z: &[f64]| z[0].clamp(-1.0, 1.0));
+    /// let nominal = Nominal::from_model(&first.model, vec![sat]).unwrap();
+    /// assert_eq!(nominal.known_maps().len(), 1);
+    /// // A cubic spring in feedback from y, with the saturation kept in the loop.
+    /// let h = nominal.hypothesis(Location::OutputFeedback, Arc::new(PolynomialDispersion::new(3).unwrap())).unwrap();
+    /// assert_eq!(h.model.blocks().len(), 2);
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Nominal::new`]; a number of maps other than the number of blocks; a block reading
+    /// several z channels.
+    pub fn from_model(model: &Model, maps: Vec<Arc<dyn Interpolant>>) -> Result<Self> {
+        if maps.len() != model.blocks().len() {
+            return Err(Error::DimensionMismatch {
+                what: "known maps of the nominal model (one per block)".into(),
+                expected: model.blocks().len().to_string(),
+                found: maps.len().to_string(),
+            });
+        }
+        let mut n = Self::new(model.lft().clone())?;
+        for (b, map) in model.blocks().iter().zip(maps) {
+            let [z] = b.inputs[..] else {
+                return Err(Error::InvalidStructure(format!(
+                    "block `{}` reads {} z channels; a known map of a nominal model reads one",
+                    b.name,
+                    b.inputs.len()
+                )));
+            };
+            n = n.with_known_map(&b.name, z, b.output, map)?;
+        }
+        Ok(n)
+    }
+
+    /// Declares that w column `w` of the LFT is the output of the fixed map `map` of its z row
+    /// `z` (a block called `name`).
+    ///
+    /// # Errors
+    /// A channel that does not exist, a channel already used by another known map, a name
+    /// already used.
+    pub fn with_known_map(
+        self,
+        name: &str,
+        z: usize,
+        w: usize,
+        map: Arc<dyn Interpolant>,
+    ) -> Result<Self> {
+        self.with_known(
+            z,
+            w,
+            KnownMap {
+                name: name.to_string(),
+                map,
+                fit: None,
+            },
+        )
+    }
+
+    /// [`Nominal::with_known_map`] with the map as a [`KnownMap`] (which may carry its named
+    /// family).
+    pub fn with_known(mut self, z: usize, w: usize, known: KnownMap) -> Result<Self> {
+        let name = known.name.as_str();
+        let d = self.lft.dims();
+        if z >= d.z || w >= d.w {
+            return Err(Error::InvalidStructure(format!(
+                "known map `{name}` reads z row {z} and writes w column {w}, but the nominal \
+                 model has {} z row(s) and {} w column(s)",
+                d.z, d.w
+            )));
+        }
+        if let Some(other) = self.known.iter().find(|k| k.w == w || k.known.name == name) {
+            return Err(Error::InvalidStructure(format!(
+                "known map `{name}` (w column {w}) clashes with `{}` (w column {})",
+                other.known.name, other.w
+            )));
+        }
+        self.known.push(KnownBlock { known, z, w });
+        // Fails early when the maps make an algebraic loop.
+        self.known_lft()?.check_no_algebraic_loop()?;
+        Ok(self)
+    }
+
+    /// The nominal model with the known maps' named families set to `fits` (one per known
+    /// map, in their order; `None` leaves a map as it is).
+    pub fn with_known_fits(mut self, fits: Vec<Option<crate::effects::EffectFit>>) -> Self {
+        for (k, fit) in self.known.iter_mut().zip(fits) {
+            if fit.is_some() {
+                k.known.fit = fit;
+            }
+        }
+        self
+    }
+
+    /// The known maps, in the order of their blocks.
+    pub fn known_maps(&self) -> Vec<KnownMap> {
+        self.known.iter().map(|k| k.known.clone()).collect()
+    }
+
+    /// The nominal LFT with only the known maps' channels, in their order.
+    fn known_lft(&self) -> Result<Lft> {
+        let z: Vec<usize> = self.known.iter().map(|k| k.z).collect();
+        let w: Vec<usize> = self.known.iter().map(|k| k.w).collect();
+        crate::known::select_channels(&self.lft, &z, &w)
+    }
+
+    /// A name for the next block, unused by the known maps: `N`, else `N2`, `N3`, ….
+    pub fn next_block_name(&self) -> String {
+        let used = |n: &str| self.known.iter().any(|k| k.known.name == n);
+        if !used("N") {
+            return "N".into();
+        }
+        (2..)
+            .map(|i| format!("N{i}"))
+            .find(|n| !used(n))
+            .unwrap_or_else(|| "N".into())
     }
 
     /// The nominal model y = G·u + e of a polynomial G (white output noise).
@@ -193,9 +365,42 @@ impl Nominal {
         &self.states
     }
 
-    /// The nominal model without any block (its declared channels dropped).
+    /// The nominal model: without any block for a linear nominal model (its declared channels
+    /// dropped), else with its known blocks (simulate it with [`Nominal::maps`]; their
+    /// dispersions are placeholders).
     pub fn model(&self) -> Result<Model> {
-        Model::new(without_blocks(&self.lft)?, Vec::new())
+        if self.known.is_empty() {
+            return Model::new(without_blocks(&self.lft)?, Vec::new());
+        }
+        let placeholder: Arc<dyn Dispersion> = Arc::new(PolynomialDispersion::new(1)?);
+        let blocks = self
+            .known
+            .iter()
+            .enumerate()
+            .map(|(i, k)| NonlinearBlock::new(&k.known.name, vec![i], i, Arc::clone(&placeholder)))
+            .collect();
+        Model::new(self.known_lft()?, blocks)
+    }
+
+    /// The known maps as [`Nominal::model`]'s blocks take them (empty for a linear nominal).
+    pub fn maps(&self) -> Vec<&dyn Interpolant> {
+        self.known
+            .iter()
+            .map(|k| k.known.map.as_ref() as &dyn Interpolant)
+            .collect()
+    }
+
+    /// The output of the nominal model simulated from u at rest, without noise (G·u for a
+    /// linear nominal model).
+    pub fn simulate_output(&self, u: &Signal) -> Result<Vec<f64>> {
+        if self.known.is_empty() {
+            return Ok(without_blocks(&self.lft)?.t_yu().simulate(u)?.channel(0));
+        }
+        Ok(self
+            .model()?
+            .simulate(&self.maps(), u, None, None)?
+            .y
+            .channel(0))
     }
 
     /// Every candidate location: the four built-in ones, then the declared ones.
@@ -244,12 +449,36 @@ impl Nominal {
         }
     }
 
-    /// The named states simulated from u (nominal model, zero initial state), by name.
+    /// The named states simulated from u (nominal model with its known maps, zero initial
+    /// state, no noise), by name.
     pub fn state_signals(&self, data: &Data) -> Result<Vec<(String, Vec<f64>)>> {
         if self.states.is_empty() {
             return Ok(Vec::new());
         }
         let n = self.lft.dims().states;
+        if !self.known.is_empty() {
+            // The maps' outputs of the noise-free simulation drive the states with u:
+            // x⁺ = A·x + B_u·u + B_w·w.
+            let model = self.model()?;
+            let w = model.simulate(&self.maps(), data.u(), None, None)?.w;
+            let m = model.lft().matrices();
+            let mut x = nalgebra::DVector::zeros(n);
+            let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(data.len()); self.states.len()];
+            for k in 0..data.len() {
+                for (o, s) in out.iter_mut().zip(&self.states) {
+                    o.push(x[s.state]);
+                }
+                let u = nalgebra::DVector::from_column_slice(data.u().sample(k));
+                let wk = nalgebra::DVector::from_column_slice(w.sample(k));
+                x = &m.a * &x + &m.bu * u + &m.bw * wk;
+            }
+            return Ok(self
+                .states
+                .iter()
+                .map(|s| s.name.clone())
+                .zip(out)
+                .collect());
+        }
         let (_, x) = self.lft.t_yu().simulate_states(&vec![0.0; n], data.u())?;
         Ok(self
             .states
@@ -286,26 +515,136 @@ impl Nominal {
                 self.declared.len()
             )));
         }
+        if self.known.is_empty() {
+            return Ok(Hypothesis {
+                location,
+                model: Structure::new(&self.lft, location, dispersion).model()?,
+                sample_time: self.lft.sample_time().unwrap_or(1.0),
+                known: Vec::new(),
+            });
+        }
+        let lft = match location {
+            Location::Declared { z, w } => {
+                let zs: Vec<usize> = std::iter::once(z)
+                    .chain(self.known.iter().map(|k| k.z))
+                    .collect();
+                let ws: Vec<usize> = std::iter::once(w)
+                    .chain(self.known.iter().map(|k| k.w))
+                    .collect();
+                crate::known::select_channels(&self.lft, &zs, &ws)?
+            }
+            site => crate::known::wrap(&self.known_lft()?, site)?,
+        };
+        let mut blocks = vec![NonlinearBlock::new(
+            self.next_block_name(),
+            vec![0],
+            0,
+            dispersion,
+        )];
+        let placeholder: Arc<dyn Dispersion> = Arc::new(PolynomialDispersion::new(1)?);
+        blocks.extend(self.known.iter().enumerate().map(|(i, k)| {
+            NonlinearBlock::new(&k.known.name, vec![i + 1], i + 1, Arc::clone(&placeholder))
+        }));
         Ok(Hypothesis {
             location,
-            model: Structure::new(&self.lft, location, dispersion).model()?,
+            model: Model::new(lft, blocks)?,
             sample_time: self.lft.sample_time().unwrap_or(1.0),
+            known: self.known_maps(),
         })
     }
 }
 
-/// An augmented model: the nominal G with one unknown block at a location.
+/// An augmented model: the nominal model with one unknown block at a location.
 #[derive(Clone, Debug)]
 pub struct Hypothesis {
     /// Where the block is.
     pub location: Location,
-    /// The LFT and its block `N`.
+    /// The LFT and its blocks: the unknown one first (z row 0, w column 0), then the nominal
+    /// model's known maps.
     pub model: Model,
     /// The sample time used for rates (1 when G has none).
     pub sample_time: f64,
+    /// The nominal model's known maps: blocks `1..` of `model` (empty for a linear nominal).
+    pub known: Vec<KnownMap>,
 }
 
 impl Hypothesis {
+    /// The maps of every block of [`Hypothesis::model`]: `map` in the unknown block, then the
+    /// known maps (what every simulation of the hypothesis binds).
+    pub fn maps<'a>(&'a self, map: &'a dyn Interpolant) -> Vec<&'a dyn Interpolant> {
+        std::iter::once(map)
+            .chain(
+                self.known
+                    .iter()
+                    .map(|k| k.map.as_ref() as &dyn Interpolant),
+            )
+            .collect()
+    }
+
+    /// The hypothesis with the unknown block's dispersion replaced.
+    pub fn with_dispersion(&self, dispersion: Arc<dyn Dispersion>) -> Self {
+        let mut first = Some(dispersion);
+        Hypothesis {
+            model: self.model.with_dispersions(|b| match first.take() {
+                Some(d) => d,
+                None => Arc::clone(&b.dispersion),
+            }),
+            ..self.clone()
+        }
+    }
+
+    /// The LFT from the unknown block's output to y with the known maps' outputs as inputs
+    /// after u ([`crate::known`]): the linear path identification and deconvolution see.
+    /// [`Hypothesis::model`]'s LFT itself without known maps.
+    pub fn block_lft(&self) -> Result<Lft> {
+        if self.known.is_empty() {
+            return Ok(self.model.lft().clone());
+        }
+        crate::known::with_known_inputs(self.model.lft())
+    }
+
+    /// The model and record that identify the unknown block: without known maps, the
+    /// hypothesis' model and [`Hypothesis::data`]; with them, the LFT of
+    /// [`Hypothesis::block_lft`] and the record with the inputs u' = [u; N_1(z_1); …], each
+    /// known map at its z computed from the record (measured, or through the inverted noise
+    /// path). That is exact for identification's one-step criterion; `data` is the record as
+    /// given (not yet passed through [`Hypothesis::data`]).
+    pub fn identification(&self, data: &Data) -> Result<(Model, Data)> {
+        let full = self.data(data)?;
+        if self.known.is_empty() {
+            return Ok((self.model.clone(), full));
+        }
+        let z = match full.z() {
+            Some(z) => z.clone(),
+            None => self.model.lft().compute_z(data.u(), data.y())?.0,
+        };
+        let len = data.len();
+        let mut columns = vec![data.u().channel(0)];
+        for (i, k) in self.known.iter().enumerate() {
+            let zi = z.channel(i + 1);
+            let w: Vec<f64> = zi.iter().map(|v| k.map.eval(&[*v])).collect();
+            if let Some(at) = w.iter().position(|v| !v.is_finite()) {
+                return Err(Error::Numerical(format!(
+                    "the known map `{}` is not finite at sample {at} (z = {})",
+                    k.name, zi[at]
+                )));
+            }
+            columns.push(w);
+        }
+        let u = Signal::from_fn(len, columns.len(), |t, c| columns[c][t]);
+        let mut id_data = Data::new(u, data.y().clone())?;
+        if self.location == Location::RateFeedback {
+            id_data = id_data.with_z(Signal::from_fn(len, 1, |t, _| z.get(t, 0)))?;
+        }
+        let block = NonlinearBlock::new(
+            self.model.blocks()[0].name.clone(),
+            vec![0],
+            0,
+            Arc::clone(&self.model.blocks()[0].dispersion),
+        );
+        Ok((Model::new(self.block_lft()?, vec![block])?, id_data))
+    }
+
     /// Simulates the augmented model with `map` in its block N from `u`, with the noise `e`
     /// (zero when `None`) and a zero initial state.
     ///
@@ -326,6 +665,9 @@ impl Hypothesis {
         u: &Signal,
         e: Option<&Signal>,
     ) -> Result<Simulation> {
+        if !self.known.is_empty() {
+            return self.model.simulate(&self.maps(map), u, e, None);
+        }
         let f = |z: &[f64]| map.eval(z);
         self.model.lft().simulate(
             &[MapBinding {
@@ -350,9 +692,20 @@ impl Hypothesis {
                 // The first sample has no predecessor in the record: its rate is taken as 0
                 // rather than y₀/T_s (a record rarely starts at y = 0, and one spurious rate
                 // of y₀/T_s would set the map's range and kernel width).
-                let z = Signal::from_fn(y.len(), 1, |k, _| {
+                let rate = |k: usize| {
                     let prev = if k > 0 { y.get(k - 1, 0) } else { y.get(0, 0) };
                     (y.get(k, 0) - prev) / ts
+                };
+                if self.known.is_empty() {
+                    return data
+                        .clone()
+                        .with_z(Signal::from_fn(y.len(), 1, |k, _| rate(k)));
+                }
+                // Every z row is attached: the known maps' as the LFT computes them from the
+                // record, the new block's as the measured rate.
+                let all = self.model.lft().compute_z(data.u(), y)?.0;
+                let z = Signal::from_fn(y.len(), all.channels(), |k, c| {
+                    if c == 0 { rate(k) } else { all.get(k, c) }
                 });
                 data.clone().with_z(z)
             }

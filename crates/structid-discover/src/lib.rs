@@ -11,10 +11,12 @@
 //! * [`gap`]: how large the gap between a model's simulation and a record is, whether it is
 //!   only noise (a model-free noise level and portmanteau tests of whiteness and of linear and
 //!   nonlinear input correlation), and where it sits;
-//! * [`hypotheses`]: the nominal model ([`hypotheses::Nominal`]: an LFT without maps, with
-//!   declared locations and named states) and the augmented LFTs that insert one unknown static
-//!   block at the input, at the output, in feedback from the output or from its rate (a
+//! * [`hypotheses`]: the nominal model ([`hypotheses::Nominal`]: an LFT, without maps or with
+//!   the known maps of earlier findings, with declared locations and named states) and the
+//!   augmented LFTs that insert one unknown static block at the input, at the output, in feedback from the output or from its rate (a
 //!   dynamic Ψ_M in the paper's Definition 1), or at a declared location;
+//! * [`known`]: the LFTs of a nominal model that already carries maps (the augmented model
+//!   of an earlier discovery), with the next block around it and its maps kept fixed inside;
 //! * [`localise`]: where the residual of a model exceeds its noise band in time, and in which
 //!   region of which candidate signal its energy concentrates (e.g. `|u| > 0.8`);
 //! * [`effects`]: a library of named static effects (saturation, smooth and one-sided
@@ -53,12 +55,16 @@ pub mod effects;
 pub mod gap;
 pub mod hypotheses;
 pub mod hysteresis;
+pub mod known;
 pub mod localise;
 pub mod physics;
 pub mod report;
 pub mod synthetic;
 
-pub use discover::{Classification, DiscoverSettings, Discovery, discover};
+pub use discover::{
+    Classification, DiscoverSettings, Discovery, Effects, EffectsSettings, discover,
+    discover_effects,
+};
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
 };

@@ -10,9 +10,10 @@ use structid_io::{DataTable, IoError, ModelFile, format_number};
 
 use structid_core::validation::Scoring;
 
-use crate::augmented::{AugmentedFile, BLOCK, ESTIMATE_FILE, TABLE_FILE, initial_state_name};
+use crate::augmented::{AugmentedFile, BLOCK, ESTIMATE_FILE, initial_state_name};
 use crate::discover::{
-    AugmentedMap, Classification, DiscoverSettings, Discovery, Finding, initial_state,
+    AugmentedMap, Classification, DiscoverSettings, Discovery, Effects, Finding, initial_state,
+    rms_text,
 };
 use crate::effects::EffectFit;
 use crate::gap::Gap;
@@ -346,13 +347,26 @@ fn nominal_text(mf: &ModelFile) -> String {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    let maps = if mf.blocks.is_empty() {
+        String::new()
+    } else {
+        format!(
+            ", with the known map(s) {}",
+            mf.blocks
+                .iter()
+                .map(|b| format!("`{}`", b.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    };
     match &mf.linear {
         Some(spec) => format!(
-            "`[linear]` lti, den = [{}], num = [{}]",
+            "`[linear]` {}, den = [{}], num = [{}]{maps}",
+            spec.structure_name(),
             list(&spec.model.den),
             list(&spec.model.num[0])
         ),
-        None => format!("`[lft]` with {} state(s)", mf.lft.dims().states),
+        None => format!("`[lft]` with {} state(s){maps}", mf.lft.dims().states),
     }
 }
 
@@ -654,8 +668,11 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         r.nominal.describe(f.location),
         match &f.augmented.map {
             AugmentedMap::Expression(x) => format!("N(z) = `{x}`"),
-            AugmentedMap::Table { z, .. } =>
-                format!("N as a table of {} points in `{TABLE_FILE}`", z.len()),
+            AugmentedMap::Table { z, .. } => format!(
+                "N as a table of {} points in `{}`",
+                z.len(),
+                table_name(r, f)
+            ),
         }
     );
     gap_table(s, &f.augmented.estimation_gap, &f.augmented.validation_gap);
@@ -671,16 +688,35 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
     if let Some(w) = r.augmented {
         let _ = writeln!(
             s,
-            "The augmented model is `augmented.toml` ({}{}; block `{BLOCK}` with the map as its \
+            "The augmented model is `augmented.toml` ({}{}; block `{}` with the map as its \
              `truth` and the hypothesis' dispersion, so that `structid identify` can re-estimate \
              it).\n",
             w.form,
             w.table
                 .as_ref()
                 .map(|t| format!(", table `{}`", t.name))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            block_name(f)
         );
     }
+}
+
+/// The name of the finding's block in the augmented model (`N`, or `N2`, … when the nominal
+/// model already had maps).
+fn block_name(f: &Finding) -> &str {
+    f.augmented
+        .model
+        .blocks()
+        .first()
+        .map_or(BLOCK, |b| b.name.as_str())
+}
+
+/// The file of the finding's table as the augmented file names it.
+fn table_name(r: &ReportContext<'_>, f: &Finding) -> String {
+    r.augmented
+        .and_then(|w| w.table.as_ref())
+        .map(|t| t.name.clone())
+        .unwrap_or_else(|| crate::augmented::table_file_name(block_name(f)))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -793,7 +829,9 @@ pub fn json(
             let curve = Some(json_value(&f.hypothesis.curve)?);
             let map = match &f.augmented.map {
                 AugmentedMap::Expression(x) => json!({ "expression": x }),
-                AugmentedMap::Table { z, .. } => json!({ "table": TABLE_FILE, "points": z.len() }),
+                AugmentedMap::Table { z, .. } => {
+                    json!({ "table": table_name(r, f), "points": z.len() })
+                }
             };
             json!({
                 "location": r.nominal.key(f.location),
@@ -822,7 +860,7 @@ pub fn json(
             "model_file": "augmented.toml",
             "form": w.form,
             "table_file": w.table.as_ref().map(|t| t.name.as_str()),
-            "block": BLOCK,
+            "block": block_name(f),
             "initial_state": initial_state_name(w.initial_state),
             "estimate_file": ESTIMATE_FILE,
             "validation_rms": f.augmented.validation_gap.rms,
@@ -965,4 +1003,145 @@ fn absolute(p: &Path) -> PathBuf {
     std::fs::canonicalize(p)
         .or_else(|_| std::path::absolute(p))
         .unwrap_or_else(|_| p.to_path_buf())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Several effects
+
+/// What one step of an iteration found, in a few words.
+fn step_effect(r: &Nominal, d: &Discovery) -> String {
+    match &d.finding {
+        Some(f) => format!(
+            "{} {}",
+            f.classification.describe(),
+            location_text(r, f.location)
+        ),
+        None => d.verdict_kind.describe().to_string(),
+    }
+}
+
+/// The section of report.md on an iteration over several effects ([`Effects`]): one row per
+/// step with what it found, the validation RMS before and after and whether it was adopted,
+/// then why the iteration stopped. The report that follows is the last adopted step's (or the
+/// first step's when none was adopted).
+pub fn effects_markdown(effects: &Effects) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "## Effects, one at a time
+"
+    );
+    let _ = writeln!(
+        s,
+        "Each step runs discovery on the model the previous adopted step left (its maps fixed \
+         in the loop), and is adopted when it cuts the validation RMS by at least {:.0} %.\n",
+        100.0 * effects.settings.min_improvement()
+    );
+    let _ = writeln!(
+        s,
+        "| step | found | validation RMS before | after | ratio | adopted |\n|---|---|---|---|---|---|"
+    );
+    for (i, step) in effects.steps.iter().enumerate() {
+        let d = &step.discovery;
+        let after = d.finding.as_ref().map(|f| f.augmented.validation_gap.rms);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} |",
+            i + 1,
+            cell(&step_effect(&step.nominal, d)),
+            rms_text(d.validation_gap.rms),
+            after.map(rms_text).unwrap_or_else(|| "—".into()),
+            after
+                .map(|a| format!("{:.3}", a / d.validation_gap.rms))
+                .unwrap_or_else(|| "—".into()),
+            if step.adopted { "yes" } else { "no" }
+        );
+    }
+    let rms = effects.validation_rms();
+    let _ = writeln!(
+        s,
+        "\n**Stopped:** {}. {} effect(s) adopted; validation RMS {}.\n",
+        effects.stop.describe(&effects.settings),
+        effects.findings().len(),
+        rms.iter()
+            .map(|v| rms_text(*v))
+            .collect::<Vec<_>>()
+            .join(" → ")
+    );
+    let _ = writeln!(
+        s,
+        "The sections below are those of the last adopted step (the first step when none was \
+         adopted): its nominal model is the given one with the effects of the steps before it.\n"
+    );
+    s
+}
+
+/// The `effects` member of report.json for an iteration: every step (location, effect,
+/// verdict, validation RMS before and after, adopted) and why it stopped.
+///
+/// # Errors
+/// A part that does not serialise.
+pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
+    let steps: Vec<Value> = effects
+        .steps
+        .iter()
+        .enumerate()
+        .map(|(i, step)| {
+            let d = &step.discovery;
+            let f = d.finding.as_ref();
+            json!({
+                "step": i + 1,
+                "verdict_kind": d.verdict_kind,
+                "verdict": d.verdict,
+                "location": f.map(|f| step.nominal.key(f.location)),
+                "effect": f.map(|f| f.classification.describe()),
+                "expression": f.and_then(|f| match &f.augmented.map {
+                    AugmentedMap::Expression(x) => Some(x.clone()),
+                    AugmentedMap::Table { .. } => None,
+                }),
+                "known_maps": step.nominal.known_maps().iter().map(|k| k.name.clone()).collect::<Vec<_>>(),
+                "validation_rms_before": d.validation_gap.rms,
+                "validation_rms_after": f.map(|f| f.augmented.validation_gap.rms),
+                "adopted": step.adopted,
+                "seconds": d.seconds,
+            })
+        })
+        .collect();
+    Ok(json!({
+        "max_effects": effects.settings.max_effects(),
+        "min_improvement": effects.settings.min_improvement(),
+        "steps": steps,
+        "stop": json_value(&effects.stop)?,
+        "stop_text": effects.stop.describe(&effects.settings),
+        "effects_found": effects.findings().len(),
+        "validation_rms": effects.validation_rms(),
+        "seconds": effects.seconds,
+    }))
+}
+
+/// The lines the run prints for an iteration, before the last step's summary.
+pub fn effects_summary(effects: &Effects) -> String {
+    let mut s = String::new();
+    for (i, step) in effects.steps.iter().enumerate() {
+        let d = &step.discovery;
+        let _ = writeln!(
+            s,
+            "step {}: {}; validation RMS {} → {}{}",
+            i + 1,
+            step_effect(&step.nominal, d),
+            rms_text(d.validation_gap.rms),
+            d.finding
+                .as_ref()
+                .map(|f| rms_text(f.augmented.validation_gap.rms))
+                .unwrap_or_else(|| "—".into()),
+            if step.adopted { " (adopted)" } else { "" }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "stopped: {} ({} effect(s))",
+        effects.stop.describe(&effects.settings),
+        effects.findings().len()
+    );
+    s
 }

@@ -1,7 +1,7 @@
 //! Is it static? The direction test on the residual deconvolved to the block's output.
 
 use structid_core::validation::validate;
-use structid_core::{Data, Interpolant, Model, Result, Signal};
+use structid_core::{Data, Interpolant, Result, Signal};
 use structid_lti::LinearSystem;
 
 use crate::hypotheses::{Hypothesis, Location};
@@ -93,18 +93,27 @@ fn half_sample_artefact(map: &dyn Interpolant, z: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// The simulation residual y − ŷ of `model` with `map` on `data` at the scored samples (as
-/// every simulation of the workflow is scored, [`scoring_settings`]), or `None` when the
-/// simulation fails.
+/// The simulation residual y − ŷ of the hypothesis `h` with `map` in its unknown block (and
+/// its known maps) on `data` at the scored samples (as every simulation of the workflow is
+/// scored, [`scoring_settings`]), or `None` when the simulation fails.
 pub(super) fn simulation_residual(
-    model: &Model,
-    location: Location,
+    h: &Hypothesis,
     map: &dyn Interpolant,
     data: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Vec<f64>> {
-    let settings = scoring_settings(location, settings);
-    let v = validate(model, &[map], data, &settings).ok()?;
+    simulation_residual_of(h, &h.maps(map), data, settings)
+}
+
+/// [`simulation_residual`] with every block's map given (`maps`, in the model's block order).
+pub(super) fn simulation_residual_of(
+    h: &Hypothesis,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> Option<Vec<f64>> {
+    let settings = scoring_settings(h.location, settings);
+    let v = validate(&h.model, maps, data, &settings).ok()?;
     let y = data.y().channel(0);
     let r: Vec<f64> = v
         .scored
@@ -118,7 +127,8 @@ pub(super) fn simulation_residual(
 /// Ridge deconvolution of `r` through the SISO operator T = L_yw: argmin ‖r − T·δ‖² + λ‖δ‖²
 /// by conjugate gradients on (TᵀT + λI)·δ = Tᵀ·r, with Tᵀ applied as time reversal around T.
 pub(super) fn deconvolve(h: &Hypothesis, r: &[f64]) -> Result<Vec<f64>> {
-    let t = h.model.lft().t_yw();
+    // The unknown block's path alone (known maps' outputs are inputs of this LFT).
+    let t = h.block_lft()?.t_yw();
     let n = r.len();
     let apply = |v: &[f64]| -> Result<Vec<f64>> {
         let s = Signal::from_fn(n, 1, |k, _| v[k]);

@@ -7,8 +7,8 @@ use std::time::Instant;
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::validation::{Scoring, ValidationSettings, Windows, validate};
 use structid_core::{
-    Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, Model,
-    PolynomialDispersion, Result, Signal,
+    Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, PolynomialDispersion,
+    Result, Signal,
 };
 use structid_io::{DispersionSpec, IoError};
 
@@ -227,21 +227,20 @@ pub fn initial_state(location: Location) -> (InitialState, InitialState) {
     }
 }
 
-/// Simulation RMS of `model` (block at `location`) with `map` on `data`, scored as every
-/// simulation of the workflow ([`scoring_settings`]); infinite when the simulation fails or
-/// diverges.
+/// Simulation RMS of the hypothesis `h` with `map` in its unknown block (and its known maps)
+/// on `data`, scored as every simulation of the workflow ([`scoring_settings`]); infinite when
+/// the simulation fails or diverges.
 pub(super) fn simulation_rms(
-    model: &Model,
-    location: Location,
+    h: &Hypothesis,
     map: &dyn Interpolant,
     data: &Data,
     settings: &DiscoverSettings,
 ) -> f64 {
-    let settings = scoring_settings(location, settings);
+    let settings = scoring_settings(h.location, settings);
     // A simulation that runs a million times beyond the output's size has diverged, even if
     // its numbers are still finite.
     let limit = 1e6 * structid_core::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
-    match validate(model, &[map], data, &settings) {
+    match validate(&h.model, &h.maps(map), data, &settings) {
         Ok(v) if v.rms[0].is_finite() && v.rms[0] < limit => v.rms[0],
         _ => f64::INFINITY,
     }
@@ -292,11 +291,11 @@ pub(super) fn finish_fit(
     // map held at its edge values there, so that the location, not the extrapolation, decides.
     // The augmented model is then written with the extrapolation that won (`held`).
     let held = |z: &[f64]| block.map.eval(&[z[0].clamp(lo, hi)]);
-    let as_estimated = simulation_rms(&h.model, location, block.map.as_ref(), val_h, settings);
-    let held_rms = simulation_rms(&h.model, location, &held, val_h, settings);
+    let as_estimated = simulation_rms(&h, block.map.as_ref(), val_h, settings);
+    let held_rms = simulation_rms(&h, &held, val_h, settings);
     let hold_edges = held_rms < as_estimated;
     let validation_rms = as_estimated.min(held_rms);
-    let estimation_rms = simulation_rms(&h.model, location, block.map.as_ref(), est_h, settings);
+    let estimation_rms = simulation_rms(&h, block.map.as_ref(), est_h, settings);
     // A map whose simulation diverges on its own estimation record is not a candidate,
     // whatever it does on the validation record.
     let validation_rms = if estimation_rms.is_finite() {
@@ -387,20 +386,19 @@ pub(super) fn identify_hypothesis(
         .criterion(Criterion::MarginalLikelihood)
         .tune_sigma(settings.tune_sigma)
         .build()?;
-    let sel = select(&h.model, &est_h, None, &identify, &selection)?;
+    // With known maps, the unknown block is identified with their outputs as known inputs.
+    let (id_model, id_est) = h.identification(est)?;
+    let sel = select(&id_model, &id_est, None, &identify, &selection)?;
     let id = if x0 == InitialState::Zero {
         sel.identification
     } else {
         structid_core::identify(
             &sel.model,
-            &est_h,
+            &id_est,
             &identify.with_initial_state(x0).with_beta(sel.beta)?,
         )?
     };
-    let h = Hypothesis {
-        model: sel.model,
-        ..h
-    };
+    let h = h.with_dispersion(std::sync::Arc::clone(&sel.model.blocks()[0].dispersion));
     let val_h = h.data(val)?;
     // The width used: the tuned one, or the fixed fraction of the range.
     let sigma = sel.sigma.or(Some(

@@ -1,12 +1,14 @@
 //! What discovery reports per hypothesis and about the effect: map curves, hypothesis
 //! results, the classification and the augmented model.
 
+use std::sync::Arc;
 use structid_core::hyperparameters::Bound;
+
 use structid_core::{ExprMap, Interpolant, LookupTable, Model, Result};
 
 use crate::effects::EffectFit;
 use crate::gap::Gap;
-use crate::hypotheses::Location;
+use crate::hypotheses::{KnownMap, Location, Nominal};
 
 /// A map estimate drawn for reports: values (and, when available, the ±2σ posterior band) on
 /// a grid over the range of z seen in the estimation record.
@@ -105,12 +107,55 @@ impl AugmentedMap {
 pub struct Augmented {
     /// Where the block sits.
     pub location: Location,
-    /// The augmented LFT with its block `N`.
+    /// The augmented LFT with its blocks: the new one first, then the nominal model's known
+    /// maps.
     pub model: Model,
-    /// Its map.
+    /// The new block's map.
     pub map: AugmentedMap,
+    /// The new block's named family, when it was named.
+    pub fit: Option<EffectFit>,
+    /// The nominal model's known maps, blocks `1..` of `model` (empty for a linear nominal).
+    pub known: Vec<KnownMap>,
     /// The gap of the augmented model on the estimation record.
     pub estimation_gap: Gap,
     /// The gap of the augmented model on the validation record.
     pub validation_gap: Gap,
+}
+
+impl Augmented {
+    /// Every block's map in block order: the new one, then the known ones (what simulates the
+    /// augmented model, e.g. with [`Model::simulate`]).
+    pub fn maps(&self) -> Result<Vec<Arc<dyn Interpolant>>> {
+        let first: Arc<dyn Interpolant> = Arc::from(self.map.interpolant()?);
+        Ok(std::iter::once(first)
+            .chain(self.known.iter().map(|k| Arc::clone(&k.map)))
+            .collect())
+    }
+
+    /// The augmented model as the nominal model of the next discovery: its LFT with every map
+    /// fixed ([`Nominal::from_model`]), and the named states of `given` (the nominal model it
+    /// was found on) that its states keep.
+    pub fn as_nominal(&self, given: &Nominal) -> Result<Nominal> {
+        let mut next = Nominal::new(self.model.lft().clone())?;
+        let fits =
+            std::iter::once(self.fit.clone()).chain(self.known.iter().map(|k| k.fit.clone()));
+        for ((block, map), fit) in self.model.blocks().iter().zip(self.maps()?).zip(fits) {
+            next = next.with_known(
+                block.inputs[0],
+                block.output,
+                KnownMap {
+                    name: block.name.clone(),
+                    map,
+                    fit,
+                },
+            )?;
+        }
+        let states = self.model.lft().dims().states;
+        for s in given.states() {
+            if s.state < states {
+                next = next.with_state(&s.name, s.state)?;
+            }
+        }
+        Ok(next)
+    }
 }

@@ -5,12 +5,12 @@ use structid_core::{Data, Error, ExprMap, Result};
 
 use crate::effects::{Effect, EffectFit, Naming, NamingSettings, fit_effect_with, name_effect};
 use crate::gap::{Gap, GapSettings, gap};
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use super::fit::{Fitted, simulation_rms};
 use super::fit::{even_indices, minmax, scoring_settings};
-use super::polish::polish;
+use super::polish::{polish, polish_jointly};
 use super::{Augmented, AugmentedMap, Classification, DiscoverSettings, Finding};
 
 /// Remarks and equivalent locations for a named effect.
@@ -268,6 +268,90 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
     )
 }
 
+/// A known map of a nominal model read from a file is only a function (an expression or a
+/// table); when it is exactly a family of the library (a map found and named by an earlier
+/// run), that family is recovered, so that its parameters can be refitted jointly with the
+/// next effect's. Each known map without a family is sampled at 400 points over the range of
+/// its z on `est`, and every family (with and without offset) is fitted to the points; the one
+/// with fewest parameters that reproduces them to 10⁻⁶ of their RMS is taken. Returns the
+/// nominal model with the families found, or `None` when nothing was to be recovered.
+pub(super) fn recover_families(
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Option<Nominal>> {
+    let known = nominal.known_maps();
+    if known.iter().all(|k| k.fit.is_some()) {
+        return Ok(None);
+    }
+    let z = nominal.model()?.lft().compute_z(est.u(), est.y())?.0;
+    let count = |f: &EffectFit| f.parameters.len() + usize::from(f.offset.is_some());
+    let fits = known
+        .iter()
+        .enumerate()
+        .map(|(i, k)| {
+            if k.fit.is_some() {
+                return None;
+            }
+            let (lo, hi) = minmax(&z.channel(i));
+            if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+                return None;
+            }
+            let zs: Vec<f64> = (0..400)
+                .map(|j| lo + (hi - lo) * j as f64 / 399.0)
+                .collect();
+            let ws: Vec<f64> = zs.iter().map(|v| k.map.eval(&[*v])).collect();
+            let scale = (ws.iter().map(|w| w * w).sum::<f64>() / ws.len() as f64).sqrt();
+            if !(scale.is_finite() && scale > 0.0) {
+                return None;
+            }
+            let mut best: Option<EffectFit> = None;
+            for &effect in &settings.library {
+                for offset in [false, true] {
+                    if let Ok(f) = fit_effect_with(effect, offset, &zs, &ws)
+                        && f.rms <= 1e-6 * scale
+                        && best.as_ref().is_none_or(|b| count(&f) < count(b))
+                    {
+                        best = Some(f);
+                    }
+                }
+            }
+            best
+        })
+        .collect();
+    Ok(Some(nominal.clone().with_known_fits(fits)))
+}
+
+/// The family `fit` refitted jointly with the named known maps of `h`
+/// ([`polish_jointly`]): the refitted family, the hypothesis with the refitted known maps, and
+/// the validation RMS; `None` when `h` has no named known map or the refit failed.
+fn refit_with_known(
+    fit: &EffectFit,
+    h: &Hypothesis,
+    est_h: &Data,
+    val_h: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(EffectFit, Hypothesis, f64)> {
+    if !h.known.iter().any(|k| k.fit.is_some()) {
+        return None;
+    }
+    let known: Vec<Option<EffectFit>> = h.known.iter().map(|k| k.fit.clone()).collect();
+    let (new_fit, refitted) = polish_jointly(fit, &known, h, est_h, settings)?;
+    if !new_fit.nameable() {
+        return None;
+    }
+    let mut joint = h.clone();
+    for (k, f) in joint.known.iter_mut().zip(refitted) {
+        if let Some(f) = f {
+            k.map = std::sync::Arc::new(ExprMap::parse(&f.expression, 1).ok()?);
+            k.fit = Some(f);
+        }
+    }
+    let m = ExprMap::parse(&new_fit.expression, 1).ok()?;
+    let rms = simulation_rms(&joint, &m, val_h, settings);
+    Some((new_fit, joint, rms))
+}
+
 #[allow(clippy::too_many_arguments)]
 pub(super) fn name_and_add(
     best: Fitted,
@@ -293,7 +377,10 @@ pub(super) fn name_and_add(
 
     let noise = before.noise_std;
     let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
+    // The known maps refitted jointly with family i, when that validated better.
+    let mut joint_known: Vec<Option<Hypothesis>> = vec![None; naming.ranked.len()];
     let mut classification = Classification::Unnamed;
+    let mut chosen_joint: Option<Hypothesis> = None;
     if direction.dynamic {
         classification = Classification::Dynamic;
     } else {
@@ -310,7 +397,17 @@ pub(super) fn name_and_add(
             let Ok(m) = ExprMap::parse(&naming.ranked[i].expression, 1) else {
                 continue;
             };
-            let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
+            let mut rms = simulation_rms(&h, &m, &val_h, settings);
+            // With maps named by earlier steps, each family is also refitted together with
+            // them, so that the families are compared without the earlier maps' bias.
+            if let Some((fit, known, joint_rms)) =
+                refit_with_known(&naming.ranked[i], &h, &est_h, &val_h, settings)
+                && joint_rms < rms
+            {
+                naming.ranked[i] = fit;
+                rms = joint_rms;
+                joint_known[i] = Some(known);
+            }
             family_rms[i] = Some(rms);
             simulated.push((i, rms));
         }
@@ -336,7 +433,7 @@ pub(super) fn name_and_add(
             }
             let fit = polish(&start, &h, &est_h, settings);
             if let Ok(m) = ExprMap::parse(&fit.expression, 1) {
-                let rms = simulation_rms(&h.model, location, &m, &val_h, settings);
+                let rms = simulation_rms(&h, &m, &val_h, settings);
                 naming.ranked[i] = fit;
                 family_rms[i] = Some(rms);
                 // In rate feedback the relay is the simplest friction and is offered first;
@@ -360,13 +457,35 @@ pub(super) fn name_and_add(
             settings.naming_tolerance,
         ) {
             classification = Classification::Named(naming.ranked[i].clone());
+            chosen_joint = joint_known[i].take();
         }
+    }
+    // The maps found by earlier steps were fitted while this effect was unmodelled: when the
+    // named family was refitted together with them, the augmented model carries them so.
+    let mut h = h;
+    let mut joint_remark = None;
+    if let Some(joint) = chosen_joint {
+        joint_remark = Some(format!(
+            "the maps of the earlier steps were refitted jointly with this one (output error, \
+             every map in the loop): {}",
+            joint
+                .known
+                .iter()
+                .filter_map(|k| k
+                    .fit
+                    .as_ref()
+                    .map(|f| format!("`{}` = {}", k.name, f.expression)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        h = joint;
     }
     naming.named = match &classification {
         Classification::Named(fit) => Some(fit.clone()),
         _ => None,
     };
     let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
+    remarks.extend(joint_remark);
     match &classification {
         Classification::Named(_) => {}
         Classification::Unnamed => {
@@ -413,19 +532,20 @@ pub(super) fn name_and_add(
     };
     let estimation_gap = gap(
         &h.model,
-        &[interp.as_ref()],
+        &h.maps(interp.as_ref()),
         &est_h,
         est_candidates,
         gap_settings,
     )?;
     let validation_gap = gap(
         &h.model,
-        &[interp.as_ref()],
+        &h.maps(interp.as_ref()),
         &val_h,
         val_candidates,
         gap_settings,
     )?;
     let shrink = before.rms / validation_gap.rms;
+    let named = naming.named.clone();
     Ok(Finding {
         location,
         hypothesis: best.result.clone(),
@@ -442,6 +562,8 @@ pub(super) fn name_and_add(
             location,
             model: h.model.clone(),
             map: augmented_map,
+            fit: named,
+            known: h.known.clone(),
             estimation_gap,
             validation_gap,
         },

@@ -2,7 +2,6 @@
 //! disturbance acting where the input acts.
 
 use structid_core::{Data, Result};
-use structid_lti::LinearSystem;
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 
 use crate::hypotheses::Nominal;
@@ -18,12 +17,11 @@ use crate::hypotheses::Nominal;
 /// needs this: without it, the output-error criterion makes the map explain the slow wander
 /// that every unmodelled force leaves in a position.
 pub(super) fn input_noise_ratio(nominal: &Nominal, est: &Data) -> Result<Option<f64>> {
-    let lft = nominal.lft();
     let u = est.u();
     let len = est.len();
     let r: Vec<f64> = {
-        let yu = lft.t_yu().simulate(u)?;
-        (0..len).map(|k| est.y().get(k, 0) - yu.get(k, 0)).collect()
+        let yu = nominal.simulate_output(u)?;
+        (0..len).map(|k| est.y().get(k, 0) - yu[k]).collect()
     };
     let nll = |n: &Nominal| -> Option<f64> {
         let noise = n.lft().t_ye();

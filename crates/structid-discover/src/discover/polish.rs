@@ -9,7 +9,7 @@ use crate::effects::{Effect, EffectFit, Refit};
 use crate::hypotheses::Hypothesis;
 
 use super::DiscoverSettings;
-use super::direction::simulation_residual;
+use super::direction::{simulation_residual, simulation_residual_of};
 
 /// Refines a named family's parameters by output error: Levenberg–Marquardt on the
 /// estimation record's simulation error with the parametric map in the loop, from the map
@@ -110,14 +110,123 @@ impl LeastSquaresProblem for PolishProblem<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let fit = self.fit;
         let map = |z: &[f64]| fit.eval_with(theta, z[0]);
-        simulation_residual(
-            &self.h.model,
-            self.h.location,
-            &map,
-            self.est_h,
-            self.settings,
-        )
-        .map(DVector::from_vec)
+        simulation_residual(self.h, &map, self.est_h, self.settings).map(DVector::from_vec)
+    }
+
+    /// Forward differences (each parameter costs a simulation).
+    fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let mut j = DMatrix::zeros(r.len(), theta.len());
+        for i in 0..theta.len() {
+            let step = JACOBIAN_STEP * theta[i].abs().max(1e-3);
+            let mut t = theta.to_vec();
+            t[i] += step;
+            let ri = self.residuals(&t)?;
+            for k in 0..r.len() {
+                j[(k, i)] = (ri[k] - r[k]) / step;
+            }
+        }
+        Some(j)
+    }
+}
+
+/// A joint output-error refit of the new block's named family `new` and the known maps'
+/// families (`known[i]`, `None` for a known map without one, which stays fixed): one
+/// Levenberg–Marquardt search over all their parameters on the estimation record's simulation
+/// error, every map in the loop. A map found first was fitted while the later effects were
+/// unmodelled, so its parameters carry their bias; refitting them with every effect in the
+/// model removes it. Returns the refitted families (with intervals from the joint fit), or
+/// `None` when the search did not converge or did not lower the cost.
+pub(super) fn polish_jointly(
+    new: &EffectFit,
+    known: &[Option<EffectFit>],
+    h: &Hypothesis,
+    est_h: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(EffectFit, Vec<Option<EffectFit>>)> {
+    let fits: Vec<&EffectFit> = std::iter::once(new).chain(known.iter().flatten()).collect();
+    let start: Vec<f64> = fits.iter().flat_map(|f| f.all_values()).collect();
+    let lm = LmSettings::builder()
+        .max_iterations(POLISH_ITERATIONS)
+        .tolerance(1e-10)
+        .initial_damping(1e-3)
+        .damping_increase(4.0)
+        .damping_decrease(3.0)
+        .min_damping(1e-12)
+        .max_damping(f64::INFINITY)
+        .max_step_attempts(10)
+        .build()
+        .ok()?;
+    let mut problem = JointProblem {
+        new,
+        known,
+        h,
+        est_h,
+        settings,
+    };
+    let lm = LevenbergMarquardt::new(lm)
+        .minimize(&mut problem, &start)
+        .ok()?;
+    let refit = Refit::from_status(lm.status, lm.iterations, lm.initial_cost, lm.cost);
+    if !(refit.converged && lm.cost < lm.initial_cost) {
+        return None;
+    }
+    let cov = lm.covariance(&mut problem);
+    let se: Vec<f64> = (0..lm.theta.len())
+        .map(|i| {
+            cov.as_ref()
+                .map(|cv| cv[(i, i)].max(0.0).sqrt())
+                .filter(|s| s.is_finite())
+                .unwrap_or(f64::INFINITY)
+        })
+        .collect();
+    let mut at = 0;
+    let mut next = |fit: &EffectFit| {
+        let n = fit.all_values().len();
+        let p = fit.parameters.len();
+        let block = cov.as_ref().map(|c| c.view((at, at), (p, p)).into_owned());
+        let mut out = fit.clone();
+        out.refit = Some(Box::new(refit.clone()));
+        let out = out.at(&lm.theta[at..at + n], &se[at..at + n], block.as_ref());
+        at += n;
+        out
+    };
+    let new_fit = next(new);
+    let known_fits = known.iter().map(|k| k.as_ref().map(&mut next)).collect();
+    Some((new_fit, known_fits))
+}
+
+/// The problem of [`polish_jointly`]: θ is the new fit's values, then each known fit's.
+struct JointProblem<'a> {
+    new: &'a EffectFit,
+    known: &'a [Option<EffectFit>],
+    h: &'a Hypothesis,
+    est_h: &'a Data,
+    settings: &'a DiscoverSettings,
+}
+
+impl LeastSquaresProblem for JointProblem<'_> {
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
+        let n0 = self.new.all_values().len();
+        let new = self.new;
+        let first = |z: &[f64]| new.eval_with(&theta[..n0], z[0]);
+        let mut at = n0;
+        let mut owned: Vec<Box<dyn structid_core::Interpolant + '_>> = Vec::new();
+        for (k, fit) in self.h.known.iter().zip(self.known) {
+            match fit {
+                Some(f) => {
+                    let n = f.all_values().len();
+                    let seg = &theta[at..at + n];
+                    at += n;
+                    owned.push(Box::new(move |z: &[f64]| f.eval_with(seg, z[0])));
+                }
+                None => owned.push(Box::new(|z: &[f64]| k.map.eval(z))),
+            }
+        }
+        let maps: Vec<&dyn structid_core::Interpolant> =
+            std::iter::once(&first as &dyn structid_core::Interpolant)
+                .chain(owned.iter().map(|m| m.as_ref()))
+                .collect();
+        simulation_residual_of(self.h, &maps, self.est_h, self.settings).map(DVector::from_vec)
     }
 
     /// Forward differences (each parameter costs a simulation).

@@ -37,6 +37,7 @@ pub(super) fn refine_nominal(
             location,
             model: Structure::new(g, location, dispersion).model()?,
             sample_time: g.sample_time.unwrap_or(1.0),
+            known: Vec::new(),
         })
     };
     let h_before = hypothesis(&start)?;
@@ -50,16 +51,10 @@ pub(super) fn refine_nominal(
         )
         .build()?;
     let r = refine_linear(&structure, &start, map.as_ref(), &est_h, &refine_settings)?;
-    let rms_before = simulation_rms(
-        &h_before.model,
-        location,
-        map.as_ref(),
-        &val_before,
-        settings,
-    );
+    let rms_before = simulation_rms(&h_before, map.as_ref(), &val_before, settings);
     let h_after = hypothesis(&r.after)?;
     let val_after = h_after.data(val)?;
-    let rms_after = simulation_rms(&h_after.model, location, map.as_ref(), &val_after, settings);
+    let rms_after = simulation_rms(&h_after, map.as_ref(), &val_after, settings);
     let adopted = rms_after < rms_before;
     if adopted {
         let est_after = h_after.data(est)?;

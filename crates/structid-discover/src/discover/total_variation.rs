@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use structid_core::hyperparameters::{Bound, Criterion, Selection, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
-use structid_core::{Data, Error, IdentifySettings, Model, Result, TotalVariation};
+use structid_core::{Data, Error, IdentifySettings, Result, TotalVariation};
 
 use crate::hypotheses::Hypothesis;
 
@@ -21,20 +21,14 @@ pub(super) fn total_variation_fit(
     settings: &DiscoverSettings,
 ) -> Result<Fitted> {
     let t0 = Instant::now();
-    let h = Hypothesis {
-        model: Model::new(
-            hyp.model.lft().clone(),
-            vec![structid_core::NonlinearBlock::new(
-                "N",
-                vec![0],
-                0,
-                Arc::new(TotalVariation::new()),
-            )],
-        )?,
-        ..hyp.clone()
-    };
+    let h = hyp.with_dispersion(Arc::new(TotalVariation::new()));
     let est_h = h.data(est)?;
     let val_h = h.data(val)?;
+    // With known maps, β is selected on the validation record's one-step model: their outputs
+    // at the record's z are inputs there ([`Hypothesis::identification`]); the simulations
+    // that rank the estimate bind them in the loop.
+    let (id_model, id_est) = h.identification(est)?;
+    let (_, id_val) = h.identification(val)?;
     // Naming needs the shape of the map, not eight digits of it: a looser ADMM tolerance and
     // a coarser β search keep this step at a fraction of a second per fit.
     let identify = IdentifySettings::builder()
@@ -45,14 +39,11 @@ pub(super) fn total_variation_fit(
         .criterion(Criterion::Validation)
         .tolerance(0.25)
         .build()?;
-    let sel = select(&h.model, &est_h, Some(&val_h), &identify, &selection)?;
+    let sel = select(&id_model, &id_est, Some(&id_val), &identify, &selection)?;
     if let Some(why) = failure_reason(&sel, &selection) {
         return Err(why);
     }
-    let h = Hypothesis {
-        model: sel.model,
-        ..h
-    };
+    let h = h.with_dispersion(Arc::clone(&sel.model.blocks()[0].dispersion));
     finish_fit(
         hyp.location,
         "total variation",

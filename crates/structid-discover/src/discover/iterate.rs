@@ -1,0 +1,245 @@
+//! Several effects, one at a time: discover, adopt the augmented model as the next nominal
+//! model, and discover again.
+
+use std::time::Instant;
+
+use structid_core::{Data, Error, Result};
+
+use crate::hypotheses::Nominal;
+
+use super::{Classification, DiscoverSettings, Discovery, Finding, Verdict, discover};
+
+/// Settings of [`discover_effects`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct EffectsSettings {
+    max_effects: usize,
+    min_improvement: f64,
+}
+
+impl Default for EffectsSettings {
+    /// At most three effects; a step must cut the validation RMS by at least 10 %.
+    fn default() -> Self {
+        Self {
+            max_effects: 3,
+            min_improvement: 0.10,
+        }
+    }
+}
+
+impl EffectsSettings {
+    /// At most `max_effects` steps (≥ 1).
+    ///
+    /// ```
+    /// use structid_discover::discover::EffectsSettings;
+    /// assert_eq!(EffectsSettings::default().with_max_effects(2).unwrap().max_effects(), 2);
+    /// assert!(EffectsSettings::default().with_max_effects(0).is_err());
+    /// ```
+    pub fn with_max_effects(mut self, max_effects: usize) -> Result<Self> {
+        if max_effects == 0 {
+            return Err(Error::InvalidParameter {
+                name: "max_effects".into(),
+                value: 0.0,
+                reason: "at least one effect must be looked for".into(),
+            });
+        }
+        self.max_effects = max_effects;
+        Ok(self)
+    }
+
+    /// The share by which a step must cut the validation RMS of the model it started from to
+    /// be adopted, in [0, 1): a step whose augmented model has validation RMS above
+    /// (1 − `share`) × its nominal model's is not adopted, and the iteration stops.
+    pub fn with_min_improvement(mut self, share: f64) -> Result<Self> {
+        if !(share.is_finite() && (0.0..1.0).contains(&share)) {
+            return Err(Error::InvalidParameter {
+                name: "min_improvement".into(),
+                value: share,
+                reason: "must be a share in [0, 1)".into(),
+            });
+        }
+        self.min_improvement = share;
+        Ok(self)
+    }
+
+    /// The most steps.
+    pub fn max_effects(&self) -> usize {
+        self.max_effects
+    }
+
+    /// The share a step must cut the validation RMS by.
+    pub fn min_improvement(&self) -> f64 {
+        self.min_improvement
+    }
+}
+
+/// Why [`discover_effects`] stopped.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "kebab-case", tag = "reason")]
+pub enum StopReason {
+    /// The last step's verdict: the gap of the model it started from is noise.
+    NoMissingEffect,
+    /// The last step's verdict: the gap is larger than the noise, but no single static block
+    /// at the candidate locations explains it.
+    Unexplained,
+    /// The last step found a dynamic effect (hysteresis or backlash suspected): its static
+    /// approximation is not adopted as a model to build on.
+    Dynamic,
+    /// The last step's augmented model cut the validation RMS by less than the required share
+    /// ([`EffectsSettings::with_min_improvement`]); `ratio` is its RMS over the RMS it started from.
+    NoImprovement {
+        /// Validation RMS after / before the step.
+        ratio: f64,
+    },
+    /// [`EffectsSettings::max_effects`] steps were run.
+    MaxEffects,
+}
+
+impl StopReason {
+    /// The reason in words.
+    pub fn describe(&self, settings: &EffectsSettings) -> String {
+        match self {
+            StopReason::NoMissingEffect => "the remaining gap is noise (no missing effect)".into(),
+            StopReason::Unexplained => {
+                "the remaining gap is larger than the noise, but no single static block at the \
+                 candidate locations explains it"
+                    .into()
+            }
+            StopReason::Dynamic => "the last effect found is dynamic (hysteresis or backlash \
+                                    suspected); its static approximation is not built on"
+                .into(),
+            StopReason::NoImprovement { ratio } => format!(
+                "the last step cut the validation RMS by {:.1} %, less than the {:.0} % required",
+                100.0 * (1.0 - ratio),
+                100.0 * settings.min_improvement
+            ),
+            StopReason::MaxEffects => format!(
+                "{} effect(s) were looked for, the most allowed",
+                settings.max_effects
+            ),
+        }
+    }
+}
+
+/// One step of [`discover_effects`].
+#[derive(Clone, Debug)]
+pub struct Step {
+    /// The nominal model the step started from (the given one, then the augmented model of
+    /// the last adopted step).
+    pub nominal: Nominal,
+    /// What discovery found on it.
+    pub discovery: Discovery,
+    /// Whether its finding was adopted as the next nominal model (and counts as an effect).
+    pub adopted: bool,
+}
+
+/// Everything [`discover_effects`] found.
+#[derive(Clone, Debug)]
+pub struct Effects {
+    /// Every step, in order (the last one may not be adopted).
+    pub steps: Vec<Step>,
+    /// Why the iteration stopped.
+    pub stop: StopReason,
+    /// The settings it ran with.
+    pub settings: EffectsSettings,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+impl Effects {
+    /// The adopted steps' findings, in order: the effects found.
+    pub fn findings(&self) -> Vec<&Finding> {
+        self.steps
+            .iter()
+            .filter(|s| s.adopted)
+            .filter_map(|s| s.discovery.finding.as_ref())
+            .collect()
+    }
+
+    /// The last adopted finding: its augmented model carries every effect found.
+    pub fn last(&self) -> Option<&Finding> {
+        self.findings().last().copied()
+    }
+
+    /// The validation RMS of the given nominal model, then after each adopted step.
+    pub fn validation_rms(&self) -> Vec<f64> {
+        let mut out: Vec<f64> = self
+            .steps
+            .first()
+            .map(|s| s.discovery.validation_gap.rms)
+            .into_iter()
+            .collect();
+        out.extend(
+            self.findings()
+                .iter()
+                .map(|f| f.augmented.validation_gap.rms),
+        );
+        out
+    }
+}
+
+/// Finds several effects one at a time: runs [`discover`] on `nominal`, adopts the finding's
+/// augmented model (every map found so far fixed inside it, [`super::Augmented::as_nominal`])
+/// as the next nominal model, and repeats.
+///
+/// It stops when a step's verdict is "no missing effect" or "unexplained", when a step finds
+/// a dynamic effect, when a step's augmented model cuts the validation RMS of the model it
+/// started from by less than [`EffectsSettings::min_improvement`] (10 % by default; that step
+/// is reported but not adopted), or after [`EffectsSettings::max_effects`] steps. Every step
+/// after the first is scored as the first was (the scoring the first step resolved), so that
+/// their RMS values compare.
+///
+/// Errors: those of [`discover`] on the first step. A later step that fails stops the
+/// iteration with its error.
+pub fn discover_effects(
+    nominal: &Nominal,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Result<Effects> {
+    let t0 = Instant::now();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut current = nominal.clone();
+    let mut settings = settings.clone();
+    let stop = loop {
+        let d = discover(&current, est, val, &settings)?;
+        settings.scoring = Some(d.scoring);
+        let outcome = match (&d.verdict_kind, &d.finding) {
+            (Verdict::NoMissingEffect, _) => Err(StopReason::NoMissingEffect),
+            (Verdict::Unexplained, _) | (Verdict::MissingEffect, None) => {
+                Err(StopReason::Unexplained)
+            }
+            (Verdict::MissingEffect, Some(f)) => {
+                let ratio = f.augmented.validation_gap.rms / d.validation_gap.rms;
+                if matches!(f.classification, Classification::Dynamic) {
+                    Err(StopReason::Dynamic)
+                } else if ratio.is_nan() || ratio > 1.0 - effects.min_improvement {
+                    Err(StopReason::NoImprovement { ratio })
+                } else {
+                    Ok(f.augmented.as_nominal(&current)?)
+                }
+            }
+        };
+        let adopted = outcome.is_ok();
+        steps.push(Step {
+            nominal: current.clone(),
+            discovery: d,
+            adopted,
+        });
+        match outcome {
+            Err(reason) => break reason,
+            Ok(next) => {
+                if steps.len() >= effects.max_effects {
+                    break StopReason::MaxEffects;
+                }
+                current = next;
+            }
+        }
+    };
+    Ok(Effects {
+        steps,
+        stop,
+        settings: effects.clone(),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
