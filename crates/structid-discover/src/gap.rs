@@ -121,7 +121,8 @@ pub struct Gap {
     pub regions: Vec<Region>,
     /// Whether the gap is larger than noise: RMS(ε) above `noise_ratio`·σ̂, or for an
     /// output-error model, whose noise may be coloured, above `coloured_ratio`·σ̂ (see
-    /// [`GapSettings`]). A gap that fails a test but is not above noise, and that no candidate
+    /// [`GapSettings`]); with windowed scoring also the simulation RMS above
+    /// `coloured_ratio`·σ̂. A gap that fails a test but is not above noise, and that no candidate
     /// block explains, is noise.
     pub above_noise: bool,
     /// Whether a missing effect was detected.
@@ -426,13 +427,18 @@ pub fn gap(
     // any effect missing. Such a gap is worth examining (a candidate block may explain it),
     // but it is larger than noise only beyond what coloured noise plausibly gives.
     let output_error = model.lft().t_ye().order() == 0;
+    // With windows the simulation residual is judged too: a noise model with an input
+    // disturbance (an integrating nominal's) predicts one step ahead well whatever the map,
+    // so its innovations stay small while the simulation misses by far more than noise.
+    let windowed = matches!(settings.scoring, Scoring::Windowed(_));
     let above_noise = prediction_rms
         > noise_std
             * if output_error {
                 settings.coloured_ratio
             } else {
                 settings.noise_ratio
-            };
+            }
+        || (windowed && v.rms[0] > settings.coloured_ratio * noise_std);
     let verdict = if missing_effect {
         let mut why: Vec<String> = failing
             .iter()
