@@ -259,6 +259,7 @@ pub(super) fn name_and_add(
     val_candidates: &[(String, Vec<f64>)],
     gap_settings: &GapSettings,
     before: &Gap,
+    noise: f64,
     settings: &DiscoverSettings,
 ) -> Result<Finding> {
     let location = best.result.location;
@@ -271,7 +272,6 @@ pub(super) fn name_and_add(
     naming.ranked = parsimonious(&naming);
     let nonparametric_rms = best.result.validation_rms;
 
-    let noise = before.noise_std;
     let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
     let mut classification = Classification::Unnamed;
     if direction.dynamic {
