@@ -406,11 +406,27 @@ pub fn discover(
         }
         by_validation(&mut fitted);
     }
-    // What each smooth hypothesis leaves unexplained on the estimation record (its noise
-    // estimate ê) bounds the noise level too. Not a total-variation estimate's, nor one whose
-    // β sits on its search bound: a map with that much freedom bends to the noise carried in
-    // z and leaves too little. With an input disturbance in the noise path, ê is split
-    // between it and the output noise, and is not the output noise alone.
+    // Each smooth hypothesis's simulation residual on the estimation record bounds the noise
+    // level too. Not a total-variation estimate's, nor one whose β sits on its search bound:
+    // with a knot at nearly every sample, a map of z can memorise the noise of y even when z
+    // is simulated.
+    for f in &fitted {
+        if f.estimator != "quadratic" || f.result.beta_at_bound.is_some() {
+            continue;
+        }
+        if let Some(fit) = f.residual_noise {
+            noise.tighten(fit, || {
+                format!(
+                    "the simulation of the {} estimate {} on the estimation record",
+                    f.estimator,
+                    nominal.describe(f.result.location)
+                )
+            });
+        }
+    }
+    // So does what it leaves unexplained there (its noise estimate ê), with the same
+    // exclusions. With an input disturbance in the noise path, ê is split between it and the
+    // output noise, and is not the output noise alone.
     if input_noise.is_none() {
         for f in &fitted {
             if f.estimator == "quadratic"
@@ -567,13 +583,18 @@ pub fn discover(
     // is not reported as a missing effect. The portmanteau family errs 0.1 % of the time on
     // stationary inputs, more on strongly non-stationary ones such as chirps, whose squares a
     // low-order prewhitening cannot whiten.
-    noise.tighten(finding.augmented.estimation_gap.noise, || {
-        format!(
-            "the augmented model ({} {}) on the estimation record",
-            finding.classification.describe(),
-            nominal.describe(finding.location)
-        )
-    });
+    for (g, record) in [
+        (&finding.augmented.estimation_gap, "estimation"),
+        (&finding.augmented.validation_gap, "validation"),
+    ] {
+        noise.tighten(g.noise, || {
+            format!(
+                "the augmented model ({} {}) on the {record} record",
+                finding.classification.describe(),
+                nominal.describe(finding.location)
+            )
+        });
+    }
     if finding.shrink < MIN_CONFIRMING_SHRINK {
         // The gap is noise-sized and only a test failed: a false alarm of the test family
         // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
