@@ -179,7 +179,7 @@ pub enum Error {
         "the nominal model is not usable on the {record} record: {}; check its units, its \
          sign, its input delay and any offset in the data, or estimate one (`structid linear`, \
          with `--integrators` for a plant that integrates)",
-        poor_nominal_text(*.model_rms, *.constant_rms, *.scoring)
+        poor_nominal_text(*.model_rms, *.constant_rms, .scoring)
     )]
     PoorNominal {
         /// Which record (`estimation`).

@@ -432,7 +432,7 @@ pub fn discover(
             if f.estimator == "quadratic"
                 && f.result.beta_at_bound.is_none()
                 && f.e_hat.channels() > 0
-                && f.e_hat.len() > 0
+                && !f.e_hat.is_empty()
             {
                 noise.tighten(
                     crate::gap::noise_level_coloured(&f.e_hat.channel(0)),
