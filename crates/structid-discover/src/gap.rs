@@ -635,6 +635,43 @@ mod tests {
         assert!((normal_quantile(1e-5) + 4.264_890_794).abs() < 1e-7);
     }
 
+    /// White noise plus a slow model error: the error's variogram grows as k² over the fitted
+    /// lags and is taken for drift, not noise, where the residual's own RMS is three times σ.
+    /// AR(1) noise of φ = 0.6 and 0.9: σ̂ is the std of the process, where the first
+    /// difference gives σ·√(1 − φ).
+    #[test]
+    fn the_coloured_noise_level_separates_noise_colour_and_slow_errors() {
+        let mut rng = StdRng::seed_from_u64(17);
+        let n = Normal::new(0.0, 1.0).unwrap();
+        let e: Vec<f64> = (0..5000).map(|_| 0.1 * n.sample(&mut rng)).collect();
+        let r: Vec<f64> = e
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + 0.4 * (0.01 * k as f64).sin())
+            .collect();
+        assert!(structid_core::metrics::rms(&r) > 2.5 * 0.1);
+        let fit = noise_level_coloured(&r);
+        assert!((fit.std - 0.1).abs() < 0.01, "{fit:?}");
+        assert!(fit.drift > 0.0, "{fit:?}");
+        for phi in [0.6, 0.9] {
+            let mut x = 0.0;
+            let ar: Vec<f64> = (0..20000)
+                .map(|_| {
+                    x = phi * x + (1.0f64 - phi * phi).sqrt() * 0.2 * n.sample(&mut rng);
+                    x
+                })
+                .collect();
+            let fit = noise_level_coloured(&ar);
+            assert!((fit.std - 0.2).abs() < 0.02, "φ = {phi}: {fit:?}");
+            assert!((fit.colour - phi).abs() < 0.06, "φ = {phi}: {fit:?}");
+            let difference = noise_level(&ar);
+            assert!(
+                (difference - 0.2 * (1.0 - phi).sqrt()).abs() < 0.02,
+                "φ = {phi}: {difference}"
+            );
+        }
+    }
+
     #[test]
     fn the_true_linear_model_leaves_no_missing_effect() {
         let mut flagged = 0;
