@@ -10,6 +10,8 @@
 //!    (whiteness; ε against u, against u², and ε² against u², together at the 0.1 % level).
 //!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
 //!    effect detected" with the statistics behind it, and the workflow stops there.
+//!    A nominal model whose simulation diverges, or is worse than the mean of y by more than
+//!    [`WORSE_THAN_CONSTANT`], is refused ([`Error::PoorNominal`]).
 //!    A nominal model with a pole on the unit circle (an integrator) is scored in windows
 //!    ([`structid_core::validation::windows`]) in this step and in every later one, and gets a
 //!    disturbance where its input acts, sized by maximum likelihood
@@ -45,7 +47,10 @@
 //!    error (Levenberg–Marquardt on the estimation record's simulation error with the
 //!    parametric map in the loop; 95 % intervals from s²·(JᵀJ)⁻¹) and simulated on the
 //!    validation record. The simplest that validates within
-//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂ and
+//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂, the
+//!    workflow's noise level [`NoiseLevel`]: the smallest semivariogram estimate over the
+//!    residuals of the nominal model and the smooth hypotheses, which allows for coloured
+//!    noise and is not inflated by the missing effect, and
 //!    1.5× the nonparametric RMS) is
 //!    *named*, unless a richer one that also does is a fifth better. Otherwise the effect is an
 //!    "unnamed static effect" and the nonparametric map is kept as a table.
@@ -271,7 +276,9 @@ pub struct Discovery {
 /// "no missing effect detected", with the failed test and the best attempt in the text.
 ///
 /// Errors: several inputs or outputs, records shorter than 100 samples, a constant input, an
-/// unstable nominal model (its simulation would diverge); a hypothesis that fails is recorded
+/// unstable nominal model (its simulation would diverge), a nominal model whose simulation
+/// diverges or is worse than a constant by more than [`WORSE_THAN_CONSTANT`]
+/// ([`Error::PoorNominal`]); a hypothesis that fails is recorded
 /// in [`HypothesisResult::failure`] and ranked last instead.
 pub fn discover(
     nominal: &Nominal,
@@ -693,8 +700,9 @@ pub fn discover(
 /// the generators' cases (30 static, 20 effect-free and 10 hysteresis cases of
 /// [`crate::synthetic`]; 40 static, 15 dynamic and 15 effect-free cases of [`crate::physics`];
 /// the positioning axis) the ratio reaches 37 (a stuck actuator: y is G's response to a
-/// constant, the nominal's to u) and 26 (a Bouc–Wen spring in a stiff closed loop, scored in
-/// windows); a stuck sensor reaches 151 but is exempt (see [`check_nominal`]). A nominal model
+/// constant, the nominal's to u) and 26 (a hysteretic spring in a stiff closed loop, scored in
+/// windows); a stuck sensor reaches 151 but is exempt: a record whose y stays within three
+/// noise levels of its mean is not checked. A nominal model
 /// in the wrong units (mm for m) is about 1000.
 pub const WORSE_THAN_CONSTANT: f64 = 100.0;
 
