@@ -417,6 +417,53 @@ fn bad_models_and_arguments_are_input_errors() {
     assert!(!out.exists(), "nothing is written on an input error");
 }
 
+/// A nominal model in the wrong units (its gain a thousand times the data's) simulates far
+/// worse than the mean of y: an input error that names both RMS values and what to do, and
+/// writes nothing.
+#[test]
+fn a_nominal_worse_than_a_constant_is_an_input_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (est, val) = records(d, NOMINAL);
+    let wrong = d.join("wrong_units.toml");
+    std::fs::write(
+        &wrong,
+        NOMINAL.replace("num = [[0.0, 0.1, 0.1]]", "num = [[0.0, 100.0, 100.0]]"),
+    )
+    .unwrap();
+    let out = d.join("out");
+    let e = input_error(&[
+        "discover",
+        "--model",
+        p(&wrong),
+        "--data",
+        p(&est),
+        "--validate",
+        p(&val),
+        "--out",
+        p(&out),
+    ]);
+    for part in [
+        "not usable on the estimation record",
+        "worse than a constant",
+        "RMS",
+        "units",
+        "structid linear",
+        "--integrators",
+    ] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    // The ratio printed is the one the gains imply: the error is 999 times y's own size.
+    let ratio: f64 = e
+        .split("× the RMS")
+        .next()
+        .and_then(|s| s.rsplit(", ").next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no ratio in {e}"));
+    assert!((ratio - 999.0).abs() < 20.0, "{ratio}: {e}");
+    assert!(!out.exists(), "nothing is written on an input error");
+}
+
 /// A nominal `[lft]` model with a declared location `spring` (z = the measured position, w
 /// entering the position equation, unlike the built-in feedback into the input channel) and a
 /// named state `velocity`.

@@ -14,6 +14,10 @@
 //!   the quantisation noise q/√12 of an output with few distinct values): first
 //!   differences remove the slow part of a model error, and for white noise Δε has standard
 //!   deviation √2·σ;
+//! * the noise level of the simulation residual allowing for coloured noise
+//!   ([`noise_level_coloured`]: the robust semivariogram over lags 1…10 fitted by
+//!   σ²·(1 − φ^k) + c·k², so that white noise, AR(1) noise and a slow model error are told
+//!   apart), from which the discovery workflow takes its noise level;
 //! * portmanteau tests, together at the 0.1 % level (Bonferroni over the tests), so that the whole
 //!   family of lags has one error rate (a lag-by-lag band would flag a correct model about
 //!   40 % of the time over 50 lags): the
@@ -48,10 +52,6 @@ pub struct GapSettings {
     pub band: f64,
     /// The gap counts as noise only when RMS(ε) ≤ `noise_ratio`·σ̂ (default 1.5).
     pub noise_ratio: f64,
-    /// For an output-error model, whose noise may be coloured, the gap counts as noise up to
-    /// `coloured_ratio`·σ̂ (default 4: AR(1) noise with lag-one correlation φ has RMS
-    /// 1/√(1 − φ) times the difference-based σ̂, 3.2× at φ = 0.9, 4× at φ ≈ 0.94).
-    pub coloured_ratio: f64,
     /// Smallest share of the samples an operating region may hold (default 0.05).
     pub min_region_share: f64,
     /// The initial state of the simulation (default: estimated; a record that starts at rest
@@ -69,7 +69,6 @@ impl Default for GapSettings {
             window: None,
             band: 3.0,
             noise_ratio: 1.5,
-            coloured_ratio: 4.0,
             min_region_share: 0.05,
             initial_state: InitialState::Estimate,
             scoring: Scoring::Free,
@@ -111,20 +110,23 @@ pub struct Gap {
     pub prediction_rms: f64,
     /// The fit in percent.
     pub fit_percent: f64,
-    /// The noise level σ̂ from the differenced residual.
+    /// The model-free noise level of the innovations ε from their first differences
+    /// ([`noise_level`], at least the quantisation noise of y), which the verdict compares
+    /// RMS(ε) with and the time windows are drawn against: a slow effect in ε does not raise
+    /// it. It reads coloured noise as white (√(1 − φ) too low for AR(1) noise) and a fast
+    /// effect as noise; `noise` is the noise level proper.
     pub noise_std: f64,
+    /// The noise level of the simulation residual y − ŷ over its scored samples: σ̂ of the
+    /// output noise, coloured or not ([`noise_level_coloured`]). Every model's residual holds
+    /// the same noise plus its own error, so the smallest of these over the models tried is
+    /// the workflow's noise level ([`crate::discover::Discovery::noise`]).
+    pub noise: NoiseFit,
     /// The portmanteau tests.
     pub tests: Vec<Portmanteau>,
     /// Time windows where ε exceeds its band.
     pub windows: Vec<Range<usize>>,
     /// Operating regions, best first.
     pub regions: Vec<Region>,
-    /// Whether the gap is larger than noise: RMS(ε) above `noise_ratio`·σ̂, or for an
-    /// output-error model, whose noise may be coloured, above `coloured_ratio`·σ̂ (see
-    /// [`GapSettings`]); with windowed scoring also the simulation RMS above
-    /// `coloured_ratio`·σ̂. A gap that fails a test but is not above noise, and that no candidate
-    /// block explains, is noise.
-    pub above_noise: bool,
     /// Whether a missing effect was detected.
     pub missing_effect: bool,
     /// The verdict in words, with the statistics behind it.
@@ -224,6 +226,134 @@ pub fn noise_level(residual: &[f64]) -> f64 {
     let m = median(d.clone());
     let mad = median(d.iter().map(|v| (v - m).abs()).collect());
     mad / (0.674_489_75 * std::f64::consts::SQRT_2)
+}
+
+/// A noise level that allows for coloured noise and a slow model error in a residual: see
+/// [`noise_level_coloured`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct NoiseFit {
+    /// σ̂: the standard deviation of the noise itself (of the coloured process, not of its
+    /// innovations).
+    pub std: f64,
+    /// φ̂: the noise's correlation decays as φ̂^k over k samples (0 for white noise).
+    pub colour: f64,
+    /// ĉ: the slow part's contribution to the semivariogram grows as ĉ·k².
+    pub drift: f64,
+}
+
+/// Largest lag of the semivariogram [`noise_level_coloured`] fits: short, so that the slow
+/// part of a model error (a plant-filtered signal, whose variogram saturates within a few
+/// tens of samples, like coloured noise's) adds little; the AR(1) shape carries σ² beyond it.
+const VARIOGRAM_LAGS: usize = 10;
+
+/// Largest φ̂ of [`noise_level_coloured`], in percent: a "noise" correlated over more than
+/// twenty samples is a slow disturbance, which a model (or its windows) has to explain, and
+/// a model error's variogram would otherwise be read as such a noise.
+const MAX_COLOUR_PERCENT: usize = 95;
+
+/// σ̂ of a residual r = e + m that holds noise e (white or coloured) and a slow model error m,
+/// from its robust semivariogram.
+///
+/// γ(k) = ½·E[(r_{t+k} − r_t)²] is estimated robustly for k = 1…10 as ½·(MAD(Δ_k r)/0.6745)²
+/// (a few jumps, e.g. at the seams of a windowed simulation, do not count), and fitted by
+/// γ(k) = σ²·(1 − φ^k) + c·k² with σ², c ≥ 0 and φ ∈ [0, 0.95] (relative least squares, φ on
+/// a grid, σ² and c linear): the noise's part saturates at σ² once its correlation φ^k has
+/// died out, while a slow error (locally a ramp, m_{t+k} − m_t ≈ ṁ·k) grows as k². White
+/// noise gives φ̂ = 0 and σ̂ = the first-difference estimate of [`noise_level`]; AR(1) noise
+/// e_k = φ·e_{k−1} + η_k is fitted exactly, where [`noise_level`] would return σ·√(1 − φ).
+/// A model error that changes as fast as the noise cannot be told from it: the residual
+/// should be that of the best model at hand.
+///
+/// ```
+/// use structid_discover::gap::noise_level_coloured;
+/// // AR(1) noise with φ = 0.8 and std 1 (a deterministic pseudo-random sequence).
+/// let mut state = 12345u64;
+/// let mut uniform = || {
+///     state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+///     (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+/// };
+/// let mut e = 0.0;
+/// let r: Vec<f64> = (0..20000)
+///     .map(|_| {
+///         // a sum of 12 uniforms is nearly Gaussian with variance 1
+///         let eta: f64 = (0..12).map(|_| uniform()).sum();
+///         e = 0.8 * e + 0.6 * eta;
+///         e
+///     })
+///     .collect();
+/// let fit = noise_level_coloured(&r);
+/// assert!((fit.std - 1.0).abs() < 0.1, "{fit:?}");
+/// assert!((fit.colour - 0.8).abs() < 0.1, "{fit:?}");
+/// ```
+pub fn noise_level_coloured(residual: &[f64]) -> NoiseFit {
+    let n = residual.len();
+    let lags = VARIOGRAM_LAGS.min(n / 20).max(1);
+    if n < 3 {
+        return NoiseFit {
+            std: noise_level(residual),
+            colour: 0.0,
+            drift: 0.0,
+        };
+    }
+    let gamma: Vec<f64> = (1..=lags)
+        .map(|k| {
+            let d: Vec<f64> = residual.windows(k + 1).map(|w| w[k] - w[0]).collect();
+            let m = median(d.clone());
+            let mad = median(d.iter().map(|v| (v - m).abs()).collect()) / 0.674_489_75;
+            0.5 * mad * mad
+        })
+        .collect();
+    let white = NoiseFit {
+        std: gamma[0].sqrt(),
+        colour: 0.0,
+        drift: 0.0,
+    };
+    if lags < 3 || gamma.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
+        return white;
+    }
+    // Relative residuals: each γ̂(k) has about the same relative error.
+    let weight: Vec<f64> = gamma.iter().map(|g| 1.0 / g).collect();
+    let mut best: Option<(f64, NoiseFit)> = None;
+    for step in 0..=MAX_COLOUR_PERCENT {
+        let phi = step as f64 / 100.0;
+        let a: Vec<f64> = (1..=lags).map(|k| 1.0 - phi.powi(k as i32)).collect();
+        let b: Vec<f64> = (1..=lags).map(|k| (k * k) as f64).collect();
+        // Weighted normal equations in (σ², c), then the bounds by dropping a term.
+        let dot = |x: &[f64], y: &[f64]| -> f64 {
+            (0..lags).map(|i| weight[i] * weight[i] * x[i] * y[i]).sum()
+        };
+        let (aa, ab, bb, ag, bg) = (
+            dot(&a, &a),
+            dot(&a, &b),
+            dot(&b, &b),
+            dot(&a, &gamma),
+            dot(&b, &gamma),
+        );
+        let det = aa * bb - ab * ab;
+        let mut candidates = vec![(ag / aa, 0.0), (0.0, bg / bb)];
+        if det > 1e-12 * aa * bb {
+            candidates.push(((ag * bb - bg * ab) / det, (aa * bg - ab * ag) / det));
+        }
+        for (s, c) in candidates {
+            if !(s >= 0.0 && c >= 0.0) {
+                continue;
+            }
+            let sse: f64 = (0..lags)
+                .map(|i| (weight[i] * (gamma[i] - s * a[i] - c * b[i])).powi(2))
+                .sum();
+            if best.is_none_or(|(v, _)| sse < v) {
+                best = Some((
+                    sse,
+                    NoiseFit {
+                        std: s.sqrt(),
+                        colour: phi,
+                        drift: c,
+                    },
+                ));
+            }
+        }
+    }
+    best.map_or(white, |(_, f)| f)
 }
 
 /// The one-step prediction errors of an AR(`order`) model of `s` fitted by least squares
@@ -341,7 +471,16 @@ pub fn gap(
     let n = innovations.len();
     // A quantised output (few distinct values) makes most differences exactly zero and the
     // MAD collapse; the quantisation error q/√12 is a floor for the noise level.
-    let noise_std = noise_level(&innovations).max(quantisation_floor(&y));
+    let floor = quantisation_floor(&y);
+    let noise_std = noise_level(&innovations).max(floor);
+    let scored: Vec<f64> = v
+        .scored
+        .iter()
+        .flat_map(|r| r.clone())
+        .map(|k| residual[k])
+        .collect();
+    let mut noise = noise_level_coloured(&scored);
+    noise.std = noise.std.max(floor);
     let max_lag = settings.max_lag.min(n.saturating_sub(1)).max(1);
 
     // Ljung–Box on the residual's autocorrelation.
@@ -422,23 +561,6 @@ pub fn gap(
     let too_large = prediction_rms > settings.noise_ratio * noise_std;
     let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
     let missing_effect = too_large || !failing.is_empty();
-    // An output-error model says nothing of the noise's colour, and coloured noise makes its
-    // residual fail whiteness and exceed a noise level taken from first differences without
-    // any effect missing. Such a gap is worth examining (a candidate block may explain it),
-    // but it is larger than noise only beyond what coloured noise plausibly gives.
-    let output_error = model.lft().t_ye().order() == 0;
-    // With windows the simulation residual is judged too: a noise model with an input
-    // disturbance (an integrating nominal's) predicts one step ahead well whatever the map,
-    // so its innovations stay small while the simulation misses by far more than noise.
-    let windowed = matches!(settings.scoring, Scoring::Windowed(_));
-    let above_noise = prediction_rms
-        > noise_std
-            * if output_error {
-                settings.coloured_ratio
-            } else {
-                settings.noise_ratio
-            }
-        || (windowed && v.rms[0] > settings.coloured_ratio * noise_std);
     let verdict = if missing_effect {
         let mut why: Vec<String> = failing
             .iter()
@@ -468,10 +590,10 @@ pub fn gap(
         prediction_rms,
         fit_percent: v.fit_percent[0],
         noise_std,
+        noise,
         tests,
         windows,
         regions,
-        above_noise,
         missing_effect,
         verdict,
     })
@@ -546,6 +668,43 @@ mod tests {
         assert!((chi_square_quantile(0.99, 51) - 77.386).abs() < 0.3);
         assert!((normal_quantile(0.975) - 1.959_963_985).abs() < 1e-8);
         assert!((normal_quantile(1e-5) + 4.264_890_794).abs() < 1e-7);
+    }
+
+    /// White noise plus a slow model error: the error's variogram grows as k² over the fitted
+    /// lags and is taken for drift, not noise, where the residual's own RMS is three times σ.
+    /// AR(1) noise of φ = 0.6 and 0.9: σ̂ is the std of the process, where the first
+    /// difference gives σ·√(1 − φ).
+    #[test]
+    fn the_coloured_noise_level_separates_noise_colour_and_slow_errors() {
+        let mut rng = StdRng::seed_from_u64(17);
+        let n = Normal::new(0.0, 1.0).unwrap();
+        let e: Vec<f64> = (0..5000).map(|_| 0.1 * n.sample(&mut rng)).collect();
+        let r: Vec<f64> = e
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + 0.4 * (0.01 * k as f64).sin())
+            .collect();
+        assert!(structid_core::metrics::rms(&r) > 2.5 * 0.1);
+        let fit = noise_level_coloured(&r);
+        assert!((fit.std - 0.1).abs() < 0.01, "{fit:?}");
+        assert!(fit.drift > 0.0, "{fit:?}");
+        for phi in [0.6, 0.9] {
+            let mut x = 0.0;
+            let ar: Vec<f64> = (0..20000)
+                .map(|_| {
+                    x = phi * x + (1.0f64 - phi * phi).sqrt() * 0.2 * n.sample(&mut rng);
+                    x
+                })
+                .collect();
+            let fit = noise_level_coloured(&ar);
+            assert!((fit.std - 0.2).abs() < 0.02, "φ = {phi}: {fit:?}");
+            assert!((fit.colour - phi).abs() < 0.06, "φ = {phi}: {fit:?}");
+            let difference = noise_level(&ar);
+            assert!(
+                (difference - 0.2 * (1.0 - phi).sqrt()).abs() < 0.02,
+                "φ = {phi}: {difference}"
+            );
+        }
     }
 
     #[test]

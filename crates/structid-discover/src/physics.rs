@@ -1004,7 +1004,14 @@ impl Setup {
 }
 
 /// An open-loop stable plant, or a closed- or open-loop integrating one.
-fn setup(rng: &mut StdRng, integrating: bool, closed: bool, slow: bool, no_steps: bool) -> Setup {
+fn setup(
+    rng: &mut StdRng,
+    integrating: bool,
+    closed: bool,
+    slow: bool,
+    no_steps: bool,
+    len: usize,
+) -> Setup {
     if integrating {
         let double = closed && rng.random::<f64>() < 0.3;
         let m = uniform(rng, 0.5, 5.0);
@@ -1037,8 +1044,8 @@ fn setup(rng: &mut StdRng, integrating: bool, closed: bool, slow: bool, no_steps
             } else {
                 ((250, 700), (100, 300))
             };
-            let est = point_to_point(rng, LENGTH, mv, dw);
-            let val = point_to_point(rng, LENGTH, mv, dw);
+            let est = point_to_point(rng, len, mv, dw);
+            let val = point_to_point(rng, len, mv, dw);
             return Setup {
                 plant,
                 control: Loop::ClosedPd { kp, kd },
@@ -1050,8 +1057,8 @@ fn setup(rng: &mut StdRng, integrating: bool, closed: bool, slow: bool, no_steps
             };
         }
         let hold = (rng.random_range(30..80), rng.random_range(100..250));
-        let est = steps(rng, LENGTH, hold);
-        let val = steps(rng, LENGTH, hold);
+        let est = steps(rng, len, hold);
+        let val = steps(rng, len, hold);
         return Setup {
             plant,
             control: Loop::Open,
@@ -1079,9 +1086,9 @@ fn setup(rng: &mut StdRng, integrating: bool, closed: bool, slow: bool, no_steps
         rng.random_range(0..3)
     };
     let shape = |rng: &mut StdRng| match which {
-        0 => filtered_noise(rng, LENGTH, wc),
-        1 => multisine(rng, LENGTH, wc),
-        _ => steps(rng, LENGTH, (5, (3.0 / (w * ts)) as usize + 6)),
+        0 => filtered_noise(rng, len, wc),
+        1 => multisine(rng, len, wc),
+        _ => steps(rng, len, (5, (3.0 / (w * ts)) as usize + 6)),
     };
     let est = shape(rng);
     let val = shape(rng);
@@ -1540,16 +1547,32 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
 /// assert!(case.effect.is_none() && case.expected.is_none());
 /// ```
 pub fn generate(kind: PhysicsKind, seed: u64) -> PhysicsCase {
+    generate_with_length(kind, seed, LENGTH)
+}
+
+/// [`generate`] with records of `len` samples each instead of [`LENGTH`] (at least 100), for
+/// timing the workflow on long records. The random draws are those of [`generate`], so a
+/// case of length [`LENGTH`] is the same case; other lengths draw the same plant, loop and
+/// effect kind, with inputs and noise of the new length.
+///
+/// ```
+/// use structid_discover::physics::{LENGTH, PhysicsKind, generate, generate_with_length};
+/// let long = generate_with_length(PhysicsKind::None, 2, 4000);
+/// assert_eq!(long.estimation.len(), 4000);
+/// assert_eq!(generate_with_length(PhysicsKind::None, 2, LENGTH), generate(PhysicsKind::None, 2));
+/// ```
+pub fn generate_with_length(kind: PhysicsKind, seed: u64, len: usize) -> PhysicsCase {
+    let len = len.max(100);
     let mut rng = StdRng::seed_from_u64(seed ^ 0x5048_5953_4943_5321);
     for _ in 0..1000 {
-        if let Some(case) = attempt(kind, seed, &mut rng) {
+        if let Some(case) = attempt(kind, seed, &mut rng, len) {
             return case;
         }
     }
     panic!("physics: no valid {kind:?} case for seed {seed} after 1000 draws")
 }
 
-fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase> {
+fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option<PhysicsCase> {
     let choice = match kind {
         PhysicsKind::Static => Some(STATIC_CHOICES[(seed % STATIC_CHOICES.len() as u64) as usize]),
         PhysicsKind::Dynamic => {
@@ -1578,6 +1601,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
         closed,
         slow,
         site == Some(Site::RateFeedback),
+        len,
     );
     if !integrating
         && matches!(site, None | Some(Site::Input) | Some(Site::Output))
@@ -1591,7 +1615,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
         return None;
     }
     let g = s.plant.discretise(s.ts);
-    let zeros = vec![0.0; LENGTH];
+    let zeros = vec![0.0; len];
     let scaled = |v: &[f64], a: f64| v.iter().map(|x| x * a).collect::<Vec<f64>>();
     let amp = s.scale * uniform(rng, 0.5, 1.0);
     let est_shape = scaled(&s.est, if closed { 1.0 } else { amp });
@@ -1631,7 +1655,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
     // The effect's size in the measure the workflow scores it by: a free run of an
     // integrating nominal drifts, so that its free-run gap grows with the record and says
     // nothing of the effect; such plants are measured over windows, each from a state fitted
-    // to its first samples (as `discover` scores them).
+    // to its first half (as `discover` scores them).
     let windowed = match s.plant.integrators {
         0 => None,
         _ => {
@@ -1640,13 +1664,13 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
                 .model()
                 .ok()?;
             let states = model.lft().dims().states;
-            Some((model, Windows::for_record(LENGTH, states + 2)))
+            Some((model, Windows::for_record(len, states + 2)))
         }
     };
     let gap = |rec: &Record| -> Option<f64> {
-        let u = Signal::from_fn(LENGTH, 1, |k, _| rec.u[k]);
+        let u = Signal::from_fn(len, 1, |k, _| rec.u[k]);
         if let Some((model, windows)) = &windowed {
-            let data = Data::new(u, Signal::from_fn(LENGTH, 1, |k, _| rec.y_clean[k])).ok()?;
+            let data = Data::new(u, Signal::from_fn(len, 1, |k, _| rec.y_clean[k])).ok()?;
             let sim =
                 simulate_scored(model, &[], &data, Scoring::Windowed(*windows), None, 0).ok()?;
             return Some(sim.rms(data.y(), 0));
@@ -1661,7 +1685,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
     };
     let mut est = None;
     for _ in 0..3 {
-        let e = noise(rng, LENGTH, noise_std, noise_ar);
+        let e = noise(rng, len, noise_std, noise_ar);
         let rec = simulate(&s.plant, effect.as_ref(), s.drive(&est_shape), &e, s.ts);
         let contribution = gap(&rec)?;
         if effect.is_none() || contribution >= 8.0 * noise_std {
@@ -1680,15 +1704,15 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Option<PhysicsCase
         uniform(rng, 0.8, 1.0)
     };
     let val_shape = scaled(&s.val, validation_scale * if closed { 1.0 } else { amp });
-    let ev = noise(rng, LENGTH, noise_std, noise_ar);
+    let ev = noise(rng, len, noise_std, noise_ar);
     let val = simulate(&s.plant, effect.as_ref(), s.drive(&val_shape), &ev, s.ts);
     if val.y.iter().any(|v| !v.is_finite()) || peak(&val.y_clean) > 40.0 * ranges.y_peak {
         return None;
     }
     let data = |r: &Record| {
         Data::new(
-            Signal::from_fn(LENGTH, 1, |k, _| r.u[k]),
-            Signal::from_fn(LENGTH, 1, |k, _| r.y[k]),
+            Signal::from_fn(len, 1, |k, _| r.u[k]),
+            Signal::from_fn(len, 1, |k, _| r.y[k]),
         )
         .ok()
     };

@@ -158,13 +158,19 @@ fn gap_table(s: &mut String, estimation: &Gap, validation: &Gap) {
     );
     let _ = writeln!(
         s,
-        "| noise level σ̂ (MAD of Δε) | {} | {} |",
+        "| model-free noise level of ε (MAD of Δε) | {} | {} |",
         e(estimation.noise_std),
         e(validation.noise_std)
     );
     let _ = writeln!(
         s,
-        "| RMS(ε) / σ̂ | {:.2} | {:.2} |",
+        "| noise level of y − ŷ (semivariogram, coloured) | {} | {} |",
+        e(estimation.noise.std),
+        e(validation.noise.std)
+    );
+    let _ = writeln!(
+        s,
+        "| RMS(ε) / MAD-based level | {:.2} | {:.2} |",
         estimation.prediction_rms / estimation.noise_std.max(f64::MIN_POSITIVE),
         validation.prediction_rms / validation.noise_std.max(f64::MIN_POSITIVE)
     );
@@ -433,6 +439,19 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
                  of output noise (maximum likelihood: the plant integrates)"
             ))
             .unwrap_or_default()
+    );
+    let _ = writeln!(
+        s,
+        "Noise level σ̂ = {} ({}): the smallest semivariogram estimate over the residuals of \
+         the models examined, from {}. The naming tolerance (within 1.5·σ̂) and the verdict \
+         (a gap larger than the noise) use it.\n",
+        e(d.noise.std),
+        if d.noise.colour > 0.0 {
+            format!("coloured, correlation φ̂^k with φ̂ = {:.2}", d.noise.colour)
+        } else {
+            "white".to_string()
+        },
+        d.noise.source
     );
     let _ = writeln!(
         s,
@@ -743,6 +762,7 @@ fn gap_json(g: &Gap, time: &TimeAxis) -> Result<Value, serde_json::Error> {
         "prediction_rms": g.prediction_rms,
         "fit_percent": g.fit_percent,
         "noise_std": g.noise_std,
+        "noise": json_value(&g.noise)?,
         "tests": g.tests.iter().map(|t| json!({
             "name": t.name,
             "statistic": t.statistic,
@@ -905,6 +925,7 @@ pub fn json(
         "missing_effect": d.missing_effect,
         "scoring": d.scoring.describe(),
         "input_noise_ratio": d.input_noise,
+        "noise": json_value(&d.noise)?,
         "seconds": d.seconds,
         "gap_before": {
             "estimation": gap_json(&d.estimation_gap, &r.estimation.time)?,
@@ -984,7 +1005,7 @@ pub fn summary(
             "validation RMS {} (fit {}), noise level σ̂ = {}",
             e(d.validation_gap.rms),
             pct(d.validation_gap.fit_percent),
-            e(d.validation_gap.noise_std)
+            e(d.noise.std)
         );
     }
     let _ = writeln!(s, "wrote:");

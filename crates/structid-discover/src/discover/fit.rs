@@ -246,6 +246,32 @@ pub(super) fn simulation_rms(
     }
 }
 
+/// [`simulation_rms`] with the noise level of the simulation residual over its scored
+/// samples ([`crate::gap::noise_level_coloured`]), `None` when the simulation failed or
+/// diverged.
+pub(super) fn simulation_rms_and_noise(
+    h: &Hypothesis,
+    map: &dyn Interpolant,
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> (f64, Option<crate::gap::NoiseFit>) {
+    let settings = scoring_settings(h.location, settings);
+    let y = data.y().channel(0);
+    let limit = 1e6 * structid_core::metrics::rms(&y).max(f64::MIN_POSITIVE);
+    match validate(&h.model, &h.maps(map), data, &settings) {
+        Ok(v) if v.rms[0].is_finite() && v.rms[0] < limit => {
+            let residual: Vec<f64> = v
+                .scored
+                .iter()
+                .flat_map(|r| r.clone())
+                .map(|k| y[k] - v.simulated.get(k, 0))
+                .collect();
+            (v.rms[0], Some(crate::gap::noise_level_coloured(&residual)))
+        }
+        _ => (f64::INFINITY, None),
+    }
+}
+
 pub(super) fn even_indices(len: usize, max: usize) -> Vec<usize> {
     let step = len.div_ceil(max).max(1);
     (0..len).step_by(step).collect()
@@ -262,6 +288,8 @@ pub(super) struct Fitted {
     pub(super) e_hat: Signal,
     /// `quadratic` or `total variation`.
     pub(super) estimator: &'static str,
+    /// The noise level of its simulation residual on the estimation record.
+    pub(super) residual_noise: Option<crate::gap::NoiseFit>,
     /// Whether the map validated better held at its edge values outside the estimation range
     /// than extrapolated as estimated (its validation RMS is the better of the two).
     pub(super) hold_edges: bool,
@@ -295,7 +323,8 @@ pub(super) fn finish_fit(
     let held_rms = simulation_rms(&h, &held, val_h, settings);
     let hold_edges = held_rms < as_estimated;
     let validation_rms = as_estimated.min(held_rms);
-    let estimation_rms = simulation_rms(&h, block.map.as_ref(), est_h, settings);
+    let (estimation_rms, residual_noise) =
+        simulation_rms_and_noise(&h, block.map.as_ref(), est_h, settings);
     // A map whose simulation diverges on its own estimation record is not a candidate,
     // whatever it does on the validation record.
     let validation_rms = if estimation_rms.is_finite() {
@@ -349,6 +378,7 @@ pub(super) fn finish_fit(
         w_hat,
         e_hat,
         estimator,
+        residual_noise,
         hold_edges,
     })
 }

@@ -10,6 +10,8 @@
 //!    (whiteness; ε against u, against u², and ε² against u², together at the 0.1 % level).
 //!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
 //!    effect detected" with the statistics behind it, and the workflow stops there.
+//!    A nominal model whose simulation diverges, or is worse than the mean of y by more than
+//!    [`WORSE_THAN_CONSTANT`], is refused ([`Error::PoorNominal`]).
 //!    A nominal model with a pole on the unit circle (an integrator) is scored in windows
 //!    ([`structid_core::validation::windows`]) in this step and in every later one, and gets a
 //!    disturbance where its input acts, sized by maximum likelihood
@@ -45,7 +47,10 @@
 //!    error (Levenberg–Marquardt on the estimation record's simulation error with the
 //!    parametric map in the loop; 95 % intervals from s²·(JᵀJ)⁻¹) and simulated on the
 //!    validation record. The simplest that validates within
-//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂ and
+//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂, the
+//!    workflow's noise level [`NoiseLevel`]: the smallest semivariogram estimate over the
+//!    residuals of the nominal model and the smooth hypotheses, which allows for coloured
+//!    noise and is not inflated by the missing effect, and
 //!    1.5× the nonparametric RMS) is
 //!    *named*, unless a richer one that also does is a fifth better. Otherwise the effect is an
 //!    "unnamed static effect" and the nonparametric map is kept as a table.
@@ -191,10 +196,9 @@ const ALTERNATIVE_FACTOR: f64 = 0.5;
 #[serde(rename_all = "kebab-case")]
 pub enum Verdict {
     /// The nominal model's gap is noise: within the noise level and passing the residual
-    /// tests on both records (or a test failed, the gap is within the noise level, for an
-    /// output-error nominal within what coloured noise gives, see
-    /// [`Gap::above_noise`](crate::gap::Gap::above_noise), and no candidate block improves on
-    /// it).
+    /// tests on both records (or a test failed, the simulation RMS is within
+    /// `noise_ratio`·σ̂ of [`Discovery::noise`], which allows for coloured noise, and no
+    /// candidate block improves on it).
     NoMissingEffect,
     /// A missing effect was found, placed and added ([`Discovery::finding`]).
     MissingEffect,
@@ -213,6 +217,38 @@ impl Verdict {
             Verdict::Unexplained => {
                 "a gap that one static block at these locations does not explain"
             }
+        }
+    }
+}
+
+/// The noise level the workflow works with: the smallest semivariogram estimate
+/// ([`crate::gap::noise_level_coloured`]) over the residuals of the models it examined.
+///
+/// Every model's residual is the same output noise plus that model's own error, and a
+/// model error only adds to a residual's variogram; so each estimate is an upper bound on
+/// the noise level up to its sampling error (a few per cent on thousands of samples), and
+/// the best model examined gives the tightest. The nominal model's residual holds the
+/// missing effect itself, which is why a noise level taken from it alone can be several
+/// times too high; a first difference of coloured noise is √(1 − φ) times too low.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NoiseLevel {
+    /// σ̂, the standard deviation of the output noise (of the coloured process itself).
+    pub std: f64,
+    /// φ̂ of that estimate: its correlation decays as φ̂^k (0 for white noise).
+    pub colour: f64,
+    /// Whose residual gave it, e.g. `the nominal model on the estimation record`.
+    pub source: String,
+}
+
+impl NoiseLevel {
+    /// The estimate of `fit` from `source`, if it is finite and below `self`'s.
+    fn tighten(&mut self, fit: crate::gap::NoiseFit, source: impl FnOnce() -> String) {
+        if fit.std.is_finite() && fit.std > 0.0 && fit.std < self.std {
+            *self = NoiseLevel {
+                std: fit.std,
+                colour: fit.colour,
+                source: source(),
+            };
         }
     }
 }
@@ -236,6 +272,10 @@ pub struct Discovery {
     /// ([`Nominal::with_input_noise`], chosen by maximum likelihood for a nominal model with
     /// integrators), if any.
     pub input_noise: Option<f64>,
+    /// The noise level σ̂ (see [`NoiseLevel`]): from the nominal model's residuals, those the
+    /// hypotheses leave, and the augmented model's. The naming tolerance "within 1.5·σ̂" and
+    /// the verdict "the gap is larger than the noise" use it.
+    pub noise: NoiseLevel,
     /// Every hypothesis tried, best validation RMS first (empty when nothing is missing).
     pub hypotheses: Vec<HypothesisResult>,
     /// The effect found (when something is missing and a hypothesis could be identified).
@@ -255,7 +295,9 @@ pub struct Discovery {
 /// "no missing effect detected", with the failed test and the best attempt in the text.
 ///
 /// Errors: several inputs or outputs, records shorter than 100 samples, a constant input, an
-/// unstable nominal model (its simulation would diverge); a hypothesis that fails is recorded
+/// unstable nominal model (its simulation would diverge), a nominal model whose simulation
+/// diverges or is worse than a constant by more than [`WORSE_THAN_CONSTANT`]
+/// ([`Error::PoorNominal`]); a hypothesis that fails is recorded
 /// in [`HypothesisResult::failure`] and ranked last instead.
 pub fn discover(
     nominal: &Nominal,
@@ -310,6 +352,7 @@ pub fn discover(
         &est_candidates,
         &gap_settings,
     )?;
+    check_nominal(&estimation_gap, est, scoring)?;
     let validation_gap = gap(
         &nominal_model,
         &nominal_maps,
@@ -317,6 +360,17 @@ pub fn discover(
         &val_candidates,
         &gap_settings,
     )?;
+    let mut noise = NoiseLevel {
+        std: f64::INFINITY,
+        colour: 0.0,
+        source: String::new(),
+    };
+    noise.tighten(estimation_gap.noise, || {
+        "the nominal model's residual on the estimation record".into()
+    });
+    noise.tighten(validation_gap.noise, || {
+        "the nominal model's residual on the validation record".into()
+    });
     let missing_effect = estimation_gap.missing_effect || validation_gap.missing_effect;
     if !missing_effect {
         let verdict = format!(
@@ -330,6 +384,7 @@ pub fn discover(
             verdict_kind: Verdict::NoMissingEffect,
             scoring,
             input_noise,
+            noise,
             hypotheses: Vec::new(),
             finding: None,
             verdict,
@@ -393,6 +448,48 @@ pub fn discover(
         }
         by_validation(&mut fitted);
     }
+    // Each smooth hypothesis's simulation residual on the estimation record bounds the noise
+    // level too. Not a total-variation estimate's, nor one whose β sits on its search bound:
+    // with a knot at nearly every sample, a map of z can memorise the noise of y even when z
+    // is simulated.
+    for f in &fitted {
+        if f.estimator != "quadratic" || f.result.beta_at_bound.is_some() {
+            continue;
+        }
+        if let Some(fit) = f.residual_noise {
+            noise.tighten(fit, || {
+                format!(
+                    "the simulation of the {} estimate {} on the estimation record",
+                    f.estimator,
+                    nominal.describe(f.result.location)
+                )
+            });
+        }
+    }
+    // So does what it leaves unexplained there (its noise estimate ê), with the same
+    // exclusions. With an input disturbance in the noise path, ê is split between it and the
+    // output noise, and is not the output noise alone.
+    if input_noise.is_none() {
+        for f in &fitted {
+            if f.estimator == "quadratic"
+                && f.result.beta_at_bound.is_none()
+                && f.e_hat.channels() > 0
+                && !f.e_hat.is_empty()
+            {
+                noise.tighten(
+                    crate::gap::noise_level_coloured(&f.e_hat.channel(0)),
+                    || {
+                        format!(
+                            "what the {} estimate {} leaves on the estimation record",
+                            f.estimator,
+                            nominal.describe(f.result.location)
+                        )
+                    },
+                );
+            }
+        }
+    }
+    let sigma = noise.std;
     // Direction dependence of every fit that explains the data about as well as the best: a
     // hysteresis may be best approximated statically at a location other than its own.
     let best_rms = fitted
@@ -438,6 +535,7 @@ pub fn discover(
             verdict_kind: Verdict::Unexplained,
             scoring,
             input_noise,
+            noise,
             hypotheses,
             finding: None,
             verdict,
@@ -463,6 +561,7 @@ pub fn discover(
             &val_candidates,
             &gap_settings,
             &validation_gap,
+            sigma,
             settings,
         )
     };
@@ -581,11 +680,26 @@ pub fn discover(
     // is not reported as a missing effect. The portmanteau family errs 0.1 % of the time on
     // stationary inputs, more on strongly non-stationary ones such as chirps, whose squares a
     // low-order prewhitening cannot whiten.
+    for (g, record) in [
+        (&finding.augmented.estimation_gap, "estimation"),
+        (&finding.augmented.validation_gap, "validation"),
+    ] {
+        noise.tighten(g.noise, || {
+            format!(
+                "the augmented model ({} {}) on the {record} record",
+                finding.classification.describe(),
+                nominal.describe(finding.location)
+            )
+        });
+    }
     if finding.shrink < MIN_CONFIRMING_SHRINK {
         // The gap is noise-sized and only a test failed: a false alarm of the test family
         // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
         // is real and unexplained, and the verdict says so.
-        let real = estimation_gap.above_noise || validation_gap.above_noise;
+        // The simulation RMS against the output noise level: both of the output, whatever
+        // noise path the model has.
+        let above_noise = |g: &Gap| g.rms > settings.gap.noise_ratio * noise.std;
+        let real = above_noise(&estimation_gap) || above_noise(&validation_gap);
         let tried = hypotheses
             .iter()
             .map(|h| {
@@ -626,8 +740,7 @@ pub fn discover(
                 Verdict::NoMissingEffect,
                 format!(
                     "no missing effect detected: the nominal model's gap is within the noise \
-                     level (for an output-error nominal, within what coloured noise gives) but \
-                     failed a test (estimation record: {}; validation record: {}), \
+                     level but failed a test (estimation record: {}; validation record: {}), \
                      and the best candidate block reduces the validation RMS by less than \
                      {:.0} % ({} {}, RMS {} → {})",
                     estimation_gap.verdict,
@@ -647,6 +760,7 @@ pub fn discover(
             verdict_kind: kind,
             scoring,
             input_noise,
+            noise,
             hypotheses,
             finding: None,
             verdict,
@@ -661,11 +775,55 @@ pub fn discover(
         verdict_kind: Verdict::MissingEffect,
         scoring,
         input_noise,
+        noise,
         hypotheses,
         finding: Some(finding),
         verdict,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// A nominal model whose simulation RMS on the estimation record exceeds this multiple of the
+/// best constant's (the RMS of y about its mean) is refused ([`Error::PoorNominal`]).
+///
+/// A missing effect legitimately makes the nominal model look bad, so the margin is wide. On
+/// the generators' cases (30 static, 20 effect-free and 10 hysteresis cases of
+/// [`crate::synthetic`]; 40 static, 15 dynamic and 15 effect-free cases of [`crate::physics`];
+/// the positioning axis) the ratio reaches 37 (a stuck actuator: y is G's response to a
+/// constant, the nominal's to u) and 26 (a hysteretic spring in a stiff closed loop, scored in
+/// windows); a stuck sensor reaches 151 but is exempt: a record whose y stays within three
+/// noise levels of its mean is not checked. A nominal model
+/// in the wrong units (mm for m) is about 1000.
+pub const WORSE_THAN_CONSTANT: f64 = 100.0;
+
+/// Refuses a nominal model that diverges on the estimation record, or whose simulation there
+/// (scored as every simulation of the workflow) is worse than the best constant by more than
+/// [`WORSE_THAN_CONSTANT`]: its gap would measure the nominal model, not a missing effect.
+///
+/// A record whose y stays within three noise levels of its mean (RMS(y − ȳ) ≤
+/// 3·MAD(Δy)/(0.6745·√2)) is exempt from the ratio: a constant explains it, any model that
+/// moves is worse, and that is the missing effect (a stuck sensor or actuator), not a bad
+/// nominal model.
+fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
+    let y = est.y().channel(0);
+    let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
+    let constant = structid_core::metrics::rms(&y.iter().map(|v| v - mean).collect::<Vec<_>>());
+    // A simulation a million times the output's size has diverged, finite or not.
+    let diverged = !gap.rms.is_finite()
+        || gap.rms > 1e6 * structid_core::metrics::rms(&y).max(f64::MIN_POSITIVE);
+    let stuck = constant <= 3.0 * crate::gap::noise_level(&y);
+    if diverged || (!stuck && gap.rms > WORSE_THAN_CONSTANT * constant) {
+        return Err(Error::PoorNominal {
+            record: "estimation".into(),
+            model_rms: if diverged { f64::INFINITY } else { gap.rms },
+            constant_rms: constant,
+            scoring: match scoring {
+                Scoring::Free => "one free run",
+                Scoring::Windowed(_) => "in windows, each from a state fitted to its first samples",
+            },
+        });
+    }
+    Ok(())
 }
 
 /// An RMS for reports: a number, or "diverged" for a simulation that did not stay finite.
@@ -845,6 +1003,62 @@ mod tests {
         .unwrap();
         let e = discover(&unstable, &long, &long, &DiscoverSettings::default()).unwrap_err();
         assert!(e.to_string().contains("unstable"), "{e}");
+    }
+
+    /// A nominal model a thousand times too large (mm for m) simulates about 999 times worse
+    /// than the mean of y, and is refused with the numbers and what to do; the right one,
+    /// one ten times too large (a gain error discovery can name) and one of the wrong sign
+    /// are not.
+    #[test]
+    fn a_nominal_worse_than_a_constant_is_an_input_error() {
+        let est = record(None, |z| z, 7, 1000);
+        let scaled = |k: f64| {
+            let mut g = nominal();
+            g.num[0].iter_mut().for_each(|b| *b *= k);
+            Nominal::from_polynomial(&g).unwrap()
+        };
+        let e = discover(&scaled(1000.0), &est, &est, &DiscoverSettings::default()).unwrap_err();
+        let Error::PoorNominal {
+            model_rms,
+            constant_rms,
+            ..
+        } = &e
+        else {
+            panic!("{e}")
+        };
+        // y ≈ G·u, the nominal 1000·G·u: its error 999·G·u is 999 times y's size about its
+        // mean (up to the noise and the estimated initial state).
+        let ratio = model_rms / constant_rms;
+        assert!((ratio - 999.0).abs() < 10.0, "{ratio}");
+        assert!(ratio > WORSE_THAN_CONSTANT);
+        let text = e.to_string();
+        for part in [
+            "worse",
+            "constant",
+            "structid linear",
+            "--integrators",
+            "units",
+        ] {
+            assert!(text.contains(part), "{part}: {text}");
+        }
+        for k in [1.0, 10.0, -1.0] {
+            assert!(discover(&scaled(k), &est, &est, &DiscoverSettings::default()).is_ok());
+        }
+        // A stuck sensor (y a constant plus noise) makes every moving model far worse than
+        // the mean, and is a missing effect, not a bad nominal model.
+        let mut rng = StdRng::seed_from_u64(9);
+        let noise = Normal::new(0.0, 0.005).unwrap();
+        let stuck = Data::new(
+            est.u().clone(),
+            Signal::from_fn(est.len(), 1, |_, _| 0.3 + noise.sample(&mut rng)),
+        )
+        .unwrap();
+        let d = discover(&scaled(1.0), &stuck, &stuck, &DiscoverSettings::default());
+        assert!(
+            !matches!(d, Err(Error::PoorNominal { .. })),
+            "{:?}",
+            d.err()
+        );
     }
 
     /// Deconvolution through the sensor location's L_yw = 1 is r/(1 + λ) with λ = 1 % of the

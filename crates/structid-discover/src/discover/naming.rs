@@ -363,6 +363,7 @@ pub(super) fn name_and_add(
     val_candidates: &[(String, Vec<f64>)],
     gap_settings: &GapSettings,
     before: &Gap,
+    noise: f64,
     settings: &DiscoverSettings,
 ) -> Result<Finding> {
     let location = best.result.location;
@@ -375,7 +376,6 @@ pub(super) fn name_and_add(
     naming.ranked = parsimonious(&naming);
     let nonparametric_rms = best.result.validation_rms;
 
-    let noise = before.noise_std;
     let mut family_rms: Vec<Option<f64>> = vec![None; naming.ranked.len()];
     // The known maps refitted jointly with family i, when that validated better.
     let mut joint_known: Vec<Option<Hypothesis>> = vec![None; naming.ranked.len()];
