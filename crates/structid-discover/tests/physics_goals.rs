@@ -24,7 +24,11 @@
 //! difference), so that even the truth leaves a gap on some plants (friction under a PD
 //! controller most of all).
 //!
-//! Each case prints one line, so a failure shows which cases fell short and why.
+//! The goals are not all met yet: the `…_meet_the_goals` tests assert them and are ignored
+//! (`cargo test --release -p structid-discover --test physics_goals -- --ignored
+//! --nocapture` measures them); the `…_hold_their_measured_level` tests assert what the
+//! workflow achieves today with a margin, so that it does not fall back. Each case prints one
+//! line, so a failure shows which cases fell short and why.
 
 use std::sync::Arc;
 
@@ -180,11 +184,8 @@ fn static_tally(seeds: std::ops::Range<u64>) -> Tally {
     t
 }
 
-#[test]
-#[ignore = "the goals are not met yet (issue 14): run with --ignored to measure"]
-fn static_effects_on_physical_plants_meet_the_goals() {
-    let t = static_tally(0..60);
-    let n = t.cases as f64;
+/// The static summary line, and the median shrink and its share of the true model's.
+fn summary(t: &Tally) -> (f64, f64) {
     let m = median(t.shrinks.clone());
     let relative = median(
         t.relative
@@ -203,11 +204,38 @@ fn static_effects_on_physical_plants_meet_the_goals() {
         100.0 * relative
     );
     assert!(
-        (0.35..=0.65).contains(&(t.estimated as f64 / n)),
+        (0.35..=0.65).contains(&(t.estimated as f64 / t.cases as f64)),
         "{} estimated nominals of {}",
         t.estimated,
         t.cases
     );
+    (m, relative)
+}
+
+/// What the workflow achieves today (measured: located 41, named 38 of 60, parameters 31 of
+/// 36, median shrink 4.8×), asserted with a margin so that it does not fall back.
+#[test]
+fn static_effects_on_physical_plants_hold_their_measured_level() {
+    let t = static_tally(0..60);
+    let (m, _) = summary(&t);
+    assert!(t.located >= 36, "located {}/{}", t.located, t.cases);
+    assert!(t.named >= 33, "named {}/{}", t.named, t.cases);
+    assert!(
+        t.within as f64 >= 0.75 * t.with_keys as f64,
+        "parameters within 20 % {}/{}",
+        t.within,
+        t.with_keys
+    );
+    assert!(m >= 3.5, "median shrink {m:.2}×");
+}
+
+/// The issue's goals (not met yet: see the measured level above).
+#[test]
+#[ignore = "the issue 14 goals are not met yet: run with --ignored to measure"]
+fn static_effects_on_physical_plants_meet_the_goals() {
+    let t = static_tally(0..60);
+    let (m, relative) = summary(&t);
+    let n = t.cases as f64;
     assert!(
         t.located as f64 >= 0.9 * n,
         "located {}/{}",
@@ -228,10 +256,7 @@ fn static_effects_on_physical_plants_meet_the_goals() {
     );
 }
 
-#[test]
-#[ignore = "the goals are not met yet (issue 14): run with --ignored to measure"]
-fn hysteresis_on_physical_plants_is_reported_as_dynamic() {
-    let cases = 15;
+fn dynamic_tally(cases: u64) -> usize {
     let mut dynamic = 0;
     for seed in 0..cases {
         let case = generate(PhysicsKind::Dynamic, seed);
@@ -245,6 +270,23 @@ fn hysteresis_on_physical_plants_is_reported_as_dynamic() {
         dynamic += usize::from(is_dynamic);
     }
     eprintln!("dynamic: {dynamic}/{cases}");
+    dynamic
+}
+
+/// Measured today: 5 of 15 reported as dynamic (backlash at an estimated actuator or sensor
+/// is mostly approximated by a static map elsewhere, often friction-like in rate feedback).
+#[test]
+fn hysteresis_on_physical_plants_holds_its_measured_level() {
+    let dynamic = dynamic_tally(15);
+    assert!(dynamic >= 4, "{dynamic}/15");
+}
+
+/// The issue's goal (not met yet).
+#[test]
+#[ignore = "the issue 14 goals are not met yet: run with --ignored to measure"]
+fn hysteresis_on_physical_plants_is_reported_as_dynamic() {
+    let cases = 15;
+    let dynamic = dynamic_tally(cases);
     assert!(dynamic as f64 >= 0.8 * cases as f64, "{dynamic}/{cases}");
 }
 
