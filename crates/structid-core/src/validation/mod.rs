@@ -124,7 +124,7 @@ impl ValidationSettings {
     }
 
     /// How the simulation is scored: one free run (the default) or windows, each from a state
-    /// fitted to its first samples ([`windows`]; for plants with integrators).
+    /// fitted to its first half ([`windows`]; for plants with integrators).
     pub fn scoring(&self) -> Scoring {
         self.scoring
     }

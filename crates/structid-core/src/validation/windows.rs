@@ -1,5 +1,5 @@
 //! Scoring a model by simulation: over the whole record, or over windows that each start from
-//! a state estimated on their first samples.
+//! a state estimated on their first half.
 //!
 //! A free-run simulation from one x̂₀ means nothing for a plant with poles on the unit circle
 //! (an integrating axis, a double integrator): any force offset or small error in the first
@@ -135,19 +135,21 @@ pub enum Scoring {
     /// settling samples.
     #[default]
     Free,
-    /// Consecutive windows, each from a state fitted to its first samples (see the
+    /// Consecutive windows, each from a state fitted to its first half (see the
     /// [module documentation](self)).
     Windowed(Windows),
 }
 
 impl Scoring {
     /// A short description for reports, e.g. `free-run simulation` or `windowed simulation
-    /// (windows of 200 samples, state fitted on the first 25)`.
+    /// (windows of 200 samples, each from a state fitted on its first half, scored after its
+    /// first 25)`.
     pub fn describe(&self) -> String {
         match self {
             Scoring::Free => "free-run simulation".into(),
             Scoring::Windowed(w) => format!(
-                "windowed simulation (windows of {} samples, each from a state fitted on its first {})",
+                "windowed simulation (windows of {} samples, each from a state fitted on its first \
+                 half, scored after its first {})",
                 w.length, w.init
             ),
         }

@@ -79,7 +79,7 @@ pub(super) fn check_records(est: &Data, val: &Data) -> Result<()> {
 /// model's poles. A pole on or within 10⁻³ of the unit circle (an integrator: a position from a
 /// force, a level from a flow) makes a free-run simulation drift with any offset or error in
 /// the first state, so the record is scored in windows, each from a state fitted to its first
-/// samples; a stable model gets one free run. A pole further outside is an error: even a
+/// half; a stable model gets one free run. A pole further outside is an error: even a
 /// window's simulation would diverge.
 pub(super) fn resolve_scoring(
     nominal: &Nominal,

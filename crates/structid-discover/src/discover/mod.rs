@@ -819,7 +819,7 @@ fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
             constant_rms: constant,
             scoring: match scoring {
                 Scoring::Free => "one free run",
-                Scoring::Windowed(_) => "in windows, each from a state fitted to its first samples",
+                Scoring::Windowed(_) => "in windows, each from a state fitted to its first half",
             },
         });
     }
