@@ -510,27 +510,27 @@ pub fn gap(
     // double prewhitening of Haugh's test). A residual the input predicts stays correlated
     // with it through any fixed filter.
     let whitened;
-    let innovations: &[f64] = if model.lft().t_ye().order() == 0 {
+    let crossed: &[f64] = if model.lft().t_ye().order() == 0 {
         whitened = prewhiten(&innovations, 10.min(n / 20));
         &whitened
     } else {
         &innovations
     };
-    let e2 = centred_square(innovations);
+    let e2 = centred_square(crossed);
     let first_lag = usize::from(model.lft().matrices().dyu.iter().all(|d| *d == 0.0));
     for c in 0..data.u().channels() {
         let u: Vec<f64> = tested.iter().map(|&k| data.u().get(k, c)).collect();
         let u2 = centred_square(&u);
         tests.push(portmanteau_cross(
             format!("ε against u{c}"),
-            innovations,
+            crossed,
             &u,
             first_lag,
             max_lag,
         ));
         tests.push(portmanteau_cross(
             format!("ε against u{c}²"),
-            innovations,
+            crossed,
             &u2,
             first_lag,
             max_lag,

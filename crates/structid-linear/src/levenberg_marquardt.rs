@@ -106,6 +106,40 @@ pub trait LeastSquaresProblem {
     }
 }
 
+/// The Jacobian of `residuals` at θ by forward differences, column i from
+/// r(θ + hᵢ·eᵢ) − r(θ) with hᵢ = `relative_step`·max(|θᵢ|, 10⁻³): for problems whose residual
+/// is a simulation without derivatives (each column costs one evaluation). `r` is r(θ);
+/// `None` when a shifted evaluation is rejected.
+///
+/// ```
+/// use nalgebra::DVector;
+/// use structid_linear::levenberg_marquardt::forward_jacobian;
+/// // r(θ) = (θ₀², θ₀θ₁): J = [[2θ₀, 0], [θ₁, θ₀]].
+/// let mut r = |t: &[f64]| Some(DVector::from_vec(vec![t[0] * t[0], t[0] * t[1]]));
+/// let at = [2.0, 3.0];
+/// let j = forward_jacobian(&mut r, &at, &r(&at).unwrap(), 1e-7).unwrap();
+/// assert!((j[(0, 0)] - 4.0).abs() < 1e-5 && (j[(1, 0)] - 3.0).abs() < 1e-5);
+/// assert!(j[(0, 1)].abs() < 1e-12 && (j[(1, 1)] - 2.0).abs() < 1e-5);
+/// ```
+pub fn forward_jacobian(
+    residuals: &mut dyn FnMut(&[f64]) -> Option<DVector<f64>>,
+    theta: &[f64],
+    r: &DVector<f64>,
+    relative_step: f64,
+) -> Option<DMatrix<f64>> {
+    let mut j = DMatrix::zeros(r.len(), theta.len());
+    for i in 0..theta.len() {
+        let step = relative_step * theta[i].abs().max(1e-3);
+        let mut t = theta.to_vec();
+        t[i] += step;
+        let ri = residuals(&t)?;
+        for k in 0..r.len() {
+            j[(k, i)] = (ri[k] - r[k]) / step;
+        }
+    }
+    Some(j)
+}
+
 /// Settings of [`LevenbergMarquardt`] (build with [`LmSettings::builder`]; [`Default`] is
 /// valid).
 ///

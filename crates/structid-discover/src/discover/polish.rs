@@ -3,7 +3,9 @@
 use nalgebra::{DMatrix, DVector};
 
 use structid_core::Data;
-use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings};
+use structid_linear::levenberg_marquardt::{
+    LeastSquaresProblem, LevenbergMarquardt, LmSettings, forward_jacobian,
+};
 
 use crate::effects::{Effect, EffectFit, Refit};
 use crate::hypotheses::Hypothesis;
@@ -115,17 +117,7 @@ impl LeastSquaresProblem for PolishProblem<'_> {
 
     /// Forward differences (each parameter costs a simulation).
     fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
-        let mut j = DMatrix::zeros(r.len(), theta.len());
-        for i in 0..theta.len() {
-            let step = JACOBIAN_STEP * theta[i].abs().max(1e-3);
-            let mut t = theta.to_vec();
-            t[i] += step;
-            let ri = self.residuals(&t)?;
-            for k in 0..r.len() {
-                j[(k, i)] = (ri[k] - r[k]) / step;
-            }
-        }
-        Some(j)
+        forward_jacobian(&mut |t| self.residuals(t), theta, r, JACOBIAN_STEP)
     }
 }
 
@@ -231,17 +223,7 @@ impl LeastSquaresProblem for JointProblem<'_> {
 
     /// Forward differences (each parameter costs a simulation).
     fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
-        let mut j = DMatrix::zeros(r.len(), theta.len());
-        for i in 0..theta.len() {
-            let step = JACOBIAN_STEP * theta[i].abs().max(1e-3);
-            let mut t = theta.to_vec();
-            t[i] += step;
-            let ri = self.residuals(&t)?;
-            for k in 0..r.len() {
-                j[(k, i)] = (ri[k] - r[k]) / step;
-            }
-        }
-        Some(j)
+        forward_jacobian(&mut |t| self.residuals(t), theta, r, JACOBIAN_STEP)
     }
 }
 
