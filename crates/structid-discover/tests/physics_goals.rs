@@ -304,3 +304,21 @@ fn lti_physical_plants_raise_no_false_alarm() {
     eprintln!("LTI: {alarms} false alarms in {cases}");
     assert!(alarms <= 1, "{alarms} false alarms in {cases}");
 }
+
+/// An integrating nominal gets an input-disturbance noise path; for an estimated double
+/// integrator whose numerator has a zero outside the unit circle that path cannot be whitened
+/// stably, and every location used to fail with the solver's refusal. Each location is then
+/// identified with the nominal model's own noise path instead.
+#[test]
+fn a_disturbance_path_that_cannot_be_whitened_falls_back_to_the_nominal_noise_path() {
+    let case = generate(PhysicsKind::Static, 52);
+    assert_ne!(case.nominal_source, NominalSource::Exact);
+    let d = run(&case);
+    assert!(d.input_noise.is_some(), "{:?}", d.scoring);
+    let identified = d
+        .hypotheses
+        .iter()
+        .filter(|h| h.failure.is_none() && h.validation_rms.is_finite())
+        .count();
+    assert!(identified >= 1, "{}", d.verdict);
+}

@@ -401,7 +401,16 @@ pub fn discover(
         .unwrap_or_else(|| nominal.locations());
     for location in locations {
         let t = Instant::now();
-        match identify_hypothesis(nominal, location, est, val, settings) {
+        // The disturbance path is a noise model like any other: where it cannot be used (its
+        // whitening filter is unstable when an estimated G has a zero outside the unit
+        // circle), the location is identified with the nominal model's own noise path.
+        let result = match identify_hypothesis(nominal, location, est, val, settings) {
+            Err(_) if input_noise.is_some() => {
+                identify_hypothesis(given, location, est, val, settings)
+            }
+            other => other,
+        };
+        match result {
             Ok(f) => fitted.push(f),
             Err(e) => failed.push(failure(location, t, &e)),
         }
