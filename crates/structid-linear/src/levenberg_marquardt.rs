@@ -117,7 +117,8 @@ pub trait LeastSquaresProblem {
 /// // r(θ) = (θ₀², θ₀θ₁): J = [[2θ₀, 0], [θ₁, θ₀]].
 /// let mut r = |t: &[f64]| Some(DVector::from_vec(vec![t[0] * t[0], t[0] * t[1]]));
 /// let at = [2.0, 3.0];
-/// let j = forward_jacobian(&mut r, &at, &r(&at).unwrap(), 1e-7).unwrap();
+/// let r0 = r(&at).unwrap();
+/// let j = forward_jacobian(&mut r, &at, &r0, 1e-7).unwrap();
 /// assert!((j[(0, 0)] - 4.0).abs() < 1e-5 && (j[(1, 0)] - 3.0).abs() < 1e-5);
 /// assert!(j[(0, 1)].abs() < 1e-12 && (j[(1, 1)] - 2.0).abs() < 1e-5);
 /// ```
