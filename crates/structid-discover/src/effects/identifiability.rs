@@ -14,7 +14,10 @@
 //!   Stribeck friction; it is what a nonparametric estimate that smooths a Coulomb jump
 //!   through zero looks like): the family collapses to Coulomb + viscous;
 //! * a **power law with its exponent on a bound** (1 or
-//!   [`POWER_LAW_MAX_EXPONENT`]).
+//!   [`POWER_LAW_MAX_EXPONENT`]);
+//! * an **offset that dwarfs the family**: more than [`OFFSET_DOMINANCE`] times the largest
+//!   value the family itself takes over the support, so that the constant, not the family,
+//!   describes the map (a fit gone astray, e.g. a clip of size 0.1 beside an offset of −10⁴).
 
 use nalgebra::DMatrix;
 
@@ -26,6 +29,10 @@ use super::result::EffectFit;
 /// fewer than a few dozen lie on the slope, and the smoothing of a nonparametric estimate is
 /// itself wider than that).
 pub const RELAY_FRACTION: f64 = 0.01;
+
+/// An offset larger than this many times the family's own largest value over the support
+/// leaves the family nothing to describe (see the module documentation).
+pub const OFFSET_DOMINANCE: f64 = 100.0;
 
 /// The reasons `fit` must not name the effect (empty when it may). `cov` is the covariance
 /// of the family's parameters (without the offset), used for differences of parameters.
@@ -40,6 +47,22 @@ pub(crate) fn flags(fit: &EffectFit, cov: Option<&DMatrix<f64>>) -> Vec<String> 
             out.push(format!(
                 "{} = {:.4e} is not resolved (95 % interval [{:.3e}, {:.3e}])",
                 p.name, p.value, p.interval.0, p.interval.1
+            ));
+        }
+    }
+    if let Some(offset) = fit.offset.as_ref() {
+        let own = (0..=64)
+            .map(|i| {
+                effect
+                    .eval(&v, fit.support.0 + span * i as f64 / 64.0)
+                    .abs()
+            })
+            .fold(0.0f64, f64::max);
+        if offset.value.abs() > OFFSET_DOMINANCE * own {
+            out.push(format!(
+                "the offset {:.4e} is more than {OFFSET_DOMINANCE}× the family's own largest \
+                 value {own:.3e} over the data: the constant, not the family, describes the map",
+                offset.value
             ));
         }
     }
@@ -117,6 +140,23 @@ mod tests {
     use super::super::fit::tests::{noisy, points};
     use super::super::{fit_effect, fit_effect_with};
     use super::*;
+
+    /// An offset beside a family of comparable size is a physical offset (a force offset
+    /// with Coulomb friction); one that dwarfs the family leaves it nothing to describe.
+    #[test]
+    fn an_offset_that_dwarfs_the_family_is_flagged() {
+        let z = points(400, 41);
+        let w = noisy(|z| 0.4 * z.signum() + 0.3, &z, 0.01, 42);
+        let fit = fit_effect_with(Effect::Coulomb, true, &z, &w).unwrap();
+        let offset = fit.offset.as_ref().unwrap().value;
+        assert!((offset - 0.3).abs() < 0.01, "{offset}");
+        assert!(!flags(&fit, None).iter().any(|f| f.contains("offset")));
+        let mut astray = fit.clone();
+        astray.offset.as_mut().unwrap().value = 1.1 * OFFSET_DOMINANCE * 0.4;
+        assert!(flags(&astray, None).iter().any(|f| f.contains("offset")));
+        astray.offset.as_mut().unwrap().value = 0.9 * OFFSET_DOMINANCE * 0.4;
+        assert!(!flags(&astray, None).iter().any(|f| f.contains("offset")));
+    }
 
     #[test]
     fn a_steep_saturation_is_flagged_as_a_relay() {
