@@ -37,6 +37,32 @@ pub(super) fn polish(
 /// The iteration limit of [`polish`].
 const POLISH_ITERATIONS: usize = 100;
 
+/// The Levenberg–Marquardt settings of every output-error polish.
+fn lm_settings(max_iterations: usize) -> Result<LmSettings, structid_linear::LinearError> {
+    LmSettings::builder()
+        .max_iterations(max_iterations)
+        .tolerance(1e-10)
+        .initial_damping(1e-3)
+        .damping_increase(4.0)
+        .damping_decrease(3.0)
+        .min_damping(1e-12)
+        .max_damping(f64::INFINITY)
+        .max_step_attempts(10)
+        .build()
+}
+
+/// The standard errors √diag(cov) of `n` parameters, infinite where the covariance is
+/// missing or not finite.
+fn standard_errors(cov: Option<&DMatrix<f64>>, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| {
+            cov.map(|cv| cv[(i, i)].max(0.0).sqrt())
+                .filter(|s| s.is_finite())
+                .unwrap_or(f64::INFINITY)
+        })
+        .collect()
+}
+
 /// [`polish`] with an iteration limit.
 pub(super) fn polish_with(
     fit: &EffectFit,
@@ -48,16 +74,7 @@ pub(super) fn polish_with(
     if fit.effect == Effect::Quantisation {
         return fit.clone();
     }
-    let settings = LmSettings::builder()
-        .max_iterations(max_iterations)
-        .tolerance(1e-10)
-        .initial_damping(1e-3)
-        .damping_increase(4.0)
-        .damping_decrease(3.0)
-        .min_damping(1e-12)
-        .max_damping(f64::INFINITY)
-        .max_step_attempts(10)
-        .build();
+    let settings = lm_settings(max_iterations);
     let mut problem = PolishProblem {
         fit,
         h,
@@ -79,14 +96,7 @@ pub(super) fn polish_with(
         }
     };
     let cov = lm.covariance(&mut problem);
-    let se: Vec<f64> = (0..lm.theta.len())
-        .map(|i| {
-            cov.as_ref()
-                .map(|cv| cv[(i, i)].max(0.0).sqrt())
-                .filter(|s| s.is_finite())
-                .unwrap_or(f64::INFINITY)
-        })
-        .collect();
+    let se = standard_errors(cov.as_ref(), lm.theta.len());
     let pf = fit.parameters.len();
     let family_cov = cov.as_ref().map(|c| c.view((0, 0), (pf, pf)).into_owned());
     let mut with_refit = fit.clone();
@@ -137,17 +147,7 @@ pub(super) fn polish_jointly(
 ) -> Option<(EffectFit, Vec<Option<EffectFit>>)> {
     let fits: Vec<&EffectFit> = std::iter::once(new).chain(known.iter().flatten()).collect();
     let start: Vec<f64> = fits.iter().flat_map(|f| f.all_values()).collect();
-    let lm = LmSettings::builder()
-        .max_iterations(POLISH_ITERATIONS)
-        .tolerance(1e-10)
-        .initial_damping(1e-3)
-        .damping_increase(4.0)
-        .damping_decrease(3.0)
-        .min_damping(1e-12)
-        .max_damping(f64::INFINITY)
-        .max_step_attempts(10)
-        .build()
-        .ok()?;
+    let lm = lm_settings(POLISH_ITERATIONS).ok()?;
     let mut problem = JointProblem {
         new,
         known,
@@ -163,14 +163,7 @@ pub(super) fn polish_jointly(
         return None;
     }
     let cov = lm.covariance(&mut problem);
-    let se: Vec<f64> = (0..lm.theta.len())
-        .map(|i| {
-            cov.as_ref()
-                .map(|cv| cv[(i, i)].max(0.0).sqrt())
-                .filter(|s| s.is_finite())
-                .unwrap_or(f64::INFINITY)
-        })
-        .collect();
+    let se = standard_errors(cov.as_ref(), lm.theta.len());
     let mut at = 0;
     let mut next = |fit: &EffectFit| {
         let n = fit.all_values().len();
