@@ -79,6 +79,9 @@ fn discover(model: &Path, est: &Path, val: &Path, out: &Path, extra: &[&str]) ->
         p(val),
         "--out",
         p(out),
+        // G is the plant's own (refitted jointly with the first map it would take up the
+        // second effect's linear part).
+        "--keep-nominal",
     ];
     args.extend_from_slice(extra);
     ok(&args)

@@ -32,9 +32,11 @@
 
 use std::sync::Arc;
 
+use structid_core::PolynomialDispersion;
 use structid_core::validation::{Scoring, ValidationSettings, validate};
-use structid_core::{InitialState, PolynomialDispersion};
-use structid_discover::discover::{Classification, DiscoverSettings, Discovery, Verdict, discover};
+use structid_discover::discover::{
+    Classification, DiscoverSettings, Discovery, Verdict, discover, initial_state,
+};
 use structid_discover::hypotheses::Nominal;
 use structid_discover::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
 
@@ -58,8 +60,10 @@ fn truth_rms(case: &PhysicsCase, scoring: Scoring) -> Option<f64> {
     let h = nominal
         .hypothesis(*site, Arc::new(PolynomialDispersion::new(1).ok()?))
         .ok()?;
+    // The initial state as the workflow treats it at that site (a sensor map's z = G·u is
+    // computed from rest).
     let settings = ValidationSettings::builder()
-        .initial_state(InitialState::Estimate)
+        .initial_state(initial_state(*site).1)
         .scoring(scoring)
         .build()
         .ok()?;
@@ -212,21 +216,22 @@ fn summary(t: &Tally) -> (f64, f64) {
     (m, relative)
 }
 
-/// What the workflow achieves today (measured: located 41, named 38 of 60, parameters 31 of
-/// 36, median shrink 4.8×), asserted with a margin so that it does not fall back.
+/// What the workflow achieves today (measured: located 43, named 40 of 60, median shrink
+/// 7.2×, with G refitted jointly with the best hypothesis' map; before that 41, 38 and 4.8×),
+/// asserted with a margin so that it does not fall back.
 #[test]
 fn static_effects_on_physical_plants_hold_their_measured_level() {
     let t = static_tally(0..60);
     let (m, _) = summary(&t);
-    assert!(t.located >= 36, "located {}/{}", t.located, t.cases);
-    assert!(t.named >= 33, "named {}/{}", t.named, t.cases);
+    assert!(t.located >= 40, "located {}/{}", t.located, t.cases);
+    assert!(t.named >= 37, "named {}/{}", t.named, t.cases);
     assert!(
         t.within as f64 >= 0.75 * t.with_keys as f64,
         "parameters within 20 % {}/{}",
         t.within,
         t.with_keys
     );
-    assert!(m >= 3.5, "median shrink {m:.2}×");
+    assert!(m >= 6.0, "median shrink {m:.2}×");
 }
 
 /// The goals (not met yet: see the measured level above).

@@ -293,6 +293,19 @@ pub(super) struct Fitted {
     /// Whether the map validated better held at its edge values outside the estimation range
     /// than extrapolated as estimated (its validation RMS is the better of the two).
     pub(super) hold_edges: bool,
+    /// G re-estimated jointly with the map ([`super::refine::refine_jointly`]), when that
+    /// helped; `None` when the hypothesis is identified around the nominal model's G.
+    pub(super) linear: Option<JointLinear>,
+    /// Its direction test, once computed.
+    pub(super) direction: Option<crate::hysteresis::DirectionTest>,
+}
+
+/// G (u → y) re-estimated jointly with a hypothesis' map, and the hypothesis' validation RMS
+/// around the nominal model's G before.
+#[derive(Clone, Debug)]
+pub(super) struct JointLinear {
+    pub(super) g: structid_linear::PolynomialModel,
+    pub(super) nominal_validation_rms: f64,
 }
 
 /// The parts of a fit every estimator shares: simulation RMS on both records, the map on a
@@ -380,6 +393,8 @@ pub(super) fn finish_fit(
         estimator,
         residual_noise,
         hold_edges,
+        linear: None,
+        direction: None,
     })
 }
 

@@ -8,13 +8,17 @@ use structid_linear::PolynomialModel;
 
 use crate::gap::{Gap, GapSettings, gap};
 
-use super::fit::simulation_rms;
+use crate::hypotheses::Nominal;
+
+use super::fit::{Fitted, JointLinear, identify_hypothesis, initial_state, simulation_rms};
 use super::{DiscoverSettings, Finding, NominalRefinement};
 
 /// Refits G (in the structure of the finding's location) by output error with the finding's
-/// map held fixed, starting from the nominal `g`, and keeps the augmented model with the new
-/// G when its validation RMS (scored as every simulation of the workflow) falls; the finding's
-/// gaps and shrink are then those of the new model. Records G before and after either way.
+/// map held fixed, starting from the finding's G (the nominal `g`, or the G re-estimated
+/// jointly with its nonparametric map, [`refine_jointly`]), and keeps the augmented model with
+/// the new G when its validation RMS (scored as every simulation of the workflow) falls; the
+/// finding's gaps and shrink are then those of the new model. Records G as given and as kept,
+/// with the validation RMS of the finding's map around each.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn refine_nominal(
     g: &PolynomialModel,
@@ -29,7 +33,12 @@ pub(super) fn refine_nominal(
 ) -> Result<()> {
     let location = finding.location;
     let structure = LinearStructure::new("N", location)?;
-    let start = structure.initial_from_bla(g)?;
+    let given = structure.initial_from_bla(g)?;
+    let joint = finding.nominal_refinement.take().filter(|r| r.adopted);
+    let start = match &joint {
+        Some(r) => structure.initial_from_bla(&u_to_y(&r.after))?,
+        None => given.clone(),
+    };
     let map = finding.augmented.map.interpolant()?;
     let hypothesis = |g: &PolynomialModel| -> Result<crate::hypotheses::Hypothesis> {
         let dispersion = Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
@@ -40,9 +49,12 @@ pub(super) fn refine_nominal(
             known: Vec::new(),
         })
     };
-    let h_before = hypothesis(&start)?;
-    let val_before = h_before.data(val)?;
-    let est_h = h_before.data(est)?;
+    let rms_of = |g: &PolynomialModel| -> Result<f64> {
+        let h = hypothesis(g)?;
+        Ok(simulation_rms(&h, map.as_ref(), &h.data(val)?, settings))
+    };
+    let h_start = hypothesis(&start)?;
+    let est_h = h_start.data(est)?;
     let refine_settings = RefineSettings::builder()
         .identify(
             IdentifySettings::builder()
@@ -51,13 +63,23 @@ pub(super) fn refine_nominal(
         )
         .build()?;
     let r = refine_linear(&structure, &start, map.as_ref(), &est_h, &refine_settings)?;
-    let rms_before = simulation_rms(&h_before, map.as_ref(), &val_before, settings);
-    let h_after = hypothesis(&r.after)?;
-    let val_after = h_after.data(val)?;
-    let rms_after = simulation_rms(&h_after, map.as_ref(), &val_after, settings);
-    let adopted = rms_after < rms_before;
-    if adopted {
-        let est_after = h_after.data(est)?;
+    let rms_given = rms_of(&given)?;
+    let rms_start = if joint.is_some() {
+        rms_of(&start)?
+    } else {
+        rms_given
+    };
+    let rms_after = rms_of(&r.after)?;
+    let refined = rms_after < rms_start;
+    let (kept, rms_kept) = if refined {
+        (r.after, rms_after)
+    } else {
+        (start, rms_start)
+    };
+    let adopted = refined || joint.is_some();
+    if refined {
+        let h_after = hypothesis(&kept)?;
+        let (est_after, val_after) = (h_after.data(est)?, h_after.data(val)?);
         let interp = map.as_ref();
         let estimation_gap: Gap = gap(
             &h_after.model,
@@ -77,17 +99,129 @@ pub(super) fn refine_nominal(
         finding.augmented.model = h_after.model.clone();
         finding.augmented.estimation_gap = estimation_gap;
         finding.augmented.validation_gap = validation_gap;
+    }
+    if adopted {
         finding.remarks.push(format!(
-            "G was re-estimated with the map in the loop (output error): validation RMS {:.4e} → {:.4e}",
-            rms_before, rms_after
+            "G was re-estimated with the map in the loop (output error{}): validation RMS of the \
+             augmented model {:.4e} with G as given → {:.4e}",
+            if joint.is_some() {
+                ", alternating with the nonparametric map"
+            } else {
+                ""
+            },
+            rms_given,
+            rms_kept
         ));
     }
     finding.nominal_refinement = Some(NominalRefinement {
-        before: start,
-        after: r.after,
-        validation_rms_before: rms_before,
-        validation_rms_after: rms_after,
+        before: given,
+        after: kept,
+        validation_rms_before: rms_given,
+        validation_rms_after: rms_kept,
         adopted,
     });
     Ok(())
+}
+
+/// G from u to y of a linear part in a structure's form (for output feedback the structure's
+/// G also carries the feedback path −B, its second input).
+pub(super) fn u_to_y(g: &PolynomialModel) -> PolynomialModel {
+    PolynomialModel {
+        num: g.num.first().cloned().into_iter().collect(),
+        den: g.den.clone(),
+        sample_time: g.sample_time,
+    }
+}
+
+/// Alternations of [`refine_jointly`] at most: each re-estimates G and the map once.
+const JOINT_ITERATIONS: usize = 3;
+
+/// A joint step is kept when it lowers the hypothesis' validation RMS below this share of the
+/// previous one: a smaller gain is within what a second fit of the same data changes anyway.
+const JOINT_GAIN: f64 = 0.95;
+
+/// Re-estimates G jointly with the nonparametric map of `fitted` (a nominal G = `g`, u → y, as
+/// estimated from data is a best linear approximation, biased by the very effect that is
+/// missing, and a static block cannot absorb a dynamic error of G): the alternation of
+/// [`structid_core::refine`] in discovery's own terms. G is refitted by output error with the
+/// map held fixed as a function ([`LinearStructure::estimate_linear_with_map`], integrators
+/// held at 1), then the map is identified again at the same location around the new G (with
+/// the nominal model's input disturbance `input_noise`, if any), and so on while the validation
+/// RMS, scored as every simulation of the workflow, falls below [`JOINT_GAIN`] of the last.
+///
+/// Returns the best fit: `fitted` itself when no step helps (an exact G) or when the refined
+/// fit's validation RMS is not below `required` times the original's (1 to keep any gain,
+/// less to ask for more), otherwise the fit around the re-estimated G, which
+/// [`Fitted::linear`] then carries. Locations declared in an
+/// `[lft]` model have no G of their own and are returned as they are, as are nominal models
+/// with known maps (G is then not the whole linear part).
+pub(super) fn refine_jointly(
+    g: &PolynomialModel,
+    input_noise: Option<f64>,
+    fitted: Fitted,
+    est: &Data,
+    val: &Data,
+    required: f64,
+    settings: &DiscoverSettings,
+) -> Fitted {
+    let location = fitted.result.location;
+    let Ok(structure) = LinearStructure::new("N", location) else {
+        return fitted;
+    };
+    let oe = RefineSettings::default().oe().clone();
+    let free = initial_state(location).1 == InitialState::Estimate;
+    let nominal_validation_rms = fitted.result.validation_rms;
+    let mut refined: Option<(PolynomialModel, Fitted)> = None;
+    for _ in 0..JOINT_ITERATIONS {
+        let (g_now, f_now) = match &refined {
+            Some((g, f)) => (g, f),
+            None => (g, &fitted),
+        };
+        let step = || -> Result<(PolynomialModel, Fitted)> {
+            let start = structure.initial_from_bla(g_now)?;
+            let fit =
+                structure.estimate_linear_with_map(est, f_now.map.as_ref(), &start, &oe, free)?;
+            let next = u_to_y(&fit.model);
+            let mut f = identify_around(&next, input_noise, location, est, val, settings)?;
+            f.linear = Some(JointLinear {
+                g: next.clone(),
+                nominal_validation_rms,
+            });
+            Ok((next, f))
+        };
+        match step() {
+            Ok((next, f))
+                if f.result.validation_rms.is_finite()
+                    && f.result.validation_rms < JOINT_GAIN * f_now.result.validation_rms =>
+            {
+                refined = Some((next, f));
+            }
+            _ => break,
+        }
+    }
+    match refined {
+        Some((_, f)) if f.result.validation_rms < required * nominal_validation_rms => f,
+        _ => fitted,
+    }
+}
+
+/// The quadratic estimate at `location` around G = `g`, with the input disturbance of ratio
+/// `input_noise` where it can be used (as [`super::discover`] identifies every location).
+fn identify_around(
+    g: &PolynomialModel,
+    input_noise: Option<f64>,
+    location: crate::hypotheses::Location,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Result<Fitted> {
+    let plain = Nominal::from_polynomial(g)?;
+    match input_noise {
+        Some(ratio) => plain
+            .clone()
+            .with_input_noise(ratio)
+            .and_then(|n| identify_hypothesis(&n, location, est, val, settings))
+            .or_else(|_| identify_hypothesis(&plain, location, est, val, settings)),
+        None => identify_hypothesis(&plain, location, est, val, settings),
+    }
 }

@@ -46,7 +46,7 @@ impl Default for DiscoverSettings {
             table_points: 201,
             settle: 0,
             scoring: None,
-            refine_nominal: false,
+            refine_nominal: true,
         }
     }
 }
@@ -241,12 +241,16 @@ impl DiscoverSettingsBuilder {
         self
     }
 
-    /// Re-estimate G with the found map held in the loop (default off). For a nominal model
-    /// estimated from data (a best linear approximation is biased by the very effect that is
-    /// missing), the map alone cannot absorb G's dynamic error; G is then refitted by output
-    /// error from u and the map's output ([`structid_core::refine::refine_linear`]) and the
-    /// augmented model is kept with the new G when its validation RMS falls. The finding
-    /// reports G before and after ([`crate::discover::NominalRefinement`]).
+    /// Re-estimate G with the map in the loop (default on). A nominal model estimated from
+    /// data (a best linear approximation) is biased by the very effect that is missing, and the
+    /// map alone cannot absorb G's dynamic error. The best hypothesis is then refined jointly:
+    /// G by output error with its nonparametric map held fixed, the map identified again around
+    /// the new G, for as long as the validation RMS falls by 5 % a step (at most three steps);
+    /// and G is refitted once more with the named map held fixed
+    /// ([`structid_core::refine::refine_linear`]). A new G is kept only when the validation RMS
+    /// falls, so an exact G stays as it is. The finding reports G before and after
+    /// ([`crate::discover::NominalRefinement`]). Only the best location is refined: G refitted
+    /// around a map at the wrong location absorbs part of the effect too.
     pub fn refine_nominal(mut self, on: bool) -> Self {
         self.inner.refine_nominal = on;
         self
