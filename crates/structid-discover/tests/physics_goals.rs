@@ -285,12 +285,15 @@ fn dynamic_tally(cases: u64) -> usize {
     dynamic
 }
 
-/// Measured today: 5 of 15 reported as dynamic (backlash at an estimated actuator or sensor
-/// is mostly approximated by a static map elsewhere, often friction-like in rate feedback).
+/// Measured today: 9 of 15 reported as dynamic (5 before a strong direction effect at the
+/// sensor or the input was preferred to a friction-like map of ẏ that explains little). The
+/// misses: backlash behind an estimated actuator or sensor nominal approximated by a static
+/// map, a Bouc–Wen spring in a stiff loop that a static map nearly explains (159×), and one
+/// effect too small to detect.
 #[test]
 fn hysteresis_on_physical_plants_holds_its_measured_level() {
     let dynamic = dynamic_tally(15);
-    assert!(dynamic >= 4, "{dynamic}/15");
+    assert!(dynamic >= 8, "{dynamic}/15");
 }
 
 /// The goal (not met yet).
