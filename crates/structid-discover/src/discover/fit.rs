@@ -298,6 +298,9 @@ pub(super) struct Fitted {
     pub(super) linear: Option<JointLinear>,
     /// Its direction test, once computed.
     pub(super) direction: Option<crate::hysteresis::DirectionTest>,
+    /// The ratio of the input disturbance it was identified with (see
+    /// [`super::noise::with_smaller_ratio`]); `None` for the nominal model's own noise path.
+    pub(super) input_noise: Option<f64>,
 }
 
 /// G (u → y) re-estimated jointly with a hypothesis' map, and the hypothesis' validation RMS
@@ -395,6 +398,7 @@ pub(super) fn finish_fit(
         hold_edges,
         linear: None,
         direction: None,
+        input_noise: None,
     })
 }
 

@@ -16,7 +16,10 @@
 //!    ([`structid_core::validation::windows`]) in this step and in every later one, and gets a
 //!    disturbance where its input acts, sized by maximum likelihood
 //!    ([`Nominal::with_input_noise`]); [`Discovery::scoring`] and [`Discovery::input_noise`]
-//!    say so. There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
+//!    say so. That ratio is taken on the nominal model's residual, which holds the missing
+//!    effect, and a force acting where the input acts inflates it: each location is also
+//!    identified with a ratio a hundred times smaller ([`SMALLER_RATIO`]), and the
+//!    fit that validates better is kept. There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
 //!    a gap larger than the noise that no candidate block closes.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
@@ -115,6 +118,7 @@ pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersio
 pub use iterate::{Effects, EffectsSettings, Step, StopReason, discover_effects};
 pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCurve};
 pub use naming::parsimonious;
+pub use noise::SMALLER_RATIO;
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
 
 use std::time::Instant;
@@ -440,6 +444,13 @@ pub fn discover(
             Err(_) if input_noise.is_some() => {
                 identify_hypothesis(given, location, est, val, settings)
             }
+            Ok(mut f) => {
+                f.input_noise = input_noise;
+                Ok(match input_noise {
+                    Some(ratio) => noise::with_smaller_ratio(given, f, ratio, est, val, settings),
+                    None => f,
+                })
+            }
             other => other,
         };
         match result {
@@ -480,7 +491,7 @@ pub fn discover(
         let best = fitted.remove(0);
         fitted.insert(
             0,
-            refine::refine_jointly(g, input_noise, best, est, val, required, settings),
+            refine::refine_jointly(g, best.input_noise, best, est, val, required, settings),
         );
     }
     // Total variation, where a smooth estimate cannot do: at every location when the best
@@ -512,6 +523,7 @@ pub fn discover(
         } else {
             Vec::new()
         };
+
         for h in targets {
             let t = Instant::now();
             match total_variation_fit(&h, est, val, settings) {
@@ -698,18 +710,29 @@ pub fn discover(
     };
     // A direction-dependent force seen from the position (a dynamic fit in feedback from y)
     // is static seen from the rate: a map of ẏ is the simplest map of y that depends on the
-    // direction of motion (friction). When the best static fit is in rate feedback, is named,
-    // and leaves at most a quarter of what the dynamic fit's static approximation leaves, it
-    // is the explanation. Hysteresis elsewhere (backlash at the input, a sensor) keeps its
-    // verdict: no static map of a measured signal explains it.
-    let position_vs_rate = chosen != 0
-        && fitted[chosen].result.location == Location::OutputFeedback
-        && fitted[0].result.location == Location::RateFeedback;
-    let mut finding = if position_vs_rate {
-        let (tv_dynamic, tv_static) = (tv_rms(&fitted, chosen), tv_rms(&fitted, 0));
-        let (dir_dynamic, dir_static) = (direction_of(chosen), direction_of(0));
-        let dynamic_fit = fitted.swap_remove(chosen);
-        let static_fit = fitted.swap_remove(0);
+    // direction of motion (friction). When the best rate fit (wherever it ranks: a better fit
+    // elsewhere, e.g. at the input, does not make the direction effect seen from the position
+    // any less a friction) is named and its augmented model validates better than the
+    // dynamic fit's static approximation, it is the explanation. Hysteresis elsewhere
+    // (backlash at the input, a sensor) keeps its verdict: no static map of a measured signal
+    // explains it.
+    let rate = fitted.iter().position(|f| {
+        f.result.location == Location::RateFeedback && f.result.validation_rms.is_finite()
+    });
+    let position_vs_rate = fitted[chosen].result.location == Location::OutputFeedback
+        && directions[chosen].as_ref().is_some_and(|d| d.dynamic)
+        && rate.is_some_and(|r| r != chosen);
+    let mut finding = if let (true, Some(rate)) = (position_vs_rate, rate) {
+        let (tv_dynamic, tv_static) = (tv_rms(&fitted, chosen), tv_rms(&fitted, rate));
+        let (dir_dynamic, dir_static) = (direction_of(chosen), direction_of(rate));
+        // Remove the later index first, so the earlier one stays where it is.
+        let (dynamic_fit, static_fit) = if chosen > rate {
+            let d = fitted.remove(chosen);
+            (d, fitted.remove(rate))
+        } else {
+            let s = fitted.remove(rate);
+            (fitted.remove(chosen), s)
+        };
         let dynamic_finding = add(dynamic_fit, dir_dynamic, tv_dynamic)?;
         match add(static_fit, dir_static, tv_static) {
             Ok(f)
@@ -725,12 +748,15 @@ pub fn discover(
         let tv = tv_rms(&fitted, chosen);
         add(fitted.swap_remove(chosen), direction_of(chosen), tv)?
     };
-    // The best nonparametric fit names nothing (dynamic, or no family validates): a named
+    // The best nonparametric fit names nothing (dynamic, or no family validates), or its
+    // augmented model does not confirm it (it closes less than 5 % of the gap): a named
     // family elsewhere may still explain the data better than that fit's table. A
     // nonparametric estimate in a feedback loop (a spring seen from the noisy measured
     // position under a controller) can validate worse than the parametric map refined by
     // output error from it; a static map there that validates better is the explanation.
-    if !matches!(finding.classification, Classification::Named(_)) {
+    if !matches!(finding.classification, Classification::Named(_))
+        || finding.shrink < MIN_CONFIRMING_SHRINK
+    {
         by_validation(&mut fitted);
         let mut tried = vec![finding.location];
         let mut best_alternative: Option<Finding> = None;

@@ -183,6 +183,7 @@ pub(super) fn refine_jointly(
                 structure.estimate_linear_with_map(est, f_now.map.as_ref(), &start, &oe, free)?;
             let next = u_to_y(&fit.model);
             let mut f = identify_around(&next, input_noise, location, est, val, settings)?;
+            f.input_noise = input_noise;
             f.linear = Some(JointLinear {
                 g: next.clone(),
                 nominal_validation_rms,
