@@ -152,9 +152,9 @@ const JOINT_GAIN: f64 = 0.95;
 /// Returns the best fit: `fitted` itself when no step helps (an exact G) or when the refined
 /// fit's validation RMS is not below `required` times the original's (1 to keep any gain,
 /// less to ask for more), otherwise the fit around the re-estimated G, which
-/// [`Fitted::linear`] then carries. Locations declared in an
-/// `[lft]` model have no G of their own and are returned as they are, as are nominal models
-/// with known maps (G is then not the whole linear part).
+/// [`Fitted::linear`] then carries. Locations declared in an `[lft]` model have no G of their
+/// own and are returned as they are. (The caller does not refine nominal models with known
+/// maps: G is then not the whole linear part.)
 pub(super) fn refine_jointly(
     g: &PolynomialModel,
     input_noise: Option<f64>,
@@ -171,13 +171,11 @@ pub(super) fn refine_jointly(
     let oe = RefineSettings::default().oe().clone();
     let free = initial_state(location).1 == InitialState::Estimate;
     let nominal_validation_rms = fitted.result.validation_rms;
-    let mut refined: Option<(PolynomialModel, Fitted)> = None;
+    let mut refined: Option<Fitted> = None;
     for _ in 0..JOINT_ITERATIONS {
-        let (g_now, f_now) = match &refined {
-            Some((g, f)) => (g, f),
-            None => (g, &fitted),
-        };
-        let step = || -> Result<(PolynomialModel, Fitted)> {
+        let f_now = refined.as_ref().unwrap_or(&fitted);
+        let g_now = f_now.linear.as_ref().map_or(g, |j| &j.g);
+        let step = || -> Result<Fitted> {
             let start = structure.initial_from_bla(g_now)?;
             let fit =
                 structure.estimate_linear_with_map(est, f_now.map.as_ref(), &start, &oe, free)?;
@@ -185,23 +183,23 @@ pub(super) fn refine_jointly(
             let mut f = identify_around(&next, input_noise, location, est, val, settings)?;
             f.input_noise = input_noise;
             f.linear = Some(JointLinear {
-                g: next.clone(),
+                g: next,
                 nominal_validation_rms,
             });
-            Ok((next, f))
+            Ok(f)
         };
         match step() {
-            Ok((next, f))
+            Ok(f)
                 if f.result.validation_rms.is_finite()
                     && f.result.validation_rms < JOINT_GAIN * f_now.result.validation_rms =>
             {
-                refined = Some((next, f));
+                refined = Some(f);
             }
             _ => break,
         }
     }
     match refined {
-        Some((_, f)) if f.result.validation_rms < required * nominal_validation_rms => f,
+        Some(f) if f.result.validation_rms < required * nominal_validation_rms => f,
         _ => fitted,
     }
 }
