@@ -30,8 +30,12 @@
 //! * the time windows where the moving RMS of ε exceeds `band`·σ̂, and the operating regions of
 //!   the candidate signals where its energy concentrates ([`crate::localise`]).
 //!
-//! The verdict is "no missing effect detected" when every test passes and RMS(ε) ≤
-//! `noise_ratio`·σ̂; otherwise the failing statistics are listed.
+//! * when every test passes, the lattice of a quantised output ([`output_lattice`]): a
+//!   quantiser's error is white and uncorrelated with the input, so the tests cannot see it.
+//!
+//! The verdict is "no missing effect detected" when every test passes, RMS(ε) ≤
+//! `noise_ratio`·σ̂ and the output sits on no lattice; otherwise the failing statistics (or
+//! the lattice) are listed.
 
 use std::ops::Range;
 
@@ -129,6 +133,9 @@ pub struct Gap {
     pub regions: Vec<Region>,
     /// Whether a missing effect was detected.
     pub missing_effect: bool,
+    /// The lattice the measured output sits on, when the tests pass and it does
+    /// ([`output_lattice`]): the gap is then a quantiser's, not noise.
+    pub lattice: Option<Lattice>,
     /// The verdict in words, with the statistics behind it.
     pub verdict: String,
 }
@@ -432,6 +439,112 @@ fn quantisation_floor(y: &[f64]) -> f64 {
     if q.is_finite() { q / 12f64.sqrt() } else { 0.0 }
 }
 
+/// An output that sits on a lattice y ∈ {a + k·q} up to a small noise: a quantised sensor
+/// (an encoder, a coarse converter), found by [`output_lattice`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Lattice {
+    /// The step q.
+    pub step: f64,
+    /// The coherence mean cos(2π·Δy/q) over the output's steps (1 on an exact lattice, about
+    /// exp(−4π²σ²/q²) with noise of std σ after the quantiser, about 0 for a continuous output).
+    pub coherence: f64,
+    /// How many of the output's one-sample changes it is measured on.
+    pub changes: usize,
+}
+
+/// The least coherence of a lattice that [`output_lattice`] reports: noise after the quantiser
+/// below about q/8.
+pub const LATTICE_COHERENCE: f64 = 0.6;
+
+/// The lattice the measured output `y` sits on, if any: the largest step q (at most a
+/// twentieth of the range of y) at which the one-sample changes Δy that move by half a step
+/// or more are whole multiples of q, as measured by mean cos(2π·Δy/q) ≥ [`LATTICE_COHERENCE`]
+/// over at least 100 changes.
+///
+/// Why the changes and not the values: an output that dwells at a few set points clusters at
+/// them, and some step puts any few clusters near a lattice; the changes between samples of a
+/// moving continuous output take every size, those of a quantised output only multiples of q.
+/// The largest coherent step is the lattice's own: q/2, q/3, … fit its changes too, and 2q
+/// does not (a change of ±q is half of it, cos π = −1). The gap tests cannot see a
+/// quantiser: its error is white and uncorrelated with the input, so it passes as noise.
+pub fn output_lattice(y: &[f64]) -> Option<Lattice> {
+    const MAX_CHANGES: usize = 4000;
+    let (lo, hi) = y
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    let range = hi - lo;
+    if !(range > 0.0 && range.is_finite()) {
+        return None;
+    }
+    let mut changes: Vec<f64> = y
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.is_finite() && *d != 0.0)
+        .collect();
+    if changes.len() > MAX_CHANGES {
+        let step = changes.len().div_ceil(MAX_CHANGES);
+        changes = changes.into_iter().step_by(step).collect();
+    }
+    let largest = changes.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+    let coherence = |q: f64| -> (f64, usize) {
+        let moved: Vec<f64> = changes
+            .iter()
+            .copied()
+            .filter(|d| d.abs() >= 0.5 * q)
+            .collect();
+        let c = moved
+            .iter()
+            .map(|d| (std::f64::consts::TAU * d / q).cos())
+            .sum::<f64>()
+            / moved.len().max(1) as f64;
+        (c, moved.len())
+    };
+    // From the largest step down: a relative spacing of q/(8·|Δy|max) keeps the phase of the
+    // largest change within π/4 of a grid point.
+    let mut q = range / 20.0;
+    let floor = range / 20_000.0;
+    while q > floor {
+        let (c, n) = coherence(q);
+        if n >= 100 && c >= LATTICE_COHERENCE {
+            // The coherence first reaches the bound above the step (cos 2π·q/q' falls off
+            // slowly); its peak is the step, below q' and above q'/1.5 (where q'/2, a
+            // sub-lattice, would peak too).
+            let (mut best, mut best_c, mut p) = (q, c, q);
+            while p > q / 1.5 {
+                let (cp, np) = coherence(p);
+                if np >= 100 && cp > best_c {
+                    (best, best_c) = (p, cp);
+                }
+                p -= p * p / (8.0 * largest.max(p));
+            }
+            // polish by a golden-section search of the coherence within one grid cell
+            let cell = best * best / (8.0 * largest.max(best));
+            let (mut a, mut b) = (best - cell, best + cell);
+            let g = 0.5 * (5f64.sqrt() - 1.0);
+            for _ in 0..40 {
+                let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+                if coherence(x1).0 >= coherence(x2).0 {
+                    b = x2;
+                } else {
+                    a = x1;
+                }
+            }
+            let step = 0.5 * (a + b);
+            let (coherence, changes) = coherence(step);
+            return Some(Lattice {
+                step,
+                coherence,
+                changes,
+            });
+        }
+        q -= q * q / (8.0 * largest.max(q));
+    }
+    None
+}
+
 /// Examines the gap between `model` (with `maps`, one per block) and `data`; `candidates` are
 /// the signals (name, samples) to localise it in. See the [module documentation](self).
 pub fn gap(
@@ -560,12 +673,25 @@ pub fn gap(
     let prediction_rms = structid_core::metrics::rms(&innovations);
     let too_large = prediction_rms > settings.noise_ratio * noise_std;
     let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
-    let missing_effect = too_large || !failing.is_empty();
+    // A quantiser's error passes every test as noise; its lattice shows it.
+    let lattice = if too_large || !failing.is_empty() {
+        None
+    } else {
+        output_lattice(&y)
+    };
+    let missing_effect = too_large || !failing.is_empty() || lattice.is_some();
     let verdict = if missing_effect {
         let mut why: Vec<String> = failing
             .iter()
             .map(|t| format!("{} = {:.1} > {:.1}", t.name, t.statistic, t.critical))
             .collect();
+        if let Some(l) = &lattice {
+            why.push(format!(
+                "the output sits on a lattice of step {:.4e} (coherence {:.2} over {} changes): \
+                 a quantised sensor, whose error passes the tests as noise",
+                l.step, l.coherence, l.changes
+            ));
+        }
         if too_large {
             why.insert(
                 0,
@@ -595,6 +721,7 @@ pub fn gap(
         windows,
         regions,
         missing_effect,
+        lattice,
         verdict,
     })
 }
@@ -607,6 +734,71 @@ mod tests {
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
     use structid_core::{Lft, LftMatrices, Signal};
+
+    /// A slow multisine of amplitude 1, quantised to `step` (none for 0), plus white noise.
+    fn sensed(step: f64, noise: f64, seed: u64) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let n = Normal::new(0.0, noise.max(1e-300)).unwrap();
+        (0..5000)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                let x = 0.6 * (0.7 * t).sin() + 0.4 * (1.9 * t + 1.0).sin();
+                let q = if step > 0.0 {
+                    (x / step).round() * step
+                } else {
+                    x
+                };
+                q + n.sample(&mut rng)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_quantised_output_is_found_with_its_step() {
+        for (step, noise) in [(0.05, 0.0), (0.05, 0.004), (0.013, 0.001), (0.08, 0.006)] {
+            let l = output_lattice(&sensed(step, noise, 1))
+                .unwrap_or_else(|| panic!("step {step}, noise {noise}: no lattice"));
+            assert!(
+                (l.step - step).abs() < 0.03 * step,
+                "step {step}, noise {noise}: {l:?}"
+            );
+            // the coherence is about exp(−4π²σ²/q²) for noise σ after the quantiser
+            let expected =
+                (-4.0 * std::f64::consts::PI.powi(2) * noise * noise / (step * step)).exp();
+            assert!((l.coherence - expected).abs() < 0.08, "{l:?} vs {expected}");
+        }
+    }
+
+    #[test]
+    fn continuous_outputs_sit_on_no_lattice() {
+        // continuous, noisy or not
+        for noise in [0.0, 1e-4, 0.01] {
+            assert_eq!(
+                output_lattice(&sensed(0.0, noise, 2)),
+                None,
+                "noise {noise}"
+            );
+        }
+        // noise coarser than the step hides the lattice (the quantiser is then part of the
+        // noise)
+        assert_eq!(output_lattice(&sensed(0.01, 0.01, 3)), None);
+        // an axis dwelling at a few set points, moving continuously between them
+        let mut rng = StdRng::seed_from_u64(4);
+        let n = Normal::new(0.0, 1e-3).unwrap();
+        let targets = [0.0, 0.37, -0.52, 0.81, 0.13, -0.29];
+        let mut y = Vec::new();
+        let mut x = 0.0_f64;
+        for target in targets.iter().cycle().take(24) {
+            for _ in 0..250 {
+                x += 0.05 * (target - x);
+                y.push(x + n.sample(&mut rng));
+            }
+        }
+        assert_eq!(output_lattice(&y), None);
+        // constant and empty records
+        assert_eq!(output_lattice(&[1.0; 100]), None);
+        assert_eq!(output_lattice(&[]), None);
+    }
 
     /// y = G·u + e with G = 0.5q⁻¹/(1 − 0.8q⁻¹), no map.
     fn nominal() -> Model {

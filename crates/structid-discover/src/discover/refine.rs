@@ -8,7 +8,7 @@ use structid_linear::PolynomialModel;
 
 use crate::gap::{Gap, GapSettings, gap};
 
-use crate::hypotheses::Nominal;
+use crate::hypotheses::{Location, Nominal};
 
 use super::fit::{Fitted, JointLinear, identify_hypothesis, initial_state, simulation_rms};
 use super::{DiscoverSettings, Finding, NominalRefinement};
@@ -143,9 +143,12 @@ const JOINT_GAIN: f64 = 0.95;
 /// Re-estimates G jointly with the nonparametric map of `fitted` (a nominal G = `g`, u → y, as
 /// estimated from data is a best linear approximation, biased by the very effect that is
 /// missing, and a static block cannot absorb a dynamic error of G): the alternation of
-/// [`structid_core::refine`] in discovery's own terms. G is refitted by output error with the
-/// map held fixed as a function ([`LinearStructure::estimate_linear_with_map`], integrators
-/// held at 1), then the map is identified again at the same location around the new G (with
+/// [`structid_core::refine`] in discovery's own terms. G is refitted with the map held fixed
+/// as a function and integrators held at 1: at the input and the output by output error
+/// ([`LinearStructure::estimate_linear_with_map`]), in feedback by the scored simulation
+/// error with the map in the loop ([`super::polish::polish_linear`]; the measured y or rate
+/// would put the output noise into the map's input), then the map is identified again at the
+/// same location around the new G (with
 /// the nominal model's input disturbance `input_noise`, if any), and so on while the validation
 /// RMS, scored as every simulation of the workflow, falls below [`JOINT_GAIN`] of the last.
 ///
@@ -176,10 +179,25 @@ pub(super) fn refine_jointly(
         let f_now = refined.as_ref().unwrap_or(&fitted);
         let g_now = f_now.linear.as_ref().map_or(g, |j| &j.g);
         let step = || -> Result<Fitted> {
-            let start = structure.initial_from_bla(g_now)?;
-            let fit =
-                structure.estimate_linear_with_map(est, f_now.map.as_ref(), &start, &oe, free)?;
-            let next = u_to_y(&fit.model);
+            let next = match location {
+                Location::OutputFeedback | Location::RateFeedback => {
+                    super::polish::polish_linear(g_now, f_now.map.as_ref(), location, est, settings)
+                        .ok_or_else(|| {
+                            structid_core::Error::Numerical("the in-loop refit of G failed".into())
+                        })?
+                }
+                _ => {
+                    let start = structure.initial_from_bla(g_now)?;
+                    let fit = structure.estimate_linear_with_map(
+                        est,
+                        f_now.map.as_ref(),
+                        &start,
+                        &oe,
+                        free,
+                    )?;
+                    u_to_y(&fit.model)
+                }
+            };
             let mut f = identify_around(&next, input_noise, location, est, val, settings)?;
             f.input_noise = input_noise;
             f.linear = Some(JointLinear {
