@@ -777,6 +777,7 @@ fn gap_json(g: &Gap, time: &TimeAxis) -> Result<Value, serde_json::Error> {
             "time_end": time.is_time.then(|| time.at(w.end.saturating_sub(1))),
         })).collect::<Vec<_>>(),
         "regions": regions,
+        "lattice": json_value(&g.lattice)?,
         "missing_effect": g.missing_effect,
         "verdict": g.verdict,
     }))
