@@ -524,12 +524,18 @@ pub fn output_lattice(y: &[f64]) -> Option<Lattice> {
             let cell = best * best / (8.0 * largest.max(best));
             let (mut a, mut b) = (best - cell, best + cell);
             let g = 0.5 * (5f64.sqrt() - 1.0);
+            let (mut x1, mut x2) = (b - g * (b - a), a + g * (b - a));
+            let (mut c1, mut c2) = (coherence(x1).0, coherence(x2).0);
+            // each step keeps one interior point and its value
             for _ in 0..40 {
-                let (x1, x2) = (b - g * (b - a), a + g * (b - a));
-                if coherence(x1).0 >= coherence(x2).0 {
-                    b = x2;
+                if c1 >= c2 {
+                    (b, x2, c2) = (x2, x1, c1);
+                    x1 = b - g * (b - a);
+                    c1 = coherence(x1).0;
                 } else {
-                    a = x1;
+                    (a, x1, c1) = (x1, x2, c2);
+                    x2 = a + g * (b - a);
+                    c2 = coherence(x2).0;
                 }
             }
             let step = 0.5 * (a + b);

@@ -1,5 +1,7 @@
 //! The output-error polish of a named family's parameters.
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, DVector};
 
 use structid_core::Data;
@@ -242,74 +244,84 @@ pub(super) fn polish_linear(
     settings: &DiscoverSettings,
 ) -> Option<PolynomialModel> {
     let parts = LinearParts::of(g)?;
-    let start = parts.theta(g);
+    // The dispersion only shapes the block (nothing is identified), and the record with its
+    // measured z depends on the location and the sample time, not on G: both are made once.
+    let dispersion: Arc<dyn structid_core::Dispersion> =
+        Arc::new(structid_core::PolynomialDispersion::new(1).ok()?);
+    let data = crate::hypotheses::hypothesis(g, location, Arc::clone(&dispersion))
+        .ok()?
+        .data(est)
+        .ok()?;
     let mut problem = LinearProblem {
         parts: &parts,
+        dispersion,
         map,
         location,
-        est,
+        data: &data,
         settings,
     };
     let lm = LevenbergMarquardt::new(lm_settings(LINEAR_ITERATIONS).ok()?)
-        .minimize(&mut problem, &start)
+        .minimize(&mut problem, &parts.start)
         .ok()?;
-    (lm.cost < lm.initial_cost && lm.cost.is_finite()).then(|| parts.model(&lm.theta))
+    (lm.cost < lm.initial_cost && lm.cost.is_finite())
+        .then(|| parts.model(&lm.theta))
+        .flatten()
 }
 
 /// The iteration limit of [`polish_linear`].
 const LINEAR_ITERATIONS: usize = 40;
 
-/// G's free coefficients: `nk` leading zeros and the numerator after them (in units of its
-/// largest coefficient, so that every θ is of order one), and the denominator deflated by
-/// `integrators` poles at 1.
+/// G's free coefficients: those of G with its integrators divided out
+/// ([`PolynomialModel::parameters`]), the numerator's in units of its largest coefficient so
+/// that every θ is of order one.
 struct LinearParts {
-    nk: usize,
-    scale: f64,
-    nb: usize,
+    orders: structid_linear::Orders,
     integrators: usize,
+    scale: f64,
     sample_time: Option<f64>,
+    start: Vec<f64>,
 }
 
 impl LinearParts {
     fn of(g: &PolynomialModel) -> Option<Self> {
-        let num = g.num.first()?;
-        let nk = num.iter().take_while(|b| **b == 0.0).count();
-        let scale = num.iter().fold(0.0_f64, |m, b| m.max(b.abs()));
-        (scale > 0.0 && scale.is_finite()).then_some(())?;
         let integrators = structid_linear::integrators::count_integrators(&g.den);
-        Some(Self {
-            nk,
-            scale,
-            nb: num.len() - nk,
-            integrators,
+        let rest = PolynomialModel {
+            num: vec![g.num.first()?.clone()],
+            den: structid_linear::integrators::deflate(&g.den, integrators)?,
             sample_time: g.sample_time,
+        };
+        let orders = rest.orders();
+        let nb = orders.nb[0];
+        let mut start = rest.parameters();
+        let scale = start[..nb].iter().fold(0.0_f64, |m, b| m.max(b.abs()));
+        if !(scale > 0.0 && scale.is_finite()) {
+            return None;
+        }
+        start[..nb].iter_mut().for_each(|b| *b /= scale);
+        Some(Self {
+            orders,
+            integrators,
+            scale,
+            sample_time: g.sample_time,
+            start,
         })
     }
 
-    fn theta(&self, g: &PolynomialModel) -> Vec<f64> {
-        let rest = structid_linear::integrators::deflate(&g.den, self.integrators)
-            .unwrap_or_else(|| vec![1.0]);
-        g.num[0][self.nk..]
+    /// G at θ, or `None` when θ gives no valid model.
+    fn model(&self, theta: &[f64]) -> Option<PolynomialModel> {
+        let nb = self.orders.nb[0];
+        let unscaled: Vec<f64> = theta
             .iter()
-            .map(|b| b / self.scale)
-            .chain(rest[1..].iter().copied())
-            .collect()
-    }
-
-    fn model(&self, theta: &[f64]) -> PolynomialModel {
-        let mut num = vec![0.0; self.nk];
-        num.extend(theta[..self.nb].iter().map(|b| b * self.scale));
-        let mut rest = vec![1.0];
-        rest.extend_from_slice(&theta[self.nb..]);
-        let den = structid_linear::integrators::convolve(
+            .enumerate()
+            .map(|(i, t)| if i < nb { t * self.scale } else { *t })
+            .collect();
+        let mut g =
+            PolynomialModel::from_parameters(&self.orders, &unscaled, self.sample_time).ok()?;
+        g.den = structid_linear::integrators::convolve(
             &structid_linear::integrators::integrator_polynomial(self.integrators),
-            &rest,
+            &g.den,
         );
-        PolynomialModel {
-            num: vec![num],
-            den,
-            sample_time: self.sample_time,
-        }
+        Some(g)
     }
 }
 
@@ -317,22 +329,22 @@ impl LinearParts {
 /// integrators) or whose simulation fails is rejected.
 struct LinearProblem<'a> {
     parts: &'a LinearParts,
+    dispersion: Arc<dyn structid_core::Dispersion>,
     map: &'a dyn Interpolant,
     location: Location,
-    est: &'a Data,
+    data: &'a Data,
     settings: &'a DiscoverSettings,
 }
 
 impl LeastSquaresProblem for LinearProblem<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
-        let g = self.parts.model(theta);
+        let g = self.parts.model(theta)?;
         if !g.stability().is_acceptable() {
             return None;
         }
-        let dispersion = std::sync::Arc::new(structid_core::PolynomialDispersion::new(1).ok()?);
-        let h = crate::hypotheses::hypothesis(&g, self.location, dispersion).ok()?;
-        let data = h.data(self.est).ok()?;
-        simulation_residual(&h, self.map, &data, self.settings).map(DVector::from_vec)
+        let h =
+            crate::hypotheses::hypothesis(&g, self.location, Arc::clone(&self.dispersion)).ok()?;
+        simulation_residual(&h, self.map, self.data, self.settings).map(DVector::from_vec)
     }
 
     fn jacobian(&mut self, theta: &[f64], r: &DVector<f64>) -> Option<DMatrix<f64>> {
