@@ -301,6 +301,10 @@ pub(super) struct Fitted {
     /// The ratio of the input disturbance it was identified with (see
     /// [`super::noise::with_smaller_ratio`]); `None` for the nominal model's own noise path.
     pub(super) input_noise: Option<f64>,
+    /// The kernel width as a share of z's range it was identified with
+    /// ([`DiscoverSettings::sigma_fraction`], a [`super::FINER_SIGMA`]-th of it in the finer
+    /// pass), so that a refit around a new G resolves the same detail.
+    pub(super) sigma_fraction: f64,
 }
 
 /// G (u → y) re-estimated jointly with a hypothesis' map, and the hypothesis' validation RMS
@@ -399,6 +403,7 @@ pub(super) fn finish_fit(
         linear: None,
         direction: None,
         input_noise: None,
+        sigma_fraction: settings.sigma_fraction,
     })
 }
 

@@ -227,6 +227,14 @@ const ALTERNATIVE_FACTOR: f64 = 0.5;
 /// an order of magnitude (a one-sided sensor clip behind a two-mass BLA: 31×).
 pub const DYNAMIC_JOINT_GAIN: f64 = 0.25;
 
+/// How many times narrower than the default kernel the second quadratic estimate at every
+/// location is, when the first closes less than half the gap (see [`discover`]).
+pub const FINER_SIGMA: f64 = 4.0;
+
+/// The finer estimate at a location replaces the default one when its validation RMS is
+/// below this share of the default's.
+pub const FINER_GAIN: f64 = 0.9;
+
 /// What a discovery concludes: one of three verdicts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -447,12 +455,11 @@ fn discover_with(
         .locations
         .clone()
         .unwrap_or_else(|| nominal.locations());
-    for location in locations {
-        let t = Instant::now();
-        // The disturbance path is a noise model like any other: where it cannot be used (its
-        // whitening filter is unstable when an estimated G has a zero outside the unit
-        // circle), the location is identified with the nominal model's own noise path.
-        let result = match identify_hypothesis(nominal, location, est, val, settings) {
+    // The disturbance path is a noise model like any other: where it cannot be used (its
+    // whitening filter is unstable when an estimated G has a zero outside the unit circle),
+    // the location is identified with the nominal model's own noise path.
+    let identify_at = |location: Location, settings: &DiscoverSettings| -> Result<Fitted> {
+        match identify_hypothesis(nominal, location, est, val, settings) {
             Err(_) if input_noise.is_some() => {
                 identify_hypothesis(given, location, est, val, settings)
             }
@@ -464,8 +471,11 @@ fn discover_with(
                 })
             }
             other => other,
-        };
-        match result {
+        }
+    };
+    for &location in &locations {
+        let t = Instant::now();
+        match identify_at(location, settings) {
             Ok(f) => fitted.push(f),
             Err(e) => failed.push(failure(location, t, &e)),
         }
@@ -474,6 +484,38 @@ fn discover_with(
         v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms))
     };
     by_validation(&mut fitted);
+    // When the best quadratic estimate closes less than half the gap, the maps may have
+    // more detail than a kernel of the default width resolves (a cogging force with several
+    // periods over the range of z): every location is identified again with σ a
+    // [`FINER_SIGMA`]-th as wide, and validation decides between the two.
+    let coarse = fitted.first().is_none_or(|best| {
+        best.result.validation_rms.is_nan() || best.result.validation_rms > 0.5 * validation_gap.rms
+    });
+    if coarse {
+        let finer = DiscoverSettings {
+            sigma_fraction: settings.sigma_fraction / FINER_SIGMA,
+            ..settings.clone()
+        };
+        // One fit a location: the finer one replaces the default only when it validates
+        // clearly better there (a narrower kernel that merely matches the default one has
+        // only more room to fit the noise).
+        for &location in &locations {
+            let Ok(f) = identify_at(location, &finer) else {
+                continue;
+            };
+            let coarse = fitted.iter().position(|c| c.result.location == location);
+            match coarse {
+                Some(i)
+                    if f.result.validation_rms < FINER_GAIN * fitted[i].result.validation_rms =>
+                {
+                    fitted[i] = f;
+                }
+                None if f.result.validation_rms.is_finite() => fitted.push(f),
+                _ => {}
+            }
+        }
+        by_validation(&mut fitted);
+    }
     // A nominal G estimated from data is biased by the missing effect itself: the best
     // hypothesis is refined jointly with G, and keeps the new G when it validates better.
     // Only the best: G refitted around a map at the wrong location absorbs part of the effect

@@ -352,6 +352,9 @@ fn refit_with_known(
     Some((new_fit, joint, rms))
 }
 
+/// The most breakpoints a written table gets, whatever the kernel's width.
+const MAX_TABLE_POINTS: usize = 20_001;
+
 #[allow(clippy::too_many_arguments)]
 pub(super) fn name_and_add(
     best: Fitted,
@@ -517,7 +520,16 @@ pub(super) fn name_and_add(
             // on each side (beyond which any table holds its last value).
             let (lo, hi) = minmax(&best.z);
             let pad = if best.hold_edges { 0.0 } else { hi - lo };
-            let n = settings.table_points;
+            // Four breakpoints per kernel width at least: a map with detail finer than the
+            // range (a cogging force) is otherwise cut to a coarser one than was estimated.
+            let per_sigma = best
+                .result
+                .sigma
+                .filter(|s| *s > 0.0)
+                .map_or(0.0, |s| 4.0 * (hi - lo + 2.0 * pad) / s);
+            let n = settings
+                .table_points
+                .max((per_sigma.ceil() as usize + 1).min(MAX_TABLE_POINTS));
             let z: Vec<f64> = (0..n)
                 .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
                 .collect();

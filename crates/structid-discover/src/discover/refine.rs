@@ -40,11 +40,13 @@ pub(super) fn refine_nominal(
         None => given.clone(),
     };
     let map = finding.augmented.map.interpolant()?;
+    // `g` is in the structure's form (for feedback from y, its u and feedback numerators);
+    // the hypothesis is built from its u → y part, as every location is.
     let hypothesis = |g: &PolynomialModel| -> Result<crate::hypotheses::Hypothesis> {
         let dispersion = Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
         Ok(crate::hypotheses::Hypothesis {
             location,
-            model: Structure::new(g, location, dispersion).model()?,
+            model: Structure::new(&u_to_y(g), location, dispersion).model()?,
             sample_time: g.sample_time.unwrap_or(1.0),
             known: Vec::new(),
         })
@@ -174,6 +176,10 @@ pub(super) fn refine_jointly(
     let oe = RefineSettings::default().oe().clone();
     let free = initial_state(location).1 == InitialState::Estimate;
     let nominal_validation_rms = fitted.result.validation_rms;
+    let same_width = DiscoverSettings {
+        sigma_fraction: fitted.sigma_fraction,
+        ..settings.clone()
+    };
     let mut refined: Option<Fitted> = None;
     for _ in 0..JOINT_ITERATIONS {
         let f_now = refined.as_ref().unwrap_or(&fitted);
@@ -198,7 +204,7 @@ pub(super) fn refine_jointly(
                     u_to_y(&fit.model)
                 }
             };
-            let mut f = identify_around(&next, input_noise, location, est, val, settings)?;
+            let mut f = identify_around(&next, input_noise, location, est, val, &same_width)?;
             f.input_noise = input_noise;
             f.linear = Some(JointLinear {
                 g: next,

@@ -123,7 +123,9 @@ impl DiscoverSettings {
         self.hysteresis_threshold
     }
 
-    /// Number of breakpoints of the table written for an unnamed map.
+    /// Least number of breakpoints of the table written for an unnamed map (more when the
+    /// kernel's width σ asks for them: at least four per σ, so that the table follows the
+    /// map as estimated).
     pub fn table_points(&self) -> usize {
         self.table_points
     }
@@ -219,7 +221,7 @@ impl DiscoverSettingsBuilder {
         self
     }
 
-    /// Breakpoints of a written table (default 201).
+    /// Least breakpoints of a written table (default 201; at least four per kernel width σ).
     pub fn table_points(mut self, n: usize) -> Self {
         self.inner.table_points = n;
         self
