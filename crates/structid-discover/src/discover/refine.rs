@@ -46,7 +46,7 @@ pub(super) fn refine_nominal(
         let dispersion = Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
         Ok(crate::hypotheses::Hypothesis {
             location,
-            model: Structure::new(&u_to_y(g), location, dispersion).model()?,
+            model: Structure::new(u_to_y(g), location, dispersion).model()?,
             sample_time: g.sample_time.unwrap_or(1.0),
             known: Vec::new(),
         })
