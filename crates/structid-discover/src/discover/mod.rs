@@ -19,7 +19,12 @@
 //!    say so. That ratio is taken on the nominal model's residual, which holds the missing
 //!    effect, and a force acting where the input acts inflates it: each location is also
 //!    identified with a ratio a hundred times smaller ([`SMALLER_RATIO`]), and the
-//!    fit that validates better is kept. There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
+//!    fit that validates better is kept. The same inflated ratio lets the one-step predictor
+//!    follow the output, so that its innovations pass every test while the windowed
+//!    simulation misses by many times σ̂: when that gap exceeds [`PAST_DISTURBANCE_GAP`]·σ̂ on
+//!    both records the hypotheses are identified anyway, and a block confirms a missing effect
+//!    only by shrinking the validation gap [`PAST_DISTURBANCE_SHRINK`] times (otherwise the
+//!    verdict is "no missing effect", the gap being what the disturbance leaves). There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
 //!    a gap larger than the noise that no candidate block closes.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
@@ -139,6 +144,16 @@ use total_variation::total_variation_fit;
 /// The validation RMS must shrink by at least this factor for a detected gap to count as a
 /// missing effect (see [`discover`]).
 pub const MIN_CONFIRMING_SHRINK: f64 = 1.05;
+
+/// A nominal model with a fitted input disturbance whose innovations pass every test, but
+/// whose simulation misses by more than this many noise levels σ̂ on both records, goes on to
+/// the hypotheses (see [`discover`]).
+pub const PAST_DISTURBANCE_GAP: f64 = 3.0;
+
+/// The validation shrink that confirms a missing effect past the tests of a nominal model
+/// with a fitted input disturbance ([`PAST_DISTURBANCE_GAP`]): what a static block must
+/// explain beyond the random force the disturbance model already allows for.
+pub const PAST_DISTURBANCE_SHRINK: f64 = 1.5;
 
 /// The effect found at the best location.
 #[derive(Clone, Debug)]
@@ -428,7 +443,19 @@ fn discover_with(
         "the nominal model's residual on the validation record".into()
     });
     let missing_effect = estimation_gap.missing_effect || validation_gap.missing_effect;
-    if !missing_effect {
+    // The input disturbance is sized on the nominal model's residual, which holds the missing
+    // effect: a large ratio lets the one-step predictor follow the output, so that its
+    // innovations pass every test while the simulation misses by many times the noise (an
+    // integrating axis with friction under a PD controller: ε within 1.5·σ̂, the windowed
+    // simulation 10× σ̂). The hypotheses decide then, and a block must shrink the validation
+    // gap by [`PAST_DISTURBANCE_SHRINK`] to be a missing effect rather than what the
+    // disturbance leaves.
+    let past_disturbance = !missing_effect
+        && input_noise.is_some()
+        && [&estimation_gap, &validation_gap]
+            .iter()
+            .all(|g| g.rms > PAST_DISTURBANCE_GAP * noise.std);
+    if !missing_effect && !past_disturbance {
         let verdict = format!(
             "no missing effect detected: on the estimation record {}; on the validation record {}",
             estimation_gap.verdict, validation_gap.verdict
@@ -936,7 +963,12 @@ fn discover_with(
     let dynamic_found = real
         && finding.classification == Classification::Dynamic
         && matches!(finding.location, Location::Input | Location::Output);
-    if finding.shrink < MIN_CONFIRMING_SHRINK && !dynamic_found {
+    let confirming = if past_disturbance {
+        PAST_DISTURBANCE_SHRINK
+    } else {
+        MIN_CONFIRMING_SHRINK
+    };
+    if finding.shrink < confirming && !dynamic_found {
         // The gap is noise-sized and only a test failed: a false alarm of the test family
         // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
         // is real and unexplained, and the verdict says so.
@@ -959,7 +991,30 @@ fn discover_with(
             })
             .collect::<Vec<_>>()
             .join("; ");
-        let (kind, verdict) = if real {
+        let (kind, verdict) = if past_disturbance {
+            (
+                Verdict::NoMissingEffect,
+                format!(
+                    "no missing effect detected: with the input disturbance fitted to the \
+                     nominal model's residual (ratio {:.3e}) its innovations pass every test \
+                     (estimation record: {}; validation record: {}); the simulation gap ({}, \
+                     {:.1}× the noise level σ̂ = {}) is what that disturbance leaves, and the \
+                     best candidate block ({} {}) reduces the validation RMS by less than \
+                     {:.0} % ({} → {}). Tried: {tried}",
+                    input_noise.unwrap_or(f64::NAN),
+                    estimation_gap.verdict,
+                    validation_gap.verdict,
+                    rms_text(validation_gap.rms),
+                    validation_gap.rms / noise.std,
+                    rms_text(noise.std),
+                    finding.classification.describe(),
+                    nominal.describe(finding.location),
+                    100.0 * (1.0 - 1.0 / PAST_DISTURBANCE_SHRINK),
+                    rms_text(validation_gap.rms),
+                    rms_text(finding.augmented.validation_gap.rms)
+                ),
+            )
+        } else if real {
             (
                 Verdict::Unexplained,
                 format!(
