@@ -254,7 +254,7 @@ impl StateSpace {
     /// plant's integrator in a noise path that only drives a sensor) never grow from a zero
     /// state, so a recursion driven by the inputs is stable when this radius is below 1 even
     /// if [`spectral_radius`](Self::spectral_radius) is not. 0 for a system without reachable
-    /// states.
+    /// states; NaN when the Krylov basis overflows (finite but huge entries).
     ///
     /// ```
     /// use nalgebra::dmatrix;
@@ -277,6 +277,10 @@ impl StateSpace {
                 .copy_from(&block);
             block = &self.a * block;
         }
+        // Huge (finite) entries can overflow A^k·B; the SVD panics on a non-finite matrix.
+        if krylov.iter().any(|v| !v.is_finite()) {
+            return f64::NAN;
+        }
         let svd = krylov.svd(true, false);
         let smax = svd.singular_values.max();
         if smax == 0.0 || !smax.is_finite() {
@@ -290,6 +294,10 @@ impl StateSpace {
             .count();
         let q = u.columns(0, rank).into_owned();
         let reduced = q.transpose() * &self.a * &q;
+        // The eigenvalue iteration does not terminate on a non-finite matrix.
+        if reduced.iter().any(|v| !v.is_finite()) {
+            return f64::NAN;
+        }
         reduced
             .complex_eigenvalues()
             .iter()

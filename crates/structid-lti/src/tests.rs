@@ -542,3 +542,19 @@ fn tf_mimo_and_validation() {
         Err(LtiError::InvalidTransferFunction(_))
     ));
 }
+
+/// Found by the `lft_problem` fuzz target: finite but huge entries overflow the Krylov basis
+/// B, AB, …; the SVD then panicked on NaN singular values. The radius is NaN instead.
+#[test]
+fn reachable_spectral_radius_of_an_overflowing_system_is_nan_not_a_panic() {
+    let huge = DMatrix::from_element(2, 2, 1e300);
+    let s = StateSpace::new(
+        huge.clone(),
+        DMatrix::from_element(2, 1, 1e300),
+        DMatrix::from_element(1, 2, 1.0),
+        scalar(0.0),
+    )
+    .unwrap();
+    assert!(s.reachable_spectral_radius().is_nan());
+    let _ = s.spectral_radius();
+}

@@ -63,6 +63,12 @@ impl Problem {
                 "the record is empty: identification needs at least one sample".into(),
             ));
         }
+        if ny == 0 {
+            return Err(Error::InvalidStructure(
+                "the residual has no output channel: identification needs at least one measured output y"
+                    .into(),
+            ));
+        }
         if noise.outputs() != ny {
             return Err(Error::DimensionMismatch {
                 what: "outputs of the noise path T_ye".into(),
@@ -321,5 +327,33 @@ impl Problem {
     /// How z was obtained.
     pub fn z_source(&self) -> &ZSource {
         &self.z_source
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::KernelDispersion;
+    use structid_lti::StateSpace;
+
+    /// Found by the `lft_problem` fuzz target: a residual with samples but no output channel
+    /// was accepted, and the exact solver then indexed past its empty Gram buffer.
+    #[test]
+    fn a_residual_without_outputs_is_an_error_not_a_panic() {
+        let residual = Signal::zeros(4, 0);
+        assert_eq!(residual.len(), 4);
+        let noise = StateSpace::static_gain(nalgebra::DMatrix::zeros(0, 1)).unwrap();
+        let block = ProblemBlock {
+            name: "b0".into(),
+            output: 0,
+            path: Arc::new(StateSpace::static_gain(nalgebra::DMatrix::zeros(0, 1)).unwrap()),
+            z: Signal::zeros(4, 1),
+            dispersion: Arc::new(KernelDispersion::gaussian(0.5).unwrap()),
+        };
+        let e = Problem::new(residual, Arc::new(noise), vec![block])
+            .err()
+            .expect("no output channel is an error");
+        assert!(matches!(e, Error::InvalidStructure(_)), "{e:?}");
+        assert!(e.to_string().contains("no output channel"), "{e}");
     }
 }

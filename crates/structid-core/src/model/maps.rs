@@ -134,8 +134,12 @@ fn check_axis(name: &str, x: &[f64]) -> Result<()> {
     Ok(())
 }
 
-/// Index i and weight t with x = (1−t)·xs[i] + t·xs[i+1], clamped to the ends.
+/// Index i and weight t with x = (1−t)·xs[i] + t·xs[i+1], clamped to the ends. A NaN x
+/// gives the weight NaN, so the table's value there is NaN (as for too few inputs).
 fn locate(xs: &[f64], x: f64) -> (usize, f64) {
+    if x.is_nan() {
+        return (0, f64::NAN);
+    }
     if xs.len() == 1 || x <= xs[0] {
         return (0, 0.0);
     }
@@ -326,5 +330,25 @@ mod tests {
         assert!(LookupTable::from_rows(&rows[1..]).is_err());
         // Too few inputs give NaN (which simulation reports), not a panic.
         assert!(t.eval(&[0.5]).is_nan());
+    }
+
+    /// Found by the `data_file` fuzz target: a NaN input made `locate` compute index −1.
+    #[test]
+    fn nan_inputs_give_nan_not_a_panic() {
+        let one =
+            LookupTable::from_rows(&[vec![-1.0, -0.5], vec![0.0, 0.0], vec![1.0, 2.0]]).unwrap();
+        assert!(one.eval(&[f64::NAN]).is_nan());
+        assert_eq!(one.eval(&[f64::INFINITY]), 2.0);
+        assert_eq!(one.eval(&[f64::NEG_INFINITY]), -0.5);
+        let grid = LookupTable::from_rows(&[
+            vec![0.0, 0.0, 1.0],
+            vec![0.0, 1.0, 2.0],
+            vec![1.0, 0.0, 3.0],
+            vec![1.0, 1.0, 4.0],
+        ])
+        .unwrap();
+        assert!(grid.eval(&[f64::NAN, 0.5]).is_nan());
+        assert!(grid.eval(&[0.5, f64::NAN]).is_nan());
+        assert_eq!(grid.eval(&[f64::INFINITY, f64::NEG_INFINITY]), 3.0);
     }
 }

@@ -97,6 +97,19 @@ fn markov_stack(lft: &Lft, output_z: bool) -> DMatrix<f64> {
     out
 }
 
+/// The Markov parameters of finite but huge LFT matrices can overflow, or their norm can: the
+/// SVD of a non-finite stack panics (NaN singular values) and an infinite norm makes every
+/// tolerance infinite (z would pass as input-only), so both are an input error.
+fn check_markov_finite(h: &DMatrix<f64>, output: &str) -> Result<()> {
+    if h.iter().all(|v| v.is_finite()) && h.norm().is_finite() {
+        return Ok(());
+    }
+    Err(Error::InvalidStructure(format!(
+        "the Markov parameters of the paths from (e, w) to {output} (D and C·Aᵏ·B) overflow \
+         the range of f64: the LFT matrices are too large; rescale the signals or the model"
+    )))
+}
+
 impl Lft {
     /// Decides whether z can be computed from u and y, and how.
     ///
@@ -119,11 +132,13 @@ impl Lft {
             return Ok(ZSource::InputOnly);
         }
         let hz = markov_stack(self, true);
+        check_markov_finite(&hz, "z")?;
         let scale = hz.norm().max(1.0);
         if hz.norm() <= 1e-12 * scale {
             return Ok(ZSource::InputOnly);
         }
         let hy = markov_stack(self, false);
+        check_markov_finite(&hy, "y")?;
         let svd = hy.clone().svd(true, true);
         let tol = 1e-12 * svd.singular_values.max().max(1.0);
         let pinv = svd
@@ -391,6 +406,42 @@ mod tests {
             let (a, b) = (rng.uniform().max(1e-300), rng.uniform());
             std * (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
         })
+    }
+
+    /// Found by the `lft_problem` fuzz target: finite LFT entries whose Markov parameters
+    /// overflow made the SVD panic (NaN singular values) or, when only their norm overflowed,
+    /// z look input-only.
+    #[test]
+    fn overflowing_markov_parameters_are_an_error_not_a_panic() {
+        let lft = |cy: f64, cz: f64| {
+            Lft::new(LftMatrices {
+                a: dmatrix![0.5],
+                bu: dmatrix![0.0],
+                be: dmatrix![1e300],
+                bw: dmatrix![0.0],
+                cy: dmatrix![cy],
+                dyu: dmatrix![0.0],
+                dye: dmatrix![1.0],
+                dyw: dmatrix![0.0],
+                cz: dmatrix![cz],
+                dzu: dmatrix![0.0],
+                dze: dmatrix![0.0],
+                dzw: dmatrix![0.0],
+            })
+            .unwrap()
+        };
+        for (cy, cz, output) in [
+            (1e300, 1e-300, "to y"),
+            (1.0, 1e300, "to z"),
+            (1.0, 1e-100, "to z"),
+        ] {
+            let e = lft(cy, cz).measurability().unwrap_err();
+            assert!(matches!(e, Error::InvalidStructure(_)), "{e:?}");
+            assert!(e.to_string().contains(output), "{e}");
+            let u = Signal::zeros(4, 0);
+            let y = Signal::zeros(4, 1);
+            assert!(lft(cy, cz).compute_z(&u, &y).is_err());
+        }
     }
 
     #[test]

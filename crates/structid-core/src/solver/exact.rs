@@ -226,14 +226,22 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
                 (0..nk).map(|i| o[(kept[i], a)] * rhs[(i, 0)]).sum()
             });
             // Directions of x₀ that do not reach y get their minimum-norm value 0 (SVD at
-            // 10⁻¹² of the largest singular value): they change neither y nor the fit.
+            // 10⁻¹² of the largest singular value): they change neither y nor the fit. A
+            // non-finite OᵀM⁻¹O (overflow on huge data or free responses) is refused before
+            // the SVD, which panics on NaN singular values.
+            let not_finite = || {
+                Error::Numerical(
+                    "the initial state is not identifiable from this record (OᵀM⁻¹O is not finite)"
+                        .into(),
+                )
+            };
+            if h.iter().any(|v| !v.is_finite()) {
+                return Err(not_finite());
+            }
             let svd = h.svd(true, true);
             let smax = svd.singular_values.max();
             if !smax.is_finite() {
-                return Err(Error::Numerical(
-                    "the initial state is not identifiable from this record (OᵀM⁻¹O is not finite)"
-                        .into(),
-                ));
+                return Err(not_finite());
             }
             let x0 = if smax == 0.0 {
                 nalgebra::DVector::zeros(nx)
@@ -528,4 +536,38 @@ fn gram_times(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{KernelDispersion, ProblemBlock};
+    use structid_lti::StateSpace;
+
+    /// Found by the `lft_problem` fuzz target: free responses so large that OᵀM⁻¹O overflows
+    /// made the SVD of the initial-state step panic (NaN singular values).
+    #[test]
+    fn an_overflowing_initial_state_step_is_an_error_not_a_panic() {
+        let len = 4;
+        let gain = |v: f64| Arc::new(StateSpace::static_gain(nalgebra::dmatrix![v]).unwrap());
+        let block = ProblemBlock {
+            name: "b0".into(),
+            output: 0,
+            path: gain(1.0),
+            z: Signal::from_fn(len, 1, |k, _| k as f64),
+            dispersion: Arc::new(KernelDispersion::gaussian(0.5).unwrap()),
+        };
+        let residual = Signal::from_fn(len, 1, |k, _| 1.0 - k as f64);
+        let problem = Problem::new(residual, gain(1.0), vec![block])
+            .unwrap()
+            .with_free_response(Mat::from_fn(len, 1, |_, _| 1e300))
+            .unwrap();
+        let settings = IdentifySettings::builder()
+            .solver(crate::SolverChoice::Exact)
+            .build()
+            .unwrap();
+        let e = solve(&problem, &settings).unwrap_err();
+        assert!(matches!(e, Error::Numerical(_)), "{e:?}");
+        assert!(e.to_string().contains("initial state"), "{e}");
+    }
 }

@@ -150,6 +150,13 @@ pub(crate) fn gram(
             // Only the modes the measurements drive through the gain can grow; a plant's
             // integrator that the noise does not reach stays at its zero state.
             let radius = k.steady_state_filter().reachable_spectral_radius();
+            if radius.is_nan() {
+                return Err(Error::Numerical(
+                    "the whitening filter of the noise model overflows (its entries are too large to \
+                     compute its spectral radius); use the exact solver, or rescale the model"
+                        .into(),
+                ));
+            }
             if radius >= 1.0 - 1e-9 {
                 return Err(Error::Unsupported(format!(
                     "the noise model is not minimum phase: its whitening filter has spectral radius {radius:.4} ≥ 1, \
@@ -580,5 +587,48 @@ fn whiten_static(mut x: MatMut<'_, f64>, l: &nalgebra::DMatrix<f64>, ny: usize) 
                 x[(t + i, j)] = acc / l[(i, i)];
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{PolynomialDispersion, ProblemBlock};
+    use nalgebra::DMatrix;
+    use structid_lti::StateSpace;
+
+    /// Found by the `lft_problem` fuzz target: a noise path with a huge (finite) entry in A
+    /// whose whitening filter overflows; its spectral radius check panicked inside the SVD.
+    #[test]
+    fn an_overflowing_whitening_filter_is_an_error_not_a_panic() {
+        let len = 5;
+        let noise = StateSpace::new(
+            DMatrix::from_column_slice(2, 2, &[-4.75, 1e300, 1.9375, -6.9375]),
+            DMatrix::from_column_slice(2, 3, &[-0.3125, 6.875, -0.9375, 7.6875, -1.75, -2.75]),
+            DMatrix::from_column_slice(3, 2, &[0.625, 5.6875, -2.8125, 3.125, -5.3125, -2.875]),
+            DMatrix::from_column_slice(
+                3,
+                3,
+                &[0.0, -5.875, -7.3125, 2.3125, -2.875, 0.1875, 1.0, 1.25, 1.0],
+            ),
+        )
+        .unwrap();
+        let block = ProblemBlock {
+            name: "b0".into(),
+            output: 0,
+            path: Arc::new(StateSpace::static_gain(DMatrix::from_element(3, 1, 1.0)).unwrap()),
+            z: Signal::from_fn(len, 1, |k, _| k as f64),
+            dispersion: Arc::new(PolynomialDispersion::new(2).unwrap()),
+        };
+        let residual = Signal::from_fn(len, 3, |k, c| (k + c) as f64 / 4.0);
+        let problem = Problem::new(residual, Arc::new(noise), vec![block]).unwrap();
+        let settings = IdentifySettings::builder()
+            .solver(crate::SolverChoice::Features)
+            .beta(0.1)
+            .build()
+            .unwrap();
+        let e = crate::identify_problem(&problem, &settings).unwrap_err();
+        assert!(!e.to_string().is_empty());
+        assert!(e.to_string().contains("overflow"), "{e}");
     }
 }
