@@ -42,14 +42,14 @@ output = 0
 pub fn fixture_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let shm = Path::new("/dev/shm");
-        let root = if shm.is_dir() {
-            shm.to_path_buf()
+        let in_memory = Path::new("/dev/shm").join("structid-fuzz-fixtures");
+        let dir = if std::fs::create_dir_all(&in_memory).is_ok() {
+            in_memory
         } else {
-            std::env::temp_dir()
+            let dir = std::env::temp_dir().join("structid-fuzz-fixtures");
+            std::fs::create_dir_all(&dir).expect("create the fixture directory");
+            dir
         };
-        let dir = root.join("structid-fuzz-fixtures");
-        std::fs::create_dir_all(&dir).expect("create the fixture directory");
         let files = [
             ("table.csv", "z,value\n-1,-0.5\n0,0\n1,2\n"),
             ("grid.csv", "z0,z1,value\n0,0,1\n0,1,2\n1,0,3\n1,1,4\n"),
