@@ -164,24 +164,31 @@ pub(crate) fn validates(rms: f64, nonparametric_rms: f64, noise: f64, tolerance:
 /// Which of the refined families names the effect: among those that may name it
 /// ([`EffectFit::nameable`]: identifiable parameters, a refit that converged) and that
 /// [`validates`], the first (simplest), unless a later one cuts its validation RMS by a fifth
-/// (a Stribeck hump is a Coulomb level plus something the data can see). `refined` is
-/// (index, fit, validation RMS) in parsimonious order.
+/// (a Stribeck hump is a Coulomb level plus something the data can see), or a later one with
+/// fewer parameters validates at least as well (the families beyond the 25 % group of
+/// [`parsimonious`] come by BIC, not by size: a tanh saturation whose map fit was twice a
+/// four-parameter power law's validated better than it, and is the better name). `refined`
+/// is (index, fit, validation RMS) in parsimonious order.
 pub(super) fn choose_family(
     refined: &[(usize, &EffectFit, f64)],
     nonparametric_rms: f64,
     noise: f64,
     tolerance: f64,
 ) -> Option<usize> {
-    let mut chosen: Option<(usize, f64)> = None;
+    let mut chosen: Option<(usize, f64, (usize, bool))> = None;
     for &(i, fit, rms) in refined {
         let passes = fit.nameable() && validates(rms, nonparametric_rms, noise, tolerance);
+        let size = parsimony(fit);
         chosen = match chosen {
-            None if passes => Some((i, rms)),
-            Some((_, best)) if passes && rms < 0.8 * best => Some((i, rms)),
+            None if passes => Some((i, rms, size)),
+            Some((_, best, _)) if passes && rms < 0.8 * best => Some((i, rms, size)),
+            Some((_, best, best_size)) if passes && size < best_size && rms <= best => {
+                Some((i, rms, size))
+            }
             other => other,
         };
     }
-    chosen.map(|(i, _)| i)
+    chosen.map(|(i, _, _)| i)
 }
 
 pub(super) fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>) {
@@ -624,5 +631,21 @@ mod tests {
         assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(1));
         let refined = [(0, &good, 0.011), (1, &good, 0.0095)];
         assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(0));
+    }
+
+    #[test]
+    fn a_later_family_with_fewer_parameters_that_validates_as_well_is_the_name() {
+        let z: Vec<f64> = (0..80).map(|k| k as f64 / 10.0 - 4.0).collect();
+        let w: Vec<f64> = z.iter().map(|z| 2.0 * (z / 2.0).tanh()).collect();
+        let tanh = fit_effect(Effect::SmoothSaturation, &z, &w).unwrap();
+        let power = fit_effect(Effect::PowerLaw { linear: true }, &z, &w).unwrap();
+        assert!(parsimony(&tanh) < parsimony(&power));
+        // The richer family came first (by BIC) and validates; the simpler one validates
+        // slightly better and is the name.
+        let refined = [(0, &power, 0.0075), (1, &tanh, 0.0071)];
+        assert_eq!(choose_family(&refined, 0.0072, 0.005, 1.15), Some(1));
+        // Not when it validates worse: the first stays.
+        let refined = [(0, &power, 0.0071), (1, &tanh, 0.0075)];
+        assert_eq!(choose_family(&refined, 0.0072, 0.005, 1.15), Some(0));
     }
 }
