@@ -423,13 +423,15 @@ fn held_out_rows_give_the_same_fit_in_the_feature_and_exact_solvers() {
 fn a_beta_on_a_search_bound_is_flagged() {
     use structid_core::hyperparameters::Bound;
     let (beta0, sigma, s2) = (1e-4, 0.1, 0.01);
-    let ml = |lo: f64, hi: f64| {
+    let ml_widened = |lo: f64, hi: f64, widen: f64| {
         SelectionSettings::builder()
             .criterion(Criterion::MarginalLikelihood)
             .beta_bounds(lo, hi)
+            .widen_decades(widen)
             .build()
             .unwrap()
     };
+    let ml = |lo: f64, hi: f64| ml_widened(lo, hi, 0.0);
     let settings = IdentifySettings::default();
     let exp = gp_experiment(600, beta0, sigma, s2, 21);
     // Interior: the likelihood's maximiser near β₀ = 1e-4 lies well inside [1e-10, 1e4].
@@ -441,6 +443,33 @@ fn a_beta_on_a_search_bound_is_flagged() {
     let sel = select(&exp.model, &exp.data, None, &settings, &ml(1e-2, 1e2)).unwrap();
     assert_eq!(sel.beta_at_bound, Some(Bound::Lower), "β = {}", sel.beta);
     assert!((sel.beta - 1e-2).abs() < 1e-12);
+    assert!(
+        sel.identification
+            .diagnostics
+            .warnings
+            .iter()
+            .any(|w| w.contains("lower bound") && w.contains("less regularisation")),
+        "{:?}",
+        sel.identification.diagnostics.warnings
+    );
+    // Widened once (the default), the search looks past the floor and finds the interior
+    // maximiser that the full range finds.
+    let full = select(&exp.model, &exp.data, None, &settings, &ml(1e-10, 1e4)).unwrap();
+    let sel = select(
+        &exp.model,
+        &exp.data,
+        None,
+        &settings,
+        &ml_widened(1e-2, 1e2, 6.0),
+    )
+    .unwrap();
+    assert_eq!(sel.beta_at_bound, None, "β = {}", sel.beta);
+    assert!(
+        (sel.beta.log10() - full.beta.log10()).abs() < 0.05,
+        "widened β {} against {}",
+        sel.beta,
+        full.beta
+    );
     // Pure noise (the map is zero): the likelihood grows without bound with β (the prior
     // variance of the map shrinks to zero), so β runs to the top of its interval.
     let base = gp_experiment(600, beta0, sigma, s2, 22);

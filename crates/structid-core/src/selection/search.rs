@@ -160,13 +160,31 @@ pub fn select(
         let (lg, value, at_bound) = if selection.tune_beta {
             let (lo, hi) = selection.beta_bounds;
             let bounds = (lo.log10(), hi.log10());
-            let (lg, value) = minimise_log10(
+            let (mut lg, mut value) = minimise_log10(
                 &mut eval,
                 selection.beta_start.log10(),
                 bounds,
                 selection.tolerance,
             )?;
-            let at = Bound::of(lg, bounds).or_else(|| plateau(&curve[first_trial..], lg, value));
+            // A bound is a finding only once the search has looked past it: widened once,
+            // from the bound it ended on (β in the units of z^p makes the default range
+            // depend on the data's units; see `SelectionSettings::widen_decades`).
+            let mut searched = bounds;
+            let w = selection.widen_decades;
+            if w > 0.0
+                && let Some(side) = Bound::of(lg, bounds)
+            {
+                searched = match side {
+                    Bound::Lower => (bounds.0 - w, bounds.1),
+                    Bound::Upper => (bounds.0, bounds.1 + w),
+                };
+                let (lg2, value2) = minimise_log10(&mut eval, lg, searched, selection.tolerance)?;
+                if value2 < value {
+                    (lg, value) = (lg2, value2);
+                }
+            }
+            let at =
+                Bound::of(lg, searched).or_else(|| plateau(&curve[first_trial..], lg, value));
             (lg, value, at)
         } else {
             let lg = settings.beta().log10();
@@ -209,6 +227,12 @@ pub fn select(
     if features.is_some() && settings.solver() == SolverChoice::Auto {
         identification.diagnostics.solver_reason = SolverReason::FeatureSpaceSelection;
     }
+    if let Some(side) = beta_at_bound {
+        identification
+            .diagnostics
+            .warnings
+            .push(bound_warning(side, beta, criterion));
+    }
     Ok(Selection {
         beta,
         beta_at_bound,
@@ -227,6 +251,23 @@ pub fn select(
         identification,
         model: chosen,
     })
+}
+
+/// What a β search that ended on a bound (after widening once) means, in words.
+fn bound_warning(side: Bound, beta: f64, criterion: Criterion) -> String {
+    let criterion = criterion.describe();
+    match side {
+        Bound::Lower => format!(
+            "the {criterion} search put β on its lower bound ({beta:.3e}, after widening once): \
+             the data want less regularisation than that, and the map may interpolate the \
+             noise; try `--selection cv`, or a smaller σ"
+        ),
+        Bound::Upper => format!(
+            "the {criterion} search put β on its upper bound ({beta:.3e}, after widening once): \
+             the flattest map fits best, so the data support no map at this width; check the \
+             structure, or try a larger σ"
+        ),
+    }
 }
 
 /// The end of the search that a flat criterion runs to: when the largest (smallest) β tried

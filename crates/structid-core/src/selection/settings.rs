@@ -62,6 +62,7 @@ pub struct SelectionSettings {
     pub(super) tune_sigma: bool,
     pub(super) beta_start: f64,
     pub(super) beta_bounds: (f64, f64),
+    pub(super) widen_decades: f64,
     pub(super) sigma_decades: f64,
     pub(super) tolerance: f64,
 }
@@ -74,6 +75,7 @@ impl Default for SelectionSettings {
             tune_sigma: false,
             beta_start: 0.01,
             beta_bounds: (1e-10, 1e4),
+            widen_decades: 6.0,
             sigma_decades: 2.0,
             tolerance: 0.02,
         }
@@ -112,6 +114,23 @@ impl SelectionSettings {
     /// The range searched for β.
     pub fn beta_bounds(&self) -> (f64, f64) {
         self.beta_bounds
+    }
+
+    /// How many decades the β search is widened by, once, when it ends on a bound of
+    /// [`beta_bounds`](Self::beta_bounds) (0: never).
+    ///
+    /// The Gaussian kernel of the paper is normalised, (2πσ²)^(−p/2)·exp(−‖z − z'‖²/2σ²), so
+    /// β carries the units of z^p: data recorded in units 10⁸ times smaller put the same
+    /// trade-off 10⁸ times lower in β, below the default floor. A bound is a finding only
+    /// after the search has looked past it.
+    ///
+    /// ```
+    /// use structid_core::hyperparameters::SelectionSettings;
+    /// assert_eq!(SelectionSettings::default().widen_decades(), 6.0);
+    /// assert!(SelectionSettings::builder().widen_decades(-1.0).build().is_err());
+    /// ```
+    pub fn widen_decades(&self) -> f64 {
+        self.widen_decades
     }
 
     /// How many decades either side of the model's widths σ is searched.
@@ -162,6 +181,13 @@ impl SelectionSettingsBuilder {
         self
     }
 
+    /// Decades the β search is widened by, once, when it ends on a bound (default 6; 0
+    /// never widens). See [`SelectionSettings::widen_decades`].
+    pub fn widen_decades(mut self, d: f64) -> Self {
+        self.inner.widen_decades = d;
+        self
+    }
+
     /// Decades either side of the model's widths searched for σ (default 2).
     pub fn sigma_decades(mut self, d: f64) -> Self {
         self.inner.sigma_decades = d;
@@ -188,6 +214,13 @@ impl SelectionSettingsBuilder {
             });
         }
         positive_finite("start of the β search", s.beta_start)?;
+        if !(s.widen_decades.is_finite() && s.widen_decades >= 0.0) {
+            return Err(Error::InvalidParameter {
+                name: "widening of the β search (decades)".into(),
+                value: s.widen_decades,
+                reason: "must be finite and at least 0".into(),
+            });
+        }
         positive_finite("σ search range (decades)", s.sigma_decades)?;
         positive_finite("tolerance (decades)", s.tolerance)?;
         if let Criterion::CrossValidation { folds } = s.criterion

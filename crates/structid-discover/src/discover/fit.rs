@@ -436,9 +436,13 @@ pub(super) fn identify_hypothesis(
         .initial_state(InitialState::Zero)
         .posterior(true)
         .build()?;
+    // A β on its bound marks the hypothesis (`HypothesisResult::beta_at_bound`), which then
+    // does not bound the noise level; widening would trade that flag for a map that
+    // interpolates the noise even more closely.
     let selection = SelectionSettings::builder()
         .criterion(Criterion::MarginalLikelihood)
         .tune_sigma(settings.tune_sigma)
+        .widen_decades(0.0)
         .build()?;
     // With known maps, the unknown block is identified with their outputs as known inputs.
     let (id_model, id_est) = h.identification(est)?;

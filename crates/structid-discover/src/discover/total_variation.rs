@@ -35,9 +35,11 @@ pub(super) fn total_variation_fit(
         .initial_state(initial_state(hyp.location).0)
         .admm(AdmmSettings::builder().tolerance(1e-4).build()?)
         .build()?;
+    // A bound is this hypothesis' failure, reported as such (`failure_reason`): not widened.
     let selection = SelectionSettings::builder()
         .criterion(Criterion::Validation)
         .tolerance(0.25)
+        .widen_decades(0.0)
         .build()?;
     let sel = select(&id_model, &id_est, Some(&id_val), &identify, &selection)?;
     if let Some(why) = failure_reason(&sel, &selection) {
@@ -135,6 +137,7 @@ mod tests {
             .criterion(Criterion::Validation)
             .beta_bounds(bounds.0, bounds.1)
             .tolerance(0.5)
+            .widen_decades(0.0)
             .build()
             .unwrap();
         let sel = select(&h.model, &est, Some(&val), &identify, &selection).unwrap();
