@@ -183,8 +183,7 @@ pub fn select(
                     (lg, value) = (lg2, value2);
                 }
             }
-            let at =
-                Bound::of(lg, searched).or_else(|| plateau(&curve[first_trial..], lg, value));
+            let at = Bound::of(lg, searched).or_else(|| plateau(&curve[first_trial..], lg, value));
             (lg, value, at)
         } else {
             let lg = settings.beta().log10();
