@@ -255,6 +255,40 @@ impl DataTable {
     /// assert_eq!(t.line_of_row(1), Some(3));
     /// ```
     pub fn read_with(path: &Path, options: &CsvOptions) -> Result<Self, IoError> {
+        Self::read_with_limit(path, options, MAX_ROWS)
+    }
+
+    /// [`DataTable::read_with`] with another limit on the number of data rows than
+    /// [`MAX_ROWS`]: a file with more than `max_rows` rows is refused with
+    /// [`IoError::TooManyRows`] after counting its lines, before anything is parsed, so that an
+    /// oversized file costs neither the memory of its parsed rows nor the time to parse them.
+    ///
+    /// ```
+    /// use structid_io::{CsvOptions, DataTable, IoError};
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("d.csv");
+    /// std::fs::write(&path, "u,y\n1,2\n3,4\n5,6\n").unwrap();
+    /// let options = CsvOptions::default();
+    /// assert_eq!(DataTable::read_with_limit(&path, &options, 3).unwrap().len(), 3);
+    /// let e = DataTable::read_with_limit(&path, &options, 2).unwrap_err();
+    /// assert!(matches!(e, IoError::TooManyRows { limit: 2, .. }), "{e}");
+    /// ```
+    pub fn read_with_limit(
+        path: &Path,
+        options: &CsvOptions,
+        max_rows: usize,
+    ) -> Result<Self, IoError> {
+        let read_err = |source| IoError::Read {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = std::fs::File::open(path).map_err(read_err)?;
+        if count_rows(file, options, max_rows).map_err(read_err)? > max_rows {
+            return Err(IoError::TooManyRows {
+                path: path.to_path_buf(),
+                limit: max_rows,
+            });
+        }
         let bytes = std::fs::read(path).map_err(|source| IoError::Read {
             path: path.to_path_buf(),
             source,
@@ -391,7 +425,7 @@ impl DataTable {
                     None,
                     format!(
                         "the first row ({}) looks numeric; the file needs a header row naming the columns",
-                        names.join(",")
+                        clip(&names.join(","))
                     ),
                 ));
             }
@@ -508,7 +542,7 @@ impl DataTable {
             }
             if found != width {
                 let expected = match header_line {
-                    Some(_) => format!("as in the header ({})", file_names.join(",")),
+                    Some(_) => format!("as in the header ({})", clip(&file_names.join(","))),
                     None => format!("as in the first row (line {})", data[0].0),
                 };
                 return Err(data_err(
@@ -617,16 +651,98 @@ impl DataTable {
     }
 }
 
+/// The largest number of data rows [`DataTable::read`] and [`DataTable::read_with`] accept:
+/// one million.
+///
+/// The bound comes from the cost of a record, not of the file: reading keeps the file and its
+/// parsed rows in memory (about 200 bytes a row for two columns), and every command then
+/// holds several copies of the record as signals and writes results as text (`simulate`
+/// writes about 100 bytes a row), so 10⁶ rows is already on the order of a gigabyte at the
+/// peak, and the quadratic-memory exact solver of `identify` stops far below it (about
+/// 40 000 samples per 16 GiB). A longer file is refused before it is parsed
+/// ([`IoError::TooManyRows`]) instead of exhausting the memory; `structid data csv` reads
+/// with a limit set by the available memory ([`DataTable::read_with_limit`]) to cut it.
+pub const MAX_ROWS: usize = 1_000_000;
+
+/// Counts the rows a parse of the file would see (non-blank, non-comment lines after the
+/// skipped ones, without the header), stopping as soon as the count exceeds `limit`: the
+/// cost is bounded by `limit` lines whatever the size of the file, and the memory by the
+/// buffer.
+fn count_rows(
+    file: impl std::io::Read,
+    options: &CsvOptions,
+    limit: usize,
+) -> std::io::Result<usize> {
+    use std::io::BufRead;
+    let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+    let header = usize::from(options.header);
+    let stop = limit.saturating_add(header).saturating_add(1);
+    let (mut line, mut counted) = (0usize, 0usize);
+    // State of the current line: whether a non-blank byte was seen, and whether it was `#`.
+    let (mut content, mut comment) = (false, false);
+    loop {
+        let buf = reader.fill_buf()?;
+        if buf.is_empty() {
+            break;
+        }
+        let n = buf.len();
+        for &b in buf {
+            if b == b'\n' {
+                if content && !comment && line >= options.skip_rows {
+                    counted += 1;
+                }
+                line += 1;
+                (content, comment) = (false, false);
+                if counted >= stop {
+                    return Ok(counted - header);
+                }
+            } else if !content && !b.is_ascii_whitespace() && b != 0xEF && b != 0xBB && b != 0xBF {
+                content = true;
+                comment = b == b'#';
+            }
+        }
+        reader.consume(n);
+    }
+    if content && !comment && line >= options.skip_rows {
+        counted += 1;
+    }
+    Ok(counted.saturating_sub(header))
+}
+
+/// The longest prefix of a field echoed in an error message, in characters.
+pub const ECHO_CHARS: usize = 60;
+
+/// A field as echoed in an error message: itself when short, else its first
+/// [`ECHO_CHARS`] characters, `…` and its length, so that a huge field does not flood the
+/// terminal.
+///
+/// ```
+/// use structid_io::data_file::clip;
+/// assert_eq!(clip("abc"), "abc");
+/// let long = "x".repeat(1000);
+/// assert_eq!(clip(&long), format!("{}… (1000 characters)", "x".repeat(60)));
+/// ```
+pub fn clip(field: &str) -> std::borrow::Cow<'_, str> {
+    match field.char_indices().nth(ECHO_CHARS) {
+        None => std::borrow::Cow::Borrowed(field),
+        Some((end, _)) => std::borrow::Cow::Owned(format!(
+            "{}… ({} characters)",
+            &field[..end],
+            field.chars().count()
+        )),
+    }
+}
+
 /// Parses one non-empty field as a finite number; the error is the message to report.
 fn parse_value(field: &str) -> Result<f64, String> {
     let v: f64 = field
         .parse()
-        .map_err(|_| format!("cannot parse `{field}` as a number"))?;
+        .map_err(|_| format!("cannot parse `{}` as a number", clip(field)))?;
     if v.is_nan() {
         return Err("value is NaN".into());
     }
     if v.is_infinite() {
-        return Err(format!("value is infinite (`{field}`)"));
+        return Err(format!("value is infinite (`{}`)", clip(field)));
     }
     Ok(v)
 }
@@ -653,7 +769,7 @@ fn resolve_column(
                         names.len().saturating_sub(1),
                         names
                             .iter()
-                            .map(|n| format!("`{n}`"))
+                            .map(|n| format!("`{}`", clip(n)))
                             .collect::<Vec<_>>()
                             .join(", ")
                     ),
@@ -669,7 +785,8 @@ fn resolve_column(
                     header_line,
                     None,
                     format!(
-                        "the header names column `{name}` twice (columns #{a} and #{b}); select it by index instead"
+                        "the header names column `{}` twice (columns #{a} and #{b}); select it by index instead",
+                        clip(name)
                     ),
                 )),
                 _ => Err(IoError::MissingColumn {
@@ -702,7 +819,8 @@ fn check_names(names: &[String], path: Option<&Path>, line: Option<u64>) -> Resu
                 line,
                 None,
                 format!(
-                    "duplicate column name `{n}` (header columns {} and {})",
+                    "duplicate column name `{}` (header columns {} and {})",
+                    clip(n),
                     j + 1,
                     i + 1
                 ),
@@ -1089,6 +1207,70 @@ mod tests {
         assert!(
             e.contains("line 2") && e.contains("cannot parse `a`"),
             "{e}"
+        );
+    }
+
+    #[test]
+    fn row_count_matches_the_parser_and_stops_at_the_limit() {
+        let cases = [
+            ("u,y\n1,2\n3,4\n", CsvOptions::default()),
+            (
+                "\u{feff}# c\n  u , y \n\n 1 , 2\n# more\n3,4\n\n5,6",
+                CsvOptions::default(),
+            ),
+            (
+                "title\nmore\n1;2\n\n3;4\n",
+                CsvOptions {
+                    delimiter: b';',
+                    header: false,
+                    skip_rows: 2,
+                    ..CsvOptions::default()
+                },
+            ),
+            ("u\r\n1\r\n2\r\n3\r\n", CsvOptions::default()),
+        ];
+        for (text, options) in &cases {
+            let parsed = DataTable::parse_with(text, None, options).unwrap().len();
+            let counted = count_rows(text.as_bytes(), options, usize::MAX).unwrap();
+            assert_eq!(counted, parsed, "{text:?}");
+            // Past the limit the count stops at limit + 1.
+            assert_eq!(
+                count_rows(text.as_bytes(), options, 1).unwrap(),
+                2,
+                "{text:?}"
+            );
+        }
+        // The reader refuses a file over the limit before parsing it: a bad field beyond the
+        // limit is never reached.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("long.csv");
+        std::fs::write(&path, "u\n1\n2\n3\nnot a number\n").unwrap();
+        let e = DataTable::read_with_limit(&path, &CsvOptions::default(), 3).unwrap_err();
+        assert!(matches!(e, IoError::TooManyRows { limit: 3, .. }), "{e}");
+        assert!(e.to_string().contains("more than 3 data rows"), "{e}");
+        assert!(e.is_input_error());
+        let e = DataTable::read_with_limit(&path, &CsvOptions::default(), 4).unwrap_err();
+        assert!(e.to_string().contains("cannot parse `not a number`"), "{e}");
+    }
+
+    #[test]
+    fn huge_fields_and_names_are_clipped_in_messages() {
+        let field = "x".repeat(2 << 20);
+        let e = DataTable::parse(&format!("u,y\n1,{field}\n"), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 200, "{} bytes", e.len());
+        assert!(
+            e.contains(&format!("`{}… (2097152 characters)`", "x".repeat(60))),
+            "{e}"
+        );
+        let t = DataTable::parse(&format!("u,{field}\n1,2\n"), None).unwrap();
+        let e = t.select(&["y"]).unwrap_err().to_string();
+        assert!(e.len() < 200 && e.contains("`u`, `xxx"), "{e}");
+        // Multi-byte characters are cut at a character boundary.
+        assert_eq!(
+            clip(&"é".repeat(61)),
+            format!("{}… (61 characters)", "é".repeat(60))
         );
     }
 

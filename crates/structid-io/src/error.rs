@@ -50,10 +50,26 @@ pub enum IoError {
         message: String,
     },
 
+    /// A data file has more rows than the reader accepts ([`crate::data_file::MAX_ROWS`], or
+    /// the limit given to [`crate::DataTable::read_with_limit`]); refused before parsing.
+    #[error(
+        "data file `{}` has more than {limit} data rows, more than structid reads at once \
+         (reading and processing a record costs memory in proportion to its length); use a \
+         shorter record, e.g. its first {limit} rows or a decimated copy",
+        path.display()
+    )]
+    TooManyRows {
+        /// The data file.
+        path: PathBuf,
+        /// The largest number of data rows accepted.
+        limit: usize,
+    },
+
     /// A column requested from a data file does not exist.
     #[error(
-        "{} has no column `{column}`; available columns: {}",
+        "{} has no column `{}`; available columns: {}",
         source_name(path.as_deref()),
+        crate::data_file::clip(column),
         list(available)
     )]
     MissingColumn {
@@ -126,6 +142,16 @@ pub enum IoError {
         input: PathBuf,
     },
 
+    /// An output location cannot be used: a file where a directory is expected (or the
+    /// reverse), or a place where files cannot be created. Found before any work is done.
+    #[error("cannot write the output `{}`: {message}", path.display())]
+    Output {
+        /// The output path as given.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+
     /// An argument given by the caller is invalid (σ ≤ 0, mismatched lengths, …).
     #[error("{0}")]
     InvalidArgument(String),
@@ -172,11 +198,13 @@ impl IoError {
             | IoError::Estimate { .. }
             | IoError::Sweep { .. }
             | IoError::Data { .. }
+            | IoError::TooManyRows { .. }
             | IoError::MissingColumn { .. }
             | IoError::BenchmarkMissing { .. }
             | IoError::Benchmark { .. }
             | IoError::Read { .. }
             | IoError::WouldOverwriteInput { .. }
+            | IoError::Output { .. }
             | IoError::InvalidArgument(_) => true,
             IoError::Write { .. } | IoError::Json(_) => false,
             IoError::Core(e) => core_is_input_error(e),
@@ -219,11 +247,18 @@ fn list(names: &[String]) -> String {
     if names.is_empty() {
         return "(none)".into();
     }
-    names
+    /// Columns listed in full; more are counted.
+    const SHOWN: usize = 20;
+    let mut s = names
         .iter()
-        .map(|n| format!("`{n}`"))
+        .take(SHOWN)
+        .map(|n| format!("`{}`", crate::data_file::clip(n)))
         .collect::<Vec<_>>()
-        .join(", ")
+        .join(", ");
+    if names.len() > SHOWN {
+        s.push_str(&format!(" and {} more", names.len() - SHOWN));
+    }
+    s
 }
 
 fn model_message(
@@ -276,7 +311,7 @@ fn data_message(
         s.push_str(&format!(", line {l}"));
     }
     if let Some(c) = column {
-        s.push_str(&format!(", column `{c}`"));
+        s.push_str(&format!(", column `{}`", crate::data_file::clip(c)));
     }
     s.push_str(": ");
     s.push_str(message);

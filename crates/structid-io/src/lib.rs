@@ -9,7 +9,9 @@
 //!   leading lines to skip) and selects, orders and renames columns ([`ColumnRef`]).
 //! * [`benchmarks`]: loaders of the Silverbox ([`Silverbox`]) and cascaded-tanks
 //!   ([`CascadedTanks`]) benchmark files with their official splits as [`Record`]s.
-//! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file.
+//! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file,
+//!   output locations checked before any work, stale temporary files of killed runs removed,
+//!   and result sets marked complete only once written in full ([`output::COMPLETE_MARKER`]).
 //! * [`Report`]: the `report.json` of an identification; [`ReportRecord`] reads one back.
 //! * [`SweepFile`]: the sweep configuration of `structid compare` (experiments × dispersions ×
 //!   β values × seeds); errors name the line. See [`sweep_file`] for the format.

@@ -7,6 +7,23 @@
 //! Unix also by device and inode, so hard links are caught) is refused with
 //! [`IoError::WouldOverwriteInput`].
 //!
+//! Output locations are checked before a command does any work ([`OutputGuard::check_out_dir`],
+//! [`OutputGuard::check_out_file`]): an output that is an input, a file where a directory is
+//! expected (or the reverse), and a location that cannot be written are refused with an input
+//! error ([`IoError::WouldOverwriteInput`] or [`IoError::Output`]).
+//!
+//! **Temporary files.** A write in progress is `.<name>.tmp-<pid>-<n>` in the destination's
+//! directory. A process killed while writing leaves it behind; the first write of a later run
+//! into that directory removes the temporary files of processes that no longer run
+//! ([`remove_stale_temp_files`]).
+//!
+//! **Result sets.** Each file is atomic, a set of files (a result directory) is not: a run
+//! killed half-way leaves some new files beside old ones. A directory's [`COMPLETE_MARKER`]
+//! (`.complete`) lists the files that belong to sets written in full: [`OutputGuard::begin_set`]
+//! takes a set's names off the list before its first write and [`OutputGuard::finish_set`]
+//! adds them after its last, so a file listed there is never one of a set still being written
+//! or left incomplete. [`is_complete`] asks; a directory without the marker predates it.
+//!
 //! ```
 //! use structid_io::{IoError, OutputGuard};
 //! let dir = tempfile::tempdir().unwrap();
@@ -89,12 +106,82 @@ impl OutputGuard {
             self.check(&dir.join(f))?;
         }
         if dir.exists() && !dir.is_dir() {
-            return Err(IoError::InvalidArgument(format!(
-                "--out `{}` exists and is not a directory",
-                dir.display()
-            )));
+            return Err(IoError::Output {
+                path: dir.to_path_buf(),
+                message: "it exists and is not a directory; give a directory for the results"
+                    .into(),
+            });
         }
-        Ok(())
+        check_writable(dir, dir)
+    }
+
+    /// Checks an output file before a command does any work: it is not a protected input, not
+    /// an existing directory, and its directory exists or can be created and is writable
+    /// ([`IoError::Output`] otherwise). Nothing is left behind.
+    ///
+    /// ```
+    /// use structid_io::{IoError, OutputGuard};
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let guard = OutputGuard::new();
+    /// assert!(guard.check_out_file(&dir.path().join("new/out.csv")).is_ok());
+    /// assert!(!dir.path().join("new").exists());
+    /// let e = guard.check_out_file(dir.path()).unwrap_err();
+    /// assert!(matches!(e, IoError::Output { .. }), "{e}");
+    /// ```
+    pub fn check_out_file(&self, path: &Path) -> Result<(), IoError> {
+        self.check(path)?;
+        if path.is_dir() {
+            return Err(IoError::Output {
+                path: path.to_path_buf(),
+                message: "it is an existing directory; give the name of a file".into(),
+            });
+        }
+        if path.file_name().is_none() {
+            return Err(IoError::Output {
+                path: path.to_path_buf(),
+                message: "it does not name a file".into(),
+            });
+        }
+        match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => check_writable(path, p),
+            _ => check_writable(path, Path::new(".")),
+        }
+    }
+
+    /// Starts writing the set of files `names` into directory `dir` (created if needed): takes
+    /// them off `dir`'s [`COMPLETE_MARKER`] (all of its entries when `names` is `None`),
+    /// creating the marker if `dir` has none, so that until [`OutputGuard::finish_set`] a
+    /// reader knows these files are not a complete set. Also removes the stale temporary files
+    /// of killed runs in `dir`.
+    pub fn begin_set<S: AsRef<str>>(&self, dir: &Path, names: Option<&[S]>) -> Result<(), IoError> {
+        self.create_dir(dir)?;
+        clean_once(dir);
+        let mut listed = completed_files(dir).unwrap_or_default();
+        match names {
+            Some(names) => listed.retain(|f| !names.iter().any(|n| n.as_ref() == f)),
+            None => listed.clear(),
+        }
+        self.write_marker(dir, &listed)
+    }
+
+    /// Ends a set begun by [`OutputGuard::begin_set`]: adds the files `names`, all written, to
+    /// `dir`'s [`COMPLETE_MARKER`].
+    pub fn finish_set<S: AsRef<str>>(&self, dir: &Path, names: &[S]) -> Result<(), IoError> {
+        let mut listed = completed_files(dir).unwrap_or_default();
+        listed.extend(names.iter().map(|n| n.as_ref().to_string()));
+        self.write_marker(dir, &listed)
+    }
+
+    fn write_marker(&self, dir: &Path, names: &[String]) -> Result<(), IoError> {
+        let mut names: Vec<&str> = names.iter().map(String::as_str).collect();
+        names.sort_unstable();
+        names.dedup();
+        let mut text = String::from(MARKER_HEADER);
+        for n in names {
+            text.push_str(n);
+            text.push('\n');
+        }
+        self.write(&dir.join(COMPLETE_MARKER), text.as_bytes())
     }
 
     /// [`write_atomic`] with this guard's inputs protected.
@@ -142,6 +229,192 @@ fn create_dir(dir: &Path) -> Result<(), IoError> {
 
 static COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// The file of a result directory that lists its complete files (see the
+/// [module documentation](self)).
+pub const COMPLETE_MARKER: &str = ".complete";
+
+const MARKER_HEADER: &str = "# Files of this directory written in full by structid, one a line. A file not listed\n\
+# here belongs to a set of results that is being written or whose run was interrupted.\n";
+
+/// The files listed in `dir`'s [`COMPLETE_MARKER`]; `None` when `dir` has no marker.
+pub fn completed_files(dir: &Path) -> Option<Vec<String>> {
+    let text = fs::read_to_string(dir.join(COMPLETE_MARKER)).ok()?;
+    Some(
+        text.lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('#'))
+            .map(String::from)
+            .collect(),
+    )
+}
+
+/// Whether `file` is complete: listed in its directory's [`COMPLETE_MARKER`], or in a
+/// directory without one (written before markers existed, or by hand).
+///
+/// ```
+/// use structid_io::OutputGuard;
+/// use structid_io::output::is_complete;
+/// let dir = tempfile::tempdir().unwrap();
+/// let guard = OutputGuard::new();
+/// guard.begin_set(dir.path(), Some(&["a.csv", "b.csv"])).unwrap();
+/// guard.write(&dir.path().join("a.csv"), b"1").unwrap();
+/// assert!(!is_complete(&dir.path().join("a.csv")));
+/// guard.write(&dir.path().join("b.csv"), b"2").unwrap();
+/// guard.finish_set(dir.path(), &["a.csv", "b.csv"]).unwrap();
+/// assert!(is_complete(&dir.path().join("a.csv")));
+/// ```
+pub fn is_complete(file: &Path) -> bool {
+    let dir = match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let Some(name) = file.file_name() else {
+        return false;
+    };
+    match completed_files(dir) {
+        None => true,
+        Some(list) => list.iter().any(|f| std::ffi::OsStr::new(f) == name),
+    }
+}
+
+/// Fails with [`IoError::Output`] about `output` unless files can be created in `dir`, or,
+/// when `dir` does not exist, in its nearest existing ancestor (which must be a directory). A
+/// probe file is created and removed at once; nothing else is touched.
+fn check_writable(output: &Path, dir: &Path) -> Result<(), IoError> {
+    let bad = |message: String| IoError::Output {
+        path: output.to_path_buf(),
+        message,
+    };
+    let mut at = if dir.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        dir.to_path_buf()
+    };
+    loop {
+        match fs::metadata(&at) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) => {
+                return Err(bad(if at == output {
+                    "it exists and is not a directory".into()
+                } else {
+                    format!("`{}` is a file, not a directory", at.display())
+                }));
+            }
+            Err(_) => match at.parent() {
+                Some(p) if !p.as_os_str().is_empty() => at = p.to_path_buf(),
+                _ => {
+                    at = PathBuf::from(".");
+                    if fs::metadata(&at).is_err() {
+                        return Err(bad("no part of it exists".into()));
+                    }
+                    break;
+                }
+            },
+        }
+    }
+    let probe = at.join(format!(
+        ".probe.tmp-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(f) => {
+            drop(f);
+            let _ = fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(bad(format!(
+            "cannot create files in `{}` ({})",
+            at.display(),
+            e.kind()
+        ))),
+    }
+}
+
+/// Temporary files of dead processes older than this are removed where liveness cannot be
+/// checked (no `/proc`).
+const STALE_AGE: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
+/// The process id of a temporary file name `.<name>.tmp-<pid>-<n>`, if it is one.
+fn temp_file_pid(name: &str) -> Option<u32> {
+    if !name.starts_with('.') {
+        return None;
+    }
+    let (_, tail) = name.rsplit_once(".tmp-")?;
+    let (pid, n) = tail.split_once('-')?;
+    if pid.is_empty() || n.is_empty() || !n.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Whether process `pid` runs: `Some` where `/proc` tells, `None` where it cannot.
+fn process_alive(pid: u32) -> Option<bool> {
+    if pid == std::process::id() {
+        return Some(true);
+    }
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return None;
+    }
+    Some(proc.join(pid.to_string()).exists())
+}
+
+/// Removes the temporary files (`.<name>.tmp-<pid>-<n>`) that killed writes left in `dir`:
+/// those of processes that no longer run (checked in `/proc`; where it is missing, those
+/// older than a day). Returns how many were removed. Files of running processes, this one
+/// included, are kept.
+///
+/// ```
+/// use structid_io::output::remove_stale_temp_files;
+/// let dir = tempfile::tempdir().unwrap();
+/// let mine = dir.path().join(format!(".a.csv.tmp-{}-0", std::process::id()));
+/// std::fs::write(&mine, "in progress").unwrap();
+/// assert_eq!(remove_stale_temp_files(dir.path()).unwrap(), 0);
+/// assert!(mine.exists());
+/// ```
+pub fn remove_stale_temp_files(dir: &Path) -> std::io::Result<usize> {
+    let mut removed = 0;
+    for entry in fs::read_dir(dir)? {
+        let Ok(entry) = entry else { continue };
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(temp_file_pid) else {
+            continue;
+        };
+        let Ok(meta) = entry.metadata() else { continue };
+        if !meta.is_file() {
+            continue;
+        }
+        let stale = match process_alive(pid) {
+            Some(alive) => !alive,
+            None => meta
+                .modified()
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > STALE_AGE),
+        };
+        if stale && fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
+/// [`remove_stale_temp_files`] once per directory and process (errors are ignored: the
+/// cleanup must never stop a write).
+fn clean_once(dir: &Path) {
+    static CLEANED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let key = resolve(dir);
+    {
+        let mut done = CLEANED.lock().unwrap_or_else(|p| p.into_inner());
+        if done.contains(&key) {
+            return;
+        }
+        done.push(key);
+    }
+    let _ = remove_stale_temp_files(dir);
+}
+
 fn write_unchecked(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     let werr = |source: std::io::Error| IoError::Write {
         path: path.to_path_buf(),
@@ -164,6 +437,7 @@ fn write_unchecked(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         _ => PathBuf::from("."),
     };
     create_dir(&dir)?;
+    clean_once(&dir);
     let tmp = dir.join(format!(
         ".{}.tmp-{}-{}",
         name.to_string_lossy(),
@@ -288,6 +562,125 @@ mod tests {
             assert!(write_atomic(&hard, b"x", &[&input]).is_err());
         }
         assert_eq!(fs::read_to_string(&input).unwrap(), "keep");
+    }
+
+    /// The id of a process that has exited.
+    fn dead_pid() -> u32 {
+        let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+            .arg("--list")
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        pid
+    }
+
+    #[test]
+    fn stale_temp_files_of_dead_processes_are_removed_by_the_next_write() {
+        assert_eq!(temp_file_pid(".a.csv.tmp-123-4"), Some(123));
+        assert_eq!(temp_file_pid(".x.tmp-1.tmp-77-0"), Some(77));
+        for not in [
+            "a.csv.tmp-1-2",
+            ".a.csv",
+            ".a.tmp-x-1",
+            ".a.tmp-1-",
+            ".a.tmp-1-x",
+        ] {
+            assert_eq!(temp_file_pid(not), None, "{not}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let dead = dead_pid();
+        let stale = dir.path().join(format!(".report.json.tmp-{dead}-3"));
+        let mine = dir
+            .path()
+            .join(format!(".other.csv.tmp-{}-0", std::process::id()));
+        let lookalike = dir.path().join(format!("report.json.tmp-{dead}-3"));
+        for f in [&stale, &mine, &lookalike] {
+            fs::write(f, "partial").unwrap();
+        }
+        write_atomic(&dir.path().join("report.json"), b"{}", &[]).unwrap();
+        if Path::new("/proc/self").exists() {
+            assert!(!stale.exists(), "the dead process's temporary file is left");
+        }
+        assert!(mine.exists() && lookalike.exists());
+        assert_eq!(
+            fs::read_to_string(dir.path().join("report.json")).unwrap(),
+            "{}"
+        );
+    }
+
+    #[test]
+    fn a_set_is_listed_as_complete_only_after_its_last_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().join("result");
+        let guard = OutputGuard::new();
+        let set = ["estimate.json", "report.json"];
+        // A directory without a marker predates markers: its files count as complete.
+        fs::create_dir(&d).unwrap();
+        fs::write(d.join("old.csv"), "1").unwrap();
+        assert!(is_complete(&d.join("old.csv")));
+        // A first set: nothing listed until it is finished.
+        guard.begin_set(&d, Some(&set)).unwrap();
+        assert_eq!(completed_files(&d), Some(Vec::new()));
+        guard.write(&d.join("estimate.json"), b"1").unwrap();
+        assert!(!is_complete(&d.join("estimate.json")));
+        guard.write(&d.join("report.json"), b"1").unwrap();
+        guard.finish_set(&d, &set).unwrap();
+        assert!(set.iter().all(|f| is_complete(&d.join(f))));
+        // Another set beside it keeps the first listed.
+        guard.begin_set(&d, Some(&["validation.json"])).unwrap();
+        guard.write(&d.join("validation.json"), b"1").unwrap();
+        guard.finish_set(&d, &["validation.json"]).unwrap();
+        assert_eq!(
+            completed_files(&d).unwrap(),
+            ["estimate.json", "report.json", "validation.json"]
+        );
+        // A rerun of the first set that stops half-way (no finish) leaves its files unlisted,
+        // the other set listed.
+        guard.begin_set(&d, Some(&set)).unwrap();
+        guard.write(&d.join("estimate.json"), b"2").unwrap();
+        assert!(!is_complete(&d.join("estimate.json")));
+        assert!(!is_complete(&d.join("report.json")));
+        assert!(is_complete(&d.join("validation.json")));
+        // `None` takes every file off the list.
+        guard.begin_set::<&str>(&d, None).unwrap();
+        assert_eq!(completed_files(&d), Some(Vec::new()));
+    }
+
+    #[test]
+    fn output_locations_are_checked_before_any_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("data.csv");
+        fs::write(&file, "u\n1\n").unwrap();
+        let guard = OutputGuard::new();
+        // A file where a directory is expected, and below a file.
+        for bad in [file.clone(), file.join("out")] {
+            let e = guard.check_out_dir(&bad, ["a.csv"]).unwrap_err();
+            assert!(matches!(e, IoError::Output { .. }), "{e}");
+            assert!(e.is_input_error());
+        }
+        let e = guard.check_out_file(&file.join("x.csv")).unwrap_err();
+        assert!(e.to_string().contains("is a file, not a directory"), "{e}");
+        // New directories are fine and not created by the check; no probe is left.
+        guard
+            .check_out_dir(&dir.path().join("a/b"), ["c.csv"])
+            .unwrap();
+        guard.check_out_file(&dir.path().join("a/b/c.csv")).unwrap();
+        let names: Vec<_> = fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let ro = dir.path().join("ro");
+            fs::create_dir(&ro).unwrap();
+            fs::set_permissions(&ro, fs::Permissions::from_mode(0o555)).unwrap();
+            // Root writes anyway; the check then agrees with the write.
+            let writable = File::create(ro.join("t")).is_ok();
+            let e = guard.check_out_dir(&ro.join("out"), ["a.csv"]);
+            assert_eq!(e.is_ok(), writable, "{e:?}");
+            fs::set_permissions(&ro, fs::Permissions::from_mode(0o755)).unwrap();
+        }
     }
 
     #[test]
