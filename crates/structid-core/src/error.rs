@@ -112,10 +112,16 @@ pub enum Error {
         explanation: String,
     },
 
+    /// The model is unstable where the computation needs it stable: a simulation or a
+    /// predictor diverged, or an identification residual would grow without bound.
+    #[error("unstable model: {0}")]
+    Unstable(String),
+
     /// The simulation would need w_k to compute z_k (D_zw ≠ 0).
     #[error(
         "algebraic loop: D_zw has a non-zero entry ({value}) at row {row}, column {col}, so z_k depends on w_k = N(z_k); \
-         simulation needs D_zw = 0 (add a delay in the loop or move the direct term into the linear block)"
+         simulation, and computing z from u and y, need D_zw = 0 (add a delay in the loop or move the direct \
+         term into the linear block)"
     )]
     AlgebraicLoop {
         /// Row of D_zw.

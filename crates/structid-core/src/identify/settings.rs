@@ -177,11 +177,28 @@ impl IdentifySettings {
     }
 }
 
-fn available_memory_bytes() -> Option<u64> {
+/// The memory available for new allocations now (`MemAvailable` of `/proc/meminfo`), in
+/// bytes; `None` where it cannot be read (other systems than Linux).
+pub fn available_memory_bytes() -> Option<u64> {
+    meminfo("MemAvailable:")
+}
+
+/// The machine's physical memory (`MemTotal` of `/proc/meminfo`), in bytes; `None` where it
+/// cannot be read (other systems than Linux). A memory budget above it cannot be honoured.
+pub fn total_memory_bytes() -> Option<u64> {
+    meminfo("MemTotal:")
+}
+
+/// A `kB` field of `/proc/meminfo`, in bytes.
+fn meminfo(key: &str) -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    parse_meminfo(&text, key)
+}
+
+fn parse_meminfo(text: &str, key: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with(key))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
+    kib.checked_mul(1024)
 }
 
 /// Builder for [`IdentifySettings`]; [`IdentifySettingsBuilder::build`] validates.
@@ -247,5 +264,28 @@ impl IdentifySettingsBuilder {
             });
         }
         Ok(self.inner)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn meminfo_fields_are_read_in_bytes() {
+        let text = "MemTotal:       24684084 kB\nMemFree:        22819832 kB\nMemAvailable:   24240236 kB\n";
+        assert_eq!(parse_meminfo(text, "MemTotal:"), Some(24684084 * 1024));
+        assert_eq!(parse_meminfo(text, "MemAvailable:"), Some(24240236 * 1024));
+        assert_eq!(parse_meminfo(text, "SwapTotal:"), None);
+        assert_eq!(parse_meminfo("MemTotal: lots kB\n", "MemTotal:"), None);
+        assert_eq!(
+            parse_meminfo(&format!("MemTotal: {} kB\n", u64::MAX), "MemTotal:"),
+            None
+        );
+        // On Linux the machine's memory is known and at least what is available.
+        if cfg!(target_os = "linux") {
+            let total = total_memory_bytes().expect("/proc/meminfo");
+            assert!(total > 0 && available_memory_bytes().is_some_and(|a| a <= total));
+        }
     }
 }

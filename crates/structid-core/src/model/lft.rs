@@ -268,6 +268,46 @@ impl Lft {
         Ok(())
     }
 
+    /// Checks that an identification residual stays bounded: when e reaches y only directly
+    /// (B_e = 0, an output-error noise model) the residual is y minus the simulated paths
+    /// u → y and w → y, and a reachable pole of either outside the unit circle makes it grow
+    /// geometrically with the record ([`Error::Unstable`]). Poles on the unit circle
+    /// (integrators) and noise models with dynamics, whose predictor filters the paths, are
+    /// accepted.
+    ///
+    /// ```
+    /// use nalgebra::dmatrix;
+    /// use structid_core::{Lft, LftMatrices};
+    /// let m = |a: f64| LftMatrices {
+    ///     a: dmatrix![a], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![1.0],
+    ///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![0.0],
+    ///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+    /// };
+    /// assert!(Lft::new(m(0.9)).unwrap().check_residual_stable().is_ok());
+    /// assert!(Lft::new(m(1.0)).unwrap().check_residual_stable().is_ok());
+    /// let e = Lft::new(m(1.5)).unwrap().check_residual_stable().unwrap_err();
+    /// assert!(e.to_string().contains("pole of modulus 1.5"), "{e}");
+    /// ```
+    pub fn check_residual_stable(&self) -> Result<()> {
+        if self.m.be.iter().any(|v| *v != 0.0) {
+            return Ok(());
+        }
+        for (name, sys) in [("u → y", self.t_yu()), ("w → y", self.t_yw())] {
+            let rho = sys.reachable_spectral_radius();
+            // The tolerance admits repeated poles at 1 (integrators), whose computed moduli
+            // are off by about ε^(1/m) for multiplicity m (6·10⁻⁶ for three).
+            if rho.is_nan() || rho > 1.0 + 1e-5 {
+                return Err(Error::Unstable(format!(
+                    "the path {name} of the linear block has a pole of modulus {rho:.4} > 1, and with \
+                     an output-error noise model (B_e = 0) the identification residual grows without \
+                     bound over the record; identify needs that path stable (poles on the unit circle, \
+                     integrators, are accepted) or a noise model whose predictor is stable"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// Residual r = y − L_yu·u with a zero initial state.
     pub fn residual(&self, u: &Signal, y: &Signal) -> Result<Signal> {
         let yu = self.t_yu().simulate(u)?;
@@ -299,4 +339,51 @@ fn vcat(parts: &[&DMatrix<f64>], cols: usize) -> DMatrix<f64> {
         at += p.nrows();
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::dmatrix;
+
+    fn output_error(a: f64, be: f64) -> Lft {
+        Lft::new(LftMatrices {
+            a: dmatrix![a],
+            bu: dmatrix![1.0],
+            be: dmatrix![be],
+            bw: dmatrix![1.0],
+            cy: dmatrix![1.0],
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: dmatrix![0.0],
+            cz: dmatrix![0.0],
+            dzu: dmatrix![1.0],
+            dze: dmatrix![0.0],
+            dzw: dmatrix![0.0],
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn an_unstable_output_error_path_is_refused_an_integrator_is_not() {
+        assert!(output_error(0.5, 0.0).check_residual_stable().is_ok());
+        // A double integrator (a Jordan block at 1).
+        let mut m = output_error(1.0, 0.0).matrices().clone();
+        m.a = dmatrix![1.0, 1.0; 0.0, 1.0];
+        m.bu = dmatrix![0.0; 1.0];
+        m.be = dmatrix![0.0; 0.0];
+        m.bw = dmatrix![0.0; 1.0];
+        m.cy = dmatrix![1.0, 0.0];
+        m.cz = dmatrix![0.0, 0.0];
+        assert!(Lft::new(m).unwrap().check_residual_stable().is_ok());
+        assert!(output_error(-1.0, 0.0).check_residual_stable().is_ok());
+        let e = output_error(1.2, 0.0).check_residual_stable().unwrap_err();
+        assert!(matches!(e, Error::Unstable(_)), "{e}");
+        assert!(
+            e.to_string().starts_with("unstable model: the path u → y"),
+            "{e}"
+        );
+        // A noise model with dynamics (innovations form): its predictor filters the paths.
+        assert!(output_error(1.2, 1.0).check_residual_stable().is_ok());
+    }
 }

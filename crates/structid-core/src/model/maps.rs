@@ -33,6 +33,12 @@ impl ExprMap {
             expression: text.to_string(),
             reason,
         };
+        if let Some(name) = unknown_function(text) {
+            return Err(err(format!(
+                "unknown function `{name}`; the functions are {}",
+                function_names().join(", ")
+            )));
+        }
         let expr = exmex::parse::<f64>(text).map_err(|e| err(e.to_string()))?;
         let mut slots = Vec::new();
         for name in expr.var_names() {
@@ -71,6 +77,44 @@ impl ExprMap {
     pub fn dim(&self) -> usize {
         self.dim
     }
+}
+
+/// The names the expression parser knows as functions: the unary ones (`sin`, `tanh`, …) and
+/// the binary ones written as calls (`min`, `max`, `atan2`).
+fn function_names() -> Vec<&'static str> {
+    <exmex::FloatOpsFactory<f64> as exmex::MakeOperators<f64>>::make()
+        .iter()
+        .filter(|op| op.constant().is_none())
+        .map(|op| op.repr())
+        .filter(|r| r.starts_with(|c: char| c.is_ascii_alphabetic()))
+        .collect()
+}
+
+/// The first name of `text` written as a call, `name(`, that is not a function of the parser
+/// (which would otherwise report it in terms of its own grammar).
+fn unknown_function(text: &str) -> Option<&str> {
+    let known = function_names();
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        let starts_name = (bytes[i].is_ascii_alphabetic() || bytes[i] == b'_')
+            && (i == 0
+                || !(bytes[i - 1].is_ascii_alphanumeric() || matches!(bytes[i - 1], b'_' | b'.')));
+        if !starts_name {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        while i < bytes.len() && (bytes[i].is_ascii_alphanumeric() || bytes[i] == b'_') {
+            i += 1;
+        }
+        let name = &text[start..i];
+        let next = text[i..].trim_start().chars().next();
+        if next == Some('(') && !known.contains(&name) {
+            return Some(name);
+        }
+    }
+    None
 }
 
 impl Interpolant for ExprMap {
@@ -309,6 +353,28 @@ mod tests {
         let e = ExprMap::parse("z3", 2).unwrap_err().to_string();
         assert!(e.contains("z3"), "{e}");
         assert!(ExprMap::parse("tanh(", 1).is_err());
+    }
+
+    #[test]
+    fn unknown_functions_are_named() {
+        let e = ExprMap::parse("0.5*frobnicate(2*z0) + 1", 1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown function `frobnicate`"), "{e}");
+        assert!(e.contains("tanh") && e.contains("min"), "{e}");
+        assert!(!e.contains("wlog"), "{e}");
+        // Known functions, binary ones and variables next to parentheses are fine.
+        for ok in [
+            "tanh (2*z0)",
+            "min(max(z0, -1), 1)",
+            "max(z0, 0.002)",
+            "2.5*(z0)",
+            "z0*(1+z0)",
+        ] {
+            assert!(ExprMap::parse(ok, 1).is_ok(), "{ok}");
+        }
+        assert_eq!(unknown_function("sinz(z)"), Some("sinz"));
+        assert_eq!(unknown_function("sin(z) + cos (z)"), None);
     }
 
     #[test]

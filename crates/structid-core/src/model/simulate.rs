@@ -201,8 +201,9 @@ impl Lft {
             gemv_add(&bw, &wk, &mut xn);
             std::mem::swap(&mut x, &mut xn);
             if x.iter().any(|v| !v.is_finite()) {
-                return Err(Error::Numerical(format!(
-                    "the state became non-finite at sample {k}: the loop is unstable for this input"
+                return Err(Error::Unstable(format!(
+                    "the simulation diverged: the state became non-finite at sample {k}; the linear \
+                     block or the loop through the maps is unstable for this input"
                 )));
             }
         }

@@ -29,6 +29,52 @@ pub(super) struct DenseScore {
     trials: usize,
 }
 
+/// Peak memory of [`DenseScore::new`] for `len` samples of `outputs` outputs, in bytes: B and
+/// A (n×n, n = L·n_y), the block Q (n×L) and the Gram buffer.
+fn memory_bytes(len: usize, outputs: usize) -> u64 {
+    let n = (len as u64).saturating_mul(outputs as u64);
+    let l = len as u64;
+    let g = 256.min(len.max(1)) as u64;
+    n.saturating_mul(n)
+        .saturating_mul(2)
+        .saturating_add(n.saturating_mul(l))
+        .saturating_add(l * g)
+        .saturating_mul(8)
+}
+
+/// Refuses ([`Error::TooLarge`]) a dense selection whose matrices would not fit in the memory
+/// budget `limit` (bytes), before anything is allocated.
+pub(super) fn check_memory(problem: &Problem, limit: u64) -> Result<()> {
+    let (len, ny) = (problem.len(), problem.outputs());
+    let need = memory_bytes(len, ny);
+    if need <= limit {
+        return Ok(());
+    }
+    // The longest record that fits: memory grows with L.
+    let (mut lo, mut hi) = (0usize, len);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if memory_bytes(mid, ny) <= limit {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Err(Error::TooLarge {
+        solver: "β/σ selection (dense marginal likelihood or GCV)".into(),
+        needed_mib: need >> 20,
+        limit_mib: limit >> 20,
+        size: len * ny,
+        suggestion: format!(
+            "Selecting β by marginal likelihood or GCV on a dispersion without features stores \
+             dense {n}×{n} matrices. Give β (and σ) instead of selecting them, select them on a \
+             window of at most about {lo} samples, or use a dispersion with features (fourier, \
+             gaussian-lowrank), whose selection is linear in L.",
+            n = len * ny
+        ),
+    })
+}
+
 impl DenseScore {
     pub(super) fn new(problem: &Problem, criterion: Criterion) -> Result<Self> {
         if problem.free_response().is_some() {
@@ -272,6 +318,11 @@ impl LowRank {
     }
 
     fn eigen(&mut self) -> (&[f64], &[f64]) {
+        if self.eig.is_none() && self.v.is_empty() {
+            // Rank 0 (B is zero to the target, e.g. a one-sample record through a path without
+            // direct term): no eigenpairs, and nalgebra cannot decompose a 0×0 matrix.
+            self.eig = Some((Vec::new(), Vec::new()));
+        }
         if self.eig.is_none() {
             let k = self.v.len();
             let vtv = DMatrix::<f64>::from_fn(k, k, |i, j| {
@@ -294,5 +345,31 @@ impl LowRank {
         }
         let (s, h) = self.eig.as_ref().expect("just set");
         (s, h)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dense_selection_beyond_the_budget_is_refused_before_allocating() {
+        // 10⁶ samples: 16 TB of matrices.
+        assert!(memory_bytes(1_000_000, 1) > 1 << 40);
+        assert_eq!(memory_bytes(usize::MAX, 2), u64::MAX);
+        assert!(memory_bytes(100, 1) < 1 << 20);
+        let lim = memory_bytes(1000, 1);
+        assert!(memory_bytes(1001, 1) > lim);
+    }
+
+    #[test]
+    fn a_zero_b_gives_rank_zero_without_panicking() {
+        // One sample whose path has no direct term: B = T·K·Tᵀ = 0.
+        let b = Mat::<f64>::zeros(1, 1);
+        let mut low = LowRank::new(&b, &[0.3]);
+        assert!(low.extend(&b, 1e-6));
+        assert_eq!(low.rank(), 0);
+        let (s, h) = low.eigen();
+        assert!(s.is_empty() && h.is_empty());
     }
 }

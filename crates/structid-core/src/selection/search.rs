@@ -130,6 +130,7 @@ pub fn select(
                         criterion,
                     })
                 } else {
+                    super::dense::check_memory(&problem, settings.effective_memory_limit())?;
                     Box::new(DenseScore::new(&problem, criterion)?)
                 }
             }

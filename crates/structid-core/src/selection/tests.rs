@@ -128,3 +128,22 @@ fn bad_inputs_are_errors() {
     assert!(select_beta(&problem, Criterion::Gcv, 0.0).is_err());
     assert!(select_beta(&problem, Criterion::Gcv, f64::NAN).is_err());
 }
+
+#[test]
+fn dense_selection_over_the_memory_budget_is_an_error_not_an_allocation() {
+    let exp = crate::paper::spray(
+        300,
+        0.5,
+        Arc::new(KernelDispersion::gaussian(0.1).unwrap()),
+        2,
+    )
+    .unwrap();
+    let settings = crate::IdentifySettings::builder()
+        .memory_limit_bytes(1 << 20)
+        .build()
+        .unwrap();
+    let how = SelectionSettings::builder().build().unwrap();
+    let e = select(&exp.model, &exp.data, None, &settings, &how).unwrap_err();
+    assert!(matches!(e, crate::Error::TooLarge { .. }), "{e}");
+    assert!(e.to_string().contains("window of at most about"), "{e}");
+}

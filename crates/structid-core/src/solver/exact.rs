@@ -80,6 +80,21 @@ pub fn posterior_memory_bytes(
     8 * (n * free_cols as u64 + batch * (len as u64 + 2 * n) + n)
 }
 
+/// The largest length in 0..=`len` that `fits` (which must hold up to some length and fail
+/// beyond it), by bisection: the suggestion of a window that fits the memory.
+fn longest_fitting(len: usize, fits: impl Fn(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (0usize, len);
+    while lo < hi {
+        let mid = lo + (hi - lo).div_ceil(2);
+        if fits(mid) {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    lo
+}
+
 fn solver_name() -> &'static str {
     "exact"
 }
@@ -101,15 +116,11 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         + posterior_memory_bytes(settings, len, ny, nx);
     let limit = settings.effective_memory_limit();
     if need > limit {
-        let max_len = (1..=len)
-            .rev()
-            .step_by((len / 64).max(1))
-            .find(|&l| {
-                peak_memory_bytes(l, ny, ne, noise_dynamic, nx)
-                    + posterior_memory_bytes(settings, l, ny, nx)
-                    <= limit
-            })
-            .unwrap_or(0);
+        let max_len = longest_fitting(len, |l| {
+            peak_memory_bytes(l, ny, ne, noise_dynamic, nx)
+                + posterior_memory_bytes(settings, l, ny, nx)
+                <= limit
+        });
         return Err(Error::TooLarge {
             solver: solver_name().into(),
             needed_mib: need >> 20,
@@ -442,7 +453,16 @@ fn compact_live_rows(
 ) -> Result<(Vec<usize>, Vec<usize>, f64)> {
     let n = m.nrows();
     let max_diag = (0..n).map(|i| m[(i, i)]).fold(0.0f64, f64::max);
-    if max_diag <= 0.0 || !max_diag.is_finite() {
+    if (0..n).any(|i| !m[(i, i)].is_finite()) {
+        // M = T·K·Tᵀ + L·β·A depends on the data only through z (where K is bounded): its
+        // overflow is the model's.
+        return Err(Error::Unstable(
+            "the paths w → y overflow over the record (the system matrix M is not finite): the \
+             linear block is unstable or badly scaled; rescale it"
+                .into(),
+        ));
+    }
+    if max_diag <= 0.0 {
         return Err(Error::Numerical(format!(
             "the system matrix M has no positive diagonal entry (max {max_diag}): no output depends on e or w"
         )));
@@ -569,5 +589,40 @@ mod tests {
         let e = solve(&problem, &settings).unwrap_err();
         assert!(matches!(e, Error::Numerical(_)), "{e:?}");
         assert!(e.to_string().contains("initial state"), "{e}");
+    }
+
+    /// The suggested window was 0 samples for long records (a coarse scan from the top).
+    #[test]
+    fn the_suggested_window_is_the_longest_that_fits() {
+        let limit = 16u64 << 30;
+        let fits = |l: usize| peak_memory_bytes(l, 1, 1, false, 0) <= limit;
+        let l = longest_fitting(10_000_000, fits);
+        assert!(l > 30_000 && fits(l) && !fits(l + 1), "{l}");
+        assert_eq!(longest_fitting(100, fits), 100);
+        assert_eq!(longest_fitting(100, |_| false), 0);
+    }
+
+    /// A path whose gain overflows M (a model with A = 1e308) is the model's instability,
+    /// not a numerical accident.
+    #[test]
+    fn an_overflowing_system_matrix_is_an_unstable_model() {
+        let len = 4;
+        let gain = |v: f64| Arc::new(StateSpace::static_gain(nalgebra::dmatrix![v]).unwrap());
+        let block = ProblemBlock {
+            name: "b0".into(),
+            output: 0,
+            path: gain(1e200),
+            z: Signal::from_fn(len, 1, |k, _| k as f64),
+            dispersion: Arc::new(KernelDispersion::gaussian(0.5).unwrap()),
+        };
+        let residual = Signal::from_fn(len, 1, |k, _| 1.0 - k as f64);
+        let problem = Problem::new(residual, gain(1.0), vec![block]).unwrap();
+        let settings = IdentifySettings::builder()
+            .solver(crate::SolverChoice::Exact)
+            .build()
+            .unwrap();
+        let e = solve(&problem, &settings).unwrap_err();
+        assert!(matches!(e, Error::Unstable(_)), "{e:?}");
+        assert!(e.to_string().contains("overflow"), "{e}");
     }
 }

@@ -301,7 +301,7 @@ pub fn validate(
         _ => v,
     };
     if let Some(i) = eps.iter().position(|x| !x.is_finite()) {
-        return Err(Error::Numerical(format!(
+        return Err(Error::Unstable(format!(
             "the one-step prediction error is not finite at sample {} (output {}): the noise model's \
              predictor is unstable on this record",
             i / ny,
