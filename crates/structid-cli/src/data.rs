@@ -144,8 +144,13 @@ fn targets<T: Copy>(
 ) -> Result<(OutputGuard, Vec<(T, PathBuf)>), CliError> {
     let mut guard = OutputGuard::new();
     guard.protect(&a.file);
-    guard.check(&a.out)?;
-    let targets: Vec<(T, PathBuf)> = if a.split.trim() == "all" {
+    let all = a.split.trim() == "all";
+    if all {
+        guard.check_out_dir(&a.out, splits.iter().map(|s| format!("{}.csv", name(*s))))?;
+    } else {
+        guard.check_out_file(&a.out)?;
+    }
+    let targets: Vec<(T, PathBuf)> = if all {
         splits
             .iter()
             .map(|s| (*s, a.out.join(format!("{}.csv", name(*s)))))
@@ -167,8 +172,11 @@ fn write_records<T>(
     record: impl Fn(&T) -> Record,
     extra: &str,
 ) -> Result<(), CliError> {
-    if a.split.trim() == "all" {
-        guard.create_dir(&a.out)?;
+    let all = a.split.trim() == "all";
+    let names: Vec<PathBuf> = targets.iter().map(|(_, p)| p.clone()).collect();
+    let names = crate::identify::file_names(&names);
+    if all {
+        guard.begin_set(&a.out, Some(&names))?;
     }
     for (s, path) in targets {
         let r = record(s);
@@ -184,7 +192,27 @@ fn write_records<T>(
             path.display()
         );
     }
+    if all {
+        guard.finish_set(&a.out, &names)?;
+    }
     Ok(())
+}
+
+/// Bytes of memory per data row that reading a file and writing the kept columns take, as
+/// measured for two columns (about 210 bytes a row while parsing, the text of the output
+/// after it) and rounded up.
+const CSV_BYTES_PER_ROW: u64 = 512;
+
+/// The largest file `structid data csv` reads: the rows that fit in three quarters of the
+/// available memory at [`CSV_BYTES_PER_ROW`], and never fewer than the
+/// [`structid_io::data_file::MAX_ROWS`] every other command reads. `data csv` is the tool
+/// that cuts a long record to a length the others accept, so it is limited by memory only.
+fn csv_row_limit() -> usize {
+    let available =
+        structid_core::identify::settings::available_memory_bytes().unwrap_or(4 << 30) / 4 * 3;
+    usize::try_from(available / CSV_BYTES_PER_ROW)
+        .unwrap_or(usize::MAX)
+        .max(structid_io::data_file::MAX_ROWS)
 }
 
 /// `structid data csv`.
@@ -203,7 +231,7 @@ fn csv(a: CsvArgs) -> Result<(), CliError> {
     let range = a.range.as_deref().map(parse_range).transpose()?;
     let mut guard = OutputGuard::new();
     guard.protect(&a.file);
-    guard.check(&a.out)?;
+    guard.check_out_file(&a.out)?;
     let options = CsvOptions {
         delimiter,
         header: !a.no_header,
@@ -211,7 +239,7 @@ fn csv(a: CsvArgs) -> Result<(), CliError> {
         columns,
         names,
     };
-    let table = DataTable::read_with(&a.file, &options)?;
+    let table = DataTable::read_with_limit(&a.file, &options, csv_row_limit())?;
     // Every kept column needs a value in every row (an empty field is reported with its line).
     let signal = table.select(&table.names)?;
     let mut cols: Vec<Vec<f64>> = (0..signal.channels()).map(|c| signal.channel(c)).collect();

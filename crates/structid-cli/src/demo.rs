@@ -10,7 +10,7 @@ use structid_core::{IdentifySettings, Interpolant, identify, paper};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, SignalNames, TruthSpec};
 use structid_plot::{Chart, HeatMap, Series, render_grid_svg, render_heatmaps_svg};
 
-use crate::error::{CliError, non_negative};
+use crate::error::CliError;
 use crate::figures::{GRID_1D, GRID_2D, grid_values, linspace, mean, span, subsample};
 use crate::{MultiInputArgs, SprayArgs};
 
@@ -34,12 +34,48 @@ const MULTI_BETA: f64 = 0.01;
 /// Most dots per series in the demo figures.
 const DEMO_DOTS: usize = 500;
 
-fn check_samples(samples: usize) -> Result<(), CliError> {
+/// The files of `demo spray` and `demo multi-input`.
+const SPRAY_OUTPUTS: [&str; 4] = ["data.csv", "model.toml", "fig4.svg", "summary.json"];
+const MULTI_OUTPUTS: [&str; 4] = ["data.csv", "model.toml", "surfaces.svg", "summary.json"];
+
+/// Checks `--samples` before anything is generated: at least 10, and few enough for the
+/// demos' exact solver (one output, white noise), whose L×L matrix must fit in the memory
+/// budget `limit` (bytes).
+fn check_samples(samples: usize, limit: u64) -> Result<(), CliError> {
     if samples < 10 {
         return Err(CliError::input(format!(
             "invalid value {samples} for --samples: the demo needs at least 10 samples"
         )));
     }
+    let need = |l: usize| structid_core::solver::exact::peak_memory_bytes(l, 1, 1, false, 0);
+    if need(samples) > limit {
+        // The largest length that fits: `need` grows with L.
+        let (mut lo, mut hi) = (10usize, samples);
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if need(mid) <= limit {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        return Err(CliError::input(format!(
+            "invalid value {samples} for --samples: the demo's exact solver would need about {} MiB, \
+             more than the memory budget of {} MiB; use at most {lo} samples",
+            need(samples) >> 20,
+            limit >> 20
+        )));
+    }
+    Ok(())
+}
+
+/// Checks the arguments shared by the demos and the output directory, before any work.
+fn check_args(samples: usize, out: &std::path::Path, files: &[&str]) -> Result<(), CliError> {
+    check_samples(
+        samples,
+        IdentifySettings::default().effective_memory_limit(),
+    )?;
+    OutputGuard::new().check_out_dir(out, files)?;
     Ok(())
 }
 
@@ -104,7 +140,7 @@ struct SprayRun {
 
 /// Runs `structid demo spray`.
 pub fn spray(a: SprayArgs) -> Result<(), CliError> {
-    check_samples(a.samples)?;
+    check_args(a.samples, &a.out, &SPRAY_OUTPUTS)?;
     let exp = paper::spray(
         a.samples,
         SPRAY_NOISE,
@@ -112,7 +148,7 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
         a.seed,
     )?;
     let guard = OutputGuard::new();
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&SPRAY_OUTPUTS))?;
     let mut written = Vec::new();
 
     let u = exp.data.u().channel(0);
@@ -222,6 +258,7 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::runtime(e.to_string()))?
         + "\n";
     write_text(&guard, &a.out.join("summary.json"), &text, &mut written)?;
+    guard.finish_set(&a.out, &SPRAY_OUTPUTS)?;
 
     let mut s = String::new();
     let _ = writeln!(
@@ -262,12 +299,12 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
 
 /// Runs `structid demo multi-input`.
 pub fn multi_input(a: MultiInputArgs) -> Result<(), CliError> {
-    check_samples(a.samples)?;
-    let noise_std = non_negative("--noise-std", a.noise_std)?;
+    let noise_std = crate::error::noise_std("--noise-std", a.noise_std)?;
+    check_args(a.samples, &a.out, &MULTI_OUTPUTS)?;
     let t = Instant::now();
     let exp = paper::multi_input(a.samples, noise_std, paper::gaussian(MULTI_SIGMA)?, a.seed)?;
     let guard = OutputGuard::new();
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&MULTI_OUTPUTS))?;
     let mut written = Vec::new();
 
     let u0 = exp.data.u().channel(0);
@@ -365,6 +402,7 @@ pub fn multi_input(a: MultiInputArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::runtime(e.to_string()))?
         + "\n";
     write_text(&guard, &a.out.join("summary.json"), &text, &mut written)?;
+    guard.finish_set(&a.out, &MULTI_OUTPUTS)?;
 
     let mut s = String::new();
     let _ = writeln!(

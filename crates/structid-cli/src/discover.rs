@@ -677,7 +677,16 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     // The gap's lags, as discovery sets them.
     let max_lag = settings.gap().max_lag.min(est.data.len() / 4).max(1);
 
-    guard.create_dir(&a.out)?;
+    // Every file this command may write, earlier runs' extra tables included.
+    let planned: Vec<String> = OUTPUTS
+        .iter()
+        .map(|f| f.to_string())
+        .chain(
+            (2..=MAX_TABLE_BLOCKS)
+                .map(|i| augmented::table_file_name(&format!("{}{i}", augmented::BLOCK))),
+        )
+        .collect();
+    guard.begin_set(&a.out, Some(&planned))?;
     let command = command_line();
     let mut written_files: Vec<PathBuf> = Vec::new();
     let written = match &d.finding {
@@ -823,6 +832,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
             removed.push(p);
         }
     }
+    guard.finish_set(&a.out, &crate::identify::file_names(&written_files))?;
 
     if let Some((effects, _)) = &effects {
         print!("{}", report::effects_summary(effects));

@@ -133,6 +133,61 @@ pub fn positive(flag: &str, v: f64) -> Result<f64, CliError> {
     }
 }
 
+/// The largest β the commands accept: two decades above the top of the automatic search
+/// (10⁻¹⁰ … 10⁴). β weighs the dispersion against the mean noise energy per sample; far
+/// above that the dispersion outweighs any record's noise and the estimate is what the
+/// dispersion leaves free (a constant, or the trend), whatever the data say, and L·β
+/// overflows for absurd values such as 1e308.
+pub const MAX_BETA: f64 = 1e6;
+
+/// Checks a command-line β: finite, greater than zero, at most [`MAX_BETA`].
+pub fn beta(flag: &str, v: f64) -> Result<f64, CliError> {
+    let v = positive(flag, v)?;
+    if v > MAX_BETA {
+        return Err(CliError::input(format!(
+            "invalid value {v:e} for {flag}: above {MAX_BETA:e} the dispersion outweighs the noise \
+             energy of any record and the estimate ignores the data; give 0 < β ≤ {MAX_BETA:e} \
+             (typically 1e-4 … 1; `auto` searches 1e-10 … 1e4)"
+        )));
+    }
+    Ok(v)
+}
+
+/// Checks a noise standard deviation: finite, zero or greater, and with a finite variance
+/// (below about 1.3e154: the noise energy and the reports square it).
+pub fn noise_std(flag: &str, v: f64) -> Result<f64, CliError> {
+    let v = non_negative(flag, v)?;
+    if !(v * v).is_finite() {
+        return Err(CliError::input(format!(
+            "invalid value {v:e} for {flag}: its square, the noise variance, overflows; give a \
+             standard deviation below 1e150 (in the units of the data)"
+        )));
+    }
+    Ok(v)
+}
+
+/// Refuses simulated columns that are not finite (the model's gains and the noise level
+/// overflow together), naming the column and the first sample, so that no file of
+/// non-finite numbers (which no command reads back) is written.
+pub fn finite_columns<S: AsRef<str>>(
+    names: &[S],
+    columns: &[Vec<f64>],
+    noise_std: f64,
+) -> Result<(), CliError> {
+    for (name, c) in names.iter().zip(columns) {
+        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+            return Err(CliError::input(format!(
+                "the simulated column `{}` is not finite at sample {k} ({}): the model's gains and \
+                 --noise-std {noise_std:e} overflow together; give a smaller --noise-std, or rescale \
+                 the model. Nothing was written",
+                name.as_ref(),
+                c[k]
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Checks a command-line number that must be finite and non-negative.
 pub fn non_negative(flag: &str, v: f64) -> Result<f64, CliError> {
     if v.is_finite() && v >= 0.0 {

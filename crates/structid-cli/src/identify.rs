@@ -77,7 +77,7 @@ pub fn protect_inputs(
 /// Builds the settings from the command line.
 fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
     let beta = match a.beta {
-        crate::AutoOr::Value(b) => positive("--beta", b)?,
+        crate::AutoOr::Value(b) => crate::error::beta("--beta", b)?,
         crate::AutoOr::Auto => IdentifySettings::default().beta(),
     };
     let mut b = IdentifySettings::builder()
@@ -123,12 +123,27 @@ fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
                 "invalid value 0 for --memory-limit-mib: it must be at least 1",
             ));
         }
-        let bytes = mib
-            .checked_mul(1 << 20)
-            .ok_or_else(|| CliError::input(format!("--memory-limit-mib {mib} is too large")))?;
-        b = b.memory_limit_bytes(bytes);
+        check_memory_limit(mib, structid_core::identify::settings::total_memory_bytes())?;
+        b = b.memory_limit_bytes(mib << 20);
     }
     Ok(b.build()?)
+}
+
+/// Refuses a `--memory-limit-mib` above the machine's memory `total` (bytes; unchecked
+/// where it is unknown): the solvers would plan for memory that does not exist and fail on
+/// an allocation instead of choosing a smaller method or refusing the problem.
+fn check_memory_limit(mib: u64, total: Option<u64>) -> Result<(), CliError> {
+    let bytes = mib.checked_mul(1 << 20);
+    match (bytes, total) {
+        (Some(b), Some(t)) if b > t => Err(CliError::input(format!(
+            "invalid value {mib} for --memory-limit-mib: the machine has {} MiB of memory; give at most that",
+            t >> 20
+        ))),
+        (None, _) => Err(CliError::input(format!(
+            "invalid value {mib} for --memory-limit-mib: more memory than any machine has"
+        ))),
+        _ => Ok(()),
+    }
 }
 
 /// Applies `--dispersion` and `--neighbours` to every block.
@@ -233,6 +248,96 @@ pub(crate) fn model_and_data(
     Ok((data, model))
 }
 
+/// The file names of `paths`, for [`OutputGuard::finish_set`].
+pub(crate) fn file_names(paths: &[PathBuf]) -> Vec<String> {
+    paths
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect()
+}
+
+/// Refuses a record on which a block's input z does not vary: the data then show its map at
+/// one point only (a single sample, or a constant input), and an estimate would be a guess
+/// everywhere else. Models whose z cannot be computed from the data are left to the solver.
+pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, path: &Path) -> Result<(), CliError> {
+    let Ok(z) = mf.z_signal(data) else {
+        return Ok(());
+    };
+    let names = mf.z_names();
+    for b in &mf.blocks {
+        let constant = b.inputs.iter().copied().find(|&i| {
+            i < z.channels() && {
+                let c = z.channel(i);
+                c.iter().all(|v| *v == c[0])
+            }
+        });
+        if let Some(i) = constant {
+            let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
+            return Err(CliError::input(format!(
+                "the input `{z_name}` of block `{}` is constant ({}) over the {} sample(s) of `{}`: \
+                 the data show its map at one point only; identify on a record that excites it",
+                b.name,
+                z.channel(i).first().copied().unwrap_or(f64::NAN),
+                data.len(),
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// How much wider or narrower than the range of a block's input z a command-line σ may be.
+const SIGMA_SPAN: f64 = 1e6;
+
+/// Refuses a `--sigma` that is absurd for the record: more than [`SIGMA_SPAN`] times wider
+/// than the range of a block's input z (the kernel is then flat over the data and the map a
+/// constant; σ² overflows for 1e308) or that many times narrower (a spike at each sample,
+/// zero between them). Blocks whose z cannot be computed or does not vary are left alone.
+pub(crate) fn check_sigma(sigma: f64, mf: &ModelFile, data: &Data) -> Result<(), CliError> {
+    let Ok(z) = mf.z_signal(data) else {
+        return Ok(());
+    };
+    let names = mf.z_names();
+    for b in &mf.blocks {
+        for &i in b.inputs.iter().filter(|&&i| i < z.channels()) {
+            let c = z.channel(i);
+            let (lo, hi) = c
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                    (l.min(*v), h.max(*v))
+                });
+            let range = hi - lo;
+            if !(range.is_finite() && range > 0.0) {
+                continue;
+            }
+            if sigma > SIGMA_SPAN * range || sigma < range / SIGMA_SPAN {
+                let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
+                return Err(CliError::input(format!(
+                    "invalid value {sigma:e} for --sigma: the input `{z_name}` of block `{}` spans \
+                     {range:.4e}, and a kernel {:.0e} times {} than that is {}; give σ between \
+                     {:.1e} and {:.1e} ({SIGMA_SPAN:.0e} times narrower or wider than the range; the \
+                     default is 0.1 × the range)",
+                    b.name,
+                    if sigma > range {
+                        sigma / range
+                    } else {
+                        range / sigma
+                    },
+                    if sigma > range { "wider" } else { "narrower" },
+                    if sigma > range {
+                        "flat over the data (the map is a constant)"
+                    } else {
+                        "a spike at each sample (the map is zero between them)"
+                    },
+                    range / SIGMA_SPAN,
+                    range * SIGMA_SPAN
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// An absolute, canonical form of an existing path (absolute but not canonical when it cannot
 /// be resolved), for reports that must not depend on the working directory.
 pub(crate) fn absolute(p: &Path) -> PathBuf {
@@ -279,6 +384,14 @@ fn reproduction(
 pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let (settings, sigma, mf) = load(&a)?;
+    let cannot = |e: structid_core::Error| {
+        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
+    };
+    // z computed from u and y: D_zw ≠ 0 makes z_k depend on N(z_k) (as in `simulate`).
+    if mf.signals.z.is_none() {
+        mf.lft.check_no_algebraic_loop().map_err(cannot)?;
+    }
+    mf.lft.check_residual_stable().map_err(cannot)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
     let auto_beta = a.beta == crate::AutoOr::Auto;
     if a.folds < 2 && a.selection == Some(crate::SelectionArg::Cv) {
@@ -302,18 +415,21 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     protect_inputs(&mut guard, &mf, &a.model, &inputs);
     // Refuse a bad output directory before the (possibly long) identification.
     let stems = file_stems(mf.blocks.iter().map(|b| b.name.as_str()));
-    guard.check_out_dir(
-        &a.out,
-        ["estimate.csv", "estimate.json", "report.json"]
-            .into_iter()
-            .map(String::from)
-            .chain(
-                stems
-                    .iter()
-                    .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
-            ),
-    )?;
+    let planned: Vec<String> = ["estimate.csv", "estimate.json", "report.json"]
+        .into_iter()
+        .map(String::from)
+        .chain(
+            stems
+                .iter()
+                .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
+        )
+        .collect();
+    guard.check_out_dir(&a.out, &planned)?;
     let (data, model) = model_and_data(&mf, &a.data, sigma)?;
+    check_excitation(&mf, &data, &a.data)?;
+    if let Some(s) = sigma {
+        check_sigma(s, &mf, &data)?;
+    }
     let (id, settings, selection) = if auto_beta || auto_sigma {
         let quadratic = !mf
             .blocks
@@ -356,7 +472,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     // An iterate that stopped at a limit is not an estimate to write: a runtime error.
     let id = id.converged()?;
 
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&planned))?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
     report.data_file = Some(a.data.display().to_string());
     let (selection, block_sigmas) = match selection {
@@ -377,6 +493,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         &mut report,
         a.no_bands,
     )?;
+    guard.finish_set(&a.out, &file_names(&written))?;
 
     print!(
         "{}",
@@ -622,6 +739,19 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn memory_limit_is_checked_against_the_machine() {
+        let gib = 1u64 << 30;
+        assert!(check_memory_limit(1024, Some(16 * gib)).is_ok());
+        assert!(check_memory_limit(16 * 1024, Some(16 * gib)).is_ok());
+        let e = check_memory_limit(100_000_000, Some(16 * gib)).unwrap_err();
+        assert_eq!(e.code(), crate::error::EXIT_INPUT);
+        assert!(e.to_string().contains("the machine has 16384 MiB"), "{e}");
+        // Unknown machine memory: any representable budget is taken as given.
+        assert!(check_memory_limit(100_000_000, None).is_ok());
+        assert!(check_memory_limit(u64::MAX, None).is_err());
+    }
 
     #[test]
     fn file_stems_are_safe_and_unique() {

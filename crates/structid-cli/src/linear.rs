@@ -29,14 +29,15 @@ pub struct LinearArgs {
     #[arg(long, value_name = "COL", default_value = "y")]
     output: String,
     /// Orders `NA,NB,NK`: denominator order, numerator coefficients and input delay (MATLAB's
-    /// arx convention). Without it, orders are selected by --select.
+    /// arx convention), NA and NB at most 30. Without it, orders are selected by --select.
     #[arg(long, value_name = "NA,NB,NK", value_parser = parse_orders)]
     orders: Option<[usize; 3]>,
     /// Order selection over NA, NB ∈ 1…--max-order and NK ∈ --min-delay…--max-delay: `aic`,
     /// `bic`, `fpe` (ARX criteria) or `validation` (simulation error on --validation-data).
     #[arg(long, value_name = "aic|bic|fpe|validation", default_value = "bic")]
     select: SelectArg,
-    /// Largest NA and NB of the selection grid.
+    /// Largest NA and NB of the selection grid (at most 30; the grid holds at most 2700
+    /// candidates, each a least-squares fit).
     #[arg(long, value_name = "N", default_value_t = 6)]
     max_order: usize,
     /// Smallest delay NK of the selection grid (output feedback needs 1).
@@ -207,6 +208,55 @@ fn map_dispersion(a: &LinearArgs) -> Result<DispersionSpec, CliError> {
     })
 }
 
+/// The order-selection grid of the arguments.
+fn grid(a: &LinearArgs) -> OrderGrid {
+    OrderGrid {
+        na: 1..=a.max_order,
+        nb: 1..=a.max_order,
+        nk: a.min_delay..=a.max_delay,
+    }
+}
+
+/// Checks the orders (given, or the selection grid) before the data are read: NA and NB at
+/// most [`MAX_ORDER`](structid_linear::selection::MAX_ORDER) (the bound of the selection
+/// grid, for the same reasons of cost and numerics: the output-error fit of given orders
+/// carries one filtered copy of the record per parameter), NK shorter than any record.
+fn check_orders(a: &LinearArgs) -> Result<(), CliError> {
+    use structid_linear::selection::{MAX_ORDER, check_grid};
+    match a.orders {
+        Some([na, nb, nk]) => {
+            if na > MAX_ORDER || nb > MAX_ORDER {
+                return Err(CliError::input(format!(
+                    "invalid value {na},{nb},{nk} for --orders: NA and NB can be at most {MAX_ORDER} \
+                     (the fit costs about L·(NA + NB)² operations per iteration, and polynomials of \
+                     higher order are numerically meaningless)"
+                )));
+            }
+            if nk >= structid_io::data_file::MAX_ROWS {
+                return Err(CliError::input(format!(
+                    "invalid value {na},{nb},{nk} for --orders: the delay NK is longer than any record \
+                     structid reads ({} samples)",
+                    structid_io::data_file::MAX_ROWS
+                )));
+            }
+            Ok(())
+        }
+        None => {
+            if a.max_order == 0 || a.min_delay > a.max_delay {
+                return Err(CliError::input(
+                    "the selection grid is empty: --max-order must be ≥ 1 and --min-delay ≤ --max-delay",
+                ));
+            }
+            check_grid(&grid(a)).map_err(|e| {
+                CliError::input(format!(
+                    "--max-order {} with delays {}..={}: {e}",
+                    a.max_order, a.min_delay, a.max_delay
+                ))
+            })
+        }
+    }
+}
+
 /// Runs `structid linear`.
 pub fn run(a: LinearArgs) -> Result<(), CliError> {
     let mut guard = OutputGuard::new();
@@ -214,7 +264,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     if let Some(v) = &a.validation_data {
         guard.protect(v);
     }
-    guard.check(&a.out)?;
+    guard.check_out_file(&a.out)?;
     if let Some(ts) = a.sample_time
         && !(ts.is_finite() && ts > 0.0)
     {
@@ -270,6 +320,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
              leave the start of the record out of the cost",
         ));
     }
+    check_orders(&a)?;
     let (u, y) = read_signals(&a.data, &a)?;
     let mut arx_settings = ArxSettings::builder().integrators(a.integrators);
     let mut oe_settings = OeSettings::builder()
@@ -289,11 +340,6 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             None,
         ),
         None => {
-            if a.max_order == 0 || a.min_delay > a.max_delay {
-                return Err(CliError::input(
-                    "the selection grid is empty: --max-order must be ≥ 1 and --min-delay ≤ --max-delay",
-                ));
-            }
             let criterion = match a.select {
                 SelectArg::Aic => OrderCriterion::Aic,
                 SelectArg::Bic => OrderCriterion::Bic,
@@ -309,11 +355,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                     }
                 }
             };
-            let grid = OrderGrid {
-                na: 1..=a.max_order,
-                nb: 1..=a.max_order,
-                nk: a.min_delay..=a.max_delay,
-            };
+            let grid = grid(&a);
             // The free part is selected on the differenced output.
             let sel = select_orders(
                 &u,

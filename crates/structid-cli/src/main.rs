@@ -15,8 +15,9 @@
 //! ```
 //!
 //! Exit codes: 0 success, 2 invalid usage or input (bad arguments, malformed model or data
-//! files, a model that cannot be identified as posed), 1 failure while running (writing files,
-//! numerical breakdown, not enough memory).
+//! files, a model that cannot be identified as posed, an output location that cannot be used,
+//! a data file longer than [`structid_io::data_file::MAX_ROWS`]), 1 failure while running
+//! (writing files, numerical breakdown, not enough memory).
 
 mod compare;
 mod data;
@@ -45,6 +46,13 @@ use crate::error::CliError;
 /// maps with their dispersions; a data file (CSV with a header row) holds the measured signals.
 /// `structid identify` estimates the maps, `structid simulate` generates data from known maps,
 /// and `structid demo` runs the examples of Hsu et al. (2006) without any files.
+///
+/// Data files may hold up to 1 000 000 rows (`structid data csv`, which cuts longer files, is
+/// limited by the memory only). Outputs are checked before any work: an output that is an
+/// input, a file where a directory is expected (or the reverse) and a place that cannot be
+/// written are input errors (exit code 2). Every file is written atomically; a result
+/// directory's `.complete` lists the files of the sets written in full, and commands that read
+/// an estimate refuse one whose set was left unfinished by an interrupted run.
 #[derive(Debug, Parser)]
 #[command(name = "structid", version, about, long_about, max_term_width = 100)]
 struct Cli {
@@ -219,7 +227,8 @@ struct IdentifyArgs {
     /// Validation record (CSV like --data) for `--selection validation`.
     #[arg(long, value_name = "V.csv")]
     validation_data: Option<PathBuf>,
-    /// Memory budget of the solver in MiB [default: 3/4 of the available memory].
+    /// Memory budget of the solver in MiB, at most the machine's memory (checked on Linux)
+    /// [default: 3/4 of the available memory].
     #[arg(long, value_name = "N")]
     memory_limit_mib: Option<u64>,
     /// How the initial state of the linear block is treated: `zero` (the system starts at

@@ -200,17 +200,24 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(v) = &a.validation_data {
         guard.protect(v);
     }
-    guard.check_out_dir(
-        &a.out,
-        [
-            "model.toml",
-            "refine.csv",
-            "refine.svg",
-            "estimation.csv",
-            "report.json",
-            "estimate.json",
-        ],
-    )?;
+    let planned: Vec<String> = [
+        "model.toml",
+        "refine.csv",
+        "refine.svg",
+        "estimation.csv",
+        "report.json",
+        "estimate.json",
+        "estimate.csv",
+    ]
+    .into_iter()
+    .map(String::from)
+    .chain(
+        crate::identify::file_stems(mf.blocks.iter().map(|b| b.name.as_str()))
+            .iter()
+            .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
+    )
+    .collect();
+    guard.check_out_dir(&a.out, &planned)?;
 
     // Records.
     let sigma = match a.sigma {
@@ -223,6 +230,10 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         _ => None,
     };
     let (all, model) = model_and_data(&mf, &a.data, sigma)?;
+    crate::identify::check_excitation(&mf, &all, &a.data)?;
+    if let Some(s) = sigma {
+        crate::identify::check_sigma(s, &mf, &all)?;
+    }
     let (data, validation, validation_note, estimation_file): (Data, Option<Data>, _, _) = match (
         &a.validation_data,
         a.validation_fraction,
@@ -277,12 +288,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let auto_beta = a.beta == AutoOr::Auto;
     let auto_sigma = a.sigma == Some(AutoOr::Auto);
     let beta = match a.beta {
-        AutoOr::Value(b) if !(b.is_finite() && b > 0.0) => {
-            return Err(CliError::input(format!(
-                "invalid value {b} for --beta: it must be a finite number greater than zero"
-            )));
-        }
-        AutoOr::Value(b) => b,
+        AutoOr::Value(b) => crate::error::beta("--beta", b)?,
         AutoOr::Auto => 0.01,
     };
     let identify_settings = IdentifySettings::builder()
@@ -340,7 +346,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     refined.blocks[0].dispersion = refined.blocks[0].dispersion.with_sigma(width);
     refined.path = None;
 
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&planned))?;
     let model_path = a.out.join("model.toml");
     guard.write(&model_path, refined.to_toml_string().as_bytes())?;
     let data_file = match &estimation_file {
@@ -457,6 +463,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(p) = estimation_file {
         written.insert(1, p);
     }
+    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
     if let Some(note) = recognised {
         println!("{note}");
     }

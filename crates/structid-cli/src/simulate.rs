@@ -4,12 +4,12 @@ use structid_core::Interpolant;
 use structid_io::{DataTable, ModelFile, OutputGuard};
 
 use crate::SimulateArgs;
-use crate::error::{CliError, non_negative};
+use crate::error::{CliError, finite_columns};
 use crate::identify::protect_inputs;
 
 /// Runs `structid simulate`.
 pub fn run(a: SimulateArgs) -> Result<(), CliError> {
-    let noise_std = non_negative("--noise-std", a.noise_std)?;
+    let noise_std = crate::error::noise_std("--noise-std", a.noise_std)?;
     let model_path = match (&a.model, &a.estimate) {
         (_, Some(e)) => return crate::stored::simulate(&a, e, noise_std),
         (Some(m), None) => m.clone(),
@@ -23,7 +23,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     let mf = ModelFile::from_path(model_path)?;
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, &mf, model_path, &[&a.input]);
-    guard.check(&a.out)?;
+    guard.check_out_file(&a.out)?;
     // A nominal model's declared w columns carry w = 0.
     let lft = mf.model_lft()?;
     lft.check_no_algebraic_loop().map_err(|e| {
@@ -79,6 +79,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     columns.extend((0..dims.y).map(|c| sim.y.channel(c)));
     columns.extend((0..dims.z).map(|c| sim.z.channel(c)));
     columns.extend(mf.blocks.iter().map(|b| sim.w.channel(b.output)));
+    finite_columns(&names, &columns, noise_std)?;
     guard.write_csv(&a.out, &names, &columns)?;
     println!(
         "simulated {len} samples ({} noise, std {noise_std}, seed {}); wrote {} with columns {}",

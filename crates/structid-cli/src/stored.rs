@@ -21,6 +21,7 @@ use crate::{InitialStateArg, PredictArgs, SimulateArgs, ValidateArgs};
 
 /// The estimate and the names of its channels (u0, u1, … / y0, … when it has none).
 fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>), CliError> {
+    check_complete(path)?;
     let estimate = read_estimate(path)?;
     let d = estimate.lft().dims();
     let (u, y) = match estimate.signals() {
@@ -31,6 +32,22 @@ fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>), CliError> {
         ),
     };
     Ok((estimate, u, y))
+}
+
+/// Refuses a file of a result set whose run did not finish: its directory's completion marker
+/// (see [`structid_io::output`]) does not list it. Files in directories without a marker
+/// (written by hand, or by an older structid) are taken as they are.
+pub(crate) fn check_complete(path: &Path) -> Result<(), CliError> {
+    if path.is_file() && !structid_io::output::is_complete(path) {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        return Err(CliError::input(format!(
+            "`{}` belongs to an incomplete set of results: the run that wrote it did not finish \
+             (it is not listed in `{}`); run that command again",
+            path.display(),
+            dir.join(structid_io::output::COMPLETE_MARKER).display()
+        )));
+    }
+    Ok(())
 }
 
 fn record(path: &Path, u: &[String], y: &[String]) -> Result<Data, CliError> {
@@ -80,17 +97,10 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     if let Some(m) = &a.model {
         guard.protect(m);
     }
-    guard.check_out_dir(
-        &a.out,
-        [
-            "validation.json",
-            "simulation.csv",
-            "simulation.svg",
-            "residuals.svg",
-        ],
-    )?;
+    guard.check_out_dir(&a.out, crate::validate::OUTPUTS)?;
     let (estimate, u_names, y_names) = load(path)?;
     let data = record(&a.data, &u_names, &y_names)?;
+    crate::validate::check_lengths(a, &data)?;
     let settings = ValidationSettings::builder()
         .initial_state(initial(a.initial_state))
         .max_lag(a.max_lag)
@@ -99,7 +109,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
         .build()?;
     let report = estimate.validate(&data, &settings)?;
 
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&crate::validate::OUTPUTS))?;
     let len = report.samples;
     let (time, time_label) = time_axis(&estimate, len);
     let mut columns = vec![time.clone()];
@@ -153,6 +163,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     });
     write_json(&guard, &json_path, &doc)?;
     written.push(json_path);
+    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
 
     println!(
         "validated the stored estimate `{}` on {len} samples of `{}` ({:.2} s)",
@@ -185,7 +196,7 @@ pub fn simulate(a: &SimulateArgs, path: &Path, noise_std: f64) -> Result<(), Cli
     let mut guard = OutputGuard::new();
     guard.protect(path);
     guard.protect(&a.input);
-    guard.check(&a.out)?;
+    guard.check_out_file(&a.out)?;
     let (estimate, u_names, y_names) = load(path)?;
     let table = DataTable::read(&a.input)?;
     let u = table
@@ -207,6 +218,7 @@ pub fn simulate(a: &SimulateArgs, path: &Path, noise_std: f64) -> Result<(), Cli
     }
     let mut columns: Vec<Vec<f64>> = (0..dims.u).map(|c| u.channel(c)).collect();
     columns.extend((0..dims.y).map(|c| sim.y.channel(c)));
+    crate::error::finite_columns(&names, &columns, noise_std)?;
     guard.write_csv(&a.out, &names, &columns)?;
     println!(
         "simulated the stored estimate `{}` on {} samples ({} noise, std {noise_std}); wrote {} with columns {}",
@@ -219,13 +231,16 @@ pub fn simulate(a: &SimulateArgs, path: &Path, noise_std: f64) -> Result<(), Cli
     Ok(())
 }
 
+/// The files of `structid predict`.
+const PREDICT_OUTPUTS: [&str; 2] = ["prediction.csv", "prediction.json"];
+
 /// `structid predict`.
 pub fn predict(a: PredictArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let mut guard = OutputGuard::new();
     guard.protect(&a.estimate);
     guard.protect(&a.data);
-    guard.check_out_dir(&a.out, ["prediction.csv", "prediction.json"])?;
+    guard.check_out_dir(&a.out, PREDICT_OUTPUTS)?;
     let settings = PredictionSettings::builder()
         .horizon(a.horizon)
         .initial_state(initial(a.initial_state))
@@ -234,7 +249,7 @@ pub fn predict(a: PredictArgs) -> Result<(), CliError> {
     let (estimate, u_names, y_names) = load(&a.estimate)?;
     let data = record(&a.data, &u_names, &y_names)?;
     let pred = estimate.predict(&data, &settings)?;
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&PREDICT_OUTPUTS))?;
     let (time, _) = time_axis(&estimate, data.len());
     let mut names = vec!["time".to_string()];
     let mut columns = vec![time];
@@ -266,6 +281,7 @@ pub fn predict(a: PredictArgs) -> Result<(), CliError> {
             "outputs": outputs,
         }),
     )?;
+    guard.finish_set(&a.out, &PREDICT_OUTPUTS)?;
     println!(
         "{}-step-ahead prediction of `{}` on {} samples of `{}` ({:.2} s)",
         a.horizon,

@@ -7,7 +7,7 @@ use std::time::Instant;
 use clap::Parser;
 use serde_json::{Value, json};
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
-use structid_core::{Identification, InitialState, Interpolant, identify};
+use structid_core::{Data, Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
@@ -22,7 +22,7 @@ use crate::{Cli, Command, IdentifyArgs, InitialStateArg, ValidateArgs};
 pub const W_TOLERANCE: f64 = 1e-6;
 
 /// The files written, in order.
-const OUTPUTS: [&str; 4] = [
+pub(crate) const OUTPUTS: [&str; 4] = [
     "validation.json",
     "simulation.csv",
     "simulation.svg",
@@ -269,6 +269,27 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
     })
 }
 
+/// Checks `--settle` and `--max-lag` against the length of the validation record.
+pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliError> {
+    if a.settle >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
+            a.settle,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
+    if a.max_lag >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
+            a.max_lag,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
+    Ok(())
+}
+
 /// Runs `structid validate`.
 pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     if let Some(p) = &a.estimate
@@ -305,6 +326,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
                     dir.display()
                 )));
             }
+            crate::stored::check_complete(&dir.join("report.json"))?;
             let vmf = ModelFile::from_path(model_path)?;
             let rec = recorded(dir, &vmf, model_path)?;
             // Never overwrite an input: the files of the command, the estimate directory's
@@ -346,22 +368,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     // The validation record, checked before the (possibly long) re-identification.
     let table = DataTable::read(&a.data)?;
     let vdata = vmf.select_data(&table)?;
-    if a.settle >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
-            a.settle,
-            a.data.display(),
-            vdata.len()
-        )));
-    }
-    if a.max_lag >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
-            a.max_lag,
-            a.data.display(),
-            vdata.len()
-        )));
-    }
+    check_lengths(&a, &vdata)?;
 
     // The maps: the estimate rebuilt and checked against its directory, or the true maps.
     let rebuilt = recorded.map(rebuild).transpose()?;
@@ -415,7 +422,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     let report = validate(&vmodel, &maps, &vdata, &settings)?;
 
     // Outputs.
-    guard.create_dir(&a.out)?;
+    guard.begin_set(&a.out, Some(&OUTPUTS))?;
     let y_names = vmf.signals.y.clone();
     let u_names = vmf.signals.u.clone();
     let len = report.samples;
@@ -517,6 +524,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     text.push('\n');
     guard.write(&json_path, text.as_bytes())?;
     written.push(json_path);
+    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
 
     print!(
         "{}",

@@ -105,18 +105,14 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(), CliError> {
             }
         }
     }
-    if out.exists() && !out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            out.display()
-        )));
-    }
+    guard.check_out_dir(out, ["results.csv", "results.md"])?;
     if !case_files(out)?.is_empty() {
         return Err(CliError::input(format!(
             "--out `{}` already holds case files; merge into a new or empty directory",
             out.display()
         )));
     }
+    guard.begin_set::<&str>(out, None)?;
     guard.create_dir(&out.join(CASES_DIR))?;
     let mut records: BTreeMap<usize, CaseRecord> = BTreeMap::new();
     let total = list.as_ref().map_or(0, |l| l.1);
@@ -130,6 +126,9 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(), CliError> {
     }
     write_tables(&guard, out, &records, total)?;
     let figs = write_figures(&guard, out, &records)?;
+    let mut set = vec![String::from("results.csv"), String::from("results.md")];
+    set.extend(crate::identify::file_names(&figs));
+    guard.finish_set(out, &set)?;
     let failed = records.values().filter(|r| !r.is_ok()).count();
     println!(
         "merged {} case(s) of {total} from {} director{} into {}{}",

@@ -296,13 +296,8 @@ fn progress_bar(len: usize) -> ProgressBar {
     pb
 }
 
-fn check_output_dir(out: &Path, resume: bool) -> Result<(), CliError> {
-    if out.exists() && !out.is_dir() {
-        return Err(CliError::input(format!(
-            "--out `{}` exists and is not a directory",
-            out.display()
-        )));
-    }
+fn check_output_dir(guard: &OutputGuard, out: &Path, resume: bool) -> Result<(), CliError> {
+    guard.check_out_dir(out, ["results.csv", "results.md"])?;
     if !resume && !case_files(out)?.is_empty() {
         return Err(CliError::input(format!(
             "--out `{}` already holds results of a sweep ({}/*.json); pass --resume to continue it, \
@@ -312,6 +307,16 @@ fn check_output_dir(out: &Path, resume: bool) -> Result<(), CliError> {
         )));
     }
     Ok(())
+}
+
+/// Whether a case file that parses is a finished case of this sweep: the record of a run that
+/// got as far as writing its result. A record of another length of case list, or one that
+/// says `ok` without the cost of its estimate, is not (a file written by hand, or by a
+/// version that wrote records before finishing them); `--resume` runs such a case again.
+fn case_is_complete(r: &CaseRecord, ctx: &Context<'_>) -> bool {
+    r.case_count == ctx.case_count
+        && r.case_list == ctx.case_list
+        && (!r.is_ok() || r.cost.is_some())
 }
 
 /// Runs `structid compare --config … --out …`.
@@ -327,11 +332,7 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
     for p in &sweep.inputs {
         guard.protect(p);
     }
-    guard.check(&opts.out)?;
-    for f in ["results.csv", "results.md"] {
-        guard.check(&opts.out.join(f))?;
-    }
-    check_output_dir(&opts.out, opts.resume)?;
+    check_output_dir(&guard, &opts.out, opts.resume)?;
     let ctx = Context {
         sweep: &sweep,
         case_count: cases.len(),
@@ -352,7 +353,7 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
             if !p.exists() {
                 continue;
             }
-            match read_case(&p) {
+            match read_case(&p).filter(|r| case_is_complete(r, &ctx)) {
                 Some(r) if r.id == c.id && r.fingerprint == skeleton(&ctx, c).fingerprint => {
                     done.insert(c.index, r);
                 }
@@ -375,7 +376,11 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
         .copied()
         .filter(|c| !done.contains_key(&c.index))
         .collect();
+    // The directory's files (tables and figures) are a set: listed as complete in its
+    // marker only once the run has finished. Case files are complete one by one.
+    guard.begin_set::<&str>(&opts.out, None)?;
     guard.create_dir(&cases_dir)?;
+    let _ = structid_io::output::remove_stale_temp_files(&cases_dir);
     write_tables(&guard, &opts.out, &done, cases.len())?;
 
     let pool = {
@@ -428,6 +433,9 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
     result?;
     let records = state.into_inner().unwrap_or_else(|p| p.into_inner());
     let figures = write_figures(&guard, &opts.out, &records)?;
+    let mut set = vec![String::from("results.csv"), String::from("results.md")];
+    set.extend(crate::identify::file_names(&figures));
+    guard.finish_set(&opts.out, &set)?;
 
     let failed = records.values().filter(|r| !r.is_ok()).count();
     println!(
