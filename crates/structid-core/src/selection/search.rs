@@ -91,6 +91,8 @@ pub fn select(
     let first_width = |w: &[Option<f64>]| w.iter().flatten().next().copied();
 
     let mut curve = Vec::new();
+    // Trials whose criterion could not be evaluated (β, why): skipped, and reported.
+    let mut skipped: Vec<(f64, String)> = Vec::new();
     let method: String;
     let mut features: Option<FeatureScore> = None;
     // The best β (and its value and s²) for the given widths.
@@ -151,12 +153,24 @@ pub fn select(
         // s² of every trial, so the choice needs no further evaluation (a CV trial is K fits)
         let mut noise = Vec::new();
         let first_trial = curve.len();
+        // A trial whose criterion is not finite (a cross-validation fold that diverges at one
+        // β) scores +∞ and the search goes on around it; only when no trial is finite does
+        // the search fail.
+        let mut first_failure: Option<Error> = None;
         let mut eval = |lg: f64| -> Result<f64> {
             let beta = 10f64.powf(lg);
-            let (value, s2) = score.score(beta)?;
-            curve.push(Trial { beta, sigma, value });
-            noise.push((lg, s2));
-            Ok(value)
+            match trial(score.score(beta))? {
+                Ok((value, s2)) => {
+                    curve.push(Trial { beta, sigma, value });
+                    noise.push((lg, s2));
+                    Ok(value)
+                }
+                Err(why) => {
+                    first_failure.get_or_insert_with(|| Error::Numerical(why.clone()));
+                    skipped.push((beta, why));
+                    Ok(f64::INFINITY)
+                }
+            }
         };
         let (lg, value, at_bound) = if selection.tune_beta {
             let (lo, hi) = selection.beta_bounds;
@@ -190,6 +204,14 @@ pub fn select(
             let lg = settings.beta().log10();
             (lg, eval(lg)?, None)
         };
+        if !value.is_finite() {
+            return Err(first_failure.unwrap_or_else(|| {
+                Error::Numerical(format!(
+                    "the {} criterion is not finite at any β tried",
+                    criterion.describe()
+                ))
+            }));
+        }
         let beta = 10f64.powf(lg);
         let s2 = noise.iter().find(|t| t.0 == lg).and_then(|t| t.1);
         Ok((beta, value, s2, score.method(), at_bound))
@@ -227,6 +249,21 @@ pub fn select(
     if features.is_some() && settings.solver() == SolverChoice::Auto {
         identification.diagnostics.solver_reason = SolverReason::FeatureSpaceSelection;
     }
+    if !skipped.is_empty() {
+        let list = skipped
+            .iter()
+            .take(5)
+            .map(|(b, why)| format!("β = {b:.3e} ({why})"))
+            .collect::<Vec<_>>()
+            .join("; ");
+        identification.diagnostics.warnings.push(format!(
+            "the {} criterion could not be evaluated at {} of the β tried, which the search \
+             skipped: {list}{}",
+            criterion.describe(),
+            skipped.len(),
+            if skipped.len() > 5 { "; …" } else { "" }
+        ));
+    }
     if let Some(side) = beta_at_bound {
         identification
             .diagnostics
@@ -251,6 +288,19 @@ pub fn select(
         identification,
         model: chosen,
     })
+}
+
+/// What one trial of the β search gives: its value and s², or why it is skipped (a criterion
+/// that is not finite, or a numerical failure of the fit at that β); any other error ends the
+/// search.
+type Scored = std::result::Result<(f64, Option<f64>), String>;
+fn trial(outcome: Result<(f64, Option<f64>)>) -> Result<Scored> {
+    match outcome {
+        Ok((value, s2)) if value.is_finite() => Ok(Ok((value, s2))),
+        Ok((value, _)) => Ok(Err(format!("the criterion is {value}"))),
+        Err(Error::Numerical(why)) => Ok(Err(why)),
+        Err(e) => Err(e),
+    }
 }
 
 /// What a β search that ended on a bound (after widening once) means, in words.
@@ -415,4 +465,44 @@ pub fn select_beta(problem: &Problem, criterion: Criterion, start: f64) -> Resul
         curve,
         noise_variance: s2.unwrap_or(f64::NAN),
     })
+}
+
+#[cfg(test)]
+mod trial_tests {
+    use super::*;
+
+    #[test]
+    fn a_trial_that_is_not_finite_is_skipped_and_other_errors_end_the_search() {
+        assert_eq!(trial(Ok((1.5, Some(0.1)))).unwrap(), Ok((1.5, Some(0.1))));
+        assert!(
+            trial(Ok((f64::NAN, None)))
+                .unwrap()
+                .unwrap_err()
+                .contains("NaN")
+        );
+        assert!(trial(Ok((f64::INFINITY, None))).unwrap().is_err());
+        let why = trial(Err(Error::Numerical(
+            "cross-validation error not finite".into(),
+        )))
+        .unwrap()
+        .unwrap_err();
+        assert!(why.contains("not finite"));
+        assert!(trial(Err(Error::Unsupported("total variation".into()))).is_err());
+    }
+
+    /// The search goes on around a β whose criterion fails: a convex criterion that cannot
+    /// be evaluated on one decade still has its minimum found.
+    #[test]
+    fn the_search_steps_over_a_trial_that_cannot_be_scored() {
+        let mut f = |x: f64| -> Result<f64> {
+            let scored = if (x - (-1.0)).abs() < 0.5 {
+                trial(Err(Error::Numerical("not finite".into())))?
+            } else {
+                trial(Ok(((x + 4.0).powi(2), None)))?
+            };
+            Ok(scored.map_or(f64::INFINITY, |(v, _)| v))
+        };
+        let (x, v) = minimise_log10(&mut f, -2.0, (-10.0, 4.0), 0.01).unwrap();
+        assert!((x + 4.0).abs() < 0.02 && v < 1e-3, "x = {x}, v = {v}");
+    }
 }
