@@ -291,14 +291,14 @@ pub fn select(
 }
 
 /// What one trial of the β search gives: its value and s², or why it is skipped (a criterion
-/// that is not finite, or a numerical failure of the fit at that β); any other error ends the
-/// search.
+/// that is not finite, a numerical failure of the fit at that β, or a simulation that diverges
+/// with that β's map in the loop); any other error ends the search.
 type Scored = std::result::Result<(f64, Option<f64>), String>;
 fn trial(outcome: Result<(f64, Option<f64>)>) -> Result<Scored> {
     match outcome {
         Ok((value, s2)) if value.is_finite() => Ok(Ok((value, s2))),
         Ok((value, _)) => Ok(Err(format!("the criterion is {value}"))),
-        Err(Error::Numerical(why)) => Ok(Err(why)),
+        Err(Error::Numerical(why) | Error::Unstable(why)) => Ok(Err(why)),
         Err(e) => Err(e),
     }
 }
@@ -487,6 +487,11 @@ mod trial_tests {
         .unwrap()
         .unwrap_err();
         assert!(why.contains("not finite"));
+        // A validation simulation that diverges with one β's map is that trial's failure.
+        let why = trial(Err(Error::Unstable("the simulation diverged".into())))
+            .unwrap()
+            .unwrap_err();
+        assert!(why.contains("diverged"));
         assert!(trial(Err(Error::Unsupported("total variation".into()))).is_err());
     }
 
