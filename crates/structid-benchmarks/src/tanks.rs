@@ -298,7 +298,7 @@ impl Sim<'_> {
         };
         let mut y = match sim {
             Ok(s) => s.y.channel(0),
-            Err(Error::Numerical(_)) => return Ok(None),
+            Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(None),
             Err(e) => return Err(e),
         };
         if y.iter().any(|v| !v.is_finite()) {

@@ -853,7 +853,7 @@ fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize
         Ok(sim) => sim,
         // A closed loop that diverges scores as infinitely bad rather than stopping the
         // alternation: another iteration or candidate may be stable.
-        Err(Error::Numerical(_)) => return Ok(f64::INFINITY),
+        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
         Err(e) => return Err(e),
     };
     let (y, ys) = (data.y(), &sim.y);
@@ -1088,7 +1088,7 @@ fn map_simulation_rms(lft: &Lft, map: &dyn Interpolant, data: &Data) -> Result<f
         None,
     ) {
         Ok(sim) => sim,
-        Err(Error::Numerical(_)) => return Ok(f64::INFINITY),
+        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
         Err(e) => return Err(e),
     };
     let y = data.y();

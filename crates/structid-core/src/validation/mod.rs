@@ -232,7 +232,8 @@ impl ValidationReport {
 /// `max_lag` is not less than the record length; [`Error::AlgebraicLoop`] when D_zw ≠ 0 (no
 /// simulation possible); [`Error::NotMeasurable`] when z cannot be computed from the data (or,
 /// with an estimated x₀, when x₀ reaches z and y differently); [`Error::Numerical`] when a map
-/// returns a non-finite value or the simulation diverges; [`Error::InvalidStructure`] when the
+/// returns a non-finite value; [`Error::Unstable`] when the simulation or the one-step
+/// predictor diverges; [`Error::InvalidStructure`] when the
 /// noise path has no Kalman predictor (some output without noise of its own).
 ///
 /// ```

@@ -389,8 +389,8 @@ pub fn state_from_record(
 /// [module documentation](self)), scored after its initialisation samples (and after
 /// `settle`).
 ///
-/// Errors as [`crate::Model::simulate`]; [`Error::Numerical`] when the simulation diverges (a
-/// non-finite output) or a map returns a non-finite value.
+/// Errors as [`crate::Model::simulate`] ([`Error::Unstable`] when its state diverges);
+/// [`Error::Numerical`] when an output is not finite or a map returns a non-finite value.
 ///
 /// ```
 /// use nalgebra::dmatrix;
