@@ -469,8 +469,10 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     } else {
         (identify(&model, &data, &settings)?, settings, None)
     };
-    // An iterate that stopped at a limit is not an estimate to write: a runtime error.
-    let id = id.converged()?;
+    // An iterate that stopped at a limit is written all the same, its status and the
+    // solver's warning in report.json, and then reported as a runtime failure: the run is
+    // not taken for a converged estimate, and the work is not lost.
+    let unconverged = id.check_converged().err();
 
     guard.begin_set(&a.out, Some(&planned))?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
@@ -499,7 +501,15 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         "{}",
         summary(&report, &id, &written, t0.elapsed().as_secs_f64())
     );
-    Ok(())
+    match unconverged {
+        Some(e) => Err(CliError::runtime(format!(
+            "{e}; the last iterate was written to `{}`, marked as not converged (report.json: \
+             diagnostics.status = {})",
+            a.out.display(),
+            serde_json::to_string(&id.diagnostics.status).unwrap_or_default()
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Writes the files of an estimate into `out` (created): estimate.json (the fitted model,

@@ -886,6 +886,17 @@ fn total_variation_from_the_model_file_and_the_command_line() {
     assert_eq!(o.code, 1, "{}", o.stderr);
     assert!(o.stderr.contains("did not converge"), "{}", o.stderr);
     assert!(!o.stderr.contains("panicked"));
+    // The iterate is written all the same, marked as not converged, and the message names a
+    // solver that can do the job.
+    assert!(
+        o.stderr.contains("last iterate was written"),
+        "{}",
+        o.stderr
+    );
+    assert!(o.stderr.contains("clarabel"), "{}", o.stderr);
+    let r = read_json(&x.join("report.json"));
+    assert_eq!(r["diagnostics"]["status"], "max_iterations", "{r}");
+    assert!(x.join("estimate.csv").exists() && x.join("estimate.json").exists());
 }
 
 fn refs(a: &[String]) -> Vec<&str> {

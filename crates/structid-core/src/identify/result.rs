@@ -159,9 +159,32 @@ impl Identification {
     /// assert!(id.converged().unwrap_err().to_string().contains("did not converge"));
     /// ```
     pub fn converged(self) -> Result<Self> {
+        self.check_converged()?;
+        Ok(self)
+    }
+
+    /// [`converged`](Self::converged) without giving the estimate up: the
+    /// [`Error::NotConverged`](crate::Error::NotConverged) it would return, for a caller that keeps the last iterate (the
+    /// CLI writes it, marked as not converged, and then reports the error).
+    ///
+    /// ```
+    /// # use std::sync::Arc;
+    /// # use structid_core::{identify, paper, IdentifySettings, SolverChoice, TotalVariation};
+    /// # use structid_core::solver::admm::AdmmSettings;
+    /// let exp = paper::spray(300, 0.5, Arc::new(TotalVariation::new()), 2).unwrap();
+    /// let quick = IdentifySettings::builder()
+    ///     .solver(SolverChoice::Admm)
+    ///     .admm(AdmmSettings::builder().max_iterations(2).build().unwrap())
+    ///     .build()
+    ///     .unwrap();
+    /// let id = identify(&exp.model, &exp.data, &quick).unwrap();
+    /// assert!(id.check_converged().is_err());
+    /// assert!(!id.blocks[0].w_hat.is_empty()); // the iterate is still there
+    /// ```
+    pub fn check_converged(&self) -> Result<()> {
         let d = &self.diagnostics;
         if d.status.is_converged() {
-            Ok(self)
+            Ok(())
         } else {
             Err(crate::solver::status::not_converged(
                 d.solver,

@@ -319,10 +319,21 @@ pub(crate) fn solve_with(
     let sol = &solver.solution;
     let iterations = sol.iterations as usize;
     let mut warnings = Vec::new();
+    // Only a model whose blocks are all total variation has another solver: ADMM does not
+    // take quadratic blocks, so pointing a mixed model there would send the user in a circle.
+    let elsewhere = if quadratic == 0 {
+        "or use the admm solver"
+    } else {
+        "or shorten the record (the quadratic blocks make the program dense in L); a model that \
+         mixes quadratic and total-variation blocks has no other solver, so to use a long record \
+         identify the total-variation block with the quadratic map fixed (its estimate as a \
+         known map), or give every block a quadratic dispersion and use the exact or feature \
+         solver"
+    };
     let unconverged_detail = |status: SolverStatus| {
         format!(
             "status {status:?} (primal residual {:.2e}, dual residual {:.2e}, gap {:.2e}); raise the \
-             iteration or time limit, rescale y and u to order one, or use the admm solver",
+             iteration or time limit, rescale y and u to order one, {elsewhere}",
             sol.r_prim,
             sol.r_dual,
             (sol.obj_val - sol.obj_val_dual).abs()

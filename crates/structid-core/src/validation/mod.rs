@@ -343,11 +343,14 @@ pub fn validate(
     let mut prediction_rms = Vec::with_capacity(ny);
     let mut whiteness = Vec::with_capacity(ny);
     let mut input_correlation = Vec::with_capacity(ny);
+    // The settling samples are left out of the one-step statistics as of the simulation's: a
+    // transient from an unknown x₀ would otherwise dominate both.
+    let settle = settings.settle;
     let inputs: Vec<Vec<f64>> = (0..data.u().channels())
-        .map(|j| data.u().channel(j))
+        .map(|j| data.u().channel(j)[settle..].to_vec())
         .collect();
     for c in 0..ny {
-        let e = prediction_error.channel(c);
+        let e = prediction_error.channel(c)[settle..].to_vec();
         rms_sim.push(scored.rms(data.y(), c));
         fit.push(scored.fit_percent(data.y(), c));
         prediction_rms.push(rms(&e));

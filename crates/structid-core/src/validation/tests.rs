@@ -260,6 +260,36 @@ fn estimate_recovers_a_nonzero_initial_state_and_zero_does_not() {
     }
 }
 
+/// `--settle` leaves the transient of an unknown x₀ out of the one-step RMS as it does out of
+/// the simulation RMS: both equal the RMS over the samples after it.
+#[test]
+fn the_settling_samples_are_left_out_of_the_one_step_rms_too() {
+    let exp = scenarios::hammerstein(400, 2, 0.05, gaussian(0.3).unwrap(), 8).unwrap();
+    let sim = exp
+        .model
+        .simulate(&[&tanh_map], exp.data.u(), None, Some(&[3.0, -2.0]))
+        .unwrap();
+    let y = Signal::from_fn(400, 1, |k, _| sim.y.get(k, 0) + exp.noise.get(k, 0));
+    let data = Data::new(exp.data.u().clone(), y).unwrap();
+    let settle = 60;
+    let with = |settle: usize| {
+        let s = ValidationSettings::builder()
+            .initial_state(InitialState::Zero)
+            .settle(settle)
+            .build()
+            .unwrap();
+        validate(&exp.model, &[&tanh_map], &data, &s).unwrap()
+    };
+    let (all, settled) = (with(0), with(settle));
+    let tail = &all.prediction_error.channel(0)[settle..];
+    let tail_rms = (tail.iter().map(|v| v * v).sum::<f64>() / tail.len() as f64).sqrt();
+    assert!((settled.prediction_rms[0] - tail_rms).abs() <= 1e-12 * tail_rms);
+    // The transient dominated the whole-record figure; after it, the noise is what is left.
+    assert!(all.prediction_rms[0] > 2.0 * settled.prediction_rms[0]);
+    assert!((settled.prediction_rms[0] / 0.05 - 1.0).abs() < 0.3);
+    assert!(settled.rms[0] < all.rms[0]);
+}
+
 #[test]
 fn a_wrong_map_fails_the_input_cross_correlation_test() {
     let exp = scenarios::hammerstein(1000, 2, 0.1, gaussian(0.3).unwrap(), 8).unwrap();
