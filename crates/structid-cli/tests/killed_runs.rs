@@ -1,7 +1,8 @@
-//! Killed runs leave no corrupt results: SIGKILL at moments spread over a whole `identify`
-//! (the last ones during its writes) leaves, under the final names, only files written in
-//! full, `.complete` lists only files that exist, and the next run into the directory
-//! finishes, lists its whole set and leaves no temporary file behind.
+//! Killed runs leave no corrupt results. SIGKILL at moments spread over a whole `identify`
+//! (the last ones during its writes), and twice during a `compare` sweep, leaves under the
+//! final names only files written in full, `.complete` lists only files that exist, and the
+//! next run (`--resume` for the sweep) finishes, lists its whole set and leaves no temporary
+//! file behind.
 
 #![cfg(unix)]
 
@@ -23,7 +24,7 @@ fn assert_whole(dir: &Path, when: &str) -> Vec<String> {
     for e in entries {
         let e = e.unwrap();
         let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') {
+        if name.starts_with('.') || e.file_type().unwrap().is_dir() {
             continue;
         }
         let text = std::fs::read_to_string(e.path()).unwrap();
@@ -122,4 +123,59 @@ fn sigkill_during_identify_leaves_whole_files_or_none_and_the_next_run_recovers(
         assert!(listed.lines().any(|l| l == n), ".complete misses {n}");
     }
     assert!(whole < Duration::from_secs(60));
+}
+
+/// A `compare` sweep (the paper's 36 cases) killed twice part-way, then resumed: every file
+/// under a final name is whole after each kill, and `--resume` finishes the sweep with one
+/// whole result per case and no temporary file left.
+#[test]
+fn sigkill_during_a_compare_sweep_leaves_whole_files_and_resume_finishes_it() {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/compare/paper.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sweep");
+    let args = |resume: bool| {
+        let mut a = vec![
+            "compare".to_string(),
+            "--config".into(),
+            p(&config).into(),
+            "--out".into(),
+            p(&out).into(),
+        ];
+        if resume {
+            a.push("--resume".into());
+        }
+        a
+    };
+    for (resume, after) in [(false, 1.5), (true, 0.8)] {
+        let mut child = Command::new(BIN)
+            .args(args(resume))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_secs_f64(after));
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        let when = format!("killed after {after} s");
+        assert_whole(&out, &when);
+        assert_whole(&out.join("cases"), &when);
+    }
+    let a = args(true);
+    ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_whole(&out, "after the resumed sweep");
+    let cases = assert_whole(&out.join("cases"), "after the resumed sweep");
+    assert_eq!(cases.len(), 36, "{cases:?}");
+    let results = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(results.lines().count(), 37, "a header and one row per case");
+    for d in [out.clone(), out.join("cases")] {
+        let temporary: Vec<String> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-"))
+            .collect();
+        assert!(
+            temporary.is_empty(),
+            "temporary files left in {d:?}: {temporary:?}"
+        );
+    }
 }

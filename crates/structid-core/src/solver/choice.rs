@@ -441,5 +441,14 @@ mod tests {
         assert_eq!(v["status"], "max_iterations");
         assert!(SolveStatus::AlmostSolved.is_converged());
         assert!(!SolveStatus::TimeLimit.is_converged());
+        assert!(!SolveStatus::NumericalFailure.is_converged());
+        assert_eq!(
+            serde_json::to_value(SolveStatus::NumericalFailure).unwrap(),
+            "numerical_failure"
+        );
+        assert_eq!(
+            SolveStatus::NumericalFailure.to_string(),
+            "numerical failure"
+        );
     }
 }

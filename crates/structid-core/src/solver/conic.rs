@@ -374,7 +374,18 @@ pub(crate) fn solve_with(
                     .into(),
             });
         }
-        // Numerical trouble or no progress: the iterate is not worth keeping.
+        // Numerical trouble or no progress: a finite iterate is kept, marked as such, for the
+        // caller to judge (the CLI writes it and exits 1); a non-finite one is worth nothing.
+        status if sol.x.iter().all(|v| v.is_finite()) => {
+            let detail = unconverged_detail(status);
+            warnings.push(unconverged_warning(
+                SolverKind::Clarabel,
+                iterations,
+                &detail,
+                SolveStatus::NumericalFailure,
+            ));
+            (SolveStatus::NumericalFailure, Some(detail))
+        }
         status => {
             return Err(Error::NotConverged {
                 solver: NAME.into(),

@@ -207,8 +207,9 @@ impl serde::Serialize for SolverReason {
 /// How the solver stopped (after Clarabel's statuses).
 ///
 /// The direct solvers always report [`SolveStatus::Solved`]. An iterative solver that hits its
-/// iteration or time limit returns its last iterate with [`SolveStatus::MaxIterations`] or
-/// [`SolveStatus::TimeLimit`] and a warning; [`crate::Identification::converged`] turns that into
+/// iteration or time limit, or stops on numerical trouble with a finite iterate, returns that
+/// iterate with [`SolveStatus::MaxIterations`], [`SolveStatus::TimeLimit`] or
+/// [`SolveStatus::NumericalFailure`] and a warning; [`crate::Identification::converged`] turns that into
 /// [`Error::NotConverged`] for callers that need a converged estimate.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -223,6 +224,9 @@ pub enum SolveStatus {
     MaxIterations,
     /// The time limit was reached first: the estimate is the last iterate.
     TimeLimit,
+    /// The solver stopped on numerical trouble (Clarabel's `NumericalError` or
+    /// `InsufficientProgress`): the estimate is the last iterate, finite but not optimal.
+    NumericalFailure,
 }
 
 impl SolveStatus {
@@ -240,6 +244,7 @@ impl fmt::Display for SolveStatus {
             SolveStatus::AlmostSolved => "almost solved (reduced accuracy)",
             SolveStatus::MaxIterations => "iteration limit reached",
             SolveStatus::TimeLimit => "time limit reached",
+            SolveStatus::NumericalFailure => "numerical failure",
         })
     }
 }
