@@ -59,7 +59,8 @@ pub(super) fn input_noise_ratio(nominal: &Nominal, est: &Data) -> Result<Option<
     Ok(best.and_then(|(ratio, _)| (ratio > 0.0).then_some(ratio)))
 }
 
-/// How far below the nominal model's ratio the second ratio of [`with_smaller_ratio`] lies.
+/// How far below the nominal model's ratio the second ratio tried at every location lies (see
+/// the module documentation of `discover`).
 pub const SMALLER_RATIO: f64 = 1e-2;
 
 /// The hypothesis `fitted`, identified with the input-disturbance ratio `ratio` of the
