@@ -97,10 +97,10 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     if let Some(m) = &a.model {
         guard.protect(m);
     }
-    guard.check_out_dir(&a.out, crate::validate::OUTPUTS)?;
+    guard.check_out_dir(&a.out, crate::validation_files::OUTPUTS)?;
     let (estimate, u_names, y_names) = load(path)?;
     let data = record(&a.data, &u_names, &y_names)?;
-    crate::validate::check_lengths(a, &data)?;
+    crate::validation_files::check_lengths(a, &data)?;
     let settings = ValidationSettings::builder()
         .initial_state(initial(a.initial_state))
         .max_lag(a.max_lag)
@@ -109,7 +109,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
         .build()?;
     let report = estimate.validate(&data, &settings)?;
 
-    guard.begin_set(&a.out, Some(&crate::validate::OUTPUTS))?;
+    guard.begin_set(&a.out, Some(&crate::validation_files::OUTPUTS))?;
     let len = report.samples;
     let (time, time_label) = time_axis(&estimate, len);
     let mut columns = vec![time.clone()];

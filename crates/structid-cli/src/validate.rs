@@ -7,27 +7,20 @@ use std::time::Instant;
 use clap::Parser;
 use serde_json::{Value, json};
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
-use structid_core::{Data, Identification, InitialState, Interpolant, identify};
+use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
 use crate::identify::{absolute, estimate_columns, load, model_and_data, protect_inputs};
 use crate::validation_files::{
-    fmt_pct, outputs_json, pass, residuals_svg, simulation_names, simulation_svg,
+    OUTPUTS, check_lengths, fmt_pct, outputs_json, pass, residuals_svg, simulation_names,
+    simulation_svg,
 };
 use crate::{Cli, Command, IdentifyArgs, InitialStateArg, ValidateArgs};
 
 /// Largest relative difference (max |Δŵ| / max |ŵ| per block) between the recomputed estimate
 /// and DIR/estimate.csv for the directory to count as reproduced.
 pub const W_TOLERANCE: f64 = 1e-6;
-
-/// The files written, in order.
-pub(crate) const OUTPUTS: [&str; 4] = [
-    "validation.json",
-    "simulation.csv",
-    "simulation.svg",
-    "residuals.svg",
-];
 
 fn list<S: AsRef<str>>(names: &[S]) -> String {
     names
@@ -267,27 +260,6 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
         id,
         w_difference,
     })
-}
-
-/// Checks `--settle` and `--max-lag` against the length of the validation record.
-pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliError> {
-    if a.settle >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
-            a.settle,
-            a.data.display(),
-            vdata.len()
-        )));
-    }
-    if a.max_lag >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
-            a.max_lag,
-            a.data.display(),
-            vdata.len()
-        )));
-    }
-    Ok(())
 }
 
 /// Runs `structid validate`.

@@ -6,6 +6,9 @@ use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::ValidationReport;
 use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, render_grid_svg};
 
+use structid_core::Data;
+
+use crate::ValidateArgs;
 use crate::error::CliError;
 pub(crate) use structid_io::validation_report::outputs_json;
 
@@ -144,6 +147,35 @@ pub(crate) fn pass(t: &CorrelationTest) -> String {
         "{} ({n} of {tested} lags outside the 99 % band)",
         if n == 0 { "pass" } else { "FAIL" }
     )
+}
+
+/// The files a validation writes, in order.
+pub(crate) const OUTPUTS: [&str; 4] = [
+    "validation.json",
+    "simulation.csv",
+    "simulation.svg",
+    "residuals.svg",
+];
+
+/// Checks `--settle` and `--max-lag` against the length of the validation record.
+pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliError> {
+    if a.settle >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
+            a.settle,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
+    if a.max_lag >= vdata.len() {
+        return Err(CliError::input(format!(
+            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
+            a.max_lag,
+            a.data.display(),
+            vdata.len()
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

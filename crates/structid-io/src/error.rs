@@ -69,7 +69,7 @@ pub enum IoError {
     #[error(
         "{} has no column `{}`; available columns: {}",
         source_name(path.as_deref()),
-        crate::data_file::clip(column),
+        clip(column),
         list(available)
     )]
     MissingColumn {
@@ -252,7 +252,7 @@ fn list(names: &[String]) -> String {
     let mut s = names
         .iter()
         .take(SHOWN)
-        .map(|n| format!("`{}`", crate::data_file::clip(n)))
+        .map(|n| format!("`{}`", clip(n)))
         .collect::<Vec<_>>()
         .join(", ");
     if names.len() > SHOWN {
@@ -311,7 +311,7 @@ fn data_message(
         s.push_str(&format!(", line {l}"));
     }
     if let Some(c) = column {
-        s.push_str(&format!(", column `{}`", crate::data_file::clip(c)));
+        s.push_str(&format!(", column `{}`", clip(c)));
     }
     s.push_str(": ");
     s.push_str(message);
@@ -347,5 +347,29 @@ impl fmt::Display for ErrorChain<'_> {
             cur = e.source();
         }
         Ok(())
+    }
+}
+
+/// The longest prefix of a field echoed in an error message, in characters.
+pub const ECHO_CHARS: usize = 60;
+
+/// A field as echoed in an error message: itself when short, else its first
+/// [`ECHO_CHARS`] characters, `…` and its length, so that a huge field does not flood the
+/// terminal.
+///
+/// ```
+/// use structid_io::data_file::clip; // also `structid_io::error::clip`
+/// assert_eq!(clip("abc"), "abc");
+/// let long = "x".repeat(1000);
+/// assert_eq!(clip(&long), format!("{}… (1000 characters)", "x".repeat(60)));
+/// ```
+pub fn clip(field: &str) -> std::borrow::Cow<'_, str> {
+    match field.char_indices().nth(ECHO_CHARS) {
+        None => std::borrow::Cow::Borrowed(field),
+        Some((end, _)) => std::borrow::Cow::Owned(format!(
+            "{}… ({} characters)",
+            &field[..end],
+            field.chars().count()
+        )),
     }
 }
