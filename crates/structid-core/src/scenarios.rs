@@ -140,3 +140,48 @@ fn build_hammerstein(
     let map = |z: &[f64]| nonlinearity(z[0]);
     Experiment::simulate(model, &[&map], u, noise)
 }
+
+/// A mixed model: y = G₁·tanh(u₁) + G₂·relay(u₂) + e, where [G₁ G₂] is a random stable 2-input
+/// block of order 2 (spectral radius 0.8, reproducible from `seed`), relay(z) = 1 for z ≥ 0.3
+/// and −0.5 otherwise, u₁ and u₂ white Gaussian of unit variance, and e white of standard
+/// deviation 0.05. The block `smooth` (on u₁) has the dispersion `smooth`, the block `relay`
+/// (on u₂) total variation: the problem of a smooth spring next to a friction with a jump.
+///
+/// ```
+/// use std::sync::Arc;
+/// use structid_core::{KernelDispersion, scenarios::mixed_hammerstein};
+/// let exp = mixed_hammerstein(100, Arc::new(KernelDispersion::gaussian(0.4).unwrap()), 1).unwrap();
+/// assert_eq!(exp.model.blocks().len(), 2);
+/// ```
+pub fn mixed_hammerstein(len: usize, smooth: Arc<dyn Dispersion>, seed: u64) -> Result<Experiment> {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, 0.8);
+    let lft = Lft::new(LftMatrices {
+        a: g.a().clone(),
+        bu: DMatrix::zeros(2, 2),
+        be: DMatrix::zeros(2, 1),
+        bw: g.b().clone(),
+        cy: g.c().clone(),
+        dyu: DMatrix::zeros(1, 2),
+        dye: DMatrix::identity(1, 1),
+        dyw: g.d().clone(),
+        cz: DMatrix::zeros(2, 2),
+        dzu: DMatrix::identity(2, 2),
+        dze: DMatrix::zeros(2, 1),
+        dzw: DMatrix::zeros(2, 2),
+    })?;
+    let blocks = vec![
+        crate::model::NonlinearBlock::new("smooth", vec![0], 0, smooth),
+        crate::model::NonlinearBlock::new(
+            "relay",
+            vec![1],
+            1,
+            Arc::new(crate::total_variation::TotalVariation::new()),
+        ),
+    ];
+    let model = crate::model::Model::new(lft, blocks)?;
+    let u = gaussian_noise(len, 2, 1.0, seed + 1);
+    let noise = gaussian_noise(len, 1, 0.05, seed + 2);
+    let f = |z: &[f64]| z[0].tanh();
+    let h = |z: &[f64]| if z[0] >= 0.3 { 1.0 } else { -0.5 };
+    Experiment::simulate(model, &[&f, &h], u, noise)
+}

@@ -573,7 +573,22 @@ fn clarabel_equals_the_exact_solver_on_a_gaussian_model() {
 
 /// y = G₁·tanh(u₁) + G₂·relay(u₂) + e: a Gaussian block and a total-variation block.
 fn mixed_experiment(len: usize, seed: u64) -> Experiment {
-    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, 0.8);
+    mixed_experiment_with(
+        len,
+        seed,
+        Arc::new(structid_core::KernelDispersion::gaussian(0.4).unwrap()),
+        0.8,
+    )
+}
+
+/// [`mixed_experiment`] with the smooth block's dispersion and the LTI block's pole radius.
+fn mixed_experiment_with(
+    len: usize,
+    seed: u64,
+    smooth: Arc<dyn structid_core::Dispersion>,
+    radius: f64,
+) -> Experiment {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, radius);
     let lft = Lft::new(LftMatrices {
         a: g.a().clone(),
         bu: DMatrix::zeros(2, 2),
@@ -590,12 +605,7 @@ fn mixed_experiment(len: usize, seed: u64) -> Experiment {
     })
     .unwrap();
     let blocks = vec![
-        NonlinearBlock::new(
-            "smooth",
-            vec![0],
-            0,
-            Arc::new(structid_core::KernelDispersion::gaussian(0.4).unwrap()),
-        ),
+        NonlinearBlock::new("smooth", vec![0], 0, smooth),
         NonlinearBlock::new("relay", vec![1], 1, tv()),
     ];
     let model = Model::new(lft, blocks).unwrap();
@@ -903,5 +913,75 @@ fn admm_iterations_do_not_depend_on_the_units() {
         );
         let d = rel_diff(&w, &w0);
         assert!(d < 1e-3, "gain {gain}, scale {s}: ŵ differs by {d:.3e}");
+    }
+}
+
+/// The smooth block's dispersion in the mixed-model comparisons: a plain Gaussian (ADMM factors
+/// its Gram matrix to rounding), a Gaussian-like Fourier series and a polynomial (ADMM uses
+/// their features; Clarabel the same kernel through its Gram matrix, so both solve the same
+/// feature problem).
+fn smooth_dispersion(kind: u8, sigma: f64) -> Arc<dyn structid_core::Dispersion> {
+    use structid_core::{
+        FourierDispersion, FourierWeights, KernelDispersion, PolynomialDispersion,
+    };
+    match kind {
+        0 => Arc::new(KernelDispersion::gaussian(sigma).unwrap()),
+        1 => Arc::new(
+            FourierDispersion::new(FourierWeights::GaussianLike { sigma })
+                .unwrap()
+                .with_harmonics(12),
+        ),
+        _ => Arc::new(PolynomialDispersion::new(3).unwrap()),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, ..ProptestConfig::default() })]
+
+    /// Mixed models (a quadratic block and a total-variation block behind a random stable
+    /// 2-input LTI block, random data): ADMM equals Clarabel.
+    #[test]
+    fn mixed_admm_and_clarabel_agree_on_small_problems(
+        seed in 0u64..10_000,
+        len in 40usize..160,
+        log_beta in -3.0f64..-1.0,
+        kind in 0u8..3,
+        sigma in 0.3f64..1.0,
+        radius in 0.3f64..0.9,
+        free in any::<bool>(),
+    ) {
+        let exp = mixed_experiment_with(len, seed, smooth_dispersion(kind, sigma), radius);
+        let beta = 10f64.powf(log_beta);
+        let initial = if free { InitialState::Estimate } else { InitialState::Zero };
+        let run = |solver| identify(&exp.model, &exp.data, &settings_with(beta, solver, initial)).unwrap();
+        let c = run(SolverChoice::Clarabel);
+        prop_assume!(c.diagnostics.status == SolveStatus::Solved);
+        let a = run(SolverChoice::Admm);
+        prop_assert_eq!(a.diagnostics.status, SolveStatus::Solved);
+        prop_assert_eq!(a.diagnostics.solver, "admm");
+        assert_agree(&a, &c);
+        // The maps agree between the samples too.
+        for z in [-1.0, -0.2, 0.5] {
+            let (x, y) = (a.blocks[0].predict(&[z]), c.blocks[0].predict(&[z]));
+            prop_assert!((x - y).abs() < 1e-3 * (1.0 + y.abs()), "at {}: {} vs {}", z, x, y);
+        }
+    }
+}
+
+#[test]
+fn auto_uses_admm_for_long_mixed_records() {
+    let exp = mixed_experiment(3000, 9);
+    let id = identify(&exp.model, &exp.data, &settings(0.01, SolverChoice::Auto)).unwrap();
+    assert_eq!(id.diagnostics.solver, "admm");
+    assert_eq!(id.diagnostics.status, SolveStatus::Solved);
+    assert!(
+        id.diagnostics.solver_reason.to_string().contains("ADMM"),
+        "{}",
+        id.diagnostics.solver_reason
+    );
+    assert!(id.diagnostics.feasibility_residual < 1e-7);
+    // The smooth block is tanh, the other the relay.
+    for z in [-1.0, 0.0, 1.0] {
+        assert!((id.blocks[0].predict(&[z]) - f64::tanh(z)).abs() < 0.2);
     }
 }

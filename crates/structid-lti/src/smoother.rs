@@ -316,7 +316,8 @@ fn accumulate_free(
 }
 
 /// `F`, its pseudo-inverse and null directions, and `K` for the error covariance `pm` of
-/// the recursion `eq` with input covariance `q`; `scale` is the running scale of the
+/// the recursion `eq`, with `q` the scaling of the backward map (`Q`, with 1 on adjoint
+/// channels, see [`DisturbanceSmoother::with_adjoint`]); `scale` is the running scale of the
 /// threshold (updated).
 fn sample_step(
     eq: &Riccati<'_>,
@@ -437,16 +438,78 @@ impl DisturbanceSmoother {
         len: usize,
         initial: SmootherInitial,
     ) -> Result<Self, LtiError> {
-        Self::build(system, variances, len, initial, true)
+        Self::build(system, variances, len, initial, true, &[])
     }
 
-    /// [`new`](Self::new), optionally never declaring the steady state (test hook).
+    /// [`new`](Self::new) with *adjoint channels*: inputs `j` in `adjoint` (each with
+    /// variance 0, i.e. fixed at its mean) for which [`smooth`](Self::smooth) writes
+    /// `mean_j + g_j` instead of `mean_j`, where `g_j = T_j^T (T Q T^T)^+ (y - T mean)` is the
+    /// sensitivity of the problem to input `j`: the minimal cost
+    /// `1/2 sum_k (v_k - m_k)^T Q^+ (v_k - m_k)` moves by `-g_j^T dm_j` when the (fixed)
+    /// input `j` moves by `dm_j` (for [`SmootherInitial::Free`], with `x_0` re-optimised).
+    /// The other inputs are smoothed as by [`new`](Self::new); the cost of a call is the
+    /// same.
+    ///
+    /// This lets a caller optimise parameters that enter through fixed inputs (a map given by
+    /// features, say) in closed form: the gradient of the cost with respect to them comes out
+    /// of the same backward pass.
+    ///
+    /// Errors: as [`new`](Self::new), and [`LtiError::InvalidParameter`] (`adjoint`) for a
+    /// channel out of range or with a non-zero variance.
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// use structid_lti::{DisturbanceSmoother, Signal, SmootherInitial, StateSpace};
+    /// // y = v_0 + v_1 (no states): v_1 fixed at its mean, v_0 ~ N(0, 2)
+    /// let sys = StateSpace::new(
+    ///     DMatrix::zeros(0, 0),
+    ///     DMatrix::zeros(0, 2),
+    ///     DMatrix::zeros(1, 0),
+    ///     DMatrix::from_row_slice(1, 2, &[1.0, 1.0]),
+    /// )
+    /// .unwrap();
+    /// let s = DisturbanceSmoother::with_adjoint(&sys, &[2.0, 0.0], 1, SmootherInitial::Zero, &[1])
+    ///     .unwrap();
+    /// let y = Signal::new(1, vec![3.0]).unwrap();
+    /// let mean = Signal::new(2, vec![0.0, 1.0]).unwrap();
+    /// let mut v = Signal::zeros(1, 2);
+    /// s.smooth(&y, &mean, &mut v).unwrap();
+    /// // v_0 = y - v_1 = 2; the cost (v_0)^2 / 4 has derivative -(y - v_1) / 2 = -1 in v_1
+    /// assert!((v.get(0, 0) - 2.0).abs() < 1e-14);
+    /// assert!((v.get(0, 1) - (1.0 + 1.0)).abs() < 1e-14);
+    /// assert!(DisturbanceSmoother::with_adjoint(&sys, &[2.0, 1.0], 1, SmootherInitial::Zero, &[1]).is_err());
+    /// ```
+    pub fn with_adjoint(
+        system: &StateSpace,
+        variances: &[f64],
+        len: usize,
+        initial: SmootherInitial,
+        adjoint: &[usize],
+    ) -> Result<Self, LtiError> {
+        if let Some(&j) = adjoint
+            .iter()
+            .find(|&&j| j >= variances.len() || variances[j] != 0.0)
+        {
+            return Err(LtiError::param(
+                "adjoint",
+                format!(
+                    "adjoint channel {j} must be an input (< {}) with variance 0",
+                    variances.len()
+                ),
+            ));
+        }
+        Self::build(system, variances, len, initial, true, adjoint)
+    }
+
+    /// [`new`](Self::new), optionally never declaring the steady state (test hook), with
+    /// adjoint channels (see [`with_adjoint`](Self::with_adjoint)).
     fn build(
         system: &StateSpace,
         variances: &[f64],
         len: usize,
         initial: SmootherInitial,
         allow_steady: bool,
+        adjoint: &[usize],
     ) -> Result<Self, LtiError> {
         let (n, m, p) = (system.order(), system.inputs(), system.outputs());
         if variances.len() != m {
@@ -476,6 +539,11 @@ impl DisturbanceSmoother {
         }
         let eq = Riccati::new(system, Some(variances));
         let q = DMatrix::from_diagonal(&DVector::from_column_slice(variances));
+        // the backward maps scale the sensitivities by Q, except on the adjoint channels
+        let mut qb = q.clone();
+        for &j in adjoint {
+            qb[(j, j)] = 1.0;
+        }
 
         // Riccati recursion until the steady state (or the end of the record)
         let pp = p * p;
@@ -498,7 +566,7 @@ impl DisturbanceSmoother {
         let mut steady = Step::default();
         let mut transient = len;
         for k in 0..len {
-            let (st, kmat) = sample_step(&eq, &q, rec.covariance(), &mut scale);
+            let (st, kmat) = sample_step(&eq, &qb, rec.covariance(), &mut scale);
             // no outputs: nothing to filter, the gains are empty and steady from the start
             let is_steady = if p == 0 {
                 allow_steady
@@ -1389,7 +1457,8 @@ mod tests {
                 .unwrap();
             let pb = problem(seed, n, m, p, len, zero_d, free);
             let fast = DisturbanceSmoother::new(&pb.sys, &pb.q, len, initial).unwrap();
-            let slow = DisturbanceSmoother::build(&pb.sys, &pb.q, len, initial, false).unwrap();
+            let slow =
+                DisturbanceSmoother::build(&pb.sys, &pb.q, len, initial, false, &[]).unwrap();
             assert!(fast.transient_len() < len / 2, "{fast:?}");
             assert_eq!(slow.transient_len(), len);
             let mut o1 = Signal::zeros(len, m);
@@ -1596,6 +1665,62 @@ mod tests {
                 times[10]
             );
         }
+    }
+
+    /// The adjoint channels give the derivative of the minimal cost with respect to the mean
+    /// of a fixed input (central differences), for both initial-state models, and leave the
+    /// other inputs as the plain smoother computes them.
+    #[test]
+    fn adjoint_channels_give_the_cost_gradient() {
+        for free in [false, true] {
+            let len = 25;
+            let mut pb = stable_problem(11, 2, 3, 1, len, false, free);
+            pb.q[2] = 0.0;
+            pb.q[0] = pb.q[0].max(0.2);
+            pb.q[1] = pb.q[1].max(0.2);
+            let initial = initial_of(free);
+            let plain = DisturbanceSmoother::new(&pb.sys, &pb.q, len, initial).unwrap();
+            let adj =
+                DisturbanceSmoother::with_adjoint(&pb.sys, &pb.q, len, initial, &[2]).unwrap();
+            let mut v = Signal::zeros(len, 3);
+            let mut va = Signal::zeros(len, 3);
+            plain.smooth(&pb.y, &pb.mean, &mut v).unwrap();
+            adj.smooth(&pb.y, &pb.mean, &mut va).unwrap();
+            let cost = |mean: &Signal| {
+                let mut out = Signal::zeros(len, 3);
+                plain.smooth(&pb.y, mean, &mut out).unwrap();
+                (0..len)
+                    .map(|k| {
+                        (0..2)
+                            .map(|j| (out.get(k, j) - mean.get(k, j)).powi(2) / pb.q[j])
+                            .sum::<f64>()
+                    })
+                    .sum::<f64>()
+                    / 2.0
+            };
+            let scale = (0..len).map(|k| va.get(k, 2).abs()).fold(1e-300, f64::max);
+            for k in 0..len {
+                for j in 0..2 {
+                    assert!((v.get(k, j) - va.get(k, j)).abs() < 1e-12 * (1.0 + v.get(k, j).abs()));
+                }
+                let h = 1e-5;
+                let mut up = pb.mean.clone();
+                up.sample_mut(k)[2] += h;
+                let mut down = pb.mean.clone();
+                down.sample_mut(k)[2] -= h;
+                let fd = (cost(&up) - cost(&down)) / (2.0 * h);
+                let g = va.get(k, 2) - pb.mean.get(k, 2);
+                assert!(
+                    (fd + g).abs() < 1e-6 * scale,
+                    "free {free}, k {k}: finite difference {fd}, adjoint {g}"
+                );
+            }
+        }
+        let sys = random_stable_system(3, 1, 2, 1, 0.9);
+        assert!(
+            DisturbanceSmoother::with_adjoint(&sys, &[1.0, 0.0], 5, SmootherInitial::Zero, &[2])
+                .is_err()
+        );
     }
 
     proptest! {

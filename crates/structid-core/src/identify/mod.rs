@@ -81,8 +81,7 @@ pub fn identify_problem(problem: &Problem, settings: &IdentifySettings) -> Resul
                     solver::conic::solve_with(problem, settings, penalties, t_start)?
                 }
                 SolverKind::Admm => {
-                    let tv = solver::tv_from_penalties(problem, penalties, "admm")?;
-                    solver::admm::solve_with(problem, settings, tv, t_start)?
+                    solver::admm::solve_with(problem, settings, penalties, t_start)?
                 }
                 SolverKind::Features { .. } => solver::features::solve(problem, settings)?,
                 SolverKind::Exact => solver::exact::solve(problem, settings)?,

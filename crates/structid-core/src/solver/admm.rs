@@ -1,4 +1,13 @@
-//! ADMM for total-variation dispersions: every iteration is linear in L.
+//! ADMM for total-variation dispersions, alone or mixed with quadratic ones: every iteration is
+//! linear in L.
+//!
+//! Quadratic blocks (a Gaussian spring next to a total-variation friction, say) are not split:
+//! each is w_q = Ψ̃·η with D = ‖η‖² (its features, or a pivoted Cholesky factor of its Gram
+//! matrix to rounding; see `quadratic_factor`), and the w-step minimises over η exactly, in
+//! closed form, together with the total-variation blocks' offsets (see `WStep`). The iteration
+//! is then the one of a model with total-variation blocks only, whose w-step carries the
+//! quadratic blocks: O(L·(n² + k)) per iteration for factors of rank k, plus k smoother passes
+//! whenever ρ changes.
 //!
 //! Split the per-sample map values w from node values d that carry the penalty
 //! (w_k^\[i\] = d_i,node(k), up to the offsets below) and alternate, in scaled form with penalty ρ:
@@ -63,14 +72,16 @@ use std::time::Instant;
 
 use structid_lti::{DisturbanceSmoother, Signal, SmootherInitial, StateSpace};
 
+use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
 use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
+use crate::solver::quadratic_factor::QuadraticFactor;
 use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples};
-use crate::solver::{finish_tv, tv_parts, tv_penalties};
+use crate::solver::{BlockPart, finish_tv, tv_parts};
 use crate::total_variation::TvPenalty;
 
 /// The solver's name in reports.
@@ -95,23 +106,71 @@ enum Prox {
     Graph(Box<GraphTv>),
 }
 
-/// Solves a problem whose blocks all have total-variation dispersions; see the module docs.
+/// Solves a problem with at least one total-variation block (the others may be quadratic);
+/// see the module docs.
 pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identification> {
     let t_start = Instant::now();
-    let penalties = tv_penalties(problem, NAME)?;
+    let penalties = crate::solver::penalties(problem)?;
     solve_with(problem, settings, penalties, t_start)
+}
+
+/// A block of the problem as ADMM sees it: the index into its total-variation or quadratic
+/// list.
+#[derive(Clone, Copy)]
+enum Slot {
+    Tv(usize),
+    Quadratic(usize),
 }
 
 /// [`solve`] with the blocks' penalties already built.
 pub(crate) fn solve_with(
     problem: &Problem,
     settings: &IdentifySettings,
-    penalties: Vec<TvPenalty>,
+    all_penalties: Vec<Penalty>,
     t_start: Instant,
 ) -> Result<Identification> {
     if problem.held_out().is_some() {
         return Err(Error::Unsupported(
             "ADMM needs every output sample (its smoother is time-invariant): cross-validation folds use the conic solver (clarabel)"
+                .into(),
+        ));
+    }
+    let mut penalties: Vec<TvPenalty> = Vec::new();
+    let mut quadratic: Vec<(Box<dyn QuadraticPenalty>, usize)> = Vec::new();
+    let mut slots = Vec::with_capacity(all_penalties.len());
+    for (bi, (b, pen)) in problem.blocks().iter().zip(all_penalties).enumerate() {
+        match pen {
+            Penalty::TotalVariation(p) if p.len() == problem.len() => {
+                slots.push(Slot::Tv(penalties.len()));
+                penalties.push(p);
+            }
+            Penalty::TotalVariation(p) => {
+                return Err(Error::DimensionMismatch {
+                    what: format!(
+                        "samples of the total-variation penalty of block `{}`",
+                        b.name
+                    ),
+                    expected: problem.len().to_string(),
+                    found: p.len().to_string(),
+                });
+            }
+            Penalty::Quadratic(q) if q.len() == problem.len() => {
+                slots.push(Slot::Quadratic(quadratic.len()));
+                quadratic.push((q, bi));
+            }
+            Penalty::Quadratic(q) => {
+                return Err(Error::DimensionMismatch {
+                    what: format!("Gram matrix of block `{}`", b.name),
+                    expected: problem.len().to_string(),
+                    found: q.len().to_string(),
+                });
+            }
+        }
+    }
+    if penalties.is_empty() {
+        return Err(Error::Unsupported(
+            "the admm solver splits total-variation blocks from the data fit, and this model has none; \
+             a model with quadratic dispersions only is solved by the exact, feature or clarabel solver (or solver = auto)"
                 .into(),
         ));
     }
@@ -122,8 +181,17 @@ pub(crate) fn solve_with(
     let (len, ny) = (problem.len(), problem.outputs());
     let ne = real.noise_inputs;
     let nin = real.ss.inputs();
-    let w_cols: Vec<usize> = problem.blocks().iter().map(|b| ne + b.output).collect();
+    // Realisation channels of the total-variation blocks (w_cols) and the quadratic ones.
+    let mut w_cols = Vec::with_capacity(penalties.len());
+    let mut q_cols = Vec::with_capacity(quadratic.len());
+    for (b, slot) in problem.blocks().iter().zip(&slots) {
+        match slot {
+            Slot::Tv(_) => w_cols.push(ne + b.output),
+            Slot::Quadratic(_) => q_cols.push(ne + b.output),
+        }
+    }
     let nb = penalties.len();
+    let factors = quadratic_factors(problem, &quadratic, nb, settings)?;
     let initial = if real.free_initial_state {
         SmootherInitial::Free
     } else {
@@ -154,9 +222,25 @@ pub(crate) fn solve_with(
         for &c in &w_cols {
             v[c] = 1.0 / rho;
         }
+        for &c in &q_cols {
+            v[c] = 0.0;
+        }
         v
     };
-    let mut wstep = WStep::new(&real.ss, &variances(rho), &w_cols, len, initial)?;
+    let channels = Channels {
+        tv: &w_cols,
+        quadratic: &q_cols,
+        factors: &factors,
+    };
+    let mut wstep = WStep::new(
+        &real.ss,
+        &variances(rho),
+        &channels,
+        len,
+        initial,
+        beta,
+        rho,
+    )?;
     let mut prox: Vec<Prox> = penalties
         .iter()
         .map(|p| {
@@ -193,7 +277,7 @@ pub(crate) fn solve_with(
     let (mut iterations, mut r_pri, mut r_dual) = (0, f64::INFINITY, f64::INFINITY);
     let (mut eps_pri, mut eps_dual) = (f64::NAN, f64::NAN);
     let mut converged = false;
-    let mut offsets = vec![0.0; nb];
+    let mut params = vec![0.0; wstep.parameters()];
     while iterations < opts.max_iterations() {
         iterations += 1;
         // w-step: smoother with prior mean d − u on the w channels.
@@ -203,7 +287,7 @@ pub(crate) fn solve_with(
                 m[w_cols[i]] = d[i][p.node_of_sample()[k]] - u[i][k];
             }
         }
-        wstep.solve(r, &mean, &mut vhat, &mut offsets)?;
+        wstep.solve(r, &mean, &mut vhat, &mut params, &channels)?;
         // d-step on the relaxed iterate, through node means.
         let (mut w_norm2, mut d_norm2, mut u_norm2, mut pri2, mut dual2) =
             (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -279,7 +363,15 @@ pub(crate) fn solve_with(
                 let factor = target / rho;
                 rho = target;
                 u.iter_mut().flatten().for_each(|v| *v /= factor);
-                wstep = WStep::new(&real.ss, &variances(rho), &w_cols, len, initial)?;
+                wstep = WStep::new(
+                    &real.ss,
+                    &variances(rho),
+                    &channels,
+                    len,
+                    initial,
+                    beta,
+                    rho,
+                )?;
                 rho_changes += 1;
             }
         }
@@ -305,15 +397,31 @@ pub(crate) fn solve_with(
 
     // ê: the least-squares noise explaining r − T_yw·ŵ with ŵ = d (w fixed: zero variance).
     let mut fixed = vec![len as f64 / 2.0; nin];
-    for &c in &w_cols {
+    for &c in w_cols.iter().chain(&q_cols) {
         fixed[c] = 0.0;
     }
+    let offsets = &params[..nb];
+    // The quadratic blocks' coefficients η and their values Ψ̃·η at the samples.
+    let mut etas = Vec::with_capacity(factors.len());
+    let mut at = nb;
+    for f in &factors {
+        etas.push(params[at..at + f.rank].to_vec());
+        at += f.rank;
+    }
+    let q_values: Vec<Vec<f64>> = factors
+        .iter()
+        .zip(&etas)
+        .map(|(f, eta)| f.values(eta))
+        .collect();
     let final_smoother = DisturbanceSmoother::new(&real.ss, &fixed, len, initial)?;
     for k in 0..len {
         let m = mean.sample_mut(k);
         m.iter_mut().for_each(|v| *v = 0.0);
         for (i, p) in penalties.iter().enumerate() {
             m[w_cols[i]] = d[i][p.node_of_sample()[k]] + offsets[i];
+        }
+        for (j, v) in q_values.iter().enumerate() {
+            m[q_cols[j]] = v[k];
         }
     }
     let report = final_smoother.smooth(r, &mean, &mut vhat)?;
@@ -322,10 +430,25 @@ pub(crate) fn solve_with(
         .collect();
     let x0 = report.initial_state;
     // The maps are the node values plus the blocks' constant offsets.
-    for (di, c) in d.iter_mut().zip(&offsets) {
+    for (di, c) in d.iter_mut().zip(offsets) {
         di.iter_mut().for_each(|v| *v += c);
     }
-    let parts = tv_parts(&penalties, d);
+    let mut tv_parts: Vec<Option<BlockPart>> =
+        tv_parts(&penalties, d).into_iter().map(Some).collect();
+    let mut q_parts: Vec<Option<BlockPart>> = factors
+        .iter()
+        .zip(&quadratic)
+        .zip(&etas)
+        .map(|((f, (pen, _)), eta)| Some(f.part(pen.as_ref(), eta, len)))
+        .collect();
+    // Each slot indexes its list once, so every part is taken exactly once.
+    let parts: Vec<BlockPart> = slots
+        .iter()
+        .filter_map(|slot| match slot {
+            Slot::Tv(j) => tv_parts[*j].take(),
+            Slot::Quadratic(j) => q_parts[*j].take(),
+        })
+        .collect();
     let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
     let mut warnings = out.warnings;
     let status = if converged {
@@ -348,8 +471,23 @@ pub(crate) fn solve_with(
         ));
     }
     let t_end = Instant::now();
-    let peak =
-        8 * (len * (4 * nin + 3 * nb) + wstep.smoother.transient_len() * 32 + len * nb * nb) as u64;
+    let rank: usize = factors.iter().map(|f| f.rank).sum();
+    let peak = 8
+        * (len * (4 * nin + 3 * nb + rank)
+            + wstep.smoother.transient_len() * 32
+            + len * nb * (nb + rank)) as u64;
+    for (f, (_, bi)) in factors.iter().zip(&quadratic) {
+        if f.capped {
+            warnings.push(format!(
+                "the Gram matrix of block `{}` was factored to rank {} only (the limit), with a largest residual \
+                 diagonal of {:.1e} relative to K's: the estimate solves an approximation of the problem; give \
+                 the block finitely many features or a wider kernel",
+                problem.blocks()[*bi].name,
+                f.rank,
+                f.residual
+            ));
+        }
+    }
     Ok(Identification {
         posterior: None,
         w_hat: out.assembled.w_hat,
@@ -439,109 +577,280 @@ fn stop_reason(s: &StopState) -> String {
     )
 }
 
-/// The w-step with the blocks' constant offsets solved exactly.
+/// The realisation channels of the blocks and the quadratic blocks' factors.
+struct Channels<'a> {
+    /// The w channels of the total-variation blocks.
+    tv: &'a [usize],
+    /// The w channels of the quadratic blocks.
+    quadratic: &'a [usize],
+    /// The quadratic blocks' factors Ψ̃ (w = Ψ̃·η, D = ‖η‖²).
+    factors: &'a [QuadraticFactor],
+}
+
+/// The quadratic blocks' factors, with a rank limit from the memory budget.
+fn quadratic_factors(
+    problem: &Problem,
+    quadratic: &[(Box<dyn QuadraticPenalty>, usize)],
+    nb: usize,
+    settings: &IdentifySettings,
+) -> Result<Vec<QuadraticFactor>> {
+    if quadratic.is_empty() {
+        return Ok(Vec::new());
+    }
+    let len = problem.len().max(1);
+    // Per column of a factor: Ψ̃ itself and the responses of the n_b total-variation channels
+    // (8 bytes each, per sample), for every quadratic block.
+    let per_column = 8 * (len as u64) * (1 + nb as u64) * quadratic.len() as u64;
+    let budget = settings.effective_memory_limit() / 2;
+    let max_rank = ((budget / per_column.max(1)) as usize).min(MAX_RANK);
+    let mut factors = Vec::with_capacity(quadratic.len());
+    for (pen, bi) in quadratic {
+        let block = &problem.blocks()[*bi];
+        if max_rank == 0 {
+            return Err(Error::TooLarge {
+                solver: NAME.into(),
+                needed_mib: per_column >> 20,
+                limit_mib: settings.effective_memory_limit() >> 20,
+                size: problem.len() * problem.outputs(),
+                suggestion: format!(
+                    "even one column of the factor of quadratic block `{}` does not fit; raise the memory \
+                     limit or shorten the record",
+                    block.name
+                ),
+            });
+        }
+        factors.push(QuadraticFactor::new(
+            pen.as_ref(),
+            &block.z,
+            max_rank,
+            &block.name,
+        )?);
+    }
+    Ok(factors)
+}
+
+/// Largest rank of a quadratic block's factor (each column costs one smoother pass per value
+/// of ρ and O(L) per iteration).
+const MAX_RANK: usize = 2048;
+
+/// The w-step with its linear parameters solved exactly: the total-variation blocks' constant
+/// offsets and the quadratic blocks' coefficients.
 ///
-/// Total variation does not see a constant added to a block's node values, so the problem is
-/// unchanged when w = S·d + E·c with free offsets c ∈ ℝ^(n_b) (E: c_i on every sample of block
-/// i) and the ADMM constraint applies to w − E·c only. The w-step then also minimises over c,
-/// in closed form: the smoother is linear in its prior mean, so with prior mean m + E·c its
-/// output is ω₀ + Ω·c (ω₀ the output for m, Ω's column j the output for the unit constant on
-/// block j and zero data), and w − m = (ω₀ − m) + (Ω − E)·c. Stationarity in c says that
-/// w − m sums to zero over each block's samples, an n_b × n_b system K·c = b with
-/// K = Eᵀ(E − Ω) = ρ⁻¹·EᵀT_wᵀ(T·Q·Tᵀ)⁺T_w·E (symmetric, positive semi-definite) and b the
-/// block sums of ω₀ − m.
+/// Total variation does not see constants, so the problem is unchanged when w = S·d + E·c with
+/// free offsets c ∈ ℝ^(n_b) (E: c_i on every sample of block i) and the ADMM constraint applies
+/// to w − E·c only. A quadratic block is w_q = Ψ̃·η with the penalty β·‖η‖²
+/// ([`QuadraticFactor`]). Both kinds of parameter p = (c, η) enter the smoother through its prior
+/// mean: the offsets on the total-variation channels, Ψ̃·η on the quadratic channels, which have
+/// variance 0 (fixed at their mean) and are *adjoint channels* of the smoother
+/// ([`DisturbanceSmoother::with_adjoint`]): their output is the sensitivity g = T_qᵀS⁺δ of the
+/// w-step's cost to them (δ = r − T·mean, S = T·Q·Tᵀ). The smoother being linear in its mean,
+/// with M_j the mean of the unit parameter j, the cost ½δᵀS⁺δ + β‖η‖² is quadratic in p and
+/// stationary where H·p = b with b_j = M_jᵀ·Tᵀ S⁺ δ₀ (from the smoother's output for p = 0:
+/// ρ·(w − m) on the total-variation channels, g on the quadratic ones) and
+/// H_ij = M_iᵀTᵀS⁺T·M_j + 2β·[i = j ∈ η] (from one smoother pass per parameter, once per ρ).
+/// The smoother's output for p is that for 0 minus Σ_j p_j·R_j, with R_j = Q·TᵀS⁺T·M_j on the
+/// total-variation channels (stored, L·n_b per parameter).
 ///
-/// Without it, a constant combination that the data see only weakly — (f + c, g − c) when two
-/// blocks read the same z into one output, seen only through the first samples from rest —
-/// has a curvature of order 1/L² against ρ ~ 1/L, and ADMM drifts along it by a fraction
-/// ~ 1/L per iteration. Constants that the data do not see at all (K singular, e.g. with a
-/// free initial state) get the minimum-norm c.
+/// H is solved by eliminating η (its block is at least 2β·I, positive definite) and taking
+/// the pseudo-inverse of the offsets' Schur complement: constants the data do not see at all
+/// (e.g. with a free initial state) get the minimum-norm c.
+///
+/// Without the offsets, a constant combination that the data see only weakly — (f + c, g − c)
+/// when two blocks read the same z into one output, seen only through the first samples from
+/// rest — has a curvature of order 1/L² against ρ ~ 1/L, and ADMM drifts along it by a fraction
+/// ~ 1/L per iteration.
 struct WStep {
     smoother: DisturbanceSmoother,
-    /// Ω − E per sample: entry (k·n_b + i)·n_b + j is the response on block i's channel to the
-    /// unit constant on block j, minus δ_ij.
-    shift: Vec<f64>,
-    /// The pseudo-inverse of K (n_b × n_b, row-major).
-    k_pinv: Vec<f64>,
-    /// The w channels of the blocks.
-    w_cols: Vec<usize>,
+    /// R per sample: entry (k·n_b + i)·P + j is the response on total-variation channel i to
+    /// the unit parameter j.
+    resp: Vec<f64>,
+    /// The solution map p = G·b (P × P, row-major).
+    g: Vec<f64>,
+    /// n_b.
+    nb: usize,
+    /// P = n_b + Σ rank.
+    np: usize,
+    rho: f64,
 }
 
 impl WStep {
     fn new(
         ss: &StateSpace,
         variances: &[f64],
-        w_cols: &[usize],
+        ch: &Channels<'_>,
         len: usize,
         initial: SmootherInitial,
+        beta: f64,
+        rho: f64,
     ) -> Result<Self> {
-        let smoother = DisturbanceSmoother::new(ss, variances, len, initial)?;
-        let (nb, nin) = (w_cols.len(), variances.len());
+        let smoother =
+            DisturbanceSmoother::with_adjoint(ss, variances, len, initial, ch.quadratic)?;
+        let nb = ch.tv.len();
+        let nq: usize = ch.factors.iter().map(|f| f.rank).sum();
+        let np = nb + nq;
+        let nin = variances.len();
         let zero = Signal::zeros(len, ss.outputs());
         let mut unit = Signal::zeros(len, nin);
         let mut out = Signal::zeros(len, nin);
-        let mut shift = vec![0.0; len * nb * nb];
-        let mut k_mat = nalgebra::DMatrix::<f64>::zeros(nb, nb);
-        for j in 0..nb {
+        let mut resp = vec![0.0; len * nb * np];
+        let mut h = nalgebra::DMatrix::<f64>::zeros(np, np);
+        let mut b = vec![0.0; np];
+        // Parameter j: an offset (channel) or column l of a factor on its channel.
+        let params: Vec<(usize, Option<(&QuadraticFactor, usize)>)> = ch
+            .tv
+            .iter()
+            .map(|&c| (c, None))
+            .chain(
+                ch.factors
+                    .iter()
+                    .zip(ch.quadratic)
+                    .flat_map(|(f, &c)| (0..f.rank).map(move |l| (c, Some((f, l))))),
+            )
+            .collect();
+        for (j, &(col, factor)) in params.iter().enumerate() {
+            // The mean −M_j: the smoother's output minus it is Q·TᵀS⁺T·M_j.
+            unit.as_mut_slice().iter_mut().for_each(|v| *v = 0.0);
             for k in 0..len {
-                let s = unit.sample_mut(k);
-                s.iter_mut().for_each(|v| *v = 0.0);
-                s[w_cols[j]] = 1.0;
+                unit.sample_mut(k)[col] = match factor {
+                    None => -1.0,
+                    Some((f, l)) => -f.rows[k * f.rank + l],
+                };
             }
             smoother.smooth(&zero, &unit, &mut out)?;
             for k in 0..len {
-                for (i, &c) in w_cols.iter().enumerate() {
-                    let v = out.get(k, c) - if i == j { 1.0 } else { 0.0 };
-                    shift[(k * nb + i) * nb + j] = v;
-                    k_mat[(i, j)] -= v;
+                for (i, &c) in ch.tv.iter().enumerate() {
+                    resp[(k * nb + i) * np + j] = out.get(k, c) - unit.get(k, c);
                 }
             }
-        }
-        let k_sym = (&k_mat + k_mat.transpose()) * 0.5;
-        let eig = k_sym.symmetric_eigen();
-        // K's entries are at most L (the squared norm of a block's constant); eigenvalues
-        // below a relative 1e-10 of that are directions the data do not see (rounding).
-        let cut = 1e-10 * (len as f64).max(eig.eigenvalues.amax());
-        let mut k_pinv = nalgebra::DMatrix::<f64>::zeros(nb, nb);
-        for (l, &lam) in eig.eigenvalues.iter().enumerate() {
-            if lam > cut {
-                let v = eig.eigenvectors.column(l);
-                k_pinv += (v * v.transpose()) / lam;
+            gather(&out, &unit, ch, rho, &mut b);
+            for (i, bi) in b.iter().enumerate() {
+                h[(i, j)] = *bi;
             }
         }
+        for i in nb..np {
+            h[(i, i)] += 2.0 * beta;
+        }
+        let h = (&h + h.transpose()) * 0.5;
+        let g = solution_map(&h, nb, len, rho);
         Ok(Self {
             smoother,
-            shift,
-            k_pinv: k_pinv.transpose().as_slice().to_vec(),
-            w_cols: w_cols.to_vec(),
+            resp,
+            g,
+            nb,
+            np,
+            rho,
         })
     }
 
-    /// The w-step for prior mean `mean` (on the w channels: d − u): writes w − E·c into the
-    /// w channels of `out` (its noise channels keep the smoother's output for c = 0, unused)
-    /// and the offsets into `c`.
-    fn solve(&self, r: &Signal, mean: &Signal, out: &mut Signal, c: &mut [f64]) -> Result<()> {
+    /// The number of parameters P (offsets, then the quadratic blocks' coefficients).
+    fn parameters(&self) -> usize {
+        self.np
+    }
+
+    /// The w-step for prior mean `mean` (on the total-variation channels: d − u; zero on the
+    /// quadratic ones): writes w − E·c into the total-variation channels of `out` (the other
+    /// channels keep the smoother's output for p = 0, unused) and the parameters into `p`.
+    fn solve(
+        &self,
+        r: &Signal,
+        mean: &Signal,
+        out: &mut Signal,
+        p: &mut [f64],
+        ch: &Channels<'_>,
+    ) -> Result<()> {
         self.smoother.smooth(r, mean, out)?;
-        let nb = self.w_cols.len();
-        let mut b = vec![0.0; nb];
-        for k in 0..out.len() {
-            let (o, m) = (out.sample(k), mean.sample(k));
-            for (bi, &col) in b.iter_mut().zip(&self.w_cols) {
-                *bi += o[col] - m[col];
-            }
-        }
-        for (i, ci) in c.iter_mut().enumerate() {
-            *ci = (0..nb).map(|j| self.k_pinv[i * nb + j] * b[j]).sum();
+        let (nb, np) = (self.nb, self.np);
+        let mut b = vec![0.0; np];
+        gather(out, mean, ch, self.rho, &mut b);
+        for (i, pi) in p.iter_mut().enumerate() {
+            *pi = self.g[i * np..(i + 1) * np]
+                .iter()
+                .zip(&b)
+                .map(|(g, b)| g * b)
+                .sum();
         }
         for k in 0..out.len() {
             let o = out.sample_mut(k);
-            let row = &self.shift[k * nb * nb..(k + 1) * nb * nb];
-            for (i, &col) in self.w_cols.iter().enumerate() {
-                o[col] += (0..nb).map(|j| row[i * nb + j] * c[j]).sum::<f64>();
+            let rows = &self.resp[k * nb * np..(k + 1) * nb * np];
+            for (i, &col) in ch.tv.iter().enumerate() {
+                let row = &rows[i * np..(i + 1) * np];
+                o[col] -= row.iter().zip(p.iter()).map(|(a, b)| a * b).sum::<f64>();
             }
         }
         Ok(())
     }
+}
+
+/// b_j = M_jᵀ·TᵀS⁺δ from a smoother output `out` for the mean `mean`: ρ times the block sums
+/// of out − mean on the total-variation channels, Ψ̃ᵀ(out − mean) on the quadratic (adjoint)
+/// channels.
+fn gather(out: &Signal, mean: &Signal, ch: &Channels<'_>, rho: f64, b: &mut [f64]) {
+    let nb = ch.tv.len();
+    b.iter_mut().for_each(|v| *v = 0.0);
+    let len = out.len();
+    for k in 0..len {
+        let (o, m) = (out.sample(k), mean.sample(k));
+        for (bi, &col) in b[..nb].iter_mut().zip(ch.tv) {
+            *bi += o[col] - m[col];
+        }
+        let mut at = nb;
+        for (f, &col) in ch.factors.iter().zip(ch.quadratic) {
+            let g = o[col] - m[col];
+            let row = &f.rows[k * f.rank..(k + 1) * f.rank];
+            for (bj, psi) in b[at..at + f.rank].iter_mut().zip(row) {
+                *bj += psi * g;
+            }
+            at += f.rank;
+        }
+    }
+    b[..nb].iter_mut().for_each(|v| *v *= rho);
+}
+
+/// The map p = G·b solving H·p = b: η eliminated through the Cholesky factor of its block
+/// (≥ 2β·I), the offsets through the pseudo-inverse of their Schur complement, whose
+/// eigenvalues below a relative 1e-10 (of max(L, λ_max) after dividing by ρ: the entries of the
+/// offsets' block are at most ρ·L) count as directions the data do not see.
+fn solution_map(h: &nalgebra::DMatrix<f64>, nb: usize, len: usize, rho: f64) -> Vec<f64> {
+    use nalgebra::DMatrix;
+    let np = h.nrows();
+    let nq = np - nb;
+    let hcc = h.view((0, 0), (nb, nb)).into_owned();
+    let hcq = h.view((0, nb), (nb, nq)).into_owned();
+    let hqq = h.view((nb, nb), (nq, nq)).into_owned();
+    // H_ηη⁻¹ (symmetric positive definite; eigen-decomposition as a fallback).
+    let hqq_inv = match hqq.clone().cholesky() {
+        Some(c) => c.inverse(),
+        None => pinv_sym(&hqq, 0.0),
+    };
+    // X = H_ηη⁻¹·H_ηc, Schur complement S = H_cc − H_cη·X.
+    let x = &hqq_inv * hcq.transpose();
+    let schur = &hcc - &hcq * &x;
+    let schur = (&schur + schur.transpose()) * 0.5;
+    let k = &schur / rho;
+    let eig_max = k.clone().symmetric_eigen().eigenvalues.amax();
+    let s_inv = pinv_sym(&k, 1e-10 * (len as f64).max(eig_max)) / rho;
+    let mut g = DMatrix::<f64>::zeros(np, np);
+    g.view_mut((0, 0), (nb, nb)).copy_from(&s_inv);
+    let sx = &s_inv * x.transpose();
+    g.view_mut((0, nb), (nb, nq)).copy_from(&(-&sx));
+    g.view_mut((nb, 0), (nq, nb)).copy_from(&(-sx.transpose()));
+    g.view_mut((nb, nb), (nq, nq))
+        .copy_from(&(&hqq_inv + &x * &sx));
+    g.transpose().as_slice().to_vec()
+}
+
+/// The pseudo-inverse of a symmetric matrix, eigenvalues at or below `cut` left out.
+fn pinv_sym(a: &nalgebra::DMatrix<f64>, cut: f64) -> nalgebra::DMatrix<f64> {
+    let n = a.nrows();
+    let eig = a.clone().symmetric_eigen();
+    let mut out = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for (l, &lam) in eig.eigenvalues.iter().enumerate() {
+        if lam > cut {
+            let v = eig.eigenvectors.column(l);
+            out += (v * v.transpose()) / lam;
+        }
+    }
+    out
 }
 
 /// The penalty's scale read off the w-step's curvature: the initial ρ₀, the bounds within

@@ -5,7 +5,10 @@
 //! [`crate::hyperparameters::select`] uses `feature_path` to decide whether β is selected in
 //! feature space. In order:
 //!
-//! 1. quadratic and total-variation blocks together → Clarabel (the only solver for both);
+//! 1. quadratic and total-variation blocks together: held-out samples (cross-validation) →
+//!    Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (its
+//!    w-step handles the quadratic blocks through their features or a factor of their Gram
+//!    matrix);
 //! 2. total variation only: held-out samples (cross-validation) → Clarabel; otherwise
 //!    L·n_y ≤ [`CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM;
 //! 3. quadratic only: every block has finitely many features, m in all, and
@@ -25,6 +28,12 @@ pub use crate::solver::status::{SolveStatus, SolverKind, SolverReason};
 /// Clarabel is exact and takes about 0.4 s at L = 1000 with a white-noise input, but grows like
 /// L³ there (3.5 s at 2000, see `BENCHMARKS.md`), while ADMM takes milliseconds.
 pub const CONIC_AUTO_LIMIT: usize = 1000;
+
+/// Largest L·n_y for which the automatic choice uses the conic solver for a model that mixes
+/// quadratic and total-variation blocks. Clarabel's program is dense in the quadratic blocks (L²
+/// entries) and its interior-point iteration meets numerical trouble from about L = 800 with a
+/// Gaussian block; ADMM factors the Gram matrix instead and is linear in L.
+pub const MIXED_CONIC_AUTO_LIMIT: usize = 500;
 
 /// Whether every block has finitely many features and the feature solver can stream the
 /// problem's paths: the condition under which the feature solver minimises the same J as the
@@ -49,7 +58,17 @@ pub(crate) fn choose_with(
         .count();
     let size = problem.len() * problem.outputs();
     if tv_blocks > 0 && tv_blocks < penalties.len() {
-        return (SolverKind::Clarabel, SolverReason::MixedDispersions);
+        let limit = MIXED_CONIC_AUTO_LIMIT;
+        return if problem.held_out().is_some() {
+            (SolverKind::Clarabel, SolverReason::MixedDispersions)
+        } else if size <= limit {
+            (
+                SolverKind::Clarabel,
+                SolverReason::MixedSmall { size, limit },
+            )
+        } else {
+            (SolverKind::Admm, SolverReason::MixedLarge { size, limit })
+        };
     }
     if tv_blocks > 0 {
         return if problem.held_out().is_some() {
@@ -297,12 +316,23 @@ mod tests {
         let tv = kinds.iter().filter(|k| matches!(k, Kind::Tv)).count();
         let featured = kinds.iter().all(|k| matches!(k, Kind::Poly(_)));
         if tv > 0 && tv < kinds.len() {
-            return (
-                "clarabel".into(),
-                "automatic: quadratic and total-variation dispersions together, which only the conic \
-                 solver handles"
-                    .into(),
-            );
+            return if len <= 500 {
+                (
+                    "clarabel".into(),
+                    format!(
+                        "automatic: quadratic and total-variation dispersions together with L·n_y = {len} ≤ \
+                         500, the exact conic solver"
+                    ),
+                )
+            } else {
+                (
+                    "admm".into(),
+                    format!(
+                        "automatic: quadratic and total-variation dispersions together with L·n_y = {len} > \
+                         500, ADMM (linear in L)"
+                    ),
+                )
+            };
         }
         if tv > 0 {
             return if len <= 1000 {

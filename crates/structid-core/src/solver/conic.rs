@@ -17,8 +17,9 @@
 //!
 //! A quadratic block (any kernel) enters with its sample values w and dual coefficients α:
 //! the rows w = K·α and the term β·αᵀKα (P = 2β·K on α), which is wᵀK⁻¹w without K⁻¹. These are
-//! dense (L² entries), so mixed models are for records up to a few thousand samples; the memory
-//! is estimated first and a problem that would not fit is refused. A purely quadratic model
+//! dense (L² entries), so mixed models are for records up to a few thousand samples (longer ones
+//! go to [`super::admm`]); the memory is estimated first and a problem that would not fit is
+//! refused. A purely quadratic model
 //! solved this way equals the exact solver's estimate (tested), which cross-checks both.
 //!
 //! The interior-point method's sparse LDLᵀ factorisation couples the time chain (the dynamics)
@@ -136,9 +137,9 @@ pub(crate) fn solve_with(
                 limit_mib: limit >> 20,
                 size: len * ny,
                 suggestion: format!(
-                    "the conic program is dense in the {quadratic} quadratic block(s); use the exact or feature \
-                     solver when every block is quadratic, or a shorter record to mix quadratic and \
-                     total-variation blocks"
+                    "the conic program is dense in the {quadratic} quadratic block(s); use the admm solver \
+                     (linear in L) for a model that mixes quadratic and total-variation blocks, or the exact \
+                     or feature solver when every block is quadratic"
                 ),
             });
         }
@@ -319,16 +320,14 @@ pub(crate) fn solve_with(
     let sol = &solver.solution;
     let iterations = sol.iterations as usize;
     let mut warnings = Vec::new();
-    // Only a model whose blocks are all total variation has another solver: ADMM does not
-    // take quadratic blocks, so pointing a mixed model there would send the user in a circle.
+    // ADMM takes the same models (quadratic blocks through their features or a factor of their
+    // Gram matrix) and is linear in L.
     let elsewhere = if quadratic == 0 {
         "or use the admm solver"
     } else {
-        "or shorten the record (the quadratic blocks make the program dense in L); a model that \
-         mixes quadratic and total-variation blocks has no other solver, so to use a long record \
-         identify the total-variation block with the quadratic map fixed (its estimate as a \
-         known map), or give every block a quadratic dispersion and use the exact or feature \
-         solver"
+        "or use the admm solver, which handles the quadratic blocks through their features or a \
+         factor of their Gram matrix and is linear in L (the quadratic blocks make this program \
+         dense in L)"
     };
     let unconverged_detail = |status: SolverStatus| {
         format!(

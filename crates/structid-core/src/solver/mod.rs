@@ -7,6 +7,7 @@ pub mod conic;
 pub mod exact;
 pub mod features;
 pub mod prox;
+mod quadratic_factor;
 mod realisation;
 pub mod settings;
 pub mod status;
@@ -129,46 +130,12 @@ pub(crate) fn quadratic_penalty(
     }
 }
 
-/// The total-variation penalties of every block, or an error when a block is quadratic (ADMM
-/// handles total variation only).
-pub(crate) fn tv_penalties(problem: &Problem, solver: &str) -> Result<Vec<TvPenalty>> {
-    tv_from_penalties(problem, penalties(problem)?, solver)
-}
-
 /// Every block's penalty, in block order.
 pub(crate) fn penalties(problem: &Problem) -> Result<Vec<Penalty>> {
     problem
         .blocks()
         .iter()
         .map(|b| b.dispersion.penalty(&b.z))
-        .collect()
-}
-
-/// [`tv_penalties`] from penalties already built (so the automatic choice builds them once).
-pub(crate) fn tv_from_penalties(
-    problem: &Problem,
-    penalties: Vec<Penalty>,
-    solver: &str,
-) -> Result<Vec<TvPenalty>> {
-    problem
-        .blocks()
-        .iter()
-        .zip(penalties)
-        .map(|(b, pen)| match pen {
-            Penalty::TotalVariation(p) if p.len() == problem.len() => Ok(p),
-            Penalty::TotalVariation(p) => Err(Error::DimensionMismatch {
-                what: format!("samples of the total-variation penalty of block `{}`", b.name),
-                expected: problem.len().to_string(),
-                found: p.len().to_string(),
-            }),
-            Penalty::Quadratic(_) => Err(Error::Unsupported(format!(
-                "the {solver} solver handles total-variation dispersions only, but block `{}` has the quadratic \
-                 dispersion {}; models that mix quadratic and total-variation blocks need the clarabel solver \
-                 (dense in the quadratic blocks: records up to a few thousand samples)",
-                b.name,
-                b.dispersion.describe()
-            ))),
-        })
         .collect()
 }
 

@@ -116,8 +116,23 @@ pub enum SolverReason {
     /// The settings named the solver.
     #[default]
     Requested,
-    /// Quadratic and total-variation blocks together: only Clarabel handles both.
+    /// Quadratic and total-variation blocks together with held-out samples (cross-validation):
+    /// only Clarabel handles both.
     MixedDispersions,
+    /// Quadratic and total-variation blocks together on a small problem: Clarabel, exact.
+    MixedSmall {
+        /// L·n_y.
+        size: usize,
+        /// [`MIXED_CONIC_AUTO_LIMIT`](crate::solver::choice::MIXED_CONIC_AUTO_LIMIT).
+        limit: usize,
+    },
+    /// Quadratic and total-variation blocks together on a large problem: ADMM, linear in L.
+    MixedLarge {
+        /// L·n_y.
+        size: usize,
+        /// [`MIXED_CONIC_AUTO_LIMIT`](crate::solver::choice::MIXED_CONIC_AUTO_LIMIT).
+        limit: usize,
+    },
     /// Total variation with held-out samples (cross-validation): only Clarabel handles them.
     TotalVariationHeldOut,
     /// Total variation on a small problem: Clarabel, exact.
@@ -164,8 +179,18 @@ impl fmt::Display for SolverReason {
         match self {
             SolverReason::Requested => f.write_str("requested"),
             SolverReason::MixedDispersions => f.write_str(
-                "automatic: quadratic and total-variation dispersions together, which only the \
-                 conic solver handles",
+                "automatic: quadratic and total-variation dispersions together with held-out samples \
+                 (cross-validation), which only the conic solver handles",
+            ),
+            SolverReason::MixedSmall { size, limit } => write!(
+                f,
+                "automatic: quadratic and total-variation dispersions together with L·n_y = {size} ≤ \
+                 {limit}, the exact conic solver"
+            ),
+            SolverReason::MixedLarge { size, limit } => write!(
+                f,
+                "automatic: quadratic and total-variation dispersions together with L·n_y = {size} > \
+                 {limit}, ADMM (linear in L)"
             ),
             SolverReason::TotalVariationHeldOut => f.write_str(
                 "automatic: total variation with held-out samples (cross-validation), which only \
