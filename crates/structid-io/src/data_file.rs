@@ -30,6 +30,7 @@ use std::path::{Path, PathBuf};
 
 use structid_lti::Signal;
 
+use crate::array_file::{ArrayFile, Format, Vars};
 use crate::error::IoError;
 use crate::output::{OutputGuard, write_atomic};
 
@@ -172,6 +173,26 @@ impl std::fmt::Display for ColumnRef {
     }
 }
 
+/// The [`CsvOptions`] that select the columns of `vars` from a CSV file with a header.
+fn csv_options(vars: &Vars) -> Result<CsvOptions, IoError> {
+    let columns = vars
+        .refs()
+        .map(|r| match (&r.variable, r.column) {
+            (Some(v), None) => Ok(ColumnRef::Name(v.clone())),
+            (None, Some(j)) => Ok(ColumnRef::Index(j)),
+            _ => Err(IoError::InvalidArgument(format!(
+                "invalid variable selection `{r}` for a CSV file: name a column of the header \
+                 (`V1`) or give its zero-based position (`#0`)"
+            ))),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(CsvOptions {
+        columns: Some(columns),
+        names: Some(vars.names().map(str::to_string).collect()),
+        ..CsvOptions::default()
+    })
+}
+
 fn data_err(
     path: Option<&Path>,
     line: Option<u64>,
@@ -223,11 +244,85 @@ impl DataTable {
         })
     }
 
-    /// Reads a CSV file (see the module documentation for the accepted format).
+    /// Reads a data file: a CSV file (see the module documentation for the accepted format),
+    /// or a MATLAB MAT-file, NumPy `.npy` or `.npz` file ([`crate::array_file`]), recognised
+    /// by its first bytes, with every real numeric variable as a column.
     ///
-    /// The same as [`DataTable::read_with`] with the default [`CsvOptions`].
+    /// For a CSV file, the same as [`DataTable::read_with`] with the default [`CsvOptions`];
+    /// the same as [`DataTable::read_vars`] without a selection.
     pub fn read(path: &Path) -> Result<Self, IoError> {
-        Self::read_with(path, &CsvOptions::default())
+        Self::read_vars(path, None)
+    }
+
+    /// Reads a data file of any format [`DataTable::read`] reads, keeping the signals `vars`
+    /// selects under the names it gives them (all columns or variables without it).
+    ///
+    /// In a MAT-file or `.npz` archive a signal is a variable (`u=vir`), a column of a matrix
+    /// variable (`u=data#0`), or, in a `.npy` file, a column of its array (`u=#0`); in a CSV
+    /// file it is a column of the header (`u=V1`) or a column by position (`u=#0`).
+    ///
+    /// ```
+    /// use structid_io::{DataTable, Vars};
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("d.csv");
+    /// std::fs::write(&path, "V1,V2\n1,2\n3,4\n").unwrap();
+    /// let vars: Vars = "y=V2,u=#0".parse().unwrap();
+    /// let t = DataTable::read_vars(&path, Some(&vars)).unwrap();
+    /// assert_eq!(t.names, ["y", "u"]);
+    /// assert_eq!(t.columns, vec![vec![2.0, 4.0], vec![1.0, 3.0]]);
+    /// // A MAT-file that is HDF5 (v7.3) says what to do.
+    /// let mat = dir.path().join("d.mat");
+    /// let mut bytes = b"MATLAB 7.3 MAT-file".to_vec();
+    /// bytes.resize(600, 0);
+    /// std::fs::write(&mat, bytes).unwrap();
+    /// let e = DataTable::read(&mat).unwrap_err().to_string();
+    /// assert!(e.contains("v7.3") && e.contains("-v7"), "{e}");
+    /// ```
+    pub fn read_vars(path: &Path, vars: Option<&Vars>) -> Result<Self, IoError> {
+        let read_err = |source| IoError::Read {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut head = Vec::with_capacity(16);
+        {
+            use std::io::Read;
+            let file = std::fs::File::open(path).map_err(read_err)?;
+            file.take(16).read_to_end(&mut head).map_err(read_err)?;
+        }
+        let extension = path.extension().and_then(|e| e.to_str());
+        let format = Format::detect(&head, extension);
+        if format == Format::Csv {
+            let options = match vars {
+                None => CsvOptions::default(),
+                Some(v) => csv_options(v)?,
+            };
+            return Self::read_with(path, &options);
+        }
+        let bytes = std::fs::read(path).map_err(read_err)?;
+        let array_err = |source| IoError::ArrayFile {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = match format {
+            Format::Npy => ArrayFile::parse_npy(&bytes),
+            Format::Npz => ArrayFile::parse_npz(&bytes),
+            _ => ArrayFile::parse_mat(&bytes),
+        }
+        .map_err(array_err)?;
+        drop(bytes);
+        let (names, columns) = file.columns(vars).map_err(array_err)?;
+        if columns.first().map_or(0, Vec::len) > MAX_ROWS {
+            return Err(IoError::TooManyRows {
+                path: path.to_path_buf(),
+                limit: MAX_ROWS,
+            });
+        }
+        let mut t = Self::new(names, columns).map_err(|e| match e {
+            IoError::InvalidArgument(m) => data_err(Some(path), None, None, m),
+            e => e,
+        })?;
+        t.path = Some(path.to_path_buf());
+        Ok(t)
     }
 
     /// Reads a CSV file with explicit [`CsvOptions`]: delimiter, header or not, lines to skip,

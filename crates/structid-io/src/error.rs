@@ -109,6 +109,16 @@ pub enum IoError {
         message: String,
     },
 
+    /// A MAT-file, `.npy` or `.npz` data file cannot be read, or lacks a variable asked for.
+    #[error("data file `{}`: {source}", path.display())]
+    ArrayFile {
+        /// The data file.
+        path: PathBuf,
+        /// What is wrong.
+        #[source]
+        source: crate::array_file::ArrayFileError,
+    },
+
     /// A file could not be read.
     #[error("cannot read `{}`", path.display())]
     Read {
@@ -203,6 +213,7 @@ impl IoError {
             | IoError::BenchmarkMissing { .. }
             | IoError::Benchmark { .. }
             | IoError::Read { .. }
+            | IoError::ArrayFile { .. }
             | IoError::WouldOverwriteInput { .. }
             | IoError::Output { .. }
             | IoError::InvalidArgument(_) => true,

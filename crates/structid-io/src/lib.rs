@@ -7,6 +7,9 @@
 //! * [`DataTable`]: data files (CSV with a header row); errors name the line and the column.
 //!   [`DataTable::read_with`] with [`CsvOptions`] reads other layouts (delimiter, no header,
 //!   leading lines to skip) and selects, orders and renames columns ([`ColumnRef`]).
+//! * [`array_file`]: MATLAB MAT-files (v5, compressed or not) and NumPy `.npy` / `.npz`
+//!   files; [`DataTable::read`] recognises them by their first bytes, and
+//!   [`DataTable::read_vars`] picks and names the signals ([`Vars`], e.g. `u=vir,y=qm`).
 //! * [`benchmarks`]: loaders of the Silverbox ([`Silverbox`]) and cascaded-tanks
 //!   ([`CascadedTanks`]) benchmark files with their official splits as [`Record`]s.
 //! * [`OutputGuard`] / [`write_atomic`]: atomic writes that refuse to overwrite an input file,
@@ -46,6 +49,7 @@
 //! assert!((id.blocks[0].predict(&[1.0]) - 1.0).abs() < 0.05, "{}", id.blocks[0].predict(&[1.0]));
 //! ```
 
+pub mod array_file;
 pub mod benchmarks;
 pub mod data_file;
 pub mod error;
@@ -56,6 +60,7 @@ pub mod report;
 pub mod sweep_file;
 pub mod validation_report;
 
+pub use array_file::{ArrayFile, ArrayFileError, Vars};
 pub use benchmarks::{CascadedTanks, Record, Silverbox, SilverboxSplit, TanksSplit};
 pub use data_file::{
     ColumnRef, CsvOptions, DataFile, DataTable, csv_bytes, format_number, write_csv,
