@@ -70,6 +70,8 @@
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use structid_lti::{DisturbanceSmoother, Signal, SmootherInitial, StateSpace};
 
 use crate::dispersion::{Penalty, QuadraticPenalty};
@@ -690,11 +692,8 @@ impl WStep {
         let np = nb + nq;
         let nin = variances.len();
         let zero = Signal::zeros(len, ss.outputs());
-        let mut unit = Signal::zeros(len, nin);
-        let mut out = Signal::zeros(len, nin);
         let mut resp = vec![0.0; len * nb * np];
         let mut h = nalgebra::DMatrix::<f64>::zeros(np, np);
-        let mut b = vec![0.0; np];
         // Parameter j: an offset (channel) or column l of a factor on its channel.
         let params: Vec<(usize, Option<(&QuadraticFactor, usize)>)> = ch
             .tv
@@ -707,25 +706,68 @@ impl WStep {
                     .flat_map(|(f, &c)| (0..f.rank).map(move |l| (c, Some((f, l))))),
             )
             .collect();
-        for (j, &(col, factor)) in params.iter().enumerate() {
-            // The mean −M_j: the smoother's output minus it is Q·TᵀS⁺T·M_j.
-            unit.as_mut_slice().iter_mut().for_each(|v| *v = 0.0);
+        // One smoother pass per parameter (independent: in parallel, each bit-identical to
+        // a sequential run): the responses on the total-variation channels and the
+        // sensitivities on the quadratic ones.
+        let nqb = ch.quadratic.len();
+        let passes: Vec<(Vec<f64>, Vec<f64>)> = params
+            .par_iter()
+            .map(|&(col, factor)| -> Result<(Vec<f64>, Vec<f64>)> {
+                // The mean −M_j: the smoother's output minus it is Q·TᵀS⁺T·M_j.
+                let mut unit = Signal::zeros(len, nin);
+                let mut out = Signal::zeros(len, nin);
+                for k in 0..len {
+                    unit.sample_mut(k)[col] = match factor {
+                        None => -1.0,
+                        Some((f, l)) => -f.rows[k * f.rank + l],
+                    };
+                }
+                smoother.smooth(&zero, &unit, &mut out)?;
+                let diff = |k: usize, c: usize| out.get(k, c) - unit.get(k, c);
+                let tv: Vec<f64> = (0..len)
+                    .flat_map(|k| ch.tv.iter().map(move |&c| (k, c)))
+                    .map(|(k, c)| diff(k, c))
+                    .collect();
+                let adj: Vec<f64> = (0..len)
+                    .flat_map(|k| ch.quadratic.iter().map(move |&c| (k, c)))
+                    .map(|(k, c)| diff(k, c))
+                    .collect();
+                Ok((tv, adj))
+            })
+            .collect::<Result<_>>()?;
+        for (j, (tv, _)) in passes.iter().enumerate() {
             for k in 0..len {
-                unit.sample_mut(k)[col] = match factor {
-                    None => -1.0,
-                    Some((f, l)) => -f.rows[k * f.rank + l],
-                };
-            }
-            smoother.smooth(&zero, &unit, &mut out)?;
-            for k in 0..len {
-                for (i, &c) in ch.tv.iter().enumerate() {
-                    resp[(k * nb + i) * np + j] = out.get(k, c) - unit.get(k, c);
+                for i in 0..nb {
+                    let v = tv[k * nb + i];
+                    resp[(k * nb + i) * np + j] = v;
+                    h[(i, j)] += rho * v;
                 }
             }
-            gather(&out, &unit, ch, rho, &mut b);
-            for (i, bi) in b.iter().enumerate() {
-                h[(i, j)] = *bi;
+        }
+        // The quadratic blocks' rows: Ψ̃_bᵀ·A_b with A_b (L × P) the sensitivities on the
+        // block's channel, one product per block (sequential: bit-identical at any thread count).
+        let mut at = nb;
+        for (b, f) in ch.factors.iter().enumerate() {
+            if f.rank == 0 {
+                continue;
             }
+            let a = faer::Mat::<f64>::from_fn(len, np, |k, j| passes[j].1[k * nqb + b]);
+            let psi = faer::MatRef::from_row_major_slice(&f.rows, len, f.rank);
+            let mut dst = faer::Mat::<f64>::zeros(f.rank, np);
+            faer::linalg::matmul::matmul(
+                dst.as_mut(),
+                faer::Accum::Replace,
+                psi.transpose(),
+                a.as_ref(),
+                1.0,
+                faer::Par::Seq,
+            );
+            for l in 0..f.rank {
+                for j in 0..np {
+                    h[(at + l, j)] = dst[(l, j)];
+                }
+            }
+            at += f.rank;
         }
         for i in nb..np {
             h[(i, i)] += 2.0 * beta;
