@@ -239,9 +239,11 @@ struct IdentifyArgs {
     /// Solver: `auto` chooses by dispersion and size — for quadratic dispersions the exact
     /// solve unless its L·n_y × L·n_y matrix would not fit in memory, then the feature solver
     /// when every dispersion has finitely many features; for total variation `clarabel` up to
-    /// L·n_y = 1000 samples, `admm` beyond; `clarabel` for models that mix the two kinds. `exact`, `features` (linear in L; fourier and
+    /// L·n_y = 1000 samples, `admm` beyond; for models that mix the two kinds `clarabel` up to
+    /// L·n_y = 500, `admm` beyond. `exact`, `features` (linear in L; fourier and
     /// gaussian-lowrank dispersions, minimum-phase noise models), `clarabel` (exact conic
-    /// program for tv) and `admm` (linear in L, for tv) force a solver.
+    /// program for tv, dense in quadratic blocks) and `admm` (linear in L, for tv alone or
+    /// mixed with quadratic dispersions) force a solver.
     #[arg(
         long,
         value_name = "auto|exact|features|clarabel|admm",
