@@ -261,9 +261,15 @@ pub(crate) fn solve_with(
     let t_assembled = Instant::now();
 
     // State: d (nodes, per block), u (samples, per block), the smoother's mean and output.
+    // The samples' own quantities (u, the w-step's output) are kept in node order: each block's
+    // samples sorted by node (`order`, with `sorted_node` the node of each position), so that
+    // every pass over the samples reads and writes the node vectors in sequence, and only two
+    // passes per block and iteration (the w-step's mean out, its output in) follow time order.
+    let orders: Vec<(Vec<usize>, Vec<usize>)> = penalties.iter().map(node_order).collect();
     let mut d: Vec<Vec<f64>> = penalties.iter().map(|p| vec![0.0; p.nodes()]).collect();
     let mut d_prev = d.clone();
     let mut u: Vec<Vec<f64>> = vec![vec![0.0; len]; nb];
+    let mut ws: Vec<f64> = vec![0.0; len];
     let mut mean = Signal::zeros(len, nin);
     let mut vhat = Signal::zeros(len, nin);
     let mut target: Vec<Vec<f64>> = penalties.iter().map(|p| vec![0.0; p.nodes()]).collect();
@@ -283,25 +289,27 @@ pub(crate) fn solve_with(
     while iterations < opts.max_iterations() {
         iterations += 1;
         // w-step: smoother with prior mean d − u on the w channels.
-        for k in 0..len {
-            let m = mean.sample_mut(k);
-            for (i, p) in penalties.iter().enumerate() {
-                m[w_cols[i]] = d[i][p.node_of_sample()[k]] - u[i][k];
+        for (i, (order, sorted_node)) in orders.iter().enumerate() {
+            let (m, col) = (mean.as_mut_slice(), w_cols[i]);
+            for ((&k, &g), &uj) in order.iter().zip(sorted_node).zip(&u[i]) {
+                m[k * nin + col] = d[i][g] - uj;
             }
         }
         wstep.solve(r, &mean, &mut vhat, &mut params, &channels)?;
         // d-step on the relaxed iterate, through node means.
         let (mut w_norm2, mut d_norm2, mut u_norm2, mut pri2, mut dual2) =
             (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (i, p) in penalties.iter().enumerate() {
-            let nodes = p.node_of_sample();
-            target[i].iter_mut().for_each(|t| *t = 0.0);
-            for k in 0..len {
-                let w = vhat.get(k, w_cols[i]);
-                let relaxed = alpha * w + (1.0 - alpha) * d[i][nodes[k]];
-                target[i][nodes[k]] += relaxed + u[i][k];
+        for (i, (order, sorted_node)) in orders.iter().enumerate() {
+            let (v, col) = (vhat.as_slice(), w_cols[i]);
+            for (w, &k) in ws.iter_mut().zip(order) {
+                *w = v[k * nin + col];
             }
-            for (t, c) in target[i].iter_mut().zip(&counts[i]) {
+            let (di, ui, ti) = (&d[i], &u[i], &mut target[i]);
+            ti.iter_mut().for_each(|t| *t = 0.0);
+            for ((&w, &g), &uj) in ws.iter().zip(sorted_node).zip(ui) {
+                ti[g] += alpha * w + (1.0 - alpha) * di[g] + uj;
+            }
+            for (t, c) in ti.iter_mut().zip(&counts[i]) {
                 *t /= c;
             }
             std::mem::swap(&mut d[i], &mut d_prev[i]);
@@ -335,16 +343,16 @@ pub(crate) fn solve_with(
                     prox_unconverged += usize::from(!rep.converged);
                 }
             }
-            for k in 0..len {
-                let g = nodes[k];
-                let w = vhat.get(k, w_cols[i]);
-                let relaxed = alpha * w + (1.0 - alpha) * d_prev[i][g];
-                u[i][k] += relaxed - d[i][g];
+            let (di, dp) = (&d[i], &d_prev[i]);
+            for ((&w, &g), uj) in ws.iter().zip(sorted_node).zip(u[i].iter_mut()) {
+                let (dg, pg) = (di[g], dp[g]);
+                let relaxed = alpha * w + (1.0 - alpha) * pg;
+                *uj += relaxed - dg;
                 w_norm2 += w * w;
-                d_norm2 += d[i][g] * d[i][g];
-                u_norm2 += u[i][k] * u[i][k];
-                pri2 += (w - d[i][g]).powi(2);
-                dual2 += (d[i][g] - d_prev[i][g]).powi(2);
+                d_norm2 += dg * dg;
+                u_norm2 += *uj * *uj;
+                pri2 += (w - dg) * (w - dg);
+                dual2 += (dg - pg) * (dg - pg);
             }
         }
         r_pri = pri2.sqrt();
@@ -577,6 +585,26 @@ fn stop_reason(s: &StopState) -> String {
          loosen the tolerance ({:.1e}), or use the clarabel solver for L up to a few thousand",
         s.max_iterations, s.r_pri, s.eps_pri, s.r_dual, s.eps_dual, s.tolerance
     )
+}
+
+/// A block's samples sorted by node (a counting sort, stable in time) and the node of each
+/// sorted position.
+fn node_order(p: &TvPenalty) -> (Vec<usize>, Vec<usize>) {
+    let nodes = p.node_of_sample();
+    let mut start = vec![0usize; p.nodes() + 1];
+    for &g in nodes {
+        start[g + 1] += 1;
+    }
+    for g in 0..p.nodes() {
+        start[g + 1] += start[g];
+    }
+    let mut order = vec![0usize; nodes.len()];
+    for (k, &g) in nodes.iter().enumerate() {
+        order[start[g]] = k;
+        start[g] += 1;
+    }
+    let sorted_node = order.iter().map(|&k| nodes[k]).collect();
+    (order, sorted_node)
 }
 
 /// The realisation channels of the blocks and the quadratic blocks' factors.
