@@ -1,15 +1,53 @@
 //! `structid data`: benchmark splits and column selection as plain `u,y` CSV files.
 
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use clap::{Args, Subcommand};
 use structid_io::{
-    CascadedTanks, ColumnRef, CsvOptions, DataTable, OutputGuard, Record, Silverbox,
-    SilverboxSplit, TanksSplit,
+    CascadedTanks, ColumnRef, CsvOptions, DataTable, IoError, ModelFile, OutputGuard, Record,
+    Silverbox, SilverboxSplit, TanksSplit, Vars,
 };
 
 use crate::error::CliError;
+
+/// The signals `--vars` selects from every data file of this run (set once by `main`).
+static VARS: OnceLock<Vars> = OnceLock::new();
+
+/// Sets the `--vars` selection of this run.
+pub fn set_vars(vars: Vars) {
+    // Set once, before any file is read.
+    let _ = VARS.set(vars);
+}
+
+/// Parses `--vars`.
+pub fn parse_vars(s: &str) -> Result<Vars, String> {
+    s.parse()
+        .map_err(|e: structid_io::ArrayFileError| e.to_string())
+}
+
+/// Reads a data file named on the command line (--data, --validation-data, --validate,
+/// --input): CSV, MAT-file, `.npy` or `.npz`, with the signals and names of `--vars`.
+pub fn read_table(path: &Path) -> Result<DataTable, IoError> {
+    DataTable::read_vars(path, VARS.get())
+}
+
+/// A record of `discover` read with [`read_table`].
+pub fn read_record(
+    mf: &ModelFile,
+    path: &Path,
+) -> Result<structid_discover::report::Record, IoError> {
+    let table = read_table(path)?;
+    let data = mf.select_data(&table)?;
+    let time = structid_discover::report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
+    Ok(structid_discover::report::Record {
+        path: path.to_path_buf(),
+        table,
+        data,
+        time,
+    })
+}
 
 /// Subcommands of `structid data`.
 #[derive(Debug, Subcommand)]

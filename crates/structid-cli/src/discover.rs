@@ -621,8 +621,8 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .protect(&a.validate);
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
-    let est = Record::read(&mf, &a.data)?;
-    let val = Record::read(&mf, &a.validate)?;
+    let est = crate::data::read_record(&mf, &a.data)?;
+    let val = crate::data::read_record(&mf, &a.validate)?;
     for (flag, r) in [("--data", &est), ("--validate", &val)] {
         if a.settle >= r.data.len() {
             return Err(CliError::input(format!(

@@ -14,8 +14,7 @@ use structid_core::{
     Data, Identification, IdentifySettings, InitialState, Model, SolverChoice, identify,
 };
 use structid_io::{
-    DataTable, DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, SelectionReport,
-    TruthSpec,
+    DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, SelectionReport, TruthSpec,
 };
 
 use crate::IdentifyArgs;
@@ -232,7 +231,7 @@ pub(crate) fn model_and_data(
     data_path: &Path,
     sigma: Option<f64>,
 ) -> Result<(Data, Model), CliError> {
-    let table = DataTable::read(data_path)?;
+    let table = crate::data::read_table(data_path)?;
     let data = mf.select_data(&table)?;
     let needs_z = sigma.is_none()
         && mf.blocks.iter().any(|b| {
@@ -444,7 +443,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
             None => Criterion::CrossValidation { folds: a.folds },
         };
         let validation = match &a.validation_data {
-            Some(v) => Some(mf.select_data(&DataTable::read(v)?)?),
+            Some(v) => Some(mf.select_data(&crate::data::read_table(v)?)?),
             None => None,
         };
         let how = SelectionSettings::builder()

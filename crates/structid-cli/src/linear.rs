@@ -5,9 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use structid_core::Site;
-use structid_io::{
-    BlockSpec, DataTable, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames,
-};
+use structid_io::{BlockSpec, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames};
 use structid_linear::{
     ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx, oe,
     select_orders,
@@ -162,7 +160,7 @@ pub enum MapDispersionArg {
 }
 
 fn read_signals(path: &std::path::Path, a: &LinearArgs) -> Result<(Signal, Signal), CliError> {
-    let table = DataTable::read(path)?;
+    let table = crate::data::read_table(path)?;
     let u = table.select(&a.input)?;
     let y = table.select(std::slice::from_ref(&a.output))?;
     Ok((u, y))

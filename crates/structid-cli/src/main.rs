@@ -14,6 +14,11 @@
 //!                   [--naming-tolerance T] [--hysteresis-threshold T]
 //! ```
 //!
+//!
+//! Every command that reads data files (--data, --validation-data, --validate, --input) reads
+//! CSV files, MATLAB MAT-files (v5 to v7) and NumPy .npy/.npz files; `--vars u=vir,y=qm`
+//! picks and names the signals.
+//!
 //! Exit codes: 0 success, 2 invalid usage or input (bad arguments, malformed model or data
 //! files, a model that cannot be identified as posed, an output location that cannot be used,
 //! a data file longer than [`structid_io::data_file::MAX_ROWS`]), 1 failure while running
@@ -43,7 +48,8 @@ use crate::error::CliError;
 /// Structured nonlinear system identification: known LTI blocks, unknown static maps.
 ///
 /// A model file (TOML) describes the known linear part as an LFT and lists the unknown static
-/// maps with their dispersions; a data file (CSV with a header row) holds the measured signals.
+/// maps with their dispersions; a data file (CSV with a header row, a MATLAB MAT-file or a
+/// NumPy .npy/.npz file, see --vars) holds the measured signals.
 /// `structid identify` estimates the maps, `structid simulate` generates data from known maps,
 /// and `structid demo` runs the examples of Hsu et al. (2006) without any files.
 ///
@@ -58,6 +64,19 @@ use crate::error::CliError;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+
+    /// The signals to read from the data files, as NAME=VARIABLE items: `u=vir,y=qm` reads the
+    /// variables `vir` and `qm` of a MAT-file (.mat, saved by MATLAB with -v6 or -v7, by Octave
+    /// or SciPy) or of a NumPy .npz archive as the signals `u` and `y` that the model file's
+    /// [signals] name; `y=data#1` is column 1 (zero-based) of a matrix variable; `u=#0` is
+    /// column 0 of a .npy array or of a CSV file, whose columns may also be named by their
+    /// header (`u=V1`). Applies to every data file of the command (--data,
+    /// --validation-data, --validate, --input). Without it a MAT-file's or .npz archive's
+    /// numeric variables are columns named by the variables (matrix columns `data#0`, …) and
+    /// a .npy array's columns are c0, c1, …. MATLAB v7.3 files (HDF5) are not read: save
+    /// with `save(..., '-v7')` or export CSV.
+    #[arg(long, global = true, value_name = "NAME=VAR,...", value_parser = data::parse_vars)]
+    vars: Option<structid_io::Vars>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -489,6 +508,21 @@ struct MultiInputArgs {
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
+    if let Some(vars) = cli.vars {
+        let reads_data = !matches!(
+            cli.command,
+            Command::Demo(_) | Command::Data(_) | Command::Compare(_)
+        );
+        if !reads_data {
+            return Err(CliError::input(
+                "--vars selects the signals of the data files of identify, validate, predict, \
+                 simulate, linear, refine and discover; this command reads none (a sweep \
+                 configuration of `compare` reads a MAT-file's variables as columns named by \
+                 the variables)",
+            ));
+        }
+        data::set_vars(vars);
+    }
     match cli.command {
         Command::Identify(a) => identify::run(a),
         Command::Simulate(a) => simulate::run(a),

@@ -11,8 +11,7 @@ use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{LinearStructure, RefineSettings, refine};
 use structid_core::{Data, IdentifySettings, InitialState};
 use structid_io::{
-    DataTable, LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction,
-    format_number,
+    LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
 };
 use structid_linear::OeSettings;
 use structid_plot::{Chart, Series, render_chart_svg};
@@ -239,7 +238,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         a.validation_fraction,
     ) {
         (Some(v), _) => {
-            let vd = mf.select_data(&DataTable::read(v)?)?;
+            let vd = mf.select_data(&crate::data::read_table(v)?)?;
             (all, Some(vd), Some(v.display().to_string()), None)
         }
         (None, Some(f)) => {

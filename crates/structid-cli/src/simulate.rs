@@ -1,7 +1,7 @@
 //! `structid simulate`.
 
 use structid_core::Interpolant;
-use structid_io::{DataTable, ModelFile, OutputGuard};
+use structid_io::{ModelFile, OutputGuard};
 
 use crate::SimulateArgs;
 use crate::error::{CliError, finite_columns};
@@ -65,7 +65,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
         }
     }
 
-    let table = DataTable::read(&a.input)?;
+    let table = crate::data::read_table(&a.input)?;
     let u = table
         .select(&mf.signals.u)
         .map_err(|e| CliError::from(e).context("reading the inputs named in [signals].u"))?;

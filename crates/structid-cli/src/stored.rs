@@ -10,7 +10,7 @@ use structid_core::estimate::PredictionSettings;
 use structid_core::paper::gaussian_noise;
 use structid_core::validation::ValidationSettings;
 use structid_core::{Data, Estimate, InitialState};
-use structid_io::{DataTable, OutputGuard, read_estimate};
+use structid_io::{OutputGuard, read_estimate};
 
 use crate::error::CliError;
 use crate::identify::absolute;
@@ -51,7 +51,7 @@ pub(crate) fn check_complete(path: &Path) -> Result<(), CliError> {
 }
 
 fn record(path: &Path, u: &[String], y: &[String]) -> Result<Data, CliError> {
-    let table = DataTable::read(path)?;
+    let table = crate::data::read_table(path)?;
     let us = table
         .select(u)
         .map_err(|e| CliError::from(e).context("reading the estimate's input columns"))?;
@@ -198,7 +198,7 @@ pub fn simulate(a: &SimulateArgs, path: &Path, noise_std: f64) -> Result<(), Cli
     guard.protect(&a.input);
     guard.check_out_file(&a.out)?;
     let (estimate, u_names, y_names) = load(path)?;
-    let table = DataTable::read(&a.input)?;
+    let table = crate::data::read_table(&a.input)?;
     let u = table
         .select(&u_names)
         .map_err(|e| CliError::from(e).context("reading the estimate's input columns"))?;

@@ -72,6 +72,7 @@ fn identify_args(rep: &Reproduction, dir: &Path, report: &Path) -> Result<Identi
     match Cli::try_parse_from(&argv) {
         Ok(Cli {
             command: Command::Identify(a),
+            ..
         }) => Ok(a),
         Ok(_) => Err(invalid("not an identify command".into())),
         Err(e) => Err(invalid(
@@ -338,7 +339,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
     // The validation record, checked before the (possibly long) re-identification.
-    let table = DataTable::read(&a.data)?;
+    let table = crate::data::read_table(&a.data)?;
     let vdata = vmf.select_data(&table)?;
     check_lengths(&a, &vdata)?;
 

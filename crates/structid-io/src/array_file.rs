@@ -234,7 +234,7 @@ pub struct Array {
 }
 
 impl Array {
-    /// Column `j` (`None` beyond the last).
+    /// Column `j` (`None` beyond the last, or when `data` is shorter than `rows × cols`).
     ///
     /// ```
     /// use structid_io::array_file::Array;
@@ -243,22 +243,16 @@ impl Array {
     /// assert_eq!(a.column(2), None);
     /// ```
     pub fn column(&self, j: usize) -> Option<&[f64]> {
-        (j < self.cols).then(|| &self.data[j * self.rows..(j + 1) * self.rows])
+        let start = j.checked_mul(self.rows)?;
+        (j < self.cols)
+            .then(|| self.data.get(start..start.checked_add(self.rows)?))
+            .flatten()
     }
 
     /// Whether the array is a vector (one row or one column); a vector is read as one
     /// column of samples.
     pub fn is_vector(&self) -> bool {
         self.rows == 1 || self.cols == 1
-    }
-
-    /// The array with a vector turned into one column (`1×N` becomes `N×1`).
-    fn into_column_if_vector(mut self) -> Self {
-        if self.rows == 1 && self.cols != 1 {
-            self.rows = self.cols;
-            self.cols = 1;
-        }
-        self
     }
 }
 
@@ -1096,8 +1090,7 @@ mod mat {
                 rows,
                 cols,
                 data: values,
-            }
-            .into_column_if_vector()),
+            }),
         }))
     }
 }

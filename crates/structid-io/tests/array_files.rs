@@ -111,7 +111,7 @@ fn scipy_mat_files_compressed_or_not() {
         );
         let e = msg("qn");
         assert!(
-            e.starts_with(&format!("data file `{}`: the file has no variable `qn`; it holds vir (8×1), qm (8×1), data (8×2)", path.display())),
+            e.starts_with(&format!("data file `{}`: the file has no variable `qn`; it holds vir (1×8), qm (8×1), data (8×2)", path.display())),
             "{e}"
         );
         assert!(e.contains("meta (a struct, not readable)"), "{e}");
@@ -217,7 +217,7 @@ impl Mat {
         out.extend(self.u32(ty));
         out.extend(self.u32(data.len() as u32));
         out.extend(data);
-        while out.len() % 8 != 0 {
+        while !out.len().is_multiple_of(8) {
             out.push(0);
         }
         out
