@@ -474,7 +474,17 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             a.integrators
         );
     }
+    // ARX knows no warnings of its own: a zero that cancels the fixed integrator is as
+    // misleading there as after output error.
+    let cancelled = structid_linear::integrators::integrator_cancellation(&model)
+        .filter(|&r| r < structid_linear::integrators::CANCELLATION);
     if let Some(w) = warning {
+        println!("warning: {w}");
+    } else if let Some(ratio) = cancelled {
+        let w = structid_linear::OeWarning::IntegratorCancelled {
+            ratio,
+            fit_percent: fit,
+        };
         println!("warning: {w}");
     } else if fit < 0.0 {
         println!(

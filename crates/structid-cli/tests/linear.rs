@@ -128,3 +128,49 @@ fn a_fixed_integrator_fits_an_integrating_axis() {
     ]);
     assert!(e.contains("--integrators"), "{e}");
 }
+
+/// A stable lag `0.1 q⁻¹/(1 − 0.9 q⁻¹)` (no integrator) driven like the axis, small noise.
+fn lag_csv() -> String {
+    let n = 3000;
+    let levels = normals(17, n / 25 + 1);
+    let e = normals(18, n);
+    let mut y = 0.0;
+    let mut text = String::from("u,y\n");
+    let mut u_prev = 0.0;
+    for k in 0..n {
+        let u = levels[k / 25];
+        y = 0.9 * y + 0.1 * u_prev;
+        u_prev = u;
+        text.push_str(&format!("{u},{}\n", y + 1e-3 * e[k]));
+    }
+    text
+}
+
+#[test]
+fn an_integrator_that_the_data_do_not_show_is_warned_about_by_both_methods() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let data = d.join("lag.csv");
+    std::fs::write(&data, lag_csv()).unwrap();
+    for method in ["oe", "arx"] {
+        let o = ok(&[
+            "linear",
+            "--data",
+            p(&data),
+            "--orders",
+            "1,2,1",
+            "--integrators",
+            "1",
+            "--method",
+            method,
+            "--out",
+            p(&d.join(format!("{method}.toml"))),
+        ]);
+        assert!(
+            o.stdout
+                .contains("warning: a zero of the fitted numerator cancels the fixed integrator"),
+            "{method}: {}",
+            o.stdout
+        );
+    }
+}

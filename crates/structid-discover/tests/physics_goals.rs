@@ -339,6 +339,45 @@ fn a_disturbance_path_that_cannot_be_whitened_falls_back_to_the_nominal_noise_pa
     assert!(identified >= 1, "{}", d.verdict);
 }
 
+/// A nominal fitted by output error to a closed-loop record with friction puts a zero on its
+/// fixed integrator (seed 57: a dead zone under a PD controller). Whatever the verdict, it
+/// must say that this G does not integrate, and why that matters.
+#[test]
+fn a_nominal_whose_zero_cancels_its_integrator_is_called_out() {
+    let case = generate(PhysicsKind::Static, 57);
+    assert_eq!(case.nominal_source, NominalSource::EstimatedOe);
+    // independently of the library's ratio: the one zero −b₂/b₁ of B = b₁q⁻¹ + b₂q⁻² is
+    // within 0.1 of z = 1
+    let b = &case.nominal.num[0];
+    assert!((-b[2] / b[1] - 1.0).abs() < 0.1, "{b:?}");
+    let d = run(&case);
+    let remarks = d
+        .finding
+        .as_ref()
+        .map(|f| f.remarks.join(" "))
+        .unwrap_or_default();
+    assert!(
+        d.verdict.contains("does not integrate") || remarks.contains("does not integrate"),
+        "{}",
+        d.verdict
+    );
+    // the exact nominal carries no such remark
+    let exact = Nominal::from_polynomial(&case.true_nominal).unwrap();
+    let d = discover(
+        &exact,
+        &case.estimation,
+        &case.validation,
+        &DiscoverSettings::default(),
+    )
+    .unwrap();
+    assert!(!d.verdict.contains("does not integrate"), "{}", d.verdict);
+    assert!(
+        d.finding
+            .as_ref()
+            .is_none_or(|f| f.remarks.iter().all(|r| !r.contains("does not integrate")))
+    );
+}
+
 /// Asymmetric friction on an integrating axis under a PD controller, exact nominal: the input
 /// disturbance sized on the nominal model's residual lets its one-step predictor follow the
 /// output, so that the innovations pass every test although the windowed simulation misses

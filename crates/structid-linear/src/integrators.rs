@@ -141,6 +141,45 @@ pub fn count_integrators(den: &[f64]) -> usize {
     n
 }
 
+/// A numerator `B(1)` below this share of `Σ|bᵢ|` puts a zero within about 0.1 of z = 1,
+/// where it cancels an integrator ([`integrator_cancellation`]).
+pub const CANCELLATION: f64 = 0.05;
+
+/// How nearly the numerators of a model with an integrator cancel it: the smallest
+/// `|B_i(1)| / Σ_k |b_ik|` over the inputs, or `None` when the denominator has no root at
+/// z = 1 or no numerator has a nonzero coefficient.
+///
+/// A zero at z₀ makes `B(1)` proportional to `1 − z₀` (for `B = b₁q⁻¹ + b₂q⁻²` the ratio is
+/// `|1 − z₀| / (1 + |z₀|)`), so a ratio under [`CANCELLATION`] means a zero within about 0.1
+/// of z = 1: with it, G does not integrate at the frequencies the record resolves. That is what an
+/// output-error or ARX fit with a fixed integrator returns when the data do not show the
+/// integration, most often because the record was taken in closed loop with the controller's
+/// action dominating (the direct fit of u → y then approaches the controller's negative
+/// inverse), or because friction holds the output still at low force.
+///
+/// ```
+/// use structid_linear::PolynomialModel;
+/// use structid_linear::integrators::integrator_cancellation;
+/// // (1 − q⁻¹)(1 − 0.9 q⁻¹) with B = q⁻¹ − 0.999 q⁻²: the zero at 0.999 cancels the integrator
+/// let m = PolynomialModel::new(vec![vec![0.0, 1.0, -0.999]], vec![1.0, -1.9, 0.9], None).unwrap();
+/// assert!(integrator_cancellation(&m).unwrap() < 1e-3);
+/// let ok = PolynomialModel::new(vec![vec![0.0, 1.0, 1.0]], vec![1.0, -1.9, 0.9], None).unwrap();
+/// assert_eq!(integrator_cancellation(&ok), Some(1.0));
+/// ```
+pub fn integrator_cancellation(model: &crate::PolynomialModel) -> Option<f64> {
+    if count_integrators(&model.den) == 0 {
+        return None;
+    }
+    model
+        .num
+        .iter()
+        .filter_map(|b| {
+            let size: f64 = b.iter().map(|v| v.abs()).sum();
+            (size > 0.0).then(|| b.iter().sum::<f64>().abs() / size)
+        })
+        .min_by(f64::total_cmp)
+}
+
 // The model's class lives here, beside the classes, so that `polynomial` need not know them.
 impl crate::PolynomialModel {
     /// Stability class of the denominator: strictly stable, marginally stable (integrators at
@@ -481,6 +520,43 @@ mod fit_tests {
         let bad = PolynomialModel::new(fit.model.num.clone(), vec![1.0, -0.9], None).unwrap();
         let e = crate::output_error(&u, &y, &bad, &s).unwrap_err();
         assert!(e.to_string().contains("z = 1"), "{e}");
+    }
+
+    #[test]
+    fn a_fixed_integrator_that_the_data_do_not_show_is_cancelled_and_warned_about() {
+        // A stable first-order lag, no integrator: forced to carry one, the best fit puts a
+        // zero on it (G = b(1 − q⁻¹)/((1 − q⁻¹)(1 − p q⁻¹)) is the lag itself).
+        let lag = PolynomialModel::new(vec![vec![0.0, 0.1]], vec![1.0, -0.9], Some(0.01)).unwrap();
+        let u = staircase(7, 3000);
+        let y0 = lag.simulate(&u).unwrap();
+        let e = white(8, 3000, 1e-3, 1);
+        let y = Signal::new(1, y0.iter().zip(e.as_slice()).map(|(a, b)| a + b).collect()).unwrap();
+        let s = OeSettings::builder()
+            .integrators(1)
+            .sample_time(0.01)
+            .build()
+            .unwrap();
+        let fit = oe(&u, &y, &Orders::siso(1, 2, 1), &s).unwrap();
+        let ratio = integrator_cancellation(&fit.model).unwrap();
+        assert!(ratio < CANCELLATION, "|B(1)|/Σ|b| = {ratio}");
+        // the zero −b₂/b₁ sits on the integrator
+        let b = &fit.model.num[0];
+        assert!((-b[2] / b[1] - 1.0).abs() < 0.1, "zero {}", -b[2] / b[1]);
+        match &fit.warning {
+            Some(w @ OeWarning::IntegratorCancelled { .. }) => {
+                assert!(
+                    w.to_string().contains("cancels the fixed integrator"),
+                    "{w}"
+                )
+            }
+            other => panic!("expected a cancellation warning, got {other:?}"),
+        }
+        // the real axis keeps its integrator: no warning (previous test) and a ratio of 1
+        let (u, y, _) = axis_data(0.02);
+        let fit = oe(&u, &y, &Orders::siso(1, 2, 1), &s).unwrap();
+        assert!(integrator_cancellation(&fit.model).unwrap() > 0.5);
+        // no integrator, no ratio
+        assert_eq!(integrator_cancellation(&lag), None);
     }
 
     #[test]

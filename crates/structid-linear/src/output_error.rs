@@ -300,8 +300,9 @@ pub struct OeFit {
     /// Simulation fit after the transient, `100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)` % (0 % is the fit
     /// of the constant ȳ; −∞ when the output is constant and not matched).
     pub fit_percent: f64,
-    /// Set when the fit is degenerate: worse than a constant, or an output near zero. A fit
-    /// that ends there must not be used as a nominal model without a look.
+    /// Set when the fit is degenerate: worse than a constant, an output near zero, or a fixed
+    /// integrator cancelled by a zero. A fit that ends there must not be used as a nominal
+    /// model without a look.
     pub warning: Option<OeWarning>,
 }
 
@@ -327,6 +328,16 @@ pub enum OeWarning {
         /// The fit, per cent.
         fit_percent: f64,
     },
+    /// A zero of the fitted numerator cancels a fixed integrator
+    /// ([`integrator_cancellation`](crate::integrators::integrator_cancellation) below
+    /// [`CANCELLATION`](crate::integrators::CANCELLATION)): the model does not integrate,
+    /// whatever its denominator says.
+    IntegratorCancelled {
+        /// `|B(1)| / Σ|bᵢ|`.
+        ratio: f64,
+        /// The fit, per cent.
+        fit_percent: f64,
+    },
 }
 
 impl std::fmt::Display for OeWarning {
@@ -343,6 +354,16 @@ impl std::fmt::Display for OeWarning {
             OeWarning::WorseThanConstant { fit_percent } => write!(
                 f,
                 "the output-error fit ({fit_percent:.1} %) is worse than a constant (0 %); {hint}"
+            ),
+            OeWarning::IntegratorCancelled { ratio, fit_percent } => write!(
+                f,
+                "a zero of the fitted numerator cancels the fixed integrator (|B(1)| is {:.2} % \
+                 of Σ|bᵢ|; fit {fit_percent:.1} %), so the model does not integrate: the record \
+                 does not show the integrating behaviour. In closed loop the direct fit of u → y \
+                 tends to the controller's negative inverse when the controller's action \
+                 dominates the input; friction that holds the output still does the same. Use a \
+                 physical nominal, or a record with open-loop or reference excitation",
+                100.0 * ratio
             ),
         }
     }
@@ -485,10 +506,17 @@ fn refine(
     let den = convolve(&free.den, &problem.fixed);
     let model = PolynomialModel::new(free.num, den, sample_time)?;
     problem.simulate_at(theta);
-    let (fit_percent, warning) = match &problem.last {
+    let (fit_percent, mut warning) = match &problem.last {
         Some((_, yhat)) => judge_fit(yv, yhat, settings.transient),
         None => (f64::NAN, None),
     };
+    if warning.is_none()
+        && n_int > 0
+        && let Some(ratio) = crate::integrators::integrator_cancellation(&model)
+        && ratio < crate::integrators::CANCELLATION
+    {
+        warning = Some(OeWarning::IntegratorCancelled { ratio, fit_percent });
+    }
     // The solver minimises the sum of squares; the reported cost is its mean.
     Ok(OeFit {
         model,

@@ -396,6 +396,9 @@ fn discover_with(
         _ => None,
     };
     let given = nominal;
+    // A nominal G whose numerator cancels its integrator is usually the direct fit of a
+    // closed-loop record: every verdict built on it says so.
+    let cancelled = cancelled_integrator(given);
     let nominal = match input_noise {
         Some(ratio) => {
             with_noise = nominal.clone().with_input_noise(ratio)?;
@@ -723,7 +726,7 @@ fn discover_with(
     if !best_rms.is_finite() {
         let verdict = format!(
             "{}: the nominal model's gap is not noise ({}), but no hypothesis could be \
-             identified and simulated: {}",
+             identified and simulated: {}{}",
             Verdict::Unexplained.describe(),
             validation_gap.verdict,
             hypotheses
@@ -733,7 +736,11 @@ fn discover_with(
                     .as_ref()
                     .map(|f| format!("{}: {f}", nominal.key(h.location))))
                 .collect::<Vec<_>>()
-                .join("; ")
+                .join("; "),
+            cancelled
+                .as_deref()
+                .map(|c| format!(". {c}"))
+                .unwrap_or_default()
         );
         return Ok(Discovery {
             estimation_gap,
@@ -1020,14 +1027,18 @@ fn discover_with(
                 format!(
                     "{}: the nominal model's gap is larger than the noise (validation record: \
                      {}), but the best candidate block ({} {}) reduces the validation RMS by \
-                     less than {:.0} % ({} → {}). Tried: {tried}",
+                     less than {:.0} % ({} → {}). Tried: {tried}{}",
                     Verdict::Unexplained.describe(),
                     validation_gap.verdict,
                     finding.classification.describe(),
                     nominal.describe(finding.location),
                     100.0 * (1.0 - 1.0 / MIN_CONFIRMING_SHRINK),
                     rms_text(validation_gap.rms),
-                    rms_text(finding.augmented.validation_gap.rms)
+                    rms_text(finding.augmented.validation_gap.rms),
+                    cancelled
+                        .as_deref()
+                        .map(|c| format!(". {c}"))
+                        .unwrap_or_default()
                 ),
             )
         } else {
@@ -1062,6 +1073,9 @@ fn discover_with(
             seconds: t0.elapsed().as_secs_f64(),
         });
     }
+    if let Some(c) = cancelled {
+        finding.remarks.push(c);
+    }
     let verdict = verdict_text(nominal, &validation_gap, &finding);
     Ok(Discovery {
         estimation_gap,
@@ -1075,6 +1089,22 @@ fn discover_with(
         finding: Some(finding),
         verdict,
         seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The remark on a nominal G whose numerator cancels one of its integrators
+/// ([`structid_linear::integrators::integrator_cancellation`]), if it does.
+fn cancelled_integrator(nominal: &Nominal) -> Option<String> {
+    use structid_linear::integrators::{CANCELLATION, integrator_cancellation};
+    let ratio = integrator_cancellation(nominal.polynomial()?)?;
+    (ratio < CANCELLATION).then(|| {
+        format!(
+            "the nominal G does not integrate: a zero of its numerator cancels its integrator \
+             (|B(1)| is {:.2} % of Σ|bᵢ|). A G fitted directly to a closed-loop record tends \
+             to the controller's negative inverse, and no static block makes up for that: \
+             prefer a physical nominal or a record with open-loop excitation",
+            100.0 * ratio
+        )
     })
 }
 
