@@ -142,6 +142,9 @@ enum Output {
     Innovations,
 }
 
+/// Steady samples below which the long-signal methods use the per-sample recursion.
+const LONG_MIN: usize = 256;
+
 /// One time-major signal as a one-column matrix.
 fn column(y: &[f64]) -> MatRef<'_, f64> {
     MatRef::from_column_major_slice(y, y.len(), 1)
@@ -394,6 +397,47 @@ impl KalmanWhitener {
             .run(&xs, &y[tl * p..], &mut out[tl * p..], self.len - tl, None);
     }
 
+    /// [`whiten`](Self::whiten) for a long signal: the time-varying transient per sample,
+    /// then the steady-state filter by the blocked recursion of
+    /// [`StateSpace::apply_long`]. The same values up to rounding. Panics on inconsistent
+    /// lengths.
+    pub fn whiten_long(&self, y: &[f64], out: &mut [f64]) {
+        self.check_rows(y.len(), "y");
+        self.check_rows(out.len(), "out");
+        let (n, p, tl) = (self.n, self.p, self.transient);
+        let rest = self.len - tl;
+        if n == 0 || p == 0 || rest < LONG_MIN {
+            self.whiten(y, out);
+            return;
+        }
+        let mut xs = vec![0.0; n];
+        let (steady, rows) = ((vec![], vec![]), tl * p);
+        let (ym, om) = (column(&y[..rows]), column_mut(&mut out[..rows]));
+        self.step_columns((0, tl), &steady, ym, om, &mut xs, Output::Whitened);
+        self.steady
+            .run_long_from(false, &y[rows..], &mut out[rows..], rest, &xs);
+    }
+
+    /// [`whiten_adjoint`](Self::whiten_adjoint) for a long signal: the steady part backwards
+    /// by the blocked recursion of [`StateSpace::apply_adjoint_long`] (its costate is the λ
+    /// of the per-sample recursion), then the transient per sample. The same values up to
+    /// rounding. Panics on inconsistent lengths.
+    pub fn whiten_adjoint_long(&self, g: &[f64], out: &mut [f64]) {
+        self.check_rows(g.len(), "g");
+        self.check_rows(out.len(), "out");
+        let (n, p, tl) = (self.n, self.p, self.transient);
+        let rest = self.len - tl;
+        if n == 0 || p == 0 || rest < LONG_MIN {
+            self.whiten_adjoint(g, out);
+            return;
+        }
+        let rows = tl * p;
+        let lam =
+            self.steady
+                .run_long_from(true, &g[rows..], &mut out[rows..], rest, &vec![0.0; n]);
+        self.adjoint_steps(tl, g, out, lam);
+    }
+
     /// The innovations `nu_t = y_t - C x^_t` of one signal (time-major, `len * p` values),
     /// in the units of `y`: the one-step-ahead prediction errors of the Kalman predictor
     /// `y^_{t|t-1} = C x^_t` of the noise path from `y_0 .. y_{t-1}` (zero initial state,
@@ -561,12 +605,17 @@ impl KalmanWhitener {
     pub fn whiten_adjoint(&self, g: &[f64], out: &mut [f64]) {
         self.check_rows(g.len(), "g");
         self.check_rows(out.len(), "out");
+        self.adjoint_steps(self.len, g, out, vec![0.0; self.n]);
+    }
+
+    /// The backward recursion of [`whiten_adjoint`](Self::whiten_adjoint) over the samples
+    /// `steps − 1, …, 0`, from the costate `lam` = λ_steps.
+    fn adjoint_steps(&self, steps: usize, g: &[f64], out: &mut [f64], mut lam: Vec<f64>) {
         let (n, p) = (self.n, self.p);
         let steady = self.steady_gains();
-        let mut lam = vec![0.0; n];
         let mut lam_next = vec![0.0; n];
         let mut h = vec![0.0; p];
-        for t in (0..self.len).rev() {
+        for t in (0..steps).rev() {
             let (gt, li) = self.gains_at(t, &steady);
             for r in 0..p {
                 h[r] = g[t * p + r] + (0..n).map(|i| gt[i * p + r] * lam[i]).sum::<f64>();

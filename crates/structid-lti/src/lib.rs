@@ -45,6 +45,7 @@
 
 pub mod error;
 pub mod kalman;
+mod long;
 pub mod operator;
 mod riccati;
 pub mod signal;

@@ -152,6 +152,30 @@ pub trait FeatureMap: Send + Sync {
     /// Writes ψ(z) into `out` (length m).
     fn eval_into(&self, z: &[f64], out: &mut [f64]);
 
+    /// Writes the scaled features `scale_j·ψ_j(z_t)` of the samples `t = t0, t0 + 1, …` of `z`
+    /// into the rows of the row-major `rows` (m values per sample, `rows.len() / m` samples).
+    /// The default evaluates [`eval_into`](Self::eval_into) sample by sample; a map with a
+    /// faster batched evaluation overrides it with the same values.
+    fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
+        let m = self.dim();
+        for (k, row) in rows.chunks_exact_mut(m).enumerate() {
+            self.eval_into(z.sample(t0 + k), row);
+            row.iter_mut().zip(scale).for_each(|(v, s)| *v *= s);
+        }
+    }
+
+    /// Writes `Σ_j coef_j·ψ_j(z_t)` for the samples `t = t0, …, t0 + out.len() − 1` of `z`
+    /// into `out` (the map's value at each sample for the coefficients `coef`, m values). The
+    /// default evaluates [`eval_into`](Self::eval_into) sample by sample and sums in feature
+    /// order; a faster override returns the same values.
+    fn combine_rows(&self, z: &Signal, t0: usize, coef: &[f64], out: &mut [f64]) {
+        let mut psi = vec![0.0; self.dim()];
+        for (k, o) in out.iter_mut().enumerate() {
+            self.eval_into(z.sample(t0 + k), &mut psi);
+            *o = psi.iter().zip(coef).map(|(p, c)| p * c).sum();
+        }
+    }
+
     /// The weights λ of the same features at another kernel width, when only the weights
     /// depend on the width (as for the Gaussian-like Fourier family); `None` (the default)
     /// otherwise. Width selection then reuses one pass over the data for every width tried.

@@ -26,21 +26,54 @@ use std::time::Instant;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Mat, MatMut};
 use rayon::prelude::*;
-use structid_lti::{
-    ColumnStream, KalmanWhitener, LinearSystem, Signal, StateSpace, WhiteningOptions,
-};
+use structid_lti::{ColumnStream, KalmanWhitener, LinearSystem, Signal, WhiteningOptions};
 
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
-use crate::identify::result::{Diagnostics, Identification, Timings};
+use crate::identify::result::{BlockEstimate, Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
 use crate::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
 use crate::problem::Problem;
-use crate::solver::{BlockPart, assemble_blocks, cost_terms};
+use crate::solver::{Assembled, BlockPart, cost_terms};
 
-/// Samples per chunk of the time pass (rounded to the streams' block length).
-const CHUNK: usize = 4096;
+/// Samples per chunk of the time pass (rounded to the streams' block length): the chunk of
+/// features and of X (m + n_x + 1 columns) stays within a core's L2 cache.
+const CHUNK: usize = 2048;
+
+/// Parts the pass is split into (run in parallel when rayon has the threads).
+const PARTS: usize = 2;
+
+/// Samples whose features one thread evaluates together (a multiple of the batch of
+/// [`FeatureMap::eval_rows`] implementations).
+const FEATURE_BATCH: usize = 64;
+
+/// The recursion of one part of a block's feature columns through its path (or through W·T_i
+/// when the whitening is folded in), with the state carried from chunk to chunk.
+struct PathJob {
+    /// The block.
+    block: usize,
+    /// First of the block's feature columns this part carries.
+    first: usize,
+    /// The stream (its column count is the part's width).
+    stream: ColumnStream,
+}
+
+/// G += XᵀX on the lower triangle (diagonal included) of `g`, on the calling thread.
+fn gram_lower(g: MatMut<'_, f64>, x: faer::MatRef<'_, f64>) {
+    use faer::linalg::matmul::triangular::{BlockStructure, matmul};
+    matmul(
+        g,
+        BlockStructure::TriangularLower,
+        faer::Accum::Add,
+        x.transpose(),
+        BlockStructure::Rectangular,
+        x,
+        BlockStructure::Rectangular,
+        1.0,
+        faer::Par::Seq,
+    );
+}
 
 /// Whether every block of `problem` can use the feature solver, and if not, why.
 pub fn unsupported_reason(problem: &Problem) -> Option<String> {
@@ -192,41 +225,62 @@ pub(crate) fn gram(
             ));
         }
     }
-    let streams: Vec<StateSpace> = problem
-        .blocks()
-        .iter()
-        .map(|b| b.path.as_state_space().expect("checked above").clone())
-        .collect();
-    let mut streamers: Vec<ColumnStream> = streams
-        .iter()
-        .zip(&dims)
-        .map(|(s, &d)| s.column_stream(d))
-        .collect();
-    let unit = streamers
-        .iter()
-        .fold(1, |a, s| a / gcd(a, s.block_len()) * s.block_len());
+    // Parts of the pass that can run in parallel: the feature columns are split between them
+    // for the recursions, the rows of each chunk for the Gram update. The split does not
+    // depend on the thread count, so neither do the results (bit for bit).
+    let parts = PARTS;
+    // A whitening without a time-varying transient is an LTI filter W from the first sample
+    // on; then the features go through the series connection W·T_i in one recursion (folded)
+    // and only the few columns [O r] through W alone.
+    let folded = match &whitening {
+        Whitening::Kalman(k) => k.transient_len() == 0,
+        Whitening::Static { .. } => false,
+    };
+    let mut jobs: Vec<PathJob> = Vec::new();
+    for (bi, b) in problem.blocks().iter().enumerate() {
+        let path = b.path.as_state_space().expect("checked above");
+        let sys = match &whitening {
+            Whitening::Kalman(k) if folded => k.steady_state_filter().series(path)?,
+            _ => path.clone(),
+        };
+        let mi = dims[bi];
+        let per = mi.div_ceil(parts);
+        let mut j0 = 0;
+        while j0 < mi {
+            let w = per.min(mi - j0);
+            jobs.push(PathJob {
+                block: bi,
+                first: j0,
+                stream: sys.column_stream(w),
+            });
+            j0 += w;
+        }
+    }
+    let unit = jobs.iter().fold(1, |a, j| {
+        a / gcd(a, j.stream.block_len()) * j.stream.block_len()
+    });
     let chunk = CHUNK.div_ceil(unit) * unit;
     let t_prepared = Instant::now();
 
     // --- one pass over time: G = XᵀX with X = W·[F O r] ----------------------------------------
     let r = problem.residual().as_slice();
-    // G = (W·[F O r])ᵀ(W·[F O r]), accumulated chunk by chunk by one matrix product each.
-    let mut g = Mat::<f64>::zeros(cols, cols);
-    let par = faer::get_global_parallelism();
+    let tail_cols = nx + 1;
+    // the lower triangle of G, one accumulator per thread (summed after the pass)
+    let mut g_parts: Vec<Mat<f64>> = (0..parts).map(|_| Mat::zeros(cols, cols)).collect();
     let mut x = Mat::<f64>::zeros(chunk * ny, cols);
+    // folded: [O r] before whitening; otherwise the whole whitened chunk
     let mut wx = Mat::<f64>::zeros(
-        if matches!(whitening, Whitening::Kalman(_)) {
-            chunk * ny
-        } else {
-            0
+        match &whitening {
+            Whitening::Kalman(_) => chunk * ny,
+            Whitening::Static { .. } => 0,
         },
-        cols,
+        if folded { tail_cols } else { cols },
     );
     let mut wstream = match &whitening {
-        Whitening::Kalman(k) => Some(k.column_stream(cols)),
+        Whitening::Kalman(k) => Some(k.column_stream(if folded { tail_cols } else { cols })),
         Whitening::Static { .. } => None,
     };
-    let mut psi_rows = vec![0.0; chunk * dims.iter().copied().max().unwrap_or(0)];
+    let mut phi: Vec<Vec<f64>> = dims.iter().map(|&d| vec![0.0; chunk * d]).collect();
     let sqrt_w: Vec<Vec<f64>> = maps
         .iter()
         .map(|(f, _)| {
@@ -240,38 +294,71 @@ pub(crate) fn gram(
     let mut t0 = 0;
     while t0 < len {
         let c = chunk.min(len - t0);
-        let mut xc = x.as_mut().subrows_mut(0, c * ny);
-        for (bi, ((map, z), stream)) in maps.iter().zip(streamers.iter_mut()).enumerate() {
+        // features of the chunk, row-major, scaled, the samples split between the threads
+        for (bi, (map, z)) in maps.iter().enumerate() {
             let mi = dims[bi];
-            let sw = &sqrt_w[bi];
-            let rows = &mut psi_rows[..c * mi];
-            rows.par_chunks_mut(mi).enumerate().for_each(|(k, row)| {
-                map.eval_into(z.sample(t0 + k), row);
-                row.iter_mut().zip(sw).for_each(|(v, s)| *v *= s);
-            });
-            let phi = faer::MatRef::from_row_major_slice(rows, c, mi);
-            stream.push(phi, xc.rb_mut().subcols_mut(offsets[bi], mi))?;
+            let per = c.div_ceil(parts).next_multiple_of(FEATURE_BATCH);
+            phi[bi][..c * mi]
+                .par_chunks_mut(per * mi)
+                .enumerate()
+                .for_each(|(k, rows)| map.eval_rows(z, t0 + k * per, &sqrt_w[bi], rows));
         }
-        for i in 0..c * ny {
-            if let Some(o) = free {
-                for j in 0..nx {
-                    xc[(i, m + j)] = o[(t0 * ny + i, j)];
+        let xc = x.as_mut().subrows_mut(0, c * ny);
+        let (mut feat, mut tail) = xc.split_at_col_mut(m);
+        // [O r] of the chunk: into the whitening input when folded, else into X
+        {
+            let mut dst = if folded {
+                wx.as_mut().subrows_mut(0, c * ny)
+            } else {
+                tail.rb_mut()
+            };
+            for i in 0..c * ny {
+                if let Some(o) = free {
+                    for j in 0..nx {
+                        dst[(i, j)] = o[(t0 * ny + i, j)];
+                    }
                 }
+                dst[(i, nx)] = r[t0 * ny + i];
             }
-            xc[(i, m + nx)] = r[t0 * ny + i];
         }
+        // the feature columns through the paths (W·T_i when folded), the column parts in
+        // parallel
+        let mut work = Vec::with_capacity(jobs.len());
+        for job in jobs.iter_mut() {
+            let w = job.stream.state().ncols();
+            let (part, rest) = feat.split_at_col_mut(w);
+            feat = rest;
+            work.push((job, part));
+        }
+        let phi_ref = &phi;
+        let dims_ref = &dims;
+        work.into_par_iter().try_for_each(|(job, out)| {
+            let mi = dims_ref[job.block];
+            let w = out.ncols();
+            let rows = faer::MatRef::from_row_major_slice(&phi_ref[job.block][..c * mi], c, mi);
+            job.stream.push(rows.subcols(job.first, w), out)
+        })?;
         if let Some(mask) = held_out {
-            // whole samples only (checked below), so zeroing before the per-sample static
+            // whole samples only (checked above), so zeroing before the per-sample static
             // whitening equals leaving the samples out
+            let mut xc = x.as_mut().subrows_mut(0, c * ny);
             for i in 0..c * ny {
                 if mask[t0 * ny + i] {
                     xc.rb_mut().row_mut(i).fill(0.0);
                 }
             }
         }
+        let mut xc = x.as_mut().subrows_mut(0, c * ny);
         let white = match (&whitening, wstream.as_mut()) {
             (Whitening::Static { ls, .. }, _) => {
                 whiten_static(xc.rb_mut(), &ls.l(), ny);
+                xc.rb()
+            }
+            (Whitening::Kalman(_), Some(ws)) if folded => {
+                ws.push(
+                    wx.as_ref().subrows(0, c * ny),
+                    xc.rb_mut().subcols_mut(m, tail_cols),
+                )?;
                 xc.rb()
             }
             (Whitening::Kalman(_), Some(ws)) => {
@@ -280,15 +367,23 @@ pub(crate) fn gram(
             }
             (Whitening::Kalman(_), None) => unreachable!("a Kalman whitening has a stream"),
         };
-        faer::linalg::matmul::matmul(
-            g.as_mut(),
-            faer::Accum::Add,
-            white.transpose(),
-            white,
-            1.0,
-            par,
-        );
+        // G += XᵀX (lower triangle), the rows split between the threads
+        let per = (c * ny).div_ceil(parts);
+        g_parts.par_iter_mut().enumerate().for_each(|(k, gk)| {
+            let r0 = (k * per).min(c * ny);
+            let rows = white.subrows(r0, per.min(c * ny - r0));
+            gram_lower(gk.as_mut(), rows);
+        });
         t0 += c;
+    }
+    let mut g = g_parts.pop().expect("at least one part");
+    for gk in &g_parts {
+        g += gk;
+    }
+    for j in 0..cols {
+        for i in 0..j {
+            g[(i, j)] = g[(j, i)];
+        }
     }
     let t_assembled = Instant::now();
     Ok(FeatureGram {
@@ -384,15 +479,9 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             .collect();
         let mut w_hat = vec![0.0; len];
         w_hat
-            .par_chunks_mut(4096)
+            .par_chunks_mut(CHUNK)
             .enumerate()
-            .for_each(|(ci, out)| {
-                let mut psi = vec![0.0; mi];
-                for (kk, wk) in out.iter_mut().enumerate() {
-                    map.eval_into(z.sample(ci * 4096 + kk), &mut psi);
-                    *wk = psi.iter().zip(&coef).map(|(p, c)| p * c).sum();
-                }
-            });
+            .for_each(|(ci, out)| map.combine_rows(z, ci * CHUNK, &coef, out));
         parts.push(BlockPart {
             w_hat,
             // D_i = a_iᵀΛ⁻¹a_i = ‖b_i‖².
@@ -400,7 +489,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             map: Box::new(FeatureExpansion::new(Arc::clone(map), coef)),
         });
     }
-    let assembled = assemble_blocks(problem, parts);
+    // the single long signals by blocked recursions (the per-sample ones for other operators)
+    let assembled = assemble_blocks_long(problem, parts);
     let fitted = &assembled.fitted;
     // ρ = r − T_yw·ŵ − O·x₀; ê is the least-norm noise explaining it, ê = T_yeᵀ(T_ye·T_yeᵀ)⁻¹ρ.
     // Held-out samples have no equation, so their noise estimate is its prior mean, 0 (the
@@ -432,13 +522,16 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         Whitening::Kalman(k) => {
             let mut w1 = vec![0.0; len * ny];
             let mut w2 = vec![0.0; len * ny];
-            k.whiten(&rho, &mut w1);
-            k.whiten_adjoint(&w1, &mut w2);
-            noise.apply_adjoint(&w2, &mut e_hat);
+            k.whiten_long(&rho, &mut w1);
+            k.whiten_adjoint_long(&w1, &mut w2);
+            match noise.as_state_space() {
+                Some(ss) => ss.apply_adjoint_long(&w2, &mut e_hat),
+                None => noise.apply_adjoint(&w2, &mut e_hat),
+            }
         }
     }
     let mut te = vec![0.0; len * ny];
-    noise.apply(&e_hat, &mut te);
+    apply_long(noise, &e_hat, &mut te);
     let res2: f64 = rho.iter().zip(&te).map(|(a, b)| (a - b) * (a - b)).sum();
     let r2: f64 = r
         .iter()
@@ -506,6 +599,50 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             ..Diagnostics::default()
         },
     })
+}
+
+/// `y = T u` for one long signal: the blocked recursion for a state-space operator, the
+/// per-sample one otherwise.
+fn apply_long(sys: &dyn LinearSystem, u: &[f64], y: &mut [f64]) {
+    match sys.as_state_space() {
+        Some(ss) => ss.apply_long(u, y),
+        None => sys.apply(u, y),
+    }
+}
+
+/// [`crate::solver::assemble_blocks`] with T_i·ŵ by the blocked long-signal recursion.
+fn assemble_blocks_long(problem: &Problem, parts: Vec<BlockPart>) -> Assembled {
+    let (len, n) = (problem.len(), problem.len() * problem.outputs());
+    let mut w_all = Signal::zeros(len, parts.len());
+    let mut fitted = vec![0.0; n];
+    let mut tmp = vec![0.0; n];
+    let mut dispersions = Vec::with_capacity(parts.len());
+    let mut blocks = Vec::with_capacity(parts.len());
+    for (block, part) in problem.blocks().iter().zip(parts) {
+        apply_long(block.path.as_ref(), &part.w_hat, &mut tmp);
+        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
+        // Problem::new guarantees the outputs are exactly 0..n_blocks.
+        for (k, w) in part.w_hat.iter().enumerate() {
+            w_all.sample_mut(k)[block.output] = *w;
+        }
+        dispersions.push(part.dispersion_value);
+        blocks.push(BlockEstimate {
+            name: block.name.clone(),
+            output: block.output,
+            dispersion: block.dispersion.describe(),
+            parameters: block.dispersion.parameters(),
+            z: block.z.clone(),
+            w_hat: part.w_hat,
+            dispersion_value: part.dispersion_value,
+            map: part.map,
+        });
+    }
+    Assembled {
+        blocks,
+        w_hat: w_all,
+        fitted,
+        dispersions,
+    }
 }
 
 /// The posterior of the maps from the m-space factor the solve computed: s² from
