@@ -9,6 +9,8 @@
 //! structid data silverbox|tanks --file PATH --split NAME|all --out OUT
 //! structid data csv --file PATH [--columns C1,C2] [--names u,y] [--delimiter ';'] [--no-header]
 //!                   [--skip-rows N] [--range A..B] [--remove-mean] --out OUT.csv
+//! structid input prbs|multisine|noise|chirp|steps --length L [--sample-time TS] [--amplitude A]
+//!                   [--offset U0] [--band LOW,HIGH] [--seed N] [--name u] [--time] --out U.csv
 //! structid discover --model NOMINAL.toml --data EST.csv --validate VAL.csv --out DIR [--locations L1,L2]
 //!                   [--no-tv] [--settle N] [--sigma-fraction F] [--trend D] [--tune-sigma]
 //!                   [--naming-tolerance T] [--hysteresis-threshold T]
@@ -31,6 +33,7 @@ mod discover;
 mod error;
 mod figures;
 mod identify;
+mod input;
 mod linear;
 mod refine;
 mod simulate;
@@ -170,6 +173,17 @@ enum Command {
     /// its `truth` (DIR/N_table.csv for an unnamed map), checked to reproduce the report's
     /// validation RMS when read back. Input files are never overwritten.
     Discover(discover::DiscoverArgs),
+    /// Design an input signal for an experiment and write it as a CSV file (column `u`, or
+    /// --name), atomically.
+    ///
+    /// `structid input prbs|multisine|noise|chirp|steps --length L [--sample-time TS]
+    /// [--amplitude A] [--offset U0] [--band LOW,HIGH] [--seed N] --out U.csv`: a
+    /// maximum-length binary sequence (--order, --clock), a random-phase multisine on the
+    /// harmonics in the band (--period, --odd, --lines, --min-crest), band-limited Gaussian
+    /// noise, a linear or logarithmic chirp (--sweep), or random steps with hold times in
+    /// --hold MIN,MAX samples. The file is ready for `structid simulate --input`.
+    #[command(subcommand)]
+    Input(input::InputCommand),
 }
 
 /// A number, or `auto`.
@@ -511,7 +525,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
     if let Some(vars) = cli.vars {
         let reads_data = !matches!(
             cli.command,
-            Command::Demo(_) | Command::Data(_) | Command::Compare(_)
+            Command::Demo(_) | Command::Data(_) | Command::Compare(_) | Command::Input(_)
         );
         if !reads_data {
             return Err(CliError::input(
@@ -535,6 +549,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Refine(a) => refine::run(a),
         Command::Data(c) => data::run(c),
         Command::Discover(a) => discover::run(a),
+        Command::Input(c) => input::run(c),
     }
 }
 

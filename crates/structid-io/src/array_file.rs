@@ -359,6 +359,18 @@ impl ArrayFile {
     }
 
     /// The variables that can be read, with their sizes (`vir (1024×1)`), for messages.
+    ///
+    /// ```
+    /// use structid_io::array_file::{Array, ArrayFile, ArrayFileError, Variable};
+    /// let file = ArrayFile { variables: vec![
+    ///     Variable { name: "u".into(), value: Ok(Array { rows: 2, cols: 1, data: vec![1.0, 2.0] }) },
+    ///     Variable { name: "z".into(), value: Err(ArrayFileError::Complex { name: "z".into() }) },
+    /// ]};
+    /// assert_eq!(file.describe(), ["u (2×1)", "z (complex, not readable)"]);
+    /// assert_eq!(file.get(Some("u")).unwrap().data, [1.0, 2.0]);
+    /// assert!(file.get(Some("z")).is_err());
+    /// assert!(file.get(None).is_err()); // two variables: name one
+    /// ```
     pub fn describe(&self) -> Vec<String> {
         self.variables
             .iter()
