@@ -1,6 +1,8 @@
 //! Automatic β against one fixed-β fit (the targets: feature path at L = 10⁶ with
 //! m = 63 features within 2×, dense path at L = 2000 within 5×). Both are measured in the same
-//! run, so their ratio is meaningful on a shared machine.
+//! run, so their ratio is meaningful on a shared machine. The last group is the paper's spray
+//! example (L = 2000, two Gaussian blocks) with β and σ automatic, as
+//! `structid demo spray && structid identify … --beta auto --sigma auto` runs it.
 //! Run: `cargo bench --bench selection`. Figures go in BENCHMARKS.md.
 
 use std::hint::black_box;
@@ -11,7 +13,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use structid::hyperparameters::{SelectionSettings, select};
 use structid::{
     FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, SolverChoice, identify,
-    scenarios,
+    paper, scenarios,
 };
 
 fn bench(c: &mut Criterion) {
@@ -87,5 +89,31 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+fn spray(c: &mut Criterion) {
+    let mut group = c.benchmark_group("selection_spray");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(20))
+        .warm_up_time(Duration::from_secs(1));
+    // the data of `structid demo spray` (L = 2000, noise std 1, σ = 0.1, seed 1)
+    let exp = paper::spray(2000, 1.0, paper::gaussian(0.1).unwrap(), 1).unwrap();
+    let settings = IdentifySettings::default();
+    let how = SelectionSettings::builder()
+        .tune_sigma(true)
+        .build()
+        .unwrap();
+    group.bench_function("fixed_beta/2000", |b| {
+        let fixed = settings.with_beta(1e-2).unwrap();
+        b.iter(|| black_box(identify(&exp.model, &exp.data, &fixed).unwrap().cost.total))
+    });
+    group.bench_function("auto_beta_sigma/2000", |b| {
+        b.iter(|| {
+            let sel = select(&exp.model, &exp.data, None, &settings, &how).unwrap();
+            black_box((sel.beta, sel.sigma))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, spray);
 criterion_main!(benches);

@@ -4,7 +4,7 @@
 use crate::error::LtiError;
 use crate::signal::Signal;
 use faer::linalg::matmul::matmul;
-use faer::prelude::ReborrowMut;
+use faer::prelude::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 /// A causal discrete-time LTI system seen as a linear operator `T` on stacked signals.
@@ -309,6 +309,81 @@ impl BlockedRecursion {
     }
 }
 
+impl BlockedRecursion {
+    /// `x = Op x` in place over `len` samples (`cin == cout`), columns split across faer's
+    /// global thread pool. Each block is packed before its rows are overwritten, and later
+    /// blocks read only rows not yet written, so no second operand-sized buffer is needed.
+    pub(crate) fn run_in_place(&self, len: usize, x: MatMut<'_, f64>) {
+        assert_eq!(self.cin, self.cout, "an in-place operator must be square");
+        par_columns_mut(x, faer::get_global_parallelism(), &|x| {
+            self.leaf_in_place(len, x)
+        });
+    }
+
+    /// One sequential in-place pass over the columns of `x` (see [`Self::run_in_place`]).
+    fn leaf_in_place(&self, len: usize, mut x: MatMut<'_, f64>) {
+        let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
+        let k = b * cin + n;
+        let nb = len.div_ceil(b);
+        let nc = x.ncols();
+        let row_major = x.col_stride() == 1 && x.row_stride() != 1;
+        let chunk = col_chunk(row_major);
+        let wmax = chunk.min(nc);
+        let mut buf0 = vec![0.0; k * wmax];
+        let mut buf1 = vec![0.0; k * wmax];
+        let mut j0 = 0;
+        while j0 < nc {
+            let w = chunk.min(nc - j0);
+            let mut xc = x.rb_mut().subcols_mut(j0, w);
+            let mut cur = &mut buf0[..k * w];
+            let mut nxt = &mut buf1[..k * w];
+            for step in 0..nb {
+                let blk = if self.reverse { nb - 1 - step } else { step };
+                let t0 = blk * b;
+                let bk = b.min(len - t0);
+                pack(
+                    xc.rb(),
+                    t0 * cin,
+                    bk * cin,
+                    b * cin,
+                    cur,
+                    row_major,
+                    step == 0,
+                    k,
+                );
+                let wv = if row_major {
+                    MatRef::from_row_major_slice(&cur[..], k, w)
+                } else {
+                    MatRef::from_column_major_slice(&cur[..], k, w)
+                };
+                matmul(
+                    xc.rb_mut().subrows_mut(t0 * cout, bk * cout),
+                    Accum::Replace,
+                    self.m1.as_ref().subrows(0, bk * cout),
+                    wv,
+                    1.0,
+                    Par::Seq,
+                );
+                if n > 0 && step + 1 < nb {
+                    let sv = if row_major {
+                        MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)
+                    } else {
+                        MatMut::from_column_major_slice_with_stride_mut(
+                            &mut nxt[b * cin..],
+                            n,
+                            w,
+                            k,
+                        )
+                    };
+                    matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
+                    std::mem::swap(&mut cur, &mut nxt);
+                }
+            }
+            j0 += w;
+        }
+    }
+}
+
 /// Copies `rows` rows of `x` starting at `r0` into the packed buffer `w` (a `k x ncols`
 /// matrix, row- or column-major), zero-fills the rows `rows..pad` and, if `zero_state`,
 /// the state rows `pad..k`.
@@ -400,6 +475,26 @@ pub(crate) fn static_columns(
             );
         }
     });
+}
+
+/// Splits the columns of `x` across the threads of `par` and runs `leaf` on each part.
+pub(crate) fn par_columns_mut(
+    x: MatMut<'_, f64>,
+    par: Par,
+    leaf: &(dyn Fn(MatMut<'_, f64>) + Sync),
+) {
+    let nc = x.ncols();
+    if par.degree() <= 1 || nc < 2 * MIN_PAR_COLS {
+        leaf(x);
+        return;
+    }
+    let mid = nc / 2;
+    let (x0, x1) = x.split_at_col_mut(mid);
+    faer::utils::thread::join_raw(
+        move |p| par_columns_mut(x0, p, leaf),
+        move |p| par_columns_mut(x1, p, leaf),
+        par,
+    );
 }
 
 /// Splits the columns of `x`/`out` across the threads of `par` and runs `leaf` on each part.

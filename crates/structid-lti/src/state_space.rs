@@ -547,6 +547,41 @@ impl StateSpace {
         self.blocked_with(time_block(n, m, p).min(len.max(1)), adjoint)
     }
 
+    /// `x ← T x` (or `x ← Tᵀ x` with `adjoint`) in place, for a square system
+    /// (inputs = outputs): each **column** of `x` is one stacked signal of `len · inputs`
+    /// rows, as in [`LinearSystem::apply_columns`], and `x` may be any strided view (a
+    /// transposed, row-major one streams fastest). The result equals `apply_columns` (or
+    /// `apply_adjoint_columns`) into a separate matrix, without that matrix.
+    ///
+    /// # Panics
+    /// When the system is not square or the rows of `x` are not a multiple of the inputs.
+    ///
+    /// ```
+    /// use faer::{Accum, Mat};
+    /// use structid_lti::{LinearSystem, testing::random_stable_system};
+    /// let sys = random_stable_system(3, 4, 1, 1, 0.9);
+    /// let x = Mat::<f64>::from_fn(50, 7, |i, j| ((i * 5 + j * 3) % 13) as f64);
+    /// let mut out = Mat::<f64>::zeros(50, 7);
+    /// sys.apply_columns(x.as_ref(), out.as_mut(), Accum::Replace, 1.0);
+    /// let mut y = x.clone();
+    /// sys.apply_columns_in_place(y.as_mut(), false);
+    /// assert!((&out - &y).norm_max() < 1e-12);
+    /// ```
+    pub fn apply_columns_in_place(&self, x: MatMut<'_, f64>, adjoint: bool) {
+        let m = self.inputs();
+        assert_eq!(m, self.outputs(), "an in-place operator must be square");
+        if m == 0 || x.nrows() == 0 || x.ncols() == 0 {
+            return;
+        }
+        assert!(
+            x.nrows().is_multiple_of(m),
+            "{} rows are not a multiple of the {m} channels",
+            x.nrows()
+        );
+        let len = x.nrows() / m;
+        self.blocked(len, adjoint).run_in_place(len, x);
+    }
+
     /// The blocked recursion with an explicit block length (streams over narrow operands use
     /// long blocks: fewer, larger matrix products).
     pub(crate) fn blocked_with(&self, bsz: usize, adjoint: bool) -> BlockedRecursion {

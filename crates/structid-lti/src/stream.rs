@@ -78,6 +78,19 @@ impl ColumnStream {
     /// Writes `out = T x` for the next chunk (`x`: samples·inputs rows, `out`: samples·outputs
     /// rows, both with the stream's column count).
     pub fn push(&mut self, x: MatRef<'_, f64>, out: MatMut<'_, f64>) -> Result<(), LtiError> {
+        self.push_with(x, out, Accum::Replace, 1.0)
+    }
+
+    /// [`ColumnStream::push`] with the accumulation of [`crate::LinearSystem::apply_columns`]:
+    /// `out = alpha · T x` (`Accum::Replace`) or `out += alpha · T x` (`Accum::Add`) for the
+    /// next chunk.
+    pub fn push_with(
+        &mut self,
+        x: MatRef<'_, f64>,
+        out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) -> Result<(), LtiError> {
         let ncols = self.state.ncols();
         if x.ncols() != ncols || out.ncols() != ncols {
             return Err(LtiError::DimensionMismatch {
@@ -108,19 +121,11 @@ impl ColumnStream {
             });
         }
         match &self.engine {
-            None => static_columns(self.d.as_ref(), len, x, out, Accum::Replace, 1.0),
+            None => static_columns(self.d.as_ref(), len, x, out, accum, alpha),
             Some(e) => {
                 let full = len.is_multiple_of(e.b);
                 let fin = full.then(|| self.next.as_mut());
-                e.leaf(
-                    len,
-                    x,
-                    out,
-                    Accum::Replace,
-                    1.0,
-                    Some(self.state.as_ref()),
-                    fin,
-                );
+                e.leaf(len, x, out, accum, alpha, Some(self.state.as_ref()), fin);
                 if full {
                     std::mem::swap(&mut self.state, &mut self.next);
                 } else {

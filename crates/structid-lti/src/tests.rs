@@ -558,3 +558,38 @@ fn reachable_spectral_radius_of_an_overflowing_system_is_nan_not_a_panic() {
     assert!(s.reachable_spectral_radius().is_nan());
     let _ = s.spectral_radius();
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, .. ProptestConfig::default() })]
+
+    /// The in-place operator equals `apply_columns` / `apply_adjoint_columns` into a separate
+    /// matrix, for square MIMO systems (n = 0 included), column- and row-major operands and
+    /// enough columns to be split across threads.
+    #[test]
+    fn prop_in_place_equals_out_of_place(
+        seed in any::<u64>(), n in 0usize..=5, m in 1usize..=2, len in 1usize..=90,
+        ncols in 1usize..=140, transposed in any::<bool>(), adjoint in any::<bool>()
+    ) {
+        let sys = random_stable_system(seed, n, m, m, 0.95);
+        let x = Mat::<f64>::from_fn(len * m, ncols, |i, j| {
+            (((i * 31 + j * 17) as u64 ^ seed) % 23) as f64 - 11.0
+        });
+        let mut want = Mat::<f64>::zeros(len * m, ncols);
+        if adjoint {
+            sys.apply_adjoint_columns(x.as_ref(), want.as_mut(), Accum::Replace, 1.0);
+        } else {
+            sys.apply_columns(x.as_ref(), want.as_mut(), Accum::Replace, 1.0);
+        }
+        let got = if transposed {
+            let mut xt = x.transpose().to_owned();
+            sys.apply_columns_in_place(xt.as_mut().transpose_mut(), adjoint);
+            xt.transpose().to_owned()
+        } else {
+            let mut y = x.clone();
+            sys.apply_columns_in_place(y.as_mut(), adjoint);
+            y
+        };
+        let scale = want.norm_max().max(1.0);
+        prop_assert!((&want - &got).norm_max() <= 1e-12 * scale);
+    }
+}

@@ -43,14 +43,18 @@
 //!   `ln det M = ln det A_noise + (n − m)·ln(L·β) + Σ ln(s_j + L·β)` (determinant lemma). For the
 //!   Gaussian-like Fourier family σ changes only Λ, so the pass is reused across σ (it is
 //!   redone only when a smaller σ needs more harmonics than the pass has).
-//! * **Dense path** (any kernel): A and B are assembled once per σ. With a static noise path
-//!   the rows are whitened (A = I) and a pivoted Cholesky factorisation B ≈ V·Vᵀ is grown on
-//!   demand, so that a trial costs O(k) after an O(n·k²) factorisation shared by all β:
-//!   the same formulas as the feature path with V in place of F·Λ^½. The discarded part
-//!   has trace t, which bounds the error of the criterion by (n + 1)·t/(2·L·β); the rank grows
-//!   until that bound is below 1e-4, and a trial whose bound would need a rank above n/3 uses
-//!   an exact Cholesky factorisation of M instead. Dynamic noise paths use the exact
-//!   factorisation at every trial.
+//! * **Dense path** (any kernel). With a static noise path the rows are whitened (A = I) and
+//!   B is never assembled while low-rank factors suffice: pivoted Cholesky factors of the
+//!   Gram matrices, K_i ≈ U_i·U_iᵀ, are grown on demand (one Gram column per pivot) and pushed
+//!   through the whitened paths, B ≈ V·Vᵀ with V = [W·T_i·U_i], so that a trial costs O(k)
+//!   after O(L·k²) work per σ shared by all β: the same formulas as the feature path with V in
+//!   place of F·Λ^½. The discarded part B − V·Vᵀ is positive semidefinite with trace t at most
+//!   Σ_i c_i·tr(K_i − U_i·U_iᵀ), c_i = (Σ_k ‖W·h_k‖)² bounding the gain of path i, and t bounds
+//!   the error of the criterion by (n + 1)·t/(2·L·β); the rank grows until that bound is
+//!   below 1e-4. When that would need a rank above n/10, B is assembled once for that σ and
+//!   factored the same way (up to rank n/10), and beyond that its eigendecomposition
+//!   B = U·S·Uᵀ, computed once, makes every β exact in O(n). Dynamic noise paths assemble A
+//!   and B once per σ and use a Cholesky factorisation of M at every trial.
 //! * Cross-validation and validation selection refit the model for every trial (K fits, resp.
 //!   one fit and one simulation): they work for any dispersion and solver, at that cost.
 //!

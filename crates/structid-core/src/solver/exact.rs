@@ -8,9 +8,11 @@
 //! ```
 //!
 //! which needs no K⁻¹ (Gaussian Gram matrices are numerically singular). M is assembled by
-//! applying the operators to panels of Gram columns, Q_i = T_i·K_i, then M += T_i·Q_iᵀ
-//! (valid because K_i and M are symmetric), so the peak memory is M plus one Q (two L×L
-//! matrices for SISO). ŵ of the last block is Q_iᵀλ; the others are recomputed panel by panel.
+//! applying the operators to Gram columns, Q_i = T_i·K_i, then M += T_i·Q_iᵀ (valid because
+//! K_i and M are symmetric). Q_i is never stored whole: the first SISO block is transformed in
+//! M's own buffer and the others stream Q_i in time blocks through a stateful Toeplitz pass
+//! (see `assemble`), so the peak memory is M plus a few panels (one L×L matrix for SISO).
+//! ŵ_i = K_i·α_i is recomputed panel by panel from the Gram columns.
 //!
 //! Output samples that depend on neither e nor w (a strictly proper path from a zero initial
 //! state) make M singular: their rows of M are zero. They are detected on M's diagonal,
@@ -39,6 +41,9 @@ use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 /// Gram columns are generated and pushed through T_i in panels of this many columns.
 const PANEL: usize = 256;
 
+/// Gram columns per panel when ŵ = K·α is recovered after the factorisation.
+const RECOVERY_PANEL: usize = 64;
+
 /// Relative diagonal jitters tried, in order, when M is numerically singular.
 const JITTER_LADDER: [f64; 3] = [1e-13, 1e-10, 1e-7];
 
@@ -53,7 +58,8 @@ pub fn peak_memory_bytes(
     let n = (len * outputs) as u64;
     let l = len as u64;
     let p = PANEL.min(len.max(1)) as u64;
-    let mut words = n * n + n * l + l * p + 8 * n + 2 * n * free_cols as u64;
+    // M, a Gram panel and a panel of Q = T·K (see `assemble`)
+    let mut words = n * n + l * p + n * p + 8 * n + 2 * n * free_cols as u64;
     if noise_dynamic {
         words += (n + (len * noise_inputs) as u64) * p;
     }
@@ -156,19 +162,13 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     // --- assemble M, leave out samples that depend on neither e nor w, factor -------------
     let lb = len as f64 * beta;
-    // M is factorised in place, so it gets faer's aligned allocation. Q is only streamed
-    // through the Toeplitz recursion: a calloc'd Vec costs nothing until it is written.
+    // M is factorised in place, so it gets faer's aligned allocation. Q = T·K is never
+    // stored whole: see `assemble`.
     let mut m = Mat::<f64>::zeros(n, n);
-    let mut q_buf = vec![0.0f64; n * len];
-    let mut q = MatMut::from_column_major_slice_mut(&mut q_buf, n, len);
-    let panel = PANEL.min(len);
+    // Gram panels for ŵ = K·α (narrow: this buffer adds to M's memory).
+    let panel = RECOVERY_PANEL.min(len);
     let nblocks = problem.blocks().len();
-    // Gram panels are needed only from the second block on (the first fills M's buffer).
-    let mut gram = if nblocks > 1 {
-        vec![0.0; len * panel]
-    } else {
-        Vec::new()
-    };
+    let mut gram = vec![0.0; len * panel];
     let r_data = problem.residual().as_slice();
     let mut t_assembled;
     let par = faer::get_global_parallelism();
@@ -182,7 +182,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut jitter = 0.0;
     let mut attempt = 0;
     let (kept, dropped, max_diag) = loop {
-        assemble(problem, &penalties, lb, &mut m, q.rb_mut(), &mut gram);
+        assemble(problem, &penalties, lb, &mut m);
         let (kept, dropped, max_diag) = compact_live_rows(&mut m, problem.held_out())?;
         let nk = kept.len();
         let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
@@ -294,17 +294,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     let mut parts = Vec::with_capacity(nblocks);
     let mut kept_penalties = Vec::with_capacity(nblocks);
-    for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
+    for (block, pen) in problem.blocks().iter().zip(penalties) {
         let mut alpha = vec![0.0; len];
         block.path.apply_adjoint(&lambda, &mut alpha);
-        let w_hat = if bi + 1 == nblocks {
-            // Q = T·K of the last block is still in memory: ŵ = K·α = Qᵀ·λ.
-            let lam = faer::Col::<f64>::from_fn(n, |i| lambda[i]);
-            let w = q.rb().transpose() * &lam;
-            (0..len).map(|k| w[k]).collect::<Vec<_>>()
-        } else {
-            gram_times(pen.as_ref(), &alpha, &mut gram, panel)
-        };
+        let w_hat = gram_times(pen.as_ref(), &alpha, &mut gram, panel);
         // D_i = ŵᵀK⁻¹ŵ = αᵀKα = αᵀŵ.
         let dispersion_value: f64 = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
         parts.push(BlockPart {
@@ -406,9 +399,97 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     })
 }
 
-/// M = Σ_i T_i·K_i·T_iᵀ + L·β·T_ye·T_yeᵀ, through Q_i = T_i·K_i built from panels of Gram columns.
-/// On return `q` holds Q of the last block.
+/// M = Σ_i T_i·K_i·T_iᵀ + L·β·T_ye·T_yeᵀ without any n×L buffer besides M.
+///
+/// * A first block whose path is a SISO state-space system with n = L (one output) is built
+///   in M's buffer: K is filled there (using its symmetry), Q = T·K replaces it in place
+///   (the transposed view: its rows are the time samples), which leaves Qᵀ, and T·Qᵀ = M
+///   replaces that in place.
+/// * Every other block streams Q = T·K in time blocks: each panel of Gram columns
+///   K[:, j₀..j₀+w] gives Q[:, j₀..j₀+w] = T·K[:, j₀..j₀+w], whose transpose is the time block
+///   j₀..j₀+w of the operand of T·Qᵀ; a stateful Toeplitz pass ([`structid_lti::ColumnStream`])
+///   adds those rows of M and carries its state to the next panel.
+///
+/// Paths that are not state-space systems fall back to [`assemble_with_q`] with an n×L Q.
+/// The panels (L×[`PANEL`] Gram columns, n×`PANEL` of Q) are allocated only for streamed
+/// blocks.
 pub(crate) fn assemble(
+    problem: &Problem,
+    penalties: &[Box<dyn QuadraticPenalty>],
+    lb: f64,
+    m: &mut Mat<f64>,
+) {
+    let len = problem.len();
+    let n = m.nrows();
+    if problem
+        .blocks()
+        .iter()
+        .any(|b| b.path.as_state_space().is_none())
+    {
+        let mut q_buf = vec![0.0f64; n * len];
+        let q = MatMut::from_column_major_slice_mut(&mut q_buf, n, len);
+        let mut gram = vec![0.0; len * PANEL.min(len)];
+        assemble_with_q(problem, penalties, lb, m, q, &mut gram);
+        return;
+    }
+    let panel = PANEL.min(len);
+    let mut gram = Vec::new();
+    let mut qp = Mat::<f64>::new();
+    for (bi, (block, pen)) in problem.blocks().iter().zip(penalties).enumerate() {
+        let ss = block
+            .path
+            .as_state_space()
+            .expect("checked above: every path is a state-space system");
+        if bi == 0 && n == len && ss.inputs() == 1 && ss.outputs() == 1 {
+            pen.fill(m.as_mut());
+            ss.apply_columns_in_place(m.as_mut().transpose_mut(), false);
+            ss.apply_columns_in_place(m.as_mut(), false);
+            continue;
+        }
+        let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
+        if gram.is_empty() {
+            gram = vec![0.0; len * panel];
+            qp = Mat::<f64>::zeros(n, panel);
+        }
+        // Two streams over the halves of M's columns, one per thread.
+        let half = n / 2;
+        let mut streams = [ss.column_stream(half), ss.column_stream(n - half)];
+        for j0 in (0..len).step_by(panel) {
+            let w = panel.min(len - j0);
+            // Row-major panels: each time sample's w values are contiguous.
+            let g = &mut gram[..len * w];
+            pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
+            let g = MatRef::from_row_major_slice(g, len, w);
+            let mut q = qp.as_mut().subcols_mut(0, w);
+            block.path.apply_columns(g, q.rb_mut(), Accum::Replace, 1.0);
+            // Time block j₀..j₀+w of Qᵀ (w rows, n columns) → rows of M.
+            let x = q.rb().transpose();
+            let out = m
+                .as_mut()
+                .subrows_mut(j0 * ny_of(n, len), w * ny_of(n, len));
+            let (x0, x1) = x.split_at_col(half);
+            let (o0, o1) = out.split_at_col_mut(half);
+            let [s0, s1] = &mut streams;
+            let (r0, r1) = rayon::join(
+                || s0.push_with(x0, o0, accum, 1.0),
+                || s1.push_with(x1, o1, accum, 1.0),
+            );
+            r0.and(r1)
+                .expect("the stream's shapes follow from M's and the panel's");
+        }
+    }
+    add_noise_term(problem.noise(), len, lb, m);
+}
+
+/// Output channels per sample of M (n = L·n_y rows).
+fn ny_of(n: usize, len: usize) -> usize {
+    n / len.max(1)
+}
+
+/// M = Σ_i T_i·K_i·T_iᵀ + L·β·T_ye·T_yeᵀ through whole Q_i = T_i·K_i (n×L each) built from
+/// panels of Gram columns; on return `q` holds Q of the last block. The fallback of
+/// [`assemble`] for paths that are not state-space systems, and its reference in tests.
+pub(crate) fn assemble_with_q(
     problem: &Problem,
     penalties: &[Box<dyn QuadraticPenalty>],
     lb: f64,
@@ -567,6 +648,66 @@ mod tests {
     use super::*;
     use crate::{KernelDispersion, ProblemBlock};
     use structid_lti::StateSpace;
+
+    /// A problem with `blocks` Gaussian blocks behind random stable paths (`ny` outputs, one
+    /// input each) and a dynamic noise path.
+    fn random_problem(seed: u64, len: usize, ny: usize, blocks: usize) -> Problem {
+        use structid_lti::testing::random_stable_system;
+        let bl = (0..blocks)
+            .map(|i| ProblemBlock {
+                name: format!("b{i}"),
+                output: i,
+                path: Arc::new(random_stable_system(seed + i as u64, 3 + i, 1, ny, 0.9)),
+                z: Signal::from_fn(len, 1, |k, _| ((k * (7 + i) + 3) % 23) as f64 / 11.0 - 1.0),
+                dispersion: Arc::new(KernelDispersion::gaussian(0.4).unwrap()),
+            })
+            .collect();
+        let residual = Signal::from_fn(len, ny, |k, c| ((k * 5 + c * 3) % 7) as f64 - 3.0);
+        let noise = Arc::new(random_stable_system(seed ^ 99, 2, ny, ny, 0.8));
+        Problem::new(residual, noise, bl).unwrap()
+    }
+
+    /// The streamed assembly (in-place first block, stateful Toeplitz pass for the others)
+    /// equals the reference that stores Q = T·K whole, to 1e-12 relative: SISO one and two
+    /// blocks, two outputs, and lengths that are and are not multiples of the panel width.
+    #[test]
+    fn the_streamed_assembly_equals_the_whole_q_assembly() {
+        for (len, ny, blocks) in [
+            (300, 1, 1),
+            (300, 1, 2),
+            (257, 1, 3),
+            (130, 2, 2),
+            (600, 1, 2),
+            (40, 2, 1),
+        ] {
+            let problem = random_problem(len as u64, len, ny, blocks);
+            let penalties: Vec<Box<dyn QuadraticPenalty>> = problem
+                .blocks()
+                .iter()
+                .map(|b| super::super::quadratic_penalty(b, "exact").unwrap())
+                .collect();
+            let n = len * ny;
+            let mut gram = vec![0.0; len * PANEL.min(len)];
+            let mut want = Mat::<f64>::zeros(n, n);
+            let mut q = vec![0.0; n * len];
+            assemble_with_q(
+                &problem,
+                &penalties,
+                0.3,
+                &mut want,
+                MatMut::from_column_major_slice_mut(&mut q, n, len),
+                &mut gram,
+            );
+            // a dirty buffer, as on a re-assembly after a failed factorisation
+            let mut got = Mat::<f64>::from_fn(n, n, |i, j| (i + 2 * j) as f64);
+            assemble(&problem, &penalties, 0.3, &mut got);
+            let err = (&want - &got).norm_max() / want.norm_max();
+            assert!(
+                err <= 1e-12,
+                "L = {len}, n_y = {ny}, {blocks} blocks: {err:e}"
+            );
+        }
+    }
 
     /// Found by the `lft_problem` fuzz target: free responses so large that OᵀM⁻¹O overflows
     /// made the SVD of the initial-state step panic (NaN singular values).
