@@ -116,8 +116,10 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 impl StateSpace {
-    /// `y = T u` for one long signal (zero initial state), by the blocked recursion of the
-    /// [module documentation](self): the same values as
+    /// `y = T u` for one long signal (zero initial state), by a blocked recursion: the record
+    /// cut into blocks of 64 samples becomes the columns of a matrix U, the outputs of all
+    /// blocks are one matrix product `[T_b Γ]·[U; S]`, and only the block states S run
+    /// serially. The same values as
     /// [`LinearSystem::apply`](crate::LinearSystem::apply) up to rounding, many times faster on
     /// long records. Short records and static gains use the per-sample recursion. Panics on
     /// inconsistent lengths, as `apply` does.

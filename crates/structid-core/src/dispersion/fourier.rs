@@ -493,7 +493,7 @@ impl FeatureMap for FourierKernel {
         Some(feature_weights(&lambda, self.combination, &self.index))
     }
 
-    /// One input: the harmonics of [`LANES`] samples at a time (independent recurrences side
+    /// One input: the harmonics of 8 samples at a time (independent recurrences side
     /// by side, which the compiler vectorises); the same operations as
     /// [`eval_into`](FeatureMap::eval_into), hence the same values.
     fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
@@ -523,7 +523,7 @@ impl FeatureMap for FourierKernel {
         }
     }
 
-    /// One input: Σ coef_j·ψ_j for [`LANES`] samples at a time, summed in feature order as
+    /// One input: Σ coef_j·ψ_j for 8 samples at a time, summed in feature order as
     /// the default does.
     fn combine_rows(&self, z: &Signal, t0: usize, coef: &[f64], out: &mut [f64]) {
         let m = self.dim();

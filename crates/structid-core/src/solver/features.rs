@@ -11,7 +11,13 @@
 //! whose normal equations need only G = [F O r]ᵀWᵀW[F O r], an (m+n_x+1)² matrix. One pass over
 //! time accumulates G chunk by chunk: the features of a chunk go through the block paths as a
 //! [`ColumnStream`] (state carried between chunks), are whitened, and G += XᵀX is one matrix
-//! product; the L×m matrix F is never stored. A second pass recovers ŵ and ê.
+//! product; the L×m matrix F is never stored. When the Kalman whitening has no time-varying
+//! transient it is folded into the paths: the features go through the series connection
+//! W·T_i in one blocked recursion, and only [O r] through W alone. The feature columns and
+//! the rows of each chunk's Gram update are split into two parts that run in parallel (the
+//! split does not depend on the thread count, so neither do the results). A second pass
+//! recovers ŵ (batched feature combinations) and ê, whose single long signals go through
+//! blocked recursions ([`structid_lti::StateSpace::apply_long`]).
 //!
 //! The scaling by Λ^½ keeps the system well conditioned (its matrix is ≥ L·β·I on b) even when
 //! λ_n decays to 1e-300. Coloured noise is whitened by the Kalman filter of the noise path,
