@@ -65,7 +65,8 @@ pub enum DataCommand {
     ///
     /// Splits: estimation (uEst, yEst) and test (uVal, yVal), 1024 samples each, Ts = 4 s.
     Tanks(BenchmarkArgs),
-    /// Select, reorder, rename and cut the columns of any delimited text file.
+    /// Select, reorder, rename and cut the columns of any delimited text file, or convert
+    /// the signals of a MAT-file or NumPy file (chosen with --vars) to CSV.
     ///
     /// Writes a CSV file with a header row that the other commands read.
     Csv(CsvArgs),
@@ -270,14 +271,36 @@ fn csv(a: CsvArgs) -> Result<(), CliError> {
     let mut guard = OutputGuard::new();
     guard.protect(&a.file);
     guard.check_out_file(&a.out)?;
-    let options = CsvOptions {
-        delimiter,
-        header: !a.no_header,
-        skip_rows: a.skip_rows,
-        columns,
-        names,
+    let text_options =
+        columns.is_some() || names.is_some() || a.no_header || a.skip_rows > 0 || delimiter != b',';
+    let table = if is_array_file(&a.file) {
+        // A MAT-file or NumPy file: converted to CSV, its signals chosen by --vars.
+        if text_options {
+            return Err(CliError::input(format!(
+                "`{}` is a MAT-file or NumPy file: choose and name its signals with --vars \
+                 (e.g. --vars u=vir,y=qm); --columns, --names, --delimiter, --no-header and \
+                 --skip-rows apply to text files",
+                a.file.display()
+            )));
+        }
+        read_table(&a.file)?
+    } else {
+        if VARS.get().is_some() {
+            return Err(CliError::input(format!(
+                "`{}` is a text file: choose and name its columns with --columns and --names \
+                 (--vars selects the variables of MAT-files and NumPy files here)",
+                a.file.display()
+            )));
+        }
+        let options = CsvOptions {
+            delimiter,
+            header: !a.no_header,
+            skip_rows: a.skip_rows,
+            columns,
+            names,
+        };
+        DataTable::read_with_limit(&a.file, &options, csv_row_limit())?
     };
-    let table = DataTable::read_with_limit(&a.file, &options, csv_row_limit())?;
     // Every kept column needs a value in every row (an empty field is reported with its line).
     let signal = table.select(&table.names)?;
     let mut cols: Vec<Vec<f64>> = (0..signal.channels()).map(|c| signal.channel(c)).collect();
@@ -306,6 +329,19 @@ fn csv(a: CsvArgs) -> Result<(), CliError> {
         a.out.display()
     );
     Ok(())
+}
+
+/// Whether `path` is a MAT-file, `.npy` or `.npz` file (by its first bytes, or its
+/// extension when it cannot be read).
+fn is_array_file(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = Vec::new();
+    if let Ok(f) = std::fs::File::open(path) {
+        let _ = f.take(16).read_to_end(&mut head);
+    }
+    let extension = path.extension().and_then(|e| e.to_str());
+    structid_io::array_file::Format::detect(&head, extension)
+        != structid_io::array_file::Format::Csv
 }
 
 /// `--delimiter`: one ASCII character, or `tab` / `\t`.

@@ -525,12 +525,15 @@ fn run(cli: Cli) -> Result<(), CliError> {
     if let Some(vars) = cli.vars {
         let reads_data = !matches!(
             cli.command,
-            Command::Demo(_) | Command::Data(_) | Command::Compare(_) | Command::Input(_)
+            Command::Demo(_)
+                | Command::Data(data::DataCommand::Silverbox(_) | data::DataCommand::Tanks(_))
+                | Command::Compare(_)
+                | Command::Input(_)
         );
         if !reads_data {
             return Err(CliError::input(
                 "--vars selects the signals of the data files of identify, validate, predict, \
-                 simulate, linear, refine and discover; this command reads none (a sweep \
+                 simulate, linear, refine, discover and data csv; this command reads none (a sweep \
                  configuration of `compare` reads a MAT-file's variables as columns named by \
                  the variables)",
             ));

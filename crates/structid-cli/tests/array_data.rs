@@ -195,6 +195,38 @@ fn identify_on_a_mat_file_equals_identify_on_the_csv() {
 }
 
 #[test]
+fn data_csv_converts_a_mat_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    files(d);
+    let (mat, out) = (d.join("d.mat"), d.join("out.csv"));
+    let o = ok(&[
+        "data",
+        "csv",
+        "--file",
+        p(&mat),
+        "--vars",
+        "u=vir,y=qm",
+        "--range",
+        "10..",
+        "--out",
+        p(&out),
+    ]);
+    assert!(
+        o.stdout
+            .contains("190 samples (rows 10..200 of 200 data rows), columns u, y"),
+        "{}",
+        o.stdout
+    );
+    let converted = structid_io::DataTable::read(&out).unwrap();
+    let original = structid_io::DataTable::read(&d.join("d.csv")).unwrap();
+    assert_eq!(converted.names, ["u", "y"]);
+    for c in 0..2 {
+        assert_eq!(converted.columns[c], original.columns[c][10..]);
+    }
+}
+
+#[test]
 fn mat_file_errors_are_input_errors() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -249,7 +281,43 @@ fn mat_file_errors_are_input_errors() {
     std::fs::write(&cut, &full[..full.len() / 2]).unwrap();
     let e = id(&cut, Some("u=vir,y=qm"));
     assert!(e.contains("truncated"), "{e}");
-    // --vars on a command that reads no data file.
+    // --vars on a command that reads no data file, or with text-file options.
+    let e = input_error(&[
+        "data",
+        "csv",
+        "--file",
+        p(&mat),
+        "--columns",
+        "u",
+        "--out",
+        p(&out),
+    ]);
+    assert!(e.contains("choose and name its signals with --vars"), "{e}");
+    let csv = d.join("d.csv");
+    let e = input_error(&[
+        "data",
+        "csv",
+        "--file",
+        p(&csv),
+        "--vars",
+        "u=u",
+        "--out",
+        p(&out),
+    ]);
+    assert!(e.contains("is a text file"), "{e}");
+    let e = input_error(&[
+        "data",
+        "silverbox",
+        "--file",
+        p(&mat),
+        "--split",
+        "all",
+        "--vars",
+        "u=vir",
+        "--out",
+        p(&out),
+    ]);
+    assert!(e.contains("--vars selects"), "{e}");
     let e = input_error(&["demo", "spray", "--vars", "u=vir", "--out", p(&out)]);
     assert!(e.contains("--vars selects"), "{e}");
     assert!(!out.exists());
