@@ -2,8 +2,9 @@
 //! std 0.1, β = 0.01, white-noise or sinusoidal input. Prints time, iterations, residuals and the
 //! map error of the chosen solver per record length.
 //!
-//! `cargo run --release --example tv_scaling -- [clarabel|admm] [white|sine] [adaptive] [L ...]`
-//! (`adaptive`: ADMM with ρ balancing).
+//! `cargo run --release --example tv_scaling -- [clarabel|admm|auto] [white|sine] [adaptive] [cv] [L ...]`
+//! (`adaptive`: ADMM with ρ balancing; `cv`: select β by blocked 5-fold cross-validation
+//! instead of one fit at β = 0.01).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -16,6 +17,8 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let solver = if args.iter().any(|a| a == "clarabel") {
         SolverChoice::Clarabel
+    } else if args.iter().any(|a| a == "auto") {
+        SolverChoice::Auto
     } else {
         SolverChoice::Admm
     };
@@ -53,6 +56,22 @@ fn main() {
         )
         .unwrap();
         let t = Instant::now();
+        if args.iter().any(|a| a == "cv") {
+            use structid::hyperparameters::{Criterion, SelectionSettings, select};
+            let how = SelectionSettings::builder()
+                .criterion(Criterion::CrossValidation { folds: 5 })
+                .build()
+                .unwrap();
+            let sel = select(&exp.model, &exp.data, None, &settings, &how).unwrap();
+            println!(
+                "L={len:>8} cv {} {excitation:?}: {:.3} s, {} trials, β = {:.3e}",
+                sel.identification.diagnostics.solver,
+                t.elapsed().as_secs_f64(),
+                sel.curve.len(),
+                sel.beta
+            );
+            continue;
+        }
         let id = identify(&exp.model, &exp.data, &settings).unwrap();
         let total = t.elapsed().as_secs_f64();
         let d = &id.diagnostics;

@@ -1,8 +1,9 @@
 //! Blocked K-fold cross-validation by refitting.
 
 use crate::error::{Error, Result};
-use crate::identify::{Identification, IdentifySettings, identify_problem};
+use crate::identify::{Identification, IdentifySettings, SolverChoice, identify_problem};
 use crate::problem::Problem;
+use crate::solver::choice::SolverKind;
 
 use super::score::BetaScore;
 
@@ -66,8 +67,20 @@ impl BetaScore for FoldScore {
         let (mut sse, mut count) = (0.0, 0usize);
         for mask in &self.masks {
             let p = self.problem.clone().with_held_out(mask.clone())?;
-            // An unconverged trial cannot be scored: the selection stops with its error.
-            let id = identify_problem(&p, &settings)?.converged()?;
+            // An unconverged trial cannot be scored: the selection stops with its error. ADMM
+            // (chosen automatically for long records) can stall on a fold whose held-out map
+            // values the remaining outputs barely see (small β): that fold is refitted by the
+            // exact conic solver.
+            let id = identify_problem(&p, &settings)?;
+            let id = if id.diagnostics.solver == SolverKind::Admm
+                && !id.diagnostics.status.is_converged()
+                && self.settings.solver() == SolverChoice::Auto
+            {
+                identify_problem(&p, &settings.with_solver(SolverChoice::Clarabel))?
+            } else {
+                id
+            };
+            let id = id.converged()?;
             let fit = fitted_residual(&p, &id);
             for (i, &held) in mask.iter().enumerate() {
                 if held {

@@ -131,12 +131,17 @@ pub(crate) fn solve_with(
     all_penalties: Vec<Penalty>,
     t_start: Instant,
 ) -> Result<Identification> {
-    if problem.held_out().is_some() {
-        return Err(Error::Unsupported(
-            "ADMM needs every output sample (its smoother is time-invariant): cross-validation folds use the conic solver (clarabel)"
-                .into(),
-        ));
-    }
+    // Held-out samples (cross-validation) are missing outputs of the smoother.
+    let missing = match held_out_samples(problem) {
+        Some(m) => Some(m.ok_or_else(|| {
+            Error::Unsupported(
+                "ADMM leaves out whole samples (every output channel of a sample); this problem holds out \
+                 only some channels of a sample: use the conic solver (clarabel)"
+                    .into(),
+            )
+        })?),
+        None => None,
+    };
     let mut penalties: Vec<TvPenalty> = Vec::new();
     let mut quadratic: Vec<(Box<dyn QuadraticPenalty>, usize)> = Vec::new();
     let mut slots = Vec::with_capacity(all_penalties.len());
@@ -233,6 +238,7 @@ pub(crate) fn solve_with(
         tv: &w_cols,
         quadratic: &q_cols,
         factors: &factors,
+        missing: missing.as_deref(),
     };
     let mut wstep = WStep::new(
         &real.ss,
@@ -243,13 +249,30 @@ pub(crate) fn solve_with(
         beta,
         rho,
     )?;
+    // The blocks as ADMM iterates them: chains without the nodes that no kept output sees.
+    let tv_z: Vec<&Signal> = problem
+        .blocks()
+        .iter()
+        .zip(&slots)
+        .filter(|(_, s)| matches!(s, Slot::Tv(_)))
+        .map(|(b, _)| &b.z)
+        .collect();
+    let views: Vec<TvView> = penalties
+        .iter()
+        .zip(&w_cols)
+        .zip(&tv_z)
+        .map(|((p, &col), z)| {
+            TvView::new(p, z, visible_samples(&real, col, missing.as_deref(), len))
+        })
+        .collect();
     let mut prox: Vec<Prox> = penalties
         .iter()
-        .map(|p| {
+        .zip(&views)
+        .map(|(p, v)| {
             if p.is_chain() {
                 Prox::Chain(
                     Tv1dWorkspace::new(),
-                    p.edges().iter().map(|e| e.2).collect(),
+                    v.weights.clone(),
                     Vec::new(),
                     f64::NAN,
                 )
@@ -265,20 +288,20 @@ pub(crate) fn solve_with(
     // samples sorted by node (`order`, with `sorted_node` the node of each position), so that
     // every pass over the samples reads and writes the node vectors in sequence, and only two
     // passes per block and iteration (the w-step's mean out, its output in) follow time order.
-    let orders: Vec<(Vec<usize>, Vec<usize>)> = penalties.iter().map(node_order).collect();
-    let mut d: Vec<Vec<f64>> = penalties.iter().map(|p| vec![0.0; p.nodes()]).collect();
+    let orders: Vec<(&[usize], &[usize])> = views
+        .iter()
+        .map(|v| (&v.order[..], &v.sorted_node[..]))
+        .collect();
+    let mut d: Vec<Vec<f64>> = views.iter().map(|v| vec![0.0; v.nodes]).collect();
     let mut d_prev = d.clone();
-    let mut u: Vec<Vec<f64>> = vec![vec![0.0; len]; nb];
+    let mut u: Vec<Vec<f64>> = views.iter().map(|v| vec![0.0; v.order.len()]).collect();
     let mut ws: Vec<f64> = vec![0.0; len];
     let mut mean = Signal::zeros(len, nin);
     let mut vhat = Signal::zeros(len, nin);
-    let mut target: Vec<Vec<f64>> = penalties.iter().map(|p| vec![0.0; p.nodes()]).collect();
-    let counts: Vec<Vec<f64>> = penalties
-        .iter()
-        .map(|p| p.counts().iter().map(|&c| c as f64).collect())
-        .collect();
+    let mut target: Vec<Vec<f64>> = views.iter().map(|v| vec![0.0; v.nodes]).collect();
+    let counts: Vec<Vec<f64>> = views.iter().map(|v| v.counts.clone()).collect();
     let alpha = opts.relaxation();
-    let sqrt_n = ((len * nb) as f64).sqrt();
+    let sqrt_n = (views.iter().map(|v| v.order.len()).sum::<usize>() as f64).sqrt();
     let mut prox_inner = 0usize;
     let mut prox_unconverged = 0usize;
     let mut rho_changes = 0usize;
@@ -289,7 +312,7 @@ pub(crate) fn solve_with(
     while iterations < opts.max_iterations() {
         iterations += 1;
         // w-step: smoother with prior mean d − u on the w channels.
-        for (i, (order, sorted_node)) in orders.iter().enumerate() {
+        for (i, &(order, sorted_node)) in orders.iter().enumerate() {
             let (m, col) = (mean.as_mut_slice(), w_cols[i]);
             for ((&k, &g), &uj) in order.iter().zip(sorted_node).zip(&u[i]) {
                 m[k * nin + col] = d[i][g] - uj;
@@ -299,7 +322,7 @@ pub(crate) fn solve_with(
         // d-step on the relaxed iterate, through node means.
         let (mut w_norm2, mut d_norm2, mut u_norm2, mut pri2, mut dual2) =
             (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (i, (order, sorted_node)) in orders.iter().enumerate() {
+        for (i, &(order, sorted_node)) in orders.iter().enumerate() {
             let (v, col) = (vhat.as_slice(), w_cols[i]);
             for (w, &k) in ws.iter_mut().zip(order) {
                 *w = v[k * nin + col];
@@ -423,7 +446,12 @@ pub(crate) fn solve_with(
         .zip(&etas)
         .map(|(f, eta)| f.values(eta))
         .collect();
-    let final_smoother = DisturbanceSmoother::new(&real.ss, &fixed, len, initial)?;
+    // The node values of the whole chains (the nodes left out filled in optimally).
+    let mut d: Vec<Vec<f64>> = views.iter().zip(d).map(|(v, d)| v.expand(d)).collect();
+    let final_smoother = match &missing {
+        Some(m) => DisturbanceSmoother::with_missing(&real.ss, &fixed, len, initial, &[], m)?,
+        None => DisturbanceSmoother::new(&real.ss, &fixed, len, initial)?,
+    };
     for k in 0..len {
         let m = mean.sample_mut(k);
         m.iter_mut().for_each(|v| *v = 0.0);
@@ -445,6 +473,7 @@ pub(crate) fn solve_with(
     }
     let mut tv_parts: Vec<Option<BlockPart>> =
         tv_parts(&penalties, d).into_iter().map(Some).collect();
+    drop(views);
     let mut q_parts: Vec<Option<BlockPart>> = factors
         .iter()
         .zip(&quadratic)
@@ -587,24 +616,178 @@ fn stop_reason(s: &StopState) -> String {
     )
 }
 
-/// A block's samples sorted by node (a counting sort, stable in time) and the node of each
-/// sorted position.
-fn node_order(p: &TvPenalty) -> (Vec<usize>, Vec<usize>) {
-    let nodes = p.node_of_sample();
-    let mut start = vec![0usize; p.nodes() + 1];
-    for &g in nodes {
-        start[g + 1] += 1;
+/// A total-variation block as ADMM iterates it.
+///
+/// The samples are sorted by node (a counting sort, stable in time): `order` holds the sample
+/// of each sorted position and `sorted_node` its node. When samples are held out at the end of
+/// the record, their w reaches no output that is kept, and a node with only such samples is
+/// set by the total variation alone: its value is not unique (any value between its chain
+/// neighbours costs the same) and ADMM would creep along it at a sublinear rate. A chain then
+/// leaves those nodes out: a run of them between kept nodes a and b becomes one edge of weight
+/// min c over the run (the least total variation that joins a to b through it), and after the
+/// iteration [`TvView::expand`] fills the run with an exact minimiser: linear in z from a's
+/// value to b's when the run's weights are equal (every monotone fill is then optimal, and this
+/// one is the map's own piecewise-linear interpolation between a and b), else a's and b's
+/// values with the jump at the cheapest edge; runs at an end of the chain take the value of
+/// their one neighbour. Graphs (p > 1) keep every node.
+struct TvView {
+    order: Vec<usize>,
+    sorted_node: Vec<usize>,
+    /// Nodes iterated.
+    nodes: usize,
+    /// Samples per node iterated.
+    counts: Vec<f64>,
+    /// Chain edge weights between consecutive nodes iterated.
+    weights: Vec<f64>,
+    /// For a reduced chain: the iterated node of each chain node (`None`: left out), the
+    /// chain's own weights and the first coordinate of z at each chain node.
+    reduced: Option<ReducedChain>,
+}
+
+/// See [`TvView::reduced`].
+type ReducedChain = (Vec<Option<usize>>, Vec<f64>, Vec<f64>);
+
+impl TvView {
+    fn new(p: &TvPenalty, z: &Signal, visible: Option<Vec<bool>>) -> Self {
+        let full_weights: Vec<f64> = p.edges().iter().map(|e| e.2).collect();
+        let nodes_of = p.node_of_sample();
+        let mut seen = vec![false; p.nodes()];
+        if let Some(vis) = &visible {
+            for (k, &g) in nodes_of.iter().enumerate() {
+                seen[g] |= vis[k];
+            }
+        }
+        let reduce = p.is_chain() && visible.is_some() && seen.iter().any(|&s| !s);
+        let (map, nodes, weights) = if reduce {
+            let mut map = vec![None; p.nodes()];
+            let mut weights = Vec::new();
+            let mut next = 0usize;
+            let mut run_min = f64::INFINITY;
+            for g in 0..p.nodes() {
+                if seen[g] {
+                    if next > 0 {
+                        weights.push(run_min);
+                    }
+                    map[g] = Some(next);
+                    next += 1;
+                    run_min = f64::INFINITY;
+                }
+                if g + 1 < p.nodes() {
+                    run_min = run_min.min(full_weights[g]);
+                }
+            }
+            (Some(map), next, weights)
+        } else {
+            (None, p.nodes(), full_weights.clone())
+        };
+        let node = |k: usize| match &map {
+            Some(m) => m[nodes_of[k]],
+            None => Some(nodes_of[k]),
+        };
+        let mut start = vec![0usize; nodes + 1];
+        for k in 0..nodes_of.len() {
+            if let Some(g) = node(k) {
+                start[g + 1] += 1;
+            }
+        }
+        let counts: Vec<f64> = start[1..].iter().map(|&c| c as f64).collect();
+        for g in 0..nodes {
+            start[g + 1] += start[g];
+        }
+        let mut order = vec![0usize; start[nodes]];
+        let mut sorted_node = vec![0usize; start[nodes]];
+        for k in 0..nodes_of.len() {
+            if let Some(g) = node(k) {
+                order[start[g]] = k;
+                sorted_node[start[g]] = g;
+                start[g] += 1;
+            }
+        }
+        Self {
+            order,
+            sorted_node,
+            nodes,
+            counts,
+            weights,
+            reduced: map.map(|m| {
+                let mut knots = vec![0.0; p.nodes()];
+                for (k, &g) in nodes_of.iter().enumerate() {
+                    knots[g] = z.sample(k).first().copied().unwrap_or(0.0);
+                }
+                (m, full_weights, knots)
+            }),
+        }
     }
-    for g in 0..p.nodes() {
-        start[g + 1] += start[g];
+
+    /// The values of every chain node from those iterated (see the type's documentation).
+    fn expand(&self, d: Vec<f64>) -> Vec<f64> {
+        let Some((map, weights, knots)) = &self.reduced else {
+            return d;
+        };
+        let full = map.len();
+        let mut out = vec![0.0; full];
+        let kept: Vec<usize> = (0..full).filter(|&g| map[g].is_some()).collect();
+        let value = |g: usize| map[g].map_or(0.0, |r| d[r]);
+        let (Some(&first), Some(&last)) = (kept.first(), kept.last()) else {
+            return out;
+        };
+        for g in 0..=first {
+            out[g] = value(first);
+        }
+        for g in last..full {
+            out[g] = value(last);
+        }
+        for pair in kept.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let (va, vb) = (value(a), value(b));
+            let (lo, hi) = weights[a..b]
+                .iter()
+                .fold((f64::INFINITY, 0.0f64), |(l, h), &w| (l.min(w), h.max(w)));
+            let span = knots[b] - knots[a];
+            if hi <= lo * (1.0 + 1e-12) && span.is_finite() && span != 0.0 {
+                for g in a..=b {
+                    out[g] = va + (vb - va) * (knots[g] - knots[a]) / span;
+                }
+            } else {
+                // The cheapest edge (g, g + 1) of the run: a's value up to g, b's after.
+                let cut = (a..b)
+                    .min_by(|&x, &y| weights[x].total_cmp(&weights[y]))
+                    .unwrap_or(a);
+                for g in a..=cut {
+                    out[g] = va;
+                }
+                for g in cut + 1..=b {
+                    out[g] = vb;
+                }
+            }
+        }
+        out
     }
-    let mut order = vec![0usize; nodes.len()];
-    for (k, &g) in nodes.iter().enumerate() {
-        order[start[g]] = k;
-        start[g] += 1;
-    }
-    let sorted_node = order.iter().map(|&k| nodes[k]).collect();
-    (order, sorted_node)
+}
+
+/// The samples whose map value (w channel `col`) reaches an output that is kept, when samples
+/// are held out: sample k is seen unless k + l₀ is past the last kept sample, l₀ the first
+/// non-zero Markov parameter of the channel. `None` without held-out samples.
+fn visible_samples(
+    real: &Realisation,
+    col: usize,
+    missing: Option<&[bool]>,
+    len: usize,
+) -> Option<Vec<bool>> {
+    let missing = missing?;
+    let last_kept = missing.iter().rposition(|&m| !m)?;
+    let ss = &real.ss;
+    let n = ss.order();
+    let tol = 1e-14 * (1.0 + ss.a().amax() + ss.b().amax() + ss.c().amax() + ss.d().amax());
+    let markov = ss.markov_parameters(n + 1);
+    let lead = (0..=n)
+        .find(|&l| markov[l].column(col).amax() > tol)
+        .unwrap_or(usize::MAX);
+    Some(
+        (0..len)
+            .map(|k| k.saturating_add(lead) <= last_kept)
+            .collect(),
+    )
 }
 
 /// The realisation channels of the blocks and the quadratic blocks' factors.
@@ -615,6 +798,25 @@ struct Channels<'a> {
     quadratic: &'a [usize],
     /// The quadratic blocks' factors Ψ̃ (w = Ψ̃·η, D = ‖η‖²).
     factors: &'a [QuadraticFactor],
+    /// The samples whose outputs are held out (cross-validation), when any.
+    missing: Option<&'a [bool]>,
+}
+
+/// The held-out samples of a problem with held-out rows: `Some(Some(mask))` when every held-out
+/// sample has all its output channels held out (one entry per sample), `Some(None)` when some
+/// sample is held out in part, `None` without held-out rows.
+pub(crate) fn held_out_samples(problem: &Problem) -> Option<Option<Vec<bool>>> {
+    let rows = problem.held_out()?;
+    let ny = problem.outputs().max(1);
+    let mut mask = Vec::with_capacity(problem.len());
+    for sample in rows.chunks(ny) {
+        let held = sample[0];
+        if sample.iter().any(|&h| h != held) {
+            return Some(None);
+        }
+        mask.push(held);
+    }
+    Some(Some(mask))
 }
 
 /// The quadratic blocks' factors, with a rank limit from the memory budget.
@@ -713,8 +915,12 @@ impl WStep {
         beta: f64,
         rho: f64,
     ) -> Result<Self> {
-        let smoother =
-            DisturbanceSmoother::with_adjoint(ss, variances, len, initial, ch.quadratic)?;
+        let smoother = match ch.missing {
+            Some(m) => {
+                DisturbanceSmoother::with_missing(ss, variances, len, initial, ch.quadratic, m)?
+            }
+            None => DisturbanceSmoother::with_adjoint(ss, variances, len, initial, ch.quadratic)?,
+        };
         let nb = ch.tv.len();
         let nq: usize = ch.factors.iter().map(|f| f.rank).sum();
         let np = nb + nq;

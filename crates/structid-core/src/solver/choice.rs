@@ -5,12 +5,13 @@
 //! [`crate::hyperparameters::select`] uses `feature_path` to decide whether β is selected in
 //! feature space. In order:
 //!
-//! 1. quadratic and total-variation blocks together: held-out samples (cross-validation) →
-//!    Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (its
+//! 1. quadratic and total-variation blocks together: some samples held out in part (some of
+//!    their output channels only) → Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (its
 //!    w-step handles the quadratic blocks through their features or a factor of their Gram
 //!    matrix);
-//! 2. total variation only: held-out samples (cross-validation) → Clarabel; otherwise
-//!    L·n_y ≤ [`CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM;
+//! 2. total variation only: some samples held out in part → Clarabel; otherwise
+//!    L·n_y ≤ [`CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (whole held-out samples, as in
+//!    cross-validation, are missing outputs of its smoother);
 //! 3. quadratic only: every block has finitely many features, m in all, and
 //!    4·(m + n_x) ≤ L·n_y (n_x the estimated initial states) → the feature solver;
 //!    else the exact solver's memory exceeds the budget and every block has features → the
@@ -57,9 +58,11 @@ pub(crate) fn choose_with(
         .filter(|p| matches!(p, Penalty::TotalVariation(_)))
         .count();
     let size = problem.len() * problem.outputs();
+    // ADMM leaves out whole samples only (its smoother's missing outputs).
+    let partly_held_out = matches!(super::admm::held_out_samples(problem), Some(None));
     if tv_blocks > 0 && tv_blocks < penalties.len() {
         let limit = MIXED_CONIC_AUTO_LIMIT;
-        return if problem.held_out().is_some() {
+        return if partly_held_out {
             (SolverKind::Clarabel, SolverReason::MixedDispersions)
         } else if size <= limit {
             (
@@ -71,7 +74,7 @@ pub(crate) fn choose_with(
         };
     }
     if tv_blocks > 0 {
-        return if problem.held_out().is_some() {
+        return if partly_held_out {
             (SolverKind::Clarabel, SolverReason::TotalVariationHeldOut)
         } else if size <= CONIC_AUTO_LIMIT {
             let limit = CONIC_AUTO_LIMIT;

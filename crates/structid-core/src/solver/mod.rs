@@ -204,7 +204,12 @@ pub(crate) fn finish_tv(
         dropped_idx.push(k * ny + ch);
     }
     let (mut res2, mut r2, mut dropped_max) = (0.0, 0.0, 0.0f64);
+    // Held-out rows (cross-validation) are not fitted: they do not count in the feasibility.
+    let held = problem.held_out();
     for i in 0..len * ny {
+        if held.is_some_and(|h| h[i]) {
+            continue;
+        }
         if is_dropped[i] {
             dropped_max = dropped_max.max(r[i].abs());
         } else {

@@ -116,8 +116,8 @@ pub enum SolverReason {
     /// The settings named the solver.
     #[default]
     Requested,
-    /// Quadratic and total-variation blocks together with held-out samples (cross-validation):
-    /// only Clarabel handles both.
+    /// Quadratic and total-variation blocks together with samples held out in part (some of
+    /// their output channels): only Clarabel handles both.
     MixedDispersions,
     /// Quadratic and total-variation blocks together on a small problem: Clarabel, exact.
     MixedSmall {
@@ -133,7 +133,8 @@ pub enum SolverReason {
         /// [`MIXED_CONIC_AUTO_LIMIT`](crate::solver::choice::MIXED_CONIC_AUTO_LIMIT).
         limit: usize,
     },
-    /// Total variation with held-out samples (cross-validation): only Clarabel handles them.
+    /// Total variation with samples held out in part (some of their output channels): only
+    /// Clarabel handles them.
     TotalVariationHeldOut,
     /// Total variation on a small problem: Clarabel, exact.
     TotalVariationSmall {
@@ -179,8 +180,8 @@ impl fmt::Display for SolverReason {
         match self {
             SolverReason::Requested => f.write_str("requested"),
             SolverReason::MixedDispersions => f.write_str(
-                "automatic: quadratic and total-variation dispersions together with held-out samples \
-                 (cross-validation), which only the conic solver handles",
+                "automatic: quadratic and total-variation dispersions together with samples held out \
+                 in part, which only the conic solver handles",
             ),
             SolverReason::MixedSmall { size, limit } => write!(
                 f,
@@ -193,8 +194,8 @@ impl fmt::Display for SolverReason {
                  {limit}, ADMM (linear in L)"
             ),
             SolverReason::TotalVariationHeldOut => f.write_str(
-                "automatic: total variation with held-out samples (cross-validation), which only \
-                 the conic solver handles",
+                "automatic: total variation with samples held out in part, which only the conic \
+                 solver handles",
             ),
             SolverReason::TotalVariationSmall { size, limit } => write!(
                 f,
