@@ -4,14 +4,30 @@
 //! Run: `cargo bench --bench total_variation`. Figures go in BENCHMARKS.md.
 //! White-noise Clarabel at L = 4000 and 8000:
 //! `cargo run --release --example tv_scaling -- clarabel white 4000 8000`.
+//!
+//! Further groups (select one with `cargo bench --bench total_variation -- <group>`):
+//! * `tv_admm_million`: ADMM at L = 10⁶, white input;
+//! * `mixed_admm`: a Gaussian (or Gaussian-like Fourier) block and a total-variation block
+//!   behind a random 2-input block ([`structid::scenarios::mixed_hammerstein`]), ADMM at
+//!   L = 10⁴ and 10⁵ (single runs: `cargo run --release --example mixed_scaling`);
+//! * `tv_cv`: β by blocked 5-fold cross-validation at L = 2000, white input, solver auto
+//!   (ADMM with held-out samples);
+//! * `graph_tv_admm`: graph total variation (p = 2, k = 8), one block h(z) = 1[z₁ + z₂ > 0]
+//!   behind a 2nd-order block, white inputs, ADMM at L = 2000 and 2·10⁴.
 
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use structid::scenarios::{Excitation, hammerstein_map};
-use structid::{IdentifySettings, SolverChoice, TotalVariation, identify};
+use nalgebra::DMatrix;
+use structid::hyperparameters::{Criterion as Cv, SelectionSettings, select};
+use structid::paper::{Experiment, gaussian_noise};
+use structid::scenarios::{Excitation, hammerstein_map, mixed_hammerstein};
+use structid::{
+    Dispersion, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, Lft,
+    LftMatrices, Model, NonlinearBlock, SolverChoice, TotalVariation, identify,
+};
 
 fn relay(z: f64) -> f64 {
     if z >= 0.3 { 1.0 } else { -0.5 }
@@ -78,5 +94,146 @@ fn bench(c: &mut Criterion) {
     run(c, "tv_admm", SolverChoice::Admm, &admm_lens, &admm_lens);
 }
 
-criterion_group!(benches, bench);
+fn group<'a>(
+    c: &'a mut Criterion,
+    name: &str,
+) -> criterion::BenchmarkGroup<'a, criterion::measurement::WallTime> {
+    let mut g = c.benchmark_group(name);
+    g.sample_size(10)
+        .measurement_time(Duration::from_secs(5))
+        .warm_up_time(Duration::from_millis(500));
+    g
+}
+
+fn settings(solver: SolverChoice) -> IdentifySettings {
+    IdentifySettings::builder()
+        .beta(0.01)
+        .solver(solver)
+        .build()
+        .unwrap()
+}
+
+/// TV by ADMM at L = 10⁶, white input.
+fn bench_million(c: &mut Criterion) {
+    let mut g = group(c, "tv_admm_million");
+    let len = 1_000_000;
+    let exp = hammerstein_map(
+        len,
+        2,
+        0.1,
+        &relay,
+        Excitation::White,
+        Arc::new(TotalVariation::new()),
+        7,
+    )
+    .unwrap();
+    let s = settings(SolverChoice::Admm);
+    g.bench_with_input(BenchmarkId::new("white", len), &len, |b, _| {
+        b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
+    });
+    g.finish();
+}
+
+/// Mixed models (quadratic + total variation) by ADMM.
+fn bench_mixed(c: &mut Criterion) {
+    let mut g = group(c, "mixed_admm");
+    let s = settings(SolverChoice::Admm);
+    let kinds: [(&str, Arc<dyn Dispersion>); 2] = [
+        (
+            "gaussian",
+            Arc::new(KernelDispersion::gaussian(0.4).unwrap()),
+        ),
+        (
+            "fourier",
+            Arc::new(
+                FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.4 })
+                    .unwrap()
+                    .with_harmonics(31),
+            ),
+        ),
+    ];
+    for (name, smooth) in kinds {
+        for len in [10_000, 100_000] {
+            let exp = mixed_hammerstein(len, Arc::clone(&smooth), 3).unwrap();
+            g.bench_with_input(BenchmarkId::new(name, len), &len, |b, _| {
+                b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
+            });
+        }
+    }
+    g.finish();
+}
+
+/// β by blocked 5-fold cross-validation for total variation.
+fn bench_cv(c: &mut Criterion) {
+    let mut g = group(c, "tv_cv");
+    let len = 2000;
+    let exp = hammerstein_map(
+        len,
+        2,
+        0.1,
+        &relay,
+        Excitation::White,
+        Arc::new(TotalVariation::new()),
+        7,
+    )
+    .unwrap();
+    let how = SelectionSettings::builder()
+        .criterion(Cv::CrossValidation { folds: 5 })
+        .build()
+        .unwrap();
+    let s = settings(SolverChoice::Auto);
+    g.bench_with_input(BenchmarkId::new("white_5_folds", len), &len, |b, _| {
+        b.iter(|| black_box(select(&exp.model, &exp.data, None, &s, &how).unwrap().beta))
+    });
+    g.finish();
+}
+
+/// y = G·h(u₁, u₂) + e with h = 1[z₁ + z₂ > 0], G a random stable 2nd-order block, white
+/// Gaussian inputs, noise std 0.1, graph total variation (k = 8 neighbours).
+fn graph_experiment(len: usize, seed: u64) -> Experiment {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 1, 1, 0.9);
+    let lft = Lft::new(LftMatrices {
+        a: g.a().clone(),
+        bu: DMatrix::zeros(2, 2),
+        be: DMatrix::zeros(2, 1),
+        bw: g.b().clone(),
+        cy: g.c().clone(),
+        dyu: DMatrix::zeros(1, 2),
+        dye: DMatrix::identity(1, 1),
+        dyw: g.d().clone(),
+        cz: DMatrix::zeros(2, 2),
+        dzu: DMatrix::identity(2, 2),
+        dze: DMatrix::zeros(2, 1),
+        dzw: DMatrix::zeros(2, 1),
+    })
+    .unwrap();
+    let block = NonlinearBlock::new("h", vec![0, 1], 0, Arc::new(TotalVariation::new()));
+    let model = Model::new(lft, vec![block]).unwrap();
+    let u = gaussian_noise(len, 2, 1.0, seed + 1);
+    let noise = gaussian_noise(len, 1, 0.1, seed + 2);
+    let h = |z: &[f64]| if z[0] + z[1] > 0.0 { 1.0 } else { 0.0 };
+    Experiment::simulate(model, &[&h], u, noise).unwrap()
+}
+
+/// Graph total variation (p = 2) by ADMM.
+fn bench_graph(c: &mut Criterion) {
+    let mut g = group(c, "graph_tv_admm");
+    let s = settings(SolverChoice::Admm);
+    for len in [2000, 20_000] {
+        let exp = graph_experiment(len, 5);
+        g.bench_with_input(BenchmarkId::new("white", len), &len, |b, _| {
+            b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    bench,
+    bench_million,
+    bench_mixed,
+    bench_cv,
+    bench_graph
+);
 criterion_main!(benches);
