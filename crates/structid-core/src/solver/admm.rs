@@ -34,6 +34,12 @@
 //!   O(G) dynamic programme [`crate::prox::tv1d`]; on a k-NN graph (p > 1) a warm-started dual
 //!   FISTA ([`crate::prox::GraphTv`]) run to a duality gap below a tenth of the outer tolerance.
 //!
+//! Held-out samples (a cross-validation fold: every output channel of the sample left out)
+//! are missing outputs of the smoother ([`DisturbanceSmoother::with_missing`]), so the same
+//! iteration fits the remaining outputs. Map values that no kept output sees (samples held out
+//! at the end of the record) are set by the total variation alone and are not unique; chains
+//! leave those nodes out of the iteration and fill them exactly afterwards (see `TvView`).
+//!
 //! Stopping follows Boyd et al. (2011, §3.3): primal residual ‖w − d‖ ≤ √N·ε_pri + ε_rel·max(‖w‖, ‖d‖)
 //! and dual residual ρ·‖d − d_prev‖ ≤ √N·ε_dual + ε_rel·ρ·‖u‖, with ε_rel = tolerance and the
 //! absolute parts in each residual's own units, so that the test is unit-free: ε_pri =
