@@ -37,11 +37,11 @@ use structid_lti::{ColumnStream, KalmanWhitener, LinearSystem, Signal, Whitening
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::fourier::FeatureExpansion;
-use crate::identify::result::{BlockEstimate, Diagnostics, Identification, Timings};
+use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
 use crate::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
 use crate::problem::Problem;
-use crate::solver::{Assembled, BlockPart, cost_terms};
+use crate::solver::{BlockPart, cost_terms};
 
 /// Samples per chunk of the time pass (rounded to the streams' block length): the chunk of
 /// features and of X (m + n_x + 1 columns) stays within a core's L2 cache.
@@ -496,7 +496,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         });
     }
     // the single long signals by blocked recursions (the per-sample ones for other operators)
-    let assembled = assemble_blocks_long(problem, parts);
+    let assembled = crate::solver::assemble_blocks_with(problem, parts, apply_long);
     let fitted = &assembled.fitted;
     // ρ = r − T_yw·ŵ − O·x₀; ê is the least-norm noise explaining it, ê = T_yeᵀ(T_ye·T_yeᵀ)⁻¹ρ.
     // Held-out samples have no equation, so their noise estimate is its prior mean, 0 (the
@@ -613,41 +613,6 @@ fn apply_long(sys: &dyn LinearSystem, u: &[f64], y: &mut [f64]) {
     match sys.as_state_space() {
         Some(ss) => ss.apply_long(u, y),
         None => sys.apply(u, y),
-    }
-}
-
-/// [`crate::solver::assemble_blocks`] with T_i·ŵ by the blocked long-signal recursion.
-fn assemble_blocks_long(problem: &Problem, parts: Vec<BlockPart>) -> Assembled {
-    let (len, n) = (problem.len(), problem.len() * problem.outputs());
-    let mut w_all = Signal::zeros(len, parts.len());
-    let mut fitted = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
-    let mut dispersions = Vec::with_capacity(parts.len());
-    let mut blocks = Vec::with_capacity(parts.len());
-    for (block, part) in problem.blocks().iter().zip(parts) {
-        apply_long(block.path.as_ref(), &part.w_hat, &mut tmp);
-        fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
-        // Problem::new guarantees the outputs are exactly 0..n_blocks.
-        for (k, w) in part.w_hat.iter().enumerate() {
-            w_all.sample_mut(k)[block.output] = *w;
-        }
-        dispersions.push(part.dispersion_value);
-        blocks.push(BlockEstimate {
-            name: block.name.clone(),
-            output: block.output,
-            dispersion: block.dispersion.describe(),
-            parameters: block.dispersion.parameters(),
-            z: block.z.clone(),
-            w_hat: part.w_hat,
-            dispersion_value: part.dispersion_value,
-            map: part.map,
-        });
-    }
-    Assembled {
-        blocks,
-        w_hat: w_all,
-        fitted,
-        dispersions,
     }
 }
 

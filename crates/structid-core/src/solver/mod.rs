@@ -44,6 +44,16 @@ pub(crate) struct Assembled {
 
 /// Builds the block estimates, ŵ and T_yw·ŵ from the parts (in the problem's block order).
 pub(crate) fn assemble_blocks(problem: &Problem, parts: Vec<BlockPart>) -> Assembled {
+    assemble_blocks_with(problem, parts, |path, w, out| path.apply(w, out))
+}
+
+/// [`assemble_blocks`] with T_i·ŵ computed by `apply` (the feature solver's blocked
+/// long-signal recursion, for one).
+pub(crate) fn assemble_blocks_with(
+    problem: &Problem,
+    parts: Vec<BlockPart>,
+    apply: impl Fn(&dyn structid_lti::LinearSystem, &[f64], &mut [f64]),
+) -> Assembled {
     let (len, n) = (problem.len(), problem.len() * problem.outputs());
     let mut w_all = Signal::zeros(len, parts.len());
     let mut fitted = vec![0.0; n];
@@ -51,7 +61,7 @@ pub(crate) fn assemble_blocks(problem: &Problem, parts: Vec<BlockPart>) -> Assem
     let mut dispersions = Vec::with_capacity(parts.len());
     let mut blocks = Vec::with_capacity(parts.len());
     for (block, part) in problem.blocks().iter().zip(parts) {
-        block.path.apply(&part.w_hat, &mut tmp);
+        apply(block.path.as_ref(), &part.w_hat, &mut tmp);
         fitted.iter_mut().zip(&tmp).for_each(|(f, t)| *f += t);
         // Problem::new guarantees the outputs are exactly 0..n_blocks.
         for (k, w) in part.w_hat.iter().enumerate() {
