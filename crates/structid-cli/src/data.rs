@@ -213,7 +213,7 @@ fn write_records<T>(
 ) -> Result<(), CliError> {
     let all = a.split.trim() == "all";
     let names: Vec<PathBuf> = targets.iter().map(|(_, p)| p.clone()).collect();
-    let names = crate::identify::file_names(&names);
+    let names = structid_io::output::file_names(&names);
     if all {
         guard.begin_set(&a.out, Some(&names))?;
     }

@@ -832,7 +832,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
             removed.push(p);
         }
     }
-    guard.finish_set(&a.out, &crate::identify::file_names(&written_files))?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&written_files))?;
 
     if let Some((effects, _)) = &effects {
         print!("{}", report::effects_summary(effects));

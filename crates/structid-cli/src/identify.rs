@@ -247,14 +247,6 @@ pub(crate) fn model_and_data(
     Ok((data, model))
 }
 
-/// The file names of `paths`, for [`OutputGuard::finish_set`].
-pub(crate) fn file_names(paths: &[PathBuf]) -> Vec<String> {
-    paths
-        .iter()
-        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect()
-}
-
 /// Refuses a record on which a block's input z does not vary: the data then show its map at
 /// one point only (a single sample, or a constant input), and an estimate would be a guess
 /// everywhere else. Models whose z cannot be computed from the data are left to the solver.
@@ -494,7 +486,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         &mut report,
         a.no_bands,
     )?;
-    guard.finish_set(&a.out, &file_names(&written))?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&written))?;
 
     print!(
         "{}",

@@ -462,7 +462,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(p) = estimation_file {
         written.insert(1, p);
     }
-    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&written))?;
     if let Some(note) = recognised {
         println!("{note}");
     }

@@ -163,7 +163,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     });
     write_json(&guard, &json_path, &doc)?;
     written.push(json_path);
-    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&written))?;
 
     println!(
         "validated the stored estimate `{}` on {len} samples of `{}` ({:.2} s)",

@@ -497,7 +497,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     text.push('\n');
     guard.write(&json_path, text.as_bytes())?;
     written.push(json_path);
-    guard.finish_set(&a.out, &crate::identify::file_names(&written))?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&written))?;
 
     print!(
         "{}",

@@ -44,7 +44,7 @@
 
 use std::io::Read;
 
-use crate::error::clip;
+use crate::echo::clip;
 
 /// The most bytes a compressed variable or archive member may expand to (4 GiB): a bound on
 /// the memory a small malicious file can claim.

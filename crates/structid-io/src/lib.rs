@@ -52,6 +52,7 @@
 pub mod array_file;
 pub mod benchmarks;
 pub mod data_file;
+pub mod echo;
 pub mod error;
 pub mod estimate_file;
 pub mod model_file;

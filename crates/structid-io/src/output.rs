@@ -533,6 +533,21 @@ fn same_file(_a: &Path, _b: &Path) -> bool {
     false
 }
 
+/// The file names of `paths` (their last components), as [`OutputGuard::finish_set`] lists
+/// them.
+///
+/// ```
+/// use std::path::PathBuf;
+/// let names = structid_io::output::file_names(&[PathBuf::from("out/a.csv"), PathBuf::from("b.svg")]);
+/// assert_eq!(names, ["a.csv", "b.svg"]);
+/// ```
+pub fn file_names(paths: &[std::path::PathBuf]) -> Vec<String> {
+    paths
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -127,7 +127,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(), CliError> {
     write_tables(&guard, out, &records, total)?;
     let figs = write_figures(&guard, out, &records)?;
     let mut set = vec![String::from("results.csv"), String::from("results.md")];
-    set.extend(crate::identify::file_names(&figs));
+    set.extend(structid_io::output::file_names(&figs));
     guard.finish_set(out, &set)?;
     let failed = records.values().filter(|r| !r.is_ok()).count();
     println!(

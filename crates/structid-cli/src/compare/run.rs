@@ -434,7 +434,7 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
     let records = state.into_inner().unwrap_or_else(|p| p.into_inner());
     let figures = write_figures(&guard, &opts.out, &records)?;
     let mut set = vec![String::from("results.csv"), String::from("results.md")];
-    set.extend(crate::identify::file_names(&figures));
+    set.extend(structid_io::output::file_names(&figures));
     guard.finish_set(&opts.out, &set)?;
 
     let failed = records.values().filter(|r| !r.is_ok()).count();

@@ -289,6 +289,24 @@ impl Problem {
         self.held_out.as_deref()
     }
 
+    /// The held-out samples, when rows are held out: `Some(Some(mask))` when every held-out
+    /// sample has all its output channels held out (one entry per sample), `Some(None)` when
+    /// some sample is held out in part, `None` without held-out rows. ADMM takes whole samples
+    /// only, as missing outputs of its smoother.
+    pub(crate) fn held_out_samples(&self) -> Option<Option<Vec<bool>>> {
+        let rows = self.held_out()?;
+        let ny = self.outputs().max(1);
+        let mut mask = Vec::with_capacity(self.len());
+        for sample in rows.chunks(ny) {
+            let held = sample[0];
+            if sample.iter().any(|&h| h != held) {
+                return Some(None);
+            }
+            mask.push(held);
+        }
+        Some(Some(mask))
+    }
+
     /// The free-response matrix O, when the initial state is estimated.
     pub fn free_response(&self) -> Option<&faer::Mat<f64>> {
         self.free_response.as_ref()

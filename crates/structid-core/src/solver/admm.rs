@@ -138,7 +138,7 @@ pub(crate) fn solve_with(
     t_start: Instant,
 ) -> Result<Identification> {
     // Held-out samples (cross-validation) are missing outputs of the smoother.
-    let missing = match held_out_samples(problem) {
+    let missing = match problem.held_out_samples() {
         Some(m) => Some(m.ok_or_else(|| {
             Error::Unsupported(
                 "ADMM leaves out whole samples (every output channel of a sample); this problem holds out \
@@ -806,23 +806,6 @@ struct Channels<'a> {
     factors: &'a [QuadraticFactor],
     /// The samples whose outputs are held out (cross-validation), when any.
     missing: Option<&'a [bool]>,
-}
-
-/// The held-out samples of a problem with held-out rows: `Some(Some(mask))` when every held-out
-/// sample has all its output channels held out (one entry per sample), `Some(None)` when some
-/// sample is held out in part, `None` without held-out rows.
-pub(crate) fn held_out_samples(problem: &Problem) -> Option<Option<Vec<bool>>> {
-    let rows = problem.held_out()?;
-    let ny = problem.outputs().max(1);
-    let mut mask = Vec::with_capacity(problem.len());
-    for sample in rows.chunks(ny) {
-        let held = sample[0];
-        if sample.iter().any(|&h| h != held) {
-            return Some(None);
-        }
-        mask.push(held);
-    }
-    Some(Some(mask))
 }
 
 /// The quadratic blocks' factors, with a rank limit from the memory budget.

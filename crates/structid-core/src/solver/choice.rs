@@ -59,7 +59,7 @@ pub(crate) fn choose_with(
         .count();
     let size = problem.len() * problem.outputs();
     // ADMM leaves out whole samples only (its smoother's missing outputs).
-    let partly_held_out = matches!(super::admm::held_out_samples(problem), Some(None));
+    let partly_held_out = matches!(problem.held_out_samples(), Some(None));
     if tv_blocks > 0 && tv_blocks < penalties.len() {
         let limit = MIXED_CONIC_AUTO_LIMIT;
         return if partly_held_out {
