@@ -154,7 +154,24 @@ fn build_hammerstein(
 /// assert_eq!(exp.model.blocks().len(), 2);
 /// ```
 pub fn mixed_hammerstein(len: usize, smooth: Arc<dyn Dispersion>, seed: u64) -> Result<Experiment> {
-    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, 0.8);
+    mixed_hammerstein_with_radius(len, smooth, 0.8, seed)
+}
+
+/// [`mixed_hammerstein`] with the spectral radius of the random LTI block.
+///
+/// ```
+/// use std::sync::Arc;
+/// use structid_core::{PolynomialDispersion, scenarios::mixed_hammerstein_with_radius};
+/// let exp = mixed_hammerstein_with_radius(60, Arc::new(PolynomialDispersion::new(3).unwrap()), 0.4, 2).unwrap();
+/// assert_eq!(exp.data.len(), 60);
+/// ```
+pub fn mixed_hammerstein_with_radius(
+    len: usize,
+    smooth: Arc<dyn Dispersion>,
+    radius: f64,
+    seed: u64,
+) -> Result<Experiment> {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, radius);
     let lft = Lft::new(LftMatrices {
         a: g.a().clone(),
         bu: DMatrix::zeros(2, 2),

@@ -588,32 +588,7 @@ fn mixed_experiment_with(
     smooth: Arc<dyn structid_core::Dispersion>,
     radius: f64,
 ) -> Experiment {
-    let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, radius);
-    let lft = Lft::new(LftMatrices {
-        a: g.a().clone(),
-        bu: DMatrix::zeros(2, 2),
-        be: DMatrix::zeros(2, 1),
-        bw: g.b().clone(),
-        cy: g.c().clone(),
-        dyu: DMatrix::zeros(1, 2),
-        dye: DMatrix::identity(1, 1),
-        dyw: g.d().clone(),
-        cz: DMatrix::zeros(2, 2),
-        dzu: DMatrix::identity(2, 2),
-        dze: DMatrix::zeros(2, 1),
-        dzw: DMatrix::zeros(2, 2),
-    })
-    .unwrap();
-    let blocks = vec![
-        NonlinearBlock::new("smooth", vec![0], 0, smooth),
-        NonlinearBlock::new("relay", vec![1], 1, tv()),
-    ];
-    let model = Model::new(lft, blocks).unwrap();
-    let u = structid_core::paper::gaussian_noise(len, 2, 1.0, seed + 1);
-    let noise = structid_core::paper::gaussian_noise(len, 1, 0.05, seed + 2);
-    let f = |z: &[f64]| z[0].tanh();
-    let h = |z: &[f64]| relay(z[0]);
-    Experiment::simulate(model, &[&f, &h], u, noise).unwrap()
+    structid_core::scenarios::mixed_hammerstein_with_radius(len, smooth, radius, seed).unwrap()
 }
 
 #[test]
