@@ -6,9 +6,9 @@
 //! feature space. In order:
 //!
 //! 1. quadratic and total-variation blocks together: some samples held out in part (some of
-//!    their output channels only) → Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (its
-//!    w-step handles the quadratic blocks through their features or a factor of their Gram
-//!    matrix);
+//!    their output channels only) → Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] →
+//!    Clarabel, larger → ADMM (its w-step handles the quadratic blocks through their features
+//!    or a factor of their Gram matrix);
 //! 2. total variation only: some samples held out in part → Clarabel; otherwise
 //!    L·n_y ≤ [`CONIC_AUTO_LIMIT`] → Clarabel, larger → ADMM (whole held-out samples, as in
 //!    cross-validation, are missing outputs of its smoother);
