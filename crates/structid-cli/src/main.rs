@@ -14,6 +14,7 @@
 //! structid discover --model NOMINAL.toml --data EST.csv --validate VAL.csv --out DIR [--locations L1,L2]
 //!                   [--no-tv] [--settle N] [--sigma-fraction F] [--trend D] [--tune-sigma]
 //!                   [--naming-tolerance T] [--hysteresis-threshold T]
+//! structid static --data D.csv --z COL --w COL [--noise-std S] [--out DIR]
 //! ```
 //!
 //!
@@ -37,6 +38,7 @@ mod input;
 mod linear;
 mod refine;
 mod simulate;
+mod staticness;
 mod stored;
 mod validate;
 mod validation_files;
@@ -184,6 +186,15 @@ enum Command {
     /// --hold MIN,MAX samples. The file is ready for `structid simulate --input`.
     #[command(subcommand)]
     Input(input::InputCommand),
+    /// Rate how well a static map explains a (z, w) scatter (the paper's Example 1).
+    ///
+    /// Fits the best static map w = N(z) (a Gaussian kernel, β by marginal likelihood), and
+    /// reports the variance it leaves unexplained against the noise variance (--noise-std, or
+    /// estimated from the residual) and whether the residual depends on the direction of
+    /// motion of z (hysteresis, backlash), with a verdict: static, direction dependent, or
+    /// unexplained (dynamics or another input). With --out DIR, writes DIR/report.json and
+    /// DIR/static.svg (the scatter and the fitted map).
+    Static(staticness::StaticArgs),
 }
 
 /// A number, or `auto`.
@@ -533,7 +544,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         if !reads_data {
             return Err(CliError::input(
                 "--vars selects the signals of the data files of identify, validate, predict, \
-                 simulate, linear, refine, discover and data csv; this command reads none (a sweep \
+                 simulate, linear, refine, discover, static and data csv; this command reads none (a sweep \
                  configuration of `compare` reads a MAT-file's variables as columns named by \
                  the variables)",
             ));
@@ -553,6 +564,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Data(c) => data::run(c),
         Command::Discover(a) => discover::run(a),
         Command::Input(c) => input::run(c),
+        Command::Static(a) => staticness::run(a),
     }
 }
 

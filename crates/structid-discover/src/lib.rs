@@ -28,6 +28,9 @@
 //!   information criterion, and named only when the best fit is within the noise;
 //! * [`hysteresis`]: whether the residual of a static fit depends on the direction of motion
 //!   (hysteresis or backlash: an effect that is not static and must not be forced into a name);
+//! * [`staticness`]: how well a static map explains a (z, w) scatter at all (the paper's
+//!   Example 1): the unexplained variance of the best static fit against the noise, and the
+//!   direction test;
 //! * [`augmented`]: the augmented model of a finding as a model file and as a stored
 //!   estimate;
 //! * [`report`]: the reports of a discovery (Markdown, JSON and the printed summary);
@@ -59,6 +62,7 @@ pub mod known;
 pub mod localise;
 pub mod physics;
 pub mod report;
+pub mod staticness;
 pub mod synthetic;
 
 pub use discover::{
