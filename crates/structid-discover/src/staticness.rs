@@ -25,9 +25,10 @@
 //! ```
 //! use structid_discover::staticness::{StaticnessSettings, Verdict, staticness};
 //! let z: Vec<f64> = (0..600).map(|k| 2.0 * (0.03 * k as f64).sin()).collect();
-//! // A static map with a little deterministic "noise".
+//! // A static map plus a deterministic disturbance of standard deviation 0.0062.
 //! let w: Vec<f64> = z.iter().enumerate().map(|(k, z)| z.atan() + 0.01 * ((k * 7919 % 13) as f64 - 6.0) / 6.0).collect();
-//! let s = staticness(&z, &w, &StaticnessSettings::default()).unwrap();
+//! let settings = StaticnessSettings::builder().noise_std(0.0062).build().unwrap();
+//! let s = staticness(&z, &w, &settings).unwrap();
 //! assert_eq!(s.verdict, Verdict::Static);
 //! ```
 
