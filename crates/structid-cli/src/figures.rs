@@ -1,6 +1,6 @@
 //! Grids over the data range and SVG figures of estimated maps.
 
-use structid_core::{BlockEstimate, Interpolant};
+use structid_core::{BlockEstimate, Identification, Interpolant, Lft};
 use structid_lti::Signal;
 use structid_plot::{Chart, HeatMap, PlotError, Series, render_chart_svg, render_heatmaps_svg};
 
@@ -169,8 +169,39 @@ pub fn grid_values(map: &dyn Interpolant, xs: &[f64], ys: &[f64]) -> Vec<f64> {
     values
 }
 
+/// Markov parameters summed for the energy gain of a path in [`partial_residuals`]: enough
+/// for any stable path of structid's records to have decayed.
+const GAIN_TERMS: usize = 2000;
+
+/// The partial residuals of the block writing w channel `output`: ŵ_k plus the output
+/// residual r = L_ye·ê mapped back to the block's output, δ = L_ywᵀ·r / ‖h‖² (h the impulse
+/// response of the block's path L_yw to y). The adjoint undoes the path exactly when it is a
+/// gain or a delay (the paper's examples: y = f(u) + g(u_(k−2)) + e); through a filter it is
+/// the matched filter scaled by its energy, a smoothed view of what the map leaves
+/// unexplained. `None` when the path does not reach y.
+pub fn partial_residuals(lft: &Lft, id: &Identification, output: usize) -> Option<Vec<f64>> {
+    let len = id.e_hat.len();
+    let t_ye = lft.t_ye();
+    let mut r = vec![0.0; len * t_ye.outputs()];
+    t_ye.apply_long(id.e_hat.as_slice(), &mut r);
+    let path = lft.t_yw_channel(output);
+    let gain2: f64 = path
+        .markov_parameters(len.min(GAIN_TERMS))
+        .iter()
+        .map(|h| h.norm_squared())
+        .sum();
+    if !(gain2.is_finite() && gain2 > 0.0) {
+        return None;
+    }
+    let mut back = vec![0.0; len];
+    path.apply_adjoint_long(&r, &mut back);
+    let w = id.w_hat.channel(output);
+    Some(w.iter().zip(&back).map(|(w, d)| w + d / gain2).collect())
+}
+
 /// The SVG figure of one block's estimate: for one input, the estimate over the grid, the
-/// points (z_k, ŵ_k), the truth and, with the posterior standard deviation `std` (at
+/// scatter of its partial residuals (`partial`, [`partial_residuals`]; the points (z_k, ŵ_k)
+/// without them) behind it, the truth and, with the posterior standard deviation `std` (at
 /// [`MapGrid::points`]), the shaded 95 % band N̂ ± 1.96·std; for two inputs, heat maps of the
 /// estimate, the truth and the standard deviation; for more, ŵ against the truth at the data
 /// points (or ŵ over time without a truth).
@@ -180,6 +211,7 @@ pub fn map_svg(
     truth: Option<&dyn Interpolant>,
     input_names: &[String],
     std: Option<&[f64]>,
+    partial: Option<&[f64]>,
 ) -> Result<String, PlotError> {
     let name = &est.name;
     let idx = subsample(est.w_hat.len(), MAX_DOTS);
@@ -187,7 +219,11 @@ pub fn map_svg(
         MapGrid::One { xs, values } => {
             let zc = est.z.channel(0);
             let dz: Vec<f64> = idx.iter().map(|&k| zc[k]).collect();
-            let dw: Vec<f64> = idx.iter().map(|&k| est.w_hat[k]).collect();
+            let (dots, label) = match partial {
+                Some(p) if p.len() == est.w_hat.len() => (p, "partial residuals ŵ + r"),
+                _ => (est.w_hat.as_slice(), "ŵ at the data points"),
+            };
+            let dw: Vec<f64> = idx.iter().map(|&k| dots[k]).collect();
             let tv: Vec<f64> = truth
                 .map(|t| xs.iter().map(|&x| t.eval(&[x])).collect())
                 .unwrap_or_default();
@@ -209,7 +245,7 @@ pub fn map_svg(
                 chart = chart.with(Series::band("95 % band", xs, &[], &lower, &upper));
             }
             chart = chart
-                .with(Series::dots("ŵ at the data points", &dz, &dw))
+                .with(Series::dots(label, &dz, &dw))
                 .with(Series::line("estimate", xs, values));
             if truth.is_some() {
                 chart = chart.with(Series::line("truth", xs, &tv));
@@ -277,5 +313,156 @@ pub fn map_svg(
                 }
             }
         }
+    }
+}
+
+/// Frequencies of the Bode plot: log-spaced over three decades below Nyquist.
+const BODE_POINTS: usize = 300;
+
+/// The figure of a linear part: Bode magnitude (dB, with the ±2σ band of the parameter
+/// `covariance` when the fit has one) and phase over log₁₀ frequency, the step response and
+/// the pole–zero map with the unit circle. One curve per input, named by `input_names`;
+/// frequencies and time in Hz and seconds when the model has a sample time.
+pub fn linear_svg(
+    model: &structid_linear::PolynomialModel,
+    covariance: Option<&nalgebra::DMatrix<f64>>,
+    input_names: &[String],
+) -> Result<String, crate::error::CliError> {
+    use structid_linear::response::{bode, poles, step_response, zeros};
+    let ts = model.sample_time;
+    let scale = ts.map_or(1.0, |t| 1.0 / t);
+    let f_unit = if ts.is_some() { "Hz" } else { "cycles/sample" };
+    let freqs: Vec<f64> = (0..BODE_POINTS)
+        .map(|i| 0.5 * 10f64.powf(-3.0 + 3.0 * i as f64 / (BODE_POINTS - 1) as f64))
+        .collect();
+    let logf: Vec<f64> = freqs.iter().map(|f| (f * scale).log10()).collect();
+    let db = |m: f64| 20.0 * m.max(f64::MIN_POSITIVE).log10();
+    // Settle within the record of the step plot: 5 time constants of the slowest pole.
+    let radius = poles(model)
+        .iter()
+        .map(|p| p.0.hypot(p.1))
+        .fold(0.0, f64::max);
+    let steps = if radius < 1.0 && radius > 0.0 {
+        ((-5.0 / radius.ln()).ceil() as usize).clamp(20, 2000)
+    } else {
+        200
+    };
+    let time: Vec<f64> = (0..steps).map(|k| k as f64 / scale).collect();
+    struct Curves {
+        name: String,
+        mag: Vec<f64>,
+        lo: Vec<f64>,
+        hi: Vec<f64>,
+        phase: Vec<f64>,
+        step: Vec<f64>,
+        zeros: (Vec<f64>, Vec<f64>),
+    }
+    let mut curves = Vec::new();
+    for i in 0..model.inputs() {
+        let b = bode(model, i, &freqs, covariance)?;
+        let band: Option<(Vec<f64>, Vec<f64>)> = b
+            .iter()
+            .map(|p| {
+                p.magnitude_std
+                    .filter(|s| s.is_finite())
+                    .map(|s| (db(p.magnitude - 2.0 * s), db(p.magnitude + 2.0 * s)))
+            })
+            .collect::<Option<Vec<_>>>()
+            .map(|v| v.into_iter().unzip());
+        let (lo, hi) = band.unwrap_or_default();
+        let z = zeros(model, i);
+        curves.push(Curves {
+            name: input_names
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("u{i}")),
+            mag: b.iter().map(|p| db(p.magnitude)).collect(),
+            lo,
+            hi,
+            phase: b.iter().map(|p| p.phase.to_degrees()).collect(),
+            step: step_response(model, i, steps)?,
+            zeros: (
+                z.iter().map(|z| z.0).collect(),
+                z.iter().map(|z| z.1).collect(),
+            ),
+        });
+    }
+    let p = poles(model);
+    let (pr, pi): (Vec<f64>, Vec<f64>) = p.iter().copied().unzip();
+    let circle: Vec<(f64, f64)> = (0..=120)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 120.0;
+            (a.cos(), a.sin())
+        })
+        .collect();
+    let (cx, cy): (Vec<f64>, Vec<f64>) = circle.into_iter().unzip();
+    let x_label = format!("log₁₀ frequency ({f_unit})");
+    let mut magnitude = Chart::new("Bode magnitude", x_label.as_str(), "|G| (dB)");
+    let mut phase = Chart::new("Bode phase", x_label.as_str(), "arg G (degrees)");
+    let mut step = Chart::new(
+        "Step response",
+        if ts.is_some() { "time (s)" } else { "sample" },
+        "y",
+    );
+    let mut pz = Chart::new("Poles and zeros", "Re z", "Im z")
+        .with(Series::line("unit circle", &cx, &cy))
+        .with(Series::dots("poles", &pr, &pi));
+    for c in &curves {
+        if !c.lo.is_empty() {
+            magnitude = magnitude.with(Series::band(
+                format!("±2σ ({})", c.name),
+                &logf,
+                &[],
+                &c.lo,
+                &c.hi,
+            ));
+        }
+        magnitude = magnitude.with(Series::line(c.name.as_str(), &logf, &c.mag));
+        phase = phase.with(Series::line(c.name.as_str(), &logf, &c.phase));
+        step = step.with(Series::line(c.name.as_str(), &time, &c.step));
+        if !c.zeros.0.is_empty() {
+            pz = pz.with(Series::dots(
+                format!("zeros ({})", c.name),
+                &c.zeros.0,
+                &c.zeros.1,
+            ));
+        }
+    }
+    Ok(structid_plot::render_grid_svg(
+        &[magnitude, phase, step, pz],
+        2,
+        (640, 440),
+    )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use structid_core::{IdentifySettings, KernelDispersion, identify, paper};
+
+    /// In the paper's spray example y = f(u_k) + g(u_(k−2)) + e, so the residual mapped back
+    /// to f is ê itself and to g is ê two samples later: the partial residuals are exactly
+    /// ŵ_f + ê and ŵ_g,k + ê_(k+2).
+    #[test]
+    fn partial_residuals_undo_gains_and_delays() {
+        let d = Arc::new(KernelDispersion::gaussian(0.1).unwrap());
+        let exp = paper::spray(300, 0.5, d, 3).unwrap();
+        let settings = IdentifySettings::builder().beta(0.01).build().unwrap();
+        let id = identify(&exp.model, &exp.data, &settings).unwrap();
+        let lft = exp.model.lft();
+        let e = id.e_hat.channel(0);
+        let f = partial_residuals(lft, &id, 0).unwrap();
+        let wf = id.w_hat.channel(0);
+        for k in 0..300 {
+            assert!((f[k] - (wf[k] + e[k])).abs() < 1e-9, "f at {k}");
+        }
+        let g = partial_residuals(lft, &id, 1).unwrap();
+        let wg = id.w_hat.channel(1);
+        for k in 0..298 {
+            assert!((g[k] - (wg[k] + e[k + 2])).abs() < 1e-9, "g at {k}");
+        }
+        // The last two samples of g never reach the record.
+        assert!((g[299] - wg[299]).abs() < 1e-12);
     }
 }

@@ -19,7 +19,7 @@ use structid_io::{
 
 use crate::IdentifyArgs;
 use crate::error::{CliError, positive};
-use crate::figures::{MapGrid, map_svg};
+use crate::figures::{MapGrid, map_svg, partial_residuals};
 
 /// A file-name-safe form of a block name: letters, digits, `_`, `-` and `.` are kept, anything
 /// else becomes `_`; names that collide get a numeric suffix.
@@ -564,7 +564,18 @@ pub(crate) fn write_estimate(
         let grid_path = out.join(format!("map_{stem}.csv"));
         guard.write_csv(&grid_path, &header, &grid.columns(est, std.as_deref()))?;
         let truth = spec.truth_map()?;
-        let svg = map_svg(est, &grid, truth.as_deref(), &input_names, std.as_deref())?;
+        let partial = match grid {
+            MapGrid::One { .. } => partial_residuals(&mf.lft, id, est.output),
+            _ => None,
+        };
+        let svg = map_svg(
+            est,
+            &grid,
+            truth.as_deref(),
+            &input_names,
+            std.as_deref(),
+            partial.as_deref(),
+        )?;
         let svg_path = out.join(format!("map_{stem}.svg"));
         guard.write(&svg_path, svg.as_bytes())?;
         if let Some(b) = report.block_mut(&est.name) {

@@ -263,6 +263,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         guard.protect(v);
     }
     guard.check_out_file(&a.out)?;
+    guard.check_out_file(&figure_path(&a.out))?;
     if let Some(ts) = a.sample_time
         && !(ts.is_finite() && ts > 0.0)
     {
@@ -376,10 +377,15 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         ));
     }
     let mut warning = None;
-    let (model, cost, what): (PolynomialModel, f64, String) = match a.method {
+    let (model, cost, what, covariance): (PolynomialModel, f64, String, _) = match a.method {
         MethodArg::Arx => {
             let fit = arx(&u, &y, &orders, &arx_settings)?;
-            (fit.model, fit.cost, "equation error (ARX)".into())
+            (
+                fit.model,
+                fit.cost,
+                "equation error (ARX)".into(),
+                fit.parameter_covariance,
+            )
         }
         MethodArg::Oe => {
             let fit = match a.initial_state {
@@ -404,7 +410,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                 )
             };
             warning = fit.warning.as_ref().map(ToString::to_string);
-            (fit.model, fit.cost, note)
+            (fit.model, fit.cost, note, fit.parameter_covariance)
         }
     };
     let structure = match a.structure {
@@ -448,6 +454,9 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         ))
     })?;
     guard.write(&a.out, text.as_bytes())?;
+    let figure = figure_path(&a.out);
+    let svg = crate::figures::linear_svg(&model, covariance.as_ref(), &a.input)?;
+    guard.write(&figure, svg.as_bytes())?;
 
     let sim = model.simulate(&u)?;
     let fit = structid_core::metrics::fit_percent(&y.channel(0), &sim);
@@ -501,6 +510,16 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             format!(", map `{}`", a.map)
         }
     );
-    println!("wrote {}", a.out.display());
+    println!("wrote {} and {}", a.out.display(), figure.display());
     Ok(())
+}
+
+/// The figure of the linear part beside the model file: `model.toml` → `model.svg` (a model
+/// file named `*.svg` gets `*.linear.svg`).
+fn figure_path(out: &std::path::Path) -> PathBuf {
+    if out.extension().is_some_and(|e| e == "svg") {
+        out.with_extension("linear.svg")
+    } else {
+        out.with_extension("svg")
+    }
 }

@@ -203,6 +203,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         "model.toml",
         "refine.csv",
         "refine.svg",
+        "linear.svg",
         "estimation.csv",
         "report.json",
         "estimate.json",
@@ -443,6 +444,11 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         chart = chart.with(Series::line("validation record", &x, &val));
     }
     guard.write(&svg_path, render_chart_svg(&chart)?.as_bytes())?;
+    // The alternation keeps no parameter covariance of G (its fits run through the map): the
+    // figure has no band.
+    let linear_path = a.out.join("linear.svg");
+    let svg = crate::figures::linear_svg(&r.linear, None, &refined.signals.u)?;
+    guard.write(&linear_path, svg.as_bytes())?;
 
     let mut stored = Estimate::from_identification(&r.model, id, &data, &identify_settings)?;
     stored = stored.clone().with_provenance(Provenance {
@@ -458,7 +464,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         &mut report,
         a.no_bands,
     )?;
-    written.splice(0..0, [model_path, csv_path, svg_path]);
+    written.splice(0..0, [model_path, csv_path, svg_path, linear_path]);
     if let Some(p) = estimation_file {
         written.insert(1, p);
     }

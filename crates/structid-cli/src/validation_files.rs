@@ -4,7 +4,9 @@
 
 use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::ValidationReport;
-use structid_plot::{Chart, CorrelationChart, Series, render_correlation_svg, render_grid_svg};
+use structid_plot::{
+    Chart, CorrelationChart, Series, decimate_min_max, render_correlation_svg, render_grid_svg,
+};
 
 use structid_core::Data;
 
@@ -12,8 +14,9 @@ use crate::ValidateArgs;
 use crate::error::CliError;
 pub(crate) use structid_io::validation_report::outputs_json;
 
-/// Most points per line in simulation.svg (longer records are drawn decimated).
-const MAX_PLOT_POINTS: usize = 5000;
+/// Buckets of the thinned lines of simulation.svg: about one per pixel column of its panels
+/// (at most two points each).
+const PLOT_BUCKETS: usize = 1000;
 
 /// Column names of simulation.csv: `time`, then per output `<y>`, `<y>_sim`,
 /// `<y>_prediction_error` (generic `y<c>` names if the model's names would collide).
@@ -39,16 +42,10 @@ pub(crate) fn simulation_names(y_names: &[String]) -> Vec<String> {
     }
 }
 
-/// Every `step`-th index so that at most [`MAX_PLOT_POINTS`] remain, plus the last one.
-pub(crate) fn plot_indices(len: usize) -> Vec<usize> {
-    let step = len.div_ceil(MAX_PLOT_POINTS).max(1);
-    let mut idx: Vec<usize> = (0..len).step_by(step).collect();
-    if len > 0 && idx.last() != Some(&(len - 1)) {
-        idx.push(len - 1);
-    }
-    idx
-}
-
+/// The simulation figure: per output, the measured and simulated signals and, in a panel
+/// below, the simulation error y − ŷ. Records longer than the figure is wide are thinned to
+/// the minimum and maximum of each pixel column ([`decimate_min_max`]), so that peaks of the
+/// error survive and the file stays small.
 pub(crate) fn simulation_svg(
     report: &ValidationReport,
     measured: &structid_lti::Signal,
@@ -56,30 +53,39 @@ pub(crate) fn simulation_svg(
     y_names: &[String],
     time_label: &str,
 ) -> Result<String, CliError> {
-    let idx = plot_indices(time.len());
-    let t: Vec<f64> = idx.iter().map(|&k| time[k]).collect();
-    let series: Vec<(Vec<f64>, Vec<f64>)> = (0..y_names.len())
+    type Xy = (Vec<f64>, Vec<f64>);
+    let series: Vec<(Xy, Xy, Xy)> = (0..y_names.len())
         .map(|c| {
+            let y = measured.channel(c);
+            let ys = report.simulated.channel(c);
+            let err: Vec<f64> = y.iter().zip(&ys).map(|(a, b)| a - b).collect();
             (
-                idx.iter().map(|&k| measured.get(k, c)).collect(),
-                idx.iter().map(|&k| report.simulated.get(k, c)).collect(),
+                decimate_min_max(time, &y, PLOT_BUCKETS),
+                decimate_min_max(time, &ys, PLOT_BUCKETS),
+                decimate_min_max(time, &err, PLOT_BUCKETS),
             )
         })
         .collect();
-    let charts: Vec<Chart> = y_names
-        .iter()
-        .zip(&series)
-        .zip(&report.fit_percent)
-        .map(|((name, (y, ys)), fit)| {
+    let mut charts: Vec<Chart> = Vec::with_capacity(2 * y_names.len());
+    for ((name, (y, ys, err)), fit) in y_names.iter().zip(&series).zip(&report.fit_percent) {
+        charts.push(
             Chart::new(
                 format!("{name}: measured and simulated (fit {fit:.1} %)"),
                 time_label,
                 name.as_str(),
             )
-            .with(Series::line("measured", &t, y))
-            .with(Series::line("simulated", &t, ys))
-        })
-        .collect();
+            .with(Series::line("measured", &y.0, &y.1))
+            .with(Series::line("simulated", &ys.0, &ys.1)),
+        );
+        charts.push(
+            Chart::new(
+                format!("{name}: simulation error"),
+                time_label,
+                format!("{name} − simulated"),
+            )
+            .with(Series::line("error", &err.0, &err.1)),
+        );
+    }
     Ok(render_grid_svg(&charts, 1, (1000, 400))?)
 }
 
@@ -201,14 +207,5 @@ mod tests {
         assert_eq!(n, ["time", "y0", "y0_sim", "y0_prediction_error"]);
         let n = simulation_names(&["a".into(), "a_sim".into()]);
         assert_eq!(n[1], "y0");
-    }
-
-    #[test]
-    fn plot_indices_keep_the_ends_and_at_most_the_limit() {
-        assert_eq!(plot_indices(3), [0, 1, 2]);
-        let idx = plot_indices(12_345);
-        assert!(idx.len() <= MAX_PLOT_POINTS + 1);
-        assert_eq!((idx[0], *idx.last().unwrap()), (0, 12_344));
-        assert!(plot_indices(0).is_empty());
     }
 }

@@ -197,6 +197,10 @@ pub struct ArxFit {
     /// [`PolynomialModel::parameters`]: `sqrt(σ̂² diag((ΦᵀΦ)⁻¹))` with `σ̂² = RSS/(samples − d)`
     /// (with a ridge, the sandwich `(ΦᵀΦ+λI)⁻¹ΦᵀΦ(ΦᵀΦ+λI)⁻¹`).
     pub parameter_std: Vec<f64>,
+    /// The covariance of the same parameters (whose diagonal gives
+    /// [`parameter_std`](Self::parameter_std)), for the uncertainty of what depends on
+    /// several of them, such as the frequency response ([`crate::response`]).
+    pub parameter_covariance: Option<DMatrix<f64>>,
     /// 2-norm condition number of the column-scaled regressor matrix (with the ridge rows).
     pub condition: f64,
     /// Number of equations (samples after the first `max_lag`, and after the `N` samples
@@ -240,10 +244,12 @@ pub fn arx(
     let (free, cov) = fit_arx(&uc, &yd, orders, settings, orders.max_lag() + n)?;
     let den = convolve(&free.model.den, &integrator_polynomial(n));
     let model = PolynomialModel::new(free.model.num, den, free.model.sample_time)?;
-    let parameter_std = std_from(&full_covariance(&cov, orders.nb.iter().sum(), orders.na, n));
+    let cov = full_covariance(&cov, orders.nb.iter().sum(), orders.na, n);
+    let parameter_std = std_from(&cov);
     Ok(ArxFit {
         model,
         parameter_std,
+        parameter_covariance: Some(cov),
         integrators: n,
         ..free
     })
@@ -429,6 +435,7 @@ pub(crate) fn fit_arx(
             model,
             cost: rss / n as f64,
             parameter_std,
+            parameter_covariance: Some(cov.clone()),
             condition,
             samples: n,
             integrators: 0,

@@ -99,6 +99,7 @@ pub mod levenberg_marquardt;
 pub mod orders;
 pub mod output_error;
 pub mod polynomial;
+pub mod response;
 pub mod selection;
 
 pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx};

@@ -291,6 +291,10 @@ pub struct OeFit {
     /// `sqrt(σ̂² diag((ΨᵀΨ)⁻¹))` at the estimate, `σ̂² = SSE/(N − d)`, `Ψ = ∂ŷ/∂θ`
     /// (infinite when `ΨᵀΨ` is singular).
     pub parameter_std: Vec<f64>,
+    /// The covariance of the same parameters, `σ̂² (ΨᵀΨ)⁻¹` (`None` when `ΨᵀΨ` is singular),
+    /// for the uncertainty of what depends on several of them, such as the frequency
+    /// response ([`crate::response`]).
+    pub parameter_covariance: Option<DMatrix<f64>>,
     /// `true` when the relative cost decrease fell below the tolerance, or no damped step
     /// could lower the cost any more (a stationary point to working precision); `false` when
     /// the iteration limit stopped the search.
@@ -496,9 +500,12 @@ fn refine(
         })?;
     let n = (len - settings.transient) as f64;
     let nb_total: usize = orders.nb.iter().sum();
-    let parameter_std = fit
+    let parameter_covariance = fit
         .covariance(&mut problem)
-        .map(|c| std_from(&full_covariance(&c, nb_total, orders.na, n_int)))
+        .map(|c| full_covariance(&c, nb_total, orders.na, n_int));
+    let parameter_std = parameter_covariance
+        .as_ref()
+        .map(std_from)
         .unwrap_or_else(|| vec![f64::INFINITY; d + n_int]);
     let theta = &fit.theta;
     let sample_time = settings.sample_time.or(initial.sample_time);
@@ -525,6 +532,7 @@ fn refine(
         iterations: fit.costs.len(),
         costs: fit.costs.iter().map(|c| c / n).collect(),
         parameter_std,
+        parameter_covariance,
         // No damped step lowering the cost is a stationary point to working precision,
         // which this fit has always reported as converged.
         converged: matches!(fit.status, LmStatus::Converged(_) | LmStatus::NoProgress),

@@ -248,8 +248,18 @@ fn draw_chart(
 ) -> Result<(), PlotError> {
     let (xr, yr) = chart.ranges()?;
     area.fill(&WHITE).map_err(backend_err)?;
+    // The legend gets a strip of its own right of the plotting area, so that it never hides
+    // data, wherever the data lie.
+    let legend = chart.series.len() > 1;
+    let (plot, strip) = if legend {
+        let (w, _) = area.dim_in_pixel();
+        let (l, r) = area.split_horizontally(w.saturating_sub(legend_width(chart, w)));
+        (l, Some(r))
+    } else {
+        (area.clone(), None)
+    };
 
-    let mut cc = ChartBuilder::on(area)
+    let mut cc = ChartBuilder::on(&plot)
         .caption(&chart.title, (FONT, TITLE_SIZE))
         .margin(MARGIN)
         .x_label_area_size(X_LABEL_AREA)
@@ -259,7 +269,7 @@ fn draw_chart(
 
     let xf = tick_formatter(xr.start, xr.end);
     let yf = tick_formatter(yr.start, yr.end);
-    let (xn, yn) = label_counts(area);
+    let (xn, yn) = label_counts(&plot);
     cc.configure_mesh()
         .x_labels(xn)
         .y_labels(yn)
@@ -274,36 +284,19 @@ fn draw_chart(
         .draw()
         .map_err(backend_err)?;
 
-    // Bands first so that lines and dots stay visible on top of them.
+    // Scatters at the back (the data behind a fit), then bands, then lines on top of both.
     let mut order: Vec<usize> = (0..chart.series.len()).collect();
-    order.sort_by_key(|&i| !matches!(chart.series[i].style, SeriesStyle::Band { .. }));
+    order.sort_by_key(|&i| match chart.series[i].style {
+        SeriesStyle::Dots => 0,
+        SeriesStyle::Band { .. } => 1,
+        SeriesStyle::Line => 2,
+    });
 
     for i in order {
         let s = &chart.series[i];
         let colour = series_colour(i);
         let line_style = colour.stroke_width(2);
         let finite_xy = |k: usize| s.x[k].is_finite() && s.y[k].is_finite();
-
-        // An empty series carrying the legend entry, so that the legend is
-        // right even when no segment of this series can be drawn.
-        let anno = cc
-            .draw_series(LineSeries::new(
-                std::iter::empty::<(f64, f64)>(),
-                line_style,
-            ))
-            .map_err(backend_err)?;
-        anno.label(s.label.as_str());
-        match s.style {
-            SeriesStyle::Line => anno.legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-            }),
-            SeriesStyle::Dots => {
-                anno.legend(move |(x, y)| Circle::new((x + 10, y), 3, colour.filled()))
-            }
-            SeriesStyle::Band { .. } => anno.legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 20, y + 5)], colour.mix(0.3).filled())
-            }),
-        };
 
         match s.style {
             SeriesStyle::Line => {
@@ -340,13 +333,55 @@ fn draw_chart(
         }
     }
 
-    if chart.series.len() > 1 {
-        cc.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font((FONT, TICK_SIZE))
-            .draw()
+    if let Some(strip) = strip {
+        draw_legend(&strip, chart)?;
+    }
+    Ok(())
+}
+
+/// Width in pixels of the legend strip of a chart `width` pixels wide: room for the longest
+/// label (about 0.6 em per character) and its glyph, at most a third of the chart.
+fn legend_width(chart: &Chart<'_>, width: u32) -> u32 {
+    let chars = chart
+        .series
+        .iter()
+        .map(|s| s.label.chars().count())
+        .max()
+        .unwrap_or(0) as u32;
+    (chars * TICK_SIZE * 6 / 10 + 48).clamp(90, width / 3)
+}
+
+/// The legend, one entry per series (its glyph and label), top-down in the strip right of the
+/// plotting area.
+fn draw_legend(
+    strip: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &Chart<'_>,
+) -> Result<(), PlotError> {
+    let top = (MARGIN + TITLE_SIZE + 20) as i32;
+    let step = (TICK_SIZE + 8) as i32;
+    let font = (FONT, TICK_SIZE).into_font().color(&BLACK);
+    for (i, s) in chart.series.iter().enumerate() {
+        let colour = series_colour(i);
+        let y = top + i as i32 * step;
+        let x = 6;
+        match s.style {
+            SeriesStyle::Line => strip.draw(&PathElement::new(
+                vec![(x, y), (x + 20, y)],
+                colour.stroke_width(2),
+            )),
+            SeriesStyle::Dots => strip.draw(&Circle::new((x + 10, y), 3, colour.filled())),
+            SeriesStyle::Band { .. } => strip.draw(&Rectangle::new(
+                [(x, y - 5), (x + 20, y + 5)],
+                colour.mix(0.3).filled(),
+            )),
+        }
+        .map_err(backend_err)?;
+        strip
+            .draw(&Text::new(
+                s.label.clone(),
+                (x + 26, y - (TICK_SIZE as i32) / 2),
+                font.clone(),
+            ))
             .map_err(backend_err)?;
     }
     Ok(())
@@ -356,8 +391,9 @@ fn draw_chart(
 ///
 /// Axis ranges come from the finite data (non-finite values are ignored),
 /// padded by 5% on each side; constant data gets a widened range. A legend
-/// is drawn when there is more than one series, and every series gets a
-/// distinct colour.
+/// is drawn when there is more than one series, in a strip right of the
+/// plotting area (it never hides data), and every series gets a distinct
+/// colour. Scatters are drawn first, bands over them and lines on top.
 ///
 /// # Errors
 /// [`PlotError::EmptyData`] if there is no series, a series is empty or no
@@ -485,6 +521,80 @@ mod tests {
         }
         assert!(count(&svg, "<circle") >= x.len());
         assert!(svg.contains("<polygon"));
+    }
+
+    /// The x coordinate of the `<text>` element whose content is `label`.
+    fn text_x(svg: &str, label: &str) -> f64 {
+        let lines: Vec<&str> = svg.lines().collect();
+        let i = lines.iter().position(|l| *l == label).expect("label drawn");
+        let open = lines[..i]
+            .iter()
+            .rev()
+            .find(|l| l.contains("<text"))
+            .expect("inside a text element");
+        let at = open.find(" x=\"").expect("x attribute") + 4;
+        open[at..].split('"').next().unwrap().parse().unwrap()
+    }
+
+    /// The largest x of any point of the SVG's polylines.
+    fn max_polyline_x(svg: &str) -> f64 {
+        svg.split("<polyline")
+            .skip(1)
+            .flat_map(|p| {
+                let at = p.find("points=\"").unwrap() + 8;
+                p[at..]
+                    .split('"')
+                    .next()
+                    .unwrap()
+                    .split_whitespace()
+                    .map(|xy| xy.split(',').next().unwrap().parse::<f64>().unwrap())
+                    .collect::<Vec<_>>()
+            })
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// Data filling every corner, including the upper right where legends used to sit: the
+    /// legend is drawn right of all of it.
+    #[test]
+    fn the_legend_never_covers_data() {
+        let x: Vec<f64> = (0..200).map(|i| i as f64 / 199.0).collect();
+        let up: Vec<f64> = x.clone();
+        let down: Vec<f64> = x.iter().map(|v| 1.0 - v).collect();
+        let chart = Chart::new("corners", "x", "y")
+            .with(Series::line("rising line", &x, &up))
+            .with(Series::line("falling line", &x, &down));
+        let svg = render_chart_svg(&chart).unwrap();
+        let right = max_polyline_x(&svg);
+        for l in ["rising line", "falling line"] {
+            assert!(
+                text_x(&svg, l) > right,
+                "{l} at {} left of data at {right}",
+                text_x(&svg, l)
+            );
+        }
+    }
+
+    /// 10⁵ samples, thinned for display, make a small SVG that still shows the spike.
+    #[test]
+    fn a_long_decimated_record_stays_small() {
+        let n = 100_000;
+        let x: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        let mut y: Vec<f64> = x.iter().map(|t| (t * 1e-3).sin()).collect();
+        y[77_777] = 5.0;
+        let (xd, yd) = crate::decimate_min_max(&x, &y, 1000);
+        let svg = render_chart_svg(&Chart::new("long", "k", "y").with(Series::line("y", &xd, &yd)))
+            .unwrap();
+        assert!(svg.len() < 100_000, "{} bytes", svg.len());
+        // The spike is the highest point drawn: some polyline reaches the top of the range.
+        let full = render_chart_svg(&Chart::new("long", "k", "y").with(Series::line("y", &x, &y)))
+            .unwrap();
+        assert!(
+            full.len() > 5 * svg.len(),
+            "thinning pays: {} vs {}",
+            full.len(),
+            svg.len()
+        );
+        assert!(yd.contains(&5.0));
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! * several charts tiled in one figure, see [`render_grid_svg`];
 //! * heat maps of scalar fields on rectilinear grids with a colour bar, see
 //!   [`HeatMap`] and [`render_heatmaps_svg`];
+//! * long records thinned for display with their envelope kept, see [`decimate_min_max`];
 //! * correlation functions as bars over their lags with a confidence band
 //!   (residual tests), see [`CorrelationChart`] and [`render_correlation_svg`].
 //!
@@ -30,12 +31,14 @@
 mod axes;
 mod chart;
 mod correlation;
+mod decimate;
 mod error;
 mod heatmap;
 mod layout;
 
 pub use chart::{Chart, Series, SeriesStyle, render_chart_svg, render_grid_svg, write_chart_svg};
 pub use correlation::{CorrelationChart, render_correlation_svg};
+pub use decimate::decimate_min_max;
 pub use error::PlotError;
 pub use heatmap::{HeatMap, render_heatmaps_svg};
 pub use layout::{DEFAULT_SIZE, MAX_FIGURE_SIZE, MIN_PANEL_SIZE};

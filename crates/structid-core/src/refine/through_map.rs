@@ -206,6 +206,7 @@ pub(super) fn fit(
         iterations: fit.costs.len(),
         costs: fit.costs.iter().map(|c| c / n).collect(),
         parameter_std: vec![f64::NAN; fit.theta.len()],
+        parameter_covariance: None,
         integrators: n_integrators,
         // The fit is through the map (y ≈ N̂(G·u)), not G's own simulation: no linear fit
         // percentage or degeneracy warning applies.
