@@ -1,0 +1,168 @@
+//! Every conversion between Python and the library in one place: errors, arrays, records,
+//! settings and dispersion specifications.
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyDictMethods};
+use structid_core::{Data, InitialState, Signal, SolverChoice};
+use structid_io::{DataTable, DispersionSpec, ErrorChain, ModelFile};
+
+pyo3::create_exception!(
+    _structid,
+    StructidError,
+    pyo3::exceptions::PyValueError,
+    "An error of the structid library: bad input, a model that cannot be identified as posed, \
+     or a numerical failure. The message is the library's, with its causes."
+);
+
+/// The library error as a Python `StructidError`, its causes on further lines (as the
+/// command-line tool prints them).
+pub fn error(e: impl std::error::Error + 'static) -> PyErr {
+    StructidError::new_err(ErrorChain(&e).to_string())
+}
+
+/// A `StructidError` with a message of the bindings themselves.
+pub fn invalid(message: impl Into<String>) -> PyErr {
+    StructidError::new_err(message.into())
+}
+
+/// A `Signal` (L × channels) from an L × n array; non-finite values are refused with
+/// `what` and the sample.
+pub fn signal(a: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<Signal> {
+    let v = a.as_array();
+    let (len, channels) = v.dim();
+    let mut data = Vec::with_capacity(len * channels);
+    for (k, row) in v.rows().into_iter().enumerate() {
+        for (c, x) in row.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(invalid(format!(
+                    "{what} has the non-finite value {x} at sample {k}, channel {c}"
+                )));
+            }
+            data.push(*x);
+        }
+    }
+    Signal::new(channels, data).map_err(error)
+}
+
+/// A signal as an L × n numpy array.
+pub fn array<'py>(py: Python<'py>, s: &Signal) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_vec((s.len(), s.channels()), s.as_slice().to_vec())
+        .expect("a signal is len × channels values")
+        .into_pyarray(py)
+}
+
+/// A vector as a 1-D numpy array.
+pub fn vector<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
+    v.into_pyarray(py)
+}
+
+/// The record a model file's `[signals]` names, from named columns: the same path as a data
+/// file (a table, then [`ModelFile::select_data`]), so that the checks and messages are the
+/// command-line tool's.
+pub fn record(mf: &ModelFile, named: Vec<(String, Vec<f64>)>) -> PyResult<Data> {
+    let (names, cols): (Vec<String>, Vec<Vec<f64>>) = named.into_iter().unzip();
+    let table = DataTable::new(names, cols).map_err(error)?;
+    mf.select_data(&table).map_err(error)
+}
+
+/// `zero` or `estimate`.
+pub fn initial_state(name: &str) -> PyResult<InitialState> {
+    match name {
+        "zero" => Ok(InitialState::Zero),
+        "estimate" => Ok(InitialState::Estimate),
+        other => Err(invalid(format!(
+            "initial_state `{other}` is neither `zero` nor `estimate`"
+        ))),
+    }
+}
+
+/// `auto`, `exact`, `features`, `clarabel` or `admm`.
+pub fn solver(name: &str) -> PyResult<SolverChoice> {
+    Ok(match name {
+        "auto" => SolverChoice::Auto,
+        "exact" => SolverChoice::Exact,
+        "features" => SolverChoice::Features,
+        "clarabel" => SolverChoice::Clarabel,
+        "admm" => SolverChoice::Admm,
+        other => {
+            return Err(invalid(format!(
+                "solver `{other}` is not one of auto, exact, features, clarabel, admm"
+            )));
+        }
+    })
+}
+
+fn opt<'py, T: FromPyObjectOwned<'py>>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<T>> {
+    match d.get_item(key)? {
+        Some(v) if !v.is_none() => Ok(Some(v.extract().map_err(Into::into)?)),
+        _ => Ok(None),
+    }
+}
+
+/// A dispersion from its dictionary form, the keys of a model file's `dispersion` table:
+/// `{"kind": "gaussian", "sigma": 0.3}`, `{"kind": "fourier", "harmonics": 20}`,
+/// `{"kind": "tv", "neighbours": 8}`, `{"kind": "gaussian", "trend": 1}`, ….
+pub fn dispersion(d: &Bound<'_, PyDict>) -> PyResult<DispersionSpec> {
+    let kind: String = opt(d, "kind")?.ok_or_else(|| invalid("a dispersion needs a `kind`"))?;
+    let sigma: Option<f64> = opt(d, "sigma")?;
+    if let Some(s) = sigma
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(invalid(format!(
+            "invalid sigma {s}: it must be a finite number greater than zero"
+        )));
+    }
+    let spec = match kind.as_str() {
+        "gaussian" => DispersionSpec::Gaussian { sigma },
+        "gaussian-lowrank" => DispersionSpec::LowRankGaussian {
+            sigma,
+            tolerance: opt(d, "tolerance")?,
+        },
+        "fourier" => DispersionSpec::Fourier {
+            sigma,
+            harmonics: opt(d, "harmonics")?,
+            additive: opt(d, "additive")?.unwrap_or(false),
+        },
+        "polynomial" => DispersionSpec::Polynomial {
+            degree: opt(d, "degree")?
+                .ok_or_else(|| invalid("a polynomial dispersion needs a `degree`"))?,
+            scale: opt(d, "scale")?,
+        },
+        "tv" => DispersionSpec::TotalVariation {
+            neighbours: opt(d, "neighbours")?,
+            interpolation: match opt::<String>(d, "interpolation")?.as_deref() {
+                None => None,
+                Some("nearest") => Some(structid_core::GraphInterpolation::Nearest),
+                Some("inverse-distance") => {
+                    Some(structid_core::GraphInterpolation::InverseDistance)
+                }
+                Some(other) => {
+                    return Err(invalid(format!(
+                        "interpolation `{other}` is neither `nearest` nor `inverse-distance`"
+                    )));
+                }
+            },
+        },
+        other => {
+            return Err(invalid(format!(
+                "dispersion kind `{other}` is not one of {}",
+                structid_io::SUPPORTED_DISPERSIONS.join(", ")
+            )));
+        }
+    };
+    Ok(match opt::<usize>(d, "trend")? {
+        Some(degree) => DispersionSpec::WithTrend {
+            kernel: Box::new(spec),
+            degree,
+            scale: opt(d, "trend_scale")?,
+        },
+        None => spec,
+    })
+}
+
+/// A serialisable value as JSON text (Python reads it with `json.loads`).
+pub fn json<T: serde::Serialize + ?Sized>(value: &T) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| invalid(format!("cannot serialise: {e}")))
+}

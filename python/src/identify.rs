@@ -1,0 +1,342 @@
+//! Identification: fixed or automatically selected β and σ, every dispersion and solver, with
+//! the results the command-line tool writes (ŵ, ê, maps on a grid with bands, report).
+
+use std::sync::Arc;
+
+use numpy::PyReadonlyArray1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::solver::admm::AdmmSettings;
+use structid_core::solver::conic::ConicSettings;
+use structid_core::{Estimate, Identification, IdentifySettings, Signal, identify};
+use structid_io::{DispersionSpec, Report, SelectionReport};
+
+use crate::convert::{self, error, invalid};
+use crate::estimate::Fitted;
+use crate::model::Model;
+
+/// Points of the grid a one-input map is evaluated on (as in the tool's map_<block>.csv).
+const GRID_1D: usize = 201;
+/// Points per axis of the grid of a two-input map.
+const GRID_2D: usize = 41;
+
+/// What `identify` is asked to do, beyond the model and the record.
+#[derive(Clone, Debug)]
+pub struct Request {
+    /// β, or `None` to select it.
+    pub beta: Option<f64>,
+    /// σ for every block, or `None` to keep the model's.
+    pub sigma: Option<f64>,
+    /// Select σ too.
+    pub sigma_auto: bool,
+    /// `ml`, `gcv`, `cv` or `validation`; `None`: marginal likelihood for quadratic
+    /// dispersions, cross-validation otherwise.
+    pub selection: Option<String>,
+    /// Folds of cross-validation.
+    pub folds: usize,
+    /// Solver name.
+    pub solver: String,
+    /// `zero` or `estimate`.
+    pub initial_state: String,
+    /// Keep the posterior for bands.
+    pub bands: bool,
+    /// Tolerance of the iterative solvers.
+    pub tolerance: Option<f64>,
+    /// Iteration limit of the iterative solvers.
+    pub max_iterations: Option<usize>,
+    /// Memory budget in MiB.
+    pub memory_limit_mib: Option<u64>,
+}
+
+/// The settings of a request, checked as the command-line tool checks its arguments.
+fn settings(r: &Request) -> PyResult<IdentifySettings> {
+    let beta = match r.beta {
+        Some(b) if !(b.is_finite() && b > 0.0) => {
+            return Err(invalid(format!(
+                "invalid beta {b}: it must be a finite number greater than zero"
+            )));
+        }
+        Some(b) => b,
+        None => IdentifySettings::default().beta(),
+    };
+    let mut b = IdentifySettings::builder()
+        .beta(beta)
+        .posterior(r.bands)
+        .initial_state(convert::initial_state(&r.initial_state)?)
+        .solver(convert::solver(&r.solver)?);
+    if r.tolerance.is_some() || r.max_iterations.is_some() {
+        let mut conic = ConicSettings::builder();
+        let mut admm = AdmmSettings::builder();
+        if let Some(t) = r.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(invalid(format!(
+                    "invalid tolerance {t}: it must be a finite number greater than zero"
+                )));
+            }
+            conic = conic.tolerance(t);
+            admm = admm.tolerance(t);
+        }
+        if let Some(n) = r.max_iterations {
+            if n == 0 {
+                return Err(invalid("max_iterations must be at least 1"));
+            }
+            conic = conic.max_iterations(u32::try_from(n).unwrap_or(u32::MAX));
+            admm = admm.max_iterations(n);
+        }
+        b = b
+            .conic(conic.build().map_err(error)?)
+            .admm(admm.build().map_err(error)?);
+    }
+    if let Some(mib) = r.memory_limit_mib {
+        if mib == 0 {
+            return Err(invalid("memory_limit_mib must be at least 1"));
+        }
+        b = b.memory_limit_bytes(mib << 20);
+    }
+    b.build().map_err(error)
+}
+
+fn criterion(r: &Request, quadratic: bool) -> PyResult<Criterion> {
+    Ok(match r.selection.as_deref() {
+        Some("ml") => Criterion::MarginalLikelihood,
+        Some("gcv") => Criterion::Gcv,
+        Some("cv") => Criterion::CrossValidation { folds: r.folds },
+        Some("validation") => Criterion::Validation,
+        Some(other) => {
+            return Err(invalid(format!(
+                "selection `{other}` is not one of ml, gcv, cv, validation"
+            )));
+        }
+        None if quadratic => Criterion::MarginalLikelihood,
+        None => Criterion::CrossValidation { folds: r.folds },
+    })
+}
+
+/// Evenly spaced points from `lo` to `hi`.
+fn linspace(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if n < 2 || hi <= lo {
+        return vec![lo; n.max(1)];
+    }
+    (0..n)
+        .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
+        .collect()
+}
+
+fn span(v: &[f64]) -> (f64, f64) {
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(*x), h.max(*x))
+        })
+}
+
+/// The points a block's map is shown on: 201 over the data range for one input, a 41 × 41
+/// grid (first input fastest) for two, the data points for more.
+pub fn grid(z: &Signal) -> Signal {
+    match z.channels() {
+        1 => {
+            let (lo, hi) = span(&z.channel(0));
+            let xs = linspace(lo, hi, GRID_1D);
+            Signal::from_fn(xs.len(), 1, |k, _| xs[k])
+        }
+        2 => {
+            let (x0, x1) = span(&z.channel(0));
+            let (y0, y1) = span(&z.channel(1));
+            let xs = linspace(x0, x1, GRID_2D);
+            let ys = linspace(y0, y1, GRID_2D);
+            Signal::from_fn(xs.len() * ys.len(), 2, |k, c| {
+                if c == 0 {
+                    xs[k % xs.len()]
+                } else {
+                    ys[k / xs.len()]
+                }
+            })
+        }
+        _ => z.clone(),
+    }
+}
+
+/// Everything an identification returns, before it becomes Python objects.
+struct Outcome {
+    id: Identification,
+    estimate: Estimate,
+    report: String,
+    beta: f64,
+    sigma: Option<f64>,
+    widths: Vec<Option<f64>>,
+}
+
+fn run(
+    model: &Model,
+    named: Vec<(String, Vec<f64>)>,
+    validation: Option<Vec<(String, Vec<f64>)>>,
+    r: &Request,
+) -> PyResult<Outcome> {
+    let settings = settings(r)?;
+    let mf = &model.file;
+    if let Some(s) = r.sigma
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(invalid(format!(
+            "invalid sigma {s}: it must be a finite number greater than zero"
+        )));
+    }
+    if mf.signals.z.is_none() {
+        mf.lft.check_no_algebraic_loop().map_err(error)?;
+    }
+    mf.lft.check_residual_stable().map_err(error)?;
+    let auto_beta = r.beta.is_none();
+    if r.selection.as_deref() == Some("cv") && r.folds < 2 {
+        return Err(invalid("folds must be at least 2"));
+    }
+    if validation.is_some() != (r.selection.as_deref() == Some("validation")) {
+        return Err(invalid(
+            "selection=\"validation\" and validation data go together",
+        ));
+    }
+    if r.selection.is_some() && !(auto_beta || r.sigma_auto) {
+        return Err(invalid(
+            "a selection criterion needs beta=\"auto\" and/or sigma=\"auto\"",
+        ));
+    }
+    let data = convert::record(mf, named)?;
+    let needs_z = r.sigma.is_none()
+        && mf.blocks.iter().any(|b| {
+            b.dispersion.sigma().is_none()
+                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
+        });
+    let z = if needs_z {
+        Some(mf.z_signal(&data).map_err(error)?)
+    } else {
+        None
+    };
+    let core = mf.to_model(r.sigma, z.as_ref()).map_err(error)?;
+    let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
+        let criterion = criterion(r, !model.has_total_variation())?;
+        let validation = validation
+            .map(|v| convert::record(mf, v))
+            .transpose()?;
+        let how = SelectionSettings::builder()
+            .criterion(criterion)
+            .tune_beta(auto_beta)
+            .tune_sigma(r.sigma_auto)
+            .build()
+            .map_err(error)?;
+        let sel = select(&core, &data, validation.as_ref(), &settings, &how).map_err(error)?;
+        let chosen = settings.with_beta(sel.beta).map_err(error)?;
+        let report = SelectionReport::new(&sel);
+        let widths = sel.widths.clone();
+        (sel.identification, chosen, sel.model, Some((report, widths)))
+    } else {
+        let id = identify(&core, &data, &settings).map_err(error)?;
+        (id, settings, core, None)
+    };
+    id.check_converged().map_err(error)?;
+    let mut report = Report::new(mf, &id, &settings, r.sigma).map_err(error)?;
+    let (selection, widths) = match selection {
+        Some((s, w)) => (Some(s), w),
+        None => (None, Vec::new()),
+    };
+    let sigma = selection.as_ref().and_then(|s| s.sigma).or(r.sigma);
+    report.selection = selection;
+    let estimate =
+        Estimate::from_identification(&fitted_model, &id, &data, &settings).map_err(error)?;
+    let estimate = estimate
+        .with_signal_names(structid_core::estimate::SignalNames {
+            u: mf.signals.u.clone(),
+            y: mf.signals.y.clone(),
+        })
+        .map_err(error)?;
+    Ok(Outcome {
+        report: report.to_json_string().map_err(error)?,
+        beta: settings.beta(),
+        sigma,
+        widths,
+        id,
+        estimate,
+    })
+}
+
+/// The map of every block: its data points (z, ŵ), the grid, N̂ on it and the posterior
+/// standard deviation there when kept.
+fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    id.blocks
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let points = grid(&b.z);
+            let d = PyDict::new(py);
+            d.set_item("name", &b.name)?;
+            d.set_item("dispersion", &b.dispersion)?;
+            d.set_item("z", convert::array(py, &b.z))?;
+            d.set_item("w_hat", convert::vector(py, b.w_hat.clone()))?;
+            d.set_item("grid", convert::array(py, &points))?;
+            d.set_item("value", convert::vector(py, b.map.eval_many(&points)))?;
+            let std = id.posterior_std(i, &points).map_err(error)?;
+            d.set_item("std", std.map(|s| convert::vector(py, s)))?;
+            d.set_item("dispersion_value", b.dispersion_value)?;
+            Ok(d)
+        })
+        .collect()
+}
+
+/// Identifies the model's maps from named columns (see `structid.identify`).
+#[pyfunction]
+#[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None))]
+pub fn identify_columns<'py>(
+    py: Python<'py>,
+    model: &Model,
+    columns: Vec<(String, PyReadonlyArray1<'py, f64>)>,
+    beta: Option<f64>,
+    sigma: Option<f64>,
+    sigma_auto: bool,
+    selection: Option<String>,
+    folds: usize,
+    validation: Option<Vec<(String, PyReadonlyArray1<'py, f64>)>>,
+    solver: &str,
+    initial_state: &str,
+    bands: bool,
+    tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+    memory_limit_mib: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let request = Request {
+        beta,
+        sigma,
+        sigma_auto,
+        selection,
+        folds,
+        solver: solver.into(),
+        initial_state: initial_state.into(),
+        bands,
+        tolerance,
+        max_iterations,
+        memory_limit_mib,
+    };
+    let named = named_columns(&columns);
+    let validation = validation.as_ref().map(|v| named_columns(v));
+    let model = model.clone();
+    let out = py.detach(move || run(&model, named, validation, &request))?;
+    let d = PyDict::new(py);
+    d.set_item("w_hat", convert::array(py, &out.id.w_hat))?;
+    d.set_item("e_hat", convert::array(py, &out.id.e_hat))?;
+    d.set_item("maps", maps(py, &out.id)?)?;
+    d.set_item("report", out.report)?;
+    d.set_item("beta", out.beta)?;
+    d.set_item("sigma", out.sigma)?;
+    d.set_item("widths", out.widths)?;
+    d.set_item(
+        "noise_variance",
+        out.id.posterior.as_ref().map(|p| p.noise_variance()),
+    )?;
+    d.set_item("estimate", Fitted::new(out.estimate, Some(Arc::new(out.id))))?;
+    Ok(d)
+}
+
+/// Columns by name, copied out of numpy before the GIL is released.
+pub fn named_columns(columns: &[(String, PyReadonlyArray1<'_, f64>)]) -> Vec<(String, Vec<f64>)> {
+    columns
+        .iter()
+        .map(|(name, a)| (name.clone(), a.as_array().to_vec()))
+        .collect()
+}

@@ -1,0 +1,26 @@
+//! `structid._structid`: the native module of the Python package `structid`.
+//!
+//! A thin layer over the library: one module per concept ([`model`], [`identify`],
+//! [`estimate`]), every conversion between Python and Rust in [`convert`]. Long calls release
+//! the GIL (`Python::detach`). The Python package (`structid/__init__.py`) turns the
+//! dictionaries returned here into dataclasses.
+
+mod convert;
+mod estimate;
+mod identify;
+mod model;
+
+use pyo3::prelude::*;
+
+/// The native module.
+#[pymodule]
+fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("StructidError", m.py().get_type::<convert::StructidError>())?;
+    m.add_class::<model::Model>()?;
+    m.add_class::<estimate::Fitted>()?;
+    m.add_function(wrap_pyfunction!(identify::identify_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(estimate::write_result, m)?)?;
+    m.add_function(wrap_pyfunction!(estimate::read_columns, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

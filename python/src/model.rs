@@ -1,0 +1,240 @@
+//! The model: a model file (an LFT or a `[linear]` structure, signal names, blocks), read from
+//! TOML or built from a structure (Hammerstein, Wiener, output or rate feedback).
+
+use std::path::{Path, PathBuf};
+
+use numpy::PyReadonlyArray2;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use structid_core::Signal;
+use structid_io::{BlockSpec, LinearSpec, ModelFile, SignalNames};
+use structid_linear::PolynomialModel;
+
+use crate::convert::{self, error, invalid};
+
+/// A structured model: the known linear block, the names of the data columns and the unknown
+/// static maps with their dispersions. Immutable; `with_dispersion` returns a new model.
+#[pyclass(module = "structid._structid", frozen)]
+#[derive(Clone)]
+pub struct Model {
+    pub(crate) file: ModelFile,
+}
+
+impl Model {
+    /// A model from a model file built in code: written as text and parsed back, so that it
+    /// passes the same checks as a file and saves to a file that reads back as itself.
+    fn checked(file: &ModelFile) -> PyResult<Self> {
+        let base = file.path.as_deref().and_then(Path::parent);
+        let mut back = ModelFile::parse(&file.to_toml_string(), base).map_err(error)?;
+        back.path.clone_from(&file.path);
+        Ok(Self { file: back })
+    }
+
+    /// The model's blocks that use a total-variation dispersion exist.
+    pub(crate) fn has_total_variation(&self) -> bool {
+        self.file.blocks.iter().any(|b| {
+            matches!(
+                b.dispersion,
+                structid_io::DispersionSpec::TotalVariation { .. }
+            )
+        })
+    }
+}
+
+#[pymethods]
+impl Model {
+    /// Parses model-file text (TOML). `base_dir` resolves relative truth-table paths.
+    #[staticmethod]
+    #[pyo3(signature = (text, base_dir=None))]
+    fn from_toml(text: &str, base_dir: Option<PathBuf>) -> PyResult<Self> {
+        let file = ModelFile::parse(text, base_dir.as_deref()).map_err(error)?;
+        Ok(Self { file })
+    }
+
+    /// Reads a model file.
+    #[staticmethod]
+    fn from_file(path: PathBuf) -> PyResult<Self> {
+        let file = ModelFile::from_path(&path).map_err(error)?;
+        Ok(Self { file })
+    }
+
+    /// One unknown static map `name` placed at `site` of the linear block
+    /// G(q) = num(q⁻¹)/den(q⁻¹) (`input`: Hammerstein y = G·N(u) + e; `output`: Wiener
+    /// y = N(G·u) + e; `output-feedback`: y = G·(u − N(y)) + e; `rate-feedback`:
+    /// y = G·(u − N(ẏ)) + e; `lti`: no map). `num` lists one numerator per input u.
+    #[staticmethod]
+    #[pyo3(signature = (site, num, den, dispersion, name="N", sample_time=None, inputs=None, output="y"))]
+    fn structure(
+        site: &str,
+        num: Vec<Vec<f64>>,
+        den: Vec<f64>,
+        dispersion: &Bound<'_, PyDict>,
+        name: &str,
+        sample_time: Option<f64>,
+        inputs: Option<Vec<String>>,
+        output: &str,
+    ) -> PyResult<Self> {
+        let site = structid_io::parse_linear_structure(site).ok_or_else(|| {
+            invalid(format!(
+                "site `{site}` is not one of {}",
+                structid_io::LINEAR_STRUCTURES.join(", ")
+            ))
+        })?;
+        let inputs = inputs.unwrap_or_else(|| {
+            if num.len() == 1 {
+                vec!["u".into()]
+            } else {
+                (0..num.len()).map(|i| format!("u{i}")).collect()
+            }
+        });
+        let g = PolynomialModel {
+            num,
+            den,
+            sample_time,
+        };
+        let spec = LinearSpec::from_linear(&g, site);
+        let lft = spec.lft().map_err(error)?;
+        let blocks = match site {
+            None => Vec::new(),
+            Some(_) => vec![BlockSpec {
+                name: name.into(),
+                inputs: vec![0],
+                output: 0,
+                dispersion: convert::dispersion(dispersion)?,
+                truth: None,
+            }],
+        };
+        Self::checked(&ModelFile {
+            lft,
+            linear: Some(spec),
+            signals: SignalNames {
+                u: inputs,
+                y: vec![output.into()],
+                z: None,
+            },
+            blocks,
+            discover: None,
+            path: None,
+        })
+    }
+
+    /// The model-file text (TOML, canonical form); `Model.from_toml` reads it back.
+    fn to_toml(&self) -> String {
+        self.file.to_toml_string()
+    }
+
+    /// The same model with every block's dispersion replaced (a block keeps its σ when the
+    /// new dispersion gives none), as `structid identify --dispersion` does.
+    fn with_dispersion(&self, dispersion: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let mut file = self.file.clone();
+        file.replace_dispersions(&convert::dispersion(dispersion)?);
+        Self::checked(&file)
+    }
+
+    /// The same model with block `name`'s truth (a model-file expression in z0, z1, …), for
+    /// `simulate`.
+    fn with_truth(&self, block: &str, expression: &str) -> PyResult<Self> {
+        let mut file = self.file.clone();
+        let b = file
+            .blocks
+            .iter_mut()
+            .find(|b| b.name == block)
+            .ok_or_else(|| invalid(format!("the model has no block `{block}`")))?;
+        b.truth = Some(structid_io::TruthSpec::Expression(expression.into()));
+        Self::checked(&file)
+    }
+
+    /// The data columns: `{"u": [...], "y": [...], "z": [...] or None}`.
+    #[getter]
+    fn signals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("u", self.file.signals.u.clone())?;
+        d.set_item("y", self.file.signals.y.clone())?;
+        d.set_item("z", self.file.signals.z.clone())?;
+        Ok(d)
+    }
+
+    /// The blocks: name, z inputs, w output, dispersion kind and σ, truth.
+    #[getter]
+    fn blocks<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.file
+            .blocks
+            .iter()
+            .map(|b| {
+                let d = PyDict::new(py);
+                d.set_item("name", &b.name)?;
+                d.set_item("inputs", b.inputs.clone())?;
+                d.set_item("output", b.output)?;
+                d.set_item("dispersion", b.dispersion.kind())?;
+                d.set_item("sigma", b.dispersion.sigma())?;
+                d.set_item("truth", b.truth.as_ref().map(|t| t.describe()))?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// The sizes of the LFT: states, u, e, w, y, z.
+    #[getter]
+    fn dims<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.file.lft.dims();
+        let d = PyDict::new(py);
+        for (k, v) in [
+            ("states", n.states),
+            ("u", n.u),
+            ("e", n.e),
+            ("w", n.w),
+            ("y", n.y),
+            ("z", n.z),
+        ] {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
+    }
+
+    /// Simulates the model with every block's truth in the loop (as `structid simulate`):
+    /// u is L × n_u; white Gaussian noise of standard deviation `noise_std` from `seed`.
+    /// Returns (y, z, w).
+    #[pyo3(signature = (u, noise_std=0.0, seed=0))]
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray2<'py, f64>,
+        noise_std: f64,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(noise_std.is_finite() && noise_std >= 0.0) {
+            return Err(invalid(format!(
+                "invalid noise_std {noise_std}: it must be a finite number, zero or more"
+            )));
+        }
+        let u: Signal = convert::signal(&u, "u")?;
+        let maps = self.file.truth_maps().map_err(error)?.ok_or_else(|| {
+            invalid("simulation needs a truth for every block (Model.with_truth)")
+        })?;
+        let file = self.file.clone();
+        let sim = py
+            .detach(move || {
+                let maps: Vec<_> = maps.iter().map(|m| m.as_ref()).collect();
+                file.simulate(&maps, &u, noise_std, seed)
+            })
+            .map_err(error)?;
+        let d = PyDict::new(py);
+        d.set_item("y", convert::array(py, &sim.y))?;
+        d.set_item("z", convert::array(py, &sim.z))?;
+        d.set_item("w", convert::array(py, &sim.w))?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        let names: Vec<_> = self.file.blocks.iter().map(|b| b.name.as_str()).collect();
+        format!(
+            "Model(u={:?}, y={:?}, blocks={names:?})",
+            self.file.signals.u, self.file.signals.y
+        )
+    }
+
+    fn __reduce__(&self, py: Python<'_>) -> PyResult<(Py<PyAny>, (String,))> {
+        let from = py.get_type::<Self>().getattr("from_toml")?.unbind();
+        Ok((from, (self.file.to_toml_string(),)))
+    }
+}
