@@ -157,13 +157,39 @@ pub fn grid(z: &Signal) -> Signal {
 }
 
 /// Everything an identification returns, before it becomes Python objects.
-struct Outcome {
-    id: Identification,
-    estimate: Estimate,
-    report: String,
-    beta: f64,
-    sigma: Option<f64>,
-    widths: Vec<Option<f64>>,
+pub(crate) struct Outcome {
+    /// The identification (kept for bands).
+    pub id: Identification,
+    /// The fitted model.
+    pub estimate: Estimate,
+    /// report.json.
+    pub report: String,
+    /// β used.
+    pub beta: f64,
+    /// σ given or chosen for every block.
+    pub sigma: Option<f64>,
+    /// σ chosen per block by selection.
+    pub widths: Vec<Option<f64>>,
+}
+
+impl Outcome {
+    /// The dictionary `structid._identify._fit` reads.
+    pub(crate) fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("w_hat", convert::array(py, &self.id.w_hat))?;
+        d.set_item("e_hat", convert::array(py, &self.id.e_hat))?;
+        d.set_item("maps", maps(py, &self.id)?)?;
+        d.set_item("report", self.report)?;
+        d.set_item("beta", self.beta)?;
+        d.set_item("sigma", self.sigma)?;
+        d.set_item("widths", self.widths)?;
+        d.set_item(
+            "noise_variance",
+            self.id.posterior.as_ref().map(|p| p.noise_variance()),
+        )?;
+        d.set_item("estimate", Fitted::new(self.estimate, Some(Arc::new(self.id))))?;
+        Ok(d)
+    }
 }
 
 fn run(
@@ -316,21 +342,8 @@ pub fn identify_columns<'py>(
     let named = named_columns(&columns);
     let validation = validation.as_ref().map(|v| named_columns(v));
     let model = model.clone();
-    let out = py.detach(move || run(&model, named, validation, &request))?;
-    let d = PyDict::new(py);
-    d.set_item("w_hat", convert::array(py, &out.id.w_hat))?;
-    d.set_item("e_hat", convert::array(py, &out.id.e_hat))?;
-    d.set_item("maps", maps(py, &out.id)?)?;
-    d.set_item("report", out.report)?;
-    d.set_item("beta", out.beta)?;
-    d.set_item("sigma", out.sigma)?;
-    d.set_item("widths", out.widths)?;
-    d.set_item(
-        "noise_variance",
-        out.id.posterior.as_ref().map(|p| p.noise_variance()),
-    )?;
-    d.set_item("estimate", Fitted::new(out.estimate, Some(Arc::new(out.id))))?;
-    Ok(d)
+    py.detach(move || run(&model, named, validation, &request))?
+        .into_dict(py)
 }
 
 /// Columns by name, copied out of numpy before the GIL is released.

@@ -1,14 +1,17 @@
 //! `structid._structid`: the native module of the Python package `structid`.
 //!
 //! A thin layer over the library: one module per concept ([`model`], [`identify`],
-//! [`estimate`]), every conversion between Python and Rust in [`convert`]. Long calls release
+//! [`estimate`], [`refine`], [`discover`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
 //! the GIL (`Python::detach`). The Python package (`structid/__init__.py`) turns the
 //! dictionaries returned here into dataclasses.
 
 mod convert;
+mod discover;
 mod estimate;
 mod identify;
 mod model;
+mod paper;
+mod refine;
 
 use pyo3::prelude::*;
 
@@ -19,6 +22,11 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Model>()?;
     m.add_class::<estimate::Fitted>()?;
     m.add_function(wrap_pyfunction!(identify::identify_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(refine::refine_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(discover::discover_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(discover::silverbox_discovery, m)?)?;
+    m.add_function(wrap_pyfunction!(paper::spray, m)?)?;
+    m.add_function(wrap_pyfunction!(paper::multi_input, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::write_result, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::read_columns, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

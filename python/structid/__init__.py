@@ -28,6 +28,9 @@ from ._structid import StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, Validation
+from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
+                         silverbox_discovery)
+from . import paper
 
 __all__ = [
     "StructidError",
@@ -39,6 +42,14 @@ __all__ = [
     "Validation",
     "identify",
     "load",
+    "refine",
+    "Refinement",
+    "discover",
+    "Discovery",
+    "Finding",
+    "silverbox_data",
+    "silverbox_discovery",
+    "paper",
     "gaussian",
     "gaussian_lowrank",
     "fourier",

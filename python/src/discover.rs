@@ -1,0 +1,229 @@
+//! Discovery: what a nominal linear model is missing, where, and which static effect (as
+//! `structid discover`), and the workflow on the Silverbox benchmark.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use numpy::PyReadonlyArray1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use structid_core::Data;
+use structid_core::estimate::SignalNames;
+use structid_discover::discover::{DiscoverSettings, Discovery, discover};
+use structid_discover::hypotheses::Nominal;
+use structid_io::ModelFile;
+
+use crate::convert::{self, error, invalid};
+use crate::estimate::Fitted;
+use crate::identify::named_columns;
+use crate::model::Model;
+
+/// The nominal model of a model file without maps: `[linear] structure = "lti"` or an `[lft]`,
+/// with the locations and states its `[discover]` section declares.
+fn nominal(mf: &ModelFile) -> PyResult<Nominal> {
+    if !mf.blocks.is_empty() {
+        return Err(invalid(
+            "discovery starts from a nominal model without maps ([linear] structure = \"lti\", \
+             e.g. Model.structure(\"lti\", ...), or an [lft] without [[nonlinearity]])",
+        ));
+    }
+    if mf.signals.u.len() != 1 || mf.signals.y.len() != 1 || mf.signals.z.is_some() {
+        return Err(invalid(
+            "discovery needs a nominal model with one input, one output and no measured z",
+        ));
+    }
+    let mut nominal = match &mf.linear {
+        Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model),
+        Some(spec) => {
+            return Err(invalid(format!(
+                "the model has [linear] structure = \"{}\"; discovery needs structure = \"lti\"",
+                spec.structure_name()
+            )));
+        }
+        None => Nominal::new(mf.lft.clone()),
+    }
+    .map_err(error)?;
+    if let Some(d) = &mf.discover {
+        for l in &d.locations {
+            nominal = nominal.with_location(&l.name, l.z, l.w).map_err(error)?;
+        }
+        for st in &d.states {
+            nominal = nominal.with_state(&st.name, st.state).map_err(error)?;
+        }
+    }
+    Ok(nominal)
+}
+
+/// A discovery as Python objects: the verdict, every hypothesis, and the finding with its
+/// augmented model and estimate.
+fn discovery_dict<'py>(
+    py: Python<'py>,
+    d: &Discovery,
+    nominal: &Nominal,
+    file: Option<&ModelFile>,
+    settings: &DiscoverSettings,
+    estimation: &Data,
+) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("verdict", &d.verdict)?;
+    out.set_item("missing_effect", d.missing_effect)?;
+    out.set_item("nominal_validation_rms", d.validation_gap.rms)?;
+    out.set_item("nominal_estimation_rms", d.estimation_gap.rms)?;
+    out.set_item("seconds", d.seconds)?;
+    let hypotheses = d
+        .hypotheses
+        .iter()
+        .map(|h| {
+            let x = PyDict::new(py);
+            x.set_item("location", nominal.key(h.location))?;
+            x.set_item("description", nominal.describe(h.location))?;
+            x.set_item("dispersion", &h.dispersion)?;
+            x.set_item("beta", h.beta)?;
+            x.set_item("sigma", h.sigma)?;
+            x.set_item("estimation_rms", h.estimation_rms)?;
+            x.set_item("validation_rms", h.validation_rms)?;
+            x.set_item("failure", &h.failure)?;
+            x.set_item("z", convert::vector(py, h.curve.z.clone()))?;
+            x.set_item("w", convert::vector(py, h.curve.w.clone()))?;
+            Ok(x)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    out.set_item("hypotheses", hypotheses)?;
+    let finding = match &d.finding {
+        None => None,
+        Some(f) => {
+            let x = PyDict::new(py);
+            x.set_item("location", nominal.key(f.location))?;
+            x.set_item("description", nominal.describe(f.location))?;
+            x.set_item("effect", f.classification.describe())?;
+            x.set_item("estimator", &f.estimator)?;
+            x.set_item("nonparametric_rms", f.nonparametric_rms)?;
+            x.set_item("validation_rms", f.augmented.validation_gap.rms)?;
+            x.set_item("remarks", f.remarks.clone())?;
+            x.set_item("shrink", f.shrink)?;
+            x.set_item("z", convert::vector(py, f.hypothesis.curve.z.clone()))?;
+            x.set_item("w", convert::vector(py, f.hypothesis.curve.w.clone()))?;
+            let estimate = f.estimate(nominal, estimation).map_err(error)?;
+            let estimate = match file {
+                Some(mf) => estimate
+                    .with_signal_names(SignalNames {
+                        u: mf.signals.u.clone(),
+                        y: mf.signals.y.clone(),
+                    })
+                    .map_err(error)?,
+                None => estimate,
+            };
+            x.set_item("estimate", Fitted::new(estimate, None))?;
+            // The augmented model as a Model when it stands alone (a named map is an
+            // expression; an unnamed one is a table file, written by the tool only).
+            let augmented = match file {
+                Some(mf) => {
+                    let a = f
+                        .augmented_file(mf, settings.trend_degree())
+                        .map_err(error)?;
+                    if a.table.is_none() && a.known_tables.is_empty() {
+                        Some(Model { file: a.model })
+                    } else {
+                        None
+                    }
+                }
+                None => None,
+            };
+            x.set_item("augmented", augmented)?;
+            Some(x)
+        }
+    };
+    out.set_item("finding", finding)?;
+    Ok(out)
+}
+
+/// Runs the discovery workflow from a nominal model on an estimation and a validation record.
+#[pyfunction]
+#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false))]
+pub fn discover_columns<'py>(
+    py: Python<'py>,
+    model: &Model,
+    columns: Vec<(String, PyReadonlyArray1<'py, f64>)>,
+    validation: Vec<(String, PyReadonlyArray1<'py, f64>)>,
+    total_variation: bool,
+    settle: usize,
+    tune_sigma: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mf = model.file.clone();
+    let nominal = nominal(&mf)?;
+    let est = convert::record(&mf, named_columns(&columns))?;
+    let val = convert::record(&mf, named_columns(&validation))?;
+    for (what, r) in [("estimation", &est), ("validation", &val)] {
+        if settle >= r.len() {
+            return Err(invalid(format!(
+                "settle {settle} must be less than the {} samples of the {what} record",
+                r.len()
+            )));
+        }
+    }
+    let settings = DiscoverSettings::builder()
+        .total_variation(total_variation)
+        .settle(settle)
+        .tune_sigma(tune_sigma)
+        .build()
+        .map_err(error)?;
+    let n = nominal.clone();
+    let s = settings.clone();
+    let e = est.clone();
+    let d = py
+        .detach(move || discover(&n, &e, &val, &s))
+        .map_err(error)?;
+    discovery_dict(py, &d, &nominal, Some(&mf), &settings, &est)
+}
+
+/// The discovery workflow on the Silverbox benchmark file `SNLS80mV.csv`: the BLA of
+/// `order` on the first part of the estimation split, discovery with the rest as validation,
+/// and the test splits simulated with the BLA and the augmented model.
+#[pyfunction]
+#[pyo3(signature = (path, order=2, validation_fraction=0.2))]
+pub fn silverbox_discovery<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    order: usize,
+    validation_fraction: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, parts, run};
+    if !(validation_fraction > 0.0 && validation_fraction < 1.0) {
+        return Err(invalid(format!(
+            "validation_fraction {validation_fraction} must lie strictly between 0 and 1"
+        )));
+    }
+    let settings = SilverboxDiscoverySettings {
+        order,
+        validation_fraction,
+        ..SilverboxDiscoverySettings::default()
+    };
+    let (r, fit) = py
+        .detach(move || {
+            let sb = structid_io::Silverbox::load(&path).map_err(error)?;
+            let r = run(&sb, &settings).map_err(error)?;
+            let (fit, _) = parts(&sb, settings.validation_fraction).map_err(error)?;
+            Ok::<_, PyErr>((Arc::new(r), fit))
+        })?;
+    let nominal = Nominal::from_polynomial(&r.bla).map_err(error)?;
+    let settings = SilverboxDiscoverySettings::default().discover;
+    let out = discovery_dict(py, &r.discovery, &nominal, None, &settings, &fit)?;
+    out.set_item("bla_num", r.bla.num.clone())?;
+    out.set_item("bla_den", r.bla.den.clone())?;
+    let tests = r
+        .tests
+        .iter()
+        .map(|t| {
+            let x = PyDict::new(py);
+            x.set_item("split", &t.split)?;
+            x.set_item("bla_rms", t.bla_rms)?;
+            x.set_item("augmented_rms", t.augmented_rms)?;
+            x.set_item("measured", convert::vector(py, t.measured.clone()))?;
+            x.set_item("simulated", convert::vector(py, t.simulated.clone()))?;
+            x.set_item("bla_simulated", convert::vector(py, t.bla_simulated.clone()))?;
+            Ok(x)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    out.set_item("tests", tests)?;
+    Ok(out)
+}

@@ -1,0 +1,96 @@
+//! The paper's examples as records and models (`structid demo`'s experiments).
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use structid_core::paper::{self, Experiment};
+use structid_io::{BlockSpec, DispersionSpec, ModelFile, SignalNames};
+
+use crate::convert::{self, error, invalid};
+use crate::model::Model;
+
+/// An experiment as Python objects: its model (Gaussian blocks of width `sigma`, as a model
+/// file with the experiment's LFT), u, y, the true w and the noise.
+fn experiment<'py>(py: Python<'py>, exp: &Experiment, sigma: f64) -> PyResult<Bound<'py, PyDict>> {
+    let dims = exp.model.lft().dims();
+    let names = |prefix: &str, n: usize| -> Vec<String> {
+        if n == 1 {
+            vec![prefix.into()]
+        } else {
+            (0..n).map(|i| format!("{prefix}{i}")).collect()
+        }
+    };
+    let file = ModelFile {
+        lft: exp.model.lft().clone(),
+        linear: None,
+        signals: SignalNames {
+            u: names("u", dims.u),
+            y: names("y", dims.y),
+            z: None,
+        },
+        blocks: exp
+            .model
+            .blocks()
+            .iter()
+            .map(|b| BlockSpec {
+                name: b.name.clone(),
+                inputs: b.inputs.clone(),
+                output: b.output,
+                dispersion: DispersionSpec::Gaussian { sigma: Some(sigma) },
+                truth: None,
+            })
+            .collect(),
+        discover: None,
+        path: None,
+    };
+    let model = ModelFile::parse(&file.to_toml_string(), None).map_err(error)?;
+    let d = PyDict::new(py);
+    d.set_item("model", Model { file: model })?;
+    d.set_item("u", convert::array(py, exp.data.u()))?;
+    d.set_item("y", convert::array(py, exp.data.y()))?;
+    d.set_item("w_true", convert::array(py, &exp.w_true))?;
+    d.set_item("noise", convert::array(py, &exp.noise))?;
+    Ok(d)
+}
+
+fn check_sigma(sigma: f64) -> PyResult<()> {
+    if sigma.is_finite() && sigma > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(format!(
+            "invalid sigma {sigma}: it must be a finite number greater than zero"
+        )))
+    }
+}
+
+/// The spray-deposition example (section 6.1): y_k = f(u_k) + g(u_(k−2)) + e_k with
+/// u_k = sin(0.1k), f(z) = −|z|, g(z) = 0.5·(sin((3z)²) + (2z)² − 2).
+#[pyfunction]
+#[pyo3(signature = (samples=2000, noise_std=1.0, sigma=0.1, seed=1))]
+pub fn spray<'py>(
+    py: Python<'py>,
+    samples: usize,
+    noise_std: f64,
+    sigma: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_sigma(sigma)?;
+    let exp = paper::spray(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
+        .map_err(error)?;
+    experiment(py, &exp, sigma)
+}
+
+/// The two-input example (section 6.2): one map N(z0, z1) behind a known LTI block.
+#[pyfunction]
+#[pyo3(signature = (samples=1500, noise_std=0.1, sigma=0.5, seed=1))]
+pub fn multi_input<'py>(
+    py: Python<'py>,
+    samples: usize,
+    noise_std: f64,
+    sigma: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_sigma(sigma)?;
+    let exp = paper::multi_input(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
+        .map_err(error)?;
+    experiment(py, &exp, sigma)
+}

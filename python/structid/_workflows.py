@@ -1,0 +1,147 @@
+"""Refinement of the linear part and discovery of a missing effect."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _structid
+from ._estimate import Estimate
+from ._identify import Fit, _columns, _fit
+from ._model import Model
+
+
+@dataclass
+class Refinement:
+    """The result of :func:`refine`: the refined model (new linear part) and its fit."""
+
+    model: Model
+    """The model with the refined linear part (``structid refine``'s model.toml)."""
+    fit: Fit
+    iterations: List[Dict[str, Any]]
+    """Per iteration: cost after the maps, after the linear part, estimation and validation RMS."""
+    best: int
+    stop_reason: str
+
+
+def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[object, object]] = None,
+           beta: Union[float, str] = "auto", sigma: Union[None, float, str] = None,
+           selection: str = "ml", iterations: int = 10, tolerance: float = 1e-3, settle: int = 0,
+           initial_state: str = "zero", bands: bool = True) -> Refinement:
+    """Refines an uncertain linear part (``structid refine``): alternates between identifying
+    the map with G fixed and re-estimating G (output error) with the map fixed, and stops when
+    the validation simulation error (``validation=(u_val, y_val)``, else the estimation one)
+    stops improving. ``model`` is a one-map structure (:meth:`Model.hammerstein`, …)."""
+    sigma_auto = isinstance(sigma, str)
+    out = _structid.refine_columns(
+        model._native, _columns(model, u, y, None, ""),
+        None if validation is None else _columns(model, validation[0], validation[1], None, "validation "),
+        None if isinstance(beta, str) else float(beta),
+        None if sigma is None or sigma_auto else float(sigma), sigma_auto, selection,
+        int(iterations), float(tolerance), int(settle), initial_state, bool(bands))
+    refined = Model(out.pop("model"))
+    fit = _fit(refined, out)
+    r = fit.report["refinement"]
+    return Refinement(model=refined, fit=fit, iterations=r["iterations"], best=r["best"],
+                      stop_reason=r["stop_reason"])
+
+
+@dataclass
+class Finding:
+    """The effect discovery found: where, which, and the augmented model."""
+
+    location: str
+    description: str
+    effect: str
+    """The named family (e.g. ``cubic stiffness``), ``unnamed`` or ``dynamic``."""
+    estimator: str
+    nonparametric_rms: float
+    validation_rms: float
+    """Validation simulation RMS of the augmented model."""
+    remarks: List[str]
+    shrink: float
+    z: np.ndarray
+    """The estimated map's curve: its input …"""
+    w: np.ndarray
+    """… and its value."""
+    estimate: Estimate
+    """The augmented model as a fitted model (simulate, predict, validate)."""
+    augmented: Optional[Model]
+    """The augmented model file (None when its map is a table)."""
+
+
+@dataclass
+class Discovery:
+    """The result of :func:`discover`."""
+
+    verdict: str
+    missing_effect: bool
+    nominal_validation_rms: float
+    nominal_estimation_rms: float
+    hypotheses: List[Dict[str, Any]]
+    """Per candidate location: dispersion, β, σ, estimation and validation RMS, failure."""
+    finding: Optional[Finding]
+    seconds: float
+    extra: Dict[str, Any]
+
+
+def _discovery(out: Dict[str, Any]) -> Discovery:
+    finding = out.pop("finding")
+    if finding is not None:
+        est = Estimate(finding.pop("estimate"))
+        aug = finding.pop("augmented")
+        finding = Finding(estimate=est, augmented=None if aug is None else Model(aug), **finding)
+    keys = ("verdict", "missing_effect", "nominal_validation_rms", "nominal_estimation_rms",
+            "hypotheses", "seconds")
+    core = {k: out.pop(k) for k in keys}
+    return Discovery(finding=finding, extra=out, **core)
+
+
+def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object, *,
+             total_variation: bool = True, settle: int = 0, tune_sigma: bool = False) -> Discovery:
+    """Finds what a nominal linear model (``Model.structure("lti", ...)`` or an ``[lft]``
+    without maps) is missing (``structid discover``): tests its residual, inserts one unknown
+    map at each candidate location, ranks them on the validation record and names the map."""
+    return _discovery(_structid.discover_columns(
+        nominal._native, _columns(nominal, u, y, None, ""),
+        _columns(nominal, u_val, y_val, None, "validation "), bool(total_variation), int(settle),
+        bool(tune_sigma)))
+
+
+def silverbox_data(path: Union[None, str, os.PathLike] = None) -> str:
+    """The Silverbox file ``SNLS80mV.csv``: ``path`` if given, else ``$STRUCTID_DATA/silverbox/``,
+    else ``../shared/data/silverbox/`` beside the repository (as the project's tests find it)."""
+    if path is not None:
+        return os.fspath(path)
+    base = os.environ.get("STRUCTID_DATA")
+    if not base:
+        here = os.path.dirname(os.path.abspath(__file__))
+        for up in (os.path.join(here, ".."), os.getcwd()):
+            repo = os.path.abspath(up)
+            while repo != os.path.dirname(repo):
+                if os.path.isfile(os.path.join(repo, "Cargo.lock")) and os.path.isdir(os.path.join(repo, "crates")):
+                    break
+                repo = os.path.dirname(repo)
+            candidate = os.path.join(repo, "..", "shared", "data")
+            if os.path.isdir(candidate):
+                base = candidate
+                break
+    if not base:
+        raise _structid.StructidError(
+            "the Silverbox data were not found: give the path of SNLS80mV.csv or set STRUCTID_DATA "
+            "to the directory holding silverbox/")
+    return os.path.normpath(os.path.join(base, "silverbox", "SNLS80mV.csv"))
+
+
+def silverbox_discovery(path: Union[None, str, os.PathLike] = None, order: int = 2,
+                        validation_fraction: float = 0.2) -> Discovery:
+    """The discovery workflow on the Silverbox benchmark: the BLA of ``order`` on the first
+    part of the estimation split, discovery with the rest as validation, the test splits
+    simulated with both. ``extra`` holds ``bla_num``, ``bla_den`` and the ``tests`` (RMS per
+    split, measured and simulated outputs)."""
+    return _discovery(_structid.silverbox_discovery(silverbox_data(path), int(order),
+                                                    float(validation_fraction)))
