@@ -283,7 +283,7 @@ fn run(
     })
 }
 
-/// The map of every block: its data points (z, ŵ), the grid, N̂ on it and the posterior
+/// The map of every block: its inputs z at the samples (ŵ is a column of the whole ŵ), the grid, N̂ on it and the posterior
 /// standard deviation there when kept.
 fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, PyDict>>> {
     id.blocks
@@ -295,7 +295,7 @@ fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, Py
             d.set_item("name", &b.name)?;
             d.set_item("dispersion", &b.dispersion)?;
             d.set_item("z", convert::array(py, &b.z))?;
-            d.set_item("w_hat", convert::vector(py, b.w_hat.clone()))?;
+            d.set_item("output", b.output)?;
             d.set_item("grid", convert::array(py, &points))?;
             d.set_item("value", convert::vector(py, b.map.eval_many(&points)))?;
             let std = id.posterior_std(i, &points).map_err(error)?;

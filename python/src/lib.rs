@@ -27,6 +27,7 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(discover::silverbox_discovery, m)?)?;
     m.add_function(wrap_pyfunction!(paper::spray, m)?)?;
     m.add_function(wrap_pyfunction!(paper::multi_input, m)?)?;
+    m.add_function(wrap_pyfunction!(paper::hammerstein_coloured, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::write_result, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::read_columns, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -1,4 +1,5 @@
-//! The paper's examples as records and models (`structid demo`'s experiments).
+//! The paper's examples (`structid demo`'s experiments) and the benchmark scenarios, as
+//! records and models.
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -8,9 +9,13 @@ use structid_io::{BlockSpec, DispersionSpec, ModelFile, SignalNames};
 use crate::convert::{self, error, invalid};
 use crate::model::Model;
 
-/// An experiment as Python objects: its model (Gaussian blocks of width `sigma`, as a model
-/// file with the experiment's LFT), u, y, the true w and the noise.
-fn experiment<'py>(py: Python<'py>, exp: &Experiment, sigma: f64) -> PyResult<Bound<'py, PyDict>> {
+/// An experiment as Python objects: its model (every block with `dispersion`, as a model file
+/// with the experiment's LFT), u, y, the true w and the noise.
+fn experiment<'py>(
+    py: Python<'py>,
+    exp: &Experiment,
+    dispersion: DispersionSpec,
+) -> PyResult<Bound<'py, PyDict>> {
     let dims = exp.model.lft().dims();
     let names = |prefix: &str, n: usize| -> Vec<String> {
         if n == 1 {
@@ -35,7 +40,7 @@ fn experiment<'py>(py: Python<'py>, exp: &Experiment, sigma: f64) -> PyResult<Bo
                 name: b.name.clone(),
                 inputs: b.inputs.clone(),
                 output: b.output,
-                dispersion: DispersionSpec::Gaussian { sigma: Some(sigma) },
+                dispersion: dispersion.clone(),
                 truth: None,
             })
             .collect(),
@@ -76,7 +81,7 @@ pub fn spray<'py>(
     check_sigma(sigma)?;
     let exp = paper::spray(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
         .map_err(error)?;
-    experiment(py, &exp, sigma)
+    experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
 }
 
 /// The two-input example (section 6.2): one map N(z0, z1) behind a known LTI block.
@@ -92,5 +97,38 @@ pub fn multi_input<'py>(
     check_sigma(sigma)?;
     let exp = paper::multi_input(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
         .map_err(error)?;
-    experiment(py, &exp, sigma)
+    experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
+}
+
+/// The feature solver's benchmark problem (`cargo bench --bench features`,
+/// `examples/feature_scaling.rs`): SISO Hammerstein with N = tanh, an IIR L_yw of `order`,
+/// coloured noise H = (1 + 0.5q⁻¹)/(1 − 0.8q⁻¹) of standard deviation `noise_std`, white
+/// input; the model's block has the Fourier dispersion with Gaussian-like weights of width
+/// `sigma` and `harmonics` harmonics.
+#[pyfunction]
+#[pyo3(signature = (samples, order=4, noise_std=0.3, seed=11, sigma=0.2, harmonics=31))]
+pub fn hammerstein_coloured<'py>(
+    py: Python<'py>,
+    samples: usize,
+    order: usize,
+    noise_std: f64,
+    seed: u64,
+    sigma: f64,
+    harmonics: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_sigma(sigma)?;
+    let spec = DispersionSpec::Fourier {
+        sigma: Some(sigma),
+        harmonics: Some(harmonics),
+        additive: false,
+    };
+    let dispersion = spec.build(None, None).map_err(error)?;
+    let exp = py
+        .detach(|| {
+            structid_core::scenarios::hammerstein_coloured(
+                samples, order, noise_std, dispersion, seed,
+            )
+        })
+        .map_err(error)?;
+    experiment(py, &exp, spec)
 }

@@ -30,7 +30,7 @@ from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, Validation
 from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
                          silverbox_discovery)
-from . import paper
+from . import paper, scenarios
 
 __all__ = [
     "StructidError",
@@ -50,6 +50,7 @@ __all__ = [
     "silverbox_data",
     "silverbox_discovery",
     "paper",
+    "scenarios",
     "gaussian",
     "gaussian_lowrank",
     "fourier",

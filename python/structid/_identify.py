@@ -172,7 +172,10 @@ def _fit(model: Model, out: Dict[str, Any]) -> Fit:
     estimate = Estimate(out["estimate"])
     blocks = {b["output"]: b["name"] for b in model.blocks}
     w_names = [blocks.get(c, f"w{c}") for c in range(out["w_hat"].shape[1])]
-    maps = {m["name"]: MapEstimate(**m) for m in out["maps"]}
+    maps = {}
+    for m in out["maps"]:
+        m["w_hat"] = out["w_hat"][:, m.pop("output")]
+        maps[m["name"]] = MapEstimate(**m)
     return Fit(estimate=estimate, model=model, w_hat=out["w_hat"], e_hat=out["e_hat"],
                w_names=w_names, beta=out["beta"], sigma=out["sigma"], maps=maps, report=report,
                widths=list(out.get("widths") or []), noise_variance=out.get("noise_variance"))
