@@ -198,13 +198,12 @@ pub fn silverbox_discovery<'py>(
         validation_fraction,
         ..SilverboxDiscoverySettings::default()
     };
-    let (r, fit) = py
-        .detach(move || {
-            let sb = structid_io::Silverbox::load(&path).map_err(error)?;
-            let r = run(&sb, &settings).map_err(error)?;
-            let (fit, _) = parts(&sb, settings.validation_fraction).map_err(error)?;
-            Ok::<_, PyErr>((Arc::new(r), fit))
-        })?;
+    let (r, fit) = py.detach(move || {
+        let sb = structid_io::Silverbox::load(&path).map_err(error)?;
+        let r = run(&sb, &settings).map_err(error)?;
+        let (fit, _) = parts(&sb, settings.validation_fraction).map_err(error)?;
+        Ok::<_, PyErr>((Arc::new(r), fit))
+    })?;
     let nominal = Nominal::from_polynomial(&r.bla).map_err(error)?;
     let settings = SilverboxDiscoverySettings::default().discover;
     let out = discovery_dict(py, &r.discovery, &nominal, None, &settings, &fit)?;
@@ -220,7 +219,10 @@ pub fn silverbox_discovery<'py>(
             x.set_item("augmented_rms", t.augmented_rms)?;
             x.set_item("measured", convert::vector(py, t.measured.clone()))?;
             x.set_item("simulated", convert::vector(py, t.simulated.clone()))?;
-            x.set_item("bla_simulated", convert::vector(py, t.bla_simulated.clone()))?;
+            x.set_item(
+                "bla_simulated",
+                convert::vector(py, t.bla_simulated.clone()),
+            )?;
             Ok(x)
         })
         .collect::<PyResult<Vec<_>>>()?;

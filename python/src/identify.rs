@@ -187,7 +187,10 @@ impl Outcome {
             "noise_variance",
             self.id.posterior.as_ref().map(|p| p.noise_variance()),
         )?;
-        d.set_item("estimate", Fitted::new(self.estimate, Some(Arc::new(self.id))))?;
+        d.set_item(
+            "estimate",
+            Fitted::new(self.estimate, Some(Arc::new(self.id))),
+        )?;
         Ok(d)
     }
 }
@@ -239,9 +242,7 @@ fn run(
     let core = mf.to_model(r.sigma, z.as_ref()).map_err(error)?;
     let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
         let criterion = criterion(r, !model.has_total_variation())?;
-        let validation = validation
-            .map(|v| convert::record(mf, v))
-            .transpose()?;
+        let validation = validation.map(|v| convert::record(mf, v)).transpose()?;
         let how = SelectionSettings::builder()
             .criterion(criterion)
             .tune_beta(auto_beta)
@@ -252,7 +253,12 @@ fn run(
         let chosen = settings.with_beta(sel.beta).map_err(error)?;
         let report = SelectionReport::new(&sel);
         let widths = sel.widths.clone();
-        (sel.identification, chosen, sel.model, Some((report, widths)))
+        (
+            sel.identification,
+            chosen,
+            sel.model,
+            Some((report, widths)),
+        )
     } else {
         let id = identify(&core, &data, &settings).map_err(error)?;
         (id, settings, core, None)

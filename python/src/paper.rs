@@ -79,8 +79,13 @@ pub fn spray<'py>(
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_sigma(sigma)?;
-    let exp = paper::spray(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
-        .map_err(error)?;
+    let exp = paper::spray(
+        samples,
+        noise_std,
+        paper::gaussian(sigma).map_err(error)?,
+        seed,
+    )
+    .map_err(error)?;
     experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
 }
 
@@ -95,8 +100,13 @@ pub fn multi_input<'py>(
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_sigma(sigma)?;
-    let exp = paper::multi_input(samples, noise_std, paper::gaussian(sigma).map_err(error)?, seed)
-        .map_err(error)?;
+    let exp = paper::multi_input(
+        samples,
+        noise_std,
+        paper::gaussian(sigma).map_err(error)?,
+        seed,
+    )
+    .map_err(error)?;
     experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
 }
 

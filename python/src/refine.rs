@@ -180,8 +180,8 @@ fn run(
         beta: result.beta,
         seconds: result.seconds,
     });
-    let estimate = Estimate::from_identification(&result.model, &id, &data, &chosen)
-        .map_err(error)?;
+    let estimate =
+        Estimate::from_identification(&result.model, &id, &data, &chosen).map_err(error)?;
     let provenance = Provenance {
         workflow: "refine".into(),
         ..estimate.provenance().clone()
