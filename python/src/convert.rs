@@ -8,8 +8,9 @@ use pyo3::types::{PyDict, PyDictMethods};
 use structid_core::{Data, InitialState, Signal, SolverChoice};
 use structid_io::{DispersionSpec, ErrorChain, ModelFile};
 
+// Named `structid.StructidError`, the name users import it under.
 pyo3::create_exception!(
-    _structid,
+    structid,
     StructidError,
     pyo3::exceptions::PyValueError,
     "An error of the structid library: bad input, a model that cannot be identified as posed, \

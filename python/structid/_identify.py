@@ -184,17 +184,17 @@ def _fit(model: Model, out: Dict[str, Any]) -> Fit:
 def load(directory: Union[str, os.PathLike]) -> Fit:
     """Reads a result directory written by :meth:`Fit.save` or by ``structid identify --out``:
     the estimate, ŵ and ê (estimate.csv), report.json and the model (model.toml, else the
-    report's model file). Maps are evaluated on the grid of the report's z ranges; bands are
-    not kept in files (``std`` is None)."""
+    report's model file). Maps are evaluated on the grid of the report's z ranges; the
+    samples' z and the bands are not kept in the files (``z`` is empty, ``std`` is None)."""
     d = os.fspath(directory)
     estimate = Estimate.from_file(os.path.join(d, "estimate.json"))
     with open(os.path.join(d, "report.json"), encoding="utf-8") as f:
         report = json.load(f)
     model_path = os.path.join(d, "model.toml")
     if not os.path.exists(model_path):
-        model_path = report.get("model_file") or ""
-        if model_path and not os.path.isabs(model_path) and not os.path.exists(model_path):
-            model_path = os.path.join(d, model_path)
+        # A directory of `structid identify`: the model file it was run with.
+        model_path = (report.get("reproduction") or {}).get("model_file_absolute") \
+            or report.get("model_file") or model_path
     model = Model.from_file(model_path)
     cols = _structid.read_columns(os.path.join(d, "estimate.csv"))
     blocks = {b["output"]: b["name"] for b in model.blocks}

@@ -92,7 +92,8 @@ class Model:
         (Hammerstein), ``"output"`` (Wiener), ``"output-feedback"``, ``"rate-feedback"``, or
         ``"lti"`` (no map). ``num`` is one numerator, or one per input; ``inputs`` and
         ``output`` name the data columns (default ``u`` or ``u0, u1, …`` and ``y``)."""
-        nums = [list(map(float, num))] if np.ndim(num) == 1 else [list(map(float, n)) for n in num]
+        nested = len(num) > 0 and np.ndim(num[0]) == 1
+        nums = [list(map(float, n)) for n in num] if nested else [list(map(float, num))]
         return cls(_structid.Model.structure(
             site, nums, [float(d) for d in den], _dispersion(dispersion), name, sample_time,
             None if inputs is None else list(inputs), output))

@@ -2,7 +2,7 @@
 //!
 //! Creates a virtual environment under `target/python-venv`, installs maturin, numpy and
 //! pytest into it from PyPI, builds the extension once in release mode (`maturin develop
-//! --release`, into `target/python`) and runs `python/tests` with pytest, which compares the
+//! --release`, into `target/python`; `target` is `$CARGO_TARGET_DIR` when set) and runs `python/tests` with pytest, which compares the
 //! bindings with this crate's `structid` binary on the same files. Every step that fails
 //! fails the test with its output: a machine without Python 3 or without access to PyPI
 //! fails here rather than skipping the bindings silently.
@@ -61,7 +61,9 @@ fn python() -> String {
 #[test]
 fn python_bindings_pass_their_tests() {
     let root = workspace_root();
-    let target = root.join("target");
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .filter(|d| !d.is_empty())
+        .map_or_else(|| root.join("target"), PathBuf::from);
     let venv = target.join("python-venv");
     let bin = venv.join(if cfg!(windows) { "Scripts" } else { "bin" });
     let venv_python = bin.join(if cfg!(windows) {
