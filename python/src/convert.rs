@@ -62,7 +62,7 @@ pub fn vector<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
 /// The record a model file's `[signals]` names, from named columns, with the checks and
 /// messages of a data table ([`DataTable::new`], then [`ModelFile::select_data`]) in one pass
 /// over the samples: at L = 10⁶ the table's own copies would cost a tenth of a feature solve.
-pub fn record(mf: &ModelFile, named: Vec<(String, Vec<f64>)>) -> PyResult<Data> {
+pub fn record(mf: &ModelFile, mut named: Vec<(String, Vec<f64>)>) -> PyResult<Data> {
     let len = named.first().map_or(0, |(_, c)| c.len());
     for (name, col) in &named {
         if col.len() != len {
@@ -79,31 +79,56 @@ pub fn record(mf: &ModelFile, named: Vec<(String, Vec<f64>)>) -> PyResult<Data> 
             )));
         }
     }
-    let select = |names: &[String]| -> PyResult<Signal> {
-        let mut out = Vec::with_capacity(len * names.len());
-        let cols = names
+    let signals = &mf.signals;
+    let uses = |n: &String| {
+        signals
+            .u
+            .iter()
+            .chain(&signals.y)
+            .chain(signals.z.iter().flatten())
+            .filter(|m| *m == n)
+            .count()
+    };
+    let mut select = |names: &[String]| -> PyResult<Signal> {
+        let index = names
             .iter()
             .map(|n| {
                 named
                     .iter()
-                    .find(|(m, _)| m == n)
-                    .map(|(_, c)| c.as_slice())
+                    .position(|(m, _)| m == n)
                     .ok_or_else(|| invalid(format!("no column `{n}` among the data given")))
             })
             .collect::<PyResult<Vec<_>>>()?;
-        for k in 0..len {
-            out.extend(cols.iter().map(|c| c[k]));
+        match index.as_slice() {
+            [] => Ok(Signal::zeros(len, 0)),
+            // One channel is its column as it is: no copy unless another signal reads it too.
+            [i] if uses(&named[*i].0) == 1 => {
+                Signal::new(1, std::mem::take(&mut named[*i].1)).map_err(error)
+            }
+            _ => {
+                let mut out = Vec::with_capacity(len * index.len());
+                for k in 0..len {
+                    out.extend(index.iter().map(|&i| named[i].1[k]));
+                }
+                Signal::new(index.len(), out).map_err(error)
+            }
         }
-        if names.is_empty() {
-            return Ok(Signal::zeros(len, 0));
-        }
-        Signal::new(names.len(), out).map_err(error)
     };
-    let data = Data::new(select(&mf.signals.u)?, select(&mf.signals.y)?).map_err(error)?;
-    match &mf.signals.z {
+    let u = select(&signals.u)?;
+    let y = select(&signals.y)?;
+    let data = Data::new(u, y).map_err(error)?;
+    match &signals.z {
         Some(z) => data.with_z(select(z)?).map_err(error),
         None => Ok(data),
     }
+}
+
+/// A signal as an L × n numpy array, without copying its samples.
+pub fn into_array(py: Python<'_>, s: Signal) -> Bound<'_, PyArray2<f64>> {
+    let shape = (s.len(), s.channels());
+    Array2::from_shape_vec(shape, s.into_vec())
+        .expect("a signal is len × channels values")
+        .into_pyarray(py)
 }
 
 /// `zero` or `estimate`.

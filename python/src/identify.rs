@@ -174,10 +174,13 @@ pub(crate) struct Outcome {
 
 impl Outcome {
     /// The dictionary `structid._identify._fit` reads.
-    pub(crate) fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    pub(crate) fn into_dict(mut self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         let d = PyDict::new(py);
-        d.set_item("w_hat", convert::array(py, &self.id.w_hat))?;
-        d.set_item("e_hat", convert::array(py, &self.id.e_hat))?;
+        // ŵ and ê move into numpy (bands need only the blocks and the posterior).
+        let w_hat = std::mem::replace(&mut self.id.w_hat, Signal::zeros(0, 0));
+        let e_hat = std::mem::replace(&mut self.id.e_hat, Signal::zeros(0, 0));
+        d.set_item("w_hat", convert::into_array(py, w_hat))?;
+        d.set_item("e_hat", convert::into_array(py, e_hat))?;
         d.set_item("maps", maps(py, &self.id)?)?;
         d.set_item("report", self.report)?;
         d.set_item("beta", self.beta)?;
