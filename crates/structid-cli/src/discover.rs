@@ -640,19 +640,26 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     }
     // One effect: the discovery itself. Several: the iteration, reported through its last
     // adopted step (whose nominal model carries the effects of the steps before it).
-    let (d, effects) = if a.effects == 1 {
-        (discover(&nominal, &est.data, &val.data, &settings)?, None)
-    } else {
-        let effects = discover_effects(
-            &nominal,
-            &est.data,
-            &val.data,
-            &settings,
-            &EffectsSettings::default().with_max_effects(a.effects)?,
-        )?;
-        let at = effects.steps.iter().rposition(|s| s.adopted).unwrap_or(0);
-        (effects.steps[at].discovery.clone(), Some((effects, at)))
+    let pb = crate::progress::bar(Some(0), "locations identified");
+    let observed = settings.with_progress(crate::progress::observer(&pb));
+    let run = || -> Result<_, CliError> {
+        Ok(if a.effects == 1 {
+            (discover(&nominal, &est.data, &val.data, &observed)?, None)
+        } else {
+            let effects = discover_effects(
+                &nominal,
+                &est.data,
+                &val.data,
+                &observed,
+                &EffectsSettings::default().with_max_effects(a.effects)?,
+            )?;
+            let at = effects.steps.iter().rposition(|s| s.adopted).unwrap_or(0);
+            (effects.steps[at].discovery.clone(), Some((effects, at)))
+        })
     };
+    let outcome = run();
+    pb.finish_and_clear();
+    let (d, effects) = outcome?;
     // The nominal model and file of the reported step: the given ones, or those of the
     // augmented model of the step before it.
     let mut step_file = mf.clone();

@@ -371,6 +371,10 @@ fn reproduction(
     }
 }
 
+/// Records longer than this show a spinner while they are identified (the exact solver is
+/// cubic in the length and takes minutes beyond it).
+const LONG_SOLVE_SAMPLES: usize = 5000;
+
 /// Runs `structid identify`.
 pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
@@ -438,12 +442,17 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
             Some(v) => Some(mf.select_data(&crate::data::read_table(v)?)?),
             None => None,
         };
+        let pb = crate::progress::bar(None, "β trials");
+        pb.set_message(format!("selecting by {}", criterion.describe()));
         let how = SelectionSettings::builder()
             .criterion(criterion)
             .tune_beta(auto_beta)
             .tune_sigma(auto_sigma)
+            .progress(crate::progress::observer(&pb))
             .build()?;
-        let sel = select(&model, &data, validation.as_ref(), &settings, &how)?;
+        let sel = select(&model, &data, validation.as_ref(), &settings, &how);
+        pb.finish_and_clear();
+        let sel = sel?;
         let chosen = settings.with_beta(sel.beta)?;
         let report = SelectionReport::new(&sel);
         let widths: Vec<(String, f64)> = if auto_sigma {
@@ -458,7 +467,16 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         };
         (sel.identification, chosen, Some((report, widths)))
     } else {
-        (identify(&model, &data, &settings)?, settings, None)
+        // One solve reports nothing on its way; above this size it takes long enough that a
+        // terminal should show it is running.
+        let pb = if data.len() > LONG_SOLVE_SAMPLES {
+            crate::progress::spinner(format!("identifying from {} samples", data.len()))
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        let id = identify(&model, &data, &settings);
+        pb.finish_and_clear();
+        (id?, settings, None)
     };
     // An iterate that stopped at a limit is written all the same, its status and the
     // solver's warning in report.json, and then reported as a runtime failure: the run is

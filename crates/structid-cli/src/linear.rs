@@ -8,7 +8,7 @@ use structid_core::Site;
 use structid_io::{BlockSpec, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames};
 use structid_linear::{
     ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx, oe,
-    select_orders,
+    select_orders_observed,
 };
 use structid_lti::Signal;
 
@@ -356,13 +356,20 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             };
             let grid = grid(&a);
             // The free part is selected on the differenced output.
-            let sel = select_orders(
+            let pb = crate::progress::bar(Some(0), "candidate orders");
+            let sel = select_orders_observed(
                 &u,
                 &differenced(&y, a.integrators)?,
                 &grid,
                 &criterion,
                 &arx_settings,
-            )?;
+                &|done, total| {
+                    pb.set_length(total);
+                    pb.set_position(done);
+                },
+            );
+            pb.finish_and_clear();
+            let sel = sel?;
             let note = format!(
                 "orders selected by {} over {} candidates",
                 criterion.name(),

@@ -36,6 +36,7 @@ mod figures;
 mod identify;
 mod input;
 mod linear;
+mod progress;
 mod refine;
 mod simulate;
 mod staticness;

@@ -296,6 +296,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         .initial_state(initial_state)
         .posterior(!a.no_bands)
         .build()?;
+    let pb = crate::progress::bar(Some(a.iterations as u64), "alternations");
     let selection = if auto_beta || auto_sigma {
         Some(
             SelectionSettings::builder()
@@ -305,6 +306,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
                 })
                 .tune_beta(auto_beta)
                 .tune_sigma(auto_sigma)
+                .progress(crate::progress::message_observer(&pb, "first pass"))
                 .build()?,
         )
     } else {
@@ -325,6 +327,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         .selection(selection)
         .oe(oe.build()?)
         .settle(settle)
+        .progress(crate::progress::observer(&pb))
         .build()?;
     let dispersion = model.blocks()[0].dispersion.clone();
     let r = refine(
@@ -334,7 +337,9 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         &data,
         validation.as_ref(),
         &settings,
-    )?;
+    );
+    pb.finish_and_clear();
+    let r = r?;
 
     // The refined model file: the new linear part, the width actually used.
     let mut refined = mf.clone();

@@ -84,6 +84,7 @@
 //! | [`estimate`], [`stored`] | the fitted model as a value and the stored forms of maps |
 //! | [`refine`] | alternating refinement of an uncertain linear part |
 //! | [`paper`], [`scenarios`] | the paper's examples and test scenarios |
+//! | [`progress`] | observers of long work (selection trials, refinement alternations) |
 //!
 //! The flat module paths of earlier versions (`structid_core::kernel`, `::lft`, `::hyperparameters`,
 //! …) remain as aliases of their new homes.
@@ -107,6 +108,7 @@ pub mod identify;
 pub mod initial_state;
 pub mod model;
 pub mod paper;
+pub mod progress;
 pub mod refine;
 pub mod scenarios;
 pub mod selection;

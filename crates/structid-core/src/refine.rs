@@ -84,6 +84,7 @@ use crate::initial_state::estimate_initial_state;
 use crate::interpolant::Interpolant;
 use crate::lft::Lft;
 use crate::model::{Data, Model, NonlinearBlock};
+use crate::progress::Progress;
 use crate::simulate::MapBinding;
 use crate::structure::{self, Site};
 
@@ -648,6 +649,7 @@ pub struct RefineSettings {
     selection: Option<SelectionSettings>,
     oe: OeSettings,
     settle: usize,
+    progress: Progress,
 }
 
 impl Default for RefineSettings {
@@ -659,6 +661,7 @@ impl Default for RefineSettings {
             selection: Some(SelectionSettings::default()),
             oe: default_oe(),
             settle: 0,
+            progress: Progress::none(),
         }
     }
 }
@@ -711,6 +714,11 @@ impl RefineSettings {
     pub fn settle(&self) -> usize {
         self.settle
     }
+
+    /// The observer told after each alternation.
+    pub fn progress(&self) -> &Progress {
+        &self.progress
+    }
 }
 
 /// Builder of [`RefineSettings`].
@@ -754,6 +762,14 @@ impl RefineSettingsBuilder {
     /// Leading validation samples that settle the state and are not scored.
     pub fn settle(mut self, n: usize) -> Self {
         self.inner.settle = n;
+        self
+    }
+
+    /// An observer told after each alternation: `(alternations done, Some(max_iterations))`
+    /// (default none). The first pass's selection reports its trials through the selection
+    /// settings' own observer.
+    pub fn progress(mut self, p: Progress) -> Self {
+        self.inner.progress = p;
         self
     }
 
@@ -953,6 +969,9 @@ pub fn refine(
         };
         let better = best.as_ref().is_none_or(|(_, s, ..)| score < *s);
         let last = it + 1 == settings.max_iterations;
+        settings
+            .progress
+            .report(it as u64 + 1, Some(settings.max_iterations as u64));
         if !improved || last {
             if !improved {
                 stop_reason = if validation.is_some() {

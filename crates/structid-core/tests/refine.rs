@@ -403,3 +403,56 @@ fn auto_uses_the_feature_solver_when_the_features_are_few() {
     assert!(reason.contains("the feature solver"), "{reason}");
     assert!(!reason.contains("  "), "stray spaces: {reason:?}");
 }
+
+/// The progress observer hears every alternation, with the largest number as the total.
+#[test]
+fn refinement_reports_each_alternation() {
+    use std::sync::{Arc as SArc, Mutex};
+    use structid_core::progress::Progress;
+    let g = second_order(0.9, 0.4, [0.2, 0.1]);
+    let structure = LinearStructure::input("actuator");
+    let lft = structure.lft(&g).unwrap();
+    let sat = |z: &[f64]| z[0].tanh();
+    let u = input(600, 1.5, 5);
+    let y = lft
+        .simulate(
+            &[MapBinding {
+                inputs: &[0],
+                output: 0,
+                map: &sat,
+            }],
+            &u,
+            None,
+            None,
+        )
+        .unwrap()
+        .y;
+    let heard = SArc::new(Mutex::new(Vec::new()));
+    let h = SArc::clone(&heard);
+    let base = settings(1e-8, InitialState::Zero, 4);
+    let observed = RefineSettings::builder()
+        .max_iterations(base.max_iterations())
+        .tolerance(0.0)
+        .identify(base.identify().clone())
+        .selection(None)
+        .progress(Progress::new(move |done, total| {
+            h.lock().unwrap().push((done, total))
+        }))
+        .build()
+        .unwrap();
+    let wrong = second_order(0.8, 0.5, [0.3, 0.0]);
+    let out = refine(
+        &structure,
+        &wrong,
+        dispersion(&u),
+        &Data::new(u, y).unwrap(),
+        None,
+        &observed,
+    )
+    .unwrap();
+    let heard = heard.lock().unwrap();
+    let expected: Vec<(u64, Option<u64>)> = (1..=out.iterations.len() as u64)
+        .map(|i| (i, Some(4)))
+        .collect();
+    assert_eq!(*heard, expected);
+}

@@ -113,7 +113,9 @@ pub use levenberg_marquardt::{
 pub use orders::Orders;
 pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, output_error};
 pub use polynomial::PolynomialModel;
-pub use selection::{OrderCriterion, OrderGrid, OrderSelection, select_orders};
+pub use selection::{
+    OrderCriterion, OrderGrid, OrderSelection, select_orders, select_orders_observed,
+};
 
 #[cfg(test)]
 mod properties;

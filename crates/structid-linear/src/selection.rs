@@ -213,6 +213,32 @@ pub fn select_orders(
     criterion: &OrderCriterion,
     settings: &ArxSettings,
 ) -> Result<OrderSelection, LinearError> {
+    select_orders_observed(u, y, grid, criterion, settings, &|_, _| {})
+}
+
+/// [`select_orders`], telling `progress(done, total)` as each point of the grid is fitted (a
+/// grid holds up to 2700 fits; the command-line tool draws a progress bar from it).
+///
+/// ```
+/// use structid_linear::{ArxSettings, OrderCriterion, OrderGrid, select_orders_observed};
+/// use structid_lti::Signal;
+/// let u = Signal::from_fn(200, 1, |k, _| ((k * 7919) % 17) as f64 - 8.0);
+/// let y = Signal::from_fn(200, 1, |k, _| if k > 0 { u.get(k - 1, 0) } else { 0.0 });
+/// let grid = OrderGrid { na: 1..=2, nb: 1..=2, nk: 1..=1 };
+/// let last = std::sync::Mutex::new((0, 0));
+/// let progress = |done, total| *last.lock().unwrap() = (done, total);
+/// select_orders_observed(&u, &y, &grid, &OrderCriterion::Bic, &ArxSettings::default(), &progress)
+///     .unwrap();
+/// assert_eq!(*last.lock().unwrap(), (4, 4));
+/// ```
+pub fn select_orders_observed(
+    u: &Signal,
+    y: &Signal,
+    grid: &OrderGrid,
+    criterion: &OrderCriterion,
+    settings: &ArxSettings,
+    progress: &dyn Fn(u64, u64),
+) -> Result<OrderSelection, LinearError> {
     if grid.is_empty() {
         return Err(LinearError::param(
             "grid",
@@ -233,9 +259,14 @@ pub fn select_orders(
     let start = na_max.max((nk_max + nb_max).saturating_sub(1));
     let mut rows: Vec<(Orders, f64, f64, PolynomialModel)> = Vec::new(); // orders, value, SE, model
     let mut last_error = None;
+    let total =
+        (grid.na.clone().count() * grid.nb.clone().count() * grid.nk.clone().count()) as u64;
+    let mut done = 0u64;
     for na in grid.na.clone() {
         for nb in grid.nb.clone() {
             for nk in grid.nk.clone() {
+                done += 1;
+                progress(done, total);
                 let orders = Orders {
                     na,
                     nb: vec![nb; inputs],

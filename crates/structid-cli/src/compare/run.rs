@@ -4,9 +4,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use structid_core::metrics::{centred_rms_difference, rms_difference};
 use structid_core::{Identification, IdentifySettings, Signal, identify};
@@ -285,17 +284,6 @@ fn run_case(ctx: &Context<'_>, case: &Case) -> CaseRecord {
     rec
 }
 
-fn progress_bar(len: usize) -> ProgressBar {
-    let pb = ProgressBar::with_draw_target(Some(len as u64), ProgressDrawTarget::stderr());
-    if let Ok(style) = ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} cases, {eta} left  {wide_msg}",
-    ) {
-        pb.set_style(style);
-    }
-    pb.enable_steady_tick(Duration::from_millis(250));
-    pb
-}
-
 fn check_output_dir(guard: &OutputGuard, out: &Path, resume: bool) -> Result<(), CliError> {
     guard.check_out_dir(out, ["results.csv", "results.md"])?;
     if !resume && !case_files(out)?.is_empty() {
@@ -410,7 +398,7 @@ pub fn run(opts: RunOptions) -> Result<(), CliError> {
     );
     let skipped = done.len();
     let state = Mutex::new(done);
-    let pb = progress_bar(pending.len());
+    let pb = crate::progress::bar(Some(pending.len() as u64), "cases");
     let result: Result<(), CliError> = pool.install(|| {
         pending.par_iter().try_for_each(|c| {
             let rec = run_case(&ctx, c);

@@ -91,6 +91,8 @@ pub fn select(
     let first_width = |w: &[Option<f64>]| w.iter().flatten().next().copied();
 
     let mut curve = Vec::new();
+    // Trials fitted so far, for the progress observer.
+    let mut trials = 0u64;
     // Trials whose criterion could not be evaluated (β, why): skipped, and reported.
     let mut skipped: Vec<(f64, String)> = Vec::new();
     let method: String;
@@ -159,7 +161,10 @@ pub fn select(
         let mut first_failure: Option<Error> = None;
         let mut eval = |lg: f64| -> Result<f64> {
             let beta = 10f64.powf(lg);
-            match trial(score.score(beta))? {
+            let scored = trial(score.score(beta))?;
+            trials += 1;
+            selection.progress.report(trials, None);
+            match scored {
                 Ok((value, s2)) => {
                     curve.push(Trial { beta, sigma, value });
                     noise.push((lg, s2));

@@ -1,6 +1,7 @@
 //! What selection chooses by and within which bounds: the criterion and the settings.
 
 use crate::error::{Error, Result, positive_finite};
+use crate::progress::Progress;
 
 /// The criterion that chooses the hyperparameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -65,6 +66,8 @@ pub struct SelectionSettings {
     pub(super) widen_decades: f64,
     pub(super) sigma_decades: f64,
     pub(super) tolerance: f64,
+    #[serde(skip)]
+    pub(super) progress: Progress,
 }
 
 impl Default for SelectionSettings {
@@ -78,6 +81,7 @@ impl Default for SelectionSettings {
             widen_decades: 6.0,
             sigma_decades: 2.0,
             tolerance: 0.02,
+            progress: Progress::none(),
         }
     }
 }
@@ -142,6 +146,27 @@ impl SelectionSettings {
     pub fn tolerance(&self) -> f64 {
         self.tolerance
     }
+
+    /// The observer told after each trial fit: `(trials done, None)`, as the search stops
+    /// when it has converged.
+    pub fn progress(&self) -> &Progress {
+        &self.progress
+    }
+
+    /// The same settings with another observer.
+    ///
+    /// ```
+    /// use structid_core::hyperparameters::SelectionSettings;
+    /// use structid_core::progress::Progress;
+    /// let s = SelectionSettings::default().with_progress(Progress::new(|_, _| {}));
+    /// assert!(s.progress().is_active());
+    /// ```
+    pub fn with_progress(&self, progress: Progress) -> Self {
+        Self {
+            progress,
+            ..self.clone()
+        }
+    }
 }
 
 /// Builder of [`SelectionSettings`]; [`build`](Self::build) validates.
@@ -197,6 +222,12 @@ impl SelectionSettingsBuilder {
     /// Final bracket width in decades (default 0.02).
     pub fn tolerance(mut self, t: f64) -> Self {
         self.inner.tolerance = t;
+        self
+    }
+
+    /// An observer told after each trial (default none); see [`SelectionSettings::progress`].
+    pub fn progress(mut self, p: Progress) -> Self {
+        self.inner.progress = p;
         self
     }
 

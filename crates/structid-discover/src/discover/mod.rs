@@ -503,12 +503,15 @@ fn discover_with(
             other => other,
         }
     };
-    for &location in &locations {
+    for (i, &location) in locations.iter().enumerate() {
         let t = Instant::now();
         match identify_at(location, settings) {
             Ok(f) => fitted.push(f),
             Err(e) => failed.push(failure(location, t, &e)),
         }
+        settings
+            .progress
+            .report(i as u64 + 1, Some(locations.len() as u64));
     }
     let by_validation = |v: &mut Vec<Fitted>| {
         v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms))

@@ -1,5 +1,6 @@
 //! Settings of [`discover`](super::discover) and their builder.
 
+use structid_core::progress::Progress;
 use structid_core::validation::Scoring;
 use structid_core::{Error, Result};
 
@@ -24,6 +25,7 @@ pub struct DiscoverSettings {
     pub(super) settle: usize,
     pub(super) scoring: Option<Scoring>,
     pub(super) refine_nominal: bool,
+    pub(super) progress: Progress,
 }
 
 impl Default for DiscoverSettings {
@@ -47,11 +49,33 @@ impl Default for DiscoverSettings {
             settle: 0,
             scoring: None,
             refine_nominal: true,
+            progress: Progress::none(),
         }
     }
 }
 
 impl DiscoverSettings {
+    /// The same settings with another progress observer (see
+    /// [`DiscoverSettingsBuilder::progress`]).
+    ///
+    /// ```
+    /// use structid_core::progress::Progress;
+    /// use structid_discover::discover::DiscoverSettings;
+    /// let s = DiscoverSettings::default().with_progress(Progress::new(|_, _| {}));
+    /// assert!(s.progress().is_active());
+    /// ```
+    pub fn with_progress(&self, progress: Progress) -> Self {
+        Self {
+            progress,
+            ..self.clone()
+        }
+    }
+
+    /// The progress observer.
+    pub fn progress(&self) -> &Progress {
+        &self.progress
+    }
+
     /// A builder starting from the defaults.
     ///
     /// ```
@@ -255,6 +279,14 @@ impl DiscoverSettingsBuilder {
     /// around a map at the wrong location absorbs part of the effect too.
     pub fn refine_nominal(mut self, on: bool) -> Self {
         self.inner.refine_nominal = on;
+        self
+    }
+
+    /// An observer told after each candidate location is identified: `(locations done,
+    /// Some(locations))` (default none). A discovery then names, refines and checks the best
+    /// one, which it does not count.
+    pub fn progress(mut self, p: Progress) -> Self {
+        self.inner.progress = p;
         self
     }
 
