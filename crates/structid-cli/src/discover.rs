@@ -19,7 +19,7 @@ use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
 use structid_discover::report::{self, Record, ReportContext, TimeAxis};
 use structid_io::{ModelFile, OutputGuard, estimate_json};
-use structid_plot::{Chart, Series, render_chart_svg, render_grid_svg};
+use structid_plot::{Chart, Series, decimate_min_max, render_chart_svg, render_grid_svg};
 
 use crate::error::CliError;
 
@@ -343,6 +343,10 @@ fn settings(
 // ---------------------------------------------------------------------------------------------
 // Figures
 
+/// Buckets of the thinned lines of the figures ([`decimate_min_max`]): about one per pixel
+/// column.
+const PLOT_BUCKETS: usize = 1000;
+
 /// Every `step`-th index so that at most [`MAX_PLOT_POINTS`] remain, plus the last one.
 fn plot_indices(len: usize) -> Vec<usize> {
     let step = len.div_ceil(MAX_PLOT_POINTS).max(1);
@@ -370,7 +374,9 @@ fn residual_svg(g: &Gap, band: f64, time: &TimeAxis) -> Result<String, CliError>
     idx.sort_unstable();
     idx.dedup();
     let t = pick(&time.values, &idx);
-    let r = pick(&g.residual, &idx);
+    // The residual itself thinned to its envelope, so that its peaks show however long the
+    // record; the band and the shading need only the sampled times.
+    let (tr, r) = decimate_min_max(&time.values, &g.residual, PLOT_BUCKETS);
     let limit = band * g.noise_std;
     let upper = vec![limit; t.len()];
     let lower = vec![-limit; t.len()];
@@ -403,7 +409,7 @@ fn residual_svg(g: &Gap, band: f64, time: &TimeAxis) -> Result<String, CliError>
         ));
     }
     chart = chart
-        .with(Series::line("residual", &t, &r))
+        .with(Series::line("residual", &tr, &r))
         .with(Series::line(format!("+{band}·σ̂"), &t, &upper))
         .with(Series::line(format!("−{band}·σ̂"), &t, &lower));
     Ok(render_chart_svg(&chart)?)
@@ -514,13 +520,14 @@ fn before_after_svg(
     after: &Gap,
     shrink: f64,
 ) -> Result<String, CliError> {
-    let idx = plot_indices(before.simulated.len());
-    let t = pick(&val.time.values, &idx);
-    let y = pick(&val.data.y().channel(0), &idx);
-    let nominal = pick(&before.simulated, &idx);
-    let augmented = pick(&after.simulated, &idx);
-    let r0 = pick(&before.residual, &idx);
-    let r1 = pick(&after.residual, &idx);
+    let n = before.simulated.len();
+    let time = &val.time.values[..n.min(val.time.values.len())];
+    let thin = |v: &[f64]| decimate_min_max(time, v, PLOT_BUCKETS);
+    let y = thin(&val.data.y().channel(0));
+    let nominal = thin(&before.simulated);
+    let augmented = thin(&after.simulated);
+    let r0 = thin(&before.residual);
+    let r1 = thin(&after.residual);
     let charts = [
         Chart::new(
             format!(
@@ -530,9 +537,9 @@ fn before_after_svg(
             val.time.label,
             "y",
         )
-        .with(Series::line("measured y", &t, &y))
-        .with(Series::line("nominal model", &t, &nominal))
-        .with(Series::line("augmented model", &t, &augmented)),
+        .with(Series::line("measured y", &y.0, &y.1))
+        .with(Series::line("nominal model", &nominal.0, &nominal.1))
+        .with(Series::line("augmented model", &augmented.0, &augmented.1)),
         Chart::new(
             format!(
                 "Residuals y − ŷ (RMS {:.3e} → {:.3e}, {:.1}× smaller)",
@@ -541,8 +548,8 @@ fn before_after_svg(
             val.time.label,
             "y − ŷ",
         )
-        .with(Series::line("nominal model", &t, &r0))
-        .with(Series::line("augmented model", &t, &r1)),
+        .with(Series::line("nominal model", &r0.0, &r0.1))
+        .with(Series::line("augmented model", &r1.0, &r1.1)),
     ];
     Ok(render_grid_svg(&charts, 1, (1000, 400))?)
 }
