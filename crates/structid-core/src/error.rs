@@ -158,6 +158,12 @@ pub enum Error {
     #[error("numerical failure: {0}")]
     Numerical(String),
 
+    /// A validation selection of β ended on a bound of its search: the data support no map
+    /// (upper bound: the flattest map validated best) or only one that follows the noise
+    /// (lower bound). Not a numerical failure: the numbers are right, the map is not usable.
+    #[error("β on its search bound: {0}")]
+    BetaAtBound(String),
+
     /// The optimisation problem has no solution: the data cannot be explained by the model.
     #[error("the {solver} solver found the problem infeasible: {detail}")]
     Infeasible {

@@ -155,6 +155,10 @@ pub const PAST_DISTURBANCE_GAP: f64 = 3.0;
 /// explain beyond the random force the disturbance model already allows for.
 pub const PAST_DISTURBANCE_SHRINK: f64 = 1.5;
 
+/// Below this validation shrink, a confirmed block whose augmented model still misses by more
+/// than the noise explains only part of the gap, and the verdict says so.
+pub const PARTIAL_SHRINK: f64 = 2.0;
+
 /// The effect found at the best location.
 #[derive(Clone, Debug)]
 pub struct Finding {
@@ -507,7 +511,7 @@ fn discover_with(
         let t = Instant::now();
         match identify_at(location, settings) {
             Ok(f) => fitted.push(f),
-            Err(e) => failed.push(failure(location, t, &e)),
+            Err(e) => failed.push(failure(location, "", t, &e)),
         }
         settings
             .progress
@@ -615,7 +619,7 @@ fn discover_with(
             let t = Instant::now();
             match total_variation_fit(&h, est, val, settings) {
                 Ok(f) => fitted.push(f),
-                Err(e) => failed.push(failure(h.location, t, &e)),
+                Err(e) => failed.push(failure(h.location, "tv", t, &e)),
             }
         }
         by_validation(&mut fitted);
@@ -1079,7 +1083,20 @@ fn discover_with(
     if let Some(c) = cancelled {
         finding.remarks.push(c);
     }
-    let verdict = verdict_text(nominal, &validation_gap, &finding);
+    let mut verdict = verdict_text(nominal, &validation_gap, &finding);
+    // A block that closes a sliver of a large gap is a missing effect, but not the whole
+    // story: the verdict must not read as if the model were now complete.
+    let left = finding.augmented.validation_gap.rms / noise.std;
+    if finding.shrink < PARTIAL_SHRINK && left > settings.gap.noise_ratio {
+        let partial = format!(
+            "the block explains only part of the gap: the augmented model still misses the \
+             validation record by {left:.1}× the noise level σ̂ = {}; another effect, or a \
+             dynamic one, remains",
+            rms_text(noise.std)
+        );
+        verdict.push_str(&format!(". Only part of the gap: {partial}"));
+        finding.remarks.push(partial);
+    }
     Ok(Discovery {
         estimation_gap,
         validation_gap,
@@ -1227,10 +1244,12 @@ pub fn rms_text(v: f64) -> String {
     }
 }
 
-fn failure(location: Location, t: Instant, e: &Error) -> HypothesisResult {
+/// A hypothesis that could not be identified; `dispersion` names the estimator that was tried
+/// (`tv` for total variation, empty for the smooth estimate) so that reports label it.
+fn failure(location: Location, dispersion: &str, t: Instant, e: &Error) -> HypothesisResult {
     HypothesisResult {
         location,
-        dispersion: String::new(),
+        dispersion: dispersion.into(),
         beta: f64::NAN,
         beta_at_bound: None,
         sigma: None,

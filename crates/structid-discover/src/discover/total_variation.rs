@@ -93,7 +93,7 @@ fn failure_reason(sel: &Selection, selection: &SelectionSettings) -> Option<Erro
                  this location",
             ),
         };
-        Error::Numerical(format!(
+        Error::BetaAtBound(format!(
             "total variation: the validation selection of β hit the {bound} bound of its search \
              ({value:.0e}; selected β = {:.3e}, on the bound or on a plateau of the validation \
              error reaching it): {meaning}",
