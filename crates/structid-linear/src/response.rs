@@ -48,16 +48,7 @@ pub fn bode(
     frequencies: &[f64],
     covariance: Option<&DMatrix<f64>>,
 ) -> Result<Vec<BodePoint>, LinearError> {
-    if input >= model.inputs() {
-        return Err(LinearError::param(
-            "input",
-            format!(
-                "the model has {} input(s), not {}",
-                model.inputs(),
-                input + 1
-            ),
-        ));
-    }
+    check_input(model, input)?;
     let orders = model.orders();
     let theta = model.parameters();
     if let Some(c) = covariance
@@ -195,6 +186,13 @@ pub fn step_response(
     input: usize,
     len: usize,
 ) -> Result<Vec<f64>, LinearError> {
+    check_input(model, input)?;
+    let u = Signal::from_fn(len, model.inputs(), |_, c| f64::from(u8::from(c == input)));
+    model.simulate(&u)
+}
+
+/// An input index out of range is a parameter error naming how many inputs the model has.
+fn check_input(model: &PolynomialModel, input: usize) -> Result<(), LinearError> {
     if input >= model.inputs() {
         return Err(LinearError::param(
             "input",
@@ -205,8 +203,7 @@ pub fn step_response(
             ),
         ));
     }
-    let u = Signal::from_fn(len, model.inputs(), |_, c| f64::from(u8::from(c == input)));
-    model.simulate(&u)
+    Ok(())
 }
 
 #[cfg(test)]
