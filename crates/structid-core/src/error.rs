@@ -32,6 +32,21 @@ pub enum Error {
         found: String,
     },
 
+    /// One record of a multi-record data set is shorter than the linear block's order, so its
+    /// own start cannot be told apart from its dynamics.
+    #[error(
+        "record {record} (numbered from 1) has {len} sample(s), fewer than the {order} state(s) of the \
+         linear block; every record needs more samples than the model order (drop or merge that record)"
+    )]
+    RecordTooShort {
+        /// One-based record number, as a user counts the `--data` files.
+        record: usize,
+        /// Its number of samples.
+        len: usize,
+        /// The number of states n of the linear block.
+        order: usize,
+    },
+
     /// A data sample is NaN or infinite.
     #[error("non-finite value {value} in {signal} at sample {sample}, channel {channel}")]
     NonFiniteData {

@@ -910,6 +910,10 @@ pub fn refine(
     validation: Option<&Data>,
     settings: &RefineSettings,
 ) -> Result<Refinement> {
+    data.require_single_record("refinement of the linear block")?;
+    if let Some(v) = validation {
+        v.require_single_record("the validation record of the refinement")?;
+    }
     let t0 = Instant::now();
     // The integrators are those of the start for the whole alternation.
     let structure = &structure
@@ -1158,6 +1162,7 @@ pub fn refine_linear(
     data: &Data,
     settings: &RefineSettings,
 ) -> Result<LinearRefinement> {
+    data.require_single_record("refinement of the linear block")?;
     let t0 = Instant::now();
     let free = settings.identify.initial_state() == InitialState::Estimate;
     let fit = structure.estimate_linear_with_map(data, map, g, &settings.oe, free)?;

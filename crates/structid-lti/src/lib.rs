@@ -35,7 +35,8 @@
 //! - [`TransferFunction`] / [`Siso`]: transfer matrices in `q^-1`, their realisation and
 //!   simulation; [`realise_row`] / [`filter_row`]: the same for a common-denominator row
 //!   (the polynomial models of `structid-linear`);
-//! - [`LinearSystem`]: the operator trait used by the solvers;
+//! - [`LinearSystem`]: the operator trait used by the solvers; [`Recordwise`]: one operator
+//!   applied to several records, restarted from rest at each record;
 //! - [`DisturbanceSmoother`] (module [`smoother`]): the posterior mean of the inputs of a
 //!   system given exact outputs (disturbance smoother, zero or free initial state);
 //! - [`KalmanWhitener`] (module [`kalman`]): the whitening operator `W` of a noise path,
@@ -47,6 +48,7 @@ pub mod error;
 pub mod kalman;
 mod long;
 pub mod operator;
+pub mod records;
 mod riccati;
 pub mod signal;
 pub mod smoother;
@@ -60,6 +62,7 @@ pub use kalman::{
     KalmanWhitener, WhiteningOptions, WhiteningStream, steady_state_whitening_filter,
 };
 pub use operator::LinearSystem;
+pub use records::Recordwise;
 pub use signal::Signal;
 pub use smoother::{DisturbanceSmoother, SmoothReport, SmootherInitial};
 pub use state_space::{ContinuousStateSpace, StateSpace};

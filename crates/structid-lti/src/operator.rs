@@ -82,6 +82,12 @@ pub trait LinearSystem: Send + Sync {
         None
     }
 
+    /// The record-by-record operator this is, when it is one ([`crate::Recordwise`]): solvers
+    /// that stream records chunk by chunk restart the inner operator at each record.
+    fn as_recordwise(&self) -> Option<&crate::Recordwise> {
+        None
+    }
+
     /// Checked simulation from zero initial state: verifies that `u` has
     /// [`inputs`](LinearSystem::inputs) channels and only finite values, then returns the
     /// output signal (same length, [`outputs`](LinearSystem::outputs) channels).

@@ -47,6 +47,8 @@ pub struct Problem {
     free_response_is_state: bool,
     /// Output rows (sample-major, L·n_y) left out of the fit: cross-validation folds.
     held_out: Option<Arc<[bool]>>,
+    /// Where each record starts, then L (`[0, L]` for one record).
+    bounds: Vec<usize>,
 }
 
 impl Problem {
@@ -113,32 +115,89 @@ impl Problem {
             realisation: None,
             free_response_is_state: false,
             held_out: None,
+            bounds: vec![0, len],
         })
     }
 
     /// Builds the problem from a model and a record: checks the data, computes z (measured or
     /// through [`crate::Lft::compute_z`]), r = y − L_yu·u, and splits L_yw by block.
+    ///
+    /// With several records ([`Data::from_records`]) z and r are computed record by record and
+    /// the paths are applied record by record ([`structid_lti::Recordwise`]), each record from
+    /// rest: the operators are block diagonal, not those of the concatenated record. Every
+    /// record must then be at least as long as the model order ([`Error::RecordTooShort`]).
     pub fn from_model(model: &Model, data: &Data) -> Result<Self> {
         let lft = model.lft();
         data.check_against(lft)?;
-        let (z, z_source) = match data.z() {
-            Some(z) => (z.clone(), ZSource::Measured),
-            None => lft.compute_z(data.u(), data.y())?,
+        let bounds = data.record_bounds();
+        let several = bounds.len() > 2;
+        let (z, z_source, residual) = if several {
+            let order = lft.dims().states;
+            for (i, w) in bounds.windows(2).enumerate() {
+                if w[1] - w[0] < order {
+                    return Err(Error::RecordTooShort {
+                        record: i + 1,
+                        len: w[1] - w[0],
+                        order,
+                    });
+                }
+            }
+            let mut z_source = ZSource::Measured;
+            let (mut z_all, mut r_all) = (Vec::new(), Vec::new());
+            for (i, rec) in data.records().iter().enumerate() {
+                let z = match rec.z() {
+                    Some(z) => z.clone(),
+                    None => {
+                        let (z, source) = lft.compute_z(rec.u(), rec.y())?;
+                        if i == 0 {
+                            z_source = source;
+                        }
+                        z
+                    }
+                };
+                z_all.extend_from_slice(z.as_slice());
+                r_all.extend_from_slice(lft.residual(rec.u(), rec.y())?.as_slice());
+            }
+            let dims = lft.dims();
+            (
+                Signal::new(dims.z, z_all)?,
+                z_source,
+                Signal::new(dims.y, r_all)?,
+            )
+        } else {
+            let (z, z_source) = match data.z() {
+                Some(z) => (z.clone(), ZSource::Measured),
+                None => lft.compute_z(data.u(), data.y())?,
+            };
+            (z, z_source, lft.residual(data.u(), data.y())?)
         };
-        let residual = lft.residual(data.u(), data.y())?;
+        // A dynamic path restarts at each record; a static one (and one record) needs no wrapper.
+        let per_record = |sys: structid_lti::StateSpace| -> Result<Arc<dyn LinearSystem>> {
+            Ok(if several && sys.order() > 0 {
+                Arc::new(structid_lti::Recordwise::new(
+                    Arc::new(sys),
+                    bounds.to_vec(),
+                )?)
+            } else {
+                Arc::new(sys)
+            })
+        };
         let blocks = model
             .blocks()
             .iter()
-            .map(|b| ProblemBlock {
-                name: b.name.clone(),
-                output: b.output,
-                path: Arc::new(lft.t_yw_channel(b.output)),
-                z: z.select_channels(&b.inputs),
-                dispersion: Arc::clone(&b.dispersion),
+            .map(|b| {
+                Ok(ProblemBlock {
+                    name: b.name.clone(),
+                    output: b.output,
+                    path: per_record(lft.t_yw_channel(b.output))?,
+                    z: z.select_channels(&b.inputs),
+                    dispersion: Arc::clone(&b.dispersion),
+                })
             })
-            .collect();
-        let mut p = Self::new(residual, Arc::new(lft.t_ye()), blocks)?;
+            .collect::<Result<_>>()?;
+        let mut p = Self::new(residual, per_record(lft.t_ye())?, blocks)?;
         p.z_source = z_source;
+        p.bounds = bounds.to_vec();
         let m = lft.matrices();
         let (n, ny) = (lft.dims().states, lft.dims().y);
         let hcat = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>, rows: usize| {
@@ -217,7 +276,10 @@ impl Problem {
                 ak = &m.a * ak;
             }
         }
-        let len = data.len();
+        // One initial state per record: O is block diagonal, each record's block the first
+        // L_r·n_y rows of the free response over the longest record.
+        let bounds = data.record_bounds();
+        let longest = bounds.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
         let ny = lft.dims().y;
         let free = structid_lti::StateSpace::new(
             m.a.clone(),
@@ -225,14 +287,18 @@ impl Problem {
             m.cy.clone(),
             nalgebra::DMatrix::zeros(ny, 0),
         )?;
-        let mut o = faer::Mat::<f64>::zeros(len * ny, n);
-        let none = Signal::zeros(len, 0);
+        let records = bounds.len() - 1;
+        let mut o = faer::Mat::<f64>::zeros(data.len() * ny, n * records);
+        let none = Signal::zeros(longest, 0);
         for j in 0..n {
             let mut x0 = vec![0.0; n];
             x0[j] = 1.0;
             let (y, _) = free.simulate_from(&x0, &none)?;
-            for (i, v) in y.as_slice().iter().enumerate() {
-                o[(i, j)] = *v;
+            for (r, w) in bounds.windows(2).enumerate() {
+                let rows = (w[1] - w[0]) * ny;
+                for (i, v) in y.as_slice()[..rows].iter().enumerate() {
+                    o[(w[0] * ny + i, r * n + j)] = *v;
+                }
             }
         }
         let mut problem = problem.with_free_response(o)?;
@@ -305,6 +371,18 @@ impl Problem {
             mask.push(held);
         }
         Some(Some(mask))
+    }
+
+    /// Where each record starts, followed by L: `[0, L₁, …, L]`, `[0, L]` for one record. With
+    /// several records the operators restart at every record and an estimated initial state
+    /// has one block of n entries per record (the columns of [`Problem::free_response`]).
+    pub fn record_bounds(&self) -> &[usize] {
+        &self.bounds
+    }
+
+    /// Number of records.
+    pub fn record_count(&self) -> usize {
+        self.bounds.len() - 1
     }
 
     /// The free-response matrix O, when the initial state is estimated.

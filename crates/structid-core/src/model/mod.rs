@@ -162,14 +162,22 @@ impl Model {
     }
 }
 
-/// A measured record: known input u, measured output y and, optionally, measured z.
+/// Measured data: known input u, measured output y and, optionally, measured z, in one or
+/// several records.
+///
+/// Several records are separate experiments on the same system (MATLAB's multi-experiment
+/// `iddata`): each starts from its own initial state, so identification restarts the linear
+/// recursions at every record and, when the initial state is estimated, estimates one per
+/// record. [`Data::u`], [`Data::y`] and [`Data::z`] return the records stacked one after the
+/// other; [`Data::record_bounds`] says where each starts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Data {
     u: Signal,
     y: Signal,
     z: Option<Signal>,
+    /// Where each record starts, then the total length: `[0, L₁, …, L]`.
+    bounds: Vec<usize>,
 }
-
 fn check_finite(name: &str, s: &Signal) -> Result<()> {
     for k in 0..s.len() {
         for (c, &v) in s.sample(k).iter().enumerate() {
@@ -211,7 +219,139 @@ impl Data {
         }
         check_finite("u", &u)?;
         check_finite("y", &y)?;
-        Ok(Self { u, y, z: None })
+        let bounds = vec![0, y.len()];
+        Ok(Self {
+            u,
+            y,
+            z: None,
+            bounds,
+        })
+    }
+
+    /// Data of several records (experiments), each a [`Data`] of its own: same channel counts,
+    /// and either all or none with measured z. One record gives it back unchanged.
+    ///
+    /// ```
+    /// use structid_core::Data;
+    /// use structid_lti::Signal;
+    /// let rec = |len: usize| {
+    ///     let u = Signal::from_fn(len, 1, |k, _| k as f64);
+    ///     Data::new(u.clone(), u).unwrap()
+    /// };
+    /// let data = Data::from_records(vec![rec(10), rec(4)]).unwrap();
+    /// assert_eq!(data.len(), 14);
+    /// assert_eq!(data.record_bounds(), &[0, 10, 14]);
+    /// assert_eq!(data.records()[1], rec(4));
+    /// // Different channel counts are refused, naming the record.
+    /// let two = Data::new(Signal::zeros(5, 2), Signal::zeros(5, 1)).unwrap();
+    /// let e = Data::from_records(vec![rec(10), two]).unwrap_err();
+    /// assert!(e.to_string().contains("record 2"), "{e}");
+    /// ```
+    pub fn from_records(records: Vec<Data>) -> Result<Self> {
+        let Some(first) = records.first() else {
+            return Err(Error::InvalidStructure("no data record was given".into()));
+        };
+        for (i, r) in records.iter().enumerate().skip(1) {
+            let pairs = [
+                ("u", first.u.channels(), r.u.channels()),
+                ("y", first.y.channels(), r.y.channels()),
+            ];
+            for (name, expected, found) in pairs {
+                if expected != found {
+                    return Err(Error::DimensionMismatch {
+                        what: format!(
+                            "number of {name} channels in record {} (numbered from 1)",
+                            i + 1
+                        ),
+                        expected: format!("{expected} like record 1"),
+                        found: found.to_string(),
+                    });
+                }
+            }
+            match (&first.z, &r.z) {
+                (None, None) => {}
+                (Some(a), Some(b)) if a.channels() == b.channels() => {}
+                (a, b) => {
+                    let count = |z: &Option<Signal>| z.as_ref().map_or(0, Signal::channels);
+                    return Err(Error::DimensionMismatch {
+                        what: format!(
+                            "number of measured z channels in record {} (numbered from 1)",
+                            i + 1
+                        ),
+                        expected: format!("{} like record 1", count(a)),
+                        found: count(b).to_string(),
+                    });
+                }
+            }
+        }
+        let mut records = records;
+        if records.len() == 1 {
+            return Ok(records.pop().expect("one record"));
+        }
+        let stack = |part: &dyn Fn(&Data) -> &Signal| {
+            let channels = part(&records[0]).channels();
+            let values = records
+                .iter()
+                .flat_map(|r| part(r).as_slice().iter().copied())
+                .collect();
+            Signal::new(channels, values)
+        };
+        let u = stack(&|r| &r.u)?;
+        let y = stack(&|r| &r.y)?;
+        let z = match records[0].z {
+            Some(_) => Some(stack(&|r| r.z.as_ref().expect("checked above"))?),
+            None => None,
+        };
+        let mut bounds = vec![0];
+        for r in &records {
+            bounds.push(bounds.last().expect("non-empty") + r.len());
+        }
+        Ok(Self { u, y, z, bounds })
+    }
+
+    /// Where each record starts, followed by the total length: `[0, L₁, L₁ + L₂, …, L]`
+    /// (`[0, L]` for one record).
+    pub fn record_bounds(&self) -> &[usize] {
+        &self.bounds
+    }
+
+    /// Number of records (1 for [`Data::new`]).
+    pub fn record_count(&self) -> usize {
+        self.bounds.len() - 1
+    }
+
+    /// The records as separate [`Data`] (copies of the samples).
+    ///
+    /// ```
+    /// use structid_core::Data;
+    /// use structid_lti::Signal;
+    /// let d = Data::new(Signal::zeros(6, 1), Signal::zeros(6, 1)).unwrap();
+    /// assert_eq!(d.records(), vec![d.clone()]);
+    /// ```
+    pub fn records(&self) -> Vec<Data> {
+        if self.record_count() == 1 {
+            return vec![self.clone()];
+        }
+        self.bounds
+            .windows(2)
+            .map(|w| Data {
+                u: self.u.slice(w[0]..w[1]),
+                y: self.y.slice(w[0]..w[1]),
+                z: self.z.as_ref().map(|z| z.slice(w[0]..w[1])),
+                bounds: vec![0, w[1] - w[0]],
+            })
+            .collect()
+    }
+
+    /// Refuses data of several records where `what` handles one record only.
+    pub fn require_single_record(&self, what: &str) -> Result<()> {
+        if self.record_count() > 1 {
+            return Err(Error::Unsupported(format!(
+                "{what} takes one data record, and these data have {} records; run it on each record",
+                self.record_count()
+            )));
+        }
+        Ok(())
     }
 
     /// Adds measured z (paper Definition 1, case 1).
@@ -228,12 +368,12 @@ impl Data {
         Ok(self)
     }
 
-    /// Number of samples L.
+    /// Number of samples L (of all records together).
     pub fn len(&self) -> usize {
         self.y.len()
     }
 
-    /// Whether the record is empty (never true for a constructed `Data`).
+    /// Whether the data are empty (never true for a constructed `Data`).
     pub fn is_empty(&self) -> bool {
         self.y.is_empty()
     }
@@ -253,7 +393,7 @@ impl Data {
         self.z.as_ref()
     }
 
-    /// Checks the record's channel counts against an LFT.
+    /// Checks the channel counts against an LFT.
     pub fn check_against(&self, lft: &Lft) -> Result<()> {
         let d = lft.dims();
         let pairs = [("u", self.u.channels(), d.u), ("y", self.y.channels(), d.y)];

@@ -12,12 +12,33 @@ pub(super) struct FoldScore {
     problem: Problem,
     settings: IdentifySettings,
     masks: Vec<Vec<bool>>,
+    /// The folds are the records (several records): each is held out whole.
+    by_record: bool,
 }
 
 impl FoldScore {
+    /// With several records the folds are the records, whatever `folds` says: a record is the
+    /// natural unit of independent data, and a fold cutting across a boundary would mix them.
     pub(super) fn new(problem: Problem, settings: IdentifySettings, folds: usize) -> Result<Self> {
         let len = problem.len();
         let ny = problem.outputs();
+        if problem.record_count() > 1 {
+            let masks = problem
+                .record_bounds()
+                .windows(2)
+                .map(|w| {
+                    (0..len * ny)
+                        .map(|row| (w[0]..w[1]).contains(&(row / ny)))
+                        .collect()
+                })
+                .collect();
+            return Ok(Self {
+                problem,
+                settings,
+                masks,
+                by_record: true,
+            });
+        }
         if folds > len {
             return Err(Error::InvalidParameter {
                 name: "folds".into(),
@@ -37,6 +58,7 @@ impl FoldScore {
             problem,
             settings,
             masks,
+            by_record: false,
         })
     }
 }
@@ -100,6 +122,13 @@ impl BetaScore for FoldScore {
     }
 
     fn method(&self) -> String {
+        if self.by_record {
+            return format!(
+                "leave-one-record-out cross-validation (each of the {} records held out in turn; {} fits per β)",
+                self.masks.len(),
+                self.masks.len()
+            );
+        }
         format!(
             "blocked {}-fold cross-validation (contiguous blocks of samples held out; {} fits per β)",
             self.masks.len(),

@@ -19,6 +19,7 @@ pub(super) struct ValidationScore<'a> {
 /// Mean squared error of simulating `model` with `id`'s maps in the loop on `data` (zero
 /// initial state, e = 0).
 pub(crate) fn simulation_mse(model: &Model, id: &Identification, data: &Data) -> Result<f64> {
+    data.require_single_record("the validation record of the selection")?;
     let bindings: Vec<MapBinding<'_>> = model
         .blocks()
         .iter()

@@ -83,13 +83,20 @@ fn gram_lower(g: MatMut<'_, f64>, x: faer::MatRef<'_, f64>) {
 
 /// Whether every block of `problem` can use the feature solver, and if not, why.
 pub fn unsupported_reason(problem: &Problem) -> Option<String> {
+    if problem.noise().order() > 0 && problem.record_count() > 1 {
+        return Some(
+            "the feature solver whitens a dynamic noise path over one record only; with several records use \
+             the exact solver"
+                .into(),
+        );
+    }
     if problem.noise().order() > 0 && problem.noise().as_state_space().is_none() {
         return Some(
             "the feature solver whitens a dynamic noise path as a state-space system".into(),
         );
     }
     for b in problem.blocks() {
-        if b.path.as_state_space().is_none() {
+        if record_state_space(b.path.as_ref()).is_none() {
             return Some(format!(
                 "block `{}`: the feature solver streams its path as a state-space system",
                 b.name
@@ -97,6 +104,13 @@ pub fn unsupported_reason(problem: &Problem) -> Option<String> {
         }
     }
     None
+}
+
+/// The state-space system of a path, or of each record of a record-by-record path (the pass
+/// restarts it at every record).
+fn record_state_space(sys: &dyn LinearSystem) -> Option<&structid_lti::StateSpace> {
+    sys.as_state_space()
+        .or_else(|| sys.as_recordwise()?.inner().as_state_space())
 }
 
 fn gcd(a: usize, b: usize) -> usize {
@@ -243,8 +257,9 @@ pub(crate) fn gram(
         Whitening::Static { .. } => false,
     };
     let mut jobs: Vec<PathJob> = Vec::new();
+    let mut systems = Vec::with_capacity(problem.blocks().len());
     for (bi, b) in problem.blocks().iter().enumerate() {
-        let path = b.path.as_state_space().expect("checked above");
+        let path = record_state_space(b.path.as_ref()).expect("checked above");
         let sys = match &whitening {
             Whitening::Kalman(k) if folded => k.steady_state_filter().series(path)?,
             _ => path.clone(),
@@ -261,6 +276,7 @@ pub(crate) fn gram(
             });
             j0 += w;
         }
+        systems.push(sys);
     }
     let unit = jobs.iter().fold(1, |a, j| {
         a / gcd(a, j.stream.block_len()) * j.stream.block_len()
@@ -297,9 +313,18 @@ pub(crate) fn gram(
             }
         })
         .collect();
+    // Chunks end at record boundaries, where the paths restart from rest.
+    let bounds = problem.record_bounds();
+    let mut next_record = 1;
     let mut t0 = 0;
     while t0 < len {
-        let c = chunk.min(len - t0);
+        if t0 == bounds[next_record] {
+            next_record += 1;
+            for job in jobs.iter_mut() {
+                job.stream = systems[job.block].column_stream(job.stream.state().ncols());
+            }
+        }
+        let c = chunk.min(bounds[next_record] - t0);
         // features of the chunk, row-major, scaled, the samples split between the threads
         for (bi, (map, z)) in maps.iter().enumerate() {
             let mi = dims[bi];

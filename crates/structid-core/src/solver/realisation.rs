@@ -21,6 +21,13 @@ pub(crate) struct Realisation {
 /// of the operators' own realisations.
 pub(crate) fn joint_realisation(problem: &Problem, solver: &str) -> Result<Realisation> {
     let ne = problem.noise().inputs();
+    if problem.record_count() > 1 {
+        return Err(Error::Unsupported(format!(
+            "the {solver} solver takes one data record, and this problem has {} records; use the exact or \
+             feature solver, or identify each record separately",
+            problem.record_count()
+        )));
+    }
     if let Some((ss, is_state)) = problem.shared_realisation() {
         if problem.free_response().is_some() && !is_state {
             return Err(unsupported_free(solver));

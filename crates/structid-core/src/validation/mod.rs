@@ -394,6 +394,7 @@ pub(crate) fn check_record(
             found: maps.len().to_string(),
         });
     }
+    data.require_single_record(what)?;
     data.check_against(model.lft())?;
     let len = data.len();
     if settle >= len {
