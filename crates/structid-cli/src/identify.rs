@@ -224,22 +224,74 @@ pub(crate) fn load(
     Ok((settings, sigma, mf))
 }
 
-/// The record named by the model file's `[signals]` and the core model, with default kernel
-/// widths chosen from the record's z.
+/// The records of the data files, one per file, as the signals the model file's `[signals]`
+/// names; several files are several records of one [`Data`].
+pub(crate) fn read_records(mf: &ModelFile, paths: &[PathBuf]) -> Result<Data, CliError> {
+    let mut records = Vec::with_capacity(paths.len());
+    let order = mf.lft.dims().states;
+    for (i, p) in paths.iter().enumerate() {
+        let table = crate::data::read_table(p)?;
+        let data = mf.select_data(&table)?;
+        // Checked here too (identification checks it) to name the file.
+        if paths.len() > 1 && data.len() < order {
+            return Err(CliError::from(structid_core::Error::RecordTooShort {
+                record: i + 1,
+                len: data.len(),
+                order,
+            })
+            .context(format!("data file `{}`", p.display())));
+        }
+        records.push(data);
+    }
+    Data::from_records(records).map_err(|e| {
+        let files: Vec<String> = paths
+            .iter()
+            .enumerate()
+            .map(|(i, p)| format!("record {} = `{}`", i + 1, p.display()))
+            .collect();
+        CliError::from(e).context(format!("the --data files ({})", files.join(", ")))
+    })
+}
+
+/// The data files for messages: `a.csv`, or `a.csv, b.csv`.
+pub(crate) fn files_label(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// z of the data (see [`ModelFile::z_signal`]), computed record by record.
+pub(crate) fn z_of(mf: &ModelFile, data: &Data) -> Result<structid_core::Signal, CliError> {
+    if data.record_count() == 1 {
+        return Ok(mf.z_signal(data)?);
+    }
+    let mut values = Vec::new();
+    let mut channels = 0;
+    for r in data.records() {
+        let z = mf.z_signal(&r)?;
+        channels = z.channels();
+        values.extend_from_slice(z.as_slice());
+    }
+    Ok(structid_core::Signal::new(channels, values).map_err(structid_core::Error::from)?)
+}
+
+/// The records named by the model file's `[signals]` and the core model, with default kernel
+/// widths chosen from the records' z.
 pub(crate) fn model_and_data(
     mf: &ModelFile,
-    data_path: &Path,
+    data_paths: &[PathBuf],
     sigma: Option<f64>,
 ) -> Result<(Data, Model), CliError> {
-    let table = crate::data::read_table(data_path)?;
-    let data = mf.select_data(&table)?;
+    let data = read_records(mf, data_paths)?;
     let needs_z = sigma.is_none()
         && mf.blocks.iter().any(|b| {
             b.dispersion.sigma().is_none()
                 && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
         });
     let z = if needs_z {
-        Some(mf.z_signal(&data)?)
+        Some(z_of(mf, &data)?)
     } else {
         None
     };
@@ -250,8 +302,8 @@ pub(crate) fn model_and_data(
 /// Refuses a record on which a block's input z does not vary: the data then show its map at
 /// one point only (a single sample, or a constant input), and an estimate would be a guess
 /// everywhere else. Models whose z cannot be computed from the data are left to the solver.
-pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, path: &Path) -> Result<(), CliError> {
-    let Ok(z) = mf.z_signal(data) else {
+pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, source: &str) -> Result<(), CliError> {
+    let Ok(z) = z_of(mf, data) else {
         return Ok(());
     };
     let names = mf.z_names();
@@ -270,7 +322,7 @@ pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, path: &Path) -> Resu
                 b.name,
                 z.channel(i).first().copied().unwrap_or(f64::NAN),
                 data.len(),
-                path.display()
+                source
             )));
         }
     }
@@ -285,7 +337,7 @@ const SIGMA_SPAN: f64 = 1e6;
 /// constant; σ² overflows for 1e308) or that many times narrower (a spike at each sample,
 /// zero between them). Blocks whose z cannot be computed or does not vary are left alone.
 pub(crate) fn check_sigma(sigma: f64, mf: &ModelFile, data: &Data) -> Result<(), CliError> {
-    let Ok(z) = mf.z_signal(data) else {
+    let Ok(z) = z_of(mf, data) else {
         return Ok(());
     };
     let names = mf.z_names();
@@ -355,7 +407,15 @@ fn reproduction(
 ) -> Reproduction {
     Reproduction {
         model_file_absolute: absolute(&a.model).display().to_string(),
-        data_file_absolute: absolute(&a.data).display().to_string(),
+        data_file_absolute: absolute(&a.data[0]).display().to_string(),
+        data_files_absolute: if a.data.len() > 1 {
+            a.data
+                .iter()
+                .map(|p| absolute(p).display().to_string())
+                .collect()
+        } else {
+            Vec::new()
+        },
         beta,
         sigma,
         solver_requested: value_name(a.solver),
@@ -403,7 +463,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         ));
     }
     let mut guard = OutputGuard::new();
-    let mut inputs: Vec<&Path> = vec![&a.data];
+    let mut inputs: Vec<&Path> = a.data.iter().map(PathBuf::as_path).collect();
     if let Some(v) = &a.validation_data {
         inputs.push(v);
     }
@@ -421,7 +481,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         .collect();
     guard.check_out_dir(&a.out, &planned)?;
     let (data, model) = model_and_data(&mf, &a.data, sigma)?;
-    check_excitation(&mf, &data, &a.data)?;
+    check_excitation(&mf, &data, &files_label(&a.data))?;
     if let Some(s) = sigma {
         check_sigma(s, &mf, &data)?;
     }
@@ -485,7 +545,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
 
     guard.begin_set(&a.out, Some(&planned))?;
     let mut report = Report::new(&mf, &id, &settings, sigma)?;
-    report.data_file = Some(a.data.display().to_string());
+    report.data_file = Some(files_label(&a.data));
     let (selection, block_sigmas) = match selection {
         Some((r, w)) => (Some(r), w),
         None => (None, Vec::new()),

@@ -17,9 +17,11 @@ use crate::error::CliError;
 /// Arguments of `structid linear`.
 #[derive(Debug, Args)]
 pub struct LinearArgs {
-    /// The estimation data (CSV with a header row).
-    #[arg(long, short = 'd', value_name = "DATA.csv")]
-    data: PathBuf,
+    /// The estimation data (CSV with a header row). Repeat it for several records of the same
+    /// system: the ARX equations of each record start after its own first samples, so no
+    /// regressor mixes two records (with --orders and --method arx).
+    #[arg(long, short = 'd', value_name = "DATA.csv", required = true)]
+    data: Vec<PathBuf>,
     /// The input column(s), comma-separated.
     #[arg(long, value_name = "COLS", default_value = "u", value_delimiter = ',')]
     input: Vec<String>,
@@ -258,7 +260,9 @@ fn check_orders(a: &LinearArgs) -> Result<(), CliError> {
 /// Runs `structid linear`.
 pub fn run(a: LinearArgs) -> Result<(), CliError> {
     let mut guard = OutputGuard::new();
-    guard.protect(&a.data);
+    for d in &a.data {
+        guard.protect(d);
+    }
     if let Some(v) = &a.validation_data {
         guard.protect(v);
     }
@@ -320,7 +324,18 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         ));
     }
     check_orders(&a)?;
-    let (u, y) = read_signals(&a.data, &a)?;
+    if a.data.len() > 1 && (a.method != MethodArg::Arx || a.orders.is_none()) {
+        return Err(CliError::input(
+            "several --data records are fitted by ARX with given orders only: add --method arx and \
+             --orders NA,NB,NK (output error and order selection take one record)",
+        ));
+    }
+    let records: Vec<(Signal, Signal)> = a
+        .data
+        .iter()
+        .map(|d| read_signals(d, &a))
+        .collect::<Result<_, _>>()?;
+    let (u, y) = &records[0];
     let mut arx_settings = ArxSettings::builder().integrators(a.integrators);
     let mut oe_settings = OeSettings::builder()
         .transient(a.transient)
@@ -386,7 +401,14 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     let mut warning = None;
     let (model, cost, what, covariance): (PolynomialModel, f64, String, _) = match a.method {
         MethodArg::Arx => {
-            let fit = arx(&u, &y, &orders, &arx_settings)?;
+            let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
+            let fit =
+                structid_linear::arx_records(&pairs, &orders, &arx_settings).map_err(|e| {
+                    CliError::from(e).context(format!(
+                        "the --data files ({})",
+                        crate::identify::files_label(&a.data)
+                    ))
+                })?;
             (
                 fit.model,
                 fit.cost,
@@ -465,8 +487,13 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     let svg = crate::figures::linear_svg(&model, covariance.as_ref(), &a.input)?;
     guard.write(&figure, svg.as_bytes())?;
 
-    let sim = model.simulate(&u)?;
-    let fit = structid_core::metrics::fit_percent(&y.channel(0), &sim);
+    // The simulation fit over every record, each simulated from rest.
+    let (mut y_all, mut sim_all) = (Vec::new(), Vec::new());
+    for (u, y) in &records {
+        sim_all.extend(model.simulate(u)?);
+        y_all.extend(y.channel(0));
+    }
+    let fit = structid_core::metrics::fit_percent(&y_all, &sim_all);
     println!(
         "linear block: na = {}, nb = {:?}, nk = {:?}{}",
         orders.na,

@@ -239,8 +239,10 @@ struct IdentifyArgs {
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
     /// The data file (CSV with a header row naming the columns of `[signals]` in the model file).
-    #[arg(long, short = 'd', value_name = "DATA.csv")]
-    data: PathBuf,
+    /// Repeat it for several records (experiments) of the same system: each record starts from
+    /// its own initial state, and the maps are fitted to all of them at once.
+    #[arg(long, short = 'd', value_name = "DATA.csv", required = true)]
+    data: Vec<PathBuf>,
     /// Output directory (created if needed).
     #[arg(long, short = 'o', value_name = "DIR")]
     out: PathBuf,
@@ -389,7 +391,7 @@ struct SimulateArgs {
 }
 
 /// Arguments of `structid validate`.
-#[derive(Debug, Args)]
+#[derive(Clone, Debug, Args)]
 struct ValidateArgs {
     /// The model file (TOML) of the estimate (same blocks as in DIR/report.json); without
     /// --estimate, the model whose true maps are validated. Not needed with --estimate
@@ -403,9 +405,11 @@ struct ValidateArgs {
     /// every block of --model needs a `truth`.
     #[arg(long, short = 'e', value_name = "FILE.json|DIR")]
     estimate: Option<PathBuf>,
-    /// The validation data (CSV with the columns named in the model's `[signals]`).
-    #[arg(long, short = 'd', value_name = "V.csv")]
-    data: PathBuf,
+    /// The validation data (CSV with the columns named in the model's `[signals]`). Repeat it
+    /// for several records: each is validated on its own (from its own initial state) into
+    /// DIR2/record_<i>/, and DIR2/validation.json adds the simulation error over all records.
+    #[arg(long, short = 'd', value_name = "V.csv", required = true)]
+    data: Vec<PathBuf>,
     /// Output directory (created if needed).
     #[arg(long, short = 'o', value_name = "DIR2")]
     out: PathBuf,

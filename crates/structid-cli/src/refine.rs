@@ -229,8 +229,8 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         Some(AutoOr::Value(s)) => Some(s),
         _ => None,
     };
-    let (all, model) = model_and_data(&mf, &a.data, sigma)?;
-    crate::identify::check_excitation(&mf, &all, &a.data)?;
+    let (all, model) = model_and_data(&mf, std::slice::from_ref(&a.data), sigma)?;
+    crate::identify::check_excitation(&mf, &all, &a.data.display().to_string())?;
     if let Some(s) = sigma {
         crate::identify::check_sigma(s, &mf, &all)?;
     }
@@ -380,6 +380,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     report.reproduction = Some(Reproduction {
         model_file_absolute: absolute(&model_path).display().to_string(),
         data_file_absolute: absolute(&data_file).display().to_string(),
+        data_files_absolute: Vec::new(),
         beta: r.beta,
         sigma: None,
         solver_requested: "auto".into(),

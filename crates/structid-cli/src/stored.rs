@@ -93,13 +93,13 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     }
     let mut guard = OutputGuard::new();
     guard.protect(path);
-    guard.protect(&a.data);
+    guard.protect(&a.data[0]);
     if let Some(m) = &a.model {
         guard.protect(m);
     }
     guard.check_out_dir(&a.out, crate::validation_files::OUTPUTS)?;
     let (estimate, u_names, y_names) = load(path)?;
-    let data = record(&a.data, &u_names, &y_names)?;
+    let data = record(&a.data[0], &u_names, &y_names)?;
     crate::validation_files::check_lengths(a, &data)?;
     let settings = ValidationSettings::builder()
         .initial_state(initial(a.initial_state))
@@ -138,8 +138,8 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
         "inputs": {
             "estimate_file": path.display().to_string(),
             "estimate_file_absolute": absolute(path).display().to_string(),
-            "data_file": a.data.display().to_string(),
-            "data_file_absolute": absolute(&a.data).display().to_string(),
+            "data_file": a.data[0].display().to_string(),
+            "data_file_absolute": absolute(&a.data[0]).display().to_string(),
             "initial_state": crate::identify::value_name(a.initial_state),
             "max_lag": a.max_lag,
             "settle": a.settle,
@@ -168,7 +168,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     println!(
         "validated the stored estimate `{}` on {len} samples of `{}` ({:.2} s)",
         path.display(),
-        a.data.display(),
+        a.data[0].display(),
         t0.elapsed().as_secs_f64()
     );
     if let Some(x0) = &report.initial_state {

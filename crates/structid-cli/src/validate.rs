@@ -39,13 +39,20 @@ fn identify_args(rep: &Reproduction, dir: &Path, report: &Path) -> Result<Identi
         "structid".into(),
         "identify".into(),
         format!("--model={}", rep.model_file_absolute),
-        format!("--data={}", rep.data_file_absolute),
         format!("--out={}", dir.display()),
         format!("--beta={:?}", rep.beta),
         // The solver that ran, not `auto`: the automatic choice depends on the free memory.
         format!("--solver={}", rep.solver),
         format!("--initial-state={}", rep.initial_state),
     ];
+    if rep.data_files_absolute.is_empty() {
+        argv.push(format!("--data={}", rep.data_file_absolute));
+    }
+    argv.extend(
+        rep.data_files_absolute
+            .iter()
+            .map(|f| format!("--data={f}")),
+    );
     let mut opt = |flag: &str, v: Option<String>| {
         if let Some(v) = v {
             argv.push(format!("{flag}={v}"));
@@ -204,7 +211,9 @@ fn recorded(dir: &Path, vmf: &ModelFile, model_path: &Path) -> Result<Recorded, 
 
     // The recorded identification, loaded (not run yet) so that its files can be protected.
     let args = identify_args(&rep, dir, &report_path)?;
-    for (what, p) in [("model", &args.model), ("data", &args.data)] {
+    let files =
+        std::iter::once(("model", &args.model)).chain(args.data.iter().map(|d| ("data", d)));
+    for (what, p) in files {
         if !p.is_file() {
             return Err(CliError::input(format!(
                 "the {what} file `{}` recorded in `{}` does not exist any more, so the estimate cannot be rebuilt",
@@ -265,6 +274,9 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
 
 /// Runs `structid validate`.
 pub fn run(a: ValidateArgs) -> Result<(), CliError> {
+    if a.data.len() > 1 {
+        return run_records(a);
+    }
     if let Some(p) = &a.estimate
         && p.is_file()
     {
@@ -305,14 +317,15 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             // Never overwrite an input: the files of the command, the estimate directory's
             // files and the files of the recorded identification.
             let mut others: Vec<PathBuf> = vec![
-                a.data.clone(),
+                a.data[0].clone(),
                 rec.report_path.clone(),
                 dir.join("estimate.csv"),
             ];
             others.extend(rec.record.files.iter().map(|f| dir.join(f)));
             let others_ref: Vec<&Path> = others.iter().map(PathBuf::as_path).collect();
             protect_inputs(&mut guard, &vmf, model_path, &others_ref);
-            protect_inputs(&mut guard, &rec.model, &rec.args.model, &[&rec.args.data]);
+            let recorded_data: Vec<&Path> = rec.args.data.iter().map(PathBuf::as_path).collect();
+            protect_inputs(&mut guard, &rec.model, &rec.args.model, &recorded_data);
             (vmf, Some(rec))
         }
         None => {
@@ -332,14 +345,14 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
                     list(&missing)
                 )));
             }
-            protect_inputs(&mut guard, &vmf, model_path, &[&a.data]);
+            protect_inputs(&mut guard, &vmf, model_path, &[&a.data[0]]);
             (vmf, None)
         }
     };
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
     // The validation record, checked before the (possibly long) re-identification.
-    let table = crate::data::read_table(&a.data)?;
+    let table = crate::data::read_table(&a.data[0])?;
     let vdata = vmf.select_data(&table)?;
     check_lengths(&a, &vdata)?;
 
@@ -470,8 +483,8 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             "model_file_absolute": absolute(model_path).display().to_string(),
             "estimate_dir": a.estimate.as_ref().map(|d| d.display().to_string()),
             "estimate_dir_absolute": a.estimate.as_ref().map(|d| absolute(d).display().to_string()),
-            "data_file": a.data.display().to_string(),
-            "data_file_absolute": absolute(&a.data).display().to_string(),
+            "data_file": a.data[0].display().to_string(),
+            "data_file_absolute": absolute(&a.data[0]).display().to_string(),
             "initial_state": crate::identify::value_name(a.initial_state),
             "max_lag": a.max_lag,
             "settle": a.settle,
@@ -516,6 +529,122 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// `structid validate` with several --data files: each record is validated on its own, from
+/// its own initial state, into DIR2/record_<i>/ (the files of one record); DIR2/validation.json
+/// lists them and pools the free-run simulation error (after the settling samples of each
+/// record) over all records.
+fn run_records(a: ValidateArgs) -> Result<(), CliError> {
+    let mut guard = OutputGuard::new();
+    for d in &a.data {
+        guard.protect(d);
+    }
+    let dirs: Vec<String> = (1..=a.data.len()).map(|i| format!("record_{i}")).collect();
+    guard.check_out_dir(
+        &a.out,
+        dirs.iter().chain(["validation.json".to_string()].iter()),
+    )?;
+    let mut records = Vec::with_capacity(a.data.len());
+    // Per output: Σ(y − y_sim)², Σy, Σy², samples.
+    let mut pooled: Vec<(String, f64, f64, f64, usize)> = Vec::new();
+    for (i, (file, dir)) in a.data.iter().zip(&dirs).enumerate() {
+        let one = ValidateArgs {
+            data: vec![file.clone()],
+            out: a.out.join(dir),
+            ..a.clone()
+        };
+        println!("record {} (`{}`):", i + 1, file.display());
+        run(one).map_err(|e| e.context(format!("record {} (`{}`)", i + 1, file.display())))?;
+        let doc: Value = serde_json::from_str(
+            &std::fs::read_to_string(a.out.join(dir).join("validation.json")).map_err(|e| {
+                CliError::runtime(format!("cannot read back record {}: {e}", i + 1))
+            })?,
+        )
+        .map_err(|e| CliError::runtime(format!("cannot read back record {}: {e}", i + 1)))?;
+        let table = DataTable::read(&a.out.join(dir).join("simulation.csv"))?;
+        let names: Vec<String> = table
+            .names
+            .iter()
+            .filter_map(|n| n.strip_suffix("_sim").map(str::to_string))
+            .collect();
+        if pooled.is_empty() {
+            pooled = names
+                .iter()
+                .map(|n| (n.clone(), 0.0, 0.0, 0.0, 0))
+                .collect();
+        }
+        for (name, sse, sy, syy, count) in pooled.iter_mut() {
+            let missing = || {
+                CliError::runtime(format!(
+                    "simulation.csv of record {} has no `{name}`",
+                    i + 1
+                ))
+            };
+            let y = table.column(name).ok_or_else(missing)?;
+            let sim = table.column(&format!("{name}_sim")).ok_or_else(missing)?;
+            for (yk, sk) in y.iter().zip(sim).skip(a.settle) {
+                *sse += (yk - sk).powi(2);
+                *sy += yk;
+                *syy += yk * yk;
+                *count += 1;
+            }
+        }
+        records.push(json!({
+            "record": i + 1,
+            "data_file": file.display().to_string(),
+            "data_file_absolute": absolute(file).display().to_string(),
+            "dir": dir,
+            "samples": doc["samples"],
+            "initial_state": doc["initial_state"],
+            "outputs": doc["outputs"],
+            "whiteness_passes": doc["whiteness_passes"],
+            "input_correlation_passes": doc["input_correlation_passes"],
+        }));
+    }
+    let mut overall = Vec::new();
+    let mut s = String::new();
+    for (name, sse, sy, syy, count) in &pooled {
+        let n = (*count).max(1) as f64;
+        let rms = (sse / n).sqrt();
+        let spread = (syy - sy * sy / n).max(0.0);
+        let fit = if spread > 0.0 {
+            100.0 * (1.0 - (sse / spread).sqrt())
+        } else {
+            f64::NAN
+        };
+        overall.push(json!({
+            "name": name,
+            "rms": rms,
+            "fit_percent": if fit.is_finite() { json!(fit) } else { Value::Null },
+            "samples": count,
+        }));
+        let _ = writeln!(
+            s,
+            "all {} records, output {name}: simulation RMS {rms:.4e}, fit {} over {count} samples",
+            a.data.len(),
+            fmt_pct(fit)
+        );
+    }
+    let doc = json!({
+        "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
+        "records": records,
+        "overall": {
+            "scoring": "free-run simulation of each record from its own initial state, after its settling samples, pooled",
+            "settle": a.settle,
+            "outputs": overall,
+        },
+    });
+    let mut text = serde_json::to_string_pretty(&doc)
+        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
+    text.push('\n');
+    guard.begin_set(&a.out, Some(&["validation.json"]))?;
+    let path = a.out.join("validation.json");
+    guard.write(&path, text.as_bytes())?;
+    guard.finish_set(&a.out, &["validation.json"])?;
+    let _ = writeln!(s, "wrote {}", path.display());
+    print!("{s}");
+    Ok(())
+}
+
 fn summary(
     report: &ValidationReport,
     model_path: &Path,
@@ -536,7 +665,7 @@ fn summary(
         s,
         "validated {what} on {} samples of `{}` ({:.2} s)",
         report.samples,
-        a.data.display(),
+        a.data[0].display(),
         seconds
     );
     match w_difference {
@@ -594,6 +723,7 @@ mod tests {
         Reproduction {
             model_file_absolute: "/m.toml".into(),
             data_file_absolute: "/d.csv".into(),
+            data_files_absolute: Vec::new(),
             beta: 0.1 + 0.2,
             sigma: Some(1e-7),
             solver_requested: "auto".into(),

@@ -169,7 +169,7 @@ pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliErr
         return Err(CliError::input(format!(
             "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
             a.settle,
-            a.data.display(),
+            a.data[0].display(),
             vdata.len()
         )));
     }
@@ -177,7 +177,7 @@ pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliErr
         return Err(CliError::input(format!(
             "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
             a.max_lag,
-            a.data.display(),
+            a.data[0].display(),
             vdata.len()
         )));
     }

@@ -84,8 +84,12 @@ pub struct RefinementReport {
 pub struct Reproduction {
     /// The model file, absolute and canonical.
     pub model_file_absolute: String,
-    /// The data file, absolute and canonical.
+    /// The data file, absolute and canonical (the first one when there are several records).
     pub data_file_absolute: String,
+    /// Every data file, absolute and canonical, when the identification used several records
+    /// (one per file, in order); empty for one record.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub data_files_absolute: Vec<String>,
     /// β.
     pub beta: f64,
     /// The σ override (`--sigma`), if any.

@@ -255,6 +255,69 @@ pub fn arx(
     })
 }
 
+/// [`arx`] over several records (experiments) of the same system, given as `(u, y)` pairs:
+/// one least-squares fit over the equations of every record, each record's equations
+/// starting `max_lag` (+ N with integrators) samples after its own start, so that no
+/// regressor mixes two records. One record gives [`arx`]'s fit.
+///
+/// ```
+/// use structid_linear::{arx, arx_records, ArxSettings, Orders, PolynomialModel};
+/// use structid_lti::Signal;
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0]], vec![1.0, -0.5], None).unwrap();
+/// let rec = |len: usize, shift: usize| {
+///     let u = Signal::from_fn(len, 1, |k, _| (((k + shift) * (k + shift)) as f64 * 0.37).sin());
+///     let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
+///     (u, y)
+/// };
+/// let (a, b) = (rec(60, 0), rec(40, 7));
+/// let s = ArxSettings::default();
+/// let fit = arx_records(&[(&a.0, &a.1), (&b.0, &b.1)], &Orders::siso(1, 1, 1), &s).unwrap();
+/// assert!((fit.model.den[1] + 0.5).abs() < 1e-9);
+/// assert_eq!(fit.samples, 59 + 39);
+/// ```
+pub fn arx_records(
+    records: &[(&Signal, &Signal)],
+    orders: &Orders,
+    settings: &ArxSettings,
+) -> Result<ArxFit, LinearError> {
+    orders.validate()?;
+    let Some(first) = records.first() else {
+        return Err(LinearError::param("records", "no data record was given"));
+    };
+    if records.len() == 1 {
+        return arx(first.0, first.1, orders, settings);
+    }
+    let mut uc: Vec<Vec<f64>> = vec![Vec::new(); orders.inputs()];
+    let mut yv = Vec::new();
+    let mut bounds = vec![0];
+    let n = settings.integrators;
+    for (i, (u, y)) in records.iter().enumerate() {
+        let (ui, yi) = prepare_data(u, y, orders.inputs(), &format!("record {}: ", i + 1))?;
+        for (c, col) in uc.iter_mut().zip(ui) {
+            c.extend(col);
+        }
+        // Differenced record by record: the first N samples of each are not equations.
+        yv.extend(if n == 0 { yi } else { difference(&yi, n) });
+        bounds.push(yv.len());
+    }
+    let start = orders.max_lag() + n;
+    let (free, cov) = fit_arx_records(&uc, &yv, orders, settings, &bounds, start)?;
+    if n == 0 {
+        return Ok(free);
+    }
+    let den = convolve(&free.model.den, &integrator_polynomial(n));
+    let model = PolynomialModel::new(free.model.num, den, free.model.sample_time)?;
+    let cov = full_covariance(&cov, orders.nb.iter().sum(), orders.na, n);
+    let parameter_std = std_from(&cov);
+    Ok(ArxFit {
+        model,
+        parameter_std,
+        parameter_covariance: Some(cov),
+        integrators: n,
+        ..free
+    })
+}
+
 /// Checks a number of fixed integrators.
 pub(crate) fn check_integrators(n: usize) -> Result<(), LinearError> {
     if n > MAX_INTEGRATORS {
@@ -352,29 +415,50 @@ pub(crate) fn fit_arx(
     settings: &ArxSettings,
     start: usize,
 ) -> Result<(ArxFit, DMatrix<f64>), LinearError> {
-    let len = y.len();
+    fit_arx_records(u, y, orders, settings, &[0, y.len()], start)
+}
+
+/// [`fit_arx`] over several records stacked in `u` and `y`, record i being samples
+/// `bounds[i]..bounds[i + 1]`: the equations of each record start `start` samples after its
+/// own first sample, so no regressor reaches into the previous record.
+pub(crate) fn fit_arx_records(
+    u: &[Vec<f64>],
+    y: &[f64],
+    orders: &Orders,
+    settings: &ArxSettings,
+    bounds: &[usize],
+    start: usize,
+) -> Result<(ArxFit, DMatrix<f64>), LinearError> {
     let d = orders.parameters();
-    let needed = start + d + 1;
-    if len < needed {
+    let rows: Vec<usize> = bounds
+        .windows(2)
+        .flat_map(|w| (w[0] + start).min(w[1])..w[1])
+        .collect();
+    if rows.len() < d + 1 {
+        let records = bounds.len().saturating_sub(1);
         return Err(LinearError::TooFewSamples {
             what: format!("ARX with orders {orders} ({d} parameters, first usable sample {start})"),
-            needed,
-            available: len,
+            needed: start + d + 1,
+            available: if records > 1 {
+                rows.len() + start
+            } else {
+                y.len()
+            },
         });
     }
-    let n = len - start;
+    let n = rows.len();
     let reg = Regressors::new(u, y, orders);
     // column scaling
     let mut scale = vec![0.0; d];
     for (p, s) in scale.iter_mut().enumerate() {
-        let ss: f64 = (start..len).map(|k| reg.at(k, p).powi(2)).sum();
+        let ss: f64 = rows.iter().map(|&k| reg.at(k, p).powi(2)).sum();
         *s = if ss > 0.0 { ss.sqrt() } else { 1.0 };
     }
     let ridge = settings.ridge();
     let extra = if ridge > 0.0 { d } else { 0 };
     let m = Mat::<f64>::from_fn(n + extra, d + 1, |r, c| {
         if r < n {
-            let k = start + r;
+            let k = rows[r];
             if c < d { reg.at(k, c) / scale[c] } else { y[k] }
         } else if c == r - n {
             ridge.sqrt() / scale[c]
@@ -408,7 +492,7 @@ pub(crate) fn fit_arx(
     };
     let theta: Vec<f64> = (0..d).map(|p| theta_s[p] / scale[p]).collect();
     let mut rss = 0.0;
-    for k in start..len {
+    for &k in &rows {
         let pred: f64 = (0..d).map(|p| reg.at(k, p) * theta[p]).sum();
         rss += (y[k] - pred).powi(2);
     }
@@ -448,6 +532,32 @@ pub(crate) fn fit_arx(
 mod tests {
     use super::*;
     use crate::testutil::*;
+
+    #[test]
+    fn records_are_fitted_exactly_where_their_concatenation_is_not() {
+        let truth =
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None).unwrap();
+        let (ua, ub) = (white(3, 80, 1.0, 1), white(4, 50, 1.0, 1));
+        let ya = Signal::new(1, truth.simulate(&ua).unwrap()).unwrap();
+        let yb = Signal::new(1, truth.simulate(&ub).unwrap()).unwrap();
+        let orders = Orders::siso(2, 2, 1);
+        let s = ArxSettings::default();
+        let fit = arx_records(&[(&ua, &ya), (&ub, &yb)], &orders, &s).unwrap();
+        assert_close(&fit.model.parameters(), &truth.parameters(), 1e-9);
+        assert_eq!(fit.samples, 78 + 48);
+        // Record b started at rest; glued after a, the equations at the seam see a's end.
+        let cat =
+            |a: &Signal, b: &Signal| Signal::new(1, [a.as_slice(), b.as_slice()].concat()).unwrap();
+        let glued = arx(&cat(&ua, &ub), &cat(&ya, &yb), &orders, &s).unwrap();
+        assert!(glued.cost > 1e-6, "{}", glued.cost);
+        // One record is arx itself; a record too short for any equation adds none.
+        let one = arx_records(&[(&ua, &ya)], &orders, &s).unwrap();
+        assert_eq!(one.model, arx(&ua, &ya, &orders, &s).unwrap().model);
+        let (us, ys) = (white(5, 2, 1.0, 1), Signal::zeros(2, 1));
+        let with_short = arx_records(&[(&ua, &ya), (&us, &ys)], &orders, &s).unwrap();
+        assert_eq!(with_short.samples, 78);
+        assert!(arx_records(&[], &orders, &s).is_err());
+    }
 
     #[test]
     fn recovers_second_order_exactly() {

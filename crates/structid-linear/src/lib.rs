@@ -102,7 +102,7 @@ pub mod polynomial;
 pub mod response;
 pub mod selection;
 
-pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx};
+pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx, arx_records};
 pub use bla::{FrequencyResponse, bla_periodic};
 pub use error::LinearError;
 pub use integrators::Stability;

@@ -455,10 +455,17 @@ impl Estimate {
         data: &Data,
         settings: &IdentifySettings,
     ) -> Result<Self> {
+        // With several records x̂₀ holds one state per estimation record, which describes
+        // none of the records an estimate is later used on.
+        let initial_state = if data.record_count() == 1 {
+            id.initial_state.clone()
+        } else {
+            None
+        };
         Self::from_maps(
             model,
             &id.maps(),
-            id.initial_state.clone(),
+            initial_state,
             Provenance {
                 workflow: "identify".into(),
                 settings: Some(settings.clone()),

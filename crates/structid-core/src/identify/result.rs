@@ -129,7 +129,8 @@ pub struct Identification {
     pub cost: CostTerms,
     /// How z was obtained.
     pub z_source: ZSource,
-    /// The estimated initial state x₀, when it was estimated.
+    /// The estimated initial state x₀, when it was estimated; with several records, the n
+    /// entries of each record's x₀ one record after the other.
     pub initial_state: Option<Vec<f64>>,
     /// Diagnostics.
     pub diagnostics: Diagnostics,

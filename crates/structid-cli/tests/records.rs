@@ -1,0 +1,332 @@
+//! Several records (`--data a.csv --data b.csv`): one fit over separate experiments, each from
+//! its own initial state — not the fit of the concatenated file.
+
+use std::path::Path;
+
+use structid_core::{Data, IdentifySettings, Signal, SolverChoice, identify};
+use structid_io::ModelFile;
+
+mod common;
+use common::*;
+
+/// A deterministic input in [−2, 2].
+fn write_input(path: &Path, len: usize, seed: u64) {
+    let mut s = String::from("u\n");
+    let mut state: u64 = 0x9e37_79b9_7f4a_7c15 ^ seed;
+    for _ in 0..len {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        s.push_str(&format!(
+            "{}\n",
+            ((state >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
+        ));
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+/// The columns of a CSV file with a header row.
+fn columns(path: &Path) -> Vec<(String, Vec<f64>)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let mut cols: Vec<(String, Vec<f64>)> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|h| (h.to_string(), Vec::new()))
+        .collect();
+    for l in lines {
+        for (c, v) in cols.iter_mut().zip(l.split(',')) {
+            c.1.push(v.parse().unwrap());
+        }
+    }
+    cols
+}
+
+fn column(path: &Path, name: &str) -> Vec<f64> {
+    columns(path)
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .unwrap_or_else(|| panic!("no column {name} in {}", path.display()))
+        .1
+}
+
+fn record(path: &Path) -> Data {
+    let (u, y) = (column(path, "u"), column(path, "y"));
+    Data::new(Signal::new(1, u).unwrap(), Signal::new(1, y).unwrap()).unwrap()
+}
+
+/// Simulates the Hammerstein example on a fresh input of `len` samples into `out`.
+fn simulate(dir: &Path, name: &str, len: usize, seed: u64) -> std::path::PathBuf {
+    let model = example_model("hammerstein.toml");
+    let u = dir.join(format!("{name}_u.csv"));
+    let out = dir.join(format!("{name}.csv"));
+    write_input(&u, len, seed);
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&out),
+        "--noise-std",
+        "0.05",
+        "--seed",
+        &seed.to_string(),
+    ]);
+    out
+}
+
+fn identify_cli(data: &[&Path], out: &Path) -> Vec<f64> {
+    let model = example_model("hammerstein.toml");
+    let mut args = vec!["identify", "--model", p(&model)];
+    for d in data {
+        args.extend(["--data", p(d)]);
+    }
+    args.extend([
+        "--out",
+        p(out),
+        "--beta",
+        "0.01",
+        "--solver",
+        "exact",
+        "--initial-state",
+        "estimate",
+    ]);
+    ok(&args);
+    column(&out.join("estimate.csv"), "N")
+}
+
+#[test]
+fn two_data_files_are_two_records_not_one_concatenated_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = simulate(dir.path(), "a", 120, 1);
+    let b = simulate(dir.path(), "b", 90, 2);
+    let w = identify_cli(&[&a, &b], &dir.path().join("two"));
+    assert_eq!(w.len(), 210);
+
+    // The library on the same two records (its multi-record fit is checked against a dense
+    // block-diagonal reference in structid-core's tests).
+    let mf = ModelFile::from_path(&example_model("hammerstein.toml")).unwrap();
+    let model = mf.to_model(None, None).unwrap();
+    let data = Data::from_records(vec![record(&a), record(&b)]).unwrap();
+    let settings = IdentifySettings::builder()
+        .beta(0.01)
+        .solver(SolverChoice::Exact)
+        .initial_state(structid_core::InitialState::Estimate)
+        .build()
+        .unwrap();
+    let id = identify(&model, &data, &settings).unwrap();
+    let scale = id
+        .w_hat
+        .as_slice()
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let diff = |x: &[f64], y: &[f64]| {
+        x.iter()
+            .zip(y)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max)
+    };
+    // estimate.csv is written with a few significant digits fewer than f64
+    assert!(diff(&w, id.w_hat.as_slice()) < 1e-6 * scale);
+
+    // The concatenated file carries the state of record 1 into record 2: another problem.
+    let cat = dir.path().join("ab.csv");
+    let (ca, cb) = (columns(&a), columns(&b));
+    let mut text = ca
+        .iter()
+        .map(|c| c.0.as_str())
+        .collect::<Vec<_>>()
+        .join(",");
+    text.push('\n');
+    for k in 0..ca[0].1.len() + cb[0].1.len() {
+        let row: Vec<String> = ca
+            .iter()
+            .zip(&cb)
+            .map(|(x, y)| {
+                let v = if k < x.1.len() {
+                    x.1[k]
+                } else {
+                    y.1[k - x.1.len()]
+                };
+                format!("{v:?}")
+            })
+            .collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    std::fs::write(&cat, text).unwrap();
+    let w_cat = identify_cli(&[&cat], &dir.path().join("cat"));
+    assert!(
+        diff(&w, &w_cat) > 1e-3 * scale,
+        "the concatenated record gave the same estimate"
+    );
+
+    // report.json records every file, so that the run can be repeated.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("two/report.json")).unwrap())
+            .unwrap();
+    let files = report["reproduction"]["data_files_absolute"]
+        .as_array()
+        .expect("both files recorded");
+    assert_eq!(files.len(), 2);
+}
+
+#[test]
+fn a_record_shorter_than_the_model_order_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = simulate(dir.path(), "a", 50, 3);
+    let short = dir.path().join("short.csv");
+    std::fs::write(&short, "u,y\n0.5,0.1\n").unwrap();
+    let model = example_model("hammerstein.toml");
+    let out = dir.path().join("out");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&a),
+        "--data",
+        p(&short),
+        "--out",
+        p(&out),
+        "--beta",
+        "0.01",
+    ]);
+    assert!(e.contains("record 2"), "{e}");
+    assert!(e.contains("fewer than the 2 state(s)"), "{e}");
+    assert!(e.contains("short.csv"), "{e}");
+}
+
+#[test]
+fn a_file_without_the_model_signals_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = simulate(dir.path(), "a", 50, 4);
+    let other = dir.path().join("other.csv");
+    std::fs::write(&other, "u,v\n0.5,0.1\n0.2,0.3\n0.1,0.0\n").unwrap();
+    let model = example_model("hammerstein.toml");
+    let out = dir.path().join("out");
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&a),
+        "--data",
+        p(&other),
+        "--out",
+        p(&out),
+        "--beta",
+        "0.01",
+    ]);
+    assert!(e.contains("other.csv"), "{e}");
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn validate_reports_each_record_and_the_pooled_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = simulate(dir.path(), "a", 150, 5);
+    let b = simulate(dir.path(), "b", 100, 6);
+    let est = dir.path().join("est");
+    identify_cli(&[&a, &b], &est);
+    let stored = est.join("estimate.json");
+    let validate = |data: &[&Path], out: &Path| {
+        let mut args = vec!["validate", "--estimate", p(&stored)];
+        for d in data {
+            args.extend(["--data", p(d)]);
+        }
+        args.extend(["--out", p(out), "--settle", "5"]);
+        ok(&args)
+    };
+    let both = dir.path().join("both");
+    validate(&[&a, &b], &both);
+    // Each record on its own, as a one-record validation computes it.
+    let single: Vec<serde_json::Value> = [(&a, "va"), (&b, "vb")]
+        .iter()
+        .map(|(d, name)| {
+            let out = dir.path().join(name);
+            validate(&[d.as_path()], &out);
+            json(&out.join("validation.json"))
+        })
+        .collect();
+    let doc = json(&both.join("validation.json"));
+    let records = doc["records"].as_array().unwrap();
+    assert_eq!(records.len(), 2);
+    let rms = |v: &serde_json::Value| v["outputs"][0]["rms"].as_f64().unwrap();
+    for (r, s) in records.iter().zip(&single) {
+        assert_eq!(rms(r), rms(s));
+        assert!(
+            both.join(r["dir"].as_str().unwrap())
+                .join("simulation.csv")
+                .is_file()
+        );
+    }
+    // Pooled over the samples after the settling ones: (150 − 5) and (100 − 5).
+    let (na, nb) = (145.0, 95.0);
+    let pooled = ((na * rms(&single[0]).powi(2) + nb * rms(&single[1]).powi(2)) / (na + nb)).sqrt();
+    let overall = doc["overall"]["outputs"][0]["rms"].as_f64().unwrap();
+    assert!(
+        (overall - pooled).abs() < 1e-9 * pooled,
+        "{overall} vs {pooled}"
+    );
+    assert_eq!(doc["overall"]["outputs"][0]["samples"].as_u64(), Some(240));
+}
+
+/// y_k = 1.5·y_(k−1) − 0.7·y_(k−2) + u_(k−1) + 0.5·u_(k−2), from rest.
+fn write_lti(path: &Path, len: usize, seed: u64) {
+    let u_path = path.with_extension("u.csv");
+    write_input(&u_path, len, seed);
+    let u = column(&u_path, "u");
+    let mut y = vec![0.0; len];
+    for k in 0..len {
+        let at = |v: &[f64], j: usize| if k >= j { v[k - j] } else { 0.0 };
+        y[k] = 1.5 * at(&y, 1) - 0.7 * at(&y, 2) + at(&u, 1) + 0.5 * at(&u, 2);
+    }
+    let mut s = String::from("u,y\n");
+    for k in 0..len {
+        s.push_str(&format!("{:?},{:?}\n", u[k], y[k]));
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+#[test]
+fn linear_arx_fits_every_record_from_its_own_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+    write_lti(&a, 80, 7);
+    write_lti(&b, 60, 8);
+    let out = dir.path().join("g.toml");
+    ok(&[
+        "linear",
+        "--data",
+        p(&a),
+        "--data",
+        p(&b),
+        "--method",
+        "arx",
+        "--orders",
+        "2,2,1",
+        "--out",
+        p(&out),
+    ]);
+    let mf = ModelFile::from_path(&out).unwrap();
+    let g = mf.linear.unwrap().model;
+    let want_den = [1.0, -1.5, 0.7];
+    for (x, w) in g.den.iter().zip(want_den) {
+        assert!((x - w).abs() < 1e-8, "{:?}", g.den);
+    }
+    assert!(
+        (g.num[0][1] - 1.0).abs() < 1e-8 && (g.num[0][2] - 0.5).abs() < 1e-8,
+        "{:?}",
+        g.num
+    );
+    // Output error and order selection take one record: refused, not silently cut.
+    let e = input_error(&["linear", "--data", p(&a), "--data", p(&b), "--out", p(&out)]);
+    assert!(e.contains("--method arx"), "{e}");
+}
