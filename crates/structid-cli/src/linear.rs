@@ -373,8 +373,8 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             // The free part is selected on the differenced output.
             let pb = crate::progress::bar(Some(0), "candidate orders");
             let sel = select_orders_observed(
-                &u,
-                &differenced(&y, a.integrators)?,
+                u,
+                &differenced(y, a.integrators)?,
                 &grid,
                 &criterion,
                 &arx_settings,
@@ -418,12 +418,12 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         }
         MethodArg::Oe => {
             let fit = match a.initial_state {
-                crate::InitialStateArg::Zero => oe(&u, &y, &orders, &oe_settings)?,
+                crate::InitialStateArg::Zero => oe(u, y, &orders, &oe_settings)?,
                 crate::InitialStateArg::Estimate => {
-                    let start = arx(&u, &y, &orders, &arx_settings)?.model;
+                    let start = arx(u, y, &orders, &arx_settings)?.model;
                     structid_core::refine::output_error_with_state(
-                        &u,
-                        &y,
+                        u,
+                        y,
                         &start,
                         &oe_settings,
                         true,
