@@ -88,7 +88,9 @@ use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::quadratic_factor::QuadraticFactor;
-use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples};
+use crate::solver::realisation::{
+    Realisation, joint_realisation, single_record, unreachable_samples,
+};
 use crate::solver::{BlockPart, finish_tv, tv_parts};
 use crate::total_variation::TvPenalty;
 
@@ -189,6 +191,7 @@ pub(crate) fn solve_with(
     }
     let beta = settings.beta();
     let opts = settings.admm();
+    single_record(problem, NAME)?;
     let real = joint_realisation(problem, NAME)?;
     let dropped = unreachable_samples(&real, problem.len());
     let (len, ny) = (problem.len(), problem.outputs());

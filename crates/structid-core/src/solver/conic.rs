@@ -38,7 +38,7 @@ use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
 use crate::problem::Problem;
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
-use crate::solver::realisation::{joint_realisation, unreachable_samples};
+use crate::solver::realisation::{joint_realisation, unreachable_samples_of_records};
 use crate::solver::{BlockPart, finish_tv, penalties, tv_part};
 use crate::total_variation::TvPenalty;
 
@@ -122,7 +122,11 @@ pub(crate) fn solve_with(
     let ss = &real.ss;
     let (n, ne) = (ss.order(), real.noise_inputs);
     let (a, b, c, d) = (ss.a(), ss.b(), ss.c(), ss.d());
-    let dropped = unreachable_samples(&real, len);
+    // Each record starts from its own state: the dynamics do not link the last sample of a
+    // record to the first of the next.
+    let bounds = problem.record_bounds();
+    let starts = &bounds[..bounds.len() - 1];
+    let dropped = unreachable_samples_of_records(&real, bounds);
     let quadratic = penalties
         .iter()
         .filter(|p| matches!(p, Penalty::Quadratic(_)))
@@ -200,14 +204,21 @@ pub(crate) fn solve_with(
         }
     };
     // Equalities: the initial state, the dynamics, the outputs and w = K·α.
-    if !real.free_initial_state {
-        for j in 0..n {
-            push(row, lay.x(0, j), 1.0, &mut ri, &mut ci);
-            rhs.push(0.0);
-            row += 1;
+    let mut record_start = vec![false; len];
+    for &s in starts {
+        record_start[s] = true;
+        if !real.free_initial_state {
+            for j in 0..n {
+                push(row, lay.x(s, j), 1.0, &mut ri, &mut ci);
+                rhs.push(0.0);
+                row += 1;
+            }
         }
     }
     for k in 0..len.saturating_sub(1) {
+        if record_start[k + 1] {
+            continue;
+        }
         for j in 0..n {
             push(row, lay.x(k + 1, j), 1.0, &mut ri, &mut ci);
             for l in 0..n {
@@ -412,9 +423,13 @@ pub(crate) fn solve_with(
         })
         .collect();
     let e_hat = x[lay.e0..lay.e0 + len * ne].to_vec();
-    let x0: Option<Vec<f64>> = real
-        .free_initial_state
-        .then(|| (0..n).map(|j| x[lay.x(0, j)]).collect());
+    let x0: Option<Vec<f64>> = real.free_initial_state.then(|| {
+        let lay = &lay;
+        starts
+            .iter()
+            .flat_map(|&s| (0..n).map(move |j| x[lay.x(s, j)]))
+            .collect()
+    });
     let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
     warnings.extend(out.warnings);
     let t_end = Instant::now();

@@ -21,13 +21,6 @@ pub(crate) struct Realisation {
 /// of the operators' own realisations.
 pub(crate) fn joint_realisation(problem: &Problem, solver: &str) -> Result<Realisation> {
     let ne = problem.noise().inputs();
-    if problem.record_count() > 1 {
-        return Err(Error::Unsupported(format!(
-            "the {solver} solver takes one data record, and this problem has {} records; use the exact or \
-             feature solver, or identify each record separately",
-            problem.record_count()
-        )));
-    }
     if let Some((ss, is_state)) = problem.shared_realisation() {
         if problem.free_response().is_some() && !is_state {
             return Err(unsupported_free(solver));
@@ -91,6 +84,37 @@ fn unsupported_free(solver: &str) -> Error {
          Problem::from_model_with_initial_state (or identify with InitialState::Estimate) rather than a \
          custom free-response matrix"
     ))
+}
+
+/// Refuses a problem of several records in a solver that runs over one record.
+pub(crate) fn single_record(problem: &Problem, solver: &str) -> Result<()> {
+    if problem.record_count() > 1 {
+        return Err(Error::Unsupported(format!(
+            "the {solver} solver takes one data record, and this problem has {} records; use the \
+             clarabel, exact or feature solver, or identify each record separately",
+            problem.record_count()
+        )));
+    }
+    Ok(())
+}
+
+/// [`unreachable_samples`] of every record, each from its own start (`bounds` as
+/// [`Problem::record_bounds`]).
+pub(crate) fn unreachable_samples_of_records(
+    real: &Realisation,
+    bounds: &[usize],
+) -> Vec<(usize, usize)> {
+    let longest = bounds.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    let first = unreachable_samples(real, longest);
+    bounds
+        .windows(2)
+        .flat_map(|w| {
+            first
+                .iter()
+                .filter(move |&&(k, _)| k < w[1] - w[0])
+                .map(move |&(k, ch)| (w[0] + k, ch))
+        })
+        .collect()
 }
 
 /// The output samples (k, channel) that depend on neither e, w nor (when free) x₀: their
