@@ -364,6 +364,24 @@ fn tv_clarabel_two_records() {
     );
 }
 
+/// Beyond the conic solver's automatic size, total variation over several records still goes
+/// to the conic solver (ADMM's smoother runs over one record), and `auto` gives what an
+/// explicit conic solve gives.
+#[test]
+fn auto_sends_total_variation_over_several_records_to_the_conic_solver() {
+    let data = Data::from_records(vec![record(3, 560), record(4, 480)]).unwrap();
+    assert!(data.len() > structid_core::identify::CONIC_AUTO_LIMIT);
+    let tv: Arc<dyn Dispersion> = Arc::new(TotalVariation::new());
+    let auto = identify_with(&data, Arc::clone(&tv), SolverChoice::Auto, 1e-2, false);
+    assert_eq!(auto.diagnostics.solver, SolverKind::Clarabel);
+    assert_eq!(
+        auto.diagnostics.solver_reason,
+        SolverReason::TotalVariationRecords { records: 2 }
+    );
+    let conic = identify_with(&data, tv, SolverChoice::Clarabel, 1e-2, false);
+    assert_eq!(auto.w_hat.as_slice(), conic.w_hat.as_slice());
+}
+
 #[test]
 fn a_short_record_and_unequal_channels_are_clear_errors() {
     let data = Data::from_records(vec![record(1, 10), record(2, 1)]).unwrap();
