@@ -1,17 +1,19 @@
 //! `structid._structid`: the native module of the Python package `structid`.
 //!
 //! A thin layer over the library: one module per concept ([`model`], [`identify`],
-//! [`estimate`], [`refine`], [`discover`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
+//! [`estimate`], [`refine`], [`discover`], [`staticness`], [`design`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
 //! the GIL (`Python::detach`). The Python package (`structid/__init__.py`) turns the
 //! dictionaries returned here into dataclasses.
 
 mod convert;
+mod design;
 mod discover;
 mod estimate;
 mod identify;
 mod model;
 mod paper;
 mod refine;
+mod staticness;
 
 use pyo3::prelude::*;
 
@@ -25,6 +27,9 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(refine::refine_columns, m)?)?;
     m.add_function(wrap_pyfunction!(discover::discover_columns, m)?)?;
     m.add_function(wrap_pyfunction!(discover::silverbox_discovery, m)?)?;
+    m.add_function(wrap_pyfunction!(staticness::staticness_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(design::design_input, m)?)?;
+    m.add_function(wrap_pyfunction!(design::crest_factor, m)?)?;
     m.add_function(wrap_pyfunction!(paper::spray, m)?)?;
     m.add_function(wrap_pyfunction!(paper::multi_input, m)?)?;
     m.add_function(wrap_pyfunction!(paper::hammerstein_coloured, m)?)?;

@@ -30,7 +30,8 @@ from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, Validation
 from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
                          silverbox_discovery)
-from . import paper, scenarios
+from ._staticness import Staticness, staticness
+from . import input, paper, scenarios
 
 __all__ = [
     "StructidError",
@@ -49,6 +50,9 @@ __all__ = [
     "Finding",
     "silverbox_data",
     "silverbox_discovery",
+    "staticness",
+    "Staticness",
+    "input",
     "paper",
     "scenarios",
     "gaussian",

@@ -72,6 +72,17 @@ def refine_columns(model: Model, columns: Columns, validation: Optional[Columns]
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False) -> Dict[str, Any]: ...
+def staticness_columns(z: Array1, w: Array1, sigma_fraction: Optional[float] = None,
+                       sigma: Optional[float] = None, noise_std: Optional[float] = None,
+                       ratio_limit: Optional[float] = None,
+                       direction_threshold: Optional[float] = None) -> Dict[str, Any]: ...
+def design_input(kind_name: str, length: int, sample_time: float = 1.0, amplitude: float = 1.0,
+                 offset: float = 0.0, band: Optional[Tuple[float, float]] = None, seed: int = 1,
+                 order: Optional[int] = None, clock: Optional[int] = None,
+                 period: Optional[int] = None, lines: Optional[List[int]] = None,
+                 odd: bool = False, minimise_crest: bool = False, sweep: str = "linear",
+                 hold: Tuple[int, int] = (1, 10)) -> Array1: ...
+def crest_factor(x: List[float]) -> float: ...
 def silverbox_discovery(path: str, order: int = 2,
                         validation_fraction: float = 0.2) -> Dict[str, Any]: ...
 def spray(samples: int = 2000, noise_std: float = 1.0, sigma: float = 0.1,
