@@ -9,7 +9,7 @@ use pyo3::types::PyDict;
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
-use structid_core::{Estimate, Identification, IdentifySettings, Signal, identify};
+use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal, identify};
 use structid_io::{DispersionSpec, Report, SelectionReport};
 
 use crate::convert::{self, error, invalid};
@@ -198,9 +198,11 @@ impl Outcome {
     }
 }
 
-fn run(
+/// Identifies the maps from one or more records (`Data::from_records`; one record is the
+/// `Data` as read).
+fn run_records(
     model: &Model,
-    named: Vec<(String, Vec<f64>)>,
+    records: Vec<Vec<(String, Vec<f64>)>>,
     validation: Option<Vec<(String, Vec<f64>)>>,
     r: &Request,
 ) -> PyResult<Outcome> {
@@ -231,7 +233,15 @@ fn run(
             "a selection criterion needs beta=\"auto\" and/or sigma=\"auto\"",
         ));
     }
-    let data = convert::record(mf, named)?;
+    let mut data = records
+        .into_iter()
+        .map(|named| convert::record(mf, named))
+        .collect::<PyResult<Vec<Data>>>()?;
+    let data = if data.len() == 1 {
+        data.pop().expect("one record")
+    } else {
+        Data::from_records(data).map_err(error)?
+    };
     let needs_z = r.sigma.is_none()
         && mf.blocks.iter().any(|b| {
             b.dispersion.sigma().is_none()
@@ -317,7 +327,7 @@ fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, Py
 
 /// Identifies the model's maps from named columns (see `structid.identify`).
 #[pyfunction]
-#[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None))]
+#[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None, more_records=None))]
 pub fn identify_columns<'py>(
     py: Python<'py>,
     model: &Model,
@@ -334,6 +344,7 @@ pub fn identify_columns<'py>(
     tolerance: Option<f64>,
     max_iterations: Option<usize>,
     memory_limit_mib: Option<u64>,
+    more_records: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let request = Request {
         beta,
@@ -348,10 +359,12 @@ pub fn identify_columns<'py>(
         max_iterations,
         memory_limit_mib,
     };
-    let named = named_columns(&columns);
+    // the first record, then any further ones: each restarts the model from its own state
+    let mut records = vec![named_columns(&columns)];
+    records.extend(more_records.iter().flatten().map(|r| named_columns(r)));
     let validation = validation.as_ref().map(|v| named_columns(v));
     let model = model.clone();
-    py.detach(move || run(&model, named, validation, &request))?
+    py.detach(move || run_records(&model, records, validation, &request))?
         .into_dict(py)
 }
 

@@ -140,7 +140,8 @@ def identify(model: Model, u: object, y: object, z: object = None, *,
     """Identifies the unknown maps of ``model`` from a record (``structid identify``).
 
     u, y (and z when the model measures it) are arrays with one row per sample (1-D for one
-    channel). ``beta`` is β or ``"auto"``; ``sigma`` is a kernel width for every block,
+    channel), or lists of such arrays for several records (experiments), each with its own
+    initial state and length: ``identify(model, [u1, u2], [y1, y2])``. ``beta`` is β or ``"auto"``; ``sigma`` is a kernel width for every block,
     ``"auto"`` or None (the model's). ``dispersion`` replaces every block's dispersion (e.g.
     ``"fourier"``, ``structid.total_variation()``). ``selection`` is ``"ml"``, ``"gcv"``,
     ``"cv"`` (``folds``) or ``"validation"`` (with ``validation=(u_val, y_val)``); by default
@@ -156,15 +157,34 @@ def identify(model: Model, u: object, y: object, z: object = None, *,
     sigma_auto = isinstance(sigma, str)
     if sigma_auto and sigma != "auto":
         raise _structid.StructidError(f"sigma `{sigma}` is neither a number nor \"auto\"")
-    cols = _columns(model, u, y, z, "")
+    more = None
+    if _is_records(u) or _is_records(y):
+        # several records (MATLAB's multi-experiment data): each restarts from its own state
+        zs = z if z is not None else [None] * len(u)
+        if not (_is_records(u) and _is_records(y) and len(u) == len(y) == len(zs)):
+            raise _structid.StructidError(
+                "several records are lists of arrays of the same length for u, y (and z)")
+        cols = _columns(model, u[0], y[0], zs[0], "record 1 ")
+        more = [_columns(model, a, b, c, f"record {i + 2} ")
+                for i, (a, b, c) in enumerate(zip(u[1:], y[1:], zs[1:]))]
+    else:
+        cols = _columns(model, u, y, z, "")
     val = None
     if validation is not None:
         val = _columns(model, *(list(validation) + [None] * (3 - len(validation))), "validation ")
     out = _structid.identify_columns(
         model._native, cols, None if beta_value is None else float(beta_value),
         None if sigma is None or sigma_auto else float(sigma), sigma_auto, selection, int(folds),
-        val, solver, initial_state, bool(bands), tolerance, max_iterations, memory_limit_mib)
+        val, solver, initial_state, bool(bands), tolerance, max_iterations, memory_limit_mib,
+        more)
     return _fit(model, out)
+
+
+def _is_records(x: object) -> bool:
+    """A list or tuple of numpy arrays: several records (a list of numbers, or of lists, is
+    one signal)."""
+    return isinstance(x, (list, tuple)) and len(x) > 0 and all(
+        isinstance(r, np.ndarray) for r in x)
 
 
 def _fit(model: Model, out: Dict[str, Any]) -> Fit:

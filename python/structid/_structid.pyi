@@ -63,7 +63,8 @@ def identify_columns(model: Model, columns: Columns, beta: Optional[float] = Non
                      validation: Optional[Columns] = None, solver: str = "auto",
                      initial_state: str = "zero", bands: bool = True,
                      tolerance: Optional[float] = None, max_iterations: Optional[int] = None,
-                     memory_limit_mib: Optional[int] = None) -> Dict[str, Any]: ...
+                     memory_limit_mib: Optional[int] = None,
+                     more_records: Optional[List[Columns]] = None) -> Dict[str, Any]: ...
 def refine_columns(model: Model, columns: Columns, validation: Optional[Columns] = None,
                    beta: Optional[float] = None, sigma: Optional[float] = None,
                    sigma_auto: bool = False, selection: str = "ml", iterations: int = 10,

@@ -164,3 +164,23 @@ def test_map_recovers_the_truth(files, records):
     assert np.max(np.abs(err)) < 0.1, np.max(np.abs(err))
     std = fit.band("N", z)
     assert std is not None and np.all(std > 0)
+
+
+def test_two_records_match_the_tool_and_not_their_concatenation(cli, files):
+    # Two records, each from its own state: the tool's `--data a --data b`.
+    out = files["dir"] / "two"
+    cli("identify", "--model", files["model"], "--data", files["data"], "--data", files["val"],
+        "--beta", "0.001", "--out", out)
+    model = structid.Model.from_file(files["model"])
+    a, b = read_csv(files["data"]), read_csv(files["val"])
+    fit = structid.identify(model, [a["u"], b["u"]], [a["y"], b["y"]], beta=0.001)
+    est = read_csv(out / "estimate.csv")
+    assert fit.w_hat.shape[0] == len(a["u"]) + len(b["u"])
+    close(fit.w_hat[:, 0], est["N"])
+    close(fit.cost["total"], read_json(out / "report.json")["cost"]["total"])
+    # one record glued from both carries the state over the joint: a different problem
+    glued = structid.identify(model, np.concatenate([a["u"], b["u"]]),
+                              np.concatenate([a["y"], b["y"]]), beta=0.001)
+    assert np.max(np.abs(glued.w_hat[:, 0] - fit.w_hat[:, 0])) > 1e-6
+    with pytest.raises(structid.StructidError, match="several records"):
+        structid.identify(model, [a["u"], b["u"]], [a["y"]], beta=0.001)
