@@ -325,13 +325,16 @@ fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, Py
         .collect()
 }
 
+/// A record as named numpy columns.
+type Columns<'py> = Vec<(String, PyReadonlyArray1<'py, f64>)>;
+
 /// Identifies the model's maps from named columns (see `structid.identify`).
 #[pyfunction]
 #[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None, more_records=None))]
 pub fn identify_columns<'py>(
     py: Python<'py>,
     model: &Model,
-    columns: Vec<(String, PyReadonlyArray1<'py, f64>)>,
+    columns: Columns<'py>,
     beta: Option<f64>,
     sigma: Option<f64>,
     sigma_auto: bool,
@@ -344,7 +347,7 @@ pub fn identify_columns<'py>(
     tolerance: Option<f64>,
     max_iterations: Option<usize>,
     memory_limit_mib: Option<u64>,
-    more_records: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
+    more_records: Option<Vec<Columns<'py>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let request = Request {
         beta,
