@@ -6,9 +6,20 @@ use structid_input::{Design, Kind, Lines, Sweep, generate};
 
 use crate::convert::{error, invalid, vector};
 
-/// The kind of input by its CLI name and options.
-fn kind(
-    name: &str,
+/// Designs one input signal (`structid input KIND`): `length` samples as a 1-D array.
+#[pyfunction]
+#[pyo3(signature = (kind_name, length, sample_time=1.0, amplitude=1.0, offset=0.0, band=None,
+                    seed=1, order=None, clock=None, period=None, lines=None, odd=false,
+                    minimise_crest=false, sweep="linear", hold=(1, 10)))]
+pub fn design_input<'py>(
+    py: Python<'py>,
+    kind_name: &str,
+    length: usize,
+    sample_time: f64,
+    amplitude: f64,
+    offset: f64,
+    band: Option<(f64, f64)>,
+    seed: u64,
     order: Option<u32>,
     clock: Option<usize>,
     period: Option<usize>,
@@ -17,8 +28,8 @@ fn kind(
     minimise_crest: bool,
     sweep: &str,
     hold: (usize, usize),
-) -> PyResult<Kind> {
-    Ok(match name {
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let kind = match kind_name {
         "prbs" => Kind::Prbs { order, clock },
         "multisine" => Kind::Multisine {
             period,
@@ -55,43 +66,7 @@ fn kind(
                 "unknown input kind `{other}`: give prbs, multisine, noise, chirp or steps"
             )));
         }
-    })
-}
-
-/// Designs one input signal (`structid input KIND`): `length` samples as a 1-D array.
-#[pyfunction]
-#[pyo3(signature = (kind_name, length, sample_time=1.0, amplitude=1.0, offset=0.0, band=None,
-                    seed=1, order=None, clock=None, period=None, lines=None, odd=false,
-                    minimise_crest=false, sweep="linear", hold=(1, 10)))]
-pub fn design_input<'py>(
-    py: Python<'py>,
-    kind_name: &str,
-    length: usize,
-    sample_time: f64,
-    amplitude: f64,
-    offset: f64,
-    band: Option<(f64, f64)>,
-    seed: u64,
-    order: Option<u32>,
-    clock: Option<usize>,
-    period: Option<usize>,
-    lines: Option<Vec<usize>>,
-    odd: bool,
-    minimise_crest: bool,
-    sweep: &str,
-    hold: (usize, usize),
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let kind = kind(
-        kind_name,
-        order,
-        clock,
-        period,
-        lines,
-        odd,
-        minimise_crest,
-        sweep,
-        hold,
-    )?;
+    };
     let design = Design {
         length,
         sample_time,

@@ -10,7 +10,7 @@ use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
 use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal, identify};
-use structid_io::{DispersionSpec, Report, SelectionReport};
+use structid_io::{Report, SelectionReport};
 
 use crate::convert::{self, error, invalid};
 use crate::estimate::Fitted;
@@ -242,17 +242,7 @@ fn run_records(
     } else {
         Data::from_records(data).map_err(error)?
     };
-    let needs_z = r.sigma.is_none()
-        && mf.blocks.iter().any(|b| {
-            b.dispersion.sigma().is_none()
-                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
-        });
-    let z = if needs_z {
-        Some(mf.z_signal(&data).map_err(error)?)
-    } else {
-        None
-    };
-    let core = mf.to_model(r.sigma, z.as_ref()).map_err(error)?;
+    let core = convert::core_model(mf, r.sigma, &data)?;
     let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
         let criterion = criterion(r, !model.has_total_variation())?;
         let validation = validation.map(|v| convert::record(mf, v)).transpose()?;

@@ -8,7 +8,7 @@ use structid_core::estimate::{Estimate, Provenance, SignalNames};
 use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{RefineSettings, refine};
 use structid_core::{Data, IdentifySettings};
-use structid_io::{DispersionSpec, ModelFile, RefinementReport, Report};
+use structid_io::{ModelFile, RefinementReport, Report};
 use structid_linear::OeSettings;
 
 use crate::convert::{self, error, invalid};
@@ -90,17 +90,7 @@ fn run(
             v.len()
         )));
     }
-    let needs_z = r.sigma.is_none()
-        && mf.blocks.iter().any(|b| {
-            b.dispersion.sigma().is_none()
-                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
-        });
-    let z = if needs_z {
-        Some(mf.z_signal(&data).map_err(error)?)
-    } else {
-        None
-    };
-    let core = mf.to_model(r.sigma, z.as_ref()).map_err(error)?;
+    let core = convert::core_model(mf, r.sigma, &data)?;
     let identify_settings = IdentifySettings::builder()
         .beta(beta)
         .initial_state(convert::initial_state(&r.initial_state)?)
