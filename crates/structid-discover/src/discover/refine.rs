@@ -135,39 +135,6 @@ pub(super) fn u_to_y(g: &PolynomialModel) -> PolynomialModel {
     }
 }
 
-/// `g` scaled by the real factor c that brings its frequency response closest to `reference`'s
-/// in relative terms, c = argmin Σ_ω |c·g(ω) − r(ω)|² / |r(ω)|² over 64 log-spaced frequencies
-/// from 10⁻⁴ to 0.5 cycles per sample (relative, so that an integrator's large low-frequency
-/// gain does not decide alone; c < 0 restores a sign the refit flipped). `g` is returned as it
-/// is when the factor is not defined (a response that vanishes or is not finite).
-pub(super) fn pin_scale(g: &PolynomialModel, reference: &PolynomialModel) -> PolynomialModel {
-    let (mut num, mut den) = (0.0, 0.0);
-    for i in 0..64 {
-        let f = 1e-4 * (0.5f64 / 1e-4).powf(i as f64 / 63.0);
-        let (Some((gr, gi)), Some((rr, ri))) = (
-            g.frequency_response(0, f),
-            reference.frequency_response(0, f),
-        ) else {
-            return g.clone();
-        };
-        let r2 = rr * rr + ri * ri;
-        if !(r2.is_finite() && r2 > 0.0 && gr.is_finite() && gi.is_finite()) {
-            continue;
-        }
-        num += (gr * rr + gi * ri) / r2;
-        den += (gr * gr + gi * gi) / r2;
-    }
-    let c = num / den;
-    if !(c.is_finite() && c != 0.0) {
-        return g.clone();
-    }
-    let mut scaled = g.clone();
-    for b in &mut scaled.num {
-        b.iter_mut().for_each(|v| *v *= c);
-    }
-    scaled
-}
-
 /// Whether `g` has more poles within about 10⁻⁴ of z = 1 than `nominal` (integrators, or
 /// poles slower than any record resolves): a joint refit that drives a pole there models a
 /// drift of the record (an unmeasured disturbance) by the plant, and the map found around it
@@ -255,10 +222,7 @@ pub(super) fn refine_jointly(
                         &oe,
                         free,
                     )?;
-                    // G·N(u) and N(G·u) are unchanged by G → c·G with the map rescaled, so
-                    // the refit's scale and sign are arbitrary: pinned to the nominal's, the
-                    // map keeps the units (and the family parameters) of the nominal model.
-                    pin_scale(&u_to_y(&fit.model), g)
+                    u_to_y(&fit.model)
                 }
             };
             if adds_integrator(&next, g) {
@@ -317,48 +281,6 @@ mod tests {
 
     fn model(num: Vec<f64>, den: Vec<f64>) -> PolynomialModel {
         PolynomialModel::new(vec![num], den, Some(0.01)).unwrap()
-    }
-
-    /// Invariance: any nonzero multiple of a model, sign included, is brought back to it.
-    #[test]
-    fn pinning_the_scale_undoes_any_gain_and_sign() {
-        // an integrating axis: (0.2 q⁻¹ + 0.15 q⁻²) / ((1 − q⁻¹)(1 − 0.9 q⁻¹))
-        let reference = model(vec![0.0, 0.2, 0.15], vec![1.0, -1.9, 0.9]);
-        for c in [-250.0, -1.0, 1e-3, 3.0, 7e4] {
-            let scaled = model(vec![0.0, 0.2 * c, 0.15 * c], vec![1.0, -1.9, 0.9]);
-            let pinned = pin_scale(&scaled, &reference);
-            for (a, b) in pinned.num[0].iter().zip(&reference.num[0]) {
-                assert!(
-                    (a - b).abs() < 1e-12 * b.abs().max(1.0),
-                    "c = {c}: {a} vs {b}"
-                );
-            }
-            assert_eq!(pinned.den, reference.den);
-        }
-    }
-
-    /// A different model is scaled by the least-squares factor of the relative responses:
-    /// checked against the factor computed here by brute force over a fine grid of c.
-    #[test]
-    fn the_pinned_scale_minimises_the_relative_response_error() {
-        let reference = model(vec![0.0, 0.2, 0.15], vec![1.0, -1.9, 0.9]);
-        let other = model(vec![0.0, 0.05, 0.0], vec![1.0, -1.8, 0.81]);
-        let pinned = pin_scale(&other, &reference);
-        let c = pinned.num[0][1] / other.num[0][1];
-        let error = |c: f64| -> f64 {
-            (0..64)
-                .map(|i| {
-                    let f = 1e-4 * (0.5f64 / 1e-4).powf(i as f64 / 63.0);
-                    let (gr, gi) = other.frequency_response(0, f).unwrap();
-                    let (rr, ri) = reference.frequency_response(0, f).unwrap();
-                    ((c * gr - rr).powi(2) + (c * gi - ri).powi(2)) / (rr * rr + ri * ri)
-                })
-                .sum()
-        };
-        let best = (1..20000)
-            .map(|k| c * (0.5 + k as f64 / 20000.0))
-            .fold(f64::INFINITY, |m, x| m.min(error(x)));
-        assert!(error(c) <= best + 1e-12, "{} > {best}", error(c));
     }
 
     #[test]
