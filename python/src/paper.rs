@@ -67,6 +67,31 @@ fn check_sigma(sigma: f64) -> PyResult<()> {
     }
 }
 
+/// A paper example with the Gaussian dispersion of width `sigma`, as its model file states it.
+fn gaussian_experiment<'py>(
+    py: Python<'py>,
+    scenario: fn(
+        usize,
+        f64,
+        std::sync::Arc<dyn structid_core::Dispersion>,
+        u64,
+    ) -> structid_core::Result<Experiment>,
+    samples: usize,
+    noise_std: f64,
+    sigma: f64,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_sigma(sigma)?;
+    let exp = scenario(
+        samples,
+        noise_std,
+        paper::gaussian(sigma).map_err(error)?,
+        seed,
+    )
+    .map_err(error)?;
+    experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
+}
+
 /// The spray-deposition example (section 6.1): y_k = f(u_k) + g(u_(k−2)) + e_k with
 /// u_k = sin(0.1k), f(z) = −|z|, g(z) = 0.5·(sin((3z)²) + (2z)² − 2).
 #[pyfunction]
@@ -78,15 +103,7 @@ pub fn spray<'py>(
     sigma: f64,
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_sigma(sigma)?;
-    let exp = paper::spray(
-        samples,
-        noise_std,
-        paper::gaussian(sigma).map_err(error)?,
-        seed,
-    )
-    .map_err(error)?;
-    experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
+    gaussian_experiment(py, paper::spray, samples, noise_std, sigma, seed)
 }
 
 /// The two-input example (section 6.2): one map N(z0, z1) behind a known LTI block.
@@ -99,15 +116,7 @@ pub fn multi_input<'py>(
     sigma: f64,
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_sigma(sigma)?;
-    let exp = paper::multi_input(
-        samples,
-        noise_std,
-        paper::gaussian(sigma).map_err(error)?,
-        seed,
-    )
-    .map_err(error)?;
-    experiment(py, &exp, DispersionSpec::Gaussian { sigma: Some(sigma) })
+    gaussian_experiment(py, paper::multi_input, samples, noise_std, sigma, seed)
 }
 
 /// The feature solver's benchmark problem (`cargo bench --bench features`,
