@@ -15,6 +15,15 @@
 //!    started at the current G).
 //! 3. Repeat until the simulation error on a validation record stops improving.
 //!
+//! # Several records
+//! Estimation and validation data may hold several records ([`Data::from_records`]). The map
+//! step is [`identify()`] over the records; the linear step is output error over the records,
+//! each simulated from rest, or from an initial state of its own with
+//! [`InitialState::Estimate`] ([`output_error_records_with_state`]); the estimation and
+//! validation errors are pooled over the records, each simulated from rest (the settling
+//! samples are left out of each validation record). The cost J is then the mean over all
+//! samples of all records, and the argument below holds as it is.
+//!
 //! # Why the estimation cost never increases
 //! With white output noise (e = y − G·[u; w]) and a zero initial state, step 1 minimises
 //!
@@ -73,7 +82,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_linear::{OeFit, OeSettings, PolynomialModel, output_error};
+use structid_linear::{OeFit, OeSettings, PolynomialModel, output_error_records};
 use structid_lti::Signal;
 
 use crate::dispersion::Dispersion;
@@ -114,7 +123,7 @@ pub fn output_error_with_state(
     settings: &OeSettings,
     free_initial_state: bool,
 ) -> Result<OeFit> {
-    oe_fit(inputs, y, g, settings, free_initial_state, 0)
+    oe_fit(&[(inputs, y)], g, settings, free_initial_state, 0)
 }
 
 /// [`output_error_with_state`] with `integrators` poles of `g` held at z = 1.
@@ -132,12 +141,71 @@ pub fn output_error_with_integrators(
     free_initial_state: bool,
     integrators: usize,
 ) -> Result<OeFit> {
-    oe_fit(inputs, y, g, settings, free_initial_state, integrators)
+    oe_fit(&[(inputs, y)], g, settings, free_initial_state, integrators)
+}
+
+/// [`output_error_with_integrators`] over several records (experiments) of the same system,
+/// given as `(inputs, y)` pairs: one fit of G to the stacked simulation errors, each record
+/// simulated from rest ([`structid_linear::output_error_records`]) or, with
+/// `free_initial_state`, from an initial state of its own (one impulse input per record, each
+/// with its own numerator, as in [`output_error_with_state`]). The cost is the mean over all
+/// samples of all records, the criterion [`identify()`] minimises on a [`Data`] of several
+/// records. `integrators` poles of `g` stay at z = 1 (0 for none), the inputs being summed
+/// record by record from zero. One record gives [`output_error_with_integrators`]'s fit.
+///
+/// ```
+/// use structid_core::refine::output_error_records_with_state;
+/// use structid_linear::PolynomialModel;
+/// use structid_lti::Signal;
+/// let g = PolynomialModel { num: vec![vec![0.0, 0.5]], den: vec![1.0, -0.8], sample_time: None };
+/// // Two records, each started from its own state x₀ (free response 2·0.8ᵏ and −1·0.8ᵏ).
+/// let rec = |len: usize, shift: usize, x0: f64| {
+///     let u = Signal::from_fn(len, 1, |k, _| (((k + shift) * (k + shift)) as f64 * 0.37).sin());
+///     let sim = g.simulate(&u).unwrap();
+///     let y: Vec<f64> = (0..len).map(|k| sim[k] + x0 * 0.8f64.powi(k as i32)).collect();
+///     (u, Signal::new(1, y).unwrap())
+/// };
+/// let (a, b) = (rec(150, 0, 2.0), rec(100, 5, -1.0));
+/// let start = PolynomialModel { num: vec![vec![0.0, 0.4]], den: vec![1.0, -0.6], sample_time: None };
+/// let s = structid_linear::OeSettings::default();
+/// let fit = output_error_records_with_state(&[(&a.0, &a.1), (&b.0, &b.1)], &start, &s, true, 0)?;
+/// assert!((fit.model.den[1] + 0.8).abs() < 1e-8 && fit.cost < 1e-20);
+/// assert_eq!(fit.model.num.len(), 1); // the impulse inputs are dropped
+/// # Ok::<(), structid_core::Error>(())
+/// ```
+pub fn output_error_records_with_state(
+    records: &[(&Signal, &Signal)],
+    g: &PolynomialModel,
+    settings: &OeSettings,
+    free_initial_state: bool,
+    integrators: usize,
+) -> Result<OeFit> {
+    oe_fit(records, g, settings, free_initial_state, integrators)
+}
+
+/// [`output_error_records_with_state`] on stacked signals with record bounds `[0, L₁, …, L]`.
+fn oe_fit_stacked(
+    inputs: &Signal,
+    y: &Signal,
+    bounds: &[usize],
+    g: &PolynomialModel,
+    settings: &OeSettings,
+    free_initial_state: bool,
+    integrators: usize,
+) -> Result<OeFit> {
+    if bounds.len() <= 2 {
+        return oe_fit(&[(inputs, y)], g, settings, free_initial_state, integrators);
+    }
+    let parts: Vec<(Signal, Signal)> = bounds
+        .windows(2)
+        .map(|w| (inputs.slice(w[0]..w[1]), y.slice(w[0]..w[1])))
+        .collect();
+    let pairs: Vec<(&Signal, &Signal)> = parts.iter().map(|(u, y)| (u, y)).collect();
+    oe_fit(&pairs, g, settings, free_initial_state, integrators)
 }
 
 fn oe_fit(
-    inputs: &Signal,
-    y: &Signal,
+    records: &[(&Signal, &Signal)],
     g: &PolynomialModel,
     settings: &OeSettings,
     free_initial_state: bool,
@@ -156,6 +224,9 @@ fn oe_fit(
              after the delay (e.g. [0.0, 1e-6, 1e-6] for a delay of one sample)"
         )));
     }
+    let Some(first) = records.first() else {
+        return Err(Error::InvalidStructure("no data record was given".into()));
+    };
     let order = g
         .num
         .iter()
@@ -163,30 +234,47 @@ fn oe_fit(
         .chain([g.den.len().saturating_sub(1)])
         .max()
         .unwrap_or(0);
-    let m = inputs.channels();
+    let m = first.0.channels();
+    let count = records.len();
     let mut start = g.clone();
-    let mut columns = inputs.clone();
+    let mut columns: Vec<Signal> = records.iter().map(|(u, _)| (*u).clone()).collect();
     if free_initial_state && order > 0 {
-        columns = Signal::from_fn(inputs.len(), m + 1, |k, c| {
-            if c < m {
-                inputs.get(k, c)
-            } else if k == 0 {
-                1.0
-            } else {
-                0.0
+        // One impulse input per record, at that record's first sample (zero in the others).
+        for (r, (inputs, _)) in records.iter().enumerate() {
+            if inputs.channels() != m {
+                // output_error_records() reports the mismatch.
+                continue;
             }
-        });
-        // Start the impulse numerator at the best initial state for `g` (a linear
-        // least-squares problem once F is fixed), so that the fit begins at the cost
+            columns[r] = Signal::from_fn(inputs.len(), m + count, |k, c| {
+                if c < m {
+                    inputs.get(k, c)
+                } else if c - m == r && k == 0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            });
+        }
+        // Start each impulse numerator at the best initial state of its record for `g` (a
+        // linear least-squares problem once F is fixed), so that the fit begins at the cost
         // identify() reaches with InitialState::Estimate and can only go below it, however
         // early the iteration stops.
-        start.num.push(best_impulse_numerator(inputs, y, g, order)?);
+        for (inputs, y) in records {
+            start.num.push(best_impulse_numerator(inputs, y, g, order)?);
+        }
     }
     if integrators > 0 {
         start.den = integrators::deflate(&g.den, integrators)?;
-        columns = integrators::sum(&columns, integrators)?;
+        for c in &mut columns {
+            *c = integrators::sum(c, integrators)?;
+        }
     }
-    let mut fit = output_error(&columns, y, &start, settings).map_err(linear_error)?;
+    let pairs: Vec<(&Signal, &Signal)> = columns
+        .iter()
+        .zip(records)
+        .map(|(u, (_, y))| (u, *y))
+        .collect();
+    let mut fit = output_error_records(&pairs, &start, settings).map_err(linear_error)?;
     fit.model.num.truncate(m);
     if integrators > 0 {
         fit.model.den = integrators::inflate(&fit.model.den, integrators);
@@ -449,7 +537,8 @@ impl LinearStructure {
     /// [`LinearStructure::with_integrators`] stay at z = 1.
     ///
     /// For output and rate feedback (shared numerator) G is SISO from v = u − ŵ; for an input
-    /// map from ŵ. A sensor map ([`Site::Output`]) reads z = G·u, which moves with G, so its
+    /// map from ŵ. Data of several records are fitted together, each record simulated from
+    /// rest or from its own initial state ([`output_error_records_with_state`]). A sensor map ([`Site::Output`]) reads z = G·u, which moves with G, so its
     /// linear step needs the map itself: use [`LinearStructure::estimate_linear_with_map`].
     pub fn estimate_linear(
         &self,
@@ -460,10 +549,18 @@ impl LinearStructure {
         free_initial_state: bool,
     ) -> Result<OeFit> {
         let integrators = self.integrators_of(g)?;
+        if w_hat.len() != data.len() {
+            return Err(Error::DimensionMismatch {
+                what: "map outputs ŵ of the linear step".into(),
+                expected: format!("{} samples, like the data", data.len()),
+                found: format!("{} samples", w_hat.len()),
+            });
+        }
         let fit = |inputs: &Signal, g: &PolynomialModel| {
-            oe_fit(
+            oe_fit_stacked(
                 inputs,
                 data.y(),
+                data.record_bounds(),
                 g,
                 settings,
                 free_initial_state,
@@ -558,10 +655,17 @@ impl LinearStructure {
             }
             Site::OutputFeedback => data.y().clone(),
             Site::RateFeedback => {
+                // Each record starts from rest: y₋₁ = 0 at its first sample.
                 let ts = g.sample_time.unwrap_or(1.0);
                 let y = data.y();
+                let starts = data.record_bounds();
                 Signal::from_fn(data.len(), 1, |k, _| {
-                    (y.get(k, 0) - if k == 0 { 0.0 } else { y.get(k - 1, 0) }) / ts
+                    let previous = if starts.contains(&k) {
+                        0.0
+                    } else {
+                        y.get(k - 1, 0)
+                    };
+                    (y.get(k, 0) - previous) / ts
                 })
             }
             Site::Declared { .. } => unreachable!("LinearStructure::new refuses declared sites"),
@@ -852,7 +956,8 @@ pub struct Refinement {
     pub seconds: f64,
 }
 
-/// RMS of y − simulation over the samples after `settle`, maps in the loop, zero state.
+/// RMS of y − simulation over the samples after `settle` of each record, maps in the loop,
+/// each record from a zero state, pooled over the records.
 fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize) -> Result<f64> {
     let maps = id.maps();
     let bindings: Vec<MapBinding<'_>> = model
@@ -865,26 +970,32 @@ fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize
             map: *m as &dyn Interpolant,
         })
         .collect();
-    let sim = match model.lft().simulate(&bindings, data.u(), None, None) {
-        Ok(sim) => sim,
-        // A closed loop that diverges scores as infinitely bad rather than stopping the
-        // alternation: another iteration or candidate may be stable.
-        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
-        Err(e) => return Err(e),
-    };
-    let (y, ys) = (data.y(), &sim.y);
-    let start = settle.min(y.len());
-    let n = (y.len() - start) * y.channels();
+    let (mut s, mut n) = (0.0, 0usize);
+    for record in data.records() {
+        let sim = match model.lft().simulate(&bindings, record.u(), None, None) {
+            Ok(sim) => sim,
+            // A closed loop that diverges scores as infinitely bad rather than stopping the
+            // alternation: another iteration or candidate may be stable.
+            Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
+            Err(e) => return Err(e),
+        };
+        let (y, ys) = (record.y(), &sim.y);
+        for k in settle.min(y.len())..y.len() {
+            for c in 0..y.channels() {
+                s += (y.get(k, c) - ys.get(k, c)).powi(2);
+                n += 1;
+            }
+        }
+    }
     if n == 0 {
         return Err(Error::InvalidStructure(format!(
-            "the validation record has no samples after the {settle} settling samples"
+            "the validation record{} no samples after the {settle} settling samples",
+            if data.record_count() > 1 {
+                "s have"
+            } else {
+                " has"
+            }
         )));
-    }
-    let mut s = 0.0;
-    for k in start..y.len() {
-        for c in 0..y.channels() {
-            s += (y.get(k, c) - ys.get(k, c)).powi(2);
-        }
     }
     let rms = (s / n as f64).sqrt();
     if rms.is_finite() {
@@ -910,10 +1021,6 @@ pub fn refine(
     validation: Option<&Data>,
     settings: &RefineSettings,
 ) -> Result<Refinement> {
-    data.require_single_record("refinement of the linear block")?;
-    if let Some(v) = validation {
-        v.require_single_record("the validation record of the refinement")?;
-    }
     let t0 = Instant::now();
     // The integrators are those of the start for the whole alternation.
     let structure = &structure
@@ -1098,28 +1205,32 @@ impl LinearRefinement {
     }
 }
 
-/// RMS of y − simulation of `lft` with `map` in the loop (zero state), ∞ on divergence.
+/// RMS of y − simulation of `lft` with `map` in the loop (each record from a zero state,
+/// pooled over the records), ∞ on divergence.
 fn map_simulation_rms(lft: &Lft, map: &dyn Interpolant, data: &Data) -> Result<f64> {
-    let sim = match lft.simulate(
-        &[MapBinding {
-            inputs: &[0],
-            output: 0,
-            map,
-        }],
-        data.u(),
-        None,
-        None,
-    ) {
-        Ok(sim) => sim,
-        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
-        Err(e) => return Err(e),
-    };
-    let y = data.y();
-    let n = y.len().max(1) as f64;
-    let s: f64 = (0..y.len())
-        .map(|k| (y.get(k, 0) - sim.y.get(k, 0)).powi(2))
-        .sum();
-    let rms = (s / n).sqrt();
+    let (mut s, mut n) = (0.0, 0usize);
+    for record in data.records() {
+        let sim = match lft.simulate(
+            &[MapBinding {
+                inputs: &[0],
+                output: 0,
+                map,
+            }],
+            record.u(),
+            None,
+            None,
+        ) {
+            Ok(sim) => sim,
+            Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
+            Err(e) => return Err(e),
+        };
+        let y = record.y();
+        s += (0..y.len())
+            .map(|k| (y.get(k, 0) - sim.y.get(k, 0)).powi(2))
+            .sum::<f64>();
+        n += y.len();
+    }
+    let rms = (s / n.max(1) as f64).sqrt();
     Ok(if rms.is_finite() { rms } else { f64::INFINITY })
 }
 
@@ -1162,7 +1273,6 @@ pub fn refine_linear(
     data: &Data,
     settings: &RefineSettings,
 ) -> Result<LinearRefinement> {
-    data.require_single_record("refinement of the linear block")?;
     let t0 = Instant::now();
     let free = settings.identify.initial_state() == InitialState::Estimate;
     let fit = structure.estimate_linear_with_map(data, map, g, &settings.oe, free)?;

@@ -111,7 +111,10 @@ pub use levenberg_marquardt::{
     LmStatus, covariance_from_normal,
 };
 pub use orders::Orders;
-pub use output_error::{OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, output_error};
+pub use output_error::{
+    OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, oe_records, output_error,
+    output_error_records,
+};
 pub use polynomial::PolynomialModel;
 pub use selection::{
     OrderCriterion, OrderGrid, OrderSelection, select_orders, select_orders_observed,

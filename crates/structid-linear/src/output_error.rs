@@ -3,7 +3,7 @@
 use nalgebra::{DMatrix, DVector};
 use structid_lti::{Signal, filter_row};
 
-use crate::arx::{ArxSettings, check_integrators, fit_arx, prepare_data, std_from};
+use crate::arx::{ArxSettings, check_integrators, fit_arx_records, prepare_data, std_from};
 use crate::error::{LinearError, check_sample_time};
 use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
 use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
@@ -432,6 +432,43 @@ pub fn output_error(
     initial: &PolynomialModel,
     settings: &OeSettings,
 ) -> Result<OeFit, LinearError> {
+    output_error_records(&[(u, y)], initial, settings)
+}
+
+/// [`output_error()`] over several records (experiments) of the same system, given as
+/// `(u, y)` pairs: one Levenberg–Marquardt fit of the stacked simulation errors, each record
+/// simulated from rest (zero initial conditions at its own first sample) and its first
+/// `transient` samples left out of the cost. The sensitivities restart with the records too,
+/// so the Jacobian is that of the stacked residual. This is not the fit of the concatenated
+/// record, which would carry the state at the end of one record into the next.
+///
+/// `cost` is the mean over every scored sample of every record; `fit_percent` and the
+/// warnings are those of the pooled scored samples. One record gives [`output_error()`]'s fit.
+///
+/// ```
+/// use structid_linear::{output_error, output_error_records, OeSettings, PolynomialModel};
+/// use structid_lti::Signal;
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None)?;
+/// let rec = |len: usize, shift: usize| {
+///     let u = Signal::from_fn(len, 1, |k, _| (((k + shift) * (k + shift)) as f64 * 0.37).sin());
+///     let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
+///     (u, y)
+/// };
+/// let (a, b) = (rec(200, 0), rec(150, 11));
+/// let start = PolynomialModel::new(vec![vec![0.0, 0.9, 0.6]], vec![1.0, -1.4, 0.6], None)?;
+/// let s = OeSettings::default();
+/// let fit = output_error_records(&[(&a.0, &a.1), (&b.0, &b.1)], &start, &s)?;
+/// assert!(fit.cost < 1e-20 && (fit.model.den[2] - 0.7).abs() < 1e-8);
+/// // One record is output_error itself.
+/// let one = output_error_records(&[(&a.0, &a.1)], &start, &s)?;
+/// assert_eq!(one.model, output_error(&a.0, &a.1, &start, &s)?.model);
+/// # Ok::<(), structid_linear::LinearError>(())
+/// ```
+pub fn output_error_records(
+    records: &[(&Signal, &Signal)],
+    initial: &PolynomialModel,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
     initial.validate()?;
     let n = settings.integrators;
     let free = if n == 0 {
@@ -447,8 +484,42 @@ pub fn output_error(
     };
     let orders = free.orders();
     orders.validate()?;
-    let (uc, yv) = prepare_data(u, y, initial.inputs(), "")?;
-    refine(&uc, &yv, &free, &orders, settings)
+    let stacked = Stacked::new(records, initial.inputs())?;
+    refine(&stacked, &free, &orders, settings)
+}
+
+/// Several `(u, y)` records checked and stacked: input channels, output, and the record
+/// bounds `[0, L₁, …, L]`.
+struct Stacked {
+    u: Vec<Vec<f64>>,
+    y: Vec<f64>,
+    bounds: Vec<usize>,
+}
+
+impl Stacked {
+    fn new(records: &[(&Signal, &Signal)], inputs: usize) -> Result<Self, LinearError> {
+        if records.is_empty() {
+            return Err(LinearError::param("records", "no data record was given"));
+        }
+        let several = records.len() > 1;
+        let mut u: Vec<Vec<f64>> = vec![Vec::new(); inputs];
+        let mut y = Vec::new();
+        let mut bounds = vec![0];
+        for (i, (ui, yi)) in records.iter().enumerate() {
+            let prefix = if several {
+                format!("record {}: ", i + 1)
+            } else {
+                String::new()
+            };
+            let (uc, yv) = prepare_data(ui, yi, inputs, &prefix)?;
+            for (c, col) in u.iter_mut().zip(uc) {
+                c.extend(col);
+            }
+            y.extend(yv);
+            bounds.push(y.len());
+        }
+        Ok(Stacked { u, y, bounds })
+    }
 }
 
 /// The Levenberg–Marquardt iteration of [`output_error()`] on checked data, with the orders
@@ -456,23 +527,34 @@ pub fn output_error(
 /// `initial` and `orders` are those of the free part: `settings.integrators` poles at
 /// `z = 1` are multiplied onto its denominator.
 fn refine(
-    uc: &[Vec<f64>],
-    yv: &[f64],
+    data: &Stacked,
     initial: &PolynomialModel,
     orders: &Orders,
     settings: &OeSettings,
 ) -> Result<OeFit, LinearError> {
+    let (uc, yv) = (&data.u, &data.y);
     let len = yv.len();
     let d = orders.parameters();
     let needed = settings.transient + d + 1;
-    if len < needed {
+    let scored = scored_samples(&data.bounds, settings.transient);
+    if scored < d + 1 {
+        let records = data.bounds.len() - 1;
         return Err(LinearError::TooFewSamples {
             what: format!(
-                "output error with orders {orders} ({d} parameters) after a transient of {} samples",
-                settings.transient
+                "output error with orders {orders} ({d} parameters) after a transient of {} samples{}",
+                settings.transient,
+                if records > 1 {
+                    format!(" in each of {records} records")
+                } else {
+                    String::new()
+                }
             ),
             needed,
-            available: len,
+            available: if records > 1 {
+                scored + settings.transient
+            } else {
+                len
+            },
         });
     }
     if !schur_stable(&initial.den) {
@@ -484,6 +566,7 @@ fn refine(
     let mut problem = Problem {
         u: uc,
         y: yv,
+        bounds: &data.bounds,
         orders,
         transient: settings.transient,
         fixed: integrator_polynomial(n_int),
@@ -498,7 +581,7 @@ fn refine(
             }
             other => other,
         })?;
-    let n = (len - settings.transient) as f64;
+    let n = scored as f64;
     let nb_total: usize = orders.nb.iter().sum();
     let parameter_covariance = fit
         .covariance(&mut problem)
@@ -514,7 +597,12 @@ fn refine(
     let model = PolynomialModel::new(free.num, den, sample_time)?;
     problem.simulate_at(theta);
     let (fit_percent, mut warning) = match &problem.last {
-        Some((_, yhat)) => judge_fit(yv, yhat, settings.transient),
+        Some((_, yhat)) => {
+            // Pooled over the scored samples of every record.
+            let (ys, yh): (Vec<f64>, Vec<f64>) =
+                problem.scored().map(|(k, _)| (yv[k], yhat[k])).unzip();
+            judge_fit(&ys, &yh, 0)
+        }
         None => (f64::NAN, None),
     };
     if warning.is_none()
@@ -566,18 +654,57 @@ pub fn oe(
     orders: &Orders,
     settings: &OeSettings,
 ) -> Result<OeFit, LinearError> {
+    oe_records(&[(u, y)], orders, settings)
+}
+
+/// [`oe`] over several records of the same system: the starting ARX model is fitted on the
+/// equations of every record (as [`arx_records`](crate::arx_records)), then
+/// [`output_error_records`] refines it with each record simulated from rest. One record gives
+/// [`oe`]'s fit.
+///
+/// ```
+/// use structid_linear::{oe_records, OeSettings, Orders, PolynomialModel};
+/// use structid_lti::Signal;
+/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None)?;
+/// let rec = |len: usize, shift: usize| {
+///     let u = Signal::from_fn(len, 1, |k, _| (((k + shift) * (k + shift)) as f64 * 0.37).sin());
+///     let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
+///     (u, y)
+/// };
+/// let (a, b) = (rec(200, 0), rec(150, 11));
+/// let fit = oe_records(&[(&a.0, &a.1), (&b.0, &b.1)], &Orders::siso(2, 2, 1), &OeSettings::default())?;
+/// assert!((fit.model.den[1] + 1.5).abs() < 1e-8);
+/// # Ok::<(), structid_linear::LinearError>(())
+/// ```
+pub fn oe_records(
+    records: &[(&Signal, &Signal)],
+    orders: &Orders,
+    settings: &OeSettings,
+) -> Result<OeFit, LinearError> {
     orders.validate()?;
-    let (uc, yv) = prepare_data(u, y, orders.inputs(), "")?;
+    let data = Stacked::new(records, orders.inputs())?;
     let mut arx_settings = settings.arx.clone();
     if settings.sample_time.is_some() {
         arx_settings.sample_time = settings.sample_time;
     }
-    // The free part A' of an ARX fit of the differenced output starts the search.
+    // The free part A' of an ARX fit of the differenced output starts the search; each record
+    // is differenced on its own, its first N samples being no equations.
     let n = settings.integrators;
-    let yd = difference(&yv, n);
-    let mut initial = fit_arx(&uc, &yd, orders, &arx_settings, orders.max_lag() + n)?
-        .0
-        .model;
+    let yd: Vec<f64> = data
+        .bounds
+        .windows(2)
+        .flat_map(|w| difference(&data.y[w[0]..w[1]], n))
+        .collect();
+    let mut initial = fit_arx_records(
+        &data.u,
+        &yd,
+        orders,
+        &arx_settings,
+        &data.bounds,
+        orders.max_lag() + n,
+    )?
+    .0
+    .model;
     if !schur_stable(&initial.den) {
         let r = root_radius(&initial.den);
         let c = 0.95 / r;
@@ -585,7 +712,15 @@ pub fn oe(
             *a *= c.powi(j as i32);
         }
     }
-    refine(&uc, &yv, &initial, orders, settings)
+    refine(&data, &initial, orders, settings)
+}
+
+/// Samples scored by the cost: those of each record after its first `transient`.
+fn scored_samples(bounds: &[usize], transient: usize) -> usize {
+    bounds
+        .windows(2)
+        .map(|w| (w[1] - w[0]).saturating_sub(transient))
+        .sum()
 }
 
 /// `θ = (b…, f…)` of `model` for the given orders (normalised by `den[0]`; missing
@@ -604,10 +739,13 @@ fn parameters_for(model: &PolynomialModel, orders: &Orders) -> Vec<f64> {
 type Sensitivities = (Vec<Vec<f64>>, Vec<(usize, usize, f64)>);
 
 /// The data and structure of an output-error problem; parameters `θ = (b…, f…)`,
-/// residuals `ε_k = y_k − ŷ_k(θ)` after the transient, rejecting unstable denominators.
+/// residuals `ε_k = y_k − ŷ_k(θ)` after the transient of each record, rejecting unstable
+/// denominators. Each record (`bounds`) is simulated from rest, and so are the sensitivities.
 struct Problem<'a> {
     u: &'a [Vec<f64>],
     y: &'a [f64],
+    /// Where each record starts, then the total length: `[0, L₁, …, L]`.
+    bounds: &'a [usize],
     orders: &'a Orders,
     transient: usize,
     /// The fixed denominator factor `(1 − q⁻¹)ᴺ` (`[1]` without integrators).
@@ -624,10 +762,9 @@ impl LeastSquaresProblem for Problem<'_> {
             return None;
         }
         let yhat = self.simulate(theta);
-        let t = self.transient;
         let r = DVector::from_iterator(
-            self.y.len() - t,
-            self.y[t..].iter().zip(&yhat[t..]).map(|(a, b)| a - b),
+            scored_samples(self.bounds, self.transient),
+            self.scored().map(|(k, _)| self.y[k] - yhat[k]),
         );
         self.last = Some((theta.to_vec(), yhat));
         Some(r)
@@ -640,11 +777,11 @@ impl LeastSquaresProblem for Problem<'_> {
             return None;
         };
         let (filtered, cols) = self.sensitivities(theta, yhat);
-        let t = self.transient;
-        Some(DMatrix::from_fn(self.y.len() - t, theta.len(), |row, p| {
+        let rows: Vec<(usize, usize)> = self.scored().collect();
+        Some(DMatrix::from_fn(rows.len(), theta.len(), |row, p| {
             let (f, lag, sign) = cols[p];
-            let k = row + t;
-            if k >= lag {
+            let (k, start) = rows[row];
+            if k >= start + lag {
                 -sign * filtered[f][k - lag]
             } else {
                 0.0
@@ -668,6 +805,19 @@ impl LeastSquaresProblem for Problem<'_> {
 }
 
 impl Problem<'_> {
+    /// The scored samples `(k, first sample of k's record)`, record after record.
+    fn scored(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let t = self.transient;
+        self.bounds
+            .windows(2)
+            .flat_map(move |w| ((w[0] + t).min(w[1])..w[1]).map(move |k| (k, w[0])))
+    }
+
+    /// Each record's samples `start..end`.
+    fn records(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.bounds.windows(2).map(|w| w[0]..w[1])
+    }
+
     fn split(&self, theta: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
         let mut off = 0;
         let mut num = Vec::with_capacity(self.orders.inputs());
@@ -686,12 +836,20 @@ impl Problem<'_> {
         schur_stable(&self.split(theta).0)
     }
 
+    /// `signals` filtered by `num/den`, record by record from rest.
+    fn filter<S: AsRef<[f64]>>(&self, num: &[Vec<f64>], den: &[f64], signals: &[S]) -> Vec<f64> {
+        let mut out = vec![0.0; self.y.len()];
+        for r in self.records() {
+            let parts: Vec<&[f64]> = signals.iter().map(|s| &s.as_ref()[r.clone()]).collect();
+            filter_row(num, den, &parts, &mut out[r]);
+        }
+        out
+    }
+
     fn simulate(&self, theta: &[f64]) -> Vec<f64> {
         let (den, num) = self.split(theta);
         let den = convolve(&den, &self.fixed);
-        let mut y = vec![0.0; self.y.len()];
-        filter_row(&num, &den, self.u, &mut y);
-        y
+        self.filter(&num, &den, self.u)
     }
 
     /// Makes `last` the simulation at θ (simulating only when it is not).
@@ -703,12 +861,13 @@ impl Problem<'_> {
 
     /// The sensitivities `∂ŷ/∂b_{i,j} = q^{−(nk_i+j)}/(F'Δ) · u_i` and
     /// `∂ŷ/∂f'_j = −q^{−j}/F' · ŷ` (`Δ` the fixed factor, `F = F'Δ`) as `n_u + 1` all-pole
-    /// filtered signals and, per parameter, (filtered signal, lag, sign).
+    /// filtered signals (each record from rest) and, per parameter, (filtered signal, lag,
+    /// sign); a lagged sample before its record's start is zero.
     fn sensitivities(&self, theta: &[f64], yhat: &[f64]) -> Sensitivities {
         let (free, _) = self.split(theta);
         let den = convolve(&free, &self.fixed);
-        let len = self.y.len();
         let d = theta.len();
+        let one = [vec![1.0]];
         // (filtered signal, lag, sign) per parameter
         let mut filtered: Vec<Vec<f64>> = Vec::new();
         let mut cols: Vec<(usize, usize, f64)> = Vec::with_capacity(d);
@@ -716,17 +875,13 @@ impl Problem<'_> {
             if nb == 0 {
                 continue;
             }
-            let mut w = vec![0.0; len];
-            filter_row(&[[1.0]], &den, &[&self.u[i]], &mut w);
-            filtered.push(w);
+            filtered.push(self.filter(&one, &den, &[&self.u[i]]));
             for j in 0..nb {
                 cols.push((filtered.len() - 1, nk + j, 1.0));
             }
         }
         if self.orders.na > 0 {
-            let mut v = vec![0.0; len];
-            filter_row(&[[1.0]], &free, &[yhat], &mut v);
-            filtered.push(v);
+            filtered.push(self.filter(&one, &free, &[yhat]));
             for j in 1..=self.orders.na {
                 cols.push((filtered.len() - 1, j, -1.0));
             }
@@ -734,18 +889,17 @@ impl Problem<'_> {
         (filtered, cols)
     }
 
-    /// `(ΨᵀΨ, Ψᵀε)` over the samples after the transient, accumulated row by row from the
-    /// sensitivities (`O(L·d²)`, Ψ never stored).
+    /// `(ΨᵀΨ, Ψᵀε)` over the scored samples, accumulated row by row from the sensitivities
+    /// (`O(L·d²)`, Ψ never stored).
     fn psi_normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, Vec<f64>) {
         let (filtered, cols) = self.sensitivities(theta, yhat);
-        let len = self.y.len();
         let d = theta.len();
         let mut h = DMatrix::zeros(d, d);
         let mut g = vec![0.0; d];
         let mut psi = vec![0.0; d];
-        for k in self.transient..len {
+        for (k, start) in self.scored() {
             for (p, &(f, lag, sign)) in cols.iter().enumerate() {
-                psi[p] = if k >= lag {
+                psi[p] = if k >= start + lag {
                     sign * filtered[f][k - lag]
                 } else {
                     0.0
@@ -880,9 +1034,11 @@ mod tests {
             let y = white(52, 300, 1.0, 1);
             let orders = g.orders();
             let (uc, yv) = prepare_data(&u, &y, 2, "").unwrap();
+            let bounds = [0, yv.len()];
             let mut p = Problem {
                 u: &uc,
                 y: &yv,
+                bounds: &bounds,
                 orders: &orders,
                 transient: 20,
                 fixed: fixed.clone(),
@@ -906,6 +1062,226 @@ mod tests {
             let mut bad = theta.clone();
             bad[4] = 1.5;
             assert!(p.residuals(&bad).is_none());
+        }
+    }
+
+    /// A record of `truth` simulated from rest with white input and output noise.
+    fn record(truth: &PolynomialModel, seed: u64, len: usize, noise: f64) -> (Signal, Signal) {
+        let u = white(seed, len, 1.0, truth.inputs());
+        let e = white(seed + 1000, len, noise, 1);
+        let y0 = truth.simulate(&u).unwrap();
+        let y = y0.iter().zip(e.as_slice()).map(|(a, b)| a + b).collect();
+        (u, Signal::new(1, y).unwrap())
+    }
+
+    /// The stacked cost of `model` computed independently of the fit: each record simulated
+    /// from rest by `PolynomialModel::simulate`, its first `transient` samples left out.
+    fn stacked_cost(
+        model: &PolynomialModel,
+        records: &[(Signal, Signal)],
+        transient: usize,
+    ) -> f64 {
+        let (mut s, mut n) = (0.0, 0);
+        for (u, y) in records {
+            let sim = model.simulate(u).unwrap();
+            for k in transient..y.len() {
+                s += (y.get(k, 0) - sim[k]).powi(2);
+                n += 1;
+            }
+        }
+        s / n as f64
+    }
+
+    fn concatenated(records: &[(Signal, Signal)]) -> (Signal, Signal) {
+        let cat = |f: &dyn Fn(&(Signal, Signal)) -> &Signal| {
+            let ch = f(&records[0]).channels();
+            Signal::new(
+                ch,
+                records
+                    .iter()
+                    .flat_map(|r| f(r).as_slice().to_vec())
+                    .collect(),
+            )
+            .unwrap()
+        };
+        (cat(&|r| &r.0), cat(&|r| &r.1))
+    }
+
+    #[test]
+    fn records_restart_from_rest_where_their_concatenation_does_not() {
+        // A slow pole: the state at the end of one record is far from rest.
+        let g =
+            PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.6, 0.8], None).unwrap();
+        let records = vec![record(&g, 61, 300, 0.01), record(&g, 62, 200, 0.01)];
+        let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
+        let orders = Orders::siso(2, 2, 1);
+        let s = OeSettings::default();
+        let fit = oe_records(&pairs, &orders, &s).unwrap();
+        assert!(fit.converged);
+        assert_non_increasing(&fit);
+        let truth = g.parameters();
+        let dist = |x: &[f64]| {
+            x.iter()
+                .zip(&truth)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let est = fit.model.parameters();
+        for (p, ((a, b), sd)) in est.iter().zip(&truth).zip(&fit.parameter_std).enumerate() {
+            assert!(
+                (a - b).abs() < 4.0 * sd,
+                "parameter {p}: {a} vs {b}, std {sd}"
+            );
+        }
+        // The reported cost is the stacked cost with each record from rest, and the estimate
+        // is its minimum: no coordinate step lowers it.
+        let cost = stacked_cost(&fit.model, &records, 0);
+        assert!(
+            (fit.cost - cost).abs() <= 1e-10 * cost,
+            "{} vs {cost}",
+            fit.cost
+        );
+        assert!(
+            (cost / 1e-4 - 1.0).abs() < 0.15,
+            "noise variance 1e-4, cost {cost}"
+        );
+        let theta = fit.model.parameters();
+        for p in 0..theta.len() {
+            for h in [-1e-4, 1e-4] {
+                let mut t = theta.clone();
+                t[p] += h;
+                let m = PolynomialModel::from_parameters(&orders, &t, None).unwrap();
+                assert!(
+                    stacked_cost(&m, &records, 0) > cost,
+                    "parameter {p} step {h}"
+                );
+            }
+        }
+        // The concatenated record carries the first record's final state into the second:
+        // a different (worse) estimate.
+        let (uc, yc) = concatenated(&records);
+        let glued = oe(&uc, &yc, &orders, &s).unwrap();
+        let d_glued = dist(&glued.model.parameters());
+        let d_records = dist(&est);
+        assert!(
+            d_records < 0.5 * d_glued,
+            "records {d_records} vs concatenation {d_glued}"
+        );
+        assert!(stacked_cost(&glued.model, &records, 0) > cost);
+        // One record is oe itself; the records' order does not matter.
+        let one = oe_records(&pairs[..1], &orders, &s).unwrap();
+        let direct = oe(pairs[0].0, pairs[0].1, &orders, &s).unwrap();
+        assert_eq!(one.model, direct.model);
+        assert_eq!(one.cost, direct.cost);
+        let swapped = oe_records(&[pairs[1], pairs[0]], &orders, &s).unwrap();
+        assert_close(&swapped.model.parameters(), &est, 1e-8);
+        assert!(oe_records(&[], &orders, &s).is_err());
+    }
+
+    #[test]
+    fn records_with_a_transient_and_a_fixed_integrator() {
+        // G = 0.1 q⁻¹ (1 + 0.5 q⁻¹) / ((1 − 0.6 q⁻¹)(1 − q⁻¹))
+        let g = PolynomialModel::new(
+            vec![vec![0.0, 0.1, 0.05]],
+            convolve(&[1.0, -0.6], &[1.0, -1.0]),
+            None,
+        )
+        .unwrap();
+        let records = [record(&g, 71, 250, 0.0), record(&g, 72, 180, 0.0)];
+        let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
+        let s = OeSettings::builder()
+            .integrators(1)
+            .transient(5)
+            .build()
+            .unwrap();
+        let fit = oe_records(&pairs, &Orders::siso(1, 2, 1), &s).unwrap();
+        assert_eq!(fit.integrators, 1);
+        assert_close(&fit.model.parameters(), &g.parameters(), 1e-7);
+        assert!(fit.cost < 1e-20, "{}", fit.cost);
+        // Started elsewhere, output_error_records holds the integrator and reaches G too.
+        let start = PolynomialModel::new(
+            vec![vec![0.0, 0.2, 0.0]],
+            convolve(&[1.0, -0.3], &[1.0, -1.0]),
+            None,
+        )
+        .unwrap();
+        let fit = output_error_records(&pairs, &start, &s).unwrap();
+        assert_close(&fit.model.parameters(), &g.parameters(), 1e-7);
+        // A transient longer than a record leaves that record out of the cost.
+        let short = record(&g, 73, 4, 0.0);
+        let with_short =
+            output_error_records(&[pairs[0], pairs[1], (&short.0, &short.1)], &start, &s).unwrap();
+        assert_close(&with_short.model.parameters(), &g.parameters(), 1e-7);
+        // Too few samples overall names the records.
+        let tiny = OeSettings::builder().transient(178).build().unwrap();
+        let e = output_error_records(&[(&short.0, &short.1), pairs[1]], &g, &tiny).unwrap_err();
+        assert!(e.to_string().contains("each of 2 records"), "{e}");
+        // A bad record is named.
+        let mut bad = records[1].1.clone();
+        bad.as_mut_slice()[3] = f64::NAN;
+        let e = output_error_records(&[pairs[0], (&records[1].0, &bad)], &g, &tiny).unwrap_err();
+        assert!(e.to_string().contains("record 2"), "{e}");
+    }
+
+    #[test]
+    fn the_jacobian_over_several_records_is_that_of_the_stacked_residual() {
+        for fixed in [vec![1.0], vec![1.0, -1.0]] {
+            let g = PolynomialModel::new(
+                vec![vec![0.3, 0.4], vec![0.0, 0.0, -0.8]],
+                vec![1.0, -1.2, 0.5],
+                None,
+            )
+            .unwrap();
+            let u = white(81, 300, 1.0, 2);
+            let y = white(82, 300, 1.0, 1);
+            let orders = g.orders();
+            let (uc, yv) = prepare_data(&u, &y, 2, "").unwrap();
+            // three records, the middle one shorter than the transient
+            let bounds = [0, 140, 150, 300];
+            let transient = 12;
+            let mut p = Problem {
+                u: &uc,
+                y: &yv,
+                bounds: &bounds,
+                orders: &orders,
+                transient,
+                fixed: fixed.clone(),
+                last: None,
+            };
+            let theta = parameters_for(&g, &orders);
+            let r = p.residuals(&theta).unwrap();
+            assert_eq!(r.len(), (140 - 12) + (150 - 12));
+            // The residual, independently: each record simulated from rest by the model.
+            let model =
+                PolynomialModel::new(g.num.clone(), convolve(&g.den, &fixed), None).unwrap();
+            let mut expected = Vec::new();
+            for w in bounds.windows(2) {
+                let ur = u.slice(w[0]..w[1]);
+                let sim = model.simulate(&ur).unwrap();
+                for k in transient.min(w[1] - w[0])..(w[1] - w[0]) {
+                    expected.push(yv[w[0] + k] - sim[k]);
+                }
+            }
+            assert_close(r.as_slice(), &expected, 1e-12);
+            let j = p.jacobian(&theta, &r).unwrap();
+            let (h, jtr) = p.normal_equations(&theta, &r).unwrap();
+            let h_ref = j.transpose() * &j;
+            let jtr_ref = j.transpose() * &r;
+            assert!((&h - &h_ref).norm() <= 1e-12 * h_ref.norm());
+            assert!((&jtr - &jtr_ref).norm() <= 1e-12 * jtr_ref.norm());
+            // Every column against central differences of the residual.
+            for c in 0..theta.len() {
+                let step = 1e-6;
+                let (mut tp, mut tm) = (theta.clone(), theta.clone());
+                tp[c] += step;
+                tm[c] -= step;
+                let fd = (p.residuals(&tp).unwrap() - p.residuals(&tm).unwrap()) / (2.0 * step);
+                assert!(
+                    (&fd - j.column(c)).norm() <= 1e-6 * j.column(c).norm().max(1.0),
+                    "column {c}"
+                );
+            }
         }
     }
 

@@ -11,7 +11,9 @@
 //! by Levenberg–Marquardt. The residual's Jacobian is −N̂′(z_k)·∂z_k/∂θ, where ∂z/∂b_(i,j) is
 //! u_i filtered by q^(−(nk_i+j))/F and ∂z/∂f_j is −z filtered by q^(−j)/F (the output-error
 //! sensitivities), and N̂′ a central difference of the map. Where the map is flat (a
-//! saturated sensor) the samples carry no information about G, as they should.
+//! saturated sensor) the samples carry no information about G, as they should. Data of
+//! several records are simulated record by record from rest (or each from an initial state of
+//! its own, an impulse input per record), and so are the sensitivities.
 
 use nalgebra::{DMatrix, DVector};
 use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings};
@@ -26,6 +28,8 @@ use crate::model::Data;
 struct Problem<'a> {
     u: Signal,
     y: Vec<f64>,
+    /// Where each record starts, then the total length: each is simulated from rest.
+    bounds: Vec<usize>,
     orders: Orders,
     sample_time: Option<f64>,
     map: &'a dyn Interpolant,
@@ -38,8 +42,27 @@ impl Problem<'_> {
     }
 
     fn z(&self, m: &PolynomialModel) -> Option<Vec<f64>> {
-        let z = m.simulate(&self.u).ok()?;
+        let mut z = Vec::with_capacity(self.y.len());
+        for w in self.bounds.windows(2) {
+            z.extend(m.simulate(&self.u.slice(w[0]..w[1])).ok()?);
+        }
         z.iter().all(|v| v.is_finite()).then_some(z)
+    }
+
+    /// `x` filtered by 1/F, each record from rest.
+    fn through_den(&self, den: &[f64], x: &[f64]) -> Vec<f64> {
+        self.bounds
+            .windows(2)
+            .flat_map(|w| through_den(den, &x[w[0]..w[1]]))
+            .collect()
+    }
+
+    /// The first sample of the record of every sample.
+    fn record_starts(&self) -> Vec<usize> {
+        self.bounds
+            .windows(2)
+            .flat_map(|w| std::iter::repeat_n(w[0], w[1] - w[0]))
+            .collect()
     }
 }
 
@@ -84,18 +107,23 @@ impl LeastSquaresProblem for Problem<'_> {
             .collect();
         let mut columns: Vec<(Vec<f64>, usize, f64)> = Vec::with_capacity(theta.len());
         for (i, (&nb, &nk)) in self.orders.nb.iter().zip(&self.orders.nk).enumerate() {
-            let x = through_den(&m.den, &self.u.channel(i));
+            let x = self.through_den(&m.den, &self.u.channel(i));
             for j in 0..nb {
                 columns.push((x.clone(), nk + j, 1.0));
             }
         }
-        let zf = through_den(&m.den, &z);
+        let zf = self.through_den(&m.den, &z);
         for j in 1..=self.orders.na {
             columns.push((zf.clone(), j, -1.0));
         }
+        let starts = self.record_starts();
         Some(DMatrix::from_fn(len, theta.len(), |k, p| {
             let (x, lag, sign) = &columns[p];
-            let dz = if k >= *lag { sign * x[k - lag] } else { 0.0 };
+            let dz = if k >= starts[k] + *lag {
+                sign * x[k - lag]
+            } else {
+                0.0
+            };
             -slope[k] * dz
         }))
     }
@@ -142,25 +170,39 @@ pub(super) fn fit(
         den: g.den.iter().map(|v| v / a0).collect(),
         sample_time: g.sample_time,
     };
+    let bounds = data.record_bounds().to_vec();
+    let count = data.record_count();
     let mut columns = u.clone();
     let free = free_initial_state && order > 0;
     if free {
-        columns = Signal::from_fn(u.len(), m + 1, |k, c| {
+        // One impulse input per record, at its first sample.
+        columns = Signal::from_fn(u.len(), m + count, |k, c| {
             if c < m {
                 u.get(k, c)
-            } else if k == 0 {
+            } else if k == bounds[c - m] {
                 1.0
             } else {
                 0.0
             }
         });
-        // The free response starts at zero (a tiny value keeps every coefficient free: the
+        // The free responses start at zero (a tiny value keeps every coefficient free: the
         // orders are read from the leading zeros).
-        start.num.push(vec![1e-12; order]);
+        for _ in 0..count {
+            start.num.push(vec![1e-12; order]);
+        }
     }
     if n_integrators > 0 {
         start.den = integrators::deflate(&start.den, n_integrators)?;
-        columns = integrators::sum(&columns, n_integrators)?;
+        // Summed record by record from zero.
+        let parts: Vec<Signal> = bounds
+            .windows(2)
+            .map(|w| integrators::sum(&columns.slice(w[0]..w[1]), n_integrators))
+            .collect::<Result<_>>()?;
+        let ch = columns.channels();
+        columns = Signal::new(
+            ch,
+            parts.iter().flat_map(|p| p.as_slice().to_vec()).collect(),
+        )?;
     }
     if !start.is_stable() {
         return Err(Error::InvalidStructure(format!(
@@ -175,6 +217,7 @@ pub(super) fn fit(
     let mut problem = Problem {
         u: columns,
         y: data.y().channel(0),
+        bounds,
         orders,
         sample_time: g.sample_time,
         map,

@@ -24,7 +24,8 @@
 //! * **Validation simulation error** ([`Criterion::Validation`], any dispersion): fit on the
 //!   estimation record, simulate the model with the fitted maps in the loop on a separate
 //!   validation record (zero initial state, e = 0) and score the mean squared simulation
-//!   error — the usual practice in system identification.
+//!   error — the usual practice in system identification. Validation data of several records
+//!   are simulated record by record, each from rest, and the squared errors pooled.
 //!
 //! # Search
 //! β is found by a bracketing golden-section search on log₁₀ β (walk downhill by decades

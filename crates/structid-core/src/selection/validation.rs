@@ -16,10 +16,9 @@ pub(super) struct ValidationScore<'a> {
     pub(super) settings: IdentifySettings,
 }
 
-/// Mean squared error of simulating `model` with `id`'s maps in the loop on `data` (zero
-/// initial state, e = 0).
+/// Mean squared error of simulating `model` with `id`'s maps in the loop on `data` (each
+/// record from a zero initial state, e = 0), pooled over the samples of every record.
 pub(crate) fn simulation_mse(model: &Model, id: &Identification, data: &Data) -> Result<f64> {
-    data.require_single_record("the validation record of the selection")?;
     let bindings: Vec<MapBinding<'_>> = model
         .blocks()
         .iter()
@@ -30,14 +29,18 @@ pub(crate) fn simulation_mse(model: &Model, id: &Identification, data: &Data) ->
             map: est.map.as_ref(),
         })
         .collect();
-    let sim = model.lft().simulate(&bindings, data.u(), None, None)?;
-    let (y, ys) = (data.y().as_slice(), sim.y.as_slice());
-    let mse = y
-        .iter()
-        .zip(ys)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        / y.len() as f64;
+    let (mut sse, mut n) = (0.0, 0usize);
+    for record in data.records() {
+        let sim = model.lft().simulate(&bindings, record.u(), None, None)?;
+        let (y, ys) = (record.y().as_slice(), sim.y.as_slice());
+        sse += y
+            .iter()
+            .zip(ys)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>();
+        n += y.len();
+    }
+    let mse = sse / n as f64;
     if !mse.is_finite() {
         return Err(Error::Numerical(
             "the validation simulation diverged (non-finite output)".into(),
@@ -54,8 +57,12 @@ impl BetaScore for ValidationScore<'_> {
 
     fn method(&self) -> String {
         format!(
-            "validation simulation error on {} samples (one fit and one simulation per β)",
-            self.validation.len()
+            "validation simulation error on {} samples{} (one fit and one simulation per β)",
+            self.validation.len(),
+            match self.validation.record_count() {
+                1 => String::new(),
+                n => format!(" of {n} records, each simulated from rest"),
+            }
         )
     }
 }
