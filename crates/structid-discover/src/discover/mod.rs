@@ -49,8 +49,13 @@
 //!    map held fixed (integrators held at 1), then the map identified again around the new G,
 //!    while the validation RMS falls by at least 5 % a step. An exact G gains nothing and stays.
 //!    Only the best location is refined, since G refitted around a map at the wrong location
-//!    absorbs part of the effect too. After naming, G is refitted once more with the named map
-//!    held fixed; [`Finding::nominal_refinement`] reports G as given and as kept.
+//!    absorbs part of the effect too, except when G's zero cancels its integrator: such a G is
+//!    the direct fit of a closed-loop record, wrong at every location (it tends to the
+//!    controller's negative inverse), and every location is refined, the rate included, the
+//!    refits competing on validation. A feedback location whose loop does not simulate around
+//!    G as given starts from G fitted with the map's input read from the measured output.
+//!    After naming, G is refitted once more with the named map held fixed;
+//!    [`Finding::nominal_refinement`] reports G as given and as kept.
 //! 4. **Is it static?** For every estimate within 1.5× of the best validation RMS, the noise
 //!    estimate ê (what the static map leaves unexplained) is deconvolved to the block's output
 //!    (a ridge-regularised inverse of L_yw, by conjugate gradients, with the adjoint applied by
@@ -555,16 +560,16 @@ fn discover_with(
     }
     // A nominal G estimated from data is biased by the missing effect itself: the best
     // hypothesis is refined jointly with G, and keeps the new G when it validates better.
-    // Only the best: G refitted around a map at the wrong location absorbs part of the effect
-    // too, and would make that location look as good as the right one.
+    // Only the best (but see below): G refitted around a map at the wrong location absorbs
+    // part of the effect too, and would make that location look as good as the right one.
     if settings.refine_nominal
         && let Some(g) = given.polynomial()
         && given.known_maps().is_empty()
         // A map of the rate depends on the direction of motion and so imitates hysteresis;
         // with G refitted around it, it imitates a backlash well enough to hide it.
-        && fitted
-            .first()
-            .is_some_and(|f| f.result.location != Location::RateFeedback)
+        && fitted.first().is_some_and(|f| {
+            cancelled.is_some() || f.result.location != Location::RateFeedback
+        })
     {
         // A hysteresis is partly a phase lag, which a refitted G absorbs: when a fit about as
         // good as the best already depends on the direction of its z, a new G must do much
@@ -579,11 +584,18 @@ fn discover_with(
             .iter()
             .any(|f| f.direction.as_ref().is_some_and(|d| d.dynamic));
         let required = if dynamic { DYNAMIC_JOINT_GAIN } else { 1.0 };
-        let best = fitted.remove(0);
-        fitted.insert(
-            0,
-            refine::refine_jointly(g, best.input_noise, best, est, val, required, settings),
-        );
+        // A G whose zero cancels its integrator is the direct fit of a closed-loop record,
+        // wrong at every location (it tends to the controller's negative inverse): each
+        // location is refined with it, its rate included, and the refits compete. The closed
+        // loop itself says little about the direction of motion that a refitted rate map
+        // could hide (on the physics generator no closed-loop backlash is lost so).
+        let joint = if cancelled.is_some() { fitted.len() } else { 1 };
+        let refitted: Vec<Fitted> = fitted
+            .drain(..joint)
+            .map(|f| refine::refine_jointly(g, f.input_noise, f, est, val, required, settings))
+            .collect();
+        fitted.extend(refitted);
+        by_validation(&mut fitted);
     }
     // Total variation, where a smooth estimate cannot do: at every location when the best
     // quadratic estimate closes less than half the gap (steps and jumps that a kernel of
@@ -1121,8 +1133,9 @@ fn cancelled_integrator(nominal: &Nominal) -> Option<String> {
         format!(
             "the nominal G does not integrate: a zero of its numerator cancels its integrator \
              (|B(1)| is {:.2} % of Σ|bᵢ|). A G fitted directly to a closed-loop record tends \
-             to the controller's negative inverse, and no static block makes up for that: \
-             prefer a physical nominal or a record with open-loop excitation",
+             to the controller's negative inverse, so every location was refined jointly with \
+             G; a physical nominal or a record with open-loop excitation is still the safer \
+             start",
             100.0 * ratio
         )
     })

@@ -208,7 +208,28 @@ pub(super) fn refine_jointly(
         let step = || -> Result<Fitted> {
             let next = match location {
                 Location::OutputFeedback | Location::RateFeedback => {
-                    super::polish::polish_linear(g_now, f_now.map.as_ref(), location, est, settings)
+                    let in_loop = |g: &PolynomialModel| {
+                        super::polish::polish_linear(g, f_now.map.as_ref(), location, est, settings)
+                    };
+                    in_loop(g_now)
+                        .or_else(|| {
+                            // The loop with G as given may not even simulate (a closed-loop
+                            // record's direct fit, whose zero cancels the integrator, diverges
+                            // with the map fed back): the map's input read from the measured
+                            // output gives a biased but stable G to start the loop from.
+                            let start = structure.initial_from_bla(g_now).ok()?;
+                            let fit = structure
+                                .estimate_linear_with_map(
+                                    est,
+                                    f_now.map.as_ref(),
+                                    &start,
+                                    &oe,
+                                    free,
+                                )
+                                .ok()?;
+                            let open = u_to_y(&fit.model);
+                            in_loop(&open).or(Some(open))
+                        })
                         .ok_or_else(|| {
                             structid_core::Error::Numerical("the in-loop refit of G failed".into())
                         })?
