@@ -319,8 +319,8 @@ impl Problem {
     /// row `k·n_y + i` is output `i` at sample `k`): their equations y_k = … are dropped, so
     /// the estimate does not see them, while ŵ and ê are still defined at every sample. This
     /// is what cross-validation needs ([`crate::hyperparameters`]). The exact and conic
-    /// solvers support it, the feature solver for a static noise path and whole samples; ADMM
-    /// does not.
+    /// solvers support it, the feature solver for a static noise path and whole samples, ADMM
+    /// for whole samples (missing outputs of its smoother).
     ///
     /// ```
     /// use std::sync::Arc;

@@ -40,6 +40,17 @@
 //! at the end of the record) are set by the total variation alone and are not unique; chains
 //! leave those nodes out of the iteration and fill them exactly afterwards (see `TvView`).
 //!
+//! Several records ([`crate::Data::from_records`]) are independent in time: each record's
+//! smoother starts from that record's own initial state (zero, or free with one x₀ per record,
+//! returned one record after the other) and ends with it, so the w-step is the posterior mean
+//! under the block-diagonal operators (see `RecordSmoother`; the records are smoothed in
+//! parallel). Samples no input reaches are found per record, and so are the samples held out
+//! at the end of a record, and, with several records, the last samples of every record, whose
+//! map values reach no output before the next record restarts (left out of chains and filled
+//! as held-out ones are). The d-step, the offsets and the quadratic blocks' coefficients
+//! couple the records only through the shared maps. One record runs the smoother on the whole
+//! signals, as before.
+//!
 //! Stopping follows Boyd et al. (2011, §3.3): primal residual ‖w − d‖ ≤ √N·ε_pri + ε_rel·max(‖w‖, ‖d‖)
 //! and dual residual ρ·‖d − d_prev‖ ≤ √N·ε_dual + ε_rel·ρ·‖u‖, with ε_rel = tolerance and the
 //! absolute parts in each residual's own units, so that the test is unit-free: ε_pri =
@@ -88,9 +99,7 @@ use crate::problem::Problem;
 use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::quadratic_factor::QuadraticFactor;
-use crate::solver::realisation::{
-    Realisation, joint_realisation, single_record, unreachable_samples,
-};
+use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples_of_records};
 use crate::solver::{BlockPart, finish_tv, tv_parts};
 use crate::total_variation::TvPenalty;
 
@@ -191,9 +200,10 @@ pub(crate) fn solve_with(
     }
     let beta = settings.beta();
     let opts = settings.admm();
-    single_record(problem, NAME)?;
     let real = joint_realisation(problem, NAME)?;
-    let dropped = unreachable_samples(&real, problem.len());
+    // Each record starts from its own state (zero or free): the smoothers restart there.
+    let bounds = problem.record_bounds();
+    let dropped = unreachable_samples_of_records(&real, bounds);
     let (len, ny) = (problem.len(), problem.outputs());
     let ne = real.noise_inputs;
     let nin = real.ss.inputs();
@@ -248,6 +258,7 @@ pub(crate) fn solve_with(
         quadratic: &q_cols,
         factors: &factors,
         missing: missing.as_deref(),
+        bounds,
     };
     let mut wstep = WStep::new(
         &real.ss,
@@ -271,7 +282,7 @@ pub(crate) fn solve_with(
         .zip(&w_cols)
         .zip(&tv_z)
         .map(|((p, &col), z)| {
-            TvView::new(p, z, visible_samples(&real, col, missing.as_deref(), len))
+            TvView::new(p, z, visible_samples(&real, col, missing.as_deref(), bounds))
         })
         .collect();
     let mut prox: Vec<Prox> = penalties
@@ -457,10 +468,14 @@ pub(crate) fn solve_with(
         .collect();
     // The node values of the whole chains (the nodes left out filled in optimally).
     let mut d: Vec<Vec<f64>> = views.iter().zip(d).map(|(v, d)| v.expand(d)).collect();
-    let final_smoother = match &missing {
-        Some(m) => DisturbanceSmoother::with_missing(&real.ss, &fixed, len, initial, &[], m)?,
-        None => DisturbanceSmoother::new(&real.ss, &fixed, len, initial)?,
-    };
+    let final_smoother = RecordSmoother::new(
+        &real.ss,
+        &fixed,
+        bounds,
+        initial,
+        &[],
+        missing.as_deref(),
+    )?;
     for k in 0..len {
         let m = mean.sample_mut(k);
         m.iter_mut().for_each(|v| *v = 0.0);
@@ -471,11 +486,11 @@ pub(crate) fn solve_with(
             m[q_cols[j]] = v[k];
         }
     }
-    let report = final_smoother.smooth(r, &mean, &mut vhat)?;
+    // One initial state per record, in record order (the columns of the free response).
+    let x0 = final_smoother.smooth(r, &mean, &mut vhat)?;
     let e_hat: Vec<f64> = (0..len)
         .flat_map(|k| vhat.sample(k)[..ne].to_vec())
         .collect();
-    let x0 = report.initial_state;
     // The maps are the node values plus the blocks' constant offsets.
     for (di, c) in d.iter_mut().zip(offsets) {
         di.iter_mut().for_each(|v| *v += c);
@@ -629,7 +644,8 @@ fn stop_reason(s: &StopState) -> String {
 ///
 /// The samples are sorted by node (a counting sort, stable in time): `order` holds the sample
 /// of each sorted position and `sorted_node` its node. When samples are held out at the end of
-/// the record, their w reaches no output that is kept, and a node with only such samples is
+/// the record (or, with several records, at the end of every record), their w reaches no
+/// output that is kept, and a node with only such samples is
 /// set by the total variation alone: its value is not unique (any value between its chain
 /// neighbours costs the same) and ADMM would creep along it at a sublinear rate. A chain then
 /// leaves those nodes out: a run of them between kept nodes a and b becomes one edge of weight
@@ -775,16 +791,25 @@ impl TvView {
 }
 
 /// The samples whose map value (w channel `col`) reaches an output that is kept, when samples
-/// are held out: sample k is seen unless k + l₀ is past the last kept sample, l₀ the first
-/// non-zero Markov parameter of the channel. `None` without held-out samples.
+/// are held out or there are several records: sample k of a record is seen unless k + l₀ is
+/// past the last kept sample of its record (each record restarts from its own state, so
+/// nothing carries over into the next), l₀ the first non-zero Markov parameter of the
+/// channel. With several records the last l₀ samples of every record are unseen even without
+/// held-out samples. `None` for one record without held-out samples (every sample but the
+/// last l₀ is seen, and those few are left to the iteration as before).
 fn visible_samples(
     real: &Realisation,
     col: usize,
     missing: Option<&[bool]>,
-    len: usize,
+    bounds: &[usize],
 ) -> Option<Vec<bool>> {
-    let missing = missing?;
-    let last_kept = missing.iter().rposition(|&m| !m)?;
+    if missing.is_none() && bounds.len() <= 2 {
+        return None;
+    }
+    if let Some(m) = missing {
+        m.iter().rposition(|&m| !m)?;
+    }
+    let held = |k: usize| missing.is_some_and(|m| m[k]);
     let ss = &real.ss;
     let n = ss.order();
     let tol = 1e-14 * (1.0 + ss.a().amax() + ss.b().amax() + ss.c().amax() + ss.d().amax());
@@ -792,11 +817,100 @@ fn visible_samples(
     let lead = (0..=n)
         .find(|&l| markov[l].column(col).amax() > tol)
         .unwrap_or(usize::MAX);
-    Some(
-        (0..len)
-            .map(|k| k.saturating_add(lead) <= last_kept)
-            .collect(),
-    )
+    let mut visible = Vec::with_capacity(*bounds.last().unwrap_or(&0));
+    for w in bounds.windows(2) {
+        let last_kept = (w[0]..w[1]).rposition(|k| !held(k));
+        visible.extend(
+            (0..w[1] - w[0]).map(|k| last_kept.is_some_and(|last| k.saturating_add(lead) <= last)),
+        );
+    }
+    Some(visible)
+}
+
+/// The disturbance smoother over every record, each from its own initial state (zero, or
+/// free with one x₀ per record): one [`DisturbanceSmoother`] per record, over its own
+/// samples and held-out mask. With one record it is that smoother on the whole signals, with
+/// no copies.
+struct RecordSmoother {
+    /// The record bounds `[0, L₁, …, L]`.
+    bounds: Vec<usize>,
+    /// The smoother of each record.
+    parts: Vec<DisturbanceSmoother>,
+}
+
+impl RecordSmoother {
+    fn new(
+        ss: &StateSpace,
+        variances: &[f64],
+        bounds: &[usize],
+        initial: SmootherInitial,
+        adjoint: &[usize],
+        missing: Option<&[bool]>,
+    ) -> Result<Self> {
+        let parts = bounds
+            .windows(2)
+            .map(|w| {
+                let len = w[1] - w[0];
+                Ok(match missing {
+                    Some(m) => DisturbanceSmoother::with_missing(
+                        ss,
+                        variances,
+                        len,
+                        initial,
+                        adjoint,
+                        &m[w[0]..w[1]],
+                    )?,
+                    None => {
+                        DisturbanceSmoother::with_adjoint(ss, variances, len, initial, adjoint)?
+                    }
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            bounds: bounds.to_vec(),
+            parts,
+        })
+    }
+
+    /// Smooths every record ([`DisturbanceSmoother::smooth`] on its samples of `y`, `mean`
+    /// and `out`) and returns the estimated initial states, record after record, for a free
+    /// initial state.
+    fn smooth(&self, y: &Signal, mean: &Signal, out: &mut Signal) -> Result<Option<Vec<f64>>> {
+        if let [one] = &self.parts[..] {
+            return Ok(one.smooth(y, mean, out)?.initial_state);
+        }
+        let (ny, nin) = (y.channels(), mean.channels());
+        let slice = |s: &Signal, ch: usize, w: &[usize]| {
+            Signal::new(ch, s.as_slice()[w[0] * ch..w[1] * ch].to_vec())
+        };
+        // The records are independent: smoothed in parallel, each bit-identical to a
+        // sequential run.
+        let results: Vec<(Signal, Option<Vec<f64>>)> = self
+            .parts
+            .par_iter()
+            .zip(self.bounds.par_windows(2))
+            .map(|(sm, w)| -> Result<(Signal, Option<Vec<f64>>)> {
+                let (yr, mr) = (slice(y, ny, w)?, slice(mean, nin, w)?);
+                let mut o = Signal::zeros(w[1] - w[0], nin);
+                let report = sm.smooth(&yr, &mr, &mut o)?;
+                Ok((o, report.initial_state))
+            })
+            .collect::<Result<_>>()?;
+        let mut x0: Option<Vec<f64>> = None;
+        let dst = out.as_mut_slice();
+        for ((o, x), w) in results.into_iter().zip(self.bounds.windows(2)) {
+            dst[w[0] * nin..w[1] * nin].copy_from_slice(o.as_slice());
+            if let Some(x) = x {
+                x0.get_or_insert_with(Vec::new).extend(x);
+            }
+        }
+        Ok(x0)
+    }
+
+    /// The samples with stored gains, over every record.
+    fn transient_len(&self) -> usize {
+        self.parts.iter().map(|s| s.transient_len()).sum()
+    }
 }
 
 /// The realisation channels of the blocks and the quadratic blocks' factors.
@@ -809,6 +923,8 @@ struct Channels<'a> {
     factors: &'a [QuadraticFactor],
     /// The samples whose outputs are held out (cross-validation), when any.
     missing: Option<&'a [bool]>,
+    /// Where each record starts, then L ([`Problem::record_bounds`]).
+    bounds: &'a [usize],
 }
 
 /// The quadratic blocks' factors, with a rank limit from the memory budget.
@@ -884,7 +1000,7 @@ const MAX_RANK: usize = 2048;
 /// rest — has a curvature of order 1/L² against ρ ~ 1/L, and ADMM drifts along it by a fraction
 /// ~ 1/L per iteration.
 struct WStep {
-    smoother: DisturbanceSmoother,
+    smoother: RecordSmoother,
     /// R per sample: entry (k·n_b + i)·P + j is the response on total-variation channel i to
     /// the unit parameter j.
     resp: Vec<f64>,
@@ -907,12 +1023,8 @@ impl WStep {
         beta: f64,
         rho: f64,
     ) -> Result<Self> {
-        let smoother = match ch.missing {
-            Some(m) => {
-                DisturbanceSmoother::with_missing(ss, variances, len, initial, ch.quadratic, m)?
-            }
-            None => DisturbanceSmoother::with_adjoint(ss, variances, len, initial, ch.quadratic)?,
-        };
+        let smoother =
+            RecordSmoother::new(ss, variances, ch.bounds, initial, ch.quadratic, ch.missing)?;
         let nb = ch.tv.len();
         let nq: usize = ch.factors.iter().map(|f| f.rank).sum();
         let np = nb + nq;

@@ -5,8 +5,6 @@
 //! [`crate::hyperparameters::select`] uses `feature_path` to decide whether β is selected in
 //! feature space. In order:
 //!
-//! 0. any total-variation block and several records → Clarabel (ADMM's smoother runs over
-//!    one record);
 //! 1. quadratic and total-variation blocks together: some samples held out in part (some of
 //!    their output channels only) → Clarabel; otherwise L·n_y ≤ [`MIXED_CONIC_AUTO_LIMIT`] →
 //!    Clarabel, larger → ADMM (its w-step handles the quadratic blocks through their features
@@ -18,6 +16,9 @@
 //!    4·(m + n_x) ≤ L·n_y (n_x the estimated initial states) → the feature solver;
 //!    else the exact solver's memory exceeds the budget and every block has features → the
 //!    feature solver; else the exact solver.
+//!
+//! L counts the samples of every record together: several records follow the same rules as
+//! one (every solver restarts the dynamics at each record).
 
 use crate::dispersion::Penalty;
 use crate::error::Result;
@@ -62,13 +63,6 @@ pub(crate) fn choose_with(
     let size = problem.len() * problem.outputs();
     // ADMM leaves out whole samples only (its smoother's missing outputs).
     let partly_held_out = matches!(problem.held_out_samples(), Some(None));
-    let records = problem.record_count();
-    if tv_blocks > 0 && records > 1 {
-        return (
-            SolverKind::Clarabel,
-            SolverReason::TotalVariationRecords { records },
-        );
-    }
     if tv_blocks > 0 && tv_blocks < penalties.len() {
         let limit = MIXED_CONIC_AUTO_LIMIT;
         return if partly_held_out {

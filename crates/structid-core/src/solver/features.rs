@@ -83,14 +83,7 @@ fn gram_lower(g: MatMut<'_, f64>, x: faer::MatRef<'_, f64>) {
 
 /// Whether every block of `problem` can use the feature solver, and if not, why.
 pub fn unsupported_reason(problem: &Problem) -> Option<String> {
-    if problem.noise().order() > 0 && problem.record_count() > 1 {
-        return Some(
-            "the feature solver whitens a dynamic noise path over one record only; with several records use \
-             the exact solver"
-                .into(),
-        );
-    }
-    if problem.noise().order() > 0 && problem.noise().as_state_space().is_none() {
+    if problem.noise().order() > 0 && record_state_space(problem.noise()).is_none() {
         return Some(
             "the feature solver whitens a dynamic noise path as a state-space system".into(),
         );
@@ -194,15 +187,19 @@ pub(crate) fn gram(
 
     // Whitening: ω_t = L_S⁻¹·ν_t with S = D_ye·D_yeᵀ for a static noise path, the Kalman
     // filter of the noise path otherwise (paper Fig. 3).
-    let whitening = match noise.as_state_space().filter(|_| noise.order() > 0) {
+    // With several records, each is whitened from its own start (its own Kalman filter from
+    // rest), as the noise path restarts there.
+    let bounds = problem.record_bounds();
+    let whitening = match record_state_space(noise).filter(|_| noise.order() > 0) {
         Some(ss) => {
-            let k = KalmanWhitener::new(ss, len, &WhiteningOptions::default())?;
+            let k = RecordWhiteners::new(ss, bounds)?;
             // A noise model whose zeros lie on or outside the unit circle has an unstable
             // whitening filter (e.g. W = T_ye⁻¹ for square D_ye): the whitened record grows
             // geometrically. The exact (dual) solver does not whiten and is unaffected.
             // Only the modes the measurements drive through the gain can grow; a plant's
-            // integrator that the noise does not reach stays at its zero state.
-            let radius = k.steady_state_filter().reachable_spectral_radius();
+            // integrator that the noise does not reach stays at its zero state. The longest
+            // record's whitener is the one nearest its steady state.
+            let radius = k.longest().steady_state_filter().reachable_spectral_radius();
             if radius.is_nan() {
                 return Err(Error::Numerical(
                     "the whitening filter of the noise model overflows (its entries are too large to \
@@ -253,7 +250,7 @@ pub(crate) fn gram(
     // on; then the features go through the series connection W·T_i in one recursion (folded)
     // and only the few columns [O r] through W alone.
     let folded = match &whitening {
-        Whitening::Kalman(k) => k.transient_len() == 0,
+        Whitening::Kalman(k) => k.without_transient(),
         Whitening::Static { .. } => false,
     };
     let mut jobs: Vec<PathJob> = Vec::new();
@@ -261,7 +258,7 @@ pub(crate) fn gram(
     for (bi, b) in problem.blocks().iter().enumerate() {
         let path = record_state_space(b.path.as_ref()).expect("checked above");
         let sys = match &whitening {
-            Whitening::Kalman(k) if folded => k.steady_state_filter().series(path)?,
+            Whitening::Kalman(k) if folded => k.longest().steady_state_filter().series(path)?,
             _ => path.clone(),
         };
         let mi = dims[bi];
@@ -299,7 +296,7 @@ pub(crate) fn gram(
         if folded { tail_cols } else { cols },
     );
     let mut wstream = match &whitening {
-        Whitening::Kalman(k) => Some(k.column_stream(if folded { tail_cols } else { cols })),
+        Whitening::Kalman(k) => Some(k.of(0).column_stream(if folded { tail_cols } else { cols })),
         Whitening::Static { .. } => None,
     };
     let mut phi: Vec<Vec<f64>> = dims.iter().map(|&d| vec![0.0; chunk * d]).collect();
@@ -313,8 +310,7 @@ pub(crate) fn gram(
             }
         })
         .collect();
-    // Chunks end at record boundaries, where the paths restart from rest.
-    let bounds = problem.record_bounds();
+    // Chunks end at record boundaries, where the paths and the whitening restart from rest.
     let mut next_record = 1;
     let mut t0 = 0;
     while t0 < len {
@@ -322,6 +318,12 @@ pub(crate) fn gram(
             next_record += 1;
             for job in jobs.iter_mut() {
                 job.stream = systems[job.block].column_stream(job.stream.state().ncols());
+            }
+            if let Whitening::Kalman(k) = &whitening {
+                wstream = Some(
+                    k.of(next_record - 1)
+                        .column_stream(if folded { tail_cols } else { cols }),
+                );
             }
         }
         let c = chunk.min(bounds[next_record] - t0);
@@ -551,13 +553,19 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             }
         }
         Whitening::Kalman(k) => {
+            // Record by record: ê = T_yeᵀ·WᵀW·ρ with each record's own whitening.
             let mut w1 = vec![0.0; len * ny];
             let mut w2 = vec![0.0; len * ny];
-            k.whiten_long(&rho, &mut w1);
-            k.whiten_adjoint_long(&w1, &mut w2);
-            match noise.as_state_space() {
-                Some(ss) => ss.apply_adjoint_long(&w2, &mut e_hat),
-                None => noise.apply_adjoint(&w2, &mut e_hat),
+            let ss = record_state_space(noise);
+            for (i, w) in problem.record_bounds().windows(2).enumerate() {
+                let (rows, ins) = (w[0] * ny..w[1] * ny, w[0] * ne..w[1] * ne);
+                let kr = k.of(i);
+                kr.whiten_long(&rho[rows.clone()], &mut w1[rows.clone()]);
+                kr.whiten_adjoint_long(&w1[rows.clone()], &mut w2[rows.clone()]);
+                match ss {
+                    Some(ss) => ss.apply_adjoint_long(&w2[rows], &mut e_hat[ins]),
+                    None => noise.apply_adjoint(&w2[rows], &mut e_hat[ins]),
+                }
             }
         }
     }
@@ -679,8 +687,62 @@ enum Whitening {
         d: nalgebra::DMatrix<f64>,
         ls: nalgebra::Cholesky<f64, nalgebra::Dyn>,
     },
-    /// Dynamic noise path: the Kalman filter of the noise system.
-    Kalman(Box<KalmanWhitener>),
+    /// Dynamic noise path: the Kalman filter of the noise system, restarted at every record.
+    Kalman(Box<RecordWhiteners>),
+}
+
+/// The Kalman whitening of a dynamic noise path over each record from its own start: one
+/// [`KalmanWhitener`] per distinct record length (their time-varying gains are the same from
+/// a record's start; only the length differs).
+struct RecordWhiteners {
+    /// The whiteners, one per distinct record length, the longest first.
+    whiteners: Vec<KalmanWhitener>,
+    /// The whitener of each record (an index into `whiteners`).
+    of_record: Vec<usize>,
+}
+
+impl RecordWhiteners {
+    fn new(noise: &structid_lti::StateSpace, bounds: &[usize]) -> Result<Self> {
+        let lens: Vec<usize> = bounds.windows(2).map(|w| w[1] - w[0]).collect();
+        let mut distinct = lens.clone();
+        distinct.sort_unstable_by(|a, b| b.cmp(a));
+        distinct.dedup();
+        let whiteners = distinct
+            .iter()
+            .map(|&l| KalmanWhitener::new(noise, l, &WhiteningOptions::default()))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let of_record = lens
+            .iter()
+            .map(|l| distinct.iter().position(|d| d == l).unwrap_or(0))
+            .collect();
+        Ok(Self {
+            whiteners,
+            of_record,
+        })
+    }
+
+    /// The whitener of record `r`.
+    fn of(&self, r: usize) -> &KalmanWhitener {
+        &self.whiteners[self.of_record[r]]
+    }
+
+    /// The whitener of the longest record.
+    fn longest(&self) -> &KalmanWhitener {
+        &self.whiteners[0]
+    }
+
+    /// Whether every whitener is an LTI filter from its first sample (no transient).
+    fn without_transient(&self) -> bool {
+        self.whiteners.iter().all(|k| k.transient_len() == 0)
+    }
+
+    /// ln det(T_ye·T_yeᵀ) of the block-diagonal noise covariance: the sum over the records.
+    fn log_det(&self) -> f64 {
+        self.of_record
+            .iter()
+            .map(|&i| self.whiteners[i].log_det())
+            .sum()
+    }
 }
 
 /// D of a static noise path, found by applying it to unit impulses.

@@ -86,18 +86,6 @@ fn unsupported_free(solver: &str) -> Error {
     ))
 }
 
-/// Refuses a problem of several records in a solver that runs over one record.
-pub(crate) fn single_record(problem: &Problem, solver: &str) -> Result<()> {
-    if problem.record_count() > 1 {
-        return Err(Error::Unsupported(format!(
-            "the {solver} solver takes one data record, and this problem has {} records; use the \
-             clarabel, exact or feature solver, or identify each record separately",
-            problem.record_count()
-        )));
-    }
-    Ok(())
-}
-
 /// [`unreachable_samples`] of every record, each from its own start (`bounds` as
 /// [`Problem::record_bounds`]).
 pub(crate) fn unreachable_samples_of_records(

@@ -136,12 +136,6 @@ pub enum SolverReason {
     /// Total variation with samples held out in part (some of their output channels): only
     /// Clarabel handles them.
     TotalVariationHeldOut,
-    /// Total variation over several records: ADMM's smoother runs over one record, the conic
-    /// solver restarts the dynamics at each record start.
-    TotalVariationRecords {
-        /// The number of records.
-        records: usize,
-    },
     /// Total variation on a small problem: Clarabel, exact.
     TotalVariationSmall {
         /// L·n_y.
@@ -202,11 +196,6 @@ impl fmt::Display for SolverReason {
             SolverReason::TotalVariationHeldOut => f.write_str(
                 "automatic: total variation with samples held out in part, which only the conic \
                  solver handles",
-            ),
-            SolverReason::TotalVariationRecords { records } => write!(
-                f,
-                "automatic: total variation over {records} records, which only the conic solver \
-                 handles (ADMM runs over one record)"
             ),
             SolverReason::TotalVariationSmall { size, limit } => write!(
                 f,
