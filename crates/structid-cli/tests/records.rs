@@ -231,7 +231,10 @@ fn admm_with_total_variation_takes_two_data_files() {
 
     // The concatenated file is another problem.
     let cat = dir.path().join("ab.csv");
-    let (ca, cb) = (std::fs::read_to_string(&a).unwrap(), std::fs::read_to_string(&b).unwrap());
+    let (ca, cb) = (
+        std::fs::read_to_string(&a).unwrap(),
+        std::fs::read_to_string(&b).unwrap(),
+    );
     let body_b: String = cb.lines().skip(1).map(|l| format!("{l}\n")).collect();
     std::fs::write(&cat, format!("{}{body_b}", ca)).unwrap();
     let (w_cat, _) = run(&[&cat], "admm", &dir.path().join("cat"));

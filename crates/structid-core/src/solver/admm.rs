@@ -282,7 +282,11 @@ pub(crate) fn solve_with(
         .zip(&w_cols)
         .zip(&tv_z)
         .map(|((p, &col), z)| {
-            TvView::new(p, z, visible_samples(&real, col, missing.as_deref(), bounds))
+            TvView::new(
+                p,
+                z,
+                visible_samples(&real, col, missing.as_deref(), bounds),
+            )
         })
         .collect();
     let mut prox: Vec<Prox> = penalties
@@ -468,14 +472,8 @@ pub(crate) fn solve_with(
         .collect();
     // The node values of the whole chains (the nodes left out filled in optimally).
     let mut d: Vec<Vec<f64>> = views.iter().zip(d).map(|(v, d)| v.expand(d)).collect();
-    let final_smoother = RecordSmoother::new(
-        &real.ss,
-        &fixed,
-        bounds,
-        initial,
-        &[],
-        missing.as_deref(),
-    )?;
+    let final_smoother =
+        RecordSmoother::new(&real.ss, &fixed, bounds, initial, &[], missing.as_deref())?;
     for k in 0..len {
         let m = mean.sample_mut(k);
         m.iter_mut().for_each(|v| *v = 0.0);

@@ -199,7 +199,10 @@ pub(crate) fn gram(
             // Only the modes the measurements drive through the gain can grow; a plant's
             // integrator that the noise does not reach stays at its zero state. The longest
             // record's whitener is the one nearest its steady state.
-            let radius = k.longest().steady_state_filter().reachable_spectral_radius();
+            let radius = k
+                .longest()
+                .steady_state_filter()
+                .reachable_spectral_radius();
             if radius.is_nan() {
                 return Err(Error::Numerical(
                     "the whitening filter of the noise model overflows (its entries are too large to \
@@ -320,10 +323,11 @@ pub(crate) fn gram(
                 job.stream = systems[job.block].column_stream(job.stream.state().ncols());
             }
             if let Whitening::Kalman(k) = &whitening {
-                wstream = Some(
-                    k.of(next_record - 1)
-                        .column_stream(if folded { tail_cols } else { cols }),
-                );
+                wstream = Some(k.of(next_record - 1).column_stream(if folded {
+                    tail_cols
+                } else {
+                    cols
+                }));
             }
         }
         let c = chunk.min(bounds[next_record] - t0);
