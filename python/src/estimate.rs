@@ -310,10 +310,23 @@ pub fn write_result(
     guard.finish_set(&directory, &planned).map_err(error)
 }
 
-/// Named columns of a CSV file (the tool's estimate.csv, a data file).
+/// Named columns of a data file: CSV (the tool's estimate.csv, a data file), MAT v5 or
+/// NumPy `.npy`/`.npz`, with `vars` choosing and naming them (`u=vir,y=qm`, `y=data#1`, as
+/// the command-line tool's `--vars`).
 #[pyfunction]
-pub fn read_columns<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
-    let table = structid_io::DataTable::read(&path).map_err(error)?;
+#[pyo3(signature = (path, vars=None))]
+pub fn read_columns<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    vars: Option<&str>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let vars: Option<structid_io::Vars> =
+        vars.map(|v| v.parse())
+            .transpose()
+            .map_err(|e: structid_io::ArrayFileError| {
+                invalid(format!("vars {v:?}: {e}", v = vars.unwrap_or_default()))
+            })?;
+    let table = structid_io::DataTable::read_vars(&path, vars.as_ref()).map_err(error)?;
     let d = PyDict::new(py);
     for (name, column) in table.names.into_iter().zip(table.columns) {
         d.set_item(name, convert::vector(py, column))?;

@@ -1,7 +1,7 @@
 //! `structid._structid`: the native module of the Python package `structid`.
 //!
 //! A thin layer over the library: one module per concept ([`model`], [`identify`],
-//! [`estimate`], [`refine`], [`discover`], [`staticness`], [`design`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
+//! [`estimate`], [`linear`], [`refine`], [`discover`], [`staticness`], [`design`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
 //! the GIL (`Python::detach`). The Python package (`structid/__init__.py`) turns the
 //! dictionaries returned here into dataclasses.
 
@@ -10,6 +10,7 @@ mod design;
 mod discover;
 mod estimate;
 mod identify;
+mod linear;
 mod model;
 mod paper;
 mod refine;
@@ -35,6 +36,8 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(paper::hammerstein_coloured, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::write_result, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::read_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(linear::linear_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(linear::linear_response, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

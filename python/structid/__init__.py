@@ -31,6 +31,7 @@ from ._estimate import Estimate, Prediction, Validation
 from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
                          silverbox_discovery)
 from ._staticness import Staticness, staticness
+from ._linear import LinearFit, Response, linear, read_data, response
 from . import input, paper, scenarios
 
 __all__ = [
@@ -51,6 +52,11 @@ __all__ = [
     "silverbox_data",
     "silverbox_discovery",
     "staticness",
+    "linear",
+    "LinearFit",
+    "response",
+    "Response",
+    "read_data",
     "Staticness",
     "input",
     "paper",

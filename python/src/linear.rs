@@ -1,0 +1,250 @@
+//! The linear part: ARX and output-error fits of G (`structid linear`) and its frequency and
+//! step responses, poles and zeros (the figures `structid linear` draws).
+
+use nalgebra::DMatrix;
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use structid_core::Signal;
+use structid_io::{LinearSpec, ModelFile, SignalNames};
+use structid_linear::response::{bode, poles, step_response, zeros};
+use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx_records, oe_records};
+
+use crate::convert::{error, invalid, signal, vector};
+
+/// Fits G = B(q)/A(q) (one output, the columns of each `u` its inputs) to one or several
+/// records by ARX (`method = "arx"`) or output error (`"oe"`, each record simulated from
+/// rest), with `integrators` poles fixed at z = 1 (0, 1 or 2) and `transient` samples of
+/// each record left out of the OE cost. Returns the model's polynomials, the cost, the
+/// parameter covariance, the simulation fit of every record, and the model file text
+/// (`[linear]` and `[signals]`, as `structid linear -o` writes it).
+#[pyfunction]
+#[pyo3(signature = (u, y, na, nb, nk, method, integrators=0, sample_time=None, transient=0,
+                    inputs=None, output=None))]
+pub fn linear_fit<'py>(
+    py: Python<'py>,
+    u: Vec<PyReadonlyArray2<'py, f64>>,
+    y: Vec<PyReadonlyArray1<'py, f64>>,
+    na: usize,
+    nb: usize,
+    nk: usize,
+    method: &str,
+    integrators: usize,
+    sample_time: Option<f64>,
+    transient: usize,
+    inputs: Option<Vec<String>>,
+    output: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if u.len() != y.len() || u.is_empty() {
+        return Err(invalid(format!(
+            "u and y must hold the same number of records (at least one), not {} and {}",
+            u.len(),
+            y.len()
+        )));
+    }
+    let mut records: Vec<(Signal, Signal)> = Vec::with_capacity(u.len());
+    for (i, (ui, yi)) in u.iter().zip(&y).enumerate() {
+        let what = |s: &str| {
+            if u.len() == 1 {
+                s.to_string()
+            } else {
+                format!("{s} of record {i}")
+            }
+        };
+        let us = signal(ui, &what("u"))?;
+        let yv: Vec<f64> = yi.as_array().iter().copied().collect();
+        if let Some((k, x)) = yv.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+            return Err(invalid(format!(
+                "{} has the non-finite value {x} at sample {k}",
+                what("y")
+            )));
+        }
+        if yv.len() != us.len() {
+            return Err(invalid(format!(
+                "{} has {} samples and {} has {}",
+                what("u"),
+                us.len(),
+                what("y"),
+                yv.len()
+            )));
+        }
+        records.push((us, Signal::from_fn(yv.len(), 1, |k, _| yv[k])));
+    }
+    let m = records[0].0.channels();
+    if let Some((i, _)) = records
+        .iter()
+        .enumerate()
+        .find(|(_, (u, _))| u.channels() != m)
+    {
+        return Err(invalid(format!(
+            "record {i} has {} input columns and record 0 has {m}",
+            records[i].0.channels()
+        )));
+    }
+    let inputs = inputs.unwrap_or_else(|| {
+        if m == 1 {
+            vec!["u".into()]
+        } else {
+            (0..m).map(|i| format!("u{i}")).collect()
+        }
+    });
+    if inputs.len() != m {
+        return Err(invalid(format!(
+            "{} input names for {m} input columns",
+            inputs.len()
+        )));
+    }
+    let output = output.unwrap_or_else(|| "y".into());
+    let orders = Orders::new(na, vec![nb; m], vec![nk; m]).map_err(error)?;
+    let mut arx_b = ArxSettings::builder().integrators(integrators);
+    let mut oe_b = OeSettings::builder()
+        .transient(transient)
+        .integrators(integrators);
+    if let Some(ts) = sample_time {
+        arx_b = arx_b.sample_time(ts);
+        oe_b = oe_b.sample_time(ts);
+    }
+    let arx_settings = arx_b.build().map_err(error)?;
+    let oe_settings = oe_b.arx(arx_settings.clone()).build().map_err(error)?;
+    let method = method.to_ascii_lowercase();
+    let fitted = py.detach(|| {
+        let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
+        match method.as_str() {
+            "arx" => arx_records(&pairs, &orders, &arx_settings).map(|f| Fitted {
+                model: f.model,
+                cost: f.cost,
+                covariance: f.parameter_covariance,
+                parameter_std: f.parameter_std,
+                iterations: 0,
+                converged: true,
+                warning: None,
+            }),
+            _ => oe_records(&pairs, &orders, &oe_settings).map(|f| Fitted {
+                model: f.model,
+                cost: f.cost,
+                covariance: f.parameter_covariance,
+                parameter_std: f.parameter_std,
+                iterations: f.iterations,
+                converged: f.converged,
+                warning: f.warning.as_ref().map(ToString::to_string),
+            }),
+        }
+    });
+    if !matches!(method.as_str(), "arx" | "oe") {
+        return Err(invalid(format!(
+            "unknown method {method:?}: use \"arx\" or \"oe\""
+        )));
+    }
+    let f = fitted.map_err(error)?;
+    let fit_percent: Vec<f64> = records
+        .iter()
+        .map(|(u, y)| {
+            let sim = f.model.simulate(u).map_err(error)?;
+            Ok(structid_core::validation::metrics::fit_percent(
+                &y.channel(0),
+                &sim,
+            ))
+        })
+        .collect::<PyResult<_>>()?;
+    let spec = LinearSpec::from_linear(&f.model, None);
+    let mf = ModelFile {
+        lft: spec.lft().map_err(error)?,
+        linear: Some(spec),
+        signals: SignalNames {
+            u: inputs,
+            y: vec![output],
+            z: None,
+        },
+        blocks: Vec::new(),
+        discover: None,
+        path: None,
+    };
+    let out = PyDict::new(py);
+    out.set_item("num", f.model.num.clone())?;
+    out.set_item("den", vector(py, f.model.den.clone()))?;
+    out.set_item("sample_time", f.model.sample_time)?;
+    out.set_item("cost", f.cost)?;
+    out.set_item("parameter_std", vector(py, f.parameter_std))?;
+    out.set_item(
+        "covariance",
+        f.covariance.map(|c| {
+            (0..c.nrows())
+                .map(|i| c.row(i).iter().copied().collect::<Vec<f64>>())
+                .collect::<Vec<_>>()
+        }),
+    )?;
+    out.set_item("iterations", f.iterations)?;
+    out.set_item("converged", f.converged)?;
+    out.set_item("warning", f.warning)?;
+    out.set_item("fit_percent", fit_percent)?;
+    out.set_item("toml", mf.to_toml_string())?;
+    Ok(out)
+}
+
+/// What both fits give.
+struct Fitted {
+    model: PolynomialModel,
+    cost: f64,
+    covariance: Option<DMatrix<f64>>,
+    parameter_std: Vec<f64>,
+    iterations: usize,
+    converged: bool,
+    warning: Option<String>,
+}
+
+/// The responses of G = `num[input]`/`den`: the Bode magnitude and unwrapped phase at the
+/// normalised `frequencies` (cycles per sample, 0 … 0.5) with the magnitude's standard
+/// deviation when the parameter covariance is given, the step response over `steps` samples,
+/// and the poles and zeros as (re, im) pairs.
+#[pyfunction]
+#[pyo3(signature = (num, den, frequencies, steps, input=0, covariance=None, sample_time=None))]
+pub fn linear_response<'py>(
+    py: Python<'py>,
+    num: Vec<Vec<f64>>,
+    den: Vec<f64>,
+    frequencies: Vec<f64>,
+    steps: usize,
+    input: usize,
+    covariance: Option<Vec<Vec<f64>>>,
+    sample_time: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = PolynomialModel::new(num, den, sample_time).map_err(error)?;
+    if let Some(f) = frequencies
+        .iter()
+        .find(|f| !(f.is_finite() && (0.0..=0.5).contains(*f)))
+    {
+        return Err(invalid(format!(
+            "frequency {f} is not a normalised frequency in 0 … 0.5 cycles per sample"
+        )));
+    }
+    let cov = match covariance {
+        None => None,
+        Some(rows) => {
+            let n = rows.len();
+            if rows.iter().any(|r| r.len() != n) {
+                return Err(invalid("the covariance must be a square matrix"));
+            }
+            Some(DMatrix::from_fn(n, n, |i, j| rows[i][j]))
+        }
+    };
+    let points = bode(&model, input, &frequencies, cov.as_ref()).map_err(error)?;
+    let step = step_response(&model, input, steps).map_err(error)?;
+    let out = PyDict::new(py);
+    out.set_item(
+        "magnitude",
+        vector(py, points.iter().map(|p| p.magnitude).collect()),
+    )?;
+    out.set_item(
+        "phase",
+        vector(py, points.iter().map(|p| p.phase).collect()),
+    )?;
+    out.set_item(
+        "magnitude_std",
+        cov.is_some()
+            .then(|| vector(py, points.iter().filter_map(|p| p.magnitude_std).collect())),
+    )?;
+    out.set_item("step", vector(py, step))?;
+    out.set_item("poles", poles(&model))?;
+    out.set_item("zeros", zeros(&model, input))?;
+    Ok(out)
+}
