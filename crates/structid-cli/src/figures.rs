@@ -2,7 +2,9 @@
 
 use structid_core::{BlockEstimate, Identification, Interpolant, Lft};
 use structid_lti::Signal;
-use structid_plot::{Chart, HeatMap, PlotError, Series, render_chart_svg, render_heatmaps_svg};
+use structid_plot::{
+    Chart, HeatMap, Panel, PlotError, Series, render_chart_svg, render_panels_svg,
+};
 
 /// Points of a one-input grid.
 pub const GRID_1D: usize = 201;
@@ -203,8 +205,9 @@ pub fn partial_residuals(lft: &Lft, id: &Identification, output: usize) -> Optio
 /// scatter of its partial residuals (`partial`, [`partial_residuals`]; the points (z_k, ŵ_k)
 /// without them) behind it, the truth and, with the posterior standard deviation `std` (at
 /// [`MapGrid::points`]), the shaded 95 % band N̂ ± 1.96·std; for two inputs, heat maps of the
-/// estimate, the truth and the standard deviation; for more, ŵ against the truth at the data
-/// points (or ŵ over time without a truth).
+/// estimate, the truth and the standard deviation, beside the partial residuals against the
+/// estimate at the data points ([`partial_check`]) when given; for more, that check, else ŵ
+/// against the truth at the data points (or ŵ over time without a truth).
 pub fn map_svg(
     est: &BlockEstimate,
     grid: &MapGrid,
@@ -284,11 +287,19 @@ pub fn map_svg(
                     s,
                 ));
             }
-            let n = maps.len();
-            render_heatmaps_svg(&maps, n, (560, 480))
+            let check = partial_check(est, partial, &idx);
+            let mut panels: Vec<Panel<'_>> = maps.into_iter().map(Panel::Heat).collect();
+            if let Some((fit, dots, diag)) = &check {
+                panels.push(Panel::Chart(partial_chart(name, fit, dots, diag)));
+            }
+            let n = panels.len();
+            render_panels_svg(&panels, n, (560, 480))
         }
         MapGrid::Points => {
             let dw: Vec<f64> = idx.iter().map(|&k| est.w_hat[k]).collect();
+            if let Some((fit, dots, diag)) = &partial_check(est, partial, &idx) {
+                return render_chart_svg(&partial_chart(name, fit, dots, diag));
+            }
             match truth {
                 Some(t) => {
                     let tv: Vec<f64> = idx.iter().map(|&k| t.eval(est.z.sample(k))).collect();
@@ -314,6 +325,34 @@ pub fn map_svg(
             }
         }
     }
+}
+
+/// The staticness check of a map of two or more inputs, whose partial residuals cannot be
+/// drawn over z: the partial residuals ŵ_k + r_k against the estimate N̂(z_k) at the samples
+/// `idx`, with the diagonal from the smallest to the largest of either. A static map leaves a
+/// band around the diagonal as wide as the noise; a dynamic one, loops or a spread that
+/// grows with the motion. `None` without partial residuals.
+fn partial_check(
+    est: &BlockEstimate,
+    partial: Option<&[f64]>,
+    idx: &[usize],
+) -> Option<(Vec<f64>, Vec<f64>, [f64; 2])> {
+    let p = partial.filter(|p| p.len() == est.w_hat.len())?;
+    let fit: Vec<f64> = idx.iter().map(|&k| est.map.eval(est.z.sample(k))).collect();
+    let dots: Vec<f64> = idx.iter().map(|&k| p[k]).collect();
+    let (lo, hi) = span(&[fit.as_slice(), dots.as_slice()].concat());
+    Some((fit, dots, [lo, hi]))
+}
+
+/// The chart of [`partial_check`].
+fn partial_chart<'a>(name: &str, fit: &'a [f64], dots: &'a [f64], diag: &'a [f64; 2]) -> Chart<'a> {
+    Chart::new(
+        format!("{name}: partial residuals against the estimate"),
+        format!("{name}(z) estimated at the data points"),
+        "partial residuals ŵ + r",
+    )
+    .with(Series::dots("(N̂(z_k), ŵ_k + r_k)", fit, dots))
+    .with(Series::line("static: on the diagonal", diag, diag))
 }
 
 /// Frequencies of the Bode plot: log-spaced over three decades below Nyquist.
@@ -464,5 +503,44 @@ mod tests {
         }
         // The last two samples of g never reach the record.
         assert!((g[299] - wg[299]).abs() < 1e-12);
+    }
+
+    /// A two-input map cannot carry its partial residuals over z: its figure adds the check
+    /// of them against the estimate, and for the paper's static multi-input map they scatter
+    /// about the diagonal by no more than the noise mapped back through L_yw (whose inverse
+    /// has a gain of at most 3).
+    #[test]
+    fn a_map_of_two_inputs_draws_its_partial_residuals_against_the_estimate() {
+        let noise = 0.05;
+        let d = Arc::new(KernelDispersion::gaussian(0.8).unwrap());
+        let exp = paper::multi_input(400, noise, d, 2).unwrap();
+        let settings = IdentifySettings::builder().beta(1e-3).build().unwrap();
+        let id = identify(&exp.model, &exp.data, &settings).unwrap();
+        let p = partial_residuals(exp.model.lft(), &id, 0).unwrap();
+        let est = &id.blocks[0];
+        let grid = MapGrid::new(est.map.as_ref(), &est.z);
+        assert!(matches!(grid, MapGrid::Two { .. }));
+        let names = ["u0".to_string(), "u1".to_string()];
+        let with = map_svg(est, &grid, None, &names, None, Some(&p)).unwrap();
+        let without = map_svg(est, &grid, None, &names, None, None).unwrap();
+        assert!(with.contains("partial residuals against the estimate"));
+        assert!(!without.contains("partial residuals"));
+        let idx = subsample(est.w_hat.len(), MAX_DOTS);
+        let (fit, dots, diag) = partial_check(est, Some(&p), &idx).unwrap();
+        let off: f64 = fit
+            .iter()
+            .zip(&dots)
+            .map(|(f, d)| (d - f).powi(2))
+            .sum::<f64>()
+            / fit.len() as f64;
+        assert!(
+            off.sqrt() < 3.0 * noise,
+            "RMS off the diagonal {}",
+            off.sqrt()
+        );
+        assert!(diag[0] <= fit.iter().copied().fold(f64::INFINITY, f64::min));
+        assert!(diag[1] >= dots.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+        // a partial-residual vector of the wrong length is ignored, not drawn
+        assert!(partial_check(est, Some(&p[1..]), &idx).is_none());
     }
 }

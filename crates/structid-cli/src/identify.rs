@@ -642,10 +642,7 @@ pub(crate) fn write_estimate(
         let grid_path = out.join(format!("map_{stem}.csv"));
         guard.write_csv(&grid_path, &header, &grid.columns(est, std.as_deref()))?;
         let truth = spec.truth_map()?;
-        let partial = match grid {
-            MapGrid::One { .. } => partial_residuals(&mf.lft, id, est.output),
-            _ => None,
-        };
+        let partial = partial_residuals(&mf.lft, id, est.output);
         let svg = map_svg(
             est,
             &grid,

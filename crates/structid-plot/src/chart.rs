@@ -176,7 +176,7 @@ impl<'a> Chart<'a> {
     }
 
     /// Validates the series and computes the padded axis ranges.
-    fn ranges(&self) -> Result<(Range<f64>, Range<f64>), PlotError> {
+    pub(crate) fn ranges(&self) -> Result<(Range<f64>, Range<f64>), PlotError> {
         if self.series.is_empty() {
             return Err(PlotError::EmptyData(format!(
                 "chart '{}' has no series",
@@ -242,7 +242,7 @@ fn runs(n: usize, ok: impl Fn(usize) -> bool) -> Vec<Range<usize>> {
 }
 
 /// Draws one chart into a drawing area (the chart's own `size` is ignored).
-fn draw_chart(
+pub(crate) fn draw_chart(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     chart: &Chart<'_>,
 ) -> Result<(), PlotError> {

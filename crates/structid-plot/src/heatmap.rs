@@ -67,7 +67,7 @@ impl<'a> HeatMap<'a> {
     }
 
     /// Validates the map; returns the colour scale `(lo, hi)` with `lo < hi`.
-    fn validate(&self) -> Result<(f64, f64), PlotError> {
+    pub(crate) fn validate(&self) -> Result<(f64, f64), PlotError> {
         if self.xs.is_empty() || self.ys.is_empty() {
             return Err(PlotError::EmptyData(format!(
                 "heat map '{}' has an empty grid ({}x{})",
@@ -182,7 +182,7 @@ fn colour_bar_width(w: u32) -> u32 {
 const COLOUR_BAR_STEPS: usize = 64;
 const COLOUR_BAR_THICKNESS: u32 = 22;
 
-fn draw_heatmap(
+pub(crate) fn draw_heatmap(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     map: &HeatMap<'_>,
 ) -> Result<(), PlotError> {

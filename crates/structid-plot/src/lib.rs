@@ -41,7 +41,7 @@ pub use correlation::{CorrelationChart, render_correlation_svg};
 pub use decimate::decimate_min_max;
 pub use error::PlotError;
 pub use heatmap::{HeatMap, render_heatmaps_svg};
-pub use layout::{DEFAULT_SIZE, MAX_FIGURE_SIZE, MIN_PANEL_SIZE};
+pub use layout::{DEFAULT_SIZE, MAX_FIGURE_SIZE, MIN_PANEL_SIZE, Panel, render_panels_svg};
 
 #[cfg(test)]
 mod tests {
