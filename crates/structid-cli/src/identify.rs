@@ -264,17 +264,7 @@ pub(crate) fn files_label(paths: &[PathBuf]) -> String {
 
 /// z of the data (see [`ModelFile::z_signal`]), computed record by record.
 pub(crate) fn z_of(mf: &ModelFile, data: &Data) -> Result<structid_core::Signal, CliError> {
-    if data.record_count() == 1 {
-        return Ok(mf.z_signal(data)?);
-    }
-    let mut values = Vec::new();
-    let mut channels = 0;
-    for r in data.records() {
-        let z = mf.z_signal(&r)?;
-        channels = z.channels();
-        values.extend_from_slice(z.as_slice());
-    }
-    Ok(structid_core::Signal::new(channels, values).map_err(structid_core::Error::from)?)
+    Ok(mf.z_of_records(data)?)
 }
 
 /// The records named by the model file's `[signals]` and the core model, with default kernel
@@ -299,86 +289,14 @@ pub(crate) fn model_and_data(
     Ok((data, model))
 }
 
-/// Refuses a record on which a block's input z does not vary: the data then show its map at
-/// one point only (a single sample, or a constant input), and an estimate would be a guess
-/// everywhere else. Models whose z cannot be computed from the data are left to the solver.
+/// Refuses a record on which a block's input z does not vary ([`ModelFile::check_excitation`]).
 pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, source: &str) -> Result<(), CliError> {
-    let Ok(z) = z_of(mf, data) else {
-        return Ok(());
-    };
-    let names = mf.z_names();
-    for b in &mf.blocks {
-        let constant = b.inputs.iter().copied().find(|&i| {
-            i < z.channels() && {
-                let c = z.channel(i);
-                c.iter().all(|v| *v == c[0])
-            }
-        });
-        if let Some(i) = constant {
-            let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
-            return Err(CliError::input(format!(
-                "the input `{z_name}` of block `{}` is constant ({}) over the {} sample(s) of `{}`: \
-                 the data show its map at one point only; identify on a record that excites it",
-                b.name,
-                z.channel(i).first().copied().unwrap_or(f64::NAN),
-                data.len(),
-                source
-            )));
-        }
-    }
-    Ok(())
+    Ok(mf.check_excitation(data, source)?)
 }
 
-/// How much wider or narrower than the range of a block's input z a command-line σ may be.
-const SIGMA_SPAN: f64 = 1e6;
-
-/// Refuses a `--sigma` that is absurd for the record: more than [`SIGMA_SPAN`] times wider
-/// than the range of a block's input z (the kernel is then flat over the data and the map a
-/// constant; σ² overflows for 1e308) or that many times narrower (a spike at each sample,
-/// zero between them). Blocks whose z cannot be computed or does not vary are left alone.
+/// Refuses a `--sigma` that is absurd for the record ([`ModelFile::check_sigma`]).
 pub(crate) fn check_sigma(sigma: f64, mf: &ModelFile, data: &Data) -> Result<(), CliError> {
-    let Ok(z) = z_of(mf, data) else {
-        return Ok(());
-    };
-    let names = mf.z_names();
-    for b in &mf.blocks {
-        for &i in b.inputs.iter().filter(|&&i| i < z.channels()) {
-            let c = z.channel(i);
-            let (lo, hi) = c
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
-                    (l.min(*v), h.max(*v))
-                });
-            let range = hi - lo;
-            if !(range.is_finite() && range > 0.0) {
-                continue;
-            }
-            if sigma > SIGMA_SPAN * range || sigma < range / SIGMA_SPAN {
-                let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
-                return Err(CliError::input(format!(
-                    "invalid value {sigma:e} for --sigma: the input `{z_name}` of block `{}` spans \
-                     {range:.4e}, and a kernel {:.0e} times {} than that is {}; give σ between \
-                     {:.1e} and {:.1e} ({SIGMA_SPAN:.0e} times narrower or wider than the range; the \
-                     default is 0.1 × the range)",
-                    b.name,
-                    if sigma > range {
-                        sigma / range
-                    } else {
-                        range / sigma
-                    },
-                    if sigma > range { "wider" } else { "narrower" },
-                    if sigma > range {
-                        "flat over the data (the map is a constant)"
-                    } else {
-                        "a spike at each sample (the map is zero between them)"
-                    },
-                    range / SIGMA_SPAN,
-                    range * SIGMA_SPAN
-                )));
-            }
-        }
-    }
-    Ok(())
+    Ok(mf.check_sigma(sigma, data, "--sigma")?)
 }
 
 /// An absolute, canonical form of an existing path (absolute but not canonical when it cannot

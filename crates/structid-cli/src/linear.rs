@@ -7,8 +7,8 @@ use clap::Args;
 use structid_core::Site;
 use structid_io::{BlockSpec, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames};
 use structid_linear::{
-    ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx, oe,
-    select_orders_observed,
+    ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx_records,
+    oe_records, select_orders_observed,
 };
 use structid_lti::Signal;
 
@@ -18,8 +18,10 @@ use crate::error::CliError;
 #[derive(Debug, Args)]
 pub struct LinearArgs {
     /// The estimation data (CSV with a header row). Repeat it for several records of the same
-    /// system: the ARX equations of each record start after its own first samples, so no
-    /// regressor mixes two records (with --orders and --method arx).
+    /// system (with --orders): the ARX equations of each record start after its own first
+    /// samples, so no regressor mixes two records, and output error simulates each record from
+    /// rest (or from its own estimated initial state), leaving its first --transient samples
+    /// out of the cost.
     #[arg(long, short = 'd', value_name = "DATA.csv", required = true)]
     data: Vec<PathBuf>,
     /// The input column(s), comma-separated.
@@ -324,10 +326,11 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         ));
     }
     check_orders(&a)?;
-    if a.data.len() > 1 && (a.method != MethodArg::Arx || a.orders.is_none()) {
+    if a.data.len() > 1 && a.orders.is_none() {
         return Err(CliError::input(
-            "several --data records are fitted by ARX with given orders only: add --method arx and \
-             --orders NA,NB,NK (output error and order selection take one record)",
+            "several --data records are fitted with given orders only: add --orders NA,NB,NK \
+             (order selection takes one record; select the orders on one record, then fit them \
+             on all)",
         ));
     }
     let records: Vec<(Signal, Signal)> = a
@@ -402,13 +405,12 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     let (model, cost, what, covariance): (PolynomialModel, f64, String, _) = match a.method {
         MethodArg::Arx => {
             let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
-            let fit =
-                structid_linear::arx_records(&pairs, &orders, &arx_settings).map_err(|e| {
-                    CliError::from(e).context(format!(
-                        "the --data files ({})",
-                        crate::identify::files_label(&a.data)
-                    ))
-                })?;
+            let fit = arx_records(&pairs, &orders, &arx_settings).map_err(|e| {
+                CliError::from(e).context(format!(
+                    "the --data files ({})",
+                    crate::identify::files_label(&a.data)
+                ))
+            })?;
             (
                 fit.model,
                 fit.cost,
@@ -417,17 +419,33 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             )
         }
         MethodArg::Oe => {
+            let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
+            let context = |e: CliError| {
+                if a.data.len() > 1 {
+                    e.context(format!(
+                        "the --data files ({})",
+                        crate::identify::files_label(&a.data)
+                    ))
+                } else {
+                    e
+                }
+            };
             let fit = match a.initial_state {
-                crate::InitialStateArg::Zero => oe(u, y, &orders, &oe_settings)?,
+                crate::InitialStateArg::Zero => {
+                    oe_records(&pairs, &orders, &oe_settings).map_err(|e| context(e.into()))?
+                }
                 crate::InitialStateArg::Estimate => {
-                    let start = arx(u, y, &orders, &arx_settings)?.model;
-                    structid_core::refine::output_error_with_state(
-                        u,
-                        y,
+                    let start = arx_records(&pairs, &orders, &arx_settings)
+                        .map_err(|e| context(e.into()))?
+                        .model;
+                    structid_core::refine::output_error_records_with_state(
+                        &pairs,
                         &start,
                         &oe_settings,
                         true,
-                    )?
+                        0,
+                    )
+                    .map_err(|e| context(e.into()))?
                 }
             };
             let note = if fit.converged {

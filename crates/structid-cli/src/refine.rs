@@ -30,19 +30,25 @@ pub struct RefineArgs {
     /// refined model is then written as `[linear]`).
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
-    /// The estimation data (CSV with the columns of `[signals]`).
-    #[arg(long, short = 'd', value_name = "DATA.csv")]
-    data: PathBuf,
+    /// The estimation data (CSV with the columns of `[signals]`). Repeat it for several
+    /// records of the same system: both steps restart at every record (each simulated from
+    /// rest, or from its own estimated initial state with --initial-state estimate) and J is
+    /// the mean over all their samples.
+    #[arg(long, short = 'd', value_name = "DATA.csv", required = true)]
+    data: Vec<PathBuf>,
     /// Output directory (created if needed).
     #[arg(long, short = 'o', value_name = "DIR")]
     out: PathBuf,
     /// A validation record (CSV like --data): the alternation stops when its simulation error
-    /// stops improving, and the best iteration is kept.
+    /// stops improving, and the best iteration is kept. Repeat it for several validation
+    /// records: each is simulated from rest (its first --settle samples not scored) and the
+    /// squared errors are pooled.
     #[arg(long, value_name = "V.csv", conflicts_with = "validation_fraction")]
-    validation_data: Option<PathBuf>,
+    validation_data: Vec<PathBuf>,
     /// Hold out the last fraction of --data as the validation record instead (0 < F < 1): the
     /// maps and G are estimated on the rest, and the validation error is that of a simulation
-    /// of the whole file, scored on the held-out samples.
+    /// of the whole file, scored on the held-out samples. One --data file only: with several
+    /// records, hold out whole records with --validation-data.
     #[arg(long, value_name = "F")]
     validation_fraction: Option<f64>,
     /// Leading validation samples that only settle the state and are not scored.
@@ -194,10 +200,19 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             "invalid value {f} for --validation-fraction: it must lie strictly between 0 and 1"
         )));
     }
+    if a.validation_fraction.is_some() && a.data.len() > 1 {
+        return Err(CliError::input(format!(
+            "--validation-fraction holds out the end of one record, and {} --data records were \
+             given: the held-out samples of a record do not start at rest, and each record would \
+             need its own settling; hold out whole records instead, passing them as \
+             --validation-data V.csv (repeat it for several)",
+            a.data.len()
+        )));
+    }
     let mut guard = OutputGuard::new();
-    guard.protect(&a.model).protect(&a.data);
-    if let Some(v) = &a.validation_data {
-        guard.protect(v);
+    guard.protect(&a.model);
+    for d in a.data.iter().chain(&a.validation_data) {
+        guard.protect(d);
     }
     let planned: Vec<String> = [
         "model.toml",
@@ -229,20 +244,31 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         Some(AutoOr::Value(s)) => Some(s),
         _ => None,
     };
-    let (all, model) = model_and_data(&mf, std::slice::from_ref(&a.data), sigma)?;
-    crate::identify::check_excitation(&mf, &all, &a.data.display().to_string())?;
+    let (all, model) = model_and_data(&mf, &a.data, sigma)?;
+    let data_label = crate::identify::files_label(&a.data);
+    crate::identify::check_excitation(&mf, &all, &data_label)?;
     if let Some(s) = sigma {
         crate::identify::check_sigma(s, &mf, &all)?;
     }
     let (data, validation, validation_note, estimation_file): (Data, Option<Data>, _, _) = match (
-        &a.validation_data,
+        a.validation_data.is_empty(),
         a.validation_fraction,
     ) {
-        (Some(v), _) => {
-            let vd = mf.select_data(&crate::data::read_table(v)?)?;
-            (all, Some(vd), Some(v.display().to_string()), None)
+        (false, _) => {
+            let vd = crate::identify::read_records(&mf, &a.validation_data).map_err(|e| {
+                e.context(format!(
+                    "the --validation-data files ({})",
+                    crate::identify::files_label(&a.validation_data)
+                ))
+            })?;
+            (
+                all,
+                Some(vd),
+                Some(crate::identify::files_label(&a.validation_data)),
+                None,
+            )
         }
-        (None, Some(f)) => {
+        (true, Some(f)) => {
             let at = ((1.0 - f) * all.len() as f64).round() as usize;
             if at < 10 || all.len() - at <= a.settle {
                 return Err(CliError::input(format!(
@@ -258,7 +284,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             let note = format!(
                 "the last {} samples of {} (fraction {f}), simulated from the start of the file",
                 all.len() - at,
-                a.data.display()
+                data_label
             );
             (
                 est,
@@ -267,17 +293,27 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
                 Some(a.out.join("estimation.csv")),
             )
         }
-        (None, None) => (all, None, None, None),
+        (true, None) => (all, None, None, None),
     };
     if let Some(v) = &validation
         && a.validation_fraction.is_none()
-        && a.settle >= v.len()
     {
-        return Err(CliError::input(format!(
-            "--settle {} is not less than the {} validation samples",
-            a.settle,
-            v.len()
-        )));
+        // Every validation record is scored after its settling samples.
+        for (i, (r, path)) in v.records().iter().zip(&a.validation_data).enumerate() {
+            if a.settle >= r.len() {
+                return Err(CliError::input(format!(
+                    "--settle {} is not less than the {} samples of validation record {}{}",
+                    a.settle,
+                    r.len(),
+                    i + 1,
+                    if a.validation_data.len() > 1 {
+                        format!(" (`{}`)", path.display())
+                    } else {
+                        String::new()
+                    }
+                )));
+            }
+        }
     }
 
     // Settings.
@@ -370,17 +406,28 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             guard.write_csv(path, &names, &columns)?;
             path.clone()
         }
-        None => a.data.clone(),
+        None => a.data[0].clone(),
     };
     let id = &r.identification;
     let chosen = identify_settings.with_beta(r.beta)?;
     let mut report = Report::new(&refined, id, &chosen, None)?;
     report.model_file = Some(model_path.display().to_string());
-    report.data_file = Some(data_file.display().to_string());
+    report.data_file = Some(if estimation_file.is_some() {
+        data_file.display().to_string()
+    } else {
+        data_label.clone()
+    });
     report.reproduction = Some(Reproduction {
         model_file_absolute: absolute(&model_path).display().to_string(),
         data_file_absolute: absolute(&data_file).display().to_string(),
-        data_files_absolute: Vec::new(),
+        data_files_absolute: if a.data.len() > 1 {
+            a.data
+                .iter()
+                .map(|p| absolute(p).display().to_string())
+                .collect()
+        } else {
+            Vec::new()
+        },
         beta: r.beta,
         sigma: None,
         solver_requested: "auto".into(),

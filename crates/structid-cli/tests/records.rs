@@ -396,7 +396,76 @@ fn linear_arx_fits_every_record_from_its_own_start() {
         "{:?}",
         g.num
     );
-    // Output error and order selection take one record: refused, not silently cut.
+    // Order selection takes one record: refused, not silently cut.
     let e = input_error(&["linear", "--data", p(&a), "--data", p(&b), "--out", p(&out)]);
-    assert!(e.contains("--method arx"), "{e}");
+    assert!(e.contains("--orders"), "{e}");
+}
+
+/// The denominator and numerator of the model file `structid linear` wrote.
+fn linear_model(path: &Path) -> (Vec<f64>, Vec<f64>) {
+    let g = ModelFile::from_path(path).unwrap().linear.unwrap().model;
+    (g.den, g.num[0].clone())
+}
+
+/// `--method oe` over two records simulated from rest recovers G exactly (each record is
+/// simulated from rest, as they were made), with and without a free initial state per record;
+/// the file glued from both does not start its second part at rest, so its fit differs.
+#[test]
+fn linear_oe_fits_every_record_from_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+    write_lti(&a, 120, 17);
+    write_lti(&b, 90, 18);
+    let want_den = [1.0, -1.5, 0.7];
+    let want_num = [0.0, 1.0, 0.5];
+    for x0 in ["zero", "estimate"] {
+        let out = dir.path().join(format!("oe_{x0}.toml"));
+        let o = ok(&[
+            "linear",
+            "--data",
+            p(&a),
+            "--data",
+            p(&b),
+            "--method",
+            "oe",
+            "--orders",
+            "2,2,1",
+            "--initial-state",
+            x0,
+            "--out",
+            p(&out),
+        ]);
+        assert!(o.stdout.contains("simulation error (OE"), "{}", o.stdout);
+        let (den, num) = linear_model(&out);
+        for (x, w) in den.iter().zip(want_den).chain(num.iter().zip(want_num)) {
+            assert!((x - w).abs() < 1e-7, "{x0}: {den:?} {num:?}");
+        }
+    }
+    // The glued file: one record whose second part starts from the first part's final state.
+    let glued = dir.path().join("glued.csv");
+    let text_b = std::fs::read_to_string(&b).unwrap();
+    let body_b: String = text_b.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&glued, std::fs::read_to_string(&a).unwrap() + &body_b).unwrap();
+    let out = dir.path().join("glued.toml");
+    ok(&[
+        "linear",
+        "--data",
+        p(&glued),
+        "--method",
+        "oe",
+        "--orders",
+        "2,2,1",
+        "--out",
+        p(&out),
+    ]);
+    let (den, _) = linear_model(&out);
+    let off = den
+        .iter()
+        .zip(want_den)
+        .map(|(x, w)| (x - w).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        off > 1e-4,
+        "the glued record fits like the records: {den:?}"
+    );
 }

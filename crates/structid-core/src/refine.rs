@@ -274,8 +274,25 @@ fn oe_fit(
         .zip(records)
         .map(|(u, (_, y))| (u, *y))
         .collect();
+    // The numerator coefficients of the inputs, then those of the impulse inputs (θ = (b…, f…)).
+    let nb = start.orders().nb;
+    let (nb_inputs, nb_impulses) = (
+        nb.iter().take(m).sum::<usize>(),
+        nb.iter().skip(m).sum::<usize>(),
+    );
     let mut fit = output_error_records(&pairs, &start, settings).map_err(linear_error)?;
     fit.model.num.truncate(m);
+    if nb_impulses > 0 {
+        // The initial states are nuisance parameters: G's uncertainty is theirs marginalised,
+        // the rows and columns of G's parameters in the joint covariance.
+        let keep: Vec<usize> = (0..fit.parameter_std.len())
+            .filter(|&i| i < nb_inputs || i >= nb_inputs + nb_impulses)
+            .collect();
+        fit.parameter_std = keep.iter().map(|&i| fit.parameter_std[i]).collect();
+        fit.parameter_covariance = fit.parameter_covariance.map(|c| {
+            nalgebra::DMatrix::from_fn(keep.len(), keep.len(), |i, j| c[(keep[i], keep[j])])
+        });
+    }
     if integrators > 0 {
         fit.model.den = integrators::inflate(&fit.model.den, integrators);
     }

@@ -327,6 +327,14 @@ fn the_linear_step_over_records_is_the_stacked_output_error() {
     let s = OeSettings::builder().tolerance(1e-12).build().unwrap();
     let fit = output_error_records_with_state(&pairs, &start, &s, true, 0).unwrap();
     assert_eq!(fit.model.num.len(), 1);
+    // The uncertainty is that of G's parameters (the initial states marginalised out).
+    let d = g.parameters().len();
+    assert_eq!(fit.parameter_std.len(), d);
+    let cov = fit.parameter_covariance.as_ref().unwrap();
+    assert_eq!((cov.nrows(), cov.ncols()), (d, d));
+    for (i, s) in fit.parameter_std.iter().enumerate() {
+        assert!((cov[(i, i)].max(0.0).sqrt() - s).abs() <= 1e-12 * s.max(1e-300));
+    }
     for (x, y) in fit.model.parameters().iter().zip(g.parameters()) {
         assert!((x - y).abs() < 1e-7, "{x} vs {y}");
     }

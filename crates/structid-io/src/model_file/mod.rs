@@ -629,7 +629,147 @@ impl ModelFile {
             None => Ok(self.lft.compute_z(data.u(), data.y())?.0),
         }
     }
+
+    /// z for data of one or several records ([`Data::from_records`]): [`ModelFile::z_signal`]
+    /// of each record, from its own start, stacked.
+    pub fn z_of_records(&self, data: &Data) -> Result<Signal, IoError> {
+        if data.record_count() == 1 {
+            return self.z_signal(data);
+        }
+        let mut values = Vec::new();
+        let mut channels = 0;
+        for r in data.records() {
+            let z = self.z_signal(&r)?;
+            channels = z.channels();
+            values.extend_from_slice(z.as_slice());
+        }
+        Ok(Signal::new(channels, values).map_err(structid_core::Error::from)?)
+    }
+
+    /// Refuses data on which a block's input z does not vary: the data then show its map at
+    /// one point only (a single sample, or a constant input), and an estimate would be a guess
+    /// everywhere else. `source` names the data in the message (e.g. the file names). Models
+    /// whose z cannot be computed from the data are left to the solver. The error is
+    /// [`IoError::InvalidArgument`].
+    ///
+    /// ```
+    /// use structid_core::Data;
+    /// use structid_io::ModelFile;
+    /// use structid_lti::Signal;
+    /// let mf = ModelFile::parse(
+    ///     "[linear]\nstructure = \"input\"\nden = [1.0, -0.5]\nnum = [[0.0, 1.0]]\n\
+    ///      [signals]\nu = [\"u\"]\ny = [\"y\"]\n\
+    ///      [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n\
+    ///      dispersion = { kind = \"gaussian\", sigma = 0.3 }\n",
+    ///     None,
+    /// )?;
+    /// let flat = Data::new(Signal::from_fn(50, 1, |_, _| 1.0), Signal::zeros(50, 1))?;
+    /// let e = mf.check_excitation(&flat, "flat.csv").unwrap_err();
+    /// assert!(e.to_string().contains("is constant"), "{e}");
+    /// let ramp = Data::new(Signal::from_fn(50, 1, |k, _| k as f64), Signal::zeros(50, 1))?;
+    /// assert!(mf.check_excitation(&ramp, "ramp.csv").is_ok());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn check_excitation(&self, data: &Data, source: &str) -> Result<(), IoError> {
+        let Ok(z) = self.z_of_records(data) else {
+            return Ok(());
+        };
+        let names = self.z_names();
+        for b in &self.blocks {
+            let constant = b.inputs.iter().copied().find(|&i| {
+                i < z.channels() && {
+                    let c = z.channel(i);
+                    c.iter().all(|v| *v == c[0])
+                }
+            });
+            if let Some(i) = constant {
+                let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
+                return Err(IoError::InvalidArgument(format!(
+                    "the input `{z_name}` of block `{}` is constant ({}) over the {} sample(s) of \
+                     `{}`: the data show its map at one point only; identify on a record that \
+                     excites it",
+                    b.name,
+                    z.channel(i).first().copied().unwrap_or(f64::NAN),
+                    data.len(),
+                    source
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses a kernel width σ that is absurd for the data: more than [`SIGMA_SPAN`] times
+    /// wider or narrower than the range of a block's input z (a kernel flat over the data, or
+    /// a spike at each sample). `what` names σ in the message (`--sigma`, `sigma`). Models
+    /// whose z cannot be computed from the data are left to the solver. The error is
+    /// [`IoError::InvalidArgument`].
+    ///
+    /// ```
+    /// use structid_core::Data;
+    /// use structid_io::ModelFile;
+    /// use structid_lti::Signal;
+    /// let mf = ModelFile::parse(
+    ///     "[linear]\nstructure = \"input\"\nden = [1.0, -0.5]\nnum = [[0.0, 1.0]]\n\
+    ///      [signals]\nu = [\"u\"]\ny = [\"y\"]\n\
+    ///      [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n\
+    ///      dispersion = { kind = \"gaussian\", sigma = 0.3 }\n",
+    ///     None,
+    /// )?;
+    /// let data = Data::new(Signal::from_fn(50, 1, |k, _| k as f64 / 49.0), Signal::zeros(50, 1))?;
+    /// assert!(mf.check_sigma(0.1, &data, "sigma").is_ok());
+    /// let e = mf.check_sigma(1e7, &data, "sigma").unwrap_err();
+    /// assert!(e.to_string().starts_with("invalid value 1e7 for sigma"), "{e}");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn check_sigma(&self, sigma: f64, data: &Data, what: &str) -> Result<(), IoError> {
+        let Ok(z) = self.z_of_records(data) else {
+            return Ok(());
+        };
+        let names = self.z_names();
+        for b in &self.blocks {
+            for &i in b.inputs.iter().filter(|&&i| i < z.channels()) {
+                let c = z.channel(i);
+                let (lo, hi) = c
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                        (l.min(*v), h.max(*v))
+                    });
+                let range = hi - lo;
+                if !(range.is_finite() && range > 0.0) {
+                    continue;
+                }
+                if sigma > SIGMA_SPAN * range || sigma < range / SIGMA_SPAN {
+                    let z_name = names.get(i).cloned().unwrap_or_else(|| format!("z{i}"));
+                    return Err(IoError::InvalidArgument(format!(
+                        "invalid value {sigma:e} for {what}: the input `{z_name}` of block `{}` \
+                         spans {range:.4e}, and a kernel {:.0e} times {} than that is {}; give σ \
+                         between {:.1e} and {:.1e} ({SIGMA_SPAN:.0e} times narrower or wider than \
+                         the range; the default is 0.1 × the range)",
+                        b.name,
+                        if sigma > range {
+                            sigma / range
+                        } else {
+                            range / sigma
+                        },
+                        if sigma > range { "wider" } else { "narrower" },
+                        if sigma > range {
+                            "flat over the data (the map is a constant)"
+                        } else {
+                            "a spike at each sample (the map is zero between them)"
+                        },
+                        range / SIGMA_SPAN,
+                        range * SIGMA_SPAN
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
 }
+
+/// How many times wider or narrower than the range of a block's input a kernel width σ may
+/// be before [`ModelFile::check_sigma`] refuses it.
+pub const SIGMA_SPAN: f64 = 1e6;
 
 #[cfg(test)]
 mod tests;
