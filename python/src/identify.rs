@@ -242,6 +242,11 @@ fn run_records(
     } else {
         Data::from_records(data).map_err(error)?
     };
+    // The checks of `structid identify`: a map input that does not vary, an absurd σ.
+    mf.check_excitation(&data, "the data").map_err(error)?;
+    if let Some(s) = r.sigma {
+        mf.check_sigma(s, &data, "sigma").map_err(error)?;
+    }
     let core = convert::core_model(mf, r.sigma, &data)?;
     let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
         let criterion = criterion(r, !model.has_total_variation())?;

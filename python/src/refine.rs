@@ -28,10 +28,27 @@ struct Request {
     bands: bool,
 }
 
+/// One or several records (`Data::from_records`) from named columns; `what` names them in
+/// messages.
+/// A record as named columns, copied out of numpy.
+type Named = Vec<(String, Vec<f64>)>;
+
+fn records(mf: &ModelFile, named: Vec<Named>, what: &str) -> PyResult<Data> {
+    let mut data = named
+        .into_iter()
+        .map(|n| convert::record(mf, n))
+        .collect::<PyResult<Vec<Data>>>()?;
+    match data.len() {
+        0 => Err(invalid(format!("no {what} record was given"))),
+        1 => Ok(data.pop().expect("one record")),
+        _ => Data::from_records(data).map_err(error),
+    }
+}
+
 fn run(
     model: &Model,
-    named: Vec<(String, Vec<f64>)>,
-    validation: Option<Vec<(String, Vec<f64>)>>,
+    named: Vec<Named>,
+    validation: Option<Vec<Named>>,
     r: &Request,
 ) -> PyResult<(Outcome, ModelFile)> {
     let mf = &model.file;
@@ -79,16 +96,32 @@ fn run(
         Some(b) => b,
         None => 0.01,
     };
-    let data: Data = convert::record(mf, named)?;
-    let validation = validation.map(|v| convert::record(mf, v)).transpose()?;
-    if let Some(v) = &validation
-        && r.settle >= v.len()
-    {
-        return Err(invalid(format!(
-            "settle {} is not less than the {} validation samples",
-            r.settle,
-            v.len()
-        )));
+    let data: Data = records(mf, named, "estimation")?;
+    let validation = validation
+        .map(|v| records(mf, v, "validation"))
+        .transpose()?;
+    if let Some(v) = &validation {
+        // Every validation record is scored after its settling samples.
+        let several = v.record_count() > 1;
+        for (i, rec) in v.records().iter().enumerate() {
+            if r.settle >= rec.len() {
+                return Err(invalid(format!(
+                    "settle {} is not less than the {} samples of the validation record{}",
+                    r.settle,
+                    rec.len(),
+                    if several {
+                        format!(" {}", i + 1)
+                    } else {
+                        String::new()
+                    }
+                )));
+            }
+        }
+    }
+    // The checks of `structid refine`: a map input that does not vary, an absurd σ.
+    mf.check_excitation(&data, "the data").map_err(error)?;
+    if let Some(s) = r.sigma {
+        mf.check_sigma(s, &data, "sigma").map_err(error)?;
     }
     let core = convert::core_model(mf, r.sigma, &data)?;
     let identify_settings = IdentifySettings::builder()
@@ -160,9 +193,10 @@ fn run(
         .map(structid_io::SelectionReport::new);
     report.refinement = Some(RefinementReport {
         structure: structure.describe(),
-        validation: validation
-            .as_ref()
-            .map(|v| format!("a record of {} samples", v.len())),
+        validation: validation.as_ref().map(|v| match v.record_count() {
+            1 => format!("a record of {} samples", v.len()),
+            n => format!("{n} records of {} samples in all", v.len()),
+        }),
         settle: r.settle,
         iterations: result.iterations,
         best: result.best,
@@ -196,14 +230,17 @@ fn run(
     ))
 }
 
+/// A record as named numpy columns.
+type Columns<'py> = Vec<(String, PyReadonlyArray1<'py, f64>)>;
+
 /// Refines the linear part of a one-map structure (see `structid.refine`).
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation=None, beta=None, sigma=None, sigma_auto=false, selection="ml", iterations=10, tolerance=1e-3, settle=0, initial_state="zero", bands=true))]
+#[pyo3(signature = (model, records, validation=None, beta=None, sigma=None, sigma_auto=false, selection="ml", iterations=10, tolerance=1e-3, settle=0, initial_state="zero", bands=true))]
 pub fn refine_columns<'py>(
     py: Python<'py>,
     model: &Model,
-    columns: Vec<(String, PyReadonlyArray1<'py, f64>)>,
-    validation: Option<Vec<(String, PyReadonlyArray1<'py, f64>)>>,
+    records: Vec<Columns<'py>>,
+    validation: Option<Vec<Columns<'py>>>,
     beta: Option<f64>,
     sigma: Option<f64>,
     sigma_auto: bool,
@@ -225,8 +262,12 @@ pub fn refine_columns<'py>(
         initial_state: initial_state.into(),
         bands,
     };
-    let named = named_columns(&columns);
-    let validation = validation.as_ref().map(|v| named_columns(v));
+    // Every estimation record, then every validation record: each restarts from rest (or
+    // from its own initial state).
+    let named: Vec<_> = records.iter().map(|r| named_columns(r)).collect();
+    let validation = validation
+        .as_ref()
+        .map(|v| v.iter().map(|r| named_columns(r)).collect());
     let model = model.clone();
     let (outcome, refined) = py.detach(move || run(&model, named, validation, &request))?;
     let d = outcome.into_dict(py)?;

@@ -27,7 +27,7 @@ from __future__ import annotations
 from ._structid import StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
-from ._estimate import Estimate, Prediction, Validation
+from ._estimate import Estimate, Prediction, RecordsValidation, Validation
 from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
                          silverbox_discovery)
 from ._staticness import Staticness, staticness
@@ -41,6 +41,7 @@ __all__ = [
     "Fit",
     "MapEstimate",
     "Prediction",
+    "RecordsValidation",
     "Validation",
     "identify",
     "load",

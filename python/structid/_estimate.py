@@ -10,7 +10,7 @@ from typing import Any, Dict, List, Optional, Union
 import numpy as np
 
 from . import _structid
-from ._arrays import as_signal
+from ._arrays import as_signal, records_of
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,36 @@ class Validation:
     input_correlation: List[List[Dict[str, Any]]]
     """[output][input]: the cross-correlation of the errors with u."""
     initial_state: Optional[List[float]]
+
+
+@dataclass(frozen=True)
+class RecordsValidation:
+    """Validation on several records (``structid validate --data a.csv --data b.csv``): each
+    record validated on its own, from its own initial state, and the free-run simulation error
+    pooled over the records after the settling samples of each."""
+
+    records: List[Validation]
+    """Per record, its :class:`Validation`."""
+    rms: List[float]
+    """Per output: RMS(y − y_sim) over the scored samples of every record."""
+    fit_percent: List[float]
+    """Per output: 100·(1 − ‖y − y_sim‖/‖y − mean y‖) over the same samples (NaN for a
+    constant output)."""
+    samples: int
+    """Scored samples of all records."""
+
+    @staticmethod
+    def pool(records: List[Validation], ys: List[np.ndarray], settle: int) -> "RecordsValidation":
+        """Pools the simulation errors of ``records`` (measured outputs ``ys``)."""
+        y = np.vstack([a[settle:] for a in ys])
+        sim = np.vstack([r.simulated[settle:] for r in records])
+        sse = ((y - sim) ** 2).sum(axis=0)
+        n = max(len(y), 1)
+        spread = np.maximum((y * y).sum(axis=0) - y.sum(axis=0) ** 2 / n, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fit = np.where(spread > 0, 100.0 * (1.0 - np.sqrt(sse / spread)), np.nan)
+        return RecordsValidation(records=records, rms=[float(v) for v in np.sqrt(sse / n)],
+                                 fit_percent=[float(v) for v in fit], samples=len(y))
 
 
 class Estimate:
@@ -119,8 +149,18 @@ class Estimate:
         return Prediction(**d)
 
     def validate(self, u: object, y: object, initial_state: str = "zero", max_lag: int = 25,
-                 settle: int = 0) -> Validation:
-        """Simulation RMS and fit, one-step errors and their whiteness and input tests."""
+                 settle: int = 0) -> Union[Validation, "RecordsValidation"]:
+        """Simulation RMS and fit, one-step errors and their whiteness and input tests.
+
+        With lists of arrays for u and y (several records, ``validate([u1, u2], [y1, y2])``)
+        each record is validated on its own, from its own initial state, and the result is a
+        :class:`RecordsValidation` that also pools the free-run simulation error over the
+        records (``structid validate --data a.csv --data b.csv``)."""
+        records = records_of(u, y)
+        if records is not None:
+            return RecordsValidation.pool(
+                [self.validate(a, b, initial_state, max_lag, settle) for a, b in records],
+                [as_signal(b, "y") for _, b in records], int(settle))
         d = self._native.validate(as_signal(u, "u"), as_signal(y, "y"), initial_state,
                                   int(max_lag), int(settle))
         d["whiteness"] = json.loads(d["whiteness"])

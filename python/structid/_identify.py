@@ -10,8 +10,8 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from . import _structid
-from ._arrays import named_columns
-from ._estimate import Estimate, Prediction, Validation
+from ._arrays import is_records, named_columns
+from ._estimate import Estimate, Prediction, RecordsValidation, Validation
 from ._model import Dispersion, Model, _dispersion
 
 
@@ -96,8 +96,9 @@ class Fit:
         """k-step-ahead prediction (see :meth:`Estimate.predict`)."""
         return self.estimate.predict(u, y, horizon, **kw)
 
-    def validate(self, u: object, y: object, **kw: Any) -> Validation:
-        """Validation on a record (see :meth:`Estimate.validate`)."""
+    def validate(self, u: object, y: object, **kw: Any) -> Union[Validation, RecordsValidation]:
+        """Validation on a record, or on several given as lists of arrays (see
+        :meth:`Estimate.validate`)."""
         return self.estimate.validate(u, y, **kw)
 
     def save(self, directory: Union[str, os.PathLike]) -> None:
@@ -181,10 +182,8 @@ def identify(model: Model, u: object, y: object, z: object = None, *,
 
 
 def _is_records(x: object) -> bool:
-    """A list or tuple of numpy arrays: several records (a list of numbers, or of lists, is
-    one signal)."""
-    return isinstance(x, (list, tuple)) and len(x) > 0 and all(
-        isinstance(r, np.ndarray) for r in x)
+    """A list or tuple of numpy arrays: several records."""
+    return is_records(x)
 
 
 def _fit(model: Model, out: Dict[str, Any]) -> Fit:

@@ -65,7 +65,8 @@ def identify_columns(model: Model, columns: Columns, beta: Optional[float] = Non
                      tolerance: Optional[float] = None, max_iterations: Optional[int] = None,
                      memory_limit_mib: Optional[int] = None,
                      more_records: Optional[List[Columns]] = None) -> Dict[str, Any]: ...
-def refine_columns(model: Model, columns: Columns, validation: Optional[Columns] = None,
+def refine_columns(model: Model, records: List[Columns],
+                   validation: Optional[List[Columns]] = None,
                    beta: Optional[float] = None, sigma: Optional[float] = None,
                    sigma_auto: bool = False, selection: str = "ml", iterations: int = 10,
                    tolerance: float = 1e-3, settle: int = 0, initial_state: str = "zero",

@@ -10,6 +10,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from . import _structid
+from ._arrays import records_of
 from ._estimate import Estimate
 from ._identify import Fit, _columns, _fit
 from ._model import Model
@@ -35,11 +36,26 @@ def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[obj
     """Refines an uncertain linear part (``structid refine``): alternates between identifying
     the map with G fixed and re-estimating G (output error) with the map fixed, and stops when
     the validation simulation error (``validation=(u_val, y_val)``, else the estimation one)
-    stops improving. ``model`` is a one-map structure (:meth:`Model.hammerstein`, …)."""
+    stops improving. ``model`` is a one-map structure (:meth:`Model.hammerstein`, …).
+
+    u and y may be lists of arrays for several records (``refine(model, [u1, u2], [y1, y2])``,
+    ``structid refine --data a.csv --data b.csv``): both steps restart at every record, each
+    simulated from rest (or from its own estimated initial state with
+    ``initial_state="estimate"``). ``validation`` may likewise be ``([u1, u2], [y1, y2])``:
+    each validation record is simulated from rest, its first ``settle`` samples not scored,
+    and the squared errors are pooled."""
     sigma_auto = isinstance(sigma, str)
+    if sigma_auto and sigma != "auto":
+        raise _structid.StructidError(f"sigma `{sigma}` is neither a number nor \"auto\"")
+    if isinstance(beta, str) and beta != "auto":
+        raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")
+    val = None
+    if validation is not None:
+        if len(validation) != 2:
+            raise _structid.StructidError("validation is a pair (u_val, y_val)")
+        val = _records_columns(model, validation[0], validation[1], "validation ")
     out = _structid.refine_columns(
-        model._native, _columns(model, u, y, None, ""),
-        None if validation is None else _columns(model, validation[0], validation[1], None, "validation "),
+        model._native, _records_columns(model, u, y, ""), val,
         None if isinstance(beta, str) else float(beta),
         None if sigma is None or sigma_auto else float(sigma), sigma_auto, selection,
         int(iterations), float(tolerance), int(settle), initial_state, bool(bands))
@@ -48,6 +64,15 @@ def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[obj
     r = fit.report["refinement"]
     return Refinement(model=refined, fit=fit, iterations=r["iterations"], best=r["best"],
                       stop_reason=r["stop_reason"])
+
+
+def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:
+    """The named columns of each record: one record, or lists of arrays for several."""
+    records = records_of(u, y, what)
+    if records is None:
+        return [_columns(model, u, y, None, what)]
+    return [_columns(model, a, b, None, f"{what}record {i + 1} ")
+            for i, (a, b) in enumerate(records)]
 
 
 @dataclass

@@ -119,3 +119,28 @@ def test_long_call_releases_the_gil(model):
     # Holding the GIL for the whole solve would leave at most a tick or two inside it.
     assert end - start > 0.05, "the problem is too small to tell"
     assert len(during) >= 5, (len(during), end - start)
+
+
+def test_constant_input_is_refused_as_the_tool_does(model):
+    """A map input that does not vary shows the map at one point: refused before fitting, by
+    identify and by refine, with the tool's message."""
+    u = np.full(200, 0.7)
+    y = np.linspace(0.0, 1.0, 200)
+    with pytest.raises(structid.StructidError, match="is constant"):
+        structid.identify(model, u, y, beta=0.01)
+    with pytest.raises(structid.StructidError, match="is constant"):
+        structid.refine(model, u, y, beta=0.01)
+    # over several records, z is refused when it takes one value in all of them
+    with pytest.raises(structid.StructidError, match="is constant"):
+        structid.identify(model, [u, u.copy()], [y, y.copy()], beta=0.01)
+
+
+@pytest.mark.parametrize("sigma", [1e7, 1e-8])
+def test_absurd_sigma_for_the_data_range_is_refused(model, record, sigma):
+    """σ a million times wider or narrower than the range of the map's input: refused, as
+    `structid identify --sigma` refuses it."""
+    u, y = record
+    with pytest.raises(structid.StructidError, match=r"invalid value \S+ for sigma: the input `z0` of block `N` spans"):
+        structid.identify(model, u, y, beta=0.01, sigma=sigma)
+    with pytest.raises(structid.StructidError, match="for sigma"):
+        structid.refine(model, u, y, beta=0.01, sigma=sigma)

@@ -53,6 +53,72 @@ def test_refine_matches_the_tool(cli, tmp_path, records):
     assert after < before
 
 
+def _hammerstein_record(rng, n):
+    """A record of the Hammerstein model with N = tanh(2z), from rest, a little noise."""
+    u = np.convolve(rng.uniform(-2.0, 2.0, n), np.ones(3) / 3.0, mode="same")
+    w = np.tanh(2.0 * u)
+    y = np.zeros(n)
+    for k in range(n):
+        y[k] = (1.2 * y[k - 1] if k >= 1 else 0.0) - (0.5 * y[k - 2] if k >= 2 else 0.0) \
+            + (0.5 * w[k - 1] if k >= 1 else 0.0) + (0.3 * w[k - 2] if k >= 2 else 0.0)
+    return u, y + 0.05 * rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("initial_state", ["zero", "estimate"])
+def test_refine_over_several_records_matches_the_tool(cli, tmp_path, initial_state):
+    """`refine(model, [u1, u2], [y1, y2], validation=([uv1, uv2], [yv1, yv2]))` is
+    `structid refine --data a --data b --validation-data c --validation-data d`; its kept
+    validation error is the pooled one `Fit.validate([uv1, uv2], [yv1, yv2])` and the tool's
+    `validate` compute; and gluing the records is a different problem."""
+    wrong = HAMMERSTEIN_TOML.replace("den = [1.0, -1.2, 0.5]", "den = [1.0, -1.1, 0.45]")
+    model_path = tmp_path / "wrong.toml"
+    model_path.write_text(wrong)
+    rng = np.random.default_rng(21)
+    recs = [_hammerstein_record(rng, n) for n in (250, 200, 150, 120)]
+    paths = [write_csv(tmp_path / f"r{i}.csv", {"u": u, "y": y}) for i, (u, y) in enumerate(recs)]
+    out = tmp_path / "refined"
+    cli("refine", "--model", model_path, "--data", paths[0], "--data", paths[1],
+        "--validation-data", paths[2], "--validation-data", paths[3], "--beta", "0.001",
+        "--initial-state", initial_state, "--out", out)
+    model = structid.Model.from_file(model_path)
+    r = structid.refine(model, [recs[0][0], recs[1][0]], [recs[0][1], recs[1][1]],
+                        validation=([recs[2][0], recs[3][0]], [recs[2][1], recs[3][1]]),
+                        beta=0.001, initial_state=initial_state)
+    assert r.model == structid.Model.from_file(out / "model.toml")
+    np.testing.assert_allclose(r.fit.w_hat[:, 0], read_csv(out / "estimate.csv")["N"],
+                               rtol=1e-9, atol=1e-12)
+    assert r.fit.w_hat.shape[0] == 250 + 200
+    report = read_json(out / "report.json")["refinement"]
+    assert r.best == report["best"]
+    assert len(r.iterations) == len(report["iterations"])
+    for mine, tool in zip(r.iterations, report["iterations"]):
+        for key in ("cost_after_maps", "estimation_rms", "validation_rms"):
+            np.testing.assert_allclose(mine[key], tool[key], rtol=1e-9)
+    kept = r.iterations[r.best]["validation_rms"]
+    assert kept < r.iterations[0]["validation_rms"]
+    # The kept validation error, recomputed: each validation record simulated from rest.
+    v = r.fit.validate([recs[2][0], recs[3][0]], [recs[2][1], recs[3][1]])
+    assert isinstance(v, structid.RecordsValidation) and len(v.records) == 2
+    assert v.samples == 150 + 120
+    np.testing.assert_allclose(v.rms[0], kept, rtol=1e-9)
+    vout = tmp_path / "validation"
+    cli("validate", "--model", out / "model.toml", "--estimate", out, "--data", paths[2],
+        "--data", paths[3], "--out", vout)
+    overall = read_json(vout / "validation.json")["overall"]["outputs"][0]
+    np.testing.assert_allclose(v.rms[0], overall["rms"], rtol=1e-9)
+    np.testing.assert_allclose(v.fit_percent[0], overall["fit_percent"], rtol=1e-9)
+    for i, rec in enumerate(v.records):
+        one = read_json(vout / f"record_{i + 1}" / "validation.json")["outputs"][0]
+        np.testing.assert_allclose(rec.rms[0], one["rms"], rtol=1e-9)
+    # The glued record is a different problem.
+    glued = structid.refine(model, np.concatenate([recs[0][0], recs[1][0]]),
+                            np.concatenate([recs[0][1], recs[1][1]]), beta=0.001,
+                            initial_state=initial_state)
+    assert np.max(np.abs(glued.fit.w_hat[:, 0] - r.fit.w_hat[:, 0])) > 1e-6
+    with pytest.raises(structid.StructidError, match="several records"):
+        structid.refine(model, [recs[0][0], recs[1][0]], [recs[0][1]], beta=0.001)
+
+
 @pytest.fixture(scope="module")
 def duffing(tmp_path_factory):
     """A nominal linear model that misses a cubic stiffness in feedback from y."""
