@@ -8,7 +8,7 @@ use structid_core::Site;
 use structid_io::{BlockSpec, DispersionSpec, LinearSpec, ModelFile, OutputGuard, SignalNames};
 use structid_linear::{
     ArxSettings, OeSettings, OrderCriterion, OrderGrid, Orders, PolynomialModel, arx_records,
-    oe_records, select_orders_observed,
+    oe_records, select_orders_records,
 };
 use structid_lti::Signal;
 
@@ -18,7 +18,7 @@ use crate::error::CliError;
 #[derive(Debug, Args)]
 pub struct LinearArgs {
     /// The estimation data (CSV with a header row). Repeat it for several records of the same
-    /// system (with --orders): the ARX equations of each record start after its own first
+    /// system: the ARX equations (of the fit and of the order selection) of each record start after its own first
     /// samples, so no regressor mixes two records, and output error simulates each record from
     /// rest (or from its own estimated initial state), leaving its first --transient samples
     /// out of the cost.
@@ -326,19 +326,11 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         ));
     }
     check_orders(&a)?;
-    if a.data.len() > 1 && a.orders.is_none() {
-        return Err(CliError::input(
-            "several --data records are fitted with given orders only: add --orders NA,NB,NK \
-             (order selection takes one record; select the orders on one record, then fit them \
-             on all)",
-        ));
-    }
     let records: Vec<(Signal, Signal)> = a
         .data
         .iter()
         .map(|d| read_signals(d, &a))
         .collect::<Result<_, _>>()?;
-    let (u, y) = &records[0];
     let mut arx_settings = ArxSettings::builder().integrators(a.integrators);
     let mut oe_settings = OeSettings::builder()
         .transient(a.transient)
@@ -373,19 +365,18 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                 }
             };
             let grid = grid(&a);
-            // The free part is selected on the differenced output.
+            // The free part is selected on the differenced output, record by record.
+            let differenced: Vec<(&Signal, Signal)> = records
+                .iter()
+                .map(|(u, y)| Ok((u, differenced(y, a.integrators)?)))
+                .collect::<Result<_, CliError>>()?;
+            let pairs: Vec<(&Signal, &Signal)> = differenced.iter().map(|(u, y)| (*u, y)).collect();
             let pb = crate::progress::bar(Some(0), "candidate orders");
-            let sel = select_orders_observed(
-                u,
-                &differenced(y, a.integrators)?,
-                &grid,
-                &criterion,
-                &arx_settings,
-                &|done, total| {
+            let sel =
+                select_orders_records(&pairs, &grid, &criterion, &arx_settings, &|done, total| {
                     pb.set_length(total);
                     pb.set_position(done);
-                },
-            );
+                });
             pb.finish_and_clear();
             let sel = sel?;
             let note = format!(

@@ -118,6 +118,7 @@ pub use output_error::{
 pub use polynomial::PolynomialModel;
 pub use selection::{
     OrderCriterion, OrderGrid, OrderSelection, select_orders, select_orders_observed,
+    select_orders_records,
 };
 
 #[cfg(test)]

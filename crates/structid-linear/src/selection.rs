@@ -4,7 +4,7 @@ use std::ops::RangeInclusive;
 
 use structid_lti::Signal;
 
-use crate::arx::{ArxSettings, fit_arx, prepare_data};
+use crate::arx::{ArxSettings, fit_arx_records, prepare_data};
 use crate::error::LinearError;
 use crate::orders::Orders;
 use crate::polynomial::PolynomialModel;
@@ -239,6 +239,44 @@ pub fn select_orders_observed(
     settings: &ArxSettings,
     progress: &dyn Fn(u64, u64),
 ) -> Result<OrderSelection, LinearError> {
+    select_orders_records(&[(u, y)], grid, criterion, settings, progress)
+}
+
+/// [`select_orders_observed`] over several records (experiments) of the same system, given as
+/// `(u, y)` pairs: each candidate is one ARX fit over the equations of every record, each
+/// record's equations starting after its own first samples (as
+/// [`arx_records`](crate::arx_records)), and AIC, BIC and FPE count the equations of all
+/// records. One record gives [`select_orders_observed`]'s selection.
+///
+/// ```
+/// use structid_linear::{select_orders_records, ArxSettings, OrderCriterion, OrderGrid, Orders};
+/// use structid_lti::{testing::SplitMix64, Signal};
+/// let mut rng = SplitMix64::new(3);
+/// let mut record = |len: usize| {
+///     let u = Signal::from_fn(len, 1, |_, _| rng.uniform_in(-1.0, 1.0));
+///     let mut y = vec![0.0; len];
+///     for k in 1..len {
+///         y[k] = 0.5 * y[k - 1] + u.get(k - 1, 0) + rng.uniform_in(-0.05, 0.05);
+///     }
+///     (u, Signal::new(1, y).unwrap())
+/// };
+/// let (a, b) = (record(200), record(150));
+/// let grid = OrderGrid { na: 1..=3, nb: 1..=3, nk: 0..=2 };
+/// let sel = select_orders_records(&[(&a.0, &a.1), (&b.0, &b.1)], &grid, &OrderCriterion::Bic,
+///     &ArxSettings::default(), &|_, _| {})?;
+/// assert_eq!(sel.best, Orders::siso(1, 1, 1));
+/// # Ok::<(), structid_linear::LinearError>(())
+/// ```
+pub fn select_orders_records(
+    records: &[(&Signal, &Signal)],
+    grid: &OrderGrid,
+    criterion: &OrderCriterion,
+    settings: &ArxSettings,
+    progress: &dyn Fn(u64, u64),
+) -> Result<OrderSelection, LinearError> {
+    let Some(&(u, _)) = records.first() else {
+        return Err(LinearError::param("records", "no data record was given"));
+    };
     if grid.is_empty() {
         return Err(LinearError::param(
             "grid",
@@ -250,7 +288,23 @@ pub fn select_orders_observed(
     if inputs == 0 {
         return Err(LinearError::dims("input channels", "at least 1", 0));
     }
-    let (uc, yv) = prepare_data(u, y, inputs, "")?;
+    let several = records.len() > 1;
+    let mut uc: Vec<Vec<f64>> = vec![Vec::new(); inputs];
+    let mut yv = Vec::new();
+    let mut bounds = vec![0];
+    for (i, (ui, yi)) in records.iter().enumerate() {
+        let prefix = if several {
+            format!("record {}: ", i + 1)
+        } else {
+            String::new()
+        };
+        let (c, v) = prepare_data(ui, yi, inputs, &prefix)?;
+        for (all, col) in uc.iter_mut().zip(c) {
+            all.extend(col);
+        }
+        yv.extend(v);
+        bounds.push(yv.len());
+    }
     let validation = match criterion {
         OrderCriterion::Validation { u, y } => Some(prepare_data(u, y, inputs, "validation ")?),
         _ => None,
@@ -275,7 +329,7 @@ pub fn select_orders_observed(
                 if orders.parameters() == 0 {
                     continue;
                 }
-                let fit = match fit_arx(&uc, &yv, &orders, settings, start) {
+                let fit = match fit_arx_records(&uc, &yv, &orders, settings, &bounds, start) {
                     Ok((f, _)) => f,
                     Err(e) => {
                         last_error = Some(e);
@@ -403,6 +457,49 @@ mod tests {
         );
         let y = Signal::new(1, two.simulate(&ue).unwrap()).unwrap();
         (u, y)
+    }
+
+    /// Over two records, BIC picks the true orders, and every candidate's value is the BIC of
+    /// the ARX fit over both records computed here with `arx_records`; one record is
+    /// `select_orders`.
+    #[test]
+    fn selection_over_records_scores_the_fit_over_every_record() {
+        let (ua, ya) = record(61, 700, 0.5);
+        let (ub, yb) = record(62, 500, 0.5);
+        let grid = OrderGrid {
+            na: 1..=3,
+            nb: 1..=3,
+            nk: 0..=2,
+        };
+        let s = ArxSettings::default();
+        let pairs = [(&ua, &ya), (&ub, &yb)];
+        let sel =
+            select_orders_records(&pairs, &grid, &OrderCriterion::Bic, &s, &|_, _| {}).unwrap();
+        assert_eq!(sel.best, Orders::siso(2, 2, 1));
+        // The equations start after the largest lag of the grid in each record.
+        // max(na_max, nk_max + nb_max − 1) = max(3, 2 + 3 − 1)
+        let start = 4;
+        for (orders, value) in &sel.table {
+            let fit = crate::arx::fit_arx_records(
+                &[[ua.channel(0), ub.channel(0)].concat()],
+                &[ya.channel(0), yb.channel(0)].concat(),
+                orders,
+                &s,
+                &[0, 700, 1200],
+                start,
+            )
+            .unwrap()
+            .0;
+            assert_eq!(fit.samples, 700 + 500 - 2 * start);
+            let (n, d) = (fit.samples as f64, orders.parameters() as f64);
+            let bic = fit.cost.ln() + d * n.ln() / n;
+            assert!((value - bic).abs() < 1e-12, "{orders}: {value} vs {bic}");
+        }
+        let one = select_orders_records(&pairs[..1], &grid, &OrderCriterion::Bic, &s, &|_, _| {})
+            .unwrap();
+        let direct = select_orders(&ua, &ya, &grid, &OrderCriterion::Bic, &s).unwrap();
+        assert_eq!(one.table, direct.table);
+        assert!(select_orders_records(&[], &grid, &OrderCriterion::Bic, &s, &|_, _| {}).is_err());
     }
 
     #[test]
