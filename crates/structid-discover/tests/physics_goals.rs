@@ -216,7 +216,7 @@ fn summary(t: &Tally) -> (f64, f64) {
     (m, relative)
 }
 
-/// What the workflow achieves today (measured: located 51, named 47 of 60, parameters 36 of
+/// What the workflow achieves today (measured: located 51, named 48 of 60, parameters 36 of
 /// 44, median shrink 8.3×, a median 100 % of the true model's, with G refitted jointly with
 /// the best hypothesis' map, at every location when the nominal's zero cancels its
 /// integrator, and each location of an integrating plant identified with two

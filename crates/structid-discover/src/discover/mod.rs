@@ -52,8 +52,10 @@
 //!    absorbs part of the effect too, except when G's zero cancels its integrator: such a G is
 //!    the direct fit of a closed-loop record, wrong at every location (it tends to the
 //!    controller's negative inverse), and every location is refined, the rate included, the
-//!    refits competing on validation. A feedback location whose loop does not simulate around
-//!    G as given starts from G fitted with the map's input read from the measured output.
+//!    refits competing on validation, and the search then runs once more around the G kept
+//!    (as after a gain error), so that one G ranks every location. A feedback location whose
+//!    loop does not simulate around G as given starts from G fitted with the map's input read
+//!    from the measured output.
 //!    After naming, G is refitted once more with the named map held fixed;
 //!    [`Finding::nominal_refinement`] reports G as given and as kept.
 //! 4. **Is it static?** For every estimate within 1.5× of the best validation RMS, the noise
@@ -951,10 +953,14 @@ fn discover_with(
     // search runs once more around the refitted G (the first pass's locations were ranked
     // around the wrong one, where a map of the rate may not even simulate), and an effect it
     // names that validates better is the finding, its shrink against the nominal as given.
+    // So does a G refitted from a closed-loop fit (its zero cancelled the integrator): the
+    // locations were refitted around it one by one, each G absorbing what its map missed, and
+    // one G for all of them ranks them fairly.
+    let gain = matches!(&finding.classification,
+        Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
     if second_pass
         && settings.refine_nominal
-        && let Classification::Named(fit) = &finding.classification
-        && fit.effect == crate::effects::Effect::Gain
+        && (gain || cancelled.is_some())
         && let Some(r) = finding.nominal_refinement.clone().filter(|r| r.adopted)
         && let Some(second) = around_refitted(&r, est, val, settings, &finding)
     {
