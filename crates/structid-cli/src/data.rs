@@ -43,6 +43,7 @@ pub fn read_record(
     let time = structid_discover::report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
     Ok(structid_discover::report::Record {
         path: path.to_path_buf(),
+        paths: vec![path.to_path_buf()],
         table,
         data,
         time,

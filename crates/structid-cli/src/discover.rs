@@ -59,13 +59,20 @@ pub struct DiscoverArgs {
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: PathBuf,
     /// The estimation record (CSV with the columns named in the model's `[signals]`): every
-    /// hypothesis' map is identified on it.
-    #[arg(long, short = 'd', value_name = "EST.csv")]
-    data: PathBuf,
+    /// hypothesis' map is identified on it. Repeat for several records (separate experiments):
+    /// each is simulated from its own initial state, and the maps are identified on all.
+    #[arg(long, short = 'd', value_name = "EST.csv", required = true)]
+    data: Vec<PathBuf>,
     /// The validation record (CSV like --data): hypotheses are ranked, and effects named, by
-    /// their simulation error on it.
-    #[arg(long, value_name = "VAL.csv")]
-    validate: PathBuf,
+    /// their simulation error on it. Repeat for several records: the error is pooled over
+    /// them, and the report shows each.
+    #[arg(
+        long = "validation-data",
+        visible_alias = "validate",
+        value_name = "VAL.csv",
+        required = true
+    )]
+    validate: Vec<PathBuf>,
     /// Output directory (created if needed).
     #[arg(long, short = 'o', value_name = "DIR")]
     out: PathBuf,
@@ -622,24 +629,31 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
 
     // Never overwrite an input; refuse a bad output directory before the long part.
     let mut guard = OutputGuard::new();
-    guard
-        .protect(&a.model)
-        .protect(&a.data)
-        .protect(&a.validate);
+    guard.protect(&a.model);
+    for p in a.data.iter().chain(&a.validate) {
+        guard.protect(p);
+    }
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
-    let est = crate::data::read_record(&mf, &a.data)?;
-    let val = crate::data::read_record(&mf, &a.validate)?;
-    for (flag, r) in [("--data", &est), ("--validate", &val)] {
-        if a.settle >= r.data.len() {
-            return Err(CliError::input(format!(
-                "invalid value {} for --settle: it must be less than the {} samples of {flag} `{}`",
-                a.settle,
-                r.data.len(),
-                r.path.display()
-            )));
+    let read = |paths: &[PathBuf], flag: &str| -> Result<Record, CliError> {
+        let mut records = Vec::with_capacity(paths.len());
+        for p in paths {
+            let r = crate::data::read_record(&mf, p)?;
+            if a.settle >= r.data.len() {
+                return Err(CliError::input(format!(
+                    "invalid value {} for --settle: it must be less than the {} samples of \
+                     {flag} `{}`",
+                    a.settle,
+                    r.data.len(),
+                    r.path.display()
+                )));
+            }
+            records.push(r);
         }
-    }
+        Record::join(records).map_err(|e| CliError::input(format!("{flag}: {e}")))
+    };
+    let est = read(&a.data, "--data")?;
+    let val = read(&a.validate, "--validation-data")?;
     if a.effects == 0 {
         return Err(CliError::input(
             "invalid value 0 for --effects: at least one effect must be looked for",
@@ -681,15 +695,23 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     }
     let (mf, nominal) = (step_file, step_nominal);
     // Said after the run, so that an input error is the first line of stderr.
-    if std::fs::canonicalize(&a.data).ok() == std::fs::canonicalize(&a.validate).ok() {
+    let canonical = |p: &PathBuf| std::fs::canonicalize(p).ok();
+    if a.validate
+        .iter()
+        .any(|v| a.data.iter().any(|d| canonical(d) == canonical(v)))
+    {
         eprintln!(
-            "warning: --validate is the --data file: the hypotheses are ranked and the effect is \
-             named on the record they were estimated on, which favours whatever overfits; give \
-             a separate validation record"
+            "warning: a --validation-data file is a --data file: the hypotheses are ranked and \
+             the effect is named on a record they were estimated on, which favours whatever \
+             overfits; give a separate validation record"
         );
     }
     // The gap's lags, as discovery sets them.
-    let max_lag = settings.gap().max_lag.min(est.data.len() / 4).max(1);
+    let max_lag = settings
+        .gap()
+        .max_lag
+        .min(structid_discover::records::shortest(&est.data) / 4)
+        .max(1);
 
     // Every file this command may write, earlier runs' extra tables included.
     let planned: Vec<String> = OUTPUTS
@@ -735,7 +757,8 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
              windows above it shaded"
         ),
     ));
-    let linear = nominal.simulate_output(est.data.u())?;
+    let linear =
+        structid_discover::records::stacked(&est.data, |r| nominal.simulate_output(r.u()))?;
     let mut candidates = candidate_signals(
         &est.data,
         &linear,

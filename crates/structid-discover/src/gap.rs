@@ -138,6 +138,20 @@ pub struct Gap {
     pub lattice: Option<Lattice>,
     /// The verdict in words, with the statistics behind it.
     pub verdict: String,
+    /// Each record's simulation RMS and fit (one entry for a record of its own; see
+    /// [`Data::from_records`]), in the order of the records.
+    pub records: Vec<RecordGap>,
+}
+
+/// One record's part of a [`Gap`] over several records.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RecordGap {
+    /// The record's simulation RMS over its scored samples.
+    pub rms: f64,
+    /// The record's fit in percent.
+    pub fit_percent: f64,
+    /// How many of its samples are scored.
+    pub samples: usize,
 }
 
 /// The standard normal quantile Φ⁻¹(p) for 0 < p < 1 (Acklam's rational approximation,
@@ -229,7 +243,22 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// assert!(noise_level(&e) < 0.01);
 /// ```
 pub fn noise_level(residual: &[f64]) -> f64 {
-    let d: Vec<f64> = residual.windows(2).map(|w| w[1] - w[0]).collect();
+    noise_level_records(&[residual])
+}
+
+/// [`noise_level`] of a residual in several records (`parts`, one slice per record): the
+/// first differences are taken within each record, never across a record boundary.
+///
+/// ```
+/// use structid_discover::gap::{noise_level, noise_level_records};
+/// let a: Vec<f64> = (0..500).map(|k| (k as f64 * 0.01).sin()).collect();
+/// let b: Vec<f64> = a.iter().map(|v| v + 100.0).collect();
+/// // The jump of 100 between the records is no difference of either.
+/// let both = noise_level_records(&[&a, &b]);
+/// assert!((both - noise_level(&a)).abs() < 1e-12);
+/// ```
+pub fn noise_level_records(parts: &[&[f64]]) -> f64 {
+    let d = lag_differences(parts, 1);
     let m = median(d.clone());
     let mad = median(d.iter().map(|v| (v - m).abs()).collect());
     mad / (0.674_489_75 * std::f64::consts::SQRT_2)
@@ -293,18 +322,33 @@ const MAX_COLOUR_PERCENT: usize = 95;
 /// assert!((fit.colour - 0.8).abs() < 0.1, "{fit:?}");
 /// ```
 pub fn noise_level_coloured(residual: &[f64]) -> NoiseFit {
-    let n = residual.len();
+    noise_level_coloured_records(&[residual])
+}
+
+/// The differences r_(t+k) − r_t within each of `parts` (never across two of them).
+fn lag_differences(parts: &[&[f64]], k: usize) -> Vec<f64> {
+    parts
+        .iter()
+        .flat_map(|p| p.windows(k + 1).map(move |w| w[k] - w[0]))
+        .collect()
+}
+
+/// [`noise_level_coloured`] of a residual in several records (`parts`, one slice per record):
+/// the semivariogram pairs samples within each record only. Its lags are limited by the
+/// shortest record.
+pub fn noise_level_coloured_records(parts: &[&[f64]]) -> NoiseFit {
+    let n = parts.iter().map(|p| p.len()).min().unwrap_or(0);
     let lags = VARIOGRAM_LAGS.min(n / 20).max(1);
     if n < 3 {
         return NoiseFit {
-            std: noise_level(residual),
+            std: noise_level_records(parts),
             colour: 0.0,
             drift: 0.0,
         };
     }
     let gamma: Vec<f64> = (1..=lags)
         .map(|k| {
-            let d: Vec<f64> = residual.windows(k + 1).map(|w| w[k] - w[0]).collect();
+            let d = lag_differences(parts, k);
             let m = median(d.clone());
             let mad = median(d.iter().map(|v| (v - m).abs()).collect()) / 0.674_489_75;
             0.5 * mad * mad
@@ -468,9 +512,16 @@ pub const LATTICE_COHERENCE: f64 = 0.6;
 /// does not (a change of ±q is half of it, cos π = −1). The gap tests cannot see a
 /// quantiser: its error is white and uncorrelated with the input, so it passes as noise.
 pub fn output_lattice(y: &[f64]) -> Option<Lattice> {
+    output_lattice_records(&[y])
+}
+
+/// [`output_lattice`] of an output in several records (`parts`, one slice per record): the
+/// one-sample changes are taken within each record, never across a record boundary.
+pub fn output_lattice_records(parts: &[&[f64]]) -> Option<Lattice> {
     const MAX_CHANGES: usize = 4000;
-    let (lo, hi) = y
+    let (lo, hi) = parts
         .iter()
+        .flat_map(|p| p.iter())
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
             (a.min(*v), b.max(*v))
@@ -479,9 +530,8 @@ pub fn output_lattice(y: &[f64]) -> Option<Lattice> {
     if !(range > 0.0 && range.is_finite()) {
         return None;
     }
-    let mut changes: Vec<f64> = y
-        .windows(2)
-        .map(|w| w[1] - w[0])
+    let mut changes: Vec<f64> = lag_differences(parts, 1)
+        .into_iter()
         .filter(|d| d.is_finite() && *d != 0.0)
         .collect();
     if changes.len() > MAX_CHANGES {
@@ -553,6 +603,14 @@ pub fn output_lattice(y: &[f64]) -> Option<Lattice> {
 
 /// Examines the gap between `model` (with `maps`, one per block) and `data`; `candidates` are
 /// the signals (name, samples) to localise it in. See the [module documentation](self).
+///
+/// Data of several records ([`Data::from_records`]) are examined record by record, each
+/// simulated from its own initial state (and in its own windows), and pooled: the RMS and fit
+/// over every record's scored samples, the noise levels from differences within records, each
+/// portmanteau statistic summed over the records (χ² with the summed degrees of freedom, the
+/// records being independent), the time windows found in each record, and the operating
+/// regions over all samples. No lag or difference pairs samples of two records.
+/// [`Gap::records`] holds each record's RMS and fit.
 pub fn gap(
     model: &Model,
     maps: &[&dyn Interpolant],
@@ -560,6 +618,123 @@ pub fn gap(
     candidates: &[(String, Vec<f64>)],
     settings: &GapSettings,
 ) -> Result<Gap> {
+    if data.record_count() == 1 {
+        return Ok(gap_record(model, maps, data, candidates, settings)?.gap);
+    }
+    let bounds = data.record_bounds();
+    let mut parts = Vec::with_capacity(data.record_count());
+    for (r, record) in data.records().iter().enumerate() {
+        let slice: Vec<(String, Vec<f64>)> = candidates
+            .iter()
+            .map(|(name, s)| {
+                let cut = crate::records::parts(s, bounds);
+                (name.clone(), cut[r].to_vec())
+            })
+            .collect();
+        parts.push(
+            gap_record(model, maps, record, &slice, settings)
+                .map_err(|e| crate::records::in_record(e, r, data))?,
+        );
+    }
+    Ok(pool(parts, data, candidates, settings))
+}
+
+/// One record's gap, with what pooling over records needs.
+struct RecordPart {
+    gap: Gap,
+    /// The tested innovations (see [`gap_record`]).
+    innovations: Vec<f64>,
+    /// The scored samples of the simulation.
+    scored: Vec<Range<usize>>,
+}
+
+/// The gaps of several records (`parts`, in the order of `data`'s records) as one.
+fn pool(
+    parts: Vec<RecordPart>,
+    data: &Data,
+    candidates: &[(String, Vec<f64>)],
+    settings: &GapSettings,
+) -> Gap {
+    let bounds = data.record_bounds();
+    let y = data.y().channel(0);
+    let residual: Vec<f64> = parts.iter().flat_map(|p| p.gap.residual.clone()).collect();
+    let simulated: Vec<f64> = parts.iter().flat_map(|p| p.gap.simulated.clone()).collect();
+    let scored: Vec<Range<usize>> = parts
+        .iter()
+        .zip(bounds)
+        .flat_map(|(p, &b)| p.scored.iter().map(move |r| r.start + b..r.end + b))
+        .collect();
+    let (rms, fit_percent) = crate::records::pooled_fit(&y, &simulated, &scored);
+    let floor = quantisation_floor(&y);
+    let innovations: Vec<&[f64]> = parts.iter().map(|p| p.innovations.as_slice()).collect();
+    let noise_std = noise_level_records(&innovations).max(floor);
+    let scored_residual: Vec<Vec<f64>> = parts
+        .iter()
+        .map(|p| {
+            p.scored
+                .iter()
+                .flat_map(|r| r.clone())
+                .map(|k| p.gap.residual[k])
+                .collect()
+        })
+        .collect();
+    let scored_parts: Vec<&[f64]> = scored_residual.iter().map(Vec::as_slice).collect();
+    let mut noise = noise_level_coloured_records(&scored_parts);
+    noise.std = noise.std.max(floor);
+    let all: Vec<f64> = innovations.concat();
+    let prediction_rms = structid_core::metrics::rms(&all);
+    // Each statistic summed over the records, with its degrees of freedom.
+    let mut tests: Vec<Portmanteau> = parts[0].gap.tests.clone();
+    for p in &parts[1..] {
+        for (t, o) in tests.iter_mut().zip(&p.gap.tests) {
+            t.statistic += o.statistic;
+            t.lags += o.lags;
+        }
+    }
+    let mut windows = Vec::new();
+    for (p, &b) in parts.iter().zip(bounds) {
+        let window = settings
+            .window
+            .unwrap_or((p.innovations.len() / 50).max(20));
+        windows.extend(
+            exceedance_windows(&p.gap.residual, noise_std, settings.band, window)
+                .into_iter()
+                .map(|r| r.start + b..r.end + b),
+        );
+    }
+    let signals: Vec<(&str, &[f64])> = candidates
+        .iter()
+        .map(|(name, s)| (name.as_str(), s.as_slice()))
+        .collect();
+    let regions = operating_regions(&residual, &signals, settings.min_region_share);
+    let y_parts = crate::records::parts(&y, bounds);
+    let verdict = conclude(tests, prediction_rms, noise_std, &y_parts, settings);
+    Gap {
+        residual,
+        simulated,
+        rms,
+        prediction_rms,
+        fit_percent,
+        noise_std,
+        noise,
+        tests: verdict.tests,
+        windows,
+        regions,
+        missing_effect: verdict.missing_effect,
+        lattice: verdict.lattice,
+        verdict: verdict.text,
+        records: parts.into_iter().flat_map(|p| p.gap.records).collect(),
+    }
+}
+
+/// The gap of one record, with its innovations and scored samples.
+fn gap_record(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    candidates: &[(String, Vec<f64>)],
+    settings: &GapSettings,
+) -> Result<RecordPart> {
     let v = validate(
         model,
         maps,
@@ -662,12 +837,6 @@ pub fn gap(
             max_lag,
         ));
     }
-    // Bonferroni: each test at 0.1 %/m, so that a correct model fails any of them 0.1 % of the
-    // time. A missing effect worth naming moves these statistics far beyond that.
-    let level = 1.0 - 0.001 / tests.len() as f64;
-    for t in &mut tests {
-        t.critical = chi_square_quantile(level, t.lags);
-    }
     let window = settings.window.unwrap_or((n / 50).max(20));
     let windows = exceedance_windows(&residual, noise_std, settings.band, window);
     let signals: Vec<(&str, &[f64])> = candidates
@@ -677,13 +846,67 @@ pub fn gap(
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let rms = v.rms[0];
     let prediction_rms = structid_core::metrics::rms(&innovations);
+    let verdict = conclude(tests, prediction_rms, noise_std, &[&y], settings);
+    let scored_samples = v.scored.iter().map(|r| r.len()).sum();
+    let gap = Gap {
+        residual,
+        simulated,
+        rms,
+        prediction_rms,
+        fit_percent: v.fit_percent[0],
+        noise_std,
+        noise,
+        tests: verdict.tests,
+        windows,
+        regions,
+        missing_effect: verdict.missing_effect,
+        lattice: verdict.lattice,
+        verdict: verdict.text,
+        records: vec![RecordGap {
+            rms,
+            fit_percent: v.fit_percent[0],
+            samples: scored_samples,
+        }],
+    };
+    Ok(RecordPart {
+        gap,
+        innovations,
+        scored: v.scored,
+    })
+}
+
+/// What the tests conclude: the tests with their critical values, whether an effect is
+/// missing, the output's lattice, and the verdict in words.
+struct Conclusion {
+    tests: Vec<Portmanteau>,
+    missing_effect: bool,
+    lattice: Option<Lattice>,
+    text: String,
+}
+
+/// The verdict of the portmanteau `tests` (statistics and degrees of freedom), RMS(ε) =
+/// `prediction_rms` against the noise level `noise_std`, and the lattice of the measured
+/// output (`y`, one slice per record).
+fn conclude(
+    mut tests: Vec<Portmanteau>,
+    prediction_rms: f64,
+    noise_std: f64,
+    y: &[&[f64]],
+    settings: &GapSettings,
+) -> Conclusion {
+    // Bonferroni: each test at 0.1 %/m, so that a correct model fails any of them 0.1 % of the
+    // time. A missing effect worth naming moves these statistics far beyond that.
+    let level = 1.0 - 0.001 / tests.len() as f64;
+    for t in &mut tests {
+        t.critical = chi_square_quantile(level, t.lags);
+    }
     let too_large = prediction_rms > settings.noise_ratio * noise_std;
     let failing: Vec<&Portmanteau> = tests.iter().filter(|t| !t.passes()).collect();
     // A quantiser's error passes every test as noise; its lattice shows it.
     let lattice = if too_large || !failing.is_empty() {
         None
     } else {
-        output_lattice(&y)
+        output_lattice_records(y)
     };
     let missing_effect = too_large || !failing.is_empty() || lattice.is_some();
     let verdict = if missing_effect {
@@ -715,21 +938,12 @@ pub fn gap(
             settings.noise_ratio
         )
     };
-    Ok(Gap {
-        residual,
-        simulated,
-        rms,
-        prediction_rms,
-        fit_percent: v.fit_percent[0],
-        noise_std,
-        noise,
+    Conclusion {
         tests,
-        windows,
-        regions,
         missing_effect,
         lattice,
-        verdict,
-    })
+        text: verdict,
+    }
 }
 
 #[cfg(test)]

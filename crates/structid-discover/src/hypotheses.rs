@@ -451,9 +451,24 @@ impl Nominal {
 
     /// The named states simulated from u (nominal model with its known maps, zero initial
     /// state, no noise), by name.
+    /// With several records, each record's states start at zero.
     pub fn state_signals(&self, data: &Data) -> Result<Vec<(String, Vec<f64>)>> {
         if self.states.is_empty() {
             return Ok(Vec::new());
+        }
+        if data.record_count() > 1 {
+            let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+            for record in data.records() {
+                let part = self.state_signals(&record)?;
+                if out.is_empty() {
+                    out = part;
+                } else {
+                    for (o, (_, p)) in out.iter_mut().zip(part) {
+                        o.1.extend(p);
+                    }
+                }
+            }
+            return Ok(out);
         }
         let n = self.lft.dims().states;
         if !self.known.is_empty() {
@@ -609,10 +624,18 @@ impl Hypothesis {
     /// known map at its z computed from the record (measured, or through the inverted noise
     /// path). That is exact for identification's one-step criterion; `data` is the record as
     /// given (not yet passed through [`Hypothesis::data`]).
+    ///
+    /// With several records, each record's z and known maps' outputs are computed from that
+    /// record alone.
     pub fn identification(&self, data: &Data) -> Result<(Model, Data)> {
         let full = self.data(data)?;
         if self.known.is_empty() {
             return Ok((self.model.clone(), full));
+        }
+        if data.record_count() > 1 {
+            let model = self.identification(&data.records()[0])?.0;
+            let id_data = crate::records::restack(data, |r| Ok(self.identification(r)?.1))?;
+            return Ok((model, id_data));
         }
         let z = match full.z() {
             Some(z) => z.clone(),
@@ -684,7 +707,12 @@ impl Hypothesis {
     /// The record as identification needs it: for the rate, with the measured z = Ψ(q)·y
     /// attached (measurability would compute the same z, through the inverted noise path,
     /// except at the first sample, whose rate is taken as 0 here); otherwise unchanged.
+    ///
+    /// With several records, each record's rate starts at 0 (see [`crate::records`]).
     pub fn data(&self, data: &Data) -> Result<Data> {
+        if data.record_count() > 1 {
+            return crate::records::restack(data, |r| self.data(r));
+        }
         match self.location {
             Location::RateFeedback => {
                 let y = data.y();

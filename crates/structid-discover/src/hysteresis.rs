@@ -71,6 +71,31 @@ impl DirectionTest {
 /// ```
 pub fn direction_dependence(z: &[f64], r: &[f64], threshold: f64) -> DirectionTest {
     let n = z.len().min(r.len());
+    direction_dependence_records(z, r, &[0, n], threshold)
+}
+
+/// [`direction_dependence`] of points in several records: `bounds` are where each record
+/// starts in `z` and `r`, then their length (`[0, L₁, …, L]`). The direction of z is taken
+/// within each record (a central difference never spans two records, and a record starts
+/// without a remembered direction); the bins and energies are over all records.
+///
+/// ```
+/// use structid_discover::hysteresis::{direction_dependence, direction_dependence_records};
+/// let z: Vec<f64> = (0..1000).map(|k| (k as f64 * 0.02).sin()).collect();
+/// let r: Vec<f64> = z.iter().map(|v| 0.1 * v).collect();
+/// let one = direction_dependence(&z, &r, 0.1);
+/// assert_eq!(direction_dependence_records(&z, &r, &[0, 1000], 0.1), one);
+/// // Two records lose the two samples next to their seam.
+/// let two = direction_dependence_records(&z, &r, &[0, 500, 1000], 0.1);
+/// assert_eq!(two.samples, one.samples - 2);
+/// ```
+pub fn direction_dependence_records(
+    z: &[f64],
+    r: &[f64],
+    bounds: &[usize],
+    threshold: f64,
+) -> DirectionTest {
+    let n = z.len().min(r.len());
     let none = DirectionTest::none();
     if n < 20 {
         return none;
@@ -81,18 +106,21 @@ pub fn direction_dependence(z: &[f64], r: &[f64], threshold: f64) -> DirectionTe
     // and the test would weigh those alone).
     let mut up: Vec<bool> = Vec::with_capacity(n);
     let mut keep: Vec<usize> = Vec::with_capacity(n);
-    let mut last: Option<bool> = None;
-    for k in 1..n - 1 {
-        let d = z[k + 1] - z[k - 1];
-        if d != 0.0 && d.is_finite() {
-            last = Some(d > 0.0);
-        }
-        if let Some(dir) = last
-            && r[k].is_finite()
-            && z[k].is_finite()
-        {
-            keep.push(k);
-            up.push(dir);
+    for w in bounds.windows(2) {
+        let (start, end) = (w[0].min(n), w[1].min(n));
+        let mut last: Option<bool> = None;
+        for k in start + 1..end.saturating_sub(1) {
+            let d = z[k + 1] - z[k - 1];
+            if d != 0.0 && d.is_finite() {
+                last = Some(d > 0.0);
+            }
+            if let Some(dir) = last
+                && r[k].is_finite()
+                && z[k].is_finite()
+            {
+                keep.push(k);
+                up.push(dir);
+            }
         }
     }
     let m = keep.len();

@@ -37,6 +37,7 @@
 //! * [`synthetic`]: test cases for the workflow, a random nominal model plus records of a
 //!   system with one hidden effect (a static effect at a location, none, or hysteresis),
 //!   deterministic in a seed;
+//! * [`records`]: several records (experiments): each step runs record by record and pools;
 //! * [`physics`]: test cases from continuous-time physics (integrators in closed loop,
 //!   two-mass plants, delays, coloured noise, estimated nominals), and the closed-loop
 //!   positioning axis.
@@ -61,6 +62,7 @@ pub mod hysteresis;
 pub mod known;
 pub mod localise;
 pub mod physics;
+pub mod records;
 pub mod report;
 pub mod staticness;
 pub mod synthetic;

@@ -69,11 +69,31 @@ impl TimeAxis {
     }
 }
 
-/// One record as read.
+/// The time axes of several records one after the other: each record's axis shifted to start
+/// one of its own steps after the end of the one before, so that figures run forward.
+fn continued<'a>(axes: impl Iterator<Item = &'a [f64]>) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for axis in axes {
+        let step = match axis {
+            [a, b, ..] => b - a,
+            _ => 1.0,
+        };
+        let shift = match (out.last(), axis.first()) {
+            (Some(end), Some(start)) => end + step - start,
+            _ => 0.0,
+        };
+        out.extend(axis.iter().map(|t| t + shift));
+    }
+    out
+}
+
+/// One record as read, or several ([`Record::join`]).
 #[derive(Clone, Debug)]
 pub struct Record {
-    /// The file as given.
+    /// The file as given (the first, for several records).
     pub path: PathBuf,
+    /// Every file, one per record of `data`.
+    pub paths: Vec<PathBuf>,
     /// Its columns.
     pub table: DataTable,
     /// The columns the model file's `[signals]` name.
@@ -93,10 +113,66 @@ impl Record {
         let time = TimeAxis::new(&table, data.len(), mf.lft.sample_time());
         Ok(Self {
             path: path.to_path_buf(),
+            paths: vec![path.to_path_buf()],
             table,
             data,
             time,
         })
+    }
+
+    /// Records read one per file as one [`Record`] of several records
+    /// ([`Data::from_records`]): `data` and `time` stacked in the files' order (each record's
+    /// time axis shifted to continue the one before, for the figures), `table` the first
+    /// file's. One record is returned as it is.
+    ///
+    /// # Errors
+    /// No record, or records whose channels differ.
+    pub fn join(records: Vec<Record>) -> structid_core::Result<Self> {
+        let mut records = records;
+        if records.len() == 1 {
+            return Ok(records.pop().expect("one record"));
+        }
+        let first = records.first().ok_or_else(|| {
+            structid_core::Error::InvalidStructure("no data record was given".into())
+        })?;
+        let (path, table, time) = (first.path.clone(), first.table.clone(), &first.time);
+        let (label, is_time) = (time.label, time.is_time);
+        let data = Data::from_records(records.iter().map(|r| r.data.clone()).collect())?;
+        Ok(Self {
+            path,
+            paths: records.iter().flat_map(|r| r.paths.clone()).collect(),
+            table,
+            data,
+            time: TimeAxis {
+                values: continued(records.iter().map(|r| r.time.values.as_slice())),
+                label,
+                is_time,
+            },
+        })
+    }
+
+    /// The files, as a command line gives them: `FLAG a.csv FLAG b.csv …` (without the first
+    /// flag).
+    pub fn files(&self, flag: &str) -> String {
+        self.paths
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(&format!(" {flag} "))
+    }
+
+    /// The files for a sentence: `a.csv` or `a.csv`, `b.csv` (2 records).
+    fn names(&self) -> String {
+        let names: Vec<String> = self
+            .paths
+            .iter()
+            .map(|p| format!("`{}`", p.display()))
+            .collect();
+        if names.len() == 1 {
+            names[0].clone()
+        } else {
+            format!("{} ({} records)", names.join(", "), names.len())
+        }
     }
 }
 
@@ -144,6 +220,22 @@ fn gap_table(s: &mut String, estimation: &Gap, validation: &Gap) {
         e(estimation.rms),
         e(validation.rms)
     );
+    if estimation.records.len() > 1 || validation.records.len() > 1 {
+        let each = |g: &Gap| {
+            g.records
+                .iter()
+                .enumerate()
+                .map(|(i, r)| format!("{}: {}", i + 1, e(r.rms)))
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        let _ = writeln!(
+            s,
+            "| simulation RMS per record | {} | {} |",
+            each(estimation),
+            each(validation)
+        );
+    }
     let _ = writeln!(
         s,
         "| one-step prediction RMS of ε | {} | {} |",
@@ -388,7 +480,7 @@ fn validate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: Scoring) 
     format!(
         "structid validate --model {} --data {} --out {} --initial-state {}{}",
         r.out.join("augmented.toml").display(),
-        r.validation.path.display(),
+        r.validation.files("--data"),
         r.out.join("validation").display(),
         initial_state_name(w.initial_state),
         scoring_argument(scoring)
@@ -399,7 +491,7 @@ fn validate_estimate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: 
     format!(
         "structid validate --estimate {} --data {} --out {} --initial-state {}{}",
         r.out.join(ESTIMATE_FILE).display(),
-        r.validation.path.display(),
+        r.validation.files("--data"),
         r.out.join("validation-estimate").display(),
         initial_state_name(w.initial_state),
         scoring_argument(scoring)
@@ -411,7 +503,7 @@ fn identify_command(r: &ReportContext<'_>, f: &Finding) -> String {
     format!(
         "structid identify --model {} --data {} --out {} --beta {} --initial-state {}",
         r.out.join("augmented.toml").display(),
-        r.estimation.path.display(),
+        r.estimation.files("--data"),
         r.out.join("identify").display(),
         format_number(beta),
         initial_state_name(initial_state(f.location).1)
@@ -455,13 +547,13 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     );
     let _ = writeln!(
         s,
-        "Nominal model `{}` ({}); estimation record `{}` ({} samples), validation record `{}` \
+        "Nominal model `{}` ({}); estimation record {} ({} samples), validation record {} \
          ({} samples); {:.1} s.\n",
         r.model_path.display(),
         nominal_text(r.nominal_file),
-        r.estimation.path.display(),
+        r.estimation.names(),
         r.estimation.data.len(),
-        r.validation.path.display(),
+        r.validation.names(),
         r.validation.data.len(),
         d.seconds
     );
@@ -704,6 +796,34 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         pct(d.validation_gap.fit_percent),
         pct(f.augmented.validation_gap.fit_percent)
     );
+    if d.validation_gap.records.len() > 1 {
+        let per: Vec<String> = d
+            .validation_gap
+            .records
+            .iter()
+            .zip(&f.augmented.validation_gap.records)
+            .enumerate()
+            .map(|(i, (a, b))| {
+                format!(
+                    "record {} ({}): {} → {} ({:.2}×)",
+                    i + 1,
+                    r.validation
+                        .paths
+                        .get(i)
+                        .map(|p| format!("`{}`", p.display()))
+                        .unwrap_or_default(),
+                    e(a.rms),
+                    e(b.rms),
+                    a.rms / b.rms
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "Per validation record (the shrink above pools their scored samples): {}.\n",
+            per.join("; ")
+        );
+    }
     if let Some(w) = r.augmented {
         let _ = writeln!(
             s,
@@ -780,6 +900,7 @@ fn gap_json(g: &Gap, time: &TimeAxis) -> Result<Value, serde_json::Error> {
         "lattice": json_value(&g.lattice)?,
         "missing_effect": g.missing_effect,
         "verdict": g.verdict,
+        "records": json_value(&g.records)?,
     }))
 }
 
@@ -904,6 +1025,8 @@ pub fn json(
             "data_file_absolute": absolute(&r.estimation.path).display().to_string(),
             "validation_file": r.validation.path.display().to_string(),
             "validation_file_absolute": absolute(&r.validation.path).display().to_string(),
+            "data_files": r.estimation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "validation_files": r.validation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "estimation_samples": r.estimation.data.len(),
             "validation_samples": r.validation.data.len(),
             "sample_time": r.nominal_file.lft.sample_time(),
@@ -951,10 +1074,10 @@ pub fn summary(
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "discovery on `{}` ({} samples) and `{}` ({} samples), {:.1} s",
-        r.estimation.path.display(),
+        "discovery on {} ({} samples) and {} ({} samples), {:.1} s",
+        r.estimation.names(),
         r.estimation.data.len(),
-        r.validation.path.display(),
+        r.validation.names(),
         r.validation.data.len(),
         seconds
     );

@@ -1,11 +1,10 @@
 //! Is it static? The direction test on the residual deconvolved to the block's output.
 
-use structid_core::validation::validate;
 use structid_core::{Data, Interpolant, Result, Signal};
 use structid_lti::LinearSystem;
 
 use crate::hypotheses::{Hypothesis, Location};
-use crate::hysteresis::{DirectionTest, direction_dependence};
+use crate::hysteresis::{DirectionTest, direction_dependence_records};
 
 use super::DiscoverSettings;
 use super::fit::Fitted;
@@ -16,16 +15,19 @@ use super::fit::scoring_settings;
 /// split by the direction of z.
 pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<DirectionTest> {
     // The model's output residual is L_ye·ê = L_yw·δ: filter ê through the noise path first
-    // (the identity for an output-error model), then invert L_yw.
-    let r = f
-        .hypothesis
-        .model
-        .lft()
-        .t_ye()
-        .simulate(&f.e_hat)?
-        .channel(0);
-    let delta = deconvolve(&f.hypothesis, &r)?;
-    let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+    // (the identity for an output-error model), then invert L_yw. Record by record, each
+    // from rest, and each record's first samples left out.
+    let t_ye = f.hypothesis.model.lft().t_ye();
+    let (mut z, mut kept, mut bounds) = (Vec::new(), Vec::new(), vec![0]);
+    for w in f.bounds.windows(2) {
+        let e = f.e_hat.slice(w[0]..w[1]);
+        let r = t_ye.simulate(&e)?.channel(0);
+        let delta = deconvolve(&f.hypothesis, &r)?;
+        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+        z.extend_from_slice(&f.z[w[0] + skip..w[1]]);
+        kept.extend_from_slice(&delta[skip..]);
+        bounds.push(z.len());
+    }
     // Actuator and sensor maps act on held or sampled signals and have no sampling artefact;
     // nor does a map of the measured rate, whose backward difference already sits half a
     // sample back (and whose steep static fits, relays, would call any direction effect an
@@ -35,8 +37,9 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         Location::OutputFeedback | Location::Declared { .. }
     );
     Ok(direction_beyond_sampling(
-        &f.z[skip..],
-        &delta[skip..],
+        &z,
+        &kept,
+        &bounds,
         feedback.then_some(f.map.as_ref()),
         settings.hysteresis_threshold,
     ))
@@ -52,19 +55,24 @@ const SAMPLING_SHARE: f64 = 4.0;
 /// direction of motion, so after any discrete static fit it is a direction effect of its own.
 /// Its size is that of the half-sample shift a_k = N̂'(z_k)·(z_(k+1) − z_(k−1))/4; a
 /// direction effect within four times its energy (twice its amplitude) is sampling, not
-/// hysteresis.
+/// hysteresis. `bounds` are the records' bounds in `z` and `r` (`[0, L]` for one record).
 pub(super) fn direction_beyond_sampling(
     z: &[f64],
     r: &[f64],
+    bounds: &[usize],
     map: Option<&dyn Interpolant>,
     threshold: f64,
 ) -> DirectionTest {
-    let mut test = direction_dependence(z, r, threshold);
+    let mut test = direction_dependence_records(z, r, bounds, threshold);
     if let Some(map) = map
         && test.dynamic
     {
-        let artefact = half_sample_artefact(map, z);
-        test.sampling_energy = direction_dependence(z, &artefact, 1.0).direction_energy;
+        let artefact: Vec<f64> = bounds
+            .windows(2)
+            .flat_map(|w| half_sample_artefact(map, &z[w[0]..w[1]]))
+            .collect();
+        test.sampling_energy =
+            direction_dependence_records(z, &artefact, bounds, 1.0).direction_energy;
         if test.direction_energy <= SAMPLING_SHARE * test.sampling_energy {
             test.dynamic = false;
         }
@@ -113,14 +121,8 @@ pub(super) fn simulation_residual_of(
     settings: &DiscoverSettings,
 ) -> Option<Vec<f64>> {
     let settings = scoring_settings(h.location, settings);
-    let v = validate(&h.model, maps, data, &settings).ok()?;
-    let y = data.y().channel(0);
-    let r: Vec<f64> = v
-        .scored
-        .iter()
-        .flat_map(|r| r.clone())
-        .map(|k| y[k] - v.simulated.get(k, 0))
-        .collect();
+    let v = crate::records::simulate(&h.model, maps, data, &settings).ok()?;
+    let r = v.scored_residual();
     r.iter().all(|v| v.is_finite()).then_some(r)
 }
 
@@ -216,9 +218,9 @@ mod tests {
                 cubic(&[half]) - cubic(&[z[k]])
             })
             .collect();
-        let plain = direction_dependence(&z, &r, 0.1);
+        let plain = crate::hysteresis::direction_dependence(&z, &r, 0.1);
         assert!(plain.dynamic, "the artefact alone is direction dependent");
-        let aware = direction_beyond_sampling(&z, &r, Some(&cubic), 0.1);
+        let aware = direction_beyond_sampling(&z, &r, &[0, z.len()], Some(&cubic), 0.1);
         assert!(!aware.dynamic && aware.sampling_energy > 0.0);
         // Backlash of half-width 0.2 on the same motion, against the static fit w = z.
         let mut w = vec![0.0; z.len()];
@@ -233,6 +235,6 @@ mod tests {
         }
         let rb: Vec<f64> = w.iter().zip(&z).map(|(w, z)| w - z).collect();
         let identity = |v: &[f64]| v[0];
-        assert!(direction_beyond_sampling(&z, &rb, Some(&identity), 0.1).dynamic);
+        assert!(direction_beyond_sampling(&z, &rb, &[0, z.len()], Some(&identity), 0.1).dynamic);
     }
 }

@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
-use structid_core::validation::{Scoring, ValidationSettings, Windows, validate};
+use structid_core::validation::{Scoring, ValidationSettings, Windows};
 use structid_core::{
     Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, PolynomialDispersion,
     Result, Signal,
@@ -16,11 +16,19 @@ use crate::hypotheses::{Hypothesis, Location, Nominal};
 
 use super::{DiscoverSettings, HypothesisResult, MapCurve};
 
-/// The candidate signals for localisation: u, y, their rates, and the simulated linear output.
+/// The candidate signals for localisation: u, y, their rates, and the simulated linear output
+/// (stacked like `data`'s records; each record's rates start at 0).
 pub fn candidate_signals(data: &Data, linear_output: &[f64], ts: f64) -> Vec<(String, Vec<f64>)> {
+    let starts = data.record_bounds();
     let rate = |s: &[f64]| -> Vec<f64> {
         (0..s.len())
-            .map(|k| if k == 0 { 0.0 } else { (s[k] - s[k - 1]) / ts })
+            .map(|k| {
+                if starts.contains(&k) {
+                    0.0
+                } else {
+                    (s[k] - s[k - 1]) / ts
+                }
+            })
             .collect()
     };
     let u = data.u().channel(0);
@@ -37,38 +45,54 @@ pub fn candidate_signals(data: &Data, linear_output: &[f64], ts: f64) -> Vec<(St
     ]
 }
 
+/// The checks of every record of the estimation and validation data: one input and one
+/// output, an input that is not constant, and at least 100 samples (naming the record when
+/// there are several).
 pub(super) fn check_records(est: &Data, val: &Data) -> Result<()> {
-    for (what, d) in [("estimation", est), ("validation", val)] {
-        if d.u().channels() != 1 || d.y().channels() != 1 {
-            return Err(Error::DimensionMismatch {
-                what: format!("channels of the {what} record"),
-                expected: "one input u and one output y".into(),
-                found: format!(
-                    "{} input(s) and {} output(s)",
-                    d.u().channels(),
-                    d.y().channels()
-                ),
-            });
+    for (set, data) in [("estimation", est), ("validation", val)] {
+        for (r, d) in data.records().iter().enumerate() {
+            let what = if data.record_count() == 1 {
+                format!("the {set} record")
+            } else {
+                format!("{set} record {} (of {})", r + 1, data.record_count())
+            };
+            check_record(&what, d)?;
         }
-        let u = d.u().channel(0);
-        let mean = u.iter().sum::<f64>() / u.len().max(1) as f64;
-        let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / u.len().max(1) as f64;
-        if var <= 1e-20 * mean.powi(2).max(f64::MIN_POSITIVE) {
-            return Err(Error::InvalidParameter {
-                name: format!("input of the {what} record"),
-                value: mean,
-                reason: "u is constant: a record without excitation cannot show what the \
-                         model is missing"
-                    .into(),
-            });
-        }
-        if d.u().len() < 100 {
-            return Err(Error::InvalidParameter {
-                name: format!("length of the {what} record"),
-                value: d.u().len() as f64,
-                reason: "discovery needs at least 100 samples per record".into(),
-            });
-        }
+    }
+    Ok(())
+}
+
+/// [`check_records`] of one record, `what` naming it.
+fn check_record(what: &str, d: &Data) -> Result<()> {
+    if d.u().channels() != 1 || d.y().channels() != 1 {
+        return Err(Error::DimensionMismatch {
+            what: format!("channels of {what}"),
+            expected: "one input u and one output y".into(),
+            found: format!(
+                "{} input(s) and {} output(s)",
+                d.u().channels(),
+                d.y().channels()
+            ),
+        });
+    }
+    let u = d.u().channel(0);
+    let mean = u.iter().sum::<f64>() / u.len().max(1) as f64;
+    let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / u.len().max(1) as f64;
+    if var <= 1e-20 * mean.powi(2).max(f64::MIN_POSITIVE) {
+        return Err(Error::InvalidParameter {
+            name: format!("input of {what}"),
+            value: mean,
+            reason: "u is constant: a record without excitation cannot show what the \
+                     model is missing"
+                .into(),
+        });
+    }
+    if d.u().len() < 100 {
+        return Err(Error::InvalidParameter {
+            name: format!("length of {what}"),
+            value: d.u().len() as f64,
+            reason: "discovery needs at least 100 samples per record".into(),
+        });
     }
     Ok(())
 }
@@ -109,7 +133,11 @@ pub(super) fn resolve_scoring(
     }
     Ok(if radius >= 1.0 - MARGINAL {
         // Two states more than the nominal: the rate's memory and a spare.
-        Scoring::Windowed(Windows::for_record(est.len(), a.nrows() + 2))
+        // Every record is scored in windows of the same length, sized for the shortest.
+        Scoring::Windowed(Windows::for_record(
+            crate::records::shortest(est),
+            a.nrows() + 2,
+        ))
     } else {
         Scoring::Free
     })
@@ -203,7 +231,9 @@ pub(crate) fn core_error(e: IoError) -> Error {
 pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
     match data.z() {
         Some(z) => Ok(z.channel(0)),
-        None => Ok(h.model.lft().compute_z(data.u(), data.y())?.0.channel(0)),
+        None => crate::records::stacked(data, |r| {
+            Ok(h.model.lft().compute_z(r.u(), r.y())?.0.channel(0))
+        }),
     }
 }
 
@@ -236,14 +266,24 @@ pub(super) fn simulation_rms(
     data: &Data,
     settings: &DiscoverSettings,
 ) -> f64 {
+    simulated(h, map, data, settings).map_or(f64::INFINITY, |v| v.rms)
+}
+
+/// The simulation of [`simulation_rms`] on every record of `data`, `None` when it fails or
+/// diverges.
+fn simulated(
+    h: &Hypothesis,
+    map: &dyn Interpolant,
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> Option<crate::records::Simulated> {
     let settings = scoring_settings(h.location, settings);
     // A simulation that runs a million times beyond the output's size has diverged, even if
     // its numbers are still finite.
     let limit = 1e6 * structid_core::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
-    match validate(&h.model, &h.maps(map), data, &settings) {
-        Ok(v) if v.rms[0].is_finite() && v.rms[0] < limit => v.rms[0],
-        _ => f64::INFINITY,
-    }
+    crate::records::simulate(&h.model, &h.maps(map), data, &settings)
+        .ok()
+        .filter(|v| v.rms.is_finite() && v.rms < limit)
 }
 
 /// [`simulation_rms`] with the noise level of the simulation residual over its scored
@@ -255,20 +295,16 @@ pub(super) fn simulation_rms_and_noise(
     data: &Data,
     settings: &DiscoverSettings,
 ) -> (f64, Option<crate::gap::NoiseFit>) {
-    let settings = scoring_settings(h.location, settings);
-    let y = data.y().channel(0);
-    let limit = 1e6 * structid_core::metrics::rms(&y).max(f64::MIN_POSITIVE);
-    match validate(&h.model, &h.maps(map), data, &settings) {
-        Ok(v) if v.rms[0].is_finite() && v.rms[0] < limit => {
-            let residual: Vec<f64> = v
-                .scored
-                .iter()
-                .flat_map(|r| r.clone())
-                .map(|k| y[k] - v.simulated.get(k, 0))
-                .collect();
-            (v.rms[0], Some(crate::gap::noise_level_coloured(&residual)))
+    match simulated(h, map, data, settings) {
+        Some(v) => {
+            let residual = v.scored_residual_parts(data.record_bounds());
+            let parts: Vec<&[f64]> = residual.iter().map(Vec::as_slice).collect();
+            (
+                v.rms,
+                Some(crate::gap::noise_level_coloured_records(&parts)),
+            )
         }
-        _ => (f64::INFINITY, None),
+        None => (f64::INFINITY, None),
     }
 }
 
@@ -286,6 +322,8 @@ pub(super) struct Fitted {
     pub(super) w_hat: Vec<f64>,
     /// The noise estimate ê, every noise channel.
     pub(super) e_hat: Signal,
+    /// Where each estimation record starts in `z`, `w_hat` and `e_hat`, then their length.
+    pub(super) bounds: Vec<usize>,
     /// `quadratic` or `total variation`.
     pub(super) estimator: &'static str,
     /// The noise level of its simulation residual on the estimation record.
@@ -397,6 +435,7 @@ pub(super) fn finish_fit(
         z: zk,
         w_hat,
         e_hat,
+        bounds: est_h.record_bounds().to_vec(),
         estimator,
         residual_noise,
         hold_edges,

@@ -291,7 +291,14 @@ pub(super) fn recover_families(
     if known.iter().all(|k| k.fit.is_some()) {
         return Ok(None);
     }
-    let z = nominal.model()?.lft().compute_z(est.u(), est.y())?.0;
+    // z of every record, each computed from that record alone.
+    let lft = nominal.model()?.lft().clone();
+    let z = est
+        .records()
+        .iter()
+        .map(|r| Ok(lft.compute_z(r.u(), r.y())?.0))
+        .collect::<Result<Vec<_>>>()?;
+    let channel = |i: usize| -> Vec<f64> { z.iter().flat_map(|z| z.channel(i)).collect() };
     let count = |f: &EffectFit| f.parameters.len() + usize::from(f.offset.is_some());
     let fits = known
         .iter()
@@ -300,7 +307,7 @@ pub(super) fn recover_families(
             if k.fit.is_some() {
                 return None;
             }
-            let (lo, hi) = minmax(&z.channel(i));
+            let (lo, hi) = minmax(&channel(i));
             if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
                 return None;
             }

@@ -19,20 +19,28 @@ use super::fit::{Fitted, identify_hypothesis};
 /// ratio of the input's to the output's standard deviation. A nominal model with integrators
 /// needs this: without it, the output-error criterion makes the map explain the slow wander
 /// that every unmodelled force leaves in a position.
+///
+/// With several records, each record's residual is simulated and whitened from rest on its
+/// own, and the likelihood is that of all records (one s² over them).
 pub(super) fn input_noise_ratio(nominal: &Nominal, est: &Data) -> Result<Option<f64>> {
     let u = est.u();
     let len = est.len();
     let r: Vec<f64> = {
-        let yu = nominal.simulate_output(u)?;
+        let yu = crate::records::stacked(est, |d| nominal.simulate_output(d.u()))?;
         (0..len).map(|k| est.y().get(k, 0) - yu[k]).collect()
     };
+    let records = crate::records::parts(&r, est.record_bounds());
     let nll = |n: &Nominal| -> Option<f64> {
         let noise = n.lft().t_ye();
-        let w = KalmanWhitener::new(&noise, len, &WhiteningOptions::default()).ok()?;
-        let mut out = vec![0.0; len];
-        w.whiten(&r, &mut out);
-        let sse: f64 = out.iter().map(|v| v * v).sum();
-        let v = len as f64 * (sse / len as f64).ln() + w.log_det();
+        let (mut sse, mut log_det) = (0.0, 0.0);
+        for part in &records {
+            let w = KalmanWhitener::new(&noise, part.len(), &WhiteningOptions::default()).ok()?;
+            let mut out = vec![0.0; part.len()];
+            w.whiten(part, &mut out);
+            sse += out.iter().map(|v| v * v).sum::<f64>();
+            log_det += w.log_det();
+        }
+        let v = len as f64 * (sse / len as f64).ln() + log_det;
         v.is_finite().then_some(v)
     };
     let base = nll(nominal);

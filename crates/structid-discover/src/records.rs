@@ -1,0 +1,225 @@
+//! Several records (experiments) in discovery: every step runs on each record on its own and
+//! pools what it found, so that no simulation, filter, difference or lag pairs samples across
+//! a record boundary.
+//!
+//! [`Data`] stacks its records one after the other ([`Data::record_bounds`]). The helpers here
+//! apply a one-record computation record by record: [`restack`] for a computation that returns
+//! a record, [`stacked`] for one that returns a signal, [`parts`] to cut a stacked signal
+//! back into its records, and [`simulate`] for the simulation with the maps in the loop that
+//! scores every model of the workflow, pooled over the records' scored samples. With one
+//! record each is the one-record computation itself.
+
+use std::ops::Range;
+
+use structid_core::validation::{ValidationSettings, validate};
+use structid_core::{Data, Error, Interpolant, Model, Result};
+
+/// `data`'s records, each passed through `f`, stacked again into one [`Data`] with the same
+/// record bounds (`f` itself for one record).
+pub fn restack(data: &Data, f: impl Fn(&Data) -> Result<Data>) -> Result<Data> {
+    if data.record_count() == 1 {
+        return f(data);
+    }
+    Data::from_records(data.records().iter().map(f).collect::<Result<Vec<_>>>()?)
+}
+
+/// `f` of each record of `data`, the outputs stacked one after the other (`f` itself for one
+/// record). Each output must have its record's length.
+pub fn stacked(data: &Data, f: impl Fn(&Data) -> Result<Vec<f64>>) -> Result<Vec<f64>> {
+    if data.record_count() == 1 {
+        return f(data);
+    }
+    let mut out = Vec::with_capacity(data.len());
+    for (i, r) in data.records().iter().enumerate() {
+        let part = f(r)?;
+        if part.len() != r.len() {
+            return Err(Error::DimensionMismatch {
+                what: format!("samples computed for record {}", i + 1),
+                expected: r.len().to_string(),
+                found: part.len().to_string(),
+            });
+        }
+        out.extend(part);
+    }
+    Ok(out)
+}
+
+/// The length of the shortest record of `data` (every step that sizes lags or windows sizes
+/// them for it).
+pub fn shortest(data: &Data) -> usize {
+    data.record_bounds()
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .min()
+        .unwrap_or(data.len())
+}
+
+/// `signal` (stacked like `data`'s records) cut into its records.
+pub fn parts<'a, T>(signal: &'a [T], bounds: &[usize]) -> Vec<&'a [T]> {
+    bounds
+        .windows(2)
+        .map(|w| &signal[w[0].min(signal.len())..w[1].min(signal.len())])
+        .collect()
+}
+
+/// The simulation of a model with its maps in the loop on every record of a [`Data`], each
+/// record scored as [`validate`] scores it (its own initial state, its own windows), pooled.
+#[derive(Clone, Debug)]
+pub struct Simulated {
+    /// The simulated output (first output), records stacked.
+    pub simulated: Vec<f64>,
+    /// The measured output (first output), records stacked.
+    pub measured: Vec<f64>,
+    /// The scored samples of every record, as indices into the stacked records.
+    pub scored: Vec<Range<usize>>,
+    /// The simulation RMS over every scored sample of every record.
+    pub rms: f64,
+    /// The fit in percent over every scored sample (about the mean of those samples).
+    pub fit_percent: f64,
+    /// Each record's simulation RMS and number of scored samples.
+    pub records: Vec<(f64, usize)>,
+}
+
+impl Simulated {
+    /// The residual y − ŷ at the scored samples, record after record.
+    pub fn scored_residual(&self) -> Vec<f64> {
+        self.scored
+            .iter()
+            .flat_map(|r| r.clone())
+            .map(|k| self.measured[k] - self.simulated[k])
+            .collect()
+    }
+
+    /// The residual y − ŷ at the scored samples, one vector per record.
+    pub fn scored_residual_parts(&self, bounds: &[usize]) -> Vec<Vec<f64>> {
+        bounds
+            .windows(2)
+            .map(|w| {
+                self.scored
+                    .iter()
+                    .flat_map(|r| r.start.max(w[0])..r.end.min(w[1]))
+                    .map(|k| self.measured[k] - self.simulated[k])
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// Simulates `model` with `maps` on every record of `data` ([`validate`] record by record,
+/// with `settings`) and pools the simulation RMS and fit over the records' scored samples.
+pub fn simulate(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settings: &ValidationSettings,
+) -> Result<Simulated> {
+    let bounds = data.record_bounds();
+    let mut out = Simulated {
+        simulated: Vec::with_capacity(data.len()),
+        measured: data.y().channel(0),
+        scored: Vec::new(),
+        rms: f64::NAN,
+        fit_percent: f64::NAN,
+        records: Vec::new(),
+    };
+    for (r, record) in data.records().iter().enumerate() {
+        let v = validate(model, maps, record, settings).map_err(|e| in_record(e, r, data))?;
+        let start = bounds[r];
+        let count = v.scored.iter().map(|s| s.len()).sum::<usize>();
+        out.scored
+            .extend(v.scored.iter().map(|s| s.start + start..s.end + start));
+        out.records.push((v.rms[0], count));
+        out.simulated.extend(v.simulated.channel(0));
+        if data.record_count() == 1 {
+            out.rms = v.rms[0];
+            out.fit_percent = v.fit_percent[0];
+        }
+    }
+    if data.record_count() > 1 {
+        let (rms, fit) = pooled_fit(&out.measured, &out.simulated, &out.scored);
+        out.rms = rms;
+        out.fit_percent = fit;
+    }
+    Ok(out)
+}
+
+/// The RMS of y − ŷ and the fit 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) over the samples `scored`.
+pub fn pooled_fit(y: &[f64], simulated: &[f64], scored: &[Range<usize>]) -> (f64, f64) {
+    let idx = || scored.iter().flat_map(|r| r.clone());
+    let n = idx().count().max(1) as f64;
+    let mean = idx().map(|k| y[k]).sum::<f64>() / n;
+    let sse: f64 = idx().map(|k| (y[k] - simulated[k]).powi(2)).sum();
+    let sst: f64 = idx().map(|k| (y[k] - mean).powi(2)).sum();
+    let fit = if sst > 0.0 {
+        100.0 * (1.0 - (sse / sst).sqrt())
+    } else {
+        f64::NAN
+    };
+    ((sse / n).sqrt(), fit)
+}
+
+/// An error of record `r` (0-based) of `data`, naming the record when there are several.
+pub fn in_record(e: Error, r: usize, data: &Data) -> Error {
+    if data.record_count() == 1 {
+        return e;
+    }
+    match e {
+        Error::InvalidParameter {
+            name,
+            value,
+            reason,
+        } => Error::InvalidParameter {
+            name: format!("{name} (record {} of {})", r + 1, data.record_count()),
+            value,
+            reason,
+        },
+        Error::InvalidStructure(s) => {
+            Error::InvalidStructure(format!("record {} of {}: {s}", r + 1, data.record_count()))
+        }
+        Error::Numerical(s) => {
+            Error::Numerical(format!("record {} of {}: {s}", r + 1, data.record_count()))
+        }
+        other => other,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use structid_core::Signal;
+
+    fn rec(len: usize, offset: f64) -> Data {
+        let u = Signal::from_fn(len, 1, |k, _| offset + k as f64);
+        Data::new(u.clone(), u).unwrap()
+    }
+
+    #[test]
+    fn restack_and_stacked_run_each_record_alone() {
+        let data = Data::from_records(vec![rec(5, 0.0), rec(3, 100.0)]).unwrap();
+        // The first difference of each record, 0 at its start: no difference across the seam.
+        let diff = |d: &Data| -> Result<Vec<f64>> {
+            let u = d.u().channel(0);
+            Ok((0..u.len())
+                .map(|k| if k == 0 { 0.0 } else { u[k] - u[k - 1] })
+                .collect())
+        };
+        assert_eq!(
+            stacked(&data, diff).unwrap(),
+            vec![0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0]
+        );
+        let again = restack(&data, |d| Ok(d.clone())).unwrap();
+        assert_eq!(again, data);
+        let cut = parts(data.u().as_slice(), data.record_bounds());
+        assert_eq!(cut[1], &[100.0, 101.0, 102.0]);
+    }
+
+    #[test]
+    fn pooled_fit_is_over_every_scored_sample() {
+        let y = [1.0, 2.0, 3.0, 4.0];
+        let s = [1.0, 2.0, 3.0, 2.0];
+        let (rms, fit) = pooled_fit(&y, &s, &[0..2, 2..4]);
+        assert!((rms - (4.0f64 / 4.0).sqrt()).abs() < 1e-12);
+        // ȳ = 2.5, Σ(y − ȳ)² = 5
+        assert!((fit - 100.0 * (1.0 - (4.0f64 / 5.0).sqrt())).abs() < 1e-12);
+    }
+}
