@@ -569,9 +569,7 @@ fn discover_with(
     // hypothesis is refined jointly with G, and keeps the new G when it validates better.
     // Only the best (but see below): G refitted around a map at the wrong location absorbs
     // part of the effect too, and would make that location look as good as the right one.
-    let unsupported_refit = joint_refit_unsupported(est, val);
     if settings.refine_nominal
-        && unsupported_refit.is_none()
         && let Some(g) = given.polynomial()
         && given.known_maps().is_empty()
         // A map of the rate depends on the direction of motion and so imitates hysteresis;
@@ -638,12 +636,6 @@ fn discover_with(
 
         for h in targets {
             let t = Instant::now();
-            // Total variation over several records needs the conic solver (ADMM runs over one
-            // record), which takes minutes at discovery's record lengths: said, not tried.
-            if let Some(why) = total_variation_unsupported(est, val) {
-                failed.push(failure(h.location, "tv", t, &Error::Unsupported(why)));
-                continue;
-            }
             match total_variation_fit(&h, est, val, settings) {
                 Ok(f) => fitted.push(f),
                 Err(e) => failed.push(failure(h.location, "tv", t, &e)),
@@ -929,13 +921,6 @@ fn discover_with(
         }
     }
     if settings.refine_nominal
-        && given.polynomial().is_some()
-        && let Some(why) = &unsupported_refit
-    {
-        finding.remarks.push(why.clone());
-    }
-    if settings.refine_nominal
-        && unsupported_refit.is_none()
         && let Some(g) = given.polynomial()
     {
         // The joint refinement of the hypotheses already stands; a failed refit of the named
@@ -1271,32 +1256,6 @@ fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
         });
     }
     Ok(())
-}
-
-/// Why G cannot be refitted jointly with a map on these records, if it cannot: the output-error
-/// refit of G takes one estimation and one validation record.
-fn joint_refit_unsupported(est: &Data, val: &Data) -> Option<String> {
-    (est.record_count() > 1 || val.record_count() > 1).then(|| {
-        format!(
-            "G was held as given: the joint refit of G with the map takes one estimation and one              validation record, and these data have {} and {}",
-            est.record_count(),
-            val.record_count()
-        )
-    })
-}
-
-/// Why no total-variation estimate is tried on these records, if none is: the fallback takes
-/// one estimation and one validation record.
-fn total_variation_unsupported(est: &Data, val: &Data) -> Option<String> {
-    (est.record_count() > 1 || val.record_count() > 1).then(|| {
-        format!(
-            "not tried: the total-variation estimate takes one estimation and one validation \
-             record in discovery (its fast solver, ADMM, runs over one record), and these data \
-             have {} and {}",
-            est.record_count(),
-            val.record_count()
-        )
-    })
 }
 
 /// An RMS for reports: a number, or "diverged" for a simulation that did not stay finite.
