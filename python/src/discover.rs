@@ -69,6 +69,22 @@ fn discovery_dict<'py>(
     out.set_item("missing_effect", d.missing_effect)?;
     out.set_item("nominal_validation_rms", d.validation_gap.rms)?;
     out.set_item("nominal_estimation_rms", d.estimation_gap.rms)?;
+    let per_record =
+        |g: &structid_discover::gap::Gap| -> Vec<f64> { g.records.iter().map(|r| r.rms).collect() };
+    out.set_item(
+        "nominal_estimation_rms_records",
+        per_record(&d.estimation_gap),
+    )?;
+    out.set_item(
+        "nominal_validation_rms_records",
+        per_record(&d.validation_gap),
+    )?;
+    out.set_item(
+        "validation_rms_records",
+        d.finding
+            .as_ref()
+            .map(|f| per_record(&f.augmented.validation_gap)),
+    )?;
     out.set_item("seconds", d.seconds)?;
     let hypotheses = d
         .hypotheses
@@ -137,9 +153,41 @@ fn discovery_dict<'py>(
     Ok(out)
 }
 
-/// Runs the discovery workflow from a nominal model on an estimation and a validation record.
+/// The record of `first` and the records of `more` as one [`Data`] of several records; `what`
+/// names them in errors (`estimation`, `validation`).
+fn records<'py>(
+    mf: &ModelFile,
+    first: &[(String, PyReadonlyArray1<'py, f64>)],
+    more: Option<&[Vec<(String, PyReadonlyArray1<'py, f64>)>]>,
+    settle: usize,
+    what: &str,
+) -> PyResult<Data> {
+    let mut all = vec![convert::record(mf, named_columns(first))?];
+    for r in more.into_iter().flatten() {
+        all.push(convert::record(mf, named_columns(r))?);
+    }
+    let several = all.len() > 1;
+    for (i, r) in all.iter().enumerate() {
+        if settle >= r.len() {
+            let which = if several {
+                format!("{what} record {}", i + 1)
+            } else {
+                format!("the {what} record")
+            };
+            return Err(invalid(format!(
+                "settle {settle} must be less than the {} samples of {which}",
+                r.len()
+            )));
+        }
+    }
+    Data::from_records(all).map_err(error)
+}
+
+/// Runs the discovery workflow from a nominal model on an estimation and a validation record,
+/// or on several of each (`more_records`, `more_validation`: the records after the first).
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false))]
+#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false, more_records=None, more_validation=None))]
+#[allow(clippy::too_many_arguments)]
 pub fn discover_columns<'py>(
     py: Python<'py>,
     model: &Model,
@@ -148,19 +196,19 @@ pub fn discover_columns<'py>(
     total_variation: bool,
     settle: usize,
     tune_sigma: bool,
+    more_records: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
+    more_validation: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let nominal = nominal(&mf)?;
-    let est = convert::record(&mf, named_columns(&columns))?;
-    let val = convert::record(&mf, named_columns(&validation))?;
-    for (what, r) in [("estimation", &est), ("validation", &val)] {
-        if settle >= r.len() {
-            return Err(invalid(format!(
-                "settle {settle} must be less than the {} samples of the {what} record",
-                r.len()
-            )));
-        }
-    }
+    let est = records(&mf, &columns, more_records.as_deref(), settle, "estimation")?;
+    let val = records(
+        &mf,
+        &validation,
+        more_validation.as_deref(),
+        settle,
+        "validation",
+    )?;
     let settings = DiscoverSettings::builder()
         .total_variation(total_variation)
         .settle(settle)

@@ -73,7 +73,8 @@ def refine_columns(model: Model, records: List[Columns],
                    bands: bool = True) -> Dict[str, Any]: ...
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
-                     tune_sigma: bool = False) -> Dict[str, Any]: ...
+                     tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,
+                     more_validation: Optional[List[Columns]] = None) -> Dict[str, Any]: ...
 def staticness_columns(z: Array1, w: Array1, sigma_fraction: Optional[float] = None,
                        sigma: Optional[float] = None, noise_std: Optional[float] = None,
                        ratio_limit: Optional[float] = None,

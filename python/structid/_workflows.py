@@ -12,7 +12,7 @@ import numpy as np
 from . import _structid
 from ._arrays import records_of
 from ._estimate import Estimate
-from ._identify import Fit, _columns, _fit
+from ._identify import Fit, _columns, _fit, _is_records
 from ._model import Model
 
 
@@ -130,11 +130,31 @@ def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object,
              total_variation: bool = True, settle: int = 0, tune_sigma: bool = False) -> Discovery:
     """Finds what a nominal linear model (``Model.structure("lti", ...)`` or an ``[lft]``
     without maps) is missing (``structid discover``): tests its residual, inserts one unknown
-    map at each candidate location, ranks them on the validation record and names the map."""
+    map at each candidate location, ranks them on the validation record and names the map.
+
+    Each of u, y, u_val, y_val is an array, or a list of arrays for several records
+    (experiments, each simulated from its own initial state):
+    ``discover(nominal, [u1, u2], [y1, y2], [u3, u4], [y3, y4])``. The validation RMS is then
+    pooled over the validation records; ``extra`` holds each record's
+    (``nominal_validation_rms_records``, ``validation_rms_records``)."""
+    est, more = _record_columns(nominal, u, y, "")
+    val, more_val = _record_columns(nominal, u_val, y_val, "validation ")
     return _discovery(_structid.discover_columns(
-        nominal._native, _columns(nominal, u, y, None, ""),
-        _columns(nominal, u_val, y_val, None, "validation "), bool(total_variation), int(settle),
-        bool(tune_sigma)))
+        nominal._native, est, val, bool(total_variation), int(settle), bool(tune_sigma),
+        more, more_val))
+
+
+def _record_columns(model: Model, u: object, y: object, what: str):
+    """The columns of one record (u, y arrays), or of the first of several records (lists of
+    arrays) and those of the others."""
+    if not (_is_records(u) or _is_records(y)):
+        return _columns(model, u, y, None, what), None
+    if not (_is_records(u) and _is_records(y) and len(u) == len(y)):
+        raise _structid.StructidError(
+            f"several {what}records are lists of arrays of the same length for u and y")
+    cols = [_columns(model, a, b, None, f"{what}record {i + 1} ")
+            for i, (a, b) in enumerate(zip(u, y))]
+    return cols[0], cols[1:]
 
 
 def silverbox_data(path: Union[None, str, os.PathLike] = None) -> str:

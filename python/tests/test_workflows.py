@@ -156,3 +156,47 @@ def test_discover_matches_the_tool(cli, duffing):
     # The augmented model simulates the validation record far better than the nominal one.
     sim = found.finding.estimate.simulate(uv)["y"][:, 0]
     assert np.sqrt(np.mean((sim - yv) ** 2)) < 0.5 * found.nominal_validation_rms
+
+
+def test_discover_on_several_records_matches_the_tool(cli, tmp_path):
+    """Two estimation and two validation records, as lists of arrays and as repeated --data
+    and --validation-data files: the same hypotheses, finding and per-record gaps."""
+    num, den = [0.0, 0.2], [1.0, -1.5, 0.7]
+    plant = structid.Model.output_feedback(num, den, structid.gaussian(sigma=0.2)) \
+        .with_truth("N", "2*z0^3")
+    rng = np.random.default_rng(5)
+
+    def record(n, seed):
+        u = np.convolve(rng.standard_normal(n), np.ones(4) / 4, mode="same")
+        return u, plant.simulate(u, noise_std=0.002, seed=seed)["y"][:, 0]
+
+    est = [record(700, 11), record(600, 12)]
+    val = [record(500, 13), record(400, 14)]
+    nominal = structid.Model.structure("lti", num, den)
+    nominal.save(tmp_path / "nominal.toml")
+    args = ["discover", "--model", tmp_path / "nominal.toml"]
+    for flag, recs, name in [("--data", est, "est"), ("--validation-data", val, "val")]:
+        for i, (u, y) in enumerate(recs):
+            args += [flag, write_csv(tmp_path / f"{name}{i}.csv", {"u": u, "y": y})]
+    cli(*args, "--out", tmp_path / "found")
+    report = read_json(tmp_path / "found" / "report.json")
+    found = structid.discover(nominal, [u for u, _ in est], [y for _, y in est],
+                              [u for u, _ in val], [y for _, y in val])
+    assert found.finding is not None
+    assert found.finding.location == report["finding"]["location"] == "output-feedback"
+    tool = {h["location"]: h["validation_rms"] for h in report["hypotheses"]}
+    mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
+    assert tool.keys() == mine.keys()
+    for k in tool:
+        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-6)
+    gap = report["gap_before"]["validation"]
+    np.testing.assert_allclose(found.nominal_validation_rms, gap["rms"], rtol=1e-9)
+    np.testing.assert_allclose(found.extra["nominal_validation_rms_records"],
+                               [r["rms"] for r in gap["records"]], rtol=1e-9)
+    after = report["finding"]["gap_after"]["validation"]
+    np.testing.assert_allclose(found.extra["validation_rms_records"],
+                               [r["rms"] for r in after["records"]], rtol=1e-6)
+    assert len(found.extra["nominal_estimation_rms_records"]) == 2
+    # Lists of different lengths are refused with a clear message.
+    with pytest.raises(structid.StructidError, match="lists of arrays"):
+        structid.discover(nominal, [est[0][0], est[1][0]], [est[0][1]], val[0][0], val[0][1])

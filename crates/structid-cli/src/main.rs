@@ -11,7 +11,7 @@
 //!                   [--skip-rows N] [--range A..B] [--remove-mean] --out OUT.csv
 //! structid input prbs|multisine|noise|chirp|steps --length L [--sample-time TS] [--amplitude A]
 //!                   [--offset U0] [--band LOW,HIGH] [--seed N] [--name u] [--time] --out U.csv
-//! structid discover --model NOMINAL.toml --data EST.csv --validate VAL.csv --out DIR [--locations L1,L2]
+//! structid discover --model NOMINAL.toml --data EST.csv… --validation-data VAL.csv… --out DIR [--locations L1,L2]
 //!                   [--no-tv] [--settle N] [--sigma-fraction F] [--trend D] [--tune-sigma]
 //!                   [--naming-tolerance T] [--hysteresis-threshold T]
 //! structid static --data D.csv --z COL --w COL [--noise-std S] [--out DIR]
@@ -165,7 +165,8 @@ enum Command {
     /// level, whiteness and (non)linear input-correlation tests) and where it is not, in time
     /// and in operating space. If something is missing, inserts one unknown static block at each
     /// candidate location (input, output, output feedback, rate feedback), identifies it on
-    /// --data, ranks the locations by the simulation error on --validate, and names the best
+    /// --data, ranks the locations by the simulation error on --validation-data (each repeated
+    /// for several records, every record simulated from its own initial state), and names the best
     /// map from a library of effects (saturation, dead zone, friction, polynomial stiffness,
     /// quantisation, offset, gain) when its parametric form validates as well, or reports it as
     /// unnamed or dynamic (hysteresis or backlash suspected).
