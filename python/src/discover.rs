@@ -15,7 +15,7 @@ use structid_io::ModelFile;
 
 use crate::convert::{self, error, invalid};
 use crate::estimate::Fitted;
-use crate::identify::named_columns;
+use crate::identify::{Columns, named_columns};
 use crate::model::Model;
 
 /// The nominal model of a model file without maps: `[linear] structure = "lti"` or an `[lft]`,
@@ -158,7 +158,7 @@ fn discovery_dict<'py>(
 fn records<'py>(
     mf: &ModelFile,
     first: &[(String, PyReadonlyArray1<'py, f64>)],
-    more: Option<&[Vec<(String, PyReadonlyArray1<'py, f64>)>]>,
+    more: Option<&[Columns<'py>]>,
     settle: usize,
     what: &str,
 ) -> PyResult<Data> {
@@ -196,8 +196,8 @@ pub fn discover_columns<'py>(
     total_variation: bool,
     settle: usize,
     tune_sigma: bool,
-    more_records: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
-    more_validation: Option<Vec<Vec<(String, PyReadonlyArray1<'py, f64>)>>>,
+    more_records: Option<Vec<Columns<'py>>>,
+    more_validation: Option<Vec<Columns<'py>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let nominal = nominal(&mf)?;

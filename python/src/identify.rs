@@ -321,7 +321,7 @@ fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, Py
 }
 
 /// A record as named numpy columns.
-type Columns<'py> = Vec<(String, PyReadonlyArray1<'py, f64>)>;
+pub(crate) type Columns<'py> = Vec<(String, PyReadonlyArray1<'py, f64>)>;
 
 /// Identifies the model's maps from named columns (see `structid.identify`).
 #[pyfunction]
