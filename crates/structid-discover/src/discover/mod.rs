@@ -364,7 +364,12 @@ pub struct Discovery {
 /// shrinks the validation RMS by at least [`MIN_CONFIRMING_SHRINK`]; otherwise the verdict is
 /// "no missing effect detected", with the failed test and the best attempt in the text.
 ///
-/// Errors: several inputs or outputs, records shorter than 100 samples, a constant input, an
+/// `est` and `val` may each hold several records (`Data::from_records`, separate experiments):
+/// every step then runs record by record, each record simulated from its own initial state,
+/// and pools (see [`crate::records`]); the RMS values that rank, name and shrink are pooled
+/// over the records' scored samples, and [`Gap::records`] holds each record's.
+///
+/// Errors: several inputs or outputs, a record shorter than 100 samples (named), a constant input, an
 /// unstable nominal model (its simulation would diverge), a nominal model whose simulation
 /// diverges or is worse than a constant by more than [`WORSE_THAN_CONSTANT`]
 /// ([`Error::PoorNominal`]); a hypothesis that fails is recorded
