@@ -35,13 +35,15 @@ mod decimate;
 mod error;
 mod heatmap;
 mod layout;
+mod panels;
 
 pub use chart::{Chart, Series, SeriesStyle, render_chart_svg, render_grid_svg, write_chart_svg};
 pub use correlation::{CorrelationChart, render_correlation_svg};
 pub use decimate::decimate_min_max;
 pub use error::PlotError;
 pub use heatmap::{HeatMap, render_heatmaps_svg};
-pub use layout::{DEFAULT_SIZE, MAX_FIGURE_SIZE, MIN_PANEL_SIZE, Panel, render_panels_svg};
+pub use layout::{DEFAULT_SIZE, MAX_FIGURE_SIZE, MIN_PANEL_SIZE};
+pub use panels::{Panel, render_panels_svg};
 
 #[cfg(test)]
 mod tests {
