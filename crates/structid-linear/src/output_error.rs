@@ -490,14 +490,14 @@ pub fn output_error_records(
 
 /// Several `(u, y)` records checked and stacked: input channels, output, and the record
 /// bounds `[0, L₁, …, L]`.
-struct Stacked {
-    u: Vec<Vec<f64>>,
-    y: Vec<f64>,
-    bounds: Vec<usize>,
+pub(crate) struct Stacked {
+    pub(crate) u: Vec<Vec<f64>>,
+    pub(crate) y: Vec<f64>,
+    pub(crate) bounds: Vec<usize>,
 }
 
 impl Stacked {
-    fn new(records: &[(&Signal, &Signal)], inputs: usize) -> Result<Self, LinearError> {
+    pub(crate) fn new(records: &[(&Signal, &Signal)], inputs: usize) -> Result<Self, LinearError> {
         if records.is_empty() {
             return Err(LinearError::param("records", "no data record was given"));
         }

@@ -288,23 +288,11 @@ pub fn select_orders_records(
     if inputs == 0 {
         return Err(LinearError::dims("input channels", "at least 1", 0));
     }
-    let several = records.len() > 1;
-    let mut uc: Vec<Vec<f64>> = vec![Vec::new(); inputs];
-    let mut yv = Vec::new();
-    let mut bounds = vec![0];
-    for (i, (ui, yi)) in records.iter().enumerate() {
-        let prefix = if several {
-            format!("record {}: ", i + 1)
-        } else {
-            String::new()
-        };
-        let (c, v) = prepare_data(ui, yi, inputs, &prefix)?;
-        for (all, col) in uc.iter_mut().zip(c) {
-            all.extend(col);
-        }
-        yv.extend(v);
-        bounds.push(yv.len());
-    }
+    let crate::output_error::Stacked {
+        u: uc,
+        y: yv,
+        bounds,
+    } = crate::output_error::Stacked::new(records, inputs)?;
     let validation = match criterion {
         OrderCriterion::Validation { u, y } => Some(prepare_data(u, y, inputs, "validation ")?),
         _ => None,
