@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use clap::Parser;
 use serde_json::{Value, json};
+use structid_core::metrics::PooledFit;
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
 use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
@@ -492,6 +493,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "maps": if rebuilt.is_some() { "estimate" } else { "truth" },
         "estimate": estimate,
         "samples": len,
+        "scored": scored_json(&report),
         "sample_time": vmf.lft.sample_time(),
         "initial_state": report.initial_state,
         "outputs": outputs,
@@ -529,6 +531,18 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// The samples a report scored, as `[start, end)` pairs (one for a free run after the
+/// settling samples, one per window otherwise).
+pub(crate) fn scored_json(report: &ValidationReport) -> Value {
+    json!(
+        report
+            .scored
+            .iter()
+            .map(|r| [r.start, r.end])
+            .collect::<Vec<_>>()
+    )
+}
+
 /// `structid validate` with several --data files: each record is validated on its own, from
 /// its own initial state, into DIR2/record_<i>/ (the files of one record); DIR2/validation.json
 /// lists them and pools the free-run simulation error (after the settling samples of each
@@ -544,8 +558,8 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
         dirs.iter().chain(["validation.json".to_string()].iter()),
     )?;
     let mut records = Vec::with_capacity(a.data.len());
-    // Per output: Σ(y − y_sim)², Σy, Σy², samples.
-    let mut pooled: Vec<(String, f64, f64, f64, usize)> = Vec::new();
+    // Per output, the fit pooled over every record's scored samples.
+    let mut pooled: Vec<(String, PooledFit)> = Vec::new();
     for (i, (file, dir)) in a.data.iter().zip(&dirs).enumerate() {
         let one = ValidateArgs {
             data: vec![file.clone()],
@@ -560,6 +574,17 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
             })?,
         )
         .map_err(|e| CliError::runtime(format!("cannot read back record {}: {e}", i + 1)))?;
+        // The samples the record's own validation scored (after its settling samples, or
+        // its windows), so that the pooled figure agrees with the records' own.
+        let scored: Vec<std::ops::Range<usize>> = doc["scored"]
+            .as_array()
+            .map(|ranges| {
+                ranges
+                    .iter()
+                    .filter_map(|r| Some(r[0].as_u64()? as usize..r[1].as_u64()? as usize))
+                    .collect()
+            })
+            .unwrap_or_default();
         let table = DataTable::read(&a.out.join(dir).join("simulation.csv"))?;
         let names: Vec<String> = table
             .names
@@ -569,10 +594,10 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
         if pooled.is_empty() {
             pooled = names
                 .iter()
-                .map(|n| (n.clone(), 0.0, 0.0, 0.0, 0))
+                .map(|n| (n.clone(), PooledFit::default()))
                 .collect();
         }
-        for (name, sse, sy, syy, count) in pooled.iter_mut() {
+        for (name, fit) in pooled.iter_mut() {
             let missing = || {
                 CliError::runtime(format!(
                     "simulation.csv of record {} has no `{name}`",
@@ -581,12 +606,7 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
             };
             let y = table.column(name).ok_or_else(missing)?;
             let sim = table.column(&format!("{name}_sim")).ok_or_else(missing)?;
-            for (yk, sk) in y.iter().zip(sim).skip(a.settle) {
-                *sse += (yk - sk).powi(2);
-                *sy += yk;
-                *syy += yk * yk;
-                *count += 1;
-            }
+            fit.add_ranges(y, sim, &scored);
         }
         records.push(json!({
             "record": i + 1,
@@ -602,15 +622,8 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
     }
     let mut overall = Vec::new();
     let mut s = String::new();
-    for (name, sse, sy, syy, count) in &pooled {
-        let n = (*count).max(1) as f64;
-        let rms = (sse / n).sqrt();
-        let spread = (syy - sy * sy / n).max(0.0);
-        let fit = if spread > 0.0 {
-            100.0 * (1.0 - (sse / spread).sqrt())
-        } else {
-            f64::NAN
-        };
+    for (name, pool) in &pooled {
+        let (rms, fit, count) = (pool.rms(), pool.fit_percent(), pool.samples());
         overall.push(json!({
             "name": name,
             "rms": rms,
@@ -628,7 +641,7 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
         "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
         "records": records,
         "overall": {
-            "scoring": "free-run simulation of each record from its own initial state, after its settling samples, pooled",
+            "scoring": "each record scored as its own validation scores it (its own initial state; after its settling samples, or its windows), pooled",
             "settle": a.settle,
             "outputs": overall,
         },

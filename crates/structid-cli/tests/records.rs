@@ -1,7 +1,7 @@
 //! Several records (`--data a.csv --data b.csv`): one fit over separate experiments, each from
 //! its own initial state — not the fit of the concatenated file.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use structid_core::{Data, IdentifySettings, Signal, SolverChoice, identify};
 use structid_io::ModelFile;
@@ -298,22 +298,31 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// Two simulated records (150 and 100 samples) and the estimate identified on both.
+fn two_records_and_their_estimate(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let a = simulate(dir, "a", 150, 5);
+    let b = simulate(dir, "b", 100, 6);
+    let est = dir.join("est");
+    identify_cli(&[&a, &b], &est);
+    (a, b, est.join("estimate.json"))
+}
+
+/// `structid validate --estimate STORED --data … --out OUT OPTION VALUE`.
+fn validate_stored(stored: &Path, data: &[&Path], out: &Path, option: &str, value: &str) {
+    let mut args = vec!["validate", "--estimate", p(stored)];
+    for d in data {
+        args.extend(["--data", p(d)]);
+    }
+    args.extend(["--out", p(out), option, value]);
+    ok(&args);
+}
+
 #[test]
 fn validate_reports_each_record_and_the_pooled_error() {
     let dir = tempfile::tempdir().unwrap();
-    let a = simulate(dir.path(), "a", 150, 5);
-    let b = simulate(dir.path(), "b", 100, 6);
-    let est = dir.path().join("est");
-    identify_cli(&[&a, &b], &est);
-    let stored = est.join("estimate.json");
-    let validate = |data: &[&Path], out: &Path| {
-        let mut args = vec!["validate", "--estimate", p(&stored)];
-        for d in data {
-            args.extend(["--data", p(d)]);
-        }
-        args.extend(["--out", p(out), "--settle", "5"]);
-        ok(&args)
-    };
+    let (a, b, stored) = two_records_and_their_estimate(dir.path());
+    let validate =
+        |data: &[&Path], out: &Path| validate_stored(&stored, data, out, "--settle", "5");
     let both = dir.path().join("both");
     validate(&[&a, &b], &both);
     // Each record on its own, as a one-record validation computes it.
@@ -346,6 +355,43 @@ fn validate_reports_each_record_and_the_pooled_error() {
         "{overall} vs {pooled}"
     );
     assert_eq!(doc["overall"]["outputs"][0]["samples"].as_u64(), Some(240));
+}
+
+/// With windowed scoring each record scores its windows, not every sample after the settling
+/// ones; the pooled error is over the same windows, so it is the records' own RMS weighted by
+/// the samples each scored.
+#[test]
+fn validate_pools_the_windows_each_record_scored() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b, stored) = two_records_and_their_estimate(dir.path());
+    let validate =
+        |data: &[&Path], out: &Path| validate_stored(&stored, data, out, "--scoring", "40:10");
+    let both = dir.path().join("both");
+    validate(&[&a, &b], &both);
+    let (mut sse, mut n) = (0.0, 0.0);
+    for (d, name) in [(&a, "va"), (&b, "vb")] {
+        let out = dir.path().join(name);
+        validate(&[d.as_path()], &out);
+        let doc = json(&out.join("validation.json"));
+        let count: f64 = doc["scored"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| (r[1].as_u64().unwrap() - r[0].as_u64().unwrap()) as f64)
+            .sum();
+        // Windows of 40 with 10 initialisation samples score 30 of every 40.
+        assert!(count <= 0.8 * doc["samples"].as_f64().unwrap(), "{count}");
+        sse += count * doc["outputs"][0]["rms"].as_f64().unwrap().powi(2);
+        n += count;
+    }
+    let doc = json(&both.join("validation.json"));
+    let overall = doc["overall"]["outputs"][0]["rms"].as_f64().unwrap();
+    let pooled = (sse / n).sqrt();
+    assert!(
+        (overall - pooled).abs() < 1e-9 * pooled,
+        "{overall} vs {pooled}"
+    );
+    assert_eq!(doc["overall"]["outputs"][0]["samples"].as_f64(), Some(n));
 }
 
 /// y_k = 1.5·y_(k−1) − 0.7·y_(k−2) + u_(k−1) + 0.5·u_(k−2), from rest.

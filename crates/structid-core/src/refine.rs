@@ -96,6 +96,7 @@ use crate::model::{Data, Model, NonlinearBlock};
 use crate::progress::Progress;
 use crate::simulate::MapBinding;
 use crate::structure::{self, Site};
+use crate::validation::simulate_records_from_rest;
 
 mod integrators;
 mod recognise;
@@ -987,24 +988,14 @@ fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize
             map: *m as &dyn Interpolant,
         })
         .collect();
-    let (mut s, mut n) = (0.0, 0usize);
-    for record in data.records() {
-        let sim = match model.lft().simulate(&bindings, record.u(), None, None) {
-            Ok(sim) => sim,
-            // A closed loop that diverges scores as infinitely bad rather than stopping the
-            // alternation: another iteration or candidate may be stable.
-            Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
-            Err(e) => return Err(e),
-        };
-        let (y, ys) = (record.y(), &sim.y);
-        for k in settle.min(y.len())..y.len() {
-            for c in 0..y.channels() {
-                s += (y.get(k, c) - ys.get(k, c)).powi(2);
-                n += 1;
-            }
-        }
-    }
-    if n == 0 {
+    let pooled = match simulate_records_from_rest(model.lft(), &bindings, data, settle) {
+        Ok(p) => p,
+        // A closed loop that diverges scores as infinitely bad rather than stopping the
+        // alternation: another iteration or candidate may be stable.
+        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
+        Err(e) => return Err(e),
+    };
+    if pooled.samples() == 0 {
         return Err(Error::InvalidStructure(format!(
             "the validation record{} no samples after the {settle} settling samples",
             if data.record_count() > 1 {
@@ -1014,12 +1005,8 @@ fn simulation_rms(model: &Model, id: &Identification, data: &Data, settle: usize
             }
         )));
     }
-    let rms = (s / n as f64).sqrt();
-    if rms.is_finite() {
-        Ok(rms)
-    } else {
-        Ok(f64::INFINITY)
-    }
+    let rms = pooled.rms();
+    Ok(if rms.is_finite() { rms } else { f64::INFINITY })
 }
 
 /// Alternates between identifying the maps with the linear part fixed and re-estimating the
@@ -1225,29 +1212,16 @@ impl LinearRefinement {
 /// RMS of y − simulation of `lft` with `map` in the loop (each record from a zero state,
 /// pooled over the records), ∞ on divergence.
 fn map_simulation_rms(lft: &Lft, map: &dyn Interpolant, data: &Data) -> Result<f64> {
-    let (mut s, mut n) = (0.0, 0usize);
-    for record in data.records() {
-        let sim = match lft.simulate(
-            &[MapBinding {
-                inputs: &[0],
-                output: 0,
-                map,
-            }],
-            record.u(),
-            None,
-            None,
-        ) {
-            Ok(sim) => sim,
-            Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
-            Err(e) => return Err(e),
-        };
-        let y = record.y();
-        s += (0..y.len())
-            .map(|k| (y.get(k, 0) - sim.y.get(k, 0)).powi(2))
-            .sum::<f64>();
-        n += y.len();
-    }
-    let rms = (s / n.max(1) as f64).sqrt();
+    let binding = [MapBinding {
+        inputs: &[0],
+        output: 0,
+        map,
+    }];
+    let rms = match simulate_records_from_rest(lft, &binding, data, 0) {
+        Ok(p) => p.rms(),
+        Err(Error::Numerical(_) | Error::Unstable(_)) => return Ok(f64::INFINITY),
+        Err(e) => return Err(e),
+    };
     Ok(if rms.is_finite() { rms } else { f64::INFINITY })
 }
 

@@ -664,7 +664,9 @@ fn pool(
         .zip(bounds)
         .flat_map(|(p, &b)| p.scored.iter().map(move |r| r.start + b..r.end + b))
         .collect();
-    let (rms, fit_percent) = crate::records::pooled_fit(&y, &simulated, &scored);
+    let mut pooled = structid_core::metrics::PooledFit::default();
+    pooled.add_ranges(&y, &simulated, &scored);
+    let (rms, fit_percent) = (pooled.rms(), pooled.fit_percent());
     let floor = quantisation_floor(&y);
     let innovations: Vec<&[f64]> = parts.iter().map(|p| p.innovations.as_slice()).collect();
     let noise_std = noise_level_records(&innovations).max(floor);

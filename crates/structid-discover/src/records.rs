@@ -11,6 +11,7 @@
 
 use std::ops::Range;
 
+use structid_core::metrics::PooledFit;
 use structid_core::validation::{ValidationSettings, validate};
 use structid_core::{Data, Error, Interpolant, Model, Result};
 
@@ -136,26 +137,12 @@ pub fn simulate(
         }
     }
     if data.record_count() > 1 {
-        let (rms, fit) = pooled_fit(&out.measured, &out.simulated, &out.scored);
-        out.rms = rms;
-        out.fit_percent = fit;
+        let mut pooled = PooledFit::default();
+        pooled.add_ranges(&out.measured, &out.simulated, &out.scored);
+        out.rms = pooled.rms();
+        out.fit_percent = pooled.fit_percent();
     }
     Ok(out)
-}
-
-/// The RMS of y − ŷ and the fit 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) over the samples `scored`.
-pub fn pooled_fit(y: &[f64], simulated: &[f64], scored: &[Range<usize>]) -> (f64, f64) {
-    let idx = || scored.iter().flat_map(|r| r.clone());
-    let n = idx().count().max(1) as f64;
-    let mean = idx().map(|k| y[k]).sum::<f64>() / n;
-    let sse: f64 = idx().map(|k| (y[k] - simulated[k]).powi(2)).sum();
-    let sst: f64 = idx().map(|k| (y[k] - mean).powi(2)).sum();
-    let fit = if sst > 0.0 {
-        100.0 * (1.0 - (sse / sst).sqrt())
-    } else {
-        f64::NAN
-    };
-    ((sse / n).sqrt(), fit)
 }
 
 /// An error of record `r` (0-based) of `data`, naming the record when there are several.
@@ -211,15 +198,5 @@ mod tests {
         assert_eq!(again, data);
         let cut = parts(data.u().as_slice(), data.record_bounds());
         assert_eq!(cut[1], &[100.0, 101.0, 102.0]);
-    }
-
-    #[test]
-    fn pooled_fit_is_over_every_scored_sample() {
-        let y = [1.0, 2.0, 3.0, 4.0];
-        let s = [1.0, 2.0, 3.0, 2.0];
-        let (rms, fit) = pooled_fit(&y, &s, &[0..2, 2..4]);
-        assert!((rms - (4.0f64 / 4.0).sqrt()).abs() < 1e-12);
-        // ȳ = 2.5, Σ(y − ȳ)² = 5
-        assert!((fit - 100.0 * (1.0 - (4.0f64 / 5.0).sqrt())).abs() < 1e-12);
     }
 }

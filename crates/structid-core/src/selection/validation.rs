@@ -29,18 +29,8 @@ pub(crate) fn simulation_mse(model: &Model, id: &Identification, data: &Data) ->
             map: est.map.as_ref(),
         })
         .collect();
-    let (mut sse, mut n) = (0.0, 0usize);
-    for record in data.records() {
-        let sim = model.lft().simulate(&bindings, record.u(), None, None)?;
-        let (y, ys) = (record.y().as_slice(), sim.y.as_slice());
-        sse += y
-            .iter()
-            .zip(ys)
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>();
-        n += y.len();
-    }
-    let mse = sse / n as f64;
+    let pooled = crate::validation::simulate_records_from_rest(model.lft(), &bindings, data, 0)?;
+    let mse = pooled.rms().powi(2);
     if !mse.is_finite() {
         return Err(Error::Numerical(
             "the validation simulation diverged (non-finite output)".into(),

@@ -52,6 +52,52 @@ pub mod windows;
 
 pub use windows::{ScoredSimulation, Scoring, Windows, simulate_scored};
 
+/// The free-run simulation error of `lft` with `bindings` in the loop on every record of
+/// `data`, each record from rest (zero state, e = 0), over every output and the samples after
+/// the first `settle` of each record, pooled ([`metrics::PooledFit`]).
+///
+/// This is the score of β selection by validation and of `refine`'s alternations; an error
+/// of the simulation (a loop that diverges: [`Error::Numerical`] or [`Error::Unstable`]) is
+/// returned for the caller to score as it must.
+///
+/// ```
+/// use nalgebra::dmatrix;
+/// use structid_core::validation::simulate_records_from_rest;
+/// use structid_core::{Data, Lft, LftMatrices, MapBinding, Signal};
+/// // y_k = 0.5·y_(k−1) + tanh(u_(k−1)), two records pooled after 1 settling sample each.
+/// let lft = Lft::new(LftMatrices {
+///     a: dmatrix![0.5], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![1.0],
+///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![0.0], dyw: dmatrix![0.0],
+///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+/// }).unwrap();
+/// let tanh = |z: &[f64]| z[0].tanh();
+/// let binding = [MapBinding { inputs: &[0], output: 0, map: &tanh }];
+/// let u = Signal::from_fn(6, 1, |k, _| k as f64 * 0.3);
+/// let y = lft.simulate(&binding, &u, None, None).unwrap().y;
+/// let one = Data::new(u.clone(), y.clone()).unwrap();
+/// let two = Data::from_records(vec![one.clone(), one]).unwrap();
+/// let pooled = simulate_records_from_rest(&lft, &binding, &two, 1).unwrap();
+/// assert_eq!(pooled.samples(), 10);
+/// assert!(pooled.rms() < 1e-15);
+/// ```
+pub fn simulate_records_from_rest(
+    lft: &crate::Lft,
+    bindings: &[crate::MapBinding<'_>],
+    data: &Data,
+    settle: usize,
+) -> Result<metrics::PooledFit> {
+    let mut pooled = metrics::PooledFit::default();
+    for record in data.records() {
+        let sim = lft.simulate(bindings, record.u(), None, None)?;
+        let y = record.y();
+        let start = settle.min(y.len());
+        for c in 0..y.channels() {
+            pooled.add(&y.channel(c)[start..], &sim.y.channel(c)[start..]);
+        }
+    }
+    Ok(pooled)
+}
+
 use structid_lti::Signal;
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 
