@@ -153,7 +153,7 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
             "blocks": estimate.blocks().iter().map(|b| json!({"name": b.name, "dispersion": b.dispersion})).collect::<Vec<_>>(),
         },
         "samples": len,
-        "scored": crate::validate::scored_json(&report),
+        "scored": crate::validation_files::scored_json(&report),
         "sample_time": estimate.lft().sample_time(),
         "initial_state": report.initial_state,
         "outputs": outputs_json(&report, &y_names, &u_names)?,

@@ -493,7 +493,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         "maps": if rebuilt.is_some() { "estimate" } else { "truth" },
         "estimate": estimate,
         "samples": len,
-        "scored": scored_json(&report),
+        "scored": crate::validation_files::scored_json(&report),
         "sample_time": vmf.lft.sample_time(),
         "initial_state": report.initial_state,
         "outputs": outputs,
@@ -529,18 +529,6 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         )
     );
     Ok(())
-}
-
-/// The samples a report scored, as `[start, end)` pairs (one for a free run after the
-/// settling samples, one per window otherwise).
-pub(crate) fn scored_json(report: &ValidationReport) -> Value {
-    json!(
-        report
-            .scored
-            .iter()
-            .map(|r| [r.start, r.end])
-            .collect::<Vec<_>>()
-    )
 }
 
 /// `structid validate` with several --data files: each record is validated on its own, from

@@ -184,6 +184,18 @@ pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliErr
     Ok(())
 }
 
+/// The samples a report scored, as `[start, end)` pairs (one for a free run after the
+/// settling samples, one per window otherwise).
+pub(crate) fn scored_json(report: &ValidationReport) -> serde_json::Value {
+    serde_json::json!(
+        report
+            .scored
+            .iter()
+            .map(|r| [r.start, r.end])
+            .collect::<Vec<_>>()
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
