@@ -55,7 +55,11 @@
 //!    refits competing on validation, and the search then runs once more around the G kept
 //!    (as after a gain error), so that one G ranks every location. A feedback location whose
 //!    loop does not simulate around G as given starts from G fitted with the map's input read
-//!    from the measured output.
+//!    from the measured output. Around such a G the loops may still diverge at every
+//!    feedback location, so the whole search also runs around a G that integrates: the
+//!    cancelling zero moved to z = −1, where a held chain of integrators has its sampling zero,
+//!    and the gain fitted to the estimation record; its finding is kept when it
+//!    validates clearly better, reported against the nominal model as given.
 //!    After naming, G is refitted once more with the named map held fixed;
 //!    [`Finding::nominal_refinement`] reports G as given and as kept.
 //! 4. **Is it static?** For every estimate within 1.5× of the best validation RMS, the noise
@@ -123,6 +127,7 @@ mod naming;
 mod noise;
 mod polish;
 mod refine;
+mod restore;
 mod settings;
 mod total_variation;
 
@@ -384,13 +389,53 @@ pub fn discover(
 }
 
 /// [`discover`], with `second_pass` allowing the search around a refitted G when the first
-/// finding is only a gain error (see [`discover`]'s module documentation).
+/// finding is only a gain error (see [`discover`]'s module documentation), and around a G
+/// that integrates when the given one's zero cancels its integrator ([`restore`]).
 fn discover_with(
     nominal: &Nominal,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
     second_pass: bool,
+) -> Result<Discovery> {
+    let first = discover_once(nominal, est, val, settings, second_pass, false)?;
+    if !second_pass || !settings.refine_nominal || !nominal.known_maps().is_empty() {
+        return Ok(first);
+    }
+    let Some(cancelled) = cancelled_integrator(nominal) else {
+        return Ok(first);
+    };
+    let Some(start) = nominal
+        .polynomial()
+        .and_then(|g| restore::integrating_start(g, est, settings))
+    else {
+        return Ok(first);
+    };
+    let second = Nominal::from_polynomial(&start)
+        .and_then(|n| discover_once(&n, est, val, settings, true, true));
+    match second {
+        Ok(second) => {
+            let mut d = restore::better(first, second, nominal, &start, val, settings)?;
+            if let Some(f) = d.finding.as_mut()
+                && !f.remarks.contains(&cancelled)
+            {
+                f.remarks.insert(0, cancelled);
+            }
+            Ok(d)
+        }
+        Err(_) => Ok(first),
+    }
+}
+
+/// One search around `nominal` (see [`discover_with`]); with `uncertain_g` every location is
+/// refined jointly with G, as behind a G whose zero cancels its integrator.
+fn discover_once(
+    nominal: &Nominal,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    second_pass: bool,
+    uncertain_g: bool,
 ) -> Result<Discovery> {
     let t0 = Instant::now();
     check_records(est, val)?;
@@ -580,7 +625,7 @@ fn discover_with(
         // A map of the rate depends on the direction of motion and so imitates hysteresis;
         // with G refitted around it, it imitates a backlash well enough to hide it.
         && fitted.first().is_some_and(|f| {
-            cancelled.is_some() || f.result.location != Location::RateFeedback
+            uncertain_g || cancelled.is_some() || f.result.location != Location::RateFeedback
         })
     {
         // A hysteresis is partly a phase lag, which a refitted G absorbs: when a fit about as
@@ -601,7 +646,11 @@ fn discover_with(
         // location is refined with it, its rate included, and the refits compete. The closed
         // loop itself says little about the direction of motion that a refitted rate map
         // could hide (on the physics generator no closed-loop backlash is lost so).
-        let joint = if cancelled.is_some() { fitted.len() } else { 1 };
+        let joint = if uncertain_g || cancelled.is_some() {
+            fitted.len()
+        } else {
+            1
+        };
         let refitted: Vec<Fitted> = fitted
             .drain(..joint)
             .map(|f| refine::refine_jointly(g, f.input_noise, f, est, val, required, settings))
