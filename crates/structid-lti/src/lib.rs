@@ -47,6 +47,7 @@
 pub mod error;
 pub mod kalman;
 mod long;
+mod minimal;
 pub mod operator;
 pub mod records;
 mod riccati;

@@ -260,9 +260,16 @@ pub(crate) fn gram(
     let mut systems = Vec::with_capacity(problem.blocks().len());
     for (bi, b) in problem.blocks().iter().enumerate() {
         let path = record_state_space(b.path.as_ref()).expect("checked above");
+        // The series connection carries the noise model's states in the path and the plant's in
+        // the filter when both come from one model (order 10 where 5 is minimal): the blocked
+        // recursion's cost grows with the order, so the hidden states are removed.
         let sys = match &whitening {
-            Whitening::Kalman(k) if folded => k.longest().steady_state_filter().series(path)?,
-            _ => path.clone(),
+            Whitening::Kalman(k) if folded => k
+                .longest()
+                .steady_state_filter()
+                .series(path)?
+                .minimal_realisation(),
+            _ => path.minimal_realisation(),
         };
         let mi = dims[bi];
         let per = mi.div_ceil(parts);
