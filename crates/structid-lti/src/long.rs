@@ -19,7 +19,7 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use crate::operator::{BlockedRecursion, horizon};
 use crate::state_space::StateSpace;
 
-/// Block length of the long-signal recursion.
+/// Block length below which a record counts as short (the per-sample recursion is as fast).
 const LONG_BLOCK: usize = 64;
 
 /// Below this many blocks the per-sample recursion is as fast.
@@ -117,7 +117,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 impl StateSpace {
     /// `y = T u` for one long signal (zero initial state), by a blocked recursion: the record
-    /// cut into blocks of 64 samples becomes the columns of a matrix U, the outputs of all
+    /// cut into blocks of 16–64 samples (about twice the order) becomes the columns of a matrix U, the outputs of all
     /// blocks are one matrix product `[T_b Γ]·[U; S]`, and only the block states S run
     /// serially. The same values as
     /// [`LinearSystem::apply`](crate::LinearSystem::apply) up to rounding, many times faster on
@@ -139,7 +139,7 @@ impl StateSpace {
             crate::LinearSystem::apply(self, u, y);
             return;
         }
-        self.blocked_with(LONG_BLOCK, false)
+        self.blocked_with(crate::stream::stream_block(self.order()), false)
             .run_signal(len, u, y, None);
     }
 
@@ -152,7 +152,7 @@ impl StateSpace {
             crate::LinearSystem::apply_adjoint(self, y, u);
             return;
         }
-        self.blocked_with(LONG_BLOCK, true)
+        self.blocked_with(crate::stream::stream_block(self.order()), true)
             .run_signal(len, y, u, None);
     }
 
@@ -169,7 +169,7 @@ impl StateSpace {
         len: usize,
         x0: &[f64],
     ) -> Vec<f64> {
-        self.blocked_with(LONG_BLOCK, adjoint)
+        self.blocked_with(crate::stream::stream_block(self.order()), adjoint)
             .run_signal(len, x, y, Some(x0))
     }
 }

@@ -106,11 +106,7 @@ impl StateSpace {
         // observable subspace = reachable subspace of the dual (Aᵀ, Cᵀ)
         let w = reachable_basis(&a1.transpose(), &c1.transpose());
         let (a2, b2, c2) = if w.ncols() < a1.nrows() {
-            (
-                w.transpose() * &a1 * &w,
-                w.transpose() * &b1,
-                &c1 * &w,
-            )
+            (w.transpose() * &a1 * &w, w.transpose() * &b1, &c1 * &w)
         } else {
             (a1, b1, c1)
         };
@@ -211,7 +207,10 @@ mod tests {
             let err = max_rel(&a0, &a1);
             assert!(err <= 1e-12, "seed {seed} (adjoint): {err:e}");
         }
-        assert!(minimal >= 38, "{minimal} of 40 reduced to the minimal order");
+        assert!(
+            minimal >= 38,
+            "{minimal} of 40 reduced to the minimal order"
+        );
         let g = random_stable_system(3, 4, 1, 1, 0.9);
         let r = g.minimal_realisation();
         assert_eq!(r.a(), g.a());

@@ -70,6 +70,10 @@ impl fmt::Debug for Penalty {
     }
 }
 
+/// Gram columns per panel of [`QuadraticPenalty::gram_times`] (narrow: the panel adds to the
+/// exact solver's L×L memory).
+const GRAM_TIMES_PANEL: usize = 64;
+
 /// A quadratic penalty wᵀK⁻¹w given through its Gram matrix K (L × L).
 pub trait QuadraticPenalty: Send + Sync {
     /// Number of sample points L.
@@ -87,6 +91,28 @@ pub trait QuadraticPenalty: Send + Sync {
     /// Writes the whole K (L × L) into `out`; override to exploit symmetry.
     fn fill(&self, out: faer::MatMut<'_, f64>) {
         self.fill_columns(0..self.len(), out);
+    }
+
+    /// K·α (L values) without storing K: by default from panels of
+    /// [`QuadraticPenalty::fill_columns`]; override to exploit symmetry.
+    fn gram_times(&self, alpha: &[f64]) -> Vec<f64> {
+        let len = self.len();
+        let panel = GRAM_TIMES_PANEL.min(len).max(1);
+        let mut out = vec![0.0; len];
+        let mut scratch = vec![0.0; len * panel];
+        for j0 in (0..len).step_by(panel) {
+            let w = panel.min(len - j0);
+            let g = &mut scratch[..len * w];
+            self.fill_columns(
+                j0..j0 + w,
+                faer::MatMut::from_row_major_slice_mut(g, len, w),
+            );
+            let a = &alpha[j0..j0 + w];
+            for (o, row) in out.iter_mut().zip(g.chunks_exact(w)) {
+                *o += row.iter().zip(a).map(|(x, y)| x * y).sum::<f64>();
+            }
+        }
+        out
     }
 
     /// The interpolant N̂(z) = Σ_k α_k K(z, z_k) for the dual coefficients α (ŵ = Kα).
@@ -286,6 +312,46 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
 
     fn fill(&self, out: faer::MatMut<'_, f64>) {
         self.kernel.fill_gram(&self.z, out);
+    }
+
+    /// Half the kernel evaluations of the default: each panel of columns j₀..j₀+w is evaluated
+    /// on rows 0..j₀+w only (the kernel on the leading samples), and the entries above the
+    /// panel's diagonal block also stand for their mirror images K_ji = K_ij.
+    fn gram_times(&self, alpha: &[f64]) -> Vec<f64> {
+        let len = self.z.len();
+        let p = self.z.channels();
+        let panel = GRAM_TIMES_PANEL.min(len).max(1);
+        let mut out = vec![0.0; len];
+        let mut scratch = vec![0.0; len * panel];
+        let data = self.z.as_slice();
+        for j0 in (0..len).step_by(panel) {
+            let w = panel.min(len - j0);
+            let rows = j0 + w;
+            let lead = Signal::new(p, data[..rows * p].to_vec())
+                .expect("a prefix of a signal is a signal");
+            let g = &mut scratch[..rows * w];
+            self.kernel.fill_gram_columns(
+                &lead,
+                j0..j0 + w,
+                faer::MatMut::from_row_major_slice_mut(g, rows, w),
+            );
+            let a = &alpha[j0..j0 + w];
+            let (above, block) = g.split_at(j0 * w);
+            let mut back = vec![0.0; w];
+            for (i, row) in above.chunks_exact(w).enumerate() {
+                out[i] += row.iter().zip(a).map(|(x, y)| x * y).sum::<f64>();
+                let ai = alpha[i];
+                back.iter_mut().zip(row).for_each(|(b, x)| *b += x * ai);
+            }
+            for (ii, row) in block.chunks_exact(w).enumerate() {
+                out[j0 + ii] += row.iter().zip(a).map(|(x, y)| x * y).sum::<f64>();
+            }
+            out[j0..j0 + w]
+                .iter_mut()
+                .zip(&back)
+                .for_each(|(o, b)| *o += b);
+        }
+        out
     }
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {

@@ -77,6 +77,7 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
+use crate::solver::exact::SquareBuffer;
 
 /// Points evaluated per batch by [`Posterior::std`]: the workspace is BATCH·(L + 2·n) f64 on
 /// the exact path.
@@ -107,7 +108,7 @@ pub(crate) struct DenseBlock {
 struct Dense {
     /// M's buffer after the in-place Cholesky: the lower triangle of its leading nk×nk block is
     /// L_M (the rest is not read).
-    factor: Mat<f64>,
+    factor: SquareBuffer,
     /// Live rows (indices into the L·n_y stacked output) in the order of the factor.
     kept: Vec<usize>,
     /// L·n_y.
@@ -154,7 +155,7 @@ impl Posterior {
     /// x₀ is estimated; `quad` = rᵀP·r (= (r − O·x̂₀)ᵀλ); `lb` = L·β. Errs with the reason when
     /// no posterior can be formed (no degrees of freedom left for s²).
     pub(crate) fn dense(
-        factor: Mat<f64>,
+        factor: SquareBuffer,
         kept: Vec<usize>,
         len: usize,
         blocks: Vec<DenseBlock>,
@@ -256,7 +257,7 @@ impl Posterior {
     pub fn memory_bytes(&self) -> u64 {
         let words = match &self.inner {
             Inner::Dense(d) => {
-                d.factor.nrows() * d.factor.ncols()
+                d.factor.nrows() * d.factor.nrows()
                     + d.free_basis.as_ref().map_or(0, |u| u.nrows() * u.ncols())
                     + d.kept.len()
             }

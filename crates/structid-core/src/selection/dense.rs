@@ -147,9 +147,9 @@ impl DenseScore {
             return Ok(score);
         }
         let mut b = Mat::<f64>::zeros(n, n);
-        assemble(problem, &penalties, 0.0, &mut b);
+        assemble(problem, &penalties, 0.0, b.as_mut());
         let mut a = Mat::<f64>::zeros(n, n);
-        add_noise_term(problem.noise(), len, 1.0, &mut a);
+        add_noise_term(problem.noise(), len, 1.0, a.as_mut());
         // Rows that depend on neither e nor w are identities 0 = r: leave them out.
         let scale = (0..n).map(|i| a[(i, i)] + b[(i, i)]).fold(0.0, f64::max);
         let kept: Vec<usize> = (0..n)
@@ -187,7 +187,7 @@ impl DenseScore {
         };
         let n = self.r.len();
         let mut b = Mat::<f64>::zeros(n, n);
-        assemble(&d.problem, &d.penalties, 0.0, &mut b);
+        assemble(&d.problem, &d.penalties, 0.0, b.as_mut());
         whiten_rows(b.as_mut(), d.w.as_ref());
         whiten_rows(b.as_mut().transpose_mut(), d.w.as_ref());
         let mut low = LowRank::new(&b, &self.r);

@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{
-    LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
+    LltParams, LltRegularization, cholesky_in_place, cholesky_in_place_scratch,
 };
 use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
 use faer::reborrow::{Reborrow, ReborrowMut};
@@ -41,11 +41,56 @@ use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 /// Gram columns are generated and pushed through T_i in panels of this many columns.
 const PANEL: usize = 256;
 
-/// Gram columns per panel when ŵ = K·α is recovered after the factorisation.
-const RECOVERY_PANEL: usize = 64;
-
 /// Relative diagonal jitters tried, in order, when M is numerically singular.
 const JITTER_LADDER: [f64; 3] = [1e-13, 1e-10, 1e-7];
+
+/// Block size of the Cholesky factorisation of M. faer's default (128) makes one rank-128
+/// update of the trailing matrix per block, each a pass over up to L×L memory; 256 halves
+/// those passes and factored a 4000² SPD matrix 5–8 % faster on the project machine.
+const CHOLESKY_BLOCK: usize = 256;
+
+/// An n×n column-major f64 matrix in zero-initialised memory from the allocator, its first
+/// column 64-byte aligned. For large sizes the allocator maps fresh pages, which the OS
+/// provides zeroed, so unlike `Mat::zeros` there is no serial zeroing pass over the L×L
+/// memory before M is filled (at L = 4000 that pass cost about as much as the in-place
+/// Toeplitz passes of the assembly).
+pub(crate) struct SquareBuffer {
+    data: Vec<f64>,
+    offset: usize,
+    n: usize,
+}
+
+impl SquareBuffer {
+    /// An n×n matrix of zeros.
+    pub(crate) fn zeros(n: usize) -> Self {
+        const ALIGN_WORDS: usize = 8;
+        let data = vec![0.0; n * n + ALIGN_WORDS];
+        // the address only to find the aligned start
+        let addr = data.as_ptr() as usize;
+        let offset = (64 - addr % 64) % 64 / 8;
+        Self { data, offset, n }
+    }
+
+    /// The matrix.
+    pub(crate) fn as_ref(&self) -> MatRef<'_, f64> {
+        MatRef::from_column_major_slice(
+            &self.data[self.offset..][..self.n * self.n],
+            self.n,
+            self.n,
+        )
+    }
+
+    /// The matrix, mutably.
+    pub(crate) fn as_mut(&mut self) -> MatMut<'_, f64> {
+        let n = self.n;
+        MatMut::from_column_major_slice_mut(&mut self.data[self.offset..][..n * n], n, n)
+    }
+
+    /// Its order n.
+    pub(crate) fn nrows(&self) -> usize {
+        self.n
+    }
+}
 
 /// Estimated peak memory of the exact solver in bytes.
 pub fn peak_memory_bytes(
@@ -162,18 +207,16 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
 
     // --- assemble M, leave out samples that depend on neither e nor w, factor -------------
     let lb = len as f64 * beta;
-    // M is factorised in place, so it gets faer's aligned allocation. Q = T·K is never
-    // stored whole: see `assemble`.
-    let mut m = Mat::<f64>::zeros(n, n);
-    // Gram panels for ŵ = K·α (narrow: this buffer adds to M's memory).
-    let panel = RECOVERY_PANEL.min(len);
+    // M is factorised in place. Q = T·K is never stored whole: see `assemble`.
+    let mut m = SquareBuffer::zeros(n);
     let nblocks = problem.blocks().len();
-    let mut gram = vec![0.0; len * panel];
     let r_data = problem.residual().as_slice();
     let mut t_assembled;
     let par = faer::get_global_parallelism();
+    let mut llt_params: LltParams = faer::Auto::<f64>::auto();
+    llt_params.block_size = CHOLESKY_BLOCK;
     let mut buf = MemBuffer::new(
-        cholesky_in_place_scratch::<f64>(n, par, Default::default())
+        cholesky_in_place_scratch::<f64>(n, par, llt_params.into())
             .or(solve_in_place_scratch::<f64>(n, 1 + nx, par)),
     );
     let stack = MemStack::new(&mut buf);
@@ -182,8 +225,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let mut jitter = 0.0;
     let mut attempt = 0;
     let (kept, dropped, max_diag) = loop {
-        assemble(problem, &penalties, lb, &mut m);
-        let (kept, dropped, max_diag) = compact_live_rows(&mut m, problem.held_out())?;
+        assemble(problem, &penalties, lb, m.as_mut());
+        let (kept, dropped, max_diag) = compact_live_rows(m.as_mut(), problem.held_out())?;
         let nk = kept.len();
         let mut mk = m.as_mut().submatrix_mut(0, 0, nk, nk);
         if jitter > 0.0 {
@@ -197,7 +240,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             LltRegularization::default(),
             par,
             stack,
-            Default::default(),
+            llt_params.into(),
         ) {
             Ok(_) => break (kept, dropped, max_diag),
             Err(e) => {
@@ -297,7 +340,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     for (block, pen) in problem.blocks().iter().zip(penalties) {
         let mut alpha = vec![0.0; len];
         block.path.apply_adjoint(&lambda, &mut alpha);
-        let w_hat = gram_times(pen.as_ref(), &alpha, &mut gram, panel);
+        let w_hat = pen.gram_times(&alpha);
         // D_i = ŵᵀK⁻¹ŵ = αᵀKα = αᵀŵ.
         let dispersion_value: f64 = alpha.iter().zip(&w_hat).map(|(a, w)| a * w).sum();
         parts.push(BlockPart {
@@ -417,7 +460,7 @@ pub(crate) fn assemble(
     problem: &Problem,
     penalties: &[Box<dyn QuadraticPenalty>],
     lb: f64,
-    m: &mut Mat<f64>,
+    mut m: MatMut<'_, f64>,
 ) {
     let len = problem.len();
     let n = m.nrows();
@@ -441,9 +484,9 @@ pub(crate) fn assemble(
             .as_state_space()
             .expect("checked above: every path is a state-space system");
         if bi == 0 && n == len && ss.inputs() == 1 && ss.outputs() == 1 {
-            pen.fill(m.as_mut());
-            ss.apply_columns_in_place(m.as_mut().transpose_mut(), false);
-            ss.apply_columns_in_place(m.as_mut(), false);
+            pen.fill(m.rb_mut());
+            ss.apply_columns_in_place(m.rb_mut().transpose_mut(), false);
+            ss.apply_columns_in_place(m.rb_mut(), false);
             continue;
         }
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
@@ -465,7 +508,7 @@ pub(crate) fn assemble(
             // Time block j₀..j₀+w of Qᵀ (w rows, n columns) → rows of M.
             let x = q.rb().transpose();
             let out = m
-                .as_mut()
+                .rb_mut()
                 .subrows_mut(j0 * ny_of(n, len), w * ny_of(n, len));
             let (x0, x1) = x.split_at_col(half);
             let (o0, o1) = out.split_at_col_mut(half);
@@ -493,7 +536,7 @@ pub(crate) fn assemble_with_q(
     problem: &Problem,
     penalties: &[Box<dyn QuadraticPenalty>],
     lb: f64,
-    m: &mut Mat<f64>,
+    mut m: MatMut<'_, f64>,
     mut q: MatMut<'_, f64>,
     gram: &mut [f64],
 ) {
@@ -504,7 +547,7 @@ pub(crate) fn assemble_with_q(
             // M's buffer is free before the first block: hold the whole K there (filled using
             // its symmetry), so Q = T·K is one pass; K's transpose view is row-major, the
             // layout the blocked recursion streams fastest, and equals K.
-            let mut k = m.as_mut().submatrix_mut(0, 0, len, len);
+            let mut k = m.rb_mut().submatrix_mut(0, 0, len, len);
             pen.fill(k.rb_mut());
             block
                 .path
@@ -524,7 +567,7 @@ pub(crate) fn assemble_with_q(
         let accum = if bi == 0 { Accum::Replace } else { Accum::Add };
         block
             .path
-            .apply_columns(q.rb().transpose(), m.as_mut(), accum, 1.0);
+            .apply_columns(q.rb().transpose(), m.rb_mut(), accum, 1.0);
     }
     add_noise_term(problem.noise(), len, lb, m);
 }
@@ -533,7 +576,7 @@ pub(crate) fn assemble_with_q(
 /// and compacts the others, except held-out rows (cross-validation), into the leading block.
 /// Returns (kept, dropped, max diag); held-out rows are in neither list.
 fn compact_live_rows(
-    m: &mut Mat<f64>,
+    mut m: MatMut<'_, f64>,
     held_out: Option<&[bool]>,
 ) -> Result<(Vec<usize>, Vec<usize>, f64)> {
     let n = m.nrows();
@@ -570,7 +613,12 @@ fn compact_live_rows(
 
 /// M += L·β·T_ye·T_yeᵀ: a block-diagonal D_ye·D_yeᵀ for a static noise path, otherwise built
 /// panel by panel from T_yeᵀ applied to identity columns.
-pub(crate) fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &mut Mat<f64>) {
+pub(crate) fn add_noise_term(
+    noise: &dyn LinearSystem,
+    len: usize,
+    lb: f64,
+    mut m: MatMut<'_, f64>,
+) {
     if lb == 0.0 {
         return;
     }
@@ -615,32 +663,11 @@ pub(crate) fn add_noise_term(noise: &dyn LinearSystem, len: usize, lb: f64, m: &
         );
         noise.apply_columns(
             x.as_ref().subcols(0, w),
-            m.as_mut().subcols_mut(j0, w),
+            m.rb_mut().subcols_mut(j0, w),
             Accum::Add,
             lb,
         );
     }
-}
-
-/// K·α computed panel by panel from the Gram columns (no L×L storage).
-fn gram_times(
-    pen: &dyn QuadraticPenalty,
-    alpha: &[f64],
-    scratch: &mut [f64],
-    panel: usize,
-) -> Vec<f64> {
-    let len = alpha.len();
-    let mut out = vec![0.0; len];
-    for j0 in (0..len).step_by(panel.max(1)) {
-        let w = panel.min(len - j0);
-        let g = &mut scratch[..len * w];
-        pen.fill_columns(j0..j0 + w, MatMut::from_row_major_slice_mut(g, len, w));
-        let a = &alpha[j0..j0 + w];
-        for (o, row) in out.iter_mut().zip(g.chunks_exact(w)) {
-            *o += row.iter().zip(a).map(|(x, y)| x * y).sum::<f64>();
-        }
-    }
-    out
 }
 
 #[cfg(test)]
@@ -694,18 +721,49 @@ mod tests {
                 &problem,
                 &penalties,
                 0.3,
-                &mut want,
+                want.as_mut(),
                 MatMut::from_column_major_slice_mut(&mut q, n, len),
                 &mut gram,
             );
             // a dirty buffer, as on a re-assembly after a failed factorisation
             let mut got = Mat::<f64>::from_fn(n, n, |i, j| (i + 2 * j) as f64);
-            assemble(&problem, &penalties, 0.3, &mut got);
+            assemble(&problem, &penalties, 0.3, got.as_mut());
             let err = (&want - &got).norm_max() / want.norm_max();
             assert!(
                 err <= 1e-12,
                 "L = {len}, n_y = {ny}, {blocks} blocks: {err:e}"
             );
+        }
+    }
+
+    /// K·α by the Gaussian penalty's symmetric panels equals the product with the whole K to
+    /// 1e-12 relative, for one and two input channels and lengths that are and are not
+    /// multiples of the panel width.
+    #[test]
+    fn the_symmetric_gram_product_equals_the_dense_one() {
+        use crate::dispersion::{Dispersion, Penalty};
+        for (len, p) in [(1, 1), (63, 1), (64, 1), (200, 1), (129, 2)] {
+            let z = Signal::from_fn(len, p, |k, c| ((k * (5 + c) + 3) % 17) as f64 / 8.0 - 1.0);
+            let Penalty::Quadratic(pen) = KernelDispersion::gaussian(0.4)
+                .unwrap()
+                .penalty(&z)
+                .unwrap()
+            else {
+                panic!("a kernel penalty is quadratic");
+            };
+            let alpha: Vec<f64> = (0..len).map(|k| ((k * 7) % 13) as f64 - 6.0).collect();
+            let mut k = Mat::<f64>::zeros(len, len);
+            pen.fill_columns(0..len, k.as_mut());
+            let want: Vec<f64> = (0..len)
+                .map(|i| (0..len).map(|j| k[(i, j)] * alpha[j]).sum())
+                .collect();
+            let got = pen.gram_times(&alpha);
+            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let err = want
+                .iter()
+                .zip(&got)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(err <= 1e-12 * scale, "L = {len}, p = {p}: {err:e}");
         }
     }
 

@@ -565,15 +565,34 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         }
         Whitening::Kalman(k) => {
             // Record by record: ê = T_yeᵀ·WᵀW·ρ with each record's own whitening.
+            // Without a transient, W is its steady-state filter from rest, so the filter and the
+            // noise path go through the recursions in minimal realisations (they carry each
+            // other's states when both come from one model: order 5 where 1 is minimal).
             let mut w1 = vec![0.0; len * ny];
             let mut w2 = vec![0.0; len * ny];
-            let ss = record_state_space(noise);
+            let ss = record_state_space(noise).map(|s| s.minimal_realisation());
+            let filters: Vec<Option<structid_lti::StateSpace>> = k
+                .whiteners
+                .iter()
+                .map(|kw| {
+                    (kw.transient_len() == 0)
+                        .then(|| kw.steady_state_filter().minimal_realisation())
+                })
+                .collect();
             for (i, w) in problem.record_bounds().windows(2).enumerate() {
                 let (rows, ins) = (w[0] * ny..w[1] * ny, w[0] * ne..w[1] * ne);
-                let kr = k.of(i);
-                kr.whiten_long(&rho[rows.clone()], &mut w1[rows.clone()]);
-                kr.whiten_adjoint_long(&w1[rows.clone()], &mut w2[rows.clone()]);
-                match ss {
+                match &filters[k.of_record[i]] {
+                    Some(f) => {
+                        f.apply_long(&rho[rows.clone()], &mut w1[rows.clone()]);
+                        f.apply_adjoint_long(&w1[rows.clone()], &mut w2[rows.clone()]);
+                    }
+                    None => {
+                        let kr = k.of(i);
+                        kr.whiten_long(&rho[rows.clone()], &mut w1[rows.clone()]);
+                        kr.whiten_adjoint_long(&w1[rows.clone()], &mut w2[rows.clone()]);
+                    }
+                }
+                match &ss {
                     Some(ss) => ss.apply_adjoint_long(&w2[rows], &mut e_hat[ins]),
                     None => noise.apply_adjoint(&w2[rows], &mut e_hat[ins]),
                 }
@@ -651,11 +670,12 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     })
 }
 
-/// `y = T u` for one long signal: the blocked recursion for a state-space operator, the
-/// per-sample one otherwise.
+/// `y = T u` for one long signal: the blocked recursion of a minimal realisation for a
+/// state-space operator (a path or noise model that shares one model's state vector carries
+/// the other's states), the per-sample recursion otherwise.
 fn apply_long(sys: &dyn LinearSystem, u: &[f64], y: &mut [f64]) {
     match sys.as_state_space() {
-        Some(ss) => ss.apply_long(u, y),
+        Some(ss) => ss.minimal_realisation().apply_long(u, y),
         None => sys.apply(u, y),
     }
 }
