@@ -523,6 +523,58 @@ impl FeatureMap for FourierKernel {
         }
     }
 
+    /// One input: the harmonics up to the last column asked for, 8 samples at a time, by the
+    /// operations of [`eval_rows`](FeatureMap::eval_rows), hence the same values.
+    fn eval_cols(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: std::ops::Range<usize>,
+        scale: &[f64],
+        rows: &mut [f64],
+    ) {
+        let (m, w) = (self.dim(), cols.len());
+        if w == 0 {
+            return;
+        }
+        if self.affine.len() != 1 || z.channels() != 1 || m.is_multiple_of(2) {
+            let mut full = vec![0.0; m];
+            for (k, row) in rows.chunks_exact_mut(w).enumerate() {
+                self.eval_rows(z, t0 + k, scale, &mut full);
+                row.copy_from_slice(&full[cols.clone()]);
+            }
+            return;
+        }
+        let a = cols.start;
+        let zs = &z.as_slice()[t0..t0 + rows.len() / w];
+        for (zl, block) in zs.chunks(LANES).zip(rows.chunks_mut(LANES * w)) {
+            let (c1, s1) = self.unit_angles(zl);
+            let (mut c, mut s) = ([1.0; LANES], [0.0; LANES]);
+            if a == 0 {
+                for row in block.chunks_exact_mut(w) {
+                    row[0] = scale[0];
+                }
+            }
+            // harmonic h fills columns 1 + 2h (cos) and 2 + 2h (sin)
+            for h in 0..(cols.end.saturating_sub(1)).div_ceil(2) {
+                rotate(&mut c, &mut s, &c1, &s1);
+                let (jc, js) = (1 + 2 * h, 2 + 2 * h);
+                if js < a {
+                    continue;
+                }
+                let (sc, ss) = (scale[jc], scale[js]);
+                for (l, row) in block.chunks_exact_mut(w).enumerate() {
+                    if cols.contains(&jc) {
+                        row[jc - a] = c[l] * sc;
+                    }
+                    if cols.contains(&js) {
+                        row[js - a] = s[l] * ss;
+                    }
+                }
+            }
+        }
+    }
+
     /// One input: Σ coef_j·ψ_j for 8 samples at a time, summed in feature order as
     /// the default does.
     fn combine_rows(&self, z: &Signal, t0: usize, coef: &[f64], out: &mut [f64]) {
@@ -559,7 +611,7 @@ impl FeatureMap for FourierKernel {
         if p == 1 {
             // [1, cos 2πt, sin 2πt, cos 4πt, …] by the angle-addition recurrence; the tensor
             // and additive orders coincide for one input.
-            let (s1, c1) = (2.0 * PI * self.unit(z, 0)).sin_cos();
+            let (s1, c1) = sin_cos_turns(self.unit(z, 0));
             out[0] = 1.0;
             let (mut c, mut s) = (1.0, 0.0);
             for pair in out[1..].chunks_exact_mut(2) {
@@ -573,7 +625,7 @@ impl FeatureMap for FourierKernel {
         let mut trig: Vec<Vec<(f64, f64)>> = Vec::with_capacity(p);
         for j in 0..p {
             let t = self.unit(z, j);
-            let (s1, c1) = (2.0 * PI * t).sin_cos();
+            let (s1, c1) = sin_cos_turns(t);
             let n = self.lambda[j].len();
             let mut v = Vec::with_capacity(n);
             let (mut c, mut s) = (1.0, 0.0);
@@ -626,12 +678,55 @@ fn rotate(c: &mut [f64; LANES], s: &mut [f64; LANES], c1: &[f64; LANES], s1: &[f
     }
 }
 
+/// (sin 2πu, cos 2πu) to about one ulp, inlined (the feature solver takes it once per sample
+/// and feature part, where libm's call cost about a tenth of the pass). u is reduced by
+/// quarter turns, u = q/4 + r with |r| ≤ 1/8 (exact by Sterbenz's lemma), and the Taylor
+/// series of sin and cos at x = 2πr (|x| ≤ π/4) are truncated past x¹⁵ and x¹⁶, whose next
+/// terms are below 5e-17. Reducing u rather than 2πu also avoids the rounding of 2π·u.
+#[inline]
+pub(crate) fn sin_cos_turns(u: f64) -> (f64, f64) {
+    let q = (4.0 * u).round();
+    let x = 2.0 * PI * (u - 0.25 * q);
+    let x2 = x * x;
+    // 1/k! for the odd (sin) and even (cos) powers
+    const S: [f64; 7] = [
+        -1.0 / 6.0,
+        1.0 / 120.0,
+        -1.0 / 5040.0,
+        1.0 / 362_880.0,
+        -1.0 / 39_916_800.0,
+        1.0 / 6_227_020_800.0,
+        -1.0 / 1_307_674_368_000.0,
+    ];
+    const C: [f64; 8] = [
+        -1.0 / 2.0,
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40_320.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 87_178_291_200.0,
+        1.0 / 20_922_789_888_000.0,
+    ];
+    let ps = S.iter().rev().fold(0.0, |acc, &k| acc * x2 + k);
+    let pc = C.iter().rev().fold(0.0, |acc, &k| acc * x2 + k);
+    let sin = x + x * x2 * ps;
+    let cos = 1.0 + x2 * pc;
+    // a finite u has a finite q; NaN and infinities give NaN either way
+    match (q as i64).rem_euclid(4) {
+        0 => (sin, cos),
+        1 => (cos, -sin),
+        2 => (-sin, -cos),
+        _ => (-cos, sin),
+    }
+}
+
 impl FourierKernel {
     /// cos and sin of 2πt for up to [`LANES`] samples of a one-input map (unused lanes: t = 0).
     fn unit_angles(&self, z: &[f64]) -> ([f64; LANES], [f64; LANES]) {
         let (mut c1, mut s1) = ([1.0; LANES], [0.0; LANES]);
         for (l, zv) in z.iter().enumerate() {
-            (s1[l], c1[l]) = (2.0 * PI * self.unit(std::slice::from_ref(zv), 0)).sin_cos();
+            (s1[l], c1[l]) = sin_cos_turns(self.unit(std::slice::from_ref(zv), 0));
         }
         (c1, s1)
     }
@@ -766,6 +861,27 @@ mod tests {
         Signal::from_channels(&[v.to_vec()]).unwrap()
     }
 
+    /// The inlined sine and cosine of 2πu agree with libm's of the rounded 2π·u to 2e-15
+    /// (absolute; libm's argument alone carries up to half an ulp of 2π·u, 9e-16 at two turns)
+    /// over two turns either way, at the quadrant boundaries included, and propagate NaN.
+    #[test]
+    fn sin_cos_of_turns_matches_libm() {
+        let mut worst = 0.0f64;
+        for k in -20_000..=20_000 {
+            let u0 = k as f64 / 10_000.0;
+            for u in [u0, u0 + 1e-9, (k % 17) as f64 * 0.125] {
+                let (s, c) = sin_cos_turns(u);
+                let (ls, lc) = (2.0 * PI * u).sin_cos();
+                worst = worst.max((s - ls).abs()).max((c - lc).abs());
+                assert!((s * s + c * c - 1.0).abs() < 4e-16, "u = {u}");
+            }
+        }
+        assert!(worst < 2e-15, "{worst:e}");
+        assert_eq!(sin_cos_turns(0.25), (1.0, 0.0));
+        assert!(sin_cos_turns(f64::NAN).0.is_nan());
+        assert!(sin_cos_turns(f64::INFINITY).1.is_nan());
+    }
+
     /// The batched evaluations equal the single-sample ones exactly (same operations), the
     /// harmonics by recurrence equal cos/sin of nθ evaluated directly, and the default trait
     /// methods (two inputs) agree with the overrides' contract.
@@ -805,6 +921,23 @@ mod tests {
                 }
             }
         }
+        // column ranges (what the feature solver's threads evaluate): the same values as the
+        // whole rows, bit for bit
+        for (t0, count) in [(0, 203), (17, 9)] {
+            let mut rows = vec![0.0; count * m];
+            k.eval_rows(&z, t0, &scale, &mut rows);
+            for cols in [0..32, 32..63, 0..63, 1..2, 2..3, 5..6, 62..63, 7..7] {
+                let w = cols.len();
+                let mut part = vec![0.0; count * w];
+                k.eval_cols(&z, t0, cols.clone(), &scale, &mut part);
+                for i in 0..count {
+                    assert_eq!(
+                        &part[i * w..(i + 1) * w],
+                        &rows[i * m + cols.start..i * m + cols.end]
+                    );
+                }
+            }
+        }
         // two inputs: the trait's per-sample defaults
         let z2 = Signal::from_channels(&[zs.clone(), zs.iter().map(|v| v * v).collect()]).unwrap();
         let k2 = FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.5 })
@@ -822,6 +955,11 @@ mod tests {
             for j in 0..m2 {
                 assert_eq!(rows[i * m2 + j], 2.0 * psi[j]);
             }
+        }
+        let mut part = vec![0.0; 10 * 3];
+        k2.eval_cols(&z2, 3, 1..4, &scale2, &mut part);
+        for i in 0..10 {
+            assert_eq!(&part[i * 3..(i + 1) * 3], &rows[i * m2 + 1..i * m2 + 4]);
         }
     }
 

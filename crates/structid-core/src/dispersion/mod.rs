@@ -190,6 +190,32 @@ pub trait FeatureMap: Send + Sync {
         }
     }
 
+    /// [`eval_rows`](Self::eval_rows) for the features `cols` only: writes
+    /// `scale_j·ψ_j(z_t)` for `j` in `cols` into the rows of the row-major `rows`
+    /// (`cols.len()` values per sample; `scale` has all m weights). The feature solver's
+    /// threads evaluate the columns each of them pushes through the paths, so that no
+    /// evaluated feature crosses between cores. The default evaluates whole rows with
+    /// [`eval_rows`](Self::eval_rows) and keeps the columns asked for; the values are the
+    /// same.
+    fn eval_cols(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: Range<usize>,
+        scale: &[f64],
+        rows: &mut [f64],
+    ) {
+        let (m, w) = (self.dim(), cols.len());
+        if w == 0 {
+            return;
+        }
+        let mut full = vec![0.0; m];
+        for (k, row) in rows.chunks_exact_mut(w).enumerate() {
+            self.eval_rows(z, t0 + k, scale, &mut full);
+            row.copy_from_slice(&full[cols.clone()]);
+        }
+    }
+
     /// Writes `Σ_j coef_j·ψ_j(z_t)` for the samples `t = t0, …, t0 + out.len() − 1` of `z`
     /// into `out` (the map's value at each sample for the coefficients `coef`, m values). The
     /// default evaluates [`eval_into`](Self::eval_into) sample by sample and sums in feature

@@ -50,10 +50,6 @@ const CHUNK: usize = 2048;
 /// Parts the pass is split into (run in parallel when rayon has the threads).
 const PARTS: usize = 2;
 
-/// Samples whose features one thread evaluates together (a multiple of the batch of
-/// [`FeatureMap::eval_rows`] implementations).
-const FEATURE_BATCH: usize = 64;
-
 /// The recursion of one part of a block's feature columns through its path (or through W·T_i
 /// when the whitening is folded in), with the state carried from chunk to chunk.
 struct PathJob {
@@ -63,6 +59,10 @@ struct PathJob {
     first: usize,
     /// The stream (its column count is the part's width).
     stream: ColumnStream,
+    /// This part's features of a chunk (row-major, chunk × width), evaluated on the thread
+    /// that pushes them: a buffer shared between threads would move between the cores'
+    /// caches every chunk.
+    phi: Vec<f64>,
 }
 
 /// G += XᵀX on the lower triangle (diagonal included) of `g`, on the calling thread.
@@ -280,6 +280,7 @@ pub(crate) fn gram(
                 block: bi,
                 first: j0,
                 stream: sys.column_stream(w),
+                phi: Vec::new(),
             });
             j0 += w;
         }
@@ -309,7 +310,9 @@ pub(crate) fn gram(
         Whitening::Kalman(k) => Some(k.of(0).column_stream(if folded { tail_cols } else { cols })),
         Whitening::Static { .. } => None,
     };
-    let mut phi: Vec<Vec<f64>> = dims.iter().map(|&d| vec![0.0; chunk * d]).collect();
+    for job in jobs.iter_mut() {
+        job.phi = vec![0.0; chunk * job.stream.state().ncols()];
+    }
     let sqrt_w: Vec<Vec<f64>> = maps
         .iter()
         .map(|(f, _)| {
@@ -338,15 +341,6 @@ pub(crate) fn gram(
             }
         }
         let c = chunk.min(bounds[next_record] - t0);
-        // features of the chunk, row-major, scaled, the samples split between the threads
-        for (bi, (map, z)) in maps.iter().enumerate() {
-            let mi = dims[bi];
-            let per = c.div_ceil(parts).next_multiple_of(FEATURE_BATCH);
-            phi[bi][..c * mi]
-                .par_chunks_mut(per * mi)
-                .enumerate()
-                .for_each(|(k, rows)| map.eval_rows(z, t0 + k * per, &sqrt_w[bi], rows));
-        }
         let xc = x.as_mut().subrows_mut(0, c * ny);
         let (mut feat, mut tail) = xc.split_at_col_mut(m);
         // [O r] of the chunk: into the whitening input when folded, else into X
@@ -365,8 +359,8 @@ pub(crate) fn gram(
                 dst[(i, nx)] = r[t0 * ny + i];
             }
         }
-        // the feature columns through the paths (W·T_i when folded), the column parts in
-        // parallel
+        // the feature columns (evaluated, row-major and scaled) through the paths (W·T_i when
+        // folded), the column parts in parallel
         let mut work = Vec::with_capacity(jobs.len());
         for job in jobs.iter_mut() {
             let w = job.stream.state().ncols();
@@ -374,13 +368,14 @@ pub(crate) fn gram(
             feat = rest;
             work.push((job, part));
         }
-        let phi_ref = &phi;
-        let dims_ref = &dims;
+        let (maps_ref, sqrt_w_ref) = (&maps, &sqrt_w);
         work.into_par_iter().try_for_each(|(job, out)| {
-            let mi = dims_ref[job.block];
             let w = out.ncols();
-            let rows = faer::MatRef::from_row_major_slice(&phi_ref[job.block][..c * mi], c, mi);
-            job.stream.push(rows.subcols(job.first, w), out)
+            let (map, z) = &maps_ref[job.block];
+            let phi = &mut job.phi[..c * w];
+            map.eval_cols(z, t0, job.first..job.first + w, &sqrt_w_ref[job.block], phi);
+            let rows = faer::MatRef::from_row_major_slice(phi, c, w);
+            job.stream.push(rows, out)
         })?;
         if let Some(mask) = held_out {
             // whole samples only (checked above), so zeroing before the per-sample static
