@@ -297,15 +297,23 @@ pub(crate) fn gram(
     let tail_cols = nx + 1;
     // the lower triangle of G, one accumulator per thread (summed after the pass)
     let mut g_parts: Vec<Mat<f64>> = (0..parts).map(|_| Mat::zeros(cols, cols)).collect();
-    let mut x = Mat::<f64>::zeros(chunk * ny, cols);
+    // Two buffers of X (and of the whitening's operand): the Gram update of one chunk runs
+    // in the same parallel step as the recursions of the next, one synchronisation per chunk
+    // and four tasks to balance instead of two steps of two. Each accumulator still takes
+    // its rows of every chunk in time order, so the results do not depend on the scheduling.
+    let mut xs: [Mat<f64>; 2] = std::array::from_fn(|_| Mat::<f64>::zeros(chunk * ny, cols));
     // folded: [O r] before whitening; otherwise the whole whitened chunk
-    let mut wx = Mat::<f64>::zeros(
-        match &whitening {
-            Whitening::Kalman(_) => chunk * ny,
-            Whitening::Static { .. } => 0,
-        },
-        if folded { tail_cols } else { cols },
-    );
+    let mut wxs: [Mat<f64>; 2] = std::array::from_fn(|_| {
+        Mat::<f64>::zeros(
+            match &whitening {
+                Whitening::Kalman(_) => chunk * ny,
+                Whitening::Static { .. } => 0,
+            },
+            if folded { tail_cols } else { cols },
+        )
+    });
+    // the Gram operand is X itself, or the whitened copy when the whitening is not folded
+    let white_in_wx = matches!(whitening, Whitening::Kalman(_)) && !folded;
     let mut wstream = match &whitening {
         Whitening::Kalman(k) => Some(k.of(0).column_stream(if folded { tail_cols } else { cols })),
         Whitening::Static { .. } => None,
@@ -323,9 +331,20 @@ pub(crate) fn gram(
             }
         })
         .collect();
+    // G += XᵀX (lower triangle) for the first `rows` rows of a chunk, split between the parts
+    let gram_update = |g_parts: &mut [Mat<f64>], white: faer::MatRef<'_, f64>, rows: usize| {
+        let per = rows.div_ceil(parts);
+        g_parts.par_iter_mut().enumerate().for_each(|(k, gk)| {
+            let r0 = (k * per).min(rows);
+            gram_lower(gk.as_mut(), white.subrows(r0, per.min(rows - r0)));
+        });
+    };
+    // rows of the previous chunk whose Gram update is pending, and its buffer
+    let mut pending: Option<(usize, usize)> = None;
     // Chunks end at record boundaries, where the paths and the whitening restart from rest.
     let mut next_record = 1;
     let mut t0 = 0;
+    let mut buf = 0;
     while t0 < len {
         if t0 == bounds[next_record] {
             next_record += 1;
@@ -341,6 +360,12 @@ pub(crate) fn gram(
             }
         }
         let c = chunk.min(bounds[next_record] - t0);
+        let ([x0, x1], [w0, w1]) = (&mut xs, &mut wxs);
+        let ((x, wx), (x_prev, wx_prev)) = if buf == 0 {
+            ((x0, w0), (&*x1, &*w1))
+        } else {
+            ((x1, w1), (&*x0, &*w0))
+        };
         let xc = x.as_mut().subrows_mut(0, c * ny);
         let (mut feat, mut tail) = xc.split_at_col_mut(m);
         // [O r] of the chunk: into the whitening input when folded, else into X
@@ -360,7 +385,7 @@ pub(crate) fn gram(
             }
         }
         // the feature columns (evaluated, row-major and scaled) through the paths (W·T_i when
-        // folded), the column parts in parallel
+        // folded), the column parts in parallel, beside the previous chunk's Gram update
         let mut work = Vec::with_capacity(jobs.len());
         for job in jobs.iter_mut() {
             let w = job.stream.state().ncols();
@@ -369,14 +394,25 @@ pub(crate) fn gram(
             work.push((job, part));
         }
         let (maps_ref, sqrt_w_ref) = (&maps, &sqrt_w);
-        work.into_par_iter().try_for_each(|(job, out)| {
-            let w = out.ncols();
-            let (map, z) = &maps_ref[job.block];
-            let phi = &mut job.phi[..c * w];
-            map.eval_cols(z, t0, job.first..job.first + w, &sqrt_w_ref[job.block], phi);
-            let rows = faer::MatRef::from_row_major_slice(phi, c, w);
-            job.stream.push(rows, out)
-        })?;
+        let (pushed, ()) = rayon::join(
+            || {
+                work.into_par_iter().try_for_each(|(job, out)| {
+                    let w = out.ncols();
+                    let (map, z) = &maps_ref[job.block];
+                    let phi = &mut job.phi[..c * w];
+                    map.eval_cols(z, t0, job.first..job.first + w, &sqrt_w_ref[job.block], phi);
+                    let rows = faer::MatRef::from_row_major_slice(phi, c, w);
+                    job.stream.push(rows, out)
+                })
+            },
+            || {
+                if let Some((_, rows)) = pending {
+                    let white = if white_in_wx { wx_prev } else { x_prev };
+                    gram_update(&mut g_parts, white.as_ref(), rows);
+                }
+            },
+        );
+        pushed?;
         if let Some(mask) = held_out {
             // whole samples only (checked above), so zeroing before the per-sample static
             // whitening equals leaving the samples out
@@ -388,32 +424,24 @@ pub(crate) fn gram(
             }
         }
         let mut xc = x.as_mut().subrows_mut(0, c * ny);
-        let white = match (&whitening, wstream.as_mut()) {
-            (Whitening::Static { ls, .. }, _) => {
-                whiten_static(xc.rb_mut(), &ls.l(), ny);
-                xc.rb()
-            }
-            (Whitening::Kalman(_), Some(ws)) if folded => {
-                ws.push(
-                    wx.as_ref().subrows(0, c * ny),
-                    xc.rb_mut().subcols_mut(m, tail_cols),
-                )?;
-                xc.rb()
-            }
+        match (&whitening, wstream.as_mut()) {
+            (Whitening::Static { ls, .. }, _) => whiten_static(xc.rb_mut(), &ls.l(), ny),
+            (Whitening::Kalman(_), Some(ws)) if folded => ws.push(
+                wx.as_ref().subrows(0, c * ny),
+                xc.rb_mut().subcols_mut(m, tail_cols),
+            )?,
             (Whitening::Kalman(_), Some(ws)) => {
-                ws.push(xc.rb(), wx.as_mut().subrows_mut(0, c * ny))?;
-                wx.as_ref().subrows(0, c * ny)
+                ws.push(xc.rb(), wx.as_mut().subrows_mut(0, c * ny))?
             }
             (Whitening::Kalman(_), None) => unreachable!("a Kalman whitening has a stream"),
-        };
-        // G += XᵀX (lower triangle), the rows split between the threads
-        let per = (c * ny).div_ceil(parts);
-        g_parts.par_iter_mut().enumerate().for_each(|(k, gk)| {
-            let r0 = (k * per).min(c * ny);
-            let rows = white.subrows(r0, per.min(c * ny - r0));
-            gram_lower(gk.as_mut(), rows);
-        });
+        }
+        pending = Some((buf, c * ny));
+        buf = 1 - buf;
         t0 += c;
+    }
+    if let Some((b, rows)) = pending {
+        let white = if white_in_wx { &wxs[b] } else { &xs[b] };
+        gram_update(&mut g_parts, white.as_ref(), rows);
     }
     let mut g = g_parts.pop().expect("at least one part");
     for gk in &g_parts {
@@ -657,7 +685,7 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             } else {
                 res2.sqrt()
             },
-            peak_memory_bytes: 8 * (cols * cols + 3 * chunk * ny * cols + chunk * m) as u64,
+            peak_memory_bytes: 8 * (cols * cols + 4 * chunk * ny * cols + chunk * m) as u64,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings,
             ..Diagnostics::default()
