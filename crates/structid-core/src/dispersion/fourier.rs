@@ -611,7 +611,7 @@ impl FeatureMap for FourierKernel {
         if p == 1 {
             // [1, cos 2πt, sin 2πt, cos 4πt, …] by the angle-addition recurrence; the tensor
             // and additive orders coincide for one input.
-            let (s1, c1) = sin_cos_turns(self.unit(z, 0));
+            let (s1, c1) = (2.0 * PI * self.unit(z, 0)).sin_cos();
             out[0] = 1.0;
             let (mut c, mut s) = (1.0, 0.0);
             for pair in out[1..].chunks_exact_mut(2) {
@@ -625,7 +625,7 @@ impl FeatureMap for FourierKernel {
         let mut trig: Vec<Vec<(f64, f64)>> = Vec::with_capacity(p);
         for j in 0..p {
             let t = self.unit(z, j);
-            let (s1, c1) = sin_cos_turns(t);
+            let (s1, c1) = (2.0 * PI * t).sin_cos();
             let n = self.lambda[j].len();
             let mut v = Vec::with_capacity(n);
             let (mut c, mut s) = (1.0, 0.0);
@@ -678,94 +678,13 @@ fn rotate(c: &mut [f64; LANES], s: &mut [f64; LANES], c1: &[f64; LANES], s1: &[f
     }
 }
 
-/// (sin 2πu, cos 2πu) to about one ulp, inlined (the feature solver takes it once per sample
-/// and feature part, where libm's call cost about a tenth of the pass). u is reduced by
-/// quarter turns, u = q/4 + r with |r| ≤ 1/8 (exact by Sterbenz's lemma), and the Taylor
-/// series of sin and cos at x = 2πr (|x| ≤ π/4) are truncated past x¹⁵ and x¹⁶, whose next
-/// terms are below 5e-17. Reducing u rather than 2πu also avoids the rounding of 2π·u.
-#[inline]
-pub(crate) fn sin_cos_turns(u: f64) -> (f64, f64) {
-    let (s, c) = sin_cos_turns_lanes(&[u; 1]);
-    (s[0], c[0])
-}
-
-/// Coefficients 1/k! of the odd powers past x of sin, and of the even powers past 1 of cos.
-const SIN_COEF: [f64; 7] = [
-    -1.0 / 6.0,
-    1.0 / 120.0,
-    -1.0 / 5040.0,
-    1.0 / 362_880.0,
-    -1.0 / 39_916_800.0,
-    1.0 / 6_227_020_800.0,
-    -1.0 / 1_307_674_368_000.0,
-];
-const COS_COEF: [f64; 8] = [
-    -1.0 / 2.0,
-    1.0 / 24.0,
-    -1.0 / 720.0,
-    1.0 / 40_320.0,
-    -1.0 / 3_628_800.0,
-    1.0 / 479_001_600.0,
-    -1.0 / 87_178_291_200.0,
-    1.0 / 20_922_789_888_000.0,
-];
-
-/// [`sin_cos_turns`] of N values side by side: every step runs over the lanes, so the
-/// compiler interleaves the independent Horner chains (one lane at a time waits on each
-/// addition's latency). Each lane takes the same operations as the scalar function, hence
-/// the same values.
-#[inline(always)]
-fn sin_cos_turns_lanes<const N: usize>(u: &[f64; N]) -> ([f64; N], [f64; N]) {
-    // round to nearest by the 1.5·2⁵² trick (`f64::round` is a libm call on the baseline
-    // target); from |4u| = 2⁵¹ on, 4u has no fraction worth keeping (u's own ulp is then an
-    // eighth of a turn or more)
-    const ROUNDER: f64 = 6_755_399_441_055_744.0;
-    let mut q = [0.0; N];
-    let mut x = [0.0; N];
-    let mut x2 = [0.0; N];
-    for l in 0..N {
-        let t = 4.0 * u[l];
-        q[l] = if t.abs() < 2_251_799_813_685_248.0 {
-            (t + ROUNDER) - ROUNDER
-        } else {
-            t
-        };
-        x[l] = 2.0 * PI * (u[l] - 0.25 * q[l]);
-        x2[l] = x[l] * x[l];
-    }
-    let (mut ps, mut pc) = ([0.0; N], [0.0; N]);
-    for &k in SIN_COEF.iter().rev() {
-        for l in 0..N {
-            ps[l] = ps[l] * x2[l] + k;
-        }
-    }
-    for &k in COS_COEF.iter().rev() {
-        for l in 0..N {
-            pc[l] = pc[l] * x2[l] + k;
-        }
-    }
-    let (mut sin, mut cos) = ([0.0; N], [0.0; N]);
-    for l in 0..N {
-        let s = x[l] + x[l] * x2[l] * ps[l];
-        let c = 1.0 + x2[l] * pc[l];
-        // the quadrant by table rather than branches (it is random from sample to sample);
-        // NaN and infinities give NaN in x, whatever the quadrant
-        let k = (q[l] as i64 & 3) as usize;
-        sin[l] = [s, c, -s, -c][k];
-        cos[l] = [c, -s, -c, s][k];
-    }
-    (sin, cos)
-}
-
 impl FourierKernel {
     /// cos and sin of 2πt for up to [`LANES`] samples of a one-input map (unused lanes: t = 0).
     fn unit_angles(&self, z: &[f64]) -> ([f64; LANES], [f64; LANES]) {
-        // unused lanes: t = 0, whose cos and sin are exactly 1 and 0
-        let mut t = [0.0; LANES];
+        let (mut c1, mut s1) = ([1.0; LANES], [0.0; LANES]);
         for (l, zv) in z.iter().enumerate() {
-            t[l] = self.unit(std::slice::from_ref(zv), 0);
+            (s1[l], c1[l]) = (2.0 * PI * self.unit(std::slice::from_ref(zv), 0)).sin_cos();
         }
-        let (s1, c1) = sin_cos_turns_lanes(&t);
         (c1, s1)
     }
 }
@@ -897,27 +816,6 @@ mod tests {
 
     fn signal(v: &[f64]) -> Signal {
         Signal::from_channels(&[v.to_vec()]).unwrap()
-    }
-
-    /// The inlined sine and cosine of 2πu agree with libm's of the rounded 2π·u to 2e-15
-    /// (absolute; libm's argument alone carries up to half an ulp of 2π·u, 9e-16 at two turns)
-    /// over two turns either way, at the quadrant boundaries included, and propagate NaN.
-    #[test]
-    fn sin_cos_of_turns_matches_libm() {
-        let mut worst = 0.0f64;
-        for k in -20_000..=20_000 {
-            let u0 = k as f64 / 10_000.0;
-            for u in [u0, u0 + 1e-9, (k % 17) as f64 * 0.125] {
-                let (s, c) = sin_cos_turns(u);
-                let (ls, lc) = (2.0 * PI * u).sin_cos();
-                worst = worst.max((s - ls).abs()).max((c - lc).abs());
-                assert!((s * s + c * c - 1.0).abs() < 4e-16, "u = {u}");
-            }
-        }
-        assert!(worst < 2e-15, "{worst:e}");
-        assert_eq!(sin_cos_turns(0.25), (1.0, 0.0));
-        assert!(sin_cos_turns(f64::NAN).0.is_nan());
-        assert!(sin_cos_turns(f64::INFINITY).1.is_nan());
     }
 
     /// The batched evaluations equal the single-sample ones exactly (same operations), the
