@@ -669,7 +669,11 @@ proptest! {
         let x0_ref = ex_ref.rows(ne_tot, n).into_owned();
         let w = stack_w(&id);
         prop_assert!(rel(&w_ref, &w) < 1e-6, "ŵ differs: {}", rel(&w_ref, &w));
-        prop_assert!((&x0_ref - &x0).norm() <= 1e-6 * x0_ref.norm().max(1e-3), "x₀ {x0_ref} vs {x0}");
+        // x₀ through what it does to y (O·x₀): a direction of x₀ that O barely maps to y is
+        // as ill-determined for the dense reference as for the solver, and both answers are
+        // minimisers when their outputs agree.
+        let (ox_ref, ox) = (&o * &x0_ref, &o * &x0);
+        prop_assert!((&ox_ref - &ox).norm() <= 1e-6 * ox_ref.norm().max(1e-3), "O·x₀ {ox_ref} vs {ox}");
         let e = DVector::from_column_slice(id.e_hat.as_slice());
         let lhs = &d.t_ye * &e + &d.t_yw * &w + &o * &x0;
         prop_assert!(rel(&lhs, &d.r) < 1e-9);

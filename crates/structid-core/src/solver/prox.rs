@@ -1113,6 +1113,9 @@ mod tests {
             // With weights over 16 decades x itself is ill-conditioned, so compare objectives.
             let x = solve_tv1d(&y, &w, &lam);
             let reference = active_set_reference(&y, &w, &chain_edges(&lam));
+            // The dense reference's Cholesky of DW⁻¹Dᵀ can break down over 16 decades of
+            // weights; it then has nothing to say (the KKT property above still holds x).
+            prop_assume!(reference.iter().all(|v| v.is_finite()));
             let (p, p_ref) = (chain_objective(&y, &w, &lam, &x), chain_objective(&y, &w, &lam, &reference));
             prop_assert!(p <= p_ref + 1e-12 * (1.0 + p_ref.abs()), "objective {p} > reference {p_ref}");
         }
