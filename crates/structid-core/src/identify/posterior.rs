@@ -77,7 +77,7 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::solver::exact::SquareBuffer;
+use crate::solver::square_buffer::SquareBuffer;
 
 /// Points evaluated per batch by [`Posterior::std`]: the workspace is BATCH·(L + 2·n) f64 on
 /// the exact path.

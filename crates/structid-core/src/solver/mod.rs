@@ -10,6 +10,7 @@ pub mod prox;
 mod quadratic_factor;
 mod realisation;
 pub mod settings;
+pub(crate) mod square_buffer;
 pub mod status;
 
 use std::time::Instant;

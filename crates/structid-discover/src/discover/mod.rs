@@ -1238,10 +1238,40 @@ fn second_finding(
     val: &Data,
     settings: &DiscoverSettings,
 ) -> Result<Finding> {
+    f.remarks.push(format!(
+        "a first pass named {} {} with G refitted (validation RMS {}); around that G this \
+         effect validates better",
+        first.classification.describe(),
+        given.describe(first.location),
+        rms_text(first.augmented.validation_gap.rms)
+    ));
+    against_given(
+        &mut f,
+        given,
+        &refine::u_to_y(&r.after),
+        before,
+        val,
+        settings,
+    )?;
+    Ok(f)
+}
+
+/// Restates `f`, found by a search around another G (`searched`, from u to y), against the
+/// nominal model as given: G before is `given`'s, G after the one `f` kept (its own refit when
+/// adopted, else `searched`), with the validation RMS of `f`'s map around each, and the shrink
+/// is over the given nominal model's validation gap `before`.
+fn against_given(
+    f: &mut Finding,
+    given: &Nominal,
+    searched: &structid_linear::PolynomialModel,
+    before: &Gap,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Result<()> {
     let structure = structid_core::refine::LinearStructure::new("N", f.location)?;
     let kept = match &f.nominal_refinement {
-        Some(second) if second.adopted => second.after.clone(),
-        _ => structure.initial_from_bla(&refine::u_to_y(&r.after))?,
+        Some(r) if r.adopted => r.after.clone(),
+        _ => structure.initial_from_bla(searched)?,
     };
     let g = given
         .polynomial()
@@ -1250,13 +1280,6 @@ fn second_finding(
     let dispersion = std::sync::Arc::clone(&f.augmented.model.blocks()[0].dispersion);
     let h = given.hypothesis(f.location, dispersion)?;
     let rms_given = fit::simulation_rms(&h, map.as_ref(), &h.data(val)?, settings);
-    f.remarks.push(format!(
-        "a first pass named {} {} with G refitted (validation RMS {}); around that G this \
-         effect validates better",
-        first.classification.describe(),
-        given.describe(first.location),
-        rms_text(first.augmented.validation_gap.rms)
-    ));
     f.nominal_refinement = Some(NominalRefinement {
         before: structure.initial_from_bla(g)?,
         after: kept,
@@ -1265,7 +1288,7 @@ fn second_finding(
         adopted: true,
     });
     f.shrink = before.rms / f.augmented.validation_gap.rms;
-    Ok(f)
+    Ok(())
 }
 
 /// A nominal model whose simulation RMS on the estimation record exceeds this multiple of the

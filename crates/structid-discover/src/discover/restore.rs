@@ -22,7 +22,7 @@ use structid_linear::PolynomialModel;
 
 use crate::hypotheses::Nominal;
 
-use super::{DiscoverSettings, Discovery, Finding, NominalRefinement, Verdict};
+use super::{DiscoverSettings, Discovery, Finding, Verdict};
 
 /// The zero of B(z) nearest z = 1 when it lies within this distance (the cancellation test
 /// allows about 0.1).
@@ -207,18 +207,6 @@ pub(super) fn better(
     }
     let mut second = second;
     let mut f: Finding = second.finding.take().expect("checked above");
-    let g = given
-        .polynomial()
-        .ok_or_else(|| structid_core::Error::InvalidStructure("no polynomial G".into()))?;
-    let structure = structid_core::refine::LinearStructure::new("N", f.location)?;
-    let kept = match &f.nominal_refinement {
-        Some(r) if r.adopted => r.after.clone(),
-        _ => structure.initial_from_bla(start)?,
-    };
-    let map = f.augmented.map.interpolant()?;
-    let dispersion = std::sync::Arc::clone(&f.augmented.model.blocks()[0].dispersion);
-    let h = given.hypothesis(f.location, dispersion)?;
-    let rms_given = super::fit::simulation_rms(&h, map.as_ref(), &h.data(val)?, settings);
     f.remarks.push(format!(
         "the search ran again around G with the zero that cancelled its integrator moved to \
          z = −1 (where a held chain of integrators has it) and its gain fitted to the \
@@ -233,14 +221,7 @@ pub(super) fn better(
         ),
         super::rms_text(first_rms)
     ));
-    f.nominal_refinement = Some(NominalRefinement {
-        before: structure.initial_from_bla(g)?,
-        after: kept,
-        validation_rms_before: rms_given,
-        validation_rms_after: f.augmented.validation_gap.rms,
-        adopted: true,
-    });
-    f.shrink = first.validation_gap.rms / f.augmented.validation_gap.rms;
+    super::against_given(&mut f, given, start, &first.validation_gap, val, settings)?;
     let verdict = super::naming::verdict_text(given, &first.validation_gap, &f);
     Ok(Discovery {
         estimation_gap: first.estimation_gap,
