@@ -78,9 +78,10 @@
 //!    [`crate::effects`] library. The points are a smoothed estimate, not independent noisy
 //!    samples, so BIC alone rewards families that bend to its artefacts; the families whose
 //!    map fit is within 25 % of the best one's are offered first, fewest parameters first
-//!    ([`parsimonious`] order), then the rest by BIC. The first three are refined by output
-//!    error (Levenberg–Marquardt on the estimation record's simulation error with the
-//!    parametric map in the loop; 95 % intervals from s²·(JᵀJ)⁻¹) and simulated on the
+//!    ([`parsimonious`] order), then the rest by BIC. The first six whose map fit carries no
+//!    flag are refined by output error (Levenberg–Marquardt on the estimation record's
+//!    simulation error with the parametric map in the loop; 95 % intervals from
+//!    s²·(JᵀJ)⁻¹) and simulated on the
 //!    validation record. The simplest that validates within
 //!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂, the
 //!    workflow's noise level [`NoiseLevel`]: the smallest semivariogram estimate over the
