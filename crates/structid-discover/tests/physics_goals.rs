@@ -216,20 +216,21 @@ fn summary(t: &Tally) -> (f64, f64) {
     (m, relative)
 }
 
-/// What the workflow achieves today (measured: located 53, named 49 of 60, parameters 36 of
-/// 45, median shrink 8.3×, a median 100 % of the true model's, with G refitted jointly with
-/// the best hypothesis' map, at every location when the nominal's zero cancels its
-/// integrator, a second search around G with that zero moved to −1, and each location of an
-/// integrating plant identified with two input-disturbance ratios; before the second search
-/// 51, 48, 36 of 44; before the refit at every location 48, 45, 35 of 43 and 7.9×, before
-/// any refit 41, 38, 31 of 36 and 4.8×), asserted with a margin so that it does not fall
-/// back.
+/// What the workflow achieves today (measured: located 55, named 54 of 60, parameters 39 of
+/// 49, median shrink 8.6×, a median 100 % of the true model's, with six families refined by
+/// output error where three were, G refitted jointly with the best hypothesis' map, at every
+/// location when the nominal's zero cancels its integrator, a second search around G with
+/// that zero moved to −1, and each location of an integrating plant identified with two
+/// input-disturbance ratios; with three families refined 53, 49, 36 of 45 and 8.3×; before
+/// the second search 51, 48, 36 of 44; before the refit at every location 48, 45, 35 of 43 and
+/// 7.9×, before any refit 41, 38, 31 of 36 and 4.8×), asserted with a margin so that it does
+/// not fall back.
 #[test]
 fn static_effects_on_physical_plants_hold_their_measured_level() {
     let t = static_tally(0..60);
     let (m, relative) = summary(&t);
-    assert!(t.located >= 50, "located {}/{}", t.located, t.cases);
-    assert!(t.named >= 46, "named {}/{}", t.named, t.cases);
+    assert!(t.located >= 53, "located {}/{}", t.located, t.cases);
+    assert!(t.named >= 51, "named {}/{}", t.named, t.cases);
     assert!(
         t.within as f64 >= 0.75 * t.with_keys as f64,
         "parameters within 20 % {}/{}",
@@ -246,9 +247,13 @@ fn static_effects_on_physical_plants_hold_their_measured_level() {
     );
 }
 
-/// The issue's goals (not met yet: see the measured level above).
+/// The issue's goals. Located and named are met; the key parameters are not quite (39 of 49,
+/// 79.6 %): the misses are mostly friction under a stiff PD controller, whose levels the
+/// sampled LFT (a held force, a backward-difference rate) fits lower and whose viscous slopes
+/// it fits steeper than the physics, and whose fitted maps validate 1.5–2× better than the
+/// true maps in that LFT.
 #[test]
-#[ignore = "the issue 14 goals are not met yet: run with --ignored to measure"]
+#[ignore = "the issue 14 goals are not all met yet: run with --ignored to measure"]
 fn static_effects_on_physical_plants_meet_the_goals() {
     let t = static_tally(0..60);
     let (m, relative) = summary(&t);
