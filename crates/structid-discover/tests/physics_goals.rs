@@ -583,7 +583,14 @@ fn a_family_ranked_behind_others_by_its_map_fit_is_named_when_it_validates() {
     let named_rms = f.family_rms[at].unwrap();
     let ahead: Vec<f64> = f.family_rms[..at].iter().flatten().copied().collect();
     assert!(ahead.len() >= 3, "{ahead:?}");
-    assert!(ahead.iter().all(|r| *r > 5.0 * named_rms), "{ahead:?} against {named_rms}");
+    assert!(
+        ahead.iter().all(|r| *r > 5.0 * named_rms),
+        "{ahead:?} against {named_rms}"
+    );
     let truth = d.validation_gap.rms / truth_rms(&case, d.scoring).unwrap();
-    assert!(f.shrink >= 0.8 * truth, "{} against the truth's {truth}", f.shrink);
+    assert!(
+        f.shrink >= 0.8 * truth,
+        "{} against the truth's {truth}",
+        f.shrink
+    );
 }
