@@ -537,7 +537,7 @@ impl FeatureMap for FourierKernel {
         if w == 0 {
             return;
         }
-        if self.affine.len() != 1 || z.channels() != 1 || m.is_multiple_of(2) {
+        if !self.one_input_fast(z) {
             let mut full = vec![0.0; m];
             for (k, row) in rows.chunks_exact_mut(w).enumerate() {
                 self.eval_rows(z, t0 + k, scale, &mut full);
@@ -545,34 +545,62 @@ impl FeatureMap for FourierKernel {
             }
             return;
         }
-        let a = cols.start;
         let zs = &z.as_slice()[t0..t0 + rows.len() / w];
-        for (zl, block) in zs.chunks(LANES).zip(rows.chunks_mut(LANES * w)) {
-            let (c1, s1) = self.unit_angles(zl);
-            let (mut c, mut s) = ([1.0; LANES], [0.0; LANES]);
-            if a == 0 {
-                for row in block.chunks_exact_mut(w) {
-                    row[0] = scale[0];
-                }
-            }
-            // harmonic h fills columns 1 + 2h (cos) and 2 + 2h (sin)
-            for h in 0..(cols.end.saturating_sub(1)).div_ceil(2) {
-                rotate(&mut c, &mut s, &c1, &s1);
-                let (jc, js) = (1 + 2 * h, 2 + 2 * h);
-                if js < a {
-                    continue;
-                }
-                let (sc, ss) = (scale[jc], scale[js]);
-                for (l, row) in block.chunks_exact_mut(w).enumerate() {
-                    if cols.contains(&jc) {
-                        row[jc - a] = c[l] * sc;
-                    }
-                    if cols.contains(&js) {
-                        row[js - a] = s[l] * ss;
-                    }
-                }
-            }
+        self.harmonic_cols(cols, scale, rows, |i| self.unit_angles(&zs[i..zs.len().min(i + LANES)]));
+    }
+
+    /// One input: cos and sin of 2πt per sample (what [`eval_cols`](FeatureMap::eval_cols)
+    /// starts every sample from); otherwise nothing.
+    fn prepared_len(&self) -> usize {
+        if self.affine.len() == 1 && !self.dim().is_multiple_of(2) {
+            2
+        } else {
+            0
         }
+    }
+
+    fn prepare_rows(&self, z: &Signal, t0: usize, out: &mut [f64]) {
+        if !self.one_input_fast(z) {
+            return;
+        }
+        let zs = &z.as_slice()[t0..t0 + out.len() / 2];
+        for (zv, cs) in zs.iter().zip(out.chunks_exact_mut(2)) {
+            let (s1, c1) = self.unit_angle(*zv);
+            cs[0] = c1;
+            cs[1] = s1;
+        }
+    }
+
+    /// [`eval_cols`](FeatureMap::eval_cols) with cos and sin of 2πt read from `prepared`
+    /// (computed by the same expression, so the values are the same bit for bit).
+    fn eval_cols_prepared(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: std::ops::Range<usize>,
+        scale: &[f64],
+        prepared: &[f64],
+        rows: &mut [f64],
+    ) {
+        let w = cols.len();
+        if w == 0 {
+            return;
+        }
+        let count = rows.len() / w;
+        if !self.one_input_fast(z) || prepared.len() < 2 * count {
+            return self.eval_cols(z, t0, cols, scale, rows);
+        }
+        self.harmonic_cols(cols, scale, rows, |i| {
+            let (mut c1, mut s1) = ([1.0; LANES], [0.0; LANES]);
+            for (l, cs) in prepared[2 * i..2 * count.min(i + LANES)]
+                .chunks_exact(2)
+                .enumerate()
+            {
+                c1[l] = cs[0];
+                s1[l] = cs[1];
+            }
+            (c1, s1)
+        });
     }
 
     /// One input: Σ coef_j·ψ_j for 8 samples at a time, summed in feature order as
@@ -679,13 +707,68 @@ fn rotate(c: &mut [f64; LANES], s: &mut [f64; LANES], c1: &[f64; LANES], s1: &[f
 }
 
 impl FourierKernel {
+    /// Whether the batched one-input evaluation applies (one input, odd m: a constant and
+    /// cos/sin pairs).
+    fn one_input_fast(&self, z: &Signal) -> bool {
+        self.affine.len() == 1 && z.channels() == 1 && !self.dim().is_multiple_of(2)
+    }
+
+    /// (sin, cos) of 2πt for one sample of a one-input map.
+    #[inline(always)]
+    fn unit_angle(&self, zv: f64) -> (f64, f64) {
+        (2.0 * PI * self.unit(std::slice::from_ref(&zv), 0)).sin_cos()
+    }
+
     /// cos and sin of 2πt for up to [`LANES`] samples of a one-input map (unused lanes: t = 0).
     fn unit_angles(&self, z: &[f64]) -> ([f64; LANES], [f64; LANES]) {
         let (mut c1, mut s1) = ([1.0; LANES], [0.0; LANES]);
         for (l, zv) in z.iter().enumerate() {
-            (s1[l], c1[l]) = (2.0 * PI * self.unit(std::slice::from_ref(zv), 0)).sin_cos();
+            (s1[l], c1[l]) = self.unit_angle(*zv);
         }
         (c1, s1)
+    }
+
+    /// The columns `cols` of the scaled one-input features of `rows.len() / cols.len()`
+    /// samples, [`LANES`] at a time, with `angles(i)` the cos and sin of 2πt of the lanes
+    /// from sample `i` on: the harmonics by the rotations of
+    /// [`eval_rows`](FeatureMap::eval_rows), up to the last column asked for.
+    #[inline(always)]
+    fn harmonic_cols(
+        &self,
+        cols: std::ops::Range<usize>,
+        scale: &[f64],
+        rows: &mut [f64],
+        angles: impl Fn(usize) -> ([f64; LANES], [f64; LANES]),
+    ) {
+        let w = cols.len();
+        let a = cols.start;
+        for (bi, block) in rows.chunks_mut(LANES * w).enumerate() {
+            let (c1, s1) = angles(bi * LANES);
+            let (mut c, mut s) = ([1.0; LANES], [0.0; LANES]);
+            if a == 0 {
+                for row in block.chunks_exact_mut(w) {
+                    row[0] = scale[0];
+                }
+            }
+            // harmonic h fills columns 1 + 2h (cos) and 2 + 2h (sin)
+            for h in 0..(cols.end.saturating_sub(1)).div_ceil(2) {
+                rotate(&mut c, &mut s, &c1, &s1);
+                let (jc, js) = (1 + 2 * h, 2 + 2 * h);
+                if js < a {
+                    continue;
+                }
+                let (sc, ss) = (scale[jc], scale[js]);
+                let (has_c, has_s) = (cols.contains(&jc), cols.contains(&js));
+                for (l, row) in block.chunks_exact_mut(w).enumerate() {
+                    if has_c {
+                        row[jc - a] = c[l] * sc;
+                    }
+                    if has_s {
+                        row[js - a] = s[l] * ss;
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -874,6 +957,29 @@ mod tests {
                 }
             }
         }
+        // from the prepared cos and sin of 2πt (what the feature solver's threads share): the
+        // same values as the column ranges computed whole, bit for bit
+        assert_eq!(k.prepared_len(), 2);
+        for (t0, count) in [(0, 203), (17, 9), (5, 1)] {
+            let mut prep = vec![0.0; 2 * count];
+            // prepared in two pieces, as the solver's threads split the samples
+            let half = count / 2;
+            k.prepare_rows(&z, t0, &mut prep[..2 * half]);
+            k.prepare_rows(&z, t0 + half, &mut prep[2 * half..]);
+            for i in 0..count {
+                let theta = 2.0 * PI * k.unit(z.sample(t0 + i), 0);
+                assert!((prep[2 * i] - theta.cos()).abs() < 1e-15);
+                assert!((prep[2 * i + 1] - theta.sin()).abs() < 1e-15);
+            }
+            for cols in [0..32, 32..63, 0..63, 1..2, 2..3, 5..6, 62..63, 7..7] {
+                let w = cols.len();
+                let mut want = vec![0.0; count * w];
+                k.eval_cols(&z, t0, cols.clone(), &scale, &mut want);
+                let mut got = vec![f64::NAN; count * w];
+                k.eval_cols_prepared(&z, t0, cols.clone(), &scale, &prep, &mut got);
+                assert_eq!(got, want, "{cols:?} from {t0}");
+            }
+        }
         // two inputs: the trait's per-sample defaults
         let z2 = Signal::from_channels(&[zs.clone(), zs.iter().map(|v| v * v).collect()]).unwrap();
         let k2 = FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.5 })
@@ -897,6 +1003,11 @@ mod tests {
         for i in 0..10 {
             assert_eq!(&part[i * 3..(i + 1) * 3], &rows[i * m2 + 1..i * m2 + 4]);
         }
+        // nothing to prepare: the prepared evaluation is eval_cols
+        assert_eq!(k2.prepared_len(), 0);
+        let mut got = vec![0.0; 10 * 3];
+        k2.eval_cols_prepared(&z2, 3, 1..4, &scale2, &[], &mut got);
+        assert_eq!(got, part);
     }
 
     #[test]

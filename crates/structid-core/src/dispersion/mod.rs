@@ -216,6 +216,37 @@ pub trait FeatureMap: Send + Sync {
         }
     }
 
+    /// Values per sample that [`prepare_rows`](Self::prepare_rows) writes: the part of the
+    /// evaluation that every column range needs (a one-input Fourier map's cos and sin of 2πt),
+    /// so that the feature solver's threads, which evaluate different columns of the same
+    /// samples, compute it once between them. 0 (the default): nothing is shared.
+    fn prepared_len(&self) -> usize {
+        0
+    }
+
+    /// Writes [`prepared_len`](Self::prepared_len) values per sample for the samples
+    /// `t = t0, t0 + 1, …` of `z` into `out` (`out.len() / prepared_len` samples), for
+    /// [`eval_cols_prepared`](Self::eval_cols_prepared). The default writes nothing.
+    fn prepare_rows(&self, z: &Signal, t0: usize, out: &mut [f64]) {
+        let _ = (z, t0, out);
+    }
+
+    /// [`eval_cols`](Self::eval_cols) from the values [`prepare_rows`](Self::prepare_rows)
+    /// wrote for the same samples; the same values as `eval_cols`, bit for bit. The default
+    /// ignores `prepared` and calls `eval_cols`.
+    fn eval_cols_prepared(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: Range<usize>,
+        scale: &[f64],
+        prepared: &[f64],
+        rows: &mut [f64],
+    ) {
+        let _ = prepared;
+        self.eval_cols(z, t0, cols, scale, rows)
+    }
+
     /// Writes `Σ_j coef_j·ψ_j(z_t)` for the samples `t = t0, …, t0 + out.len() − 1` of `z`
     /// into `out` (the map's value at each sample for the coefficients `coef`, m values). The
     /// default evaluates [`eval_into`](Self::eval_into) sample by sample and sums in feature

@@ -353,12 +353,46 @@ pub(crate) fn gram(
             gram_lower(gk.as_mut(), white.subrows(r0, per.min(rows - r0)));
         });
     };
+    // The chunks (first sample, length); they end at record boundaries.
+    let mut schedule = Vec::new();
+    {
+        let (mut t, mut rec) = (0, 1);
+        while t < len {
+            if t == bounds[rec] {
+                rec += 1;
+            }
+            let c = chunk.min(bounds[rec] - t);
+            schedule.push((t, c));
+            t += c;
+        }
+    }
+    // What the column parts of a map share per sample (a Fourier map's cos and sin of 2πt),
+    // computed once for both, a chunk ahead and split by samples, in two buffers like X.
+    let plen: Vec<usize> = maps.iter().map(|(f, _)| f.prepared_len()).collect();
+    let mut preps: [Vec<Vec<f64>>; 2] =
+        std::array::from_fn(|_| plen.iter().map(|&p| vec![0.0; chunk * p]).collect());
+    let prepare = |bufs: &mut [Vec<f64>], (t0, c): (usize, usize)| {
+        for ((buf, &p), (map, z)) in bufs.iter_mut().zip(&plen).zip(&maps) {
+            if p == 0 {
+                continue;
+            }
+            let half = c.div_ceil(parts);
+            buf[..c * p]
+                .par_chunks_mut(half * p)
+                .enumerate()
+                .for_each(|(k, out)| map.prepare_rows(z, t0 + k * half, out));
+        }
+    };
+    if let Some(&first) = schedule.first() {
+        prepare(&mut preps[0], first);
+    }
     // rows of the previous chunk whose Gram update is pending, and its buffer
     let mut pending: Option<(usize, usize)> = None;
     // Chunks end at record boundaries, where the paths and the whitening restart from rest.
     let mut next_record = 1;
     let mut t0 = 0;
     let mut buf = 0;
+    let mut ci = 0;
     while t0 < len {
         if t0 == bounds[next_record] {
             next_record += 1;
@@ -374,6 +408,13 @@ pub(crate) fn gram(
             }
         }
         let c = chunk.min(bounds[next_record] - t0);
+        debug_assert_eq!(schedule[ci], (t0, c));
+        let (p0, p1) = preps.split_at_mut(1);
+        let (prep, prep_next) = if buf == 0 {
+            (&p0[0], &mut p1[0])
+        } else {
+            (&p1[0], &mut p0[0])
+        };
         let ([x0, x1], [w0, w1]) = (&mut xs, &mut wxs);
         let ((x, wx), (x_prev, wx_prev)) = if buf == 0 {
             ((x0, w0), (&*x1, &*w1))
@@ -408,22 +449,38 @@ pub(crate) fn gram(
             work.push((job, part));
         }
         let (maps_ref, sqrt_w_ref) = (&maps, &sqrt_w);
-        let (pushed, ()) = rayon::join(
+        let (pushed, ((), ())) = rayon::join(
             || {
                 work.into_par_iter().try_for_each(|(job, out)| {
                     let w = out.ncols();
                     let (map, z) = &maps_ref[job.block];
                     let phi = &mut job.phi[..c * w];
-                    map.eval_cols(z, t0, job.first..job.first + w, &sqrt_w_ref[job.block], phi);
+                    map.eval_cols_prepared(
+                        z,
+                        t0,
+                        job.first..job.first + w,
+                        &sqrt_w_ref[job.block],
+                        &prep[job.block][..c * plen[job.block]],
+                        phi,
+                    );
                     let rows = faer::MatRef::from_row_major_slice(phi, c, w);
                     job.stream.push(rows, out)
                 })
             },
             || {
-                if let Some((_, rows)) = pending {
-                    let white = if white_in_wx { wx_prev } else { x_prev };
-                    gram_update(&mut g_parts, white.as_ref(), rows);
-                }
+                rayon::join(
+                    || {
+                        if let Some((_, rows)) = pending {
+                            let white = if white_in_wx { wx_prev } else { x_prev };
+                            gram_update(&mut g_parts, white.as_ref(), rows);
+                        }
+                    },
+                    || {
+                        if let Some(&next) = schedule.get(ci + 1) {
+                            prepare(prep_next, next);
+                        }
+                    },
+                )
             },
         );
         pushed?;
@@ -452,6 +509,7 @@ pub(crate) fn gram(
         pending = Some((buf, c * ny));
         buf = 1 - buf;
         t0 += c;
+        ci += 1;
     }
     if let Some((b, rows)) = pending {
         let white = if white_in_wx { &wxs[b] } else { &xs[b] };
