@@ -546,7 +546,9 @@ impl FeatureMap for FourierKernel {
             return;
         }
         let zs = &z.as_slice()[t0..t0 + rows.len() / w];
-        self.harmonic_cols(cols, scale, rows, |i| self.unit_angles(&zs[i..zs.len().min(i + LANES)]));
+        self.harmonic_cols(cols, scale, rows, |i| {
+            self.unit_angles(&zs[i..zs.len().min(i + LANES)])
+        });
     }
 
     /// One input: cos and sin of 2πt per sample (what [`eval_cols`](FeatureMap::eval_cols)

@@ -922,7 +922,15 @@ mod tests {
     /// included), for column counts around and between the panel boundaries.
     #[test]
     fn gram_lower_equals_the_dense_product_on_the_lower_triangle() {
-        for (rows, cols) in [(1, 1), (7, 3), (50, 8), (33, 11), (64, 12), (100, 17), (2048, 65)] {
+        for (rows, cols) in [
+            (1, 1),
+            (7, 3),
+            (50, 8),
+            (33, 11),
+            (64, 12),
+            (100, 17),
+            (2048, 65),
+        ] {
             let x = Mat::<f64>::from_fn(rows, cols, |i, j| {
                 ((i * 37 + j * 11) % 29) as f64 / 7.0 - 2.0 + (i as f64 * 0.1).sin()
             });
