@@ -194,7 +194,7 @@ mod tests {
             minimal += usize::from(r.order() == nmin);
             let len = 300;
             let u: Vec<f64> = (0..len * m)
-                .map(|k| ((k as u64 * 2654435761 ^ seed) % 1000) as f64 / 500.0 - 1.0)
+                .map(|k| (((k as u64 * 2654435761) ^ seed) % 1000) as f64 / 500.0 - 1.0)
                 .collect();
             let (mut y0, mut y1) = (vec![0.0; len * p], vec![0.0; len * p]);
             s.apply(&u, &mut y0);

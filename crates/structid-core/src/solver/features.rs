@@ -10,12 +10,15 @@
 //!
 //! whose normal equations need only G = [F O r]ᵀWᵀW[F O r], an (m+n_x+1)² matrix. One pass over
 //! time accumulates G chunk by chunk: the features of a chunk go through the block paths as a
-//! [`ColumnStream`] (state carried between chunks), are whitened, and G += XᵀX is one matrix
-//! product; the L×m matrix F is never stored. When the Kalman whitening has no time-varying
+//! [`ColumnStream`] (state carried between chunks), are whitened, and G += XᵀX is accumulated
+//! from them; the L×m matrix F is never stored. When the Kalman whitening has no time-varying
 //! transient it is folded into the paths: the features go through the series connection
 //! W·T_i in one blocked recursion, and only [O r] through W alone. The feature columns and
 //! the rows of each chunk's Gram update are split into two parts that run in parallel (the
-//! split does not depend on the thread count, so neither do the results). A second pass
+//! split does not depend on the thread count, so neither do the results); what both column
+//! parts of a map need per sample (a Fourier map's cos and sin of 2πt,
+//! [`FeatureMap::prepare_rows`]) is computed once, a chunk ahead. The Gram update is a few
+//! rectangular matrix products over row panels of G. A second pass
 //! recovers ŵ (batched feature combinations) and ê, whose single long signals go through
 //! blocked recursions ([`structid_lti::StateSpace::apply_long`]).
 //!
