@@ -35,7 +35,8 @@ use std::sync::Arc;
 use structid_core::PolynomialDispersion;
 use structid_core::validation::{Scoring, ValidationSettings, validate};
 use structid_discover::discover::{
-    Classification, DiscoverSettings, Discovery, Verdict, discover, initial_state,
+    Classification, DiscoverSettings, Discovery, PARTIAL_SHRINK, UNLOCATED_DIRECTION_EFFECT,
+    Verdict, discover, initial_state, rate_explains,
 };
 use structid_discover::hypotheses::Nominal;
 use structid_discover::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
@@ -295,15 +296,17 @@ fn dynamic_tally(cases: u64) -> usize {
     dynamic
 }
 
-/// Measured today: 9 of 15 reported as dynamic (5 before a strong direction effect at the
-/// sensor or the input was preferred to a friction-like map of ẏ that explains little). The
-/// misses: backlash behind an estimated actuator or sensor nominal approximated by a static
-/// map, a Bouc–Wen spring in a stiff loop that a static map nearly explains (159×), and one
-/// effect too small to detect.
+/// Measured today: 10 of 15 reported as dynamic (9 before a rate map had to validate clearly
+/// better than a dynamic fit in feedback from the position to replace it, 5 before a strong
+/// direction effect at the sensor or the input was preferred to a friction-like map of ẏ
+/// that explains little). The misses: backlash behind an estimated actuator, sensor or spring
+/// nominal, which absorbed its phase lag (seeds 0, 8, 9), a Bouc–Wen spring in a stiff loop
+/// that a static map nearly explains (seed 2, 159×), and one effect that a fitted input
+/// disturbance takes up (seed 12).
 #[test]
 fn hysteresis_on_physical_plants_holds_its_measured_level() {
     let dynamic = dynamic_tally(15);
-    assert!(dynamic >= 8, "{dynamic}/15");
+    assert!(dynamic >= 9, "{dynamic}/15");
 }
 
 /// The goal (not met yet).
@@ -593,4 +596,66 @@ fn a_family_ranked_behind_others_by_its_map_fit_is_named_when_it_validates() {
         "{} against the truth's {truth}",
         f.shrink
     );
+}
+
+/// A map of the rate that barely beats the position's static approximation does not turn a
+/// direction effect seen from the position into friction (dynamic seed 5: a spring behind a
+/// play under PD control, with a nominal estimated from the record; a relay of ẏ closed a
+/// tenth of the gap and was named Coulomb friction at 61× the force the loop can see). The
+/// hysteresis is reported where it acts.
+#[test]
+fn a_rate_map_that_barely_beats_the_position_does_not_hide_a_hysteresis() {
+    let case = generate(PhysicsKind::Dynamic, 5);
+    let d = run(&case);
+    eprintln!("{}", line(&case, &d));
+    let f = d.finding.as_ref().unwrap();
+    assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
+    assert_eq!(
+        f.location,
+        case.expected.as_ref().unwrap().site,
+        "{}",
+        d.verdict
+    );
+    // The rate was tried, and its best fit neither validates clearly better than the
+    // finding's static approximation nor closes the gap.
+    let rate = d
+        .hypotheses
+        .iter()
+        .filter(|h| h.location == structid_discover::hypotheses::Location::RateFeedback)
+        .map(|h| h.validation_rms)
+        .fold(f64::INFINITY, f64::min);
+    assert!(rate.is_finite());
+    assert!(
+        !rate_explains(
+            rate,
+            d.validation_gap.rms / rate,
+            f.augmented.validation_gap.rms
+        ),
+        "rate {rate} against {}, gap {}",
+        f.augmented.validation_gap.rms,
+        d.validation_gap.rms
+    );
+}
+
+/// A dynamic finding whose static approximation closes little of the gap says that the
+/// direction effect is not located by it (dynamic seed 1: a backlash in a sensor's drive,
+/// 1.0×); one that closes most of the gap does not (seed 11: a spring behind a play under PD
+/// control, about 60×).
+#[test]
+fn a_direction_effect_that_no_static_map_reduces_is_not_claimed_located() {
+    for (seed, unlocated) in [(1, true), (11, false)] {
+        let case = generate(PhysicsKind::Dynamic, seed);
+        let d = run(&case);
+        let f = d.finding.as_ref().unwrap();
+        assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
+        assert_eq!(f.shrink < PARTIAL_SHRINK, unlocated, "{}", d.verdict);
+        assert_eq!(
+            f.remarks
+                .iter()
+                .any(|r| r.as_str() == UNLOCATED_DIRECTION_EFFECT),
+            unlocated,
+            "{:?}",
+            f.remarks
+        );
+    }
 }

@@ -68,7 +68,11 @@
 //!    time reversal) and tested for dependence on the direction of z
 //!    ([`crate::hysteresis::direction_dependence`]). If one depends on the direction, the effect
 //!    is reported as "dynamic: hysteresis or backlash suspected" at that location, and no
-//!    static name is forced (the paper's Example 1). A static map of the rate imitates a
+//!    static name is forced (the paper's Example 1). Friction seen from the position depends
+//!    on the direction of motion too: a dynamic fit in feedback from the output yields to a
+//!    named map of the rate when that validates clearly better, or better and closes the gap
+//!    ([`rate_explains`]).
+//!    A static map of the rate imitates a
 //!    hysteresis anywhere in the loop: when one validates best but leaves more than a quarter
 //!    of the RMS of a fit at the input or the sensor whose direction effect explains at least
 //!    [`SENSOR_HYSTERESIS_SHARE`] of its residual energy, that dynamic fit is the finding. At
@@ -232,6 +236,31 @@ pub const DIRECTION_WITHIN: f64 = 1.5;
 /// that a dynamic fit in feedback from the output leaves, to be preferred to it (see
 /// [`discover`]).
 pub const STATIC_OVER_DYNAMIC: f64 = 0.25;
+
+/// A static named map of the rate that leaves at most this share of the validation RMS that
+/// a dynamic fit in feedback from the output leaves with its static approximation is preferred
+/// to it (see [`rate_explains`]).
+pub const RATE_OVER_POSITION: f64 = 0.8;
+
+/// Whether a named map of the rate (augmented validation RMS `rate_rms`, shrink
+/// `rate_shrink`) is the explanation of a direction effect seen from the position, whose
+/// dynamic fit's static approximation validates at `position_rms`. A map of ẏ depends on the
+/// direction of motion, so it takes up part of any hysteresis in the loop: it must validate
+/// clearly better ([`RATE_OVER_POSITION`]), or better and close the gap itself (a shrink of
+/// at least [`PARTIAL_SHRINK`]). A relay of ẏ that closes a tenth of the gap behind a spring
+/// with play, 9 % better than the play's static approximation, is neither.
+///
+/// ```
+/// use structid_discover::discover::rate_explains;
+/// assert!(rate_explains(0.7, 1.3, 1.0)); // clearly better
+/// assert!(rate_explains(0.9, 8.0, 1.0)); // better, and closes the gap
+/// assert!(!rate_explains(0.9, 1.1, 1.0)); // neither
+/// assert!(!rate_explains(1.1, 8.0, 1.0)); // worse
+/// ```
+pub fn rate_explains(rate_rms: f64, rate_shrink: f64, position_rms: f64) -> bool {
+    rate_rms < RATE_OVER_POSITION * position_rms
+        || (rate_rms < position_rms && rate_shrink >= PARTIAL_SHRINK)
+}
 
 /// The share of the residual energy the direction of z must explain at the input or the
 /// sensor for a dynamic fit there to be preferred to a better-validating static map of the
@@ -881,8 +910,9 @@ fn discover_once(
     // is static seen from the rate: a map of ẏ is the simplest map of y that depends on the
     // direction of motion (friction). When the best rate fit (wherever it ranks: a better fit
     // elsewhere, e.g. at the input, does not make the direction effect seen from the position
-    // any less a friction) is named and its augmented model validates better than the
-    // dynamic fit's static approximation, it is the explanation. Hysteresis elsewhere
+    // any less a friction) is named and its augmented model validates clearly better than
+    // the dynamic fit's static approximation, or better and closes the gap
+    // ([`rate_explains`]), it is the explanation. Hysteresis elsewhere
     // (backlash at the input, a sensor) keeps its verdict: no static map of a measured signal
     // explains it.
     let rate = fitted.iter().position(|f| {
@@ -906,8 +936,11 @@ fn discover_once(
         match add(static_fit, dir_static, tv_static) {
             Ok(f)
                 if matches!(f.classification, Classification::Named(_))
-                    && f.augmented.validation_gap.rms
-                        < dynamic_finding.augmented.validation_gap.rms =>
+                    && rate_explains(
+                        f.augmented.validation_gap.rms,
+                        f.shrink,
+                        dynamic_finding.augmented.validation_gap.rms,
+                    ) =>
             {
                 f
             }
@@ -1174,6 +1207,9 @@ fn discover_once(
         );
         verdict.push_str(&format!(". Only part of the gap: {partial}"));
         finding.remarks.push(partial);
+        if finding.classification == Classification::Dynamic {
+            finding.remarks.push(UNLOCATED_DIRECTION_EFFECT.to_string());
+        }
     }
     Ok(Discovery {
         estimation_gap,
@@ -1189,6 +1225,14 @@ fn discover_once(
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
+
+/// The remark on a dynamic finding whose static approximation closes little of the gap: the
+/// direction effect is real, but nothing says it sits where it was measured.
+pub const UNLOCATED_DIRECTION_EFFECT: &str = "the static approximation at this location \
+     closes little of the gap, so the direction effect is not located by it: a hysteresis \
+     elsewhere in the loop leaves one too, and so does a nonlinearity acting on a state that \
+     no location here measures (a tank's outflow √h inside G); a model that declares that \
+     state as z (an `[lft]` nominal) tests the latter";
 
 /// The remark on a nominal G whose numerator cancels one of its integrators
 /// ([`structid_linear::integrators::integrator_cancellation`]), if it does.
