@@ -549,8 +549,10 @@ fn before_after_svg(
         .with(Series::line("augmented model", &augmented.0, &augmented.1)),
         Chart::new(
             format!(
-                "Residuals y − ŷ (RMS {:.3e} → {:.3e}, {:.1}× smaller)",
-                before.rms, after.rms, shrink
+                "Residuals y − ŷ (RMS {:.3e} → {:.3e}, {})",
+                before.rms,
+                after.rms,
+                structid_discover::report::shrink_text(shrink, 1)
             ),
             val.time.label,
             "y − ŷ",

@@ -206,6 +206,23 @@ fn cell(s: &str) -> String {
     s.replace('|', "\\|").replace('\n', " ")
 }
 
+/// A validation shrink in words, with `digits` decimals: "3.2× smaller", or for a model that
+/// validates worse than the nominal "1.16× larger" (never "0.9× smaller").
+///
+/// ```
+/// use structid_discover::report::shrink_text;
+/// assert_eq!(shrink_text(3.21, 1), "3.2× smaller");
+/// assert_eq!(shrink_text(0.8, 2), "1.25× larger");
+/// assert_eq!(shrink_text(f64::NAN, 1), "NaN× smaller");
+/// ```
+pub fn shrink_text(shrink: f64, digits: usize) -> String {
+    if shrink < 1.0 && shrink > 0.0 {
+        format!("{:.digits$}× larger", 1.0 / shrink)
+    } else {
+        format!("{shrink:.digits$}× smaller")
+    }
+}
+
 /// A location as reports name it: its key and what it means.
 pub fn location_text(nominal: &Nominal, l: Location) -> String {
     format!("`{}` ({})", nominal.key(l), nominal.describe(l))
@@ -789,10 +806,10 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
     gap_table(s, &f.augmented.estimation_gap, &f.augmented.validation_gap);
     let _ = writeln!(
         s,
-        "**Shrink factor:** validation RMS {} → {} ({:.2}× smaller); fit {} → {}.\n",
+        "**Shrink factor:** validation RMS {} → {} ({}); fit {} → {}.\n",
         e(d.validation_gap.rms),
         e(f.augmented.validation_gap.rms),
-        f.shrink,
+        shrink_text(f.shrink, 2),
         pct(d.validation_gap.fit_percent),
         pct(f.augmented.validation_gap.fit_percent)
     );
@@ -1109,10 +1126,10 @@ pub fn summary(
         }
         let _ = writeln!(
             s,
-            "validation RMS: {} → {} ({:.2}× smaller), fit {} → {}",
+            "validation RMS: {} → {} ({}), fit {} → {}",
             e(d.validation_gap.rms),
             e(f.augmented.validation_gap.rms),
-            f.shrink,
+            shrink_text(f.shrink, 2),
             pct(d.validation_gap.fit_percent),
             pct(f.augmented.validation_gap.fit_percent)
         );

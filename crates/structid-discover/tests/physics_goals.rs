@@ -35,8 +35,8 @@ use std::sync::Arc;
 use structid_core::PolynomialDispersion;
 use structid_core::validation::{Scoring, ValidationSettings, validate};
 use structid_discover::discover::{
-    Classification, DiscoverSettings, Discovery, PARTIAL_SHRINK, UNLOCATED_DIRECTION_EFFECT,
-    Verdict, discover, initial_state, rate_explains,
+    Classification, DiscoverSettings, Discovery, FEEDBACK_HYSTERESIS_SHARE, PARTIAL_SHRINK,
+    UNLOCATED_DIRECTION_EFFECT, Verdict, discover, initial_state, rate_explains,
 };
 use structid_discover::hypotheses::Nominal;
 use structid_discover::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
@@ -658,4 +658,36 @@ fn a_direction_effect_that_no_static_map_reduces_is_not_claimed_located() {
             f.remarks
         );
     }
+}
+
+/// In feedback a direction effect that explains a large share of the residual is a missing
+/// (dynamic) effect however little its static approximation closes (dynamic seed 12: a
+/// hysteresis under a stiff PD loop, whose gap a fitted input disturbance takes up in
+/// prediction but whose simulation misses by 8× the noise; no static block gains anything).
+/// The effect-free closed loops of the generator stay below the share
+/// (`lti_physical_plants_raise_no_false_alarm`).
+#[test]
+fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
+    let case = generate(PhysicsKind::Dynamic, 12);
+    let d = run(&case);
+    eprintln!("{}", line(&case, &d));
+    assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
+    let f = d.finding.as_ref().unwrap();
+    assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
+    assert!(
+        matches!(
+            f.location,
+            structid_discover::hypotheses::Location::OutputFeedback
+                | structid_discover::hypotheses::Location::RateFeedback
+        ),
+        "{}",
+        d.verdict
+    );
+    assert!(
+        f.direction.explained >= FEEDBACK_HYSTERESIS_SHARE,
+        "{:?}",
+        f.direction
+    );
+    assert!(f.shrink < 1.05, "{}", d.verdict);
+    assert!(d.validation_gap.rms > 3.0 * d.noise.std, "{}", d.verdict);
 }

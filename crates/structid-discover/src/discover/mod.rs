@@ -268,6 +268,12 @@ pub fn rate_explains(rate_rms: f64, rate_shrink: f64, position_rms: f64) -> bool
 /// since it overrides a better fit.
 pub const SENSOR_HYSTERESIS_SHARE: f64 = 0.25;
 
+/// The share of the residual energy the direction of z must explain in feedback for a real
+/// gap to be a missing (dynamic) effect however little its static approximation closes (see
+/// [`discover`]): a biased G in a loop leaves direction effects of its own, weaker than this on
+/// the physics generator's effect-free closed loops.
+pub const FEEDBACK_HYSTERESIS_SHARE: f64 = 0.25;
+
 /// When the best nonparametric fit names nothing, at most this many other locations (in
 /// order of validation RMS) are named too, and the named map among them that validates best,
 /// if clearly better than the best fit's table ([`ALTERNATIVE_FACTOR`]), is the finding.
@@ -1084,10 +1090,12 @@ fn discover_once(
     // the sensor, whose z (u, or G·u) carries no output noise, a real gap with a direction
     // effect is a missing (dynamic) effect whatever the shrink. In feedback z is the noisy
     // measured output, and a biased G in a loop leaves direction effects of its own, so
-    // there the shrink must confirm it as it confirms a static map.
+    // there the shrink must confirm it as it confirms a static map, unless the direction
+    // explains a large share of the residual ([`FEEDBACK_HYSTERESIS_SHARE`]).
     let dynamic_found = real
         && finding.classification == Classification::Dynamic
-        && matches!(finding.location, Location::Input | Location::Output);
+        && (matches!(finding.location, Location::Input | Location::Output)
+            || finding.direction.explained >= FEEDBACK_HYSTERESIS_SHARE);
     let confirming = if past_disturbance {
         PAST_DISTURBANCE_SHRINK
     } else {

@@ -272,11 +272,11 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
         other => other.describe(),
     };
     format!(
-        "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({:.1}× smaller), fit {:.1} % → {:.1} %",
+        "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({}), fit {:.1} % → {:.1} %",
         nominal.describe(f.location),
         before.rms,
         f.augmented.validation_gap.rms,
-        f.shrink,
+        crate::report::shrink_text(f.shrink, 1),
         before.fit_percent,
         f.augmented.validation_gap.fit_percent
     )
