@@ -77,7 +77,10 @@
 //!    of the RMS of a fit at the input or the sensor whose direction effect explains at least
 //!    [`SENSOR_HYSTERESIS_SHARE`] of its residual energy, that dynamic fit is the finding. At
 //!    those two sites (z is u or G·u, free of output noise) a real gap with a direction effect
-//!    is a missing effect even when the static approximation closes little of it.
+//!    is a missing effect even when the static approximation closes little of it; in feedback
+//!    only when the direction explains at least [`FEEDBACK_HYSTERESIS_SHARE`] of the residual
+//!    energy (a biased G in a loop leaves weaker direction effects of its own). Such a finding
+//!    says that its location is not established ([`UNLOCATED_DIRECTION_EFFECT`]).
 //! 5. **What is it?** The best estimate's points (z_k, ŵ_k) are fitted by every family of the
 //!    [`crate::effects`] library. The points are a smoothed estimate, not independent noisy
 //!    samples, so BIC alone rewards families that bend to its artefacts; the families whose
