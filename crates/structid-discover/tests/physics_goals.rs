@@ -296,17 +296,17 @@ fn dynamic_tally(cases: u64) -> usize {
     dynamic
 }
 
-/// Measured today: 10 of 15 reported as dynamic (9 before a rate map had to validate clearly
-/// better than a dynamic fit in feedback from the position to replace it, 5 before a strong
-/// direction effect at the sensor or the input was preferred to a friction-like map of ẏ
-/// that explains little). The misses: backlash behind an estimated actuator, sensor or spring
-/// nominal, which absorbed its phase lag (seeds 0, 8, 9), a Bouc–Wen spring in a stiff loop
-/// that a static map nearly explains (seed 2, 159×), and one effect that a fitted input
-/// disturbance takes up (seed 12).
+/// Measured today: 11 of 15 reported as dynamic (9 before a rate map had to validate clearly
+/// better than a dynamic fit in feedback from the position, or close the gap, to replace it,
+/// and before a strong direction effect in feedback counted whatever the shrink; 5 before a
+/// strong direction effect at the sensor or the input was preferred to a friction-like map of
+/// ẏ that explains little). The misses: backlash behind an estimated actuator, sensor or
+/// spring nominal, which absorbed its phase lag (seeds 0, 8, 9), and a Bouc–Wen spring in a
+/// stiff loop that a static map at the sensor nearly explains (seed 2, 159×).
 #[test]
 fn hysteresis_on_physical_plants_holds_its_measured_level() {
     let dynamic = dynamic_tally(15);
-    assert!(dynamic >= 9, "{dynamic}/15");
+    assert!(dynamic >= 10, "{dynamic}/15");
 }
 
 /// The goal (not met yet).
