@@ -552,7 +552,7 @@ fn before_after_svg(
                 "Residuals y − ŷ (RMS {:.3e} → {:.3e}, {})",
                 before.rms,
                 after.rms,
-                structid_discover::report::shrink_text(shrink, 1)
+                structid_discover::gap::shrink_text(shrink, 1)
             ),
             val.time.label,
             "y − ŷ",

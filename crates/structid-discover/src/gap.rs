@@ -948,6 +948,23 @@ fn conclude(
     }
 }
 
+/// A validation shrink in words, with `digits` decimals: "3.2× smaller", or for a model that
+/// validates worse than the nominal "1.16× larger" (never "0.9× smaller").
+///
+/// ```
+/// use structid_discover::gap::shrink_text;
+/// assert_eq!(shrink_text(3.21, 1), "3.2× smaller");
+/// assert_eq!(shrink_text(0.8, 2), "1.25× larger");
+/// assert_eq!(shrink_text(f64::NAN, 1), "NaN× smaller");
+/// ```
+pub fn shrink_text(shrink: f64, digits: usize) -> String {
+    if shrink < 1.0 && shrink > 0.0 {
+        format!("{:.digits$}× larger", 1.0 / shrink)
+    } else {
+        format!("{shrink:.digits$}× smaller")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

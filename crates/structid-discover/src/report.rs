@@ -206,23 +206,6 @@ fn cell(s: &str) -> String {
     s.replace('|', "\\|").replace('\n', " ")
 }
 
-/// A validation shrink in words, with `digits` decimals: "3.2× smaller", or for a model that
-/// validates worse than the nominal "1.16× larger" (never "0.9× smaller").
-///
-/// ```
-/// use structid_discover::report::shrink_text;
-/// assert_eq!(shrink_text(3.21, 1), "3.2× smaller");
-/// assert_eq!(shrink_text(0.8, 2), "1.25× larger");
-/// assert_eq!(shrink_text(f64::NAN, 1), "NaN× smaller");
-/// ```
-pub fn shrink_text(shrink: f64, digits: usize) -> String {
-    if shrink < 1.0 && shrink > 0.0 {
-        format!("{:.digits$}× larger", 1.0 / shrink)
-    } else {
-        format!("{shrink:.digits$}× smaller")
-    }
-}
-
 /// A location as reports name it: its key and what it means.
 pub fn location_text(nominal: &Nominal, l: Location) -> String {
     format!("`{}` ({})", nominal.key(l), nominal.describe(l))
@@ -809,7 +792,7 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         "**Shrink factor:** validation RMS {} → {} ({}); fit {} → {}.\n",
         e(d.validation_gap.rms),
         e(f.augmented.validation_gap.rms),
-        shrink_text(f.shrink, 2),
+        crate::gap::shrink_text(f.shrink, 2),
         pct(d.validation_gap.fit_percent),
         pct(f.augmented.validation_gap.fit_percent)
     );
@@ -1129,7 +1112,7 @@ pub fn summary(
             "validation RMS: {} → {} ({}), fit {} → {}",
             e(d.validation_gap.rms),
             e(f.augmented.validation_gap.rms),
-            shrink_text(f.shrink, 2),
+            crate::gap::shrink_text(f.shrink, 2),
             pct(d.validation_gap.fit_percent),
             pct(f.augmented.validation_gap.fit_percent)
         );

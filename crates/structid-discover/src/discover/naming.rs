@@ -276,7 +276,7 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
         nominal.describe(f.location),
         before.rms,
         f.augmented.validation_gap.rms,
-        crate::report::shrink_text(f.shrink, 1),
+        crate::gap::shrink_text(f.shrink, 1),
         before.fit_percent,
         f.augmented.validation_gap.fit_percent
     )
