@@ -117,6 +117,20 @@ fn discovery_dict<'py>(
             x.set_item("validation_rms", f.augmented.validation_gap.rms)?;
             x.set_item("remarks", f.remarks.clone())?;
             x.set_item("shrink", f.shrink)?;
+            let hysteresis = match &f.input_hysteresis {
+                None => None,
+                Some(h) => {
+                    let d = PyDict::new(py);
+                    d.set_item("description", h.describe())?;
+                    d.set_item("threshold", h.threshold)?;
+                    d.set_item("weight", h.weight)?;
+                    d.set_item("play", h.is_play())?;
+                    d.set_item("validation_rms", h.validation_rms)?;
+                    d.set_item("without_hysteresis_rms", h.without_hysteresis_rms)?;
+                    Some(d)
+                }
+            };
+            x.set_item("input_hysteresis", hysteresis)?;
             x.set_item("z", convert::vector(py, f.hypothesis.curve.z.clone()))?;
             x.set_item("w", convert::vector(py, f.hypothesis.curve.w.clone()))?;
             let estimate = f.estimate(nominal, estimation).map_err(error)?;

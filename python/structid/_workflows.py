@@ -97,6 +97,11 @@ class Finding:
     """The augmented model as a fitted model (simulate, predict, validate)."""
     augmented: Optional[Model]
     """The augmented model file (None when its map is a table)."""
+    input_hysteresis: Optional[Dict[str, Any]] = None
+    """A dynamic finding's hysteresis at the input fitted with G (w = u + λ·s, s a stop
+    operator of threshold c): ``threshold``, ``weight`` (λ), ``play`` (λ near −1, a
+    backlash), ``description``, ``validation_rms`` and ``without_hysteresis_rms``; None when
+    none was fitted or it did not explain the gap."""
 
 
 @dataclass

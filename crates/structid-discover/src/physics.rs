@@ -442,9 +442,11 @@ pub struct Accepted {
     /// The family.
     pub effect: Effect,
     /// Key parameters by [`Effect::parameter_names`] name (`offset` is the family's constant
-    /// offset), in the site's map units. Empty when the family only approximates the truth
-    /// and no parameter of it corresponds to a physical one (e.g. a hard saturation fitted
-    /// to a `tanh`).
+    /// offset) or [derived](crate::effects::EffectFit::derived) name, in the site's map
+    /// units. A saturation at the input is judged by its knee, the actuator's limit in u,
+    /// because its level in w trades with the gain of an estimated G. Empty when the family
+    /// only approximates the truth and no parameter of it corresponds to a physical one
+    /// (e.g. a hard saturation fitted to a `tanh`).
     pub key: Vec<(String, f64)>,
 }
 
@@ -488,7 +490,7 @@ impl Expected {
         };
         let parameters = (!accepted.key.is_empty()).then(|| {
             accepted.key.iter().all(|(name, truth)| {
-                fit.parameter(name)
+                fit.quantity(name)
                     .is_some_and(|p| (p.value - truth).abs() <= tolerance * truth.abs())
             })
         });
@@ -1202,10 +1204,10 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     E::Saturation.name(),
                     Some((E::Saturation, vec![1.0, level])),
                     vec![
-                        ok(E::Saturation, &[("level", level)]),
+                        ok(E::Saturation, &[("knee", level)]),
                         ok(
                             E::AsymmetricSaturation,
-                            &[("lower", -level), ("upper", level)],
+                            &[("lower_knee", -level), ("upper_knee", level)],
                         ),
                         ok(E::SmoothSaturation, &[]),
                     ],
@@ -1234,8 +1236,8 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     E::ClipAbove.name(),
                     Some((E::ClipAbove, vec![1.0, level])),
                     vec![
-                        ok(E::ClipAbove, &[("level", level)]),
-                        ok(E::AsymmetricSaturation, &[("upper", level)]),
+                        ok(E::ClipAbove, &[("knee", level)]),
+                        ok(E::AsymmetricSaturation, &[("upper_knee", level)]),
                     ],
                 ),
             )
@@ -1248,7 +1250,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     E::SmoothSaturation.name(),
                     Some((E::SmoothSaturation, vec![1.0, level])),
                     vec![
-                        ok(E::SmoothSaturation, &[("level", level)]),
+                        ok(E::SmoothSaturation, &[("knee", level)]),
                         ok(E::Saturation, &[]),
                         ok(E::AsymmetricSaturation, &[]),
                     ],

@@ -190,7 +190,7 @@ fn pct(v: f64) -> String {
     }
 }
 
-fn g4(v: f64) -> String {
+pub(crate) fn g4(v: f64) -> String {
     if !v.is_finite() {
         return e(v);
     }
@@ -393,8 +393,10 @@ fn regions_section(s: &mut String, estimation: &Gap, validation: &Gap) {
 }
 
 fn parameters_text(fit: &EffectFit) -> String {
+    // Derived quantities (a saturation's knee) follow the fitted parameters.
     fit.parameters
         .iter()
+        .chain(&fit.derived())
         .map(|p| {
             format!(
                 "{} = {} [{}, {}]",
@@ -693,6 +695,22 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         f.classification.describe(),
         r.nominal.describe(f.location)
     );
+    if let Some(h) = &f.input_hysteresis {
+        let _ = writeln!(
+            s,
+            "- {}: w = u + λ·s, s_k = clamp(s_(k−1) + u_k − u_(k−1), −c, c), y = G·w, with G \
+             re-estimated behind it (F = {:?}, B = {:?}): validation RMS {}, against {} for G \
+             re-estimated alone and {} for the static approximation below. The augmented \
+             model files hold that static approximation; a model file cannot declare the \
+             hysteresis.\n",
+            h.describe(),
+            h.g.den,
+            h.g.num,
+            e(h.validation_rms),
+            e(h.without_hysteresis_rms),
+            e(f.augmented.validation_gap.rms)
+        );
+    }
     if let Classification::Named(fit) = &f.classification {
         let _ = writeln!(s, "- map: `{}`", fit.expression);
         let _ = writeln!(s, "- parameters (95 % intervals): {}", parameters_text(fit));
@@ -914,6 +932,11 @@ fn fit_json(fit: &EffectFit, validation_rms: Option<f64>) -> Result<Value, serde
             "value": p.value,
             "interval": [p.interval.0, p.interval.1],
         })).collect::<Vec<_>>(),
+        "derived": fit.derived().iter().map(|p| json!({
+            "name": p.name,
+            "value": p.value,
+            "interval": [p.interval.0, p.interval.1],
+        })).collect::<Vec<_>>(),
         "rms": fit.rms,
         "bic": fit.bic,
         "validation_rms": validation_rms,
@@ -986,6 +1009,7 @@ pub fn json(
                 "total_variation_validation_rms": f.total_variation_rms,
                 "families": families,
                 "direction": json_value(&f.direction)?,
+                "input_hysteresis": json_value(&f.input_hysteresis)?,
                 "remarks": f.remarks,
                 "map": map,
                 "curve": curve,
@@ -1097,15 +1121,28 @@ pub fn summary(
                     fit.effect.name(),
                     fit.parameters
                         .iter()
+                        .chain(&fit.derived())
                         .map(|p| format!("{} = {}", p.name, g4(p.value)))
                         .collect::<Vec<_>>()
                         .join(", "),
                     fit.expression
                 );
             }
-            other => {
-                let _ = writeln!(s, "effect: {} (map kept as a table)", other.describe());
-            }
+            other => match &f.input_hysteresis {
+                Some(h) => {
+                    let _ = writeln!(
+                        s,
+                        "effect: {}: {}, with G re-estimated, validation RMS {} (the model files \
+                         hold its static approximation)",
+                        other.describe(),
+                        h.describe(),
+                        e(h.validation_rms)
+                    );
+                }
+                None => {
+                    let _ = writeln!(s, "effect: {} (map kept as a table)", other.describe());
+                }
+            },
         }
         let _ = writeln!(
             s,

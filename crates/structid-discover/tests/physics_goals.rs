@@ -24,11 +24,11 @@
 //! difference), so that even the truth leaves a gap on some plants (friction under a PD
 //! controller most of all).
 //!
-//! The goals are not all met yet: the `…_meet_the_goals` tests assert them and are ignored
-//! (`cargo test --release -p structid-discover --test physics_goals -- --ignored
-//! --nocapture` measures them); the `…_hold_their_measured_level` tests assert what the
-//! workflow achieves today with a margin, so that it does not fall back. Each case prints one
-//! line, so a failure shows which cases fell short and why.
+//! The `…_meet_the_goals` tests assert these goals on fixed seeds (60 static, 15 dynamic and
+//! 15 effect-free cases), and print one line per case, so a failure shows which cases fell
+//! short and why (`cargo test --release -p structid-discover --test physics_goals --
+//! --nocapture`). Measured: located 56/60, named 54/60, key parameters 42/49, a median 100 %
+//! of the true model's shrink, dynamic 13/15, no false alarm in 15.
 
 use std::sync::Arc;
 
@@ -217,44 +217,21 @@ fn summary(t: &Tally) -> (f64, f64) {
     (m, relative)
 }
 
-/// What the workflow achieves today (measured: located 55, named 54 of 60, parameters 39 of
-/// 49, median shrink 8.6×, a median 100 % of the true model's, with six families refined by
-/// output error where three were, G refitted jointly with the best hypothesis' map, at every
-/// location when the nominal's zero cancels its integrator, a second search around G with
-/// that zero moved to −1, and each location of an integrating plant identified with two
-/// input-disturbance ratios; with three families refined 53, 49, 36 of 45 and 8.3×; before
-/// the second search 51, 48, 36 of 44; before the refit at every location 48, 45, 35 of 43 and
-/// 7.9×, before any refit 41, 38, 31 of 36 and 4.8×), asserted with a margin so that it does
-/// not fall back.
+/// The issue's goals on the 60 static cases (measured: located 56, named 54 of 60, key
+/// parameters 42 of 49, median shrink 8.6×, a median 100 % of the true model's).
+///
+/// A saturation at the input is judged by its knee, the actuator's limit in u
+/// ([`EffectFit::derived`](structid_discover::effects::EffectFit::derived)): with G estimated
+/// along with the map, its fitted level follows G's gain (a level 1.6 times the truth's with a
+/// slope of 1.6, seed 42), while the knee is the truth's to 0.1 %. Judged by the level, the
+/// key parameters were 39 of 49. The remaining misses are mostly friction under a stiff PD
+/// controller, whose levels the sampled LFT (a held force, a backward-difference rate) fits
+/// lower and whose viscous slopes it fits steeper than the physics, and whose fitted maps
+/// validate 1.5–2× better than the true maps in that LFT. Earlier rounds: with three families
+/// refined 53, 49, 36 of 45 and 8.3×; before the second search around a refitted G 51, 48, 36
+/// of 44; before the refit at every location 48, 45, 35 of 43 and 7.9×, before any refit 41,
+/// 38, 31 of 36 and 4.8×.
 #[test]
-fn static_effects_on_physical_plants_hold_their_measured_level() {
-    let t = static_tally(0..60);
-    let (m, relative) = summary(&t);
-    assert!(t.located >= 53, "located {}/{}", t.located, t.cases);
-    assert!(t.named >= 51, "named {}/{}", t.named, t.cases);
-    assert!(
-        t.within as f64 >= 0.75 * t.with_keys as f64,
-        "parameters within 20 % {}/{}",
-        t.within,
-        t.with_keys
-    );
-    assert!(m >= 6.0, "median shrink {m:.2}×");
-    // The shrink goal holds in its relative form (measured: a median 100 % of the true
-    // model's).
-    assert!(
-        relative >= 0.8,
-        "median shrink {:.0} % of the true model's",
-        100.0 * relative
-    );
-}
-
-/// The issue's goals. Located and named are met; the key parameters are not quite (39 of 49,
-/// 79.6 %): the misses are mostly friction under a stiff PD controller, whose levels the
-/// sampled LFT (a held force, a backward-difference rate) fits lower and whose viscous slopes
-/// it fits steeper than the physics, and whose fitted maps validate 1.5–2× better than the
-/// true maps in that LFT.
-#[test]
-#[ignore = "the issue 14 goals are not all met yet: run with --ignored to measure"]
 fn static_effects_on_physical_plants_meet_the_goals() {
     let t = static_tally(0..60);
     let (m, relative) = summary(&t);
@@ -296,22 +273,18 @@ fn dynamic_tally(cases: u64) -> usize {
     dynamic
 }
 
-/// Measured today: 11 of 15 reported as dynamic (9 before a rate map had to validate clearly
-/// better than a dynamic fit in feedback from the position, or close the gap, to replace it,
-/// and before a strong direction effect in feedback counted whatever the shrink; 5 before a
-/// strong direction effect at the sensor or the input was preferred to a friction-like map of
-/// ẏ that explains little). The misses: backlash behind an estimated actuator, sensor or
-/// spring nominal, which absorbed its phase lag (seeds 0, 8, 9), and a Bouc–Wen spring in a
-/// stiff loop that a static map at the sensor nearly explains (seed 2, 159×).
+/// The issue's goal on the 15 hysteresis cases (measured: 13 of 15 reported as dynamic; 11
+/// before a hysteresis at the input was fitted with G behind it (dynamic seeds 0 and 9:
+/// a play and a Bouc–Wen element at an actuator behind an estimated nominal, which had
+/// absorbed their phase lag); 9 before a rate map had to validate clearly better than a
+/// dynamic fit in feedback from the position, or close the gap, to replace it, and before a
+/// strong direction effect in feedback counted whatever the shrink; 5 before a strong
+/// direction effect at the sensor or the input was preferred to a friction-like map of ẏ
+/// that explains little). The misses: a backlash spring in feedback behind an estimated
+/// nominal (seed 8, a gap no static block explains), and a backlash spring under a stiff PD
+/// loop around a double integrator that a static map at the sensor nearly explains (seed 2,
+/// 159×).
 #[test]
-fn hysteresis_on_physical_plants_holds_its_measured_level() {
-    let dynamic = dynamic_tally(15);
-    assert!(dynamic >= 10, "{dynamic}/15");
-}
-
-/// The issue's goal (not met yet).
-#[test]
-#[ignore = "the issue 14 goals are not met yet: run with --ignored to measure"]
 fn hysteresis_on_physical_plants_is_reported_as_dynamic() {
     let cases = 15;
     let dynamic = dynamic_tally(cases);
@@ -690,4 +663,52 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
     );
     assert!(f.shrink < 1.05, "{}", d.verdict);
     assert!(d.validation_gap.rms > 3.0 * d.noise.std, "{}", d.verdict);
+}
+
+/// A hysteresis at the actuator behind a nominal estimated from its own record: the estimated
+/// G absorbed part of its phase lag, no static block closes more than a sliver of the gap,
+/// and the direction test on the static fits stays below its threshold. The hysteresis
+/// fitted at the input with G re-estimated behind it makes the finding dynamic, at the
+/// input, with its parameters judged against the generator's truth: dynamic seed 0 is a play
+/// of half-width 0.133, found as a play (λ near −1) with that half-width to 10 %; seed 9 is a
+/// Bouc–Wen element (α = 0.14, n = 1, its hysteretic part saturating at 1/(β + γ) ≈ 160),
+/// found as an elasto-plastic stop (λ > 0) yielding within 20 % of that level.
+#[test]
+fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_parameters() {
+    use structid_discover::hypotheses::Location;
+    use structid_discover::physics::PhysicalEffect;
+    for seed in [0, 9] {
+        let case = generate(PhysicsKind::Dynamic, seed);
+        assert_ne!(case.nominal_source, NominalSource::Exact);
+        let d = run(&case);
+        eprintln!("{}", line(&case, &d));
+        let f = d.finding.as_ref().unwrap();
+        assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
+        assert_eq!(f.location, Location::Input, "{}", d.verdict);
+        let h = f.input_hysteresis.as_ref().expect("the input hysteresis");
+        // It explains more than half of what the static approximation leaves.
+        assert!(
+            h.validation_rms <= std::f64::consts::FRAC_1_SQRT_2 * f.augmented.validation_gap.rms,
+            "{h:?}"
+        );
+        match case.effect.as_ref().unwrap().0 {
+            PhysicalEffect::Backlash { width, .. } => {
+                assert!(h.is_play(), "{h:?}");
+                assert!(
+                    (h.threshold - width).abs() <= 0.1 * width,
+                    "{h:?} vs {width}"
+                );
+            }
+            PhysicalEffect::BoucWen { beta, gamma, .. } => {
+                assert!(!h.is_play() && h.weight > 0.0, "{h:?}");
+                let level = 1.0 / (beta + gamma);
+                assert!(
+                    (h.threshold - level).abs() <= 0.2 * level,
+                    "{h:?} vs {level}"
+                );
+            }
+            ref other => panic!("seed {seed}: {other:?} is not a hysteresis"),
+        }
+        assert!(d.verdict.contains("at the input"), "{}", d.verdict);
+    }
 }

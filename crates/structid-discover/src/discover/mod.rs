@@ -81,6 +81,14 @@
 //!    only when the direction explains at least [`FEEDBACK_HYSTERESIS_SHARE`] of the residual
 //!    energy (a biased G in a loop leaves weaker direction effects of its own). Such a finding
 //!    says that its location is not established ([`UNLOCATED_DIRECTION_EFFECT`]).
+//!    A nominal G estimated from a record with a hysteresis at the actuator absorbs part of
+//!    its phase lag, and the direction test can then stay quiet while no static block closes
+//!    the gap. So when the finding leaves a gap larger than the noise, a hysteresis at the
+//!    input (w = u + λ·s with a stop operator s: a play when λ = −1, an elasto-plastic
+//!    element when λ > 0, [`InputHysteresis`]) is fitted with G re-estimated behind it; when
+//!    it explains more than half of the residual energy that both the static block and G
+//!    re-estimated alone leave ([`HYSTERESIS_OVER_STATIC`]), the finding is dynamic at the
+//!    input and [`Finding::input_hysteresis`] carries the operator.
 //! 5. **What is it?** The best estimate's points (z_k, ŵ_k) are fitted by every family of the
 //!    [`crate::effects`] library. The points are a smoothed estimate, not independent noisy
 //!    samples, so BIC alone rewards families that bend to its artefacts; the families whose
@@ -129,6 +137,7 @@
 
 mod direction;
 mod fit;
+mod input_hysteresis;
 mod iterate;
 mod model;
 mod naming;
@@ -140,6 +149,7 @@ mod settings;
 mod total_variation;
 
 pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersion_spec};
+pub use input_hysteresis::{InputHysteresis, PLAY_WEIGHT_TOLERANCE, play_into, stop_into};
 pub use iterate::{Effects, EffectsSettings, Step, StopReason, discover_effects};
 pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCurve};
 pub use naming::parsimonious;
@@ -213,7 +223,17 @@ pub struct Finding {
     /// G re-estimated with the map in the loop
     /// ([`DiscoverSettingsBuilder::refine_nominal`]), when it was tried.
     pub nominal_refinement: Option<NominalRefinement>,
+    /// A hysteresis at the input fitted with G (a play, or an elasto-plastic stop), when it
+    /// explained the gap clearly better than any static block
+    /// ([`HYSTERESIS_OVER_STATIC`]); the finding is then dynamic.
+    pub input_hysteresis: Option<InputHysteresis>,
 }
+
+/// A hysteresis at the input fitted with G ([`InputHysteresis`]) makes the finding dynamic
+/// when its validation RMS is at most this share of the best static block's, and of G
+/// re-estimated without it: 1/√2, so that it explains more than half of the residual energy
+/// that either leaves. It is tried when the static block leaves a gap larger than the noise.
+pub const HYSTERESIS_OVER_STATIC: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// G before and after its re-estimation with the found map in the loop.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -1017,6 +1037,56 @@ fn discover_once(
             finding = alt;
         }
     }
+    // A static block that leaves a gap larger than the noise may be the static shadow of a
+    // hysteresis at the input (a play, or an elasto-plastic stop), whose phase lag an
+    // estimated G has partly absorbed (so that the direction test stays quiet): the
+    // hysteresis is fitted with G, and when it explains the record clearly better than the
+    // static block and than a better G alone, the effect is dynamic.
+    if finding.classification != Classification::Dynamic
+        && finding.augmented.validation_gap.rms > settings.gap.noise_ratio * noise.std
+        && let Some(g) = given.polynomial()
+        && let Some(h) = input_hysteresis::input_hysteresis(g, est, val, settings)
+        && h.validation_rms <= HYSTERESIS_OVER_STATIC * finding.augmented.validation_gap.rms
+        && h.validation_rms <= HYSTERESIS_OVER_STATIC * h.without_hysteresis_rms
+    {
+        let static_rms = finding.augmented.validation_gap.rms;
+        let static_what = format!(
+            "{} {}",
+            finding.classification.describe(),
+            nominal.describe(finding.location)
+        );
+        if finding.location != Location::Input
+            && let Some(i) = fitted
+                .iter()
+                .position(|f| f.result.location == Location::Input)
+        {
+            let tv = tv_rms(&fitted, i);
+            let input = fitted.remove(i);
+            let mut direction = direction_test(&input, settings)
+                .ok()
+                .unwrap_or_else(DirectionTest::none);
+            direction.dynamic = true;
+            if let Ok(f) = add(input, direction, tv) {
+                finding = f;
+            }
+        }
+        if finding.location == Location::Input {
+            finding.classification = Classification::Dynamic;
+            finding.direction.dynamic = true;
+            // What the augmented model carries is the static approximation, not a name.
+            finding.augmented.fit = None;
+            finding.remarks.push(format!(
+                "{}, with G re-estimated behind it, validates at RMS {}, against {} for the \
+                 best static block ({static_what}) and {} for G re-estimated alone: the \
+                 missing effect has memory",
+                h.describe(),
+                rms_text(h.validation_rms),
+                rms_text(static_rms),
+                rms_text(h.without_hysteresis_rms)
+            ));
+            finding.input_hysteresis = Some(h);
+        }
+    }
     if settings.refine_nominal
         && let Some(g) = given.polynomial()
     {
@@ -1206,6 +1276,14 @@ fn discover_once(
         finding.remarks.push(c);
     }
     let mut verdict = verdict_text(nominal, &validation_gap, &finding);
+    if let Some(h) = &finding.input_hysteresis {
+        verdict.push_str(&format!(
+            "; {}, with G re-estimated, validates at RMS {} ({})",
+            h.describe(),
+            rms_text(h.validation_rms),
+            crate::gap::shrink_text(validation_gap.rms / h.validation_rms, 1)
+        ));
+    }
     // A block that closes a sliver of a large gap is a missing effect, but not the whole
     // story: the verdict must not read as if the model were now complete.
     let left = finding.augmented.validation_gap.rms / noise.std;

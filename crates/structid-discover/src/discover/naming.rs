@@ -267,7 +267,12 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
                 .map(|p| format!("{} = {:.4}", p.name, p.value))
                 .collect::<Vec<_>>()
                 .join(", ");
-            format!("{} ({params})", fit.effect.name())
+            let derived = fit
+                .derived()
+                .iter()
+                .map(|p| format!("; {} = {:.4}", p.name, p.value))
+                .collect::<String>();
+            format!("{} ({params}{derived})", fit.effect.name())
         }
         other => other.describe(),
     };
@@ -602,6 +607,7 @@ pub(super) fn name_and_add(
         },
         shrink,
         nominal_refinement: None,
+        input_hysteresis: None,
     })
 }
 

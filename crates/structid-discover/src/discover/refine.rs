@@ -145,7 +145,7 @@ pub(super) fn adds_integrator(g: &PolynomialModel, nominal: &PolynomialModel) ->
 
 /// The number of roots of `den` within about 10⁻⁴ of z = 1 (successive deflations by
 /// (1 − q⁻¹) whose remainder is below 10⁻⁴ of the coefficients' sum).
-fn near_unit_poles(den: &[f64]) -> usize {
+pub(super) fn near_unit_poles(den: &[f64]) -> usize {
     use structid_linear::integrators::deflate_within;
     let mut n = 0;
     let mut p = den.to_vec();

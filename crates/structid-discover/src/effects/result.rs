@@ -154,6 +154,84 @@ impl EffectFit {
             .find(|p| p.name == name)
     }
 
+    /// Quantities the parameters imply that a reader compares with physics: the *knee* of a
+    /// saturating family, where |k·z| reaches its level (`knee` = level/gain for a symmetric
+    /// saturation, its `tanh` form and one-sided clipping; `lower_knee` and `upper_knee` for
+    /// an asymmetric saturation). For a map at the plant input the knee is the actuator's
+    /// limit in u's units. It is also what the data determine when G is estimated with the
+    /// map: c·N followed by G/c is the same system, so the fitted level follows whatever
+    /// gain G was given while the knee does not.
+    ///
+    /// The interval adds the two parameters' relative half-widths (first order, correlation
+    /// ignored: an upper bound on the linearised interval). Empty for other families and
+    /// for a gain of zero.
+    ///
+    /// ```
+    /// use structid_discover::effects::{Effect, fit_effect};
+    /// // An actuator limited at |u| = 0.15, seen through a G with 0.6 of the true gain:
+    /// // the map is 1/0.6 times the saturation, and its level 0.25 is not the limit.
+    /// let z: Vec<f64> = (0..400).map(|k| -0.5 + k as f64 / 399.0).collect();
+    /// let w: Vec<f64> = z.iter().map(|z| z.clamp(-0.15, 0.15) / 0.6).collect();
+    /// let fit = fit_effect(Effect::Saturation, &z, &w).unwrap();
+    /// assert!((fit.parameter("level").unwrap().value - 0.25).abs() < 1e-6);
+    /// let knee = fit.quantity("knee").unwrap();
+    /// assert!((knee.value - 0.15).abs() < 1e-6);
+    /// ```
+    pub fn derived(&self) -> Vec<Parameter> {
+        let p = |name: &str| self.parameter(name);
+        let ratio = |name: &str, level: &Parameter, gain: &Parameter| -> Option<Parameter> {
+            let value = level.value / gain.value;
+            if !value.is_finite() || gain.value == 0.0 {
+                return None;
+            }
+            let rel = level.half_width() / level.value.abs() + gain.half_width() / gain.value.abs();
+            let h = rel * value.abs();
+            let interval = if h.is_finite() {
+                (value - h, value + h)
+            } else {
+                (f64::NEG_INFINITY, f64::INFINITY)
+            };
+            Some(Parameter {
+                name: name.into(),
+                value,
+                interval,
+            })
+        };
+        let Some(gain) = p("gain") else {
+            return Vec::new();
+        };
+        let knees: &[(&str, &str)] = match self.effect {
+            Effect::Saturation | Effect::SmoothSaturation => &[("knee", "level")],
+            Effect::ClipAbove | Effect::ClipBelow => &[("knee", "level")],
+            Effect::AsymmetricSaturation => &[("lower_knee", "lower"), ("upper_knee", "upper")],
+            _ => &[],
+        };
+        knees
+            .iter()
+            .filter_map(|(name, level)| {
+                let level = p(level)?;
+                // The symmetric families use |level| and are odd in the gain's sign.
+                let abs = |q: &Parameter| Parameter {
+                    value: q.value.abs(),
+                    ..q.clone()
+                };
+                match self.effect {
+                    Effect::Saturation | Effect::SmoothSaturation => {
+                        ratio(name, &abs(level), &abs(gain))
+                    }
+                    _ => ratio(name, level, gain),
+                }
+            })
+            .collect()
+    }
+
+    /// The parameter, offset or [derived](Self::derived) quantity called `name`.
+    pub fn quantity(&self, name: &str) -> Option<Parameter> {
+        self.parameter(name)
+            .cloned()
+            .or_else(|| self.derived().into_iter().find(|p| p.name == name))
+    }
+
     /// The fitted map at z, offset included.
     ///
     /// ```
