@@ -200,3 +200,44 @@ def test_discover_on_several_records_matches_the_tool(cli, tmp_path):
     # Lists of different lengths are refused with a clear message.
     with pytest.raises(structid.StructidError, match="lists of arrays"):
         structid.discover(nominal, [est[0][0], est[1][0]], [est[0][1]], val[0][0], val[0][1])
+
+
+def test_a_backlash_at_the_input_is_reported_with_its_play(cli, tmp_path):
+    """A play of half-width 0.3 between the command and G, the nominal G fitted by output error
+    to the same record (it absorbs part of the play's lag): discover reports a dynamic effect
+    at the input with the play's half-width, as the tool's report.json does."""
+    num, den = [0.0, 0.2, 0.1], [1.0, -1.2, 0.5]
+    rng = np.random.default_rng(7)
+
+    def record(phase):
+        t = np.arange(1500.0)
+        u = 1.5 * np.sin(0.013 * t + phase) + 0.5 * np.sin(0.057 * t + 2 * phase)
+        b = np.empty_like(u)
+        follower = u[0]
+        for k, x in enumerate(u):
+            follower = min(max(follower, x - 0.3), x + 0.3)
+            b[k] = follower
+        y = np.zeros_like(u)
+        for k in range(len(u)):
+            y[k] = sum(num[i] * b[k - i] for i in range(1, 3) if k - i >= 0) \
+                - sum(den[i] * y[k - i] for i in range(1, 3) if k - i >= 0)
+        return u, y + 0.01 * rng.standard_normal(len(u))
+
+    (u, y), (uv, yv) = record(0.0), record(1.0)
+    nominal = structid.linear(u, y, (2, 2, 1), method="oe").model
+    found = structid.discover(nominal, u, y, uv, yv)
+    assert found.finding is not None
+    assert found.finding.location == "input"
+    assert found.finding.effect.startswith("dynamic")
+    h = found.finding.input_hysteresis
+    assert h is not None and h["play"]
+    assert abs(h["threshold"] - 0.3) < 0.03
+    assert h["validation_rms"] < h["without_hysteresis_rms"] / 2
+    nominal.save(tmp_path / "nominal.toml")
+    cli("discover", "--model", tmp_path / "nominal.toml",
+        "--data", write_csv(tmp_path / "est.csv", {"u": u, "y": y}),
+        "--validate", write_csv(tmp_path / "val.csv", {"u": uv, "y": yv}),
+        "--out", tmp_path / "found")
+    report = read_json(tmp_path / "found" / "report.json")
+    np.testing.assert_allclose(report["finding"]["input_hysteresis"]["threshold"],
+                               h["threshold"], rtol=1e-9)

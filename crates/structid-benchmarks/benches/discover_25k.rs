@@ -7,7 +7,9 @@
 //! with its default settings: the gap of the nominal model on both records, every default
 //! location identified on the estimation record and ranked on the validation record, total
 //! variation where the smooth estimates call for it, the direction test, the naming and the
-//! augmented model's gap. Drawing the case is not timed.
+//! augmented model's gap. Drawing the case is not timed. A second benchmark times dynamic
+//! case 0 drawn alike (a backlash at the actuator behind a nominal estimated from the record),
+//! the path that also fits a hysteresis at the input with G.
 //!
 //! Run: `cargo bench -j 1 -p structid-benchmarks --bench discover_25k`.
 
@@ -37,6 +39,24 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let d = discover(&nominal, &case.estimation, &case.validation, &settings)
                 .expect("discovery runs");
+            black_box((d.verdict_kind, d.hypotheses.len()))
+        })
+    });
+    // The slowest path: a backlash at the actuator behind a nominal estimated from its own
+    // record, where no static block explains the gap and the hysteresis at the input is
+    // fitted with G (a threshold search with output-error fits of G at each point).
+    let dynamic = generate_with_length(PhysicsKind::Dynamic, 0, SAMPLES);
+    let dynamic_nominal =
+        Nominal::from_polynomial(&dynamic.nominal).expect("the nominal model is valid");
+    group.bench_function("physics_dynamic_0_25k_samples", |b| {
+        b.iter(|| {
+            let d = discover(
+                &dynamic_nominal,
+                &dynamic.estimation,
+                &dynamic.validation,
+                &settings,
+            )
+            .expect("discovery runs");
             black_box((d.verdict_kind, d.hypotheses.len()))
         })
     });

@@ -190,7 +190,7 @@ fn pct(v: f64) -> String {
     }
 }
 
-pub(crate) fn g4(v: f64) -> String {
+fn g4(v: f64) -> String {
     if !v.is_finite() {
         return e(v);
     }

@@ -74,16 +74,14 @@ impl InputHysteresis {
     pub fn describe(&self) -> String {
         if self.is_play() {
             format!(
-                "a play (backlash) of half-width {} at the input (stop weight λ = {:.3})",
-                crate::report::g4(self.threshold),
-                self.weight
+                "a play (backlash) of half-width {:.4} at the input (stop weight λ = {:.3})",
+                self.threshold, self.weight
             )
         } else {
             format!(
                 "an elasto-plastic hysteresis at the input, w = u + λ·s with a stop operator s \
-                 of threshold c = {} and λ = {:.3}",
-                crate::report::g4(self.threshold),
-                self.weight
+                 of threshold c = {:.4} and λ = {:.3}",
+                self.threshold, self.weight
             )
         }
     }
@@ -376,6 +374,11 @@ mod tests {
         assert_eq!(b, u);
     }
 
+    /// G = (0.2q⁻¹ + 0.1q⁻²)/(1 − 1.2q⁻¹ + 0.5q⁻²).
+    fn plant() -> PolynomialModel {
+        PolynomialModel::new(vec![vec![0.0, 0.2, 0.1]], vec![1.0, -1.2, 0.5], None).unwrap()
+    }
+
     fn record(
         g: &PolynomialModel,
         rng: &mut rand::rngs::StdRng,
@@ -398,8 +401,7 @@ mod tests {
     /// does not.
     #[test]
     fn a_play_at_the_input_is_found_with_its_width() {
-        let g =
-            PolynomialModel::new(vec![vec![0.0, 0.2, 0.1]], vec![1.0, -1.2, 0.5], None).unwrap();
+        let g = plant();
         let play = |u: &[f64]| {
             let mut b = vec![0.0; u.len()];
             play_into(u, 0.3, &mut b);
@@ -421,8 +423,7 @@ mod tests {
     /// λ = 0.7/0.3 (G absorbs the 0.3).
     #[test]
     fn an_elasto_plastic_hysteresis_is_found_with_its_weight() {
-        let g =
-            PolynomialModel::new(vec![vec![0.0, 0.2, 0.1]], vec![1.0, -1.2, 0.5], None).unwrap();
+        let g = plant();
         let operator = |u: &[f64]| {
             let mut s = vec![0.0; u.len()];
             stop_into(u, 0.5, &mut s);

@@ -88,7 +88,8 @@
 //!    element when λ > 0, [`InputHysteresis`]) is fitted with G re-estimated behind it; when
 //!    it explains more than half of the residual energy that both the static block and G
 //!    re-estimated alone leave ([`HYSTERESIS_OVER_STATIC`]), the finding is dynamic at the
-//!    input and [`Finding::input_hysteresis`] carries the operator.
+//!    input and [`Finding::input_hysteresis`] carries the operator. A finding that the
+//!    direction test already calls dynamic at the input gets the operator the same way.
 //! 5. **What is it?** The best estimate's points (z_k, ŵ_k) are fitted by every family of the
 //!    [`crate::effects`] library. The points are a smoothed estimate, not independent noisy
 //!    samples, so BIC alone rewards families that bend to its artefacts; the families whose
@@ -225,7 +226,8 @@ pub struct Finding {
     pub nominal_refinement: Option<NominalRefinement>,
     /// A hysteresis at the input fitted with G (a play, or an elasto-plastic stop), when it
     /// explained the gap clearly better than any static block
-    /// ([`HYSTERESIS_OVER_STATIC`]); the finding is then dynamic.
+    /// ([`HYSTERESIS_OVER_STATIC`]); the finding is then dynamic at the input. It is fitted
+    /// when a static finding, or a dynamic one at the input, leaves a gap above the noise.
     pub input_hysteresis: Option<InputHysteresis>,
 }
 
@@ -1041,8 +1043,9 @@ fn discover_once(
     // hysteresis at the input (a play, or an elasto-plastic stop), whose phase lag an
     // estimated G has partly absorbed (so that the direction test stays quiet): the
     // hysteresis is fitted with G, and when it explains the record clearly better than the
-    // static block and than a better G alone, the effect is dynamic.
-    if finding.classification != Classification::Dynamic
+    // static block and than a better G alone, the effect is dynamic. A dynamic finding at the
+    // input gets the operator's parameters the same way.
+    if (finding.classification != Classification::Dynamic || finding.location == Location::Input)
         && finding.augmented.validation_gap.rms > settings.gap.noise_ratio * noise.std
         && let Some(g) = given.polynomial()
         && let Some(h) = input_hysteresis::input_hysteresis(g, est, val, settings)
