@@ -29,8 +29,8 @@ use crate::records::{self, Simulated};
 use super::DiscoverSettings;
 use super::fit::scoring_settings;
 
-/// A hysteresis at the input fitted with G ([`input_hysteresis`]): w = u + λ·s with s the
-/// stop operator of threshold c, and y = G·w.
+/// A hysteresis at the input fitted with G (by `discover`, step 4 of the workflow):
+/// w = u + λ·s with s the stop operator of threshold c, and y = G·w.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct InputHysteresis {
     /// The stop operator's threshold c, in u's units (the play's half-width when λ = −1).
