@@ -922,21 +922,21 @@ fn gap_json(g: &Gap, time: &TimeAxis) -> Result<Value, serde_json::Error> {
     }))
 }
 
+fn parameter_json(p: &crate::effects::Parameter) -> Value {
+    json!({
+        "name": p.name,
+        "value": p.value,
+        "interval": [p.interval.0, p.interval.1],
+    })
+}
+
 fn fit_json(fit: &EffectFit, validation_rms: Option<f64>) -> Result<Value, serde_json::Error> {
     Ok(json!({
         "name": fit.effect.name(),
         "family": json_value(&fit.effect)?,
         "expression": fit.expression,
-        "parameters": fit.parameters.iter().map(|p| json!({
-            "name": p.name,
-            "value": p.value,
-            "interval": [p.interval.0, p.interval.1],
-        })).collect::<Vec<_>>(),
-        "derived": fit.derived().iter().map(|p| json!({
-            "name": p.name,
-            "value": p.value,
-            "interval": [p.interval.0, p.interval.1],
-        })).collect::<Vec<_>>(),
+        "parameters": fit.parameters.iter().map(parameter_json).collect::<Vec<_>>(),
+        "derived": fit.derived().iter().map(parameter_json).collect::<Vec<_>>(),
         "rms": fit.rms,
         "bic": fit.bic,
         "validation_rms": validation_rms,

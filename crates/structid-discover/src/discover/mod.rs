@@ -1053,11 +1053,18 @@ fn discover_once(
         && h.validation_rms <= HYSTERESIS_OVER_STATIC * h.without_hysteresis_rms
     {
         let static_rms = finding.augmented.validation_gap.rms;
-        let static_what = format!(
-            "{} {}",
-            finding.classification.describe(),
-            nominal.describe(finding.location)
-        );
+        let static_what = match finding.classification {
+            // A dynamic finding's augmented model holds the static approximation at its site.
+            Classification::Dynamic => format!(
+                "the static approximation {}",
+                nominal.describe(finding.location)
+            ),
+            _ => format!(
+                "{} {}",
+                finding.classification.describe(),
+                nominal.describe(finding.location)
+            ),
+        };
         if finding.location != Location::Input
             && let Some(i) = fitted
                 .iter()
