@@ -52,6 +52,19 @@ fn run(case: &PhysicsCase) -> Discovery {
     .unwrap_or_else(|e| panic!("seed {}: discover failed: {e}", case.seed))
 }
 
+/// Dynamic case `seed` through the workflow; its finding must be dynamic.
+fn dynamic_finding(seed: u64) -> (PhysicsCase, Discovery) {
+    let case = generate(PhysicsKind::Dynamic, seed);
+    let d = run(&case);
+    eprintln!("{}", line(&case, &d));
+    let f = d
+        .finding
+        .as_ref()
+        .unwrap_or_else(|| panic!("seed {seed}: {}", d.verdict));
+    assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
+    (case, d)
+}
+
 /// The validation RMS of the true G with the true static map at the true site, scored as
 /// `scoring` (None for dynamic effects).
 fn truth_rms(case: &PhysicsCase, scoring: Scoring) -> Option<f64> {
@@ -578,11 +591,8 @@ fn a_family_ranked_behind_others_by_its_map_fit_is_named_when_it_validates() {
 /// hysteresis is reported where it acts.
 #[test]
 fn a_rate_map_that_barely_beats_the_position_does_not_hide_a_hysteresis() {
-    let case = generate(PhysicsKind::Dynamic, 5);
-    let d = run(&case);
-    eprintln!("{}", line(&case, &d));
+    let (case, d) = dynamic_finding(5);
     let f = d.finding.as_ref().unwrap();
-    assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
     assert_eq!(
         f.location,
         case.expected.as_ref().unwrap().site,
@@ -617,10 +627,8 @@ fn a_rate_map_that_barely_beats_the_position_does_not_hide_a_hysteresis() {
 #[test]
 fn a_direction_effect_that_no_static_map_reduces_is_not_claimed_located() {
     for (seed, unlocated) in [(1, true), (11, false)] {
-        let case = generate(PhysicsKind::Dynamic, seed);
-        let d = run(&case);
+        let (_, d) = dynamic_finding(seed);
         let f = d.finding.as_ref().unwrap();
-        assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
         assert_eq!(f.shrink < PARTIAL_SHRINK, unlocated, "{}", d.verdict);
         assert_eq!(
             f.remarks
@@ -641,12 +649,9 @@ fn a_direction_effect_that_no_static_map_reduces_is_not_claimed_located() {
 /// (`lti_physical_plants_raise_no_false_alarm`).
 #[test]
 fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
-    let case = generate(PhysicsKind::Dynamic, 12);
-    let d = run(&case);
-    eprintln!("{}", line(&case, &d));
+    let (_, d) = dynamic_finding(12);
     assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
     let f = d.finding.as_ref().unwrap();
-    assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
     assert!(
         matches!(
             f.location,
@@ -678,12 +683,9 @@ fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_par
     use structid_discover::hypotheses::Location;
     use structid_discover::physics::PhysicalEffect;
     for seed in [0, 9] {
-        let case = generate(PhysicsKind::Dynamic, seed);
+        let (case, d) = dynamic_finding(seed);
         assert_ne!(case.nominal_source, NominalSource::Exact);
-        let d = run(&case);
-        eprintln!("{}", line(&case, &d));
         let f = d.finding.as_ref().unwrap();
-        assert_eq!(f.classification, Classification::Dynamic, "{}", d.verdict);
         assert_eq!(f.location, Location::Input, "{}", d.verdict);
         let h = f.input_hysteresis.as_ref().expect("the input hysteresis");
         // It explains more than half of what the static approximation leaves.

@@ -379,6 +379,15 @@ mod tests {
         PolynomialModel::new(vec![vec![0.0, 0.2, 0.1]], vec![1.0, -1.2, 0.5], None).unwrap()
     }
 
+    /// Estimation and validation records of `plant()` behind `operator`, seeded by `seed`.
+    fn est_and_val(seed: u64, operator: impl Fn(&[f64]) -> Vec<f64> + Copy) -> (Data, Data) {
+        let g = plant();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let est = record(&g, &mut rng, 0.0, operator);
+        let val = record(&g, &mut rng, 1.0, operator);
+        (est, val)
+    }
+
     fn record(
         g: &PolynomialModel,
         rng: &mut rand::rngs::StdRng,
@@ -401,15 +410,11 @@ mod tests {
     /// does not.
     #[test]
     fn a_play_at_the_input_is_found_with_its_width() {
-        let g = plant();
-        let play = |u: &[f64]| {
+        let (est, val) = est_and_val(3, |u: &[f64]| {
             let mut b = vec![0.0; u.len()];
             play_into(u, 0.3, &mut b);
             b
-        };
-        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
-        let est = record(&g, &mut rng, 0.0, play);
-        let val = record(&g, &mut rng, 1.0, play);
+        });
         let start =
             PolynomialModel::new(vec![vec![0.0, 0.14, 0.07]], vec![1.0, -1.2, 0.5], None).unwrap();
         let h = input_hysteresis(&start, &est, &val, &DiscoverSettings::default()).unwrap();
@@ -423,16 +428,12 @@ mod tests {
     /// λ = 0.7/0.3 (G absorbs the 0.3).
     #[test]
     fn an_elasto_plastic_hysteresis_is_found_with_its_weight() {
-        let g = plant();
-        let operator = |u: &[f64]| {
+        let (est, val) = est_and_val(5, |u: &[f64]| {
             let mut s = vec![0.0; u.len()];
             stop_into(u, 0.5, &mut s);
             u.iter().zip(&s).map(|(u, s)| 0.3 * u + 0.7 * s).collect()
-        };
-        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let est = record(&g, &mut rng, 0.0, operator);
-        let val = record(&g, &mut rng, 1.0, operator);
-        let h = input_hysteresis(&g, &est, &val, &DiscoverSettings::default()).unwrap();
+        });
+        let h = input_hysteresis(&plant(), &est, &val, &DiscoverSettings::default()).unwrap();
         assert!((h.threshold - 0.5).abs() < 0.05, "{h:?}");
         assert!((h.weight - 0.7 / 0.3).abs() < 0.25, "{h:?}");
         assert!(!h.is_play());
