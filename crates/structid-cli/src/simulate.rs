@@ -26,7 +26,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     guard.check_out_file(&a.out)?;
     // A nominal model's declared w columns carry w = 0.
     let lft = mf.model_lft()?;
-    lft.check_no_algebraic_loop().map_err(|e| {
+    mf.evaluation_order().map_err(|e| {
         CliError::from(e).context(format!("cannot simulate `{}`", model_path.display()))
     })?;
     let missing: Vec<String> = mf

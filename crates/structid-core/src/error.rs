@@ -132,13 +132,36 @@ pub enum Error {
     #[error("unstable model: {0}")]
     Unstable(String),
 
-    /// The simulation would need w_k to compute z_k (D_zw ≠ 0).
+    /// The maps form a cycle through D_zw: z_k would depend on w_k = N(z_k) through the maps
+    /// named in `cycle`. Maps in series (an acyclic D_zw) are evaluated in order and are not
+    /// refused.
     #[error(
-        "algebraic loop: D_zw has a non-zero entry ({value}) at row {row}, column {col}, so z_k depends on w_k = N(z_k); \
-         simulation, and computing z from u and y, need D_zw = 0 (add a delay in the loop or move the direct \
-         term into the linear block)"
+        "algebraic loop: D_zw has a non-zero entry ({value}) at row {row}, column {col}, and the maps form a cycle \
+         {}: z_k would depend on w_k = N(z_k) through them; simulation needs the maps' dependencies through D_zw \
+         to be acyclic (add a delay in the loop or move the direct term into the linear block)",
+        cycle_text(cycle)
     )]
     AlgebraicLoop {
+        /// Row of D_zw.
+        row: usize,
+        /// Column of D_zw.
+        col: usize,
+        /// The non-zero entry.
+        value: f64,
+        /// The blocks of the cycle in the order one reads the next's output backwards, the
+        /// first repeated at the end (`a → b → a`: a reads b, b reads a).
+        cycle: Vec<String>,
+    },
+
+    /// D_zw ≠ 0 where z must be computed from u and y alone (the paper's identification, the
+    /// one-step predictor): a map reads another map's output of the same sample.
+    #[error(
+        "maps in series: D_zw has a non-zero entry ({value}) at row {row}, column {col}, so z_k depends on \
+         another map's output w_k; z cannot be computed from u and y alone, which identification by the \
+         dispersion criterion and one-step prediction need. Simulation evaluates maps in series in order, \
+         and the joint fit by simulation error identifies them"
+    )]
+    SeriesMaps {
         /// Row of D_zw.
         row: usize,
         /// Column of D_zw.
@@ -243,6 +266,14 @@ fn poor_nominal_text(model: f64, constant: f64, scoring: &str) -> String {
 
 /// Result alias used across `structid-core`.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+fn cycle_text(cycle: &[String]) -> String {
+    cycle
+        .iter()
+        .map(|c| format!("`{c}`"))
+        .collect::<Vec<_>>()
+        .join(" ← ")
+}
 
 pub(crate) fn positive_finite(name: &str, value: f64) -> Result<f64> {
     if value.is_finite() && value > 0.0 {

@@ -237,7 +237,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
                 }
             }
             ExperimentData::Simulated(sim) => {
-                mf.lft.check_no_algebraic_loop().map_err(|e| {
+                mf.evaluation_order().map_err(|e| {
                     CliError::from(e).context(format!(
                         "experiment `{}` (line {}): cannot simulate `{}`",
                         exp.name,

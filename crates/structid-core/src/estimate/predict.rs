@@ -190,7 +190,7 @@ impl Stepper {
 ///
 /// # Errors
 /// [`Error::DimensionMismatch`] for a wrong number of maps or channels,
-/// [`Error::AlgebraicLoop`] when D_zw ≠ 0, [`Error::NotMeasurable`] when z cannot be computed
+/// [`Error::AlgebraicLoop`] for a cycle of maps, [`Error::SeriesMaps`] for maps in series, [`Error::NotMeasurable`] when z cannot be computed
 /// from the record, [`Error::InvalidParameter`] when `settle` is not less than the record
 /// length, [`Error::Numerical`] when a map returns a non-finite value or the prediction
 /// diverges.
@@ -202,7 +202,7 @@ pub fn predict(
 ) -> Result<Prediction> {
     check_record(model, maps, data, settings.settle, "prediction")?;
     let lft = model.lft();
-    lft.check_no_algebraic_loop()?;
+    model.check_z_free_of_w()?;
     let blocks = model.blocks();
     let len = data.len();
     let m = lft.matrices();

@@ -251,13 +251,20 @@ impl Lft {
         }
     }
 
-    /// Checks D_zw = 0, which simulation with the maps in the loop requires.
+    /// Checks D_zw = 0, which computing z from u and y requires (the paper's identification
+    /// and the one-step predictor): with D_zw ≠ 0, z_k depends on maps' outputs w_k.
+    ///
+    /// Simulation does not need it: maps in series are evaluated in order
+    /// ([`Lft::evaluation_order`]), and only a cycle is refused there.
+    ///
+    /// # Errors
+    /// [`Error::SeriesMaps`] naming the first non-zero entry of D_zw.
     pub fn check_no_algebraic_loop(&self) -> Result<()> {
         let dzw = &self.m.dzw;
         for j in 0..dzw.ncols() {
             for i in 0..dzw.nrows() {
                 if dzw[(i, j)] != 0.0 {
-                    return Err(Error::AlgebraicLoop {
+                    return Err(Error::SeriesMaps {
                         row: i,
                         col: j,
                         value: dzw[(i, j)],

@@ -4,6 +4,7 @@ pub mod interpolant;
 pub mod lft;
 pub mod maps;
 pub mod measurability;
+pub mod order;
 pub mod simulate;
 pub mod structure;
 
@@ -140,6 +141,35 @@ impl Model {
     /// The nonlinear blocks, in the order given.
     pub fn blocks(&self) -> &[NonlinearBlock] {
         &self.blocks
+    }
+
+    /// The order in which the blocks are evaluated within a sample (indices into
+    /// [`Model::blocks`]): maps in series after the maps they read through D_zw
+    /// ([`Lft::evaluation_order`]).
+    ///
+    /// # Errors
+    /// [`Error::AlgebraicLoop`] naming the blocks of a cycle.
+    pub fn evaluation_order(&self) -> Result<Vec<usize>> {
+        self.lft.evaluation_order(&self.places())
+    }
+
+    /// Where each block sits, for [`Lft::evaluation_order`].
+    pub fn places(&self) -> Vec<order::BlockPlace<'_>> {
+        self.blocks
+            .iter()
+            .map(|b| order::BlockPlace {
+                name: &b.name,
+                inputs: &b.inputs,
+                output: b.output,
+            })
+            .collect()
+    }
+
+    /// Refuses D_zw ≠ 0 where z must be computed from u and y: a cycle as
+    /// [`Error::AlgebraicLoop`] (naming its blocks), maps in series as [`Error::SeriesMaps`].
+    pub fn check_z_free_of_w(&self) -> Result<()> {
+        self.evaluation_order()?;
+        self.lft.check_no_algebraic_loop()
     }
 
     /// A copy with every block's dispersion replaced by `f(block)`.

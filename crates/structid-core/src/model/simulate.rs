@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::interpolant::Interpolant;
 use crate::lft::Lft;
 use crate::model::Model;
+use crate::model::order::BlockPlace;
 
 /// One static map placed in the loop: `w[output] = map(z[inputs])`.
 #[derive(Clone, Copy)]
@@ -74,8 +75,9 @@ fn gemv_add(m: &[f64], x: &[f64], out: &mut [f64]) {
 impl Lft {
     /// Simulates the LFT with the given maps in the loop.
     ///
-    /// `e` defaults to zero and `x0` to the zero state. Requires D_zw = 0
-    /// ([`Error::AlgebraicLoop`] otherwise) and a map for every w channel.
+    /// `e` defaults to zero and `x0` to the zero state. Needs a map for every w channel. Maps
+    /// in series (D_zw ≠ 0 without a cycle) are evaluated in order within each sample
+    /// ([`Lft::evaluation_order`]); a cycle is refused with [`Error::AlgebraicLoop`].
     ///
     /// ```
     /// use nalgebra::dmatrix;
@@ -99,7 +101,6 @@ impl Lft {
         e: Option<&Signal>,
         x0: Option<&[f64]>,
     ) -> Result<Simulation> {
-        self.check_no_algebraic_loop()?;
         let d = self.dims();
         let len = u.len();
         if u.channels() != d.u {
@@ -158,37 +159,61 @@ impl Lft {
                 "no map given for w[{c}]; simulation needs every static map"
             )));
         }
+        let names: Vec<String> = maps.iter().map(|m| format!("w[{}]", m.output)).collect();
+        let places: Vec<BlockPlace<'_>> = maps
+            .iter()
+            .zip(&names)
+            .map(|(m, name)| BlockPlace {
+                name,
+                inputs: m.inputs,
+                output: m.output,
+            })
+            .collect();
+        let order = self.evaluation_order(&places)?;
         let mm = self.matrices();
-        let [a, bu, be, bw, cy, dyu, dye, dyw, cz, dzu, dze] = [
+        let [a, bu, be, bw, cy, dyu, dye, dyw, cz, dzu, dze, dzw] = [
             &mm.a, &mm.bu, &mm.be, &mm.bw, &mm.cy, &mm.dyu, &mm.dye, &mm.dyw, &mm.cz, &mm.dzu,
-            &mm.dze,
+            &mm.dze, &mm.dzw,
         ]
         .map(row_major);
+        let series = dzw.iter().any(|v| *v != 0.0);
         let mut y = Signal::zeros(len, d.y);
         let mut z = Signal::zeros(len, d.z);
         let mut w = Signal::zeros(len, d.w);
         let mut xn = vec![0.0; d.states];
         let mut arg = Vec::new();
+        let mut zk = vec![0.0; d.z];
         for k in 0..len {
             let (uk, ek) = (u.sample(k), e.sample(k));
-            let zk = z.sample_mut(k);
-            gemv_add(&cz, &x, zk);
-            gemv_add(&dzu, uk, zk);
-            gemv_add(&dze, ek, zk);
-            let zk = z.sample(k).to_vec();
+            zk.iter_mut().for_each(|v| *v = 0.0);
+            gemv_add(&cz, &x, &mut zk);
+            gemv_add(&dzu, uk, &mut zk);
+            gemv_add(&dze, ek, &mut zk);
             let wk = w.sample_mut(k);
-            for m in maps {
+            for &b in &order {
+                let m = &maps[b];
                 arg.clear();
-                arg.extend(m.inputs.iter().map(|&i| zk[i]));
+                // w channels not yet written this sample are zero, and the order guarantees
+                // that every channel this map reads through D_zw has been written.
+                arg.extend(m.inputs.iter().map(|&i| {
+                    let through_w = if series {
+                        dzw[i * d.w..(i + 1) * d.w].iter().zip(wk.iter()).map(|(a, b)| a * b).sum()
+                    } else {
+                        0.0
+                    };
+                    zk[i] + through_w
+                }));
                 wk[m.output] = m.map.eval(&arg);
+                if !wk[m.output].is_finite() {
+                    return Err(Error::Numerical(format!(
+                        "the map for w[{}] returned {} at sample {k} (its input {arg:?})",
+                        m.output, wk[m.output]
+                    )));
+                }
             }
             let wk = w.sample(k).to_vec();
-            if let Some(bad) = wk.iter().position(|v| !v.is_finite()) {
-                return Err(Error::Numerical(format!(
-                    "the map for w[{bad}] returned {} at sample {k} (z = {zk:?})",
-                    wk[bad]
-                )));
-            }
+            gemv_add(&dzw, &wk, &mut zk);
+            z.sample_mut(k).copy_from_slice(&zk);
             let yk = y.sample_mut(k);
             gemv_add(&cy, &x, yk);
             gemv_add(&dyu, uk, yk);
@@ -232,6 +257,8 @@ impl Model {
                 found: maps.len().to_string(),
             });
         }
+        // A cycle is named by the blocks' own names before the LFT's simulation sees it.
+        self.evaluation_order()?;
         let places = self
             .blocks()
             .iter()

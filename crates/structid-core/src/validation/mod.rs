@@ -275,8 +275,9 @@ impl ValidationReport {
 ///
 /// Errors: [`Error::DimensionMismatch`] when the number of maps differs from the number of
 /// blocks or the data's channels do not fit the model; [`Error::InvalidParameter`] when
-/// `max_lag` is not less than the record length; [`Error::AlgebraicLoop`] when D_zw ≠ 0 (no
-/// simulation possible); [`Error::NotMeasurable`] when z cannot be computed from the data (or,
+/// `max_lag` is not less than the record length; [`Error::AlgebraicLoop`] for a cycle of
+/// maps and [`Error::SeriesMaps`] for maps in series (the one-step predictor computes z from the
+/// data); [`Error::NotMeasurable`] when z cannot be computed from the data (or,
 /// with an estimated x₀, when x₀ reaches z and y differently); [`Error::Numerical`] when a map
 /// returns a non-finite value; [`Error::Unstable`] when the simulation or the one-step
 /// predictor diverges; [`Error::InvalidStructure`] when the
@@ -328,8 +329,8 @@ pub fn validate(
             ),
         });
     }
-    // Simulation needs no algebraic loop; check before the (longer) prediction work.
-    lft.check_no_algebraic_loop()?;
+    // The predictor computes z from u and y; check before the (longer) prediction work.
+    model.check_z_free_of_w()?;
     let MeasuredResidual {
         v,
         whitener,

@@ -124,6 +124,7 @@ use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::paper::gaussian_noise;
 use structid_core::{
+    BlockPlace,
     Data, Interpolant, Lft, LftMatrices, MapBinding, Model, NonlinearBlock, Simulation,
 };
 use structid_lti::Signal;
@@ -520,10 +521,54 @@ impl ModelFile {
             }
             .into());
         }
+        self.evaluation_order()?;
         let lft = self.model_lft()?;
         let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), lft.dims().e, noise_std, seed));
         let places = self.blocks.iter().map(|b| (b.inputs.as_slice(), b.output));
         Ok(lft.simulate(&MapBinding::zip(places, maps), u, e.as_ref(), None)?)
+    }
+
+    /// The order in which the blocks are evaluated within a sample: maps in series (D_zw ≠ 0)
+    /// after the maps they read ([`Lft::evaluation_order`]).
+    ///
+    /// # Errors
+    /// An algebraic loop naming the blocks of a cycle.
+    ///
+    /// ```
+    /// use structid_io::ModelFile;
+    /// // A dead zone feeding a saturation: the saturation reads the dead zone's output.
+    /// let m = ModelFile::parse(r#"
+    ///     [lft]
+    ///     A = []
+    ///     Dye = [[1.0]]
+    ///     Dyw = [[0.0, 1.0]]
+    ///     Dzu = [[0.0], [1.0]]
+    ///     Dzw = [[1.0, 0.0], [0.0, 0.0]]
+    ///     [signals]
+    ///     u = ["u"]
+    ///     y = ["y"]
+    ///     [[nonlinearity]]
+    ///     name = "saturation"
+    ///     inputs = [0]
+    ///     output = 1
+    ///     [[nonlinearity]]
+    ///     name = "dead_zone"
+    ///     inputs = [1]
+    ///     output = 0
+    /// "#, None).unwrap();
+    /// assert_eq!(m.evaluation_order().unwrap(), vec![1, 0]);
+    /// ```
+    pub fn evaluation_order(&self) -> Result<Vec<usize>, IoError> {
+        let places: Vec<BlockPlace<'_>> = self
+            .blocks
+            .iter()
+            .map(|b| BlockPlace {
+                name: &b.name,
+                inputs: &b.inputs,
+                output: b.output,
+            })
+            .collect();
+        Ok(self.model_lft()?.evaluation_order(&places)?)
     }
 
     /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a

@@ -1,0 +1,60 @@
+//! The error type of `structid-joint`.
+
+/// What can go wrong when building or fitting a joint model.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum JointError {
+    /// An error of the model layer (dimensions, a cycle of maps, operator parameters, …).
+    #[error(transparent)]
+    Core(#[from] structid_core::Error),
+
+    /// A setting or a parameter is outside its range.
+    #[error("invalid {name} = {value}: {reason}")]
+    InvalidParameter {
+        /// Which setting or parameter.
+        name: String,
+        /// The value given.
+        value: f64,
+        /// What it must be.
+        reason: String,
+    },
+
+    /// The model is not one the joint fit can take.
+    #[error("invalid joint model: {0}")]
+    InvalidModel(String),
+
+    /// The starting model cannot be simulated on the data (it diverges or a map returns a
+    /// non-finite value), so there is no cost to start from.
+    #[error("the starting model cannot be simulated on record {record} (numbered from 1): {detail}")]
+    NoStart {
+        /// The record, numbered from 1.
+        record: usize,
+        /// What failed.
+        detail: String,
+    },
+
+    /// A block's input does not move over the data, so its map is not determined there.
+    #[error(
+        "block `{block}` is not excited: its input spans {span:e} over the data (its features' \
+         width is {width:e}); a latent map needs an input that moves across its centres"
+    )]
+    NotExcited {
+        /// The block.
+        block: String,
+        /// max − min of its input over the starting simulation.
+        span: f64,
+        /// The feature width σ it was given.
+        width: f64,
+    },
+}
+
+/// `Result` with [`JointError`].
+pub type Result<T> = std::result::Result<T, JointError>;
+
+pub(crate) fn invalid(name: &str, value: f64, reason: &str) -> JointError {
+    JointError::InvalidParameter {
+        name: name.into(),
+        value,
+        reason: reason.into(),
+    }
+}

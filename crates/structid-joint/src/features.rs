@@ -1,0 +1,299 @@
+//! A static map in kernel-feature form on fixed centres, the joint fit's nonparametric map:
+//!
+//! ```text
+//!   N(z) = Σ_j θ_j·K(z, c_j) + a₀ + aᵀz,       K(z, c) = (2πσ²)^(−p/2)·exp(−‖z − c‖²/2σ²)
+//! ```
+//!
+//! K is the paper's Gaussian kernel, so the dispersion of the kernel part is its RKHS norm
+//! D = θᵀ·K_cc·θ with K_cc the Gram matrix of the centres, and β means what it means in
+//! `identify`. The affine part a₀ + aᵀz is not penalised: a map's level and slope are what a
+//! linear model already has, and the kernel part describes the departure from it. Far from the
+//! centres the map falls back to that affine part, which extrapolates a tank's outflow or a
+//! spring better than a kernel sum decaying to zero.
+//!
+//! Parameter order: θ₁ … θ_m, a₀, a₁ … a_p.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::block::{BlockJacobian, BlockMap};
+use crate::error::{Result, invalid};
+
+/// A Gaussian-kernel feature map on fixed centres plus an unpenalised affine part.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GaussianFeatures {
+    centres: Vec<Vec<f64>>,
+    sigma: f64,
+    beta: f64,
+    theta: Vec<f64>,
+    affine: Vec<f64>,
+}
+
+impl GaussianFeatures {
+    /// Centres `centres` (m points of dimension p), width σ > 0 and dispersion weight β ≥ 0;
+    /// all coefficients start at zero.
+    ///
+    /// ```
+    /// use structid_joint::GaussianFeatures;
+    /// assert!(GaussianFeatures::new(vec![vec![0.0], vec![1.0]], 0.5, 1e-3).is_ok());
+    /// assert!(GaussianFeatures::new(vec![vec![0.0], vec![1.0, 2.0]], 0.5, 1e-3).is_err());
+    /// assert!(GaussianFeatures::new(vec![vec![0.0]], 0.0, 1e-3).is_err());
+    /// ```
+    pub fn new(centres: Vec<Vec<f64>>, sigma: f64, beta: f64) -> Result<Self> {
+        let p = centres.first().map_or(0, Vec::len);
+        if centres.is_empty() || p == 0 {
+            return Err(invalid("centres", centres.len() as f64, "need at least one centre of dimension ≥ 1"));
+        }
+        if let Some(bad) = centres.iter().position(|c| c.len() != p) {
+            return Err(invalid("centres", bad as f64, "every centre needs the first centre's dimension"));
+        }
+        if centres.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(invalid("centres", f64::NAN, "centres must be finite"));
+        }
+        if !(sigma.is_finite() && sigma > 0.0) {
+            return Err(invalid("sigma", sigma, "must be finite and greater than zero"));
+        }
+        if !(beta.is_finite() && beta >= 0.0) {
+            return Err(invalid("beta", beta, "must be finite and not negative"));
+        }
+        let m = centres.len();
+        Ok(Self {
+            centres,
+            sigma,
+            beta,
+            theta: vec![0.0; m],
+            affine: vec![0.0; p + 1],
+        })
+    }
+
+    /// `count` centres spread evenly over [lo, hi] for a scalar input.
+    ///
+    /// ```
+    /// use structid_joint::GaussianFeatures;
+    /// let f = GaussianFeatures::on_interval(0.0, 2.0, 3, 0.5, 0.0).unwrap();
+    /// assert_eq!(f.centres(), &[vec![0.0], vec![1.0], vec![2.0]]);
+    /// ```
+    pub fn on_interval(lo: f64, hi: f64, count: usize, sigma: f64, beta: f64) -> Result<Self> {
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) || count < 2 {
+            return Err(invalid("interval", hi - lo, "needs finite lo < hi and at least two centres"));
+        }
+        let step = (hi - lo) / (count - 1) as f64;
+        let centres = (0..count).map(|j| vec![lo + step * j as f64]).collect();
+        Self::new(centres, sigma, beta)
+    }
+
+    /// The centres.
+    pub fn centres(&self) -> &[Vec<f64>] {
+        &self.centres
+    }
+
+    /// The kernel width σ.
+    pub fn sigma(&self) -> f64 {
+        self.sigma
+    }
+
+    /// The dispersion weight β.
+    pub fn beta(&self) -> f64 {
+        self.beta
+    }
+
+    fn kernel(&self, z: &[f64], c: &[f64]) -> f64 {
+        let p = z.len() as f64;
+        let s2 = self.sigma * self.sigma;
+        let d2: f64 = z.iter().zip(c).map(|(a, b)| (a - b) * (a - b)).sum();
+        (2.0 * std::f64::consts::PI * s2).powf(-p / 2.0) * (-d2 / (2.0 * s2)).exp()
+    }
+
+    /// The Gram matrix K_cc of the centres.
+    fn gram(&self) -> DMatrix<f64> {
+        let m = self.centres.len();
+        DMatrix::from_fn(m, m, |i, j| self.kernel(&self.centres[i], &self.centres[j]))
+    }
+
+    /// The coefficients that fit the values `w` at the points `z` (one point per entry) in
+    /// the least-squares sense with this map's dispersion:
+    /// min Σ_k (N(z_k) − w_k)² + n·β·θᵀK_ccθ, n the number of points. This is how an
+    /// estimated map (a table, an interpolant) becomes a starting point of the joint fit.
+    ///
+    /// ```
+    /// use structid_joint::{BlockMap, GaussianFeatures};
+    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-8).unwrap();
+    /// let z: Vec<Vec<f64>> = (0..81).map(|k| vec![-2.0 + 0.05 * k as f64]).collect();
+    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
+    /// let f = f.fitted_to(&z, &w).unwrap();
+    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
+    /// ```
+    pub fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
+        if z.len() != w.len() || z.is_empty() {
+            return Err(invalid("points", z.len() as f64, "need as many values as points, and at least one"));
+        }
+        let (m, p) = (self.centres.len(), self.centres[0].len());
+        let np = m + 1 + p;
+        let mut gram = DMatrix::zeros(np, np);
+        let mut rhs = DVector::zeros(np);
+        let mut row = vec![0.0; np];
+        for (zk, &wk) in z.iter().zip(w) {
+            if zk.len() != p || !wk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
+                return Err(invalid("points", wk, "points need the centres' dimension and finite values"));
+            }
+            self.features(zk, &mut row);
+            for i in 0..np {
+                rhs[i] += row[i] * wk;
+                for j in 0..np {
+                    gram[(i, j)] += row[i] * row[j];
+                }
+            }
+        }
+        let reg = self.gram() * (self.beta * z.len() as f64);
+        let mut kk = gram.view_mut((0, 0), (m, m));
+        kk += &reg;
+        // A small ridge on everything keeps the solve defined when points do not reach every
+        // centre (then the coefficient of an unreached centre is left near zero).
+        let ridge = 1e-10 * (0..np).map(|i| gram[(i, i)]).fold(1e-300, f64::max);
+        for i in 0..np {
+            gram[(i, i)] += ridge;
+        }
+        let sol = gram
+            .cholesky()
+            .ok_or_else(|| invalid("points", z.len() as f64, "the fit's normal equations are not positive definite"))?
+            .solve(&rhs);
+        let mut out = self.clone();
+        out.theta = sol.rows(0, m).iter().copied().collect();
+        out.affine = sol.rows(m, p + 1).iter().copied().collect();
+        Ok(out)
+    }
+
+    /// The regressors [K(z, c_1) … K(z, c_m), 1, z₁ … z_p] of the parameters at `z`.
+    fn features(&self, z: &[f64], out: &mut [f64]) {
+        let m = self.centres.len();
+        for (o, c) in out.iter_mut().zip(&self.centres) {
+            *o = self.kernel(z, c);
+        }
+        out[m] = 1.0;
+        out[m + 1..].copy_from_slice(z);
+    }
+}
+
+impl BlockMap for GaussianFeatures {
+    fn kind(&self) -> &'static str {
+        "gaussian features"
+    }
+
+    fn input_len(&self) -> usize {
+        self.centres[0].len()
+    }
+
+    fn parameters(&self) -> Vec<f64> {
+        self.theta.iter().chain(&self.affine).copied().collect()
+    }
+
+    fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
+        let m = self.centres.len();
+        if p.len() != m + self.affine.len() {
+            return Err(invalid("parameters", p.len() as f64, "wrong number of parameters for this feature map"));
+        }
+        if let Some(v) = p.iter().find(|v| !v.is_finite()) {
+            return Err(invalid("parameters", *v, "must be finite"));
+        }
+        let mut out = self.clone();
+        out.theta = p[..m].to_vec();
+        out.affine = p[m..].to_vec();
+        Ok(Box::new(out))
+    }
+
+    fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {
+        let kernel: f64 = self
+            .centres
+            .iter()
+            .zip(&self.theta)
+            .map(|(c, t)| t * self.kernel(z, c))
+            .sum();
+        let lin: f64 = z.iter().zip(&self.affine[1..]).map(|(a, b)| a * b).sum();
+        kernel + self.affine[0] + lin
+    }
+
+    fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
+        let m = self.centres.len();
+        self.features(z, &mut jac.dw_dp);
+        let s2 = self.sigma * self.sigma;
+        jac.dw_dz.copy_from_slice(&self.affine[1..]);
+        for ((c, t), k) in self.centres.iter().zip(&self.theta).zip(&jac.dw_dp[..m]) {
+            for (d, (zi, ci)) in jac.dw_dz.iter_mut().zip(z.iter().zip(c)) {
+                *d -= t * k * (zi - ci) / s2;
+            }
+        }
+        self.eval(state, z)
+    }
+
+    fn regulariser(&self) -> Option<DMatrix<f64>> {
+        if self.beta == 0.0 {
+            return None;
+        }
+        let m = self.centres.len();
+        let mut k = self.gram();
+        // Gaussian Gram matrices are numerically singular: a relative jitter makes the
+        // Cholesky factor exist, and changes D by a relative 1e-10 at most.
+        let jitter = 1e-10 * (0..m).map(|i| k[(i, i)]).sum::<f64>() / m as f64;
+        for i in 0..m {
+            k[(i, i)] += jitter;
+        }
+        let l = k.cholesky()?.l();
+        let mut r = DMatrix::zeros(m, m + self.affine.len());
+        r.view_mut((0, 0), (m, m))
+            .copy_from(&(l.transpose() * self.beta.sqrt()));
+        Some(r)
+    }
+
+    fn boxed(&self) -> Box<dyn BlockMap> {
+        Box::new(self.clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_regulariser_squares_to_beta_times_the_rkhs_norm() {
+        let f = GaussianFeatures::on_interval(-1.0, 1.0, 6, 0.4, 0.3).unwrap();
+        let theta = [0.5, -1.0, 2.0, 0.1, -0.3, 0.7, 9.0, 4.0];
+        let f = f.with_parameters(&theta).unwrap();
+        let r = f.regulariser().unwrap();
+        let rt = &r * DVector::from_column_slice(&theta);
+        // θᵀKθ summed by hand from the kernel definition.
+        let g = GaussianFeatures::on_interval(-1.0, 1.0, 6, 0.4, 0.3).unwrap();
+        let mut d = 0.0;
+        for i in 0..6 {
+            for j in 0..6 {
+                d += theta[i] * theta[j] * g.kernel(&g.centres[i], &g.centres[j]);
+            }
+        }
+        assert!((rt.norm_squared() - 0.3 * d).abs() < 1e-8 * d, "{} {}", rt.norm_squared(), 0.3 * d);
+    }
+
+    #[test]
+    fn derivatives_match_finite_differences() {
+        let centres = vec![vec![0.0, 0.0], vec![1.0, -0.5], vec![-0.4, 0.8]];
+        let f = GaussianFeatures::new(centres, 0.7, 0.0).unwrap();
+        let p = [0.3, -1.2, 0.8, 0.1, 0.5, -0.25];
+        let f = f.with_parameters(&p).unwrap();
+        let z = [0.2, 0.4];
+        let mut jac = BlockJacobian::for_map(f.as_ref());
+        f.eval_jacobian(&mut [], &z, &mut jac);
+        let h = 1e-6;
+        for i in 0..2 {
+            let (mut a, mut b) = (z, z);
+            a[i] += h;
+            b[i] -= h;
+            let fd = (f.eval(&mut [], &a) - f.eval(&mut [], &b)) / (2.0 * h);
+            assert!((fd - jac.dw_dz[i]).abs() < 1e-7, "z{i}: {fd} vs {}", jac.dw_dz[i]);
+        }
+        for i in 0..p.len() {
+            let (mut a, mut b) = (p, p);
+            a[i] += h;
+            b[i] -= h;
+            let fa = f.with_parameters(&a).unwrap().eval(&mut [], &z);
+            let fb = f.with_parameters(&b).unwrap().eval(&mut [], &z);
+            assert!(((fa - fb) / (2.0 * h) - jac.dw_dp[i]).abs() < 1e-7, "θ{i}");
+        }
+    }
+}

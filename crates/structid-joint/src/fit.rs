@@ -1,0 +1,372 @@
+//! The joint fit: settings, the executor and its result.
+//!
+//! [`fit`] minimises the multiple-shooting problem ([`crate::shooting`]) by
+//! Levenberg–Marquardt, then polishes the result by single shooting (one segment per record,
+//! the continuity penalty gone), and returns the best of the start, the multiple-shooting
+//! result and the polish by the single-shooting criterion
+//!
+//! ```text
+//!   C(θ, ξ₀) = Σ_k |y_k − ŷ_k(θ, ξ₀)|² + L·Σ_b β_b·D_b(θ_b)
+//! ```
+//!
+//! so it never ends at a higher cost than it started from.
+
+use structid_core::Data;
+use structid_linear::levenberg_marquardt::{
+    LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus,
+};
+
+use crate::error::{JointError, Result, invalid};
+use crate::model::JointModel;
+use crate::shooting::{Segment, Shooting};
+use crate::step::Stepper;
+
+/// Settings of [`fit`], built by [`JointSettings::builder`] with validated values.
+///
+/// ```
+/// use structid_joint::JointSettings;
+/// let s = JointSettings::builder().segment_length(100).build().unwrap();
+/// assert_eq!(s.segment_length(), Some(100));
+/// assert!(JointSettings::builder().segment_length(1).build().is_err());
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointSettings {
+    segment_length: Option<usize>,
+    continuity_weight: f64,
+    max_iterations: usize,
+    tolerance: f64,
+    estimate_initial_state: bool,
+    polish: bool,
+}
+
+impl Default for JointSettings {
+    fn default() -> Self {
+        Self {
+            segment_length: None,
+            continuity_weight: 1.0,
+            max_iterations: 100,
+            tolerance: 1e-9,
+            estimate_initial_state: true,
+            polish: true,
+        }
+    }
+}
+
+impl JointSettings {
+    /// A builder from the defaults: single shooting, 100 iterations, relative tolerance 1e-9,
+    /// initial states estimated, continuity weight 1.
+    pub fn builder() -> JointSettingsBuilder {
+        JointSettingsBuilder(Self::default())
+    }
+
+    /// Samples per shooting segment (`None`: one segment per record, single shooting).
+    pub fn segment_length(&self) -> Option<usize> {
+        self.segment_length
+    }
+
+    /// μ of the continuity residuals μ·(ξ_(s+1) − Φ_s), in units of the output per unit of
+    /// state, scaled by √(segment length) so that a defect weighs like the segment it spoils.
+    pub fn continuity_weight(&self) -> f64 {
+        self.continuity_weight
+    }
+
+    /// Largest number of Levenberg–Marquardt iterations of each stage.
+    pub fn max_iterations(&self) -> usize {
+        self.max_iterations
+    }
+
+    /// Relative decrease of the cost under which a stage has converged.
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance
+    }
+
+    /// Whether each record's initial state is fitted (otherwise the given or zero state,
+    /// blocks at rest).
+    pub fn estimate_initial_state(&self) -> bool {
+        self.estimate_initial_state
+    }
+
+    /// Whether multiple shooting is followed by a single-shooting polish.
+    pub fn polish(&self) -> bool {
+        self.polish
+    }
+}
+
+/// Builder of [`JointSettings`].
+#[derive(Clone, Debug)]
+pub struct JointSettingsBuilder(JointSettings);
+
+impl JointSettingsBuilder {
+    /// Samples per shooting segment (at least 2).
+    pub fn segment_length(mut self, len: usize) -> Self {
+        self.0.segment_length = Some(len);
+        self
+    }
+    /// Continuity weight μ (> 0).
+    pub fn continuity_weight(mut self, mu: f64) -> Self {
+        self.0.continuity_weight = mu;
+        self
+    }
+    /// Iterations per stage (≥ 1).
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.0.max_iterations = n;
+        self
+    }
+    /// Relative tolerance (in (0, 1)).
+    pub fn tolerance(mut self, tol: f64) -> Self {
+        self.0.tolerance = tol;
+        self
+    }
+    /// Whether initial states are fitted.
+    pub fn estimate_initial_state(mut self, yes: bool) -> Self {
+        self.0.estimate_initial_state = yes;
+        self
+    }
+    /// Whether to polish by single shooting.
+    pub fn polish(mut self, yes: bool) -> Self {
+        self.0.polish = yes;
+        self
+    }
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<JointSettings> {
+        let s = self.0;
+        if let Some(l) = s.segment_length
+            && l < 2
+        {
+            return Err(invalid("segment_length", l as f64, "must be at least 2 samples"));
+        }
+        if !(s.continuity_weight.is_finite() && s.continuity_weight > 0.0) {
+            return Err(invalid("continuity_weight", s.continuity_weight, "must be finite and positive"));
+        }
+        if s.max_iterations == 0 {
+            return Err(invalid("max_iterations", 0.0, "must be at least 1"));
+        }
+        if !(s.tolerance > 0.0 && s.tolerance < 1.0) {
+            return Err(invalid("tolerance", s.tolerance, "must lie in (0, 1)"));
+        }
+        Ok(s)
+    }
+}
+
+/// One stage of the fit, as data.
+#[derive(Clone, Debug)]
+pub struct Stage {
+    /// "multiple shooting" or "single shooting".
+    pub name: &'static str,
+    /// Segments used.
+    pub segments: usize,
+    /// The stage's own cost (continuity penalty included) after each accepted step.
+    pub costs: Vec<f64>,
+    /// How it ended.
+    pub status: LmStatus,
+}
+
+/// The fitted model and how the fit went.
+#[derive(Clone, Debug)]
+pub struct JointFit {
+    /// The fitted model.
+    pub model: JointModel,
+    /// Each record's stacked initial state ξ₀ (see [`JointModel::stacked_state_len`]).
+    pub initial_states: Vec<Vec<f64>>,
+    /// The single-shooting criterion C at the start.
+    pub initial_cost: f64,
+    /// C at the end (never above `initial_cost`).
+    pub cost: f64,
+    /// RMS simulation error per output channel over all records at the end.
+    pub rms: Vec<f64>,
+    /// The stages that ran.
+    pub stages: Vec<Stage>,
+}
+
+/// Fits `model` to `data` (one or several records) by its simulation error; `x0` optionally
+/// gives each record's starting LFT state (zero otherwise).
+///
+/// # Errors
+/// [`JointError::NoStart`] when the starting model cannot be simulated on a record; wrong
+/// channel counts; settings errors come from the builder.
+pub fn fit(model: &JointModel, data: &Data, x0: Option<&[Vec<f64>]>, settings: &JointSettings) -> Result<JointFit> {
+    let d = model.lft().dims();
+    if data.u().channels() != d.u || data.y().channels() != d.y {
+        return Err(JointError::InvalidModel(format!(
+            "the data have {} input and {} output channel(s), the model {} and {}",
+            data.u().channels(),
+            data.y().channels(),
+            d.u,
+            d.y
+        )));
+    }
+    let starts = start_states(model, data, x0)?;
+    let initial_cost = single_cost(model, data, &starts).ok_or_else(|| JointError::NoStart {
+        record: 1,
+        detail: "the simulation diverged or a block returned a non-finite value".into(),
+    })?;
+    let mut best = (model.clone(), starts.clone(), initial_cost);
+    let mut stages = Vec::new();
+    if let Some(len) = settings.segment_length {
+        let (m, xi, stage) = run_stage(model, data, &starts, Some(len), settings)?;
+        if let Some(c) = single_cost(&m, data, &xi)
+            && c < best.2
+        {
+            best = (m, xi, c);
+        }
+        stages.push(stage);
+    }
+    if settings.polish || settings.segment_length.is_none() {
+        let (m, xi, stage) = run_stage(&best.0, data, &best.1, None, settings)?;
+        if let Some(c) = single_cost(&m, data, &xi)
+            && c < best.2
+        {
+            best = (m, xi, c);
+        }
+        stages.push(stage);
+    }
+    let rms = simulation_rms(&best.0, data, &best.1);
+    Ok(JointFit {
+        model: best.0,
+        initial_states: best.1,
+        initial_cost,
+        cost: best.2,
+        rms,
+        stages,
+    })
+}
+
+/// Each record's starting stacked state: the given x₀ (or zero), blocks at rest.
+fn start_states(model: &JointModel, data: &Data, x0: Option<&[Vec<f64>]>) -> Result<Vec<Vec<f64>>> {
+    let bounds = data.record_bounds();
+    if let Some(x0) = x0
+        && x0.len() != bounds.len() - 1
+    {
+        return Err(JointError::InvalidModel(format!(
+            "{} initial state(s) given for {} record(s)",
+            x0.len(),
+            bounds.len() - 1
+        )));
+    }
+    (0..bounds.len() - 1)
+        .map(|r| model.rest_state(data.u().sample(bounds[r]), x0.map(|x| x[r].as_slice())))
+        .collect()
+}
+
+/// One LM stage from `model` and stacked starts: segments of `len` samples (one per record
+/// when `None`). Returns the fitted model, each record's fitted start and the stage.
+fn run_stage(
+    model: &JointModel,
+    data: &Data,
+    starts: &[Vec<f64>],
+    len: Option<usize>,
+    settings: &JointSettings,
+) -> Result<(JointModel, Vec<Vec<f64>>, Stage)> {
+    let segments = segments(model, data, starts, len, settings.estimate_initial_state)?;
+    let count = segments.len();
+    let weight = settings.continuity_weight * (len.unwrap_or(1) as f64).sqrt();
+    let mut problem = Shooting::new(model, data, segments, weight);
+    let mut theta = model.parameters();
+    for s in &problem.segments {
+        if s.state_at.is_some() {
+            theta.extend(&s.fixed);
+        }
+    }
+    let lm = LmSettings::builder()
+        .max_iterations(settings.max_iterations)
+        .tolerance(settings.tolerance)
+        .build()
+        .map_err(|e| JointError::InvalidModel(e.to_string()))?;
+    let out = LevenbergMarquardt::new(lm)
+        .minimize(&mut problem, &theta)
+        .map_err(|e| JointError::InvalidModel(e.to_string()))?;
+    let fitted = model.with_parameters(&out.theta[..problem.globals])?;
+    // Each record's start is its first segment's state.
+    let mut firsts = Vec::new();
+    let mut new_record = true;
+    for s in &problem.segments {
+        if new_record {
+            firsts.push(match s.state_at {
+                Some(at) => out.theta[at..at + s.fixed.len()].to_vec(),
+                None => s.fixed.clone(),
+            });
+        }
+        new_record = !s.continued;
+    }
+    let stage = Stage {
+        name: if len.is_some() { "multiple shooting" } else { "single shooting" },
+        segments: count,
+        costs: std::iter::once(out.initial_cost).chain(out.costs.iter().copied()).collect(),
+        status: out.status,
+    };
+    Ok((fitted, firsts, stage))
+}
+
+/// Cuts each record into segments; the states of later segments start where a simulation of
+/// the starting model from the record's start passes (the usual multiple-shooting start).
+fn segments(
+    model: &JointModel,
+    data: &Data,
+    starts: &[Vec<f64>],
+    len: Option<usize>,
+    free_first: bool,
+) -> Result<Vec<Segment>> {
+    let stepper = Stepper::new(model);
+    let bounds = data.record_bounds();
+    let nxi = model.stacked_state_len();
+    let mut out: Vec<Segment> = Vec::new();
+    let mut next_at = *model.parameter_offsets().last().expect("non-empty");
+    for r in 0..bounds.len() - 1 {
+        let (a, b) = (bounds[r], bounds[r + 1]);
+        let step = len.unwrap_or(b - a).max(2);
+        let mut xi = starts[r].clone();
+        let mut k = a;
+        while k < b {
+            // A short tail joins the previous segment of its record.
+            let end = if b - k < step + step / 2 { b } else { k + step };
+            let free = free_first || k > a;
+            out.push(Segment {
+                start: k,
+                end,
+                state_at: free.then_some(next_at),
+                fixed: xi.clone(),
+                continued: end < b,
+            });
+            if free {
+                next_at += nxi;
+            }
+            // Where the starting model passes; a diverging start keeps the last finite state.
+            let mut trial = xi.clone();
+            if stepper.run(data.u(), k..end, &mut trial, |_, _| {}).is_some() {
+                xi = trial;
+            }
+            k = end;
+        }
+    }
+    if out.is_empty() {
+        return Err(JointError::InvalidModel("the data have no samples".into()));
+    }
+    Ok(out)
+}
+
+/// The single-shooting criterion C, or `None` when a simulation diverges.
+fn single_cost(model: &JointModel, data: &Data, starts: &[Vec<f64>]) -> Option<f64> {
+    let segments = segments(model, data, starts, None, false).ok()?;
+    let mut p = Shooting::new(model, data, segments, 1.0);
+    let theta = model.parameters();
+    p.residuals(&theta).map(|r| r.norm_squared())
+}
+
+fn simulation_rms(model: &JointModel, data: &Data, starts: &[Vec<f64>]) -> Vec<f64> {
+    let stepper = Stepper::new(model);
+    let ny = stepper.outputs();
+    let bounds = data.record_bounds();
+    let mut sum = vec![0.0; ny];
+    for r in 0..bounds.len() - 1 {
+        let mut xi = starts[r].clone();
+        let ok = stepper.run(data.u(), bounds[r]..bounds[r + 1], &mut xi, |k, y| {
+            for (o, s) in sum.iter_mut().enumerate() {
+                *s += (data.y().sample(k)[o] - y[o]).powi(2);
+            }
+        });
+        if ok.is_none() {
+            return vec![f64::INFINITY; ny];
+        }
+    }
+    sum.iter().map(|s| (s / data.len() as f64).sqrt()).collect()
+}
