@@ -25,7 +25,9 @@ pub enum JointError {
 
     /// The starting model cannot be simulated on the data (it diverges or a map returns a
     /// non-finite value), so there is no cost to start from.
-    #[error("the starting model cannot be simulated on record {record} (numbered from 1): {detail}")]
+    #[error(
+        "the starting model cannot be simulated on record {record} (numbered from 1): {detail}"
+    )]
     NoStart {
         /// The record, numbered from 1.
         record: usize,

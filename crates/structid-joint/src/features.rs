@@ -41,16 +41,28 @@ impl GaussianFeatures {
     pub fn new(centres: Vec<Vec<f64>>, sigma: f64, beta: f64) -> Result<Self> {
         let p = centres.first().map_or(0, Vec::len);
         if centres.is_empty() || p == 0 {
-            return Err(invalid("centres", centres.len() as f64, "need at least one centre of dimension ≥ 1"));
+            return Err(invalid(
+                "centres",
+                centres.len() as f64,
+                "need at least one centre of dimension ≥ 1",
+            ));
         }
         if let Some(bad) = centres.iter().position(|c| c.len() != p) {
-            return Err(invalid("centres", bad as f64, "every centre needs the first centre's dimension"));
+            return Err(invalid(
+                "centres",
+                bad as f64,
+                "every centre needs the first centre's dimension",
+            ));
         }
         if centres.iter().flatten().any(|v| !v.is_finite()) {
             return Err(invalid("centres", f64::NAN, "centres must be finite"));
         }
         if !(sigma.is_finite() && sigma > 0.0) {
-            return Err(invalid("sigma", sigma, "must be finite and greater than zero"));
+            return Err(invalid(
+                "sigma",
+                sigma,
+                "must be finite and greater than zero",
+            ));
         }
         if !(beta.is_finite() && beta >= 0.0) {
             return Err(invalid("beta", beta, "must be finite and not negative"));
@@ -74,7 +86,11 @@ impl GaussianFeatures {
     /// ```
     pub fn on_interval(lo: f64, hi: f64, count: usize, sigma: f64, beta: f64) -> Result<Self> {
         if !(lo.is_finite() && hi.is_finite() && hi > lo) || count < 2 {
-            return Err(invalid("interval", hi - lo, "needs finite lo < hi and at least two centres"));
+            return Err(invalid(
+                "interval",
+                hi - lo,
+                "needs finite lo < hi and at least two centres",
+            ));
         }
         let step = (hi - lo) / (count - 1) as f64;
         let centres = (0..count).map(|j| vec![lo + step * j as f64]).collect();
@@ -124,7 +140,11 @@ impl GaussianFeatures {
     /// ```
     pub fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
         if z.len() != w.len() || z.is_empty() {
-            return Err(invalid("points", z.len() as f64, "need as many values as points, and at least one"));
+            return Err(invalid(
+                "points",
+                z.len() as f64,
+                "need as many values as points, and at least one",
+            ));
         }
         let (m, p) = (self.centres.len(), self.centres[0].len());
         let np = m + 1 + p;
@@ -133,7 +153,11 @@ impl GaussianFeatures {
         let mut row = vec![0.0; np];
         for (zk, &wk) in z.iter().zip(w) {
             if zk.len() != p || !wk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
-                return Err(invalid("points", wk, "points need the centres' dimension and finite values"));
+                return Err(invalid(
+                    "points",
+                    wk,
+                    "points need the centres' dimension and finite values",
+                ));
             }
             self.features(zk, &mut row);
             for i in 0..np {
@@ -154,7 +178,13 @@ impl GaussianFeatures {
         }
         let sol = gram
             .cholesky()
-            .ok_or_else(|| invalid("points", z.len() as f64, "the fit's normal equations are not positive definite"))?
+            .ok_or_else(|| {
+                invalid(
+                    "points",
+                    z.len() as f64,
+                    "the fit's normal equations are not positive definite",
+                )
+            })?
             .solve(&rhs);
         let mut out = self.clone();
         out.theta = sol.rows(0, m).iter().copied().collect();
@@ -189,7 +219,11 @@ impl BlockMap for GaussianFeatures {
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
         let m = self.centres.len();
         if p.len() != m + self.affine.len() {
-            return Err(invalid("parameters", p.len() as f64, "wrong number of parameters for this feature map"));
+            return Err(invalid(
+                "parameters",
+                p.len() as f64,
+                "wrong number of parameters for this feature map",
+            ));
         }
         if let Some(v) = p.iter().find(|v| !v.is_finite()) {
             return Err(invalid("parameters", *v, "must be finite"));
@@ -267,7 +301,12 @@ mod tests {
                 d += theta[i] * theta[j] * g.kernel(&g.centres[i], &g.centres[j]);
             }
         }
-        assert!((rt.norm_squared() - 0.3 * d).abs() < 1e-8 * d, "{} {}", rt.norm_squared(), 0.3 * d);
+        assert!(
+            (rt.norm_squared() - 0.3 * d).abs() < 1e-8 * d,
+            "{} {}",
+            rt.norm_squared(),
+            0.3 * d
+        );
     }
 
     #[test]
@@ -285,7 +324,11 @@ mod tests {
             a[i] += h;
             b[i] -= h;
             let fd = (f.eval(&mut [], &a) - f.eval(&mut [], &b)) / (2.0 * h);
-            assert!((fd - jac.dw_dz[i]).abs() < 1e-7, "z{i}: {fd} vs {}", jac.dw_dz[i]);
+            assert!(
+                (fd - jac.dw_dz[i]).abs() < 1e-7,
+                "z{i}: {fd} vs {}",
+                jac.dw_dz[i]
+            );
         }
         for i in 0..p.len() {
             let (mut a, mut b) = (p, p);

@@ -133,10 +133,18 @@ impl JointSettingsBuilder {
         if let Some(l) = s.segment_length
             && l < 2
         {
-            return Err(invalid("segment_length", l as f64, "must be at least 2 samples"));
+            return Err(invalid(
+                "segment_length",
+                l as f64,
+                "must be at least 2 samples",
+            ));
         }
         if !(s.continuity_weight.is_finite() && s.continuity_weight > 0.0) {
-            return Err(invalid("continuity_weight", s.continuity_weight, "must be finite and positive"));
+            return Err(invalid(
+                "continuity_weight",
+                s.continuity_weight,
+                "must be finite and positive",
+            ));
         }
         if s.max_iterations == 0 {
             return Err(invalid("max_iterations", 0.0, "must be at least 1"));
@@ -184,7 +192,12 @@ pub struct JointFit {
 /// # Errors
 /// [`JointError::NoStart`] when the starting model cannot be simulated on a record; wrong
 /// channel counts; settings errors come from the builder.
-pub fn fit(model: &JointModel, data: &Data, x0: Option<&[Vec<f64>]>, settings: &JointSettings) -> Result<JointFit> {
+pub fn fit(
+    model: &JointModel,
+    data: &Data,
+    x0: Option<&[Vec<f64>]>,
+    settings: &JointSettings,
+) -> Result<JointFit> {
     let d = model.lft().dims();
     if data.u().channels() != d.u || data.y().channels() != d.y {
         return Err(JointError::InvalidModel(format!(
@@ -289,9 +302,15 @@ fn run_stage(
         new_record = !s.continued;
     }
     let stage = Stage {
-        name: if len.is_some() { "multiple shooting" } else { "single shooting" },
+        name: if len.is_some() {
+            "multiple shooting"
+        } else {
+            "single shooting"
+        },
         segments: count,
-        costs: std::iter::once(out.initial_cost).chain(out.costs.iter().copied()).collect(),
+        costs: std::iter::once(out.initial_cost)
+            .chain(out.costs.iter().copied())
+            .collect(),
         status: out.status,
     };
     Ok((fitted, firsts, stage))
@@ -332,7 +351,10 @@ fn segments(
             }
             // Where the starting model passes; a diverging start keeps the last finite state.
             let mut trial = xi.clone();
-            if stepper.run(data.u(), k..end, &mut trial, |_, _| {}).is_some() {
+            if stepper
+                .run(data.u(), k..end, &mut trial, |_, _| {})
+                .is_some()
+            {
                 xi = trial;
             }
             k = end;
@@ -342,6 +364,17 @@ fn segments(
         return Err(JointError::InvalidModel("the data have no samples".into()));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+pub(crate) fn test_segments(
+    model: &JointModel,
+    data: &Data,
+    starts: &[Vec<f64>],
+    len: Option<usize>,
+    free_first: bool,
+) -> Vec<Segment> {
+    segments(model, data, starts, len, free_first).unwrap()
 }
 
 /// The single-shooting criterion C, or `None` when a simulation diverges.

@@ -96,7 +96,12 @@ pub struct JointBlock {
 
 impl JointBlock {
     /// A block reading `inputs` and writing `output`.
-    pub fn new(name: impl Into<String>, inputs: Vec<usize>, output: usize, map: Box<dyn BlockMap>) -> Self {
+    pub fn new(
+        name: impl Into<String>,
+        inputs: Vec<usize>,
+        output: usize,
+        map: Box<dyn BlockMap>,
+    ) -> Self {
         Self {
             name: name.into(),
             inputs,
@@ -204,7 +209,9 @@ impl JointModel {
         }
         let entry = LftEntry { matrix, row, col };
         if self.free.contains(&entry) {
-            return Err(JointError::InvalidModel(format!("{matrix:?}[{row}][{col}] is freed twice")));
+            return Err(JointError::InvalidModel(format!(
+                "{matrix:?}[{row}][{col}] is freed twice"
+            )));
         }
         self.free.push(entry);
         Ok(self)
@@ -216,7 +223,11 @@ impl JointModel {
         let m = matrix.of(self.lft.matrices()).clone();
         for j in 0..m.ncols() {
             for i in 0..m.nrows() {
-                let entry = LftEntry { matrix, row: i, col: j };
+                let entry = LftEntry {
+                    matrix,
+                    row: i,
+                    col: j,
+                };
                 if m[(i, j)] != 0.0 && !self.free.contains(&entry) {
                     self.free.push(entry);
                 }
@@ -253,7 +264,11 @@ impl JointModel {
     /// The parameter vector [G's free entries | each block's parameters].
     pub fn parameters(&self) -> Vec<f64> {
         let m = self.lft.matrices();
-        let mut p: Vec<f64> = self.free.iter().map(|e| e.matrix.of(m)[(e.row, e.col)]).collect();
+        let mut p: Vec<f64> = self
+            .free
+            .iter()
+            .map(|e| e.matrix.of(m)[(e.row, e.col)])
+            .collect();
         for b in &self.blocks {
             p.extend(b.map.parameters());
         }

@@ -52,7 +52,12 @@ pub(crate) struct Shooting<'a> {
 }
 
 impl<'a> Shooting<'a> {
-    pub(crate) fn new(model: &'a JointModel, data: &'a Data, segments: Vec<Segment>, weight: f64) -> Self {
+    pub(crate) fn new(
+        model: &'a JointModel,
+        data: &'a Data,
+        segments: Vec<Segment>,
+        weight: f64,
+    ) -> Self {
         let offsets = model.parameter_offsets();
         let scale = (data.len() as f64).sqrt();
         let regularisers = model
@@ -74,7 +79,11 @@ impl<'a> Shooting<'a> {
     /// Total parameter count: globals, then each free segment state.
     pub(crate) fn len(&self) -> usize {
         self.globals
-            + self.segments.iter().filter(|s| s.state_at.is_some()).count()
+            + self
+                .segments
+                .iter()
+                .filter(|s| s.state_at.is_some())
+                .count()
                 * self.model.stacked_state_len()
     }
 
@@ -112,11 +121,17 @@ impl LeastSquaresProblem for Shooting<'_> {
         for (i, s) in self.segments.iter().enumerate() {
             if s.continued {
                 let next = self.start_state(&self.segments[i + 1], theta);
-                r.extend(next.iter().zip(&ends[i]).map(|(a, b)| self.weight * (a - b)));
+                r.extend(
+                    next.iter()
+                        .zip(&ends[i])
+                        .map(|(a, b)| self.weight * (a - b)),
+                );
             }
         }
         self.regulariser_residuals(theta, &mut r);
-        r.iter().all(|v| v.is_finite()).then(|| DVector::from_vec(r))
+        r.iter()
+            .all(|v| v.is_finite())
+            .then(|| DVector::from_vec(r))
     }
 
     fn jacobian(&mut self, _theta: &[f64], _r: &DVector<f64>) -> Option<DMatrix<f64>> {
@@ -124,7 +139,11 @@ impl LeastSquaresProblem for Shooting<'_> {
         None
     }
 
-    fn normal_equations(&mut self, theta: &[f64], _r: &DVector<f64>) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    fn normal_equations(
+        &mut self,
+        theta: &[f64],
+        _r: &DVector<f64>,
+    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
         let (ny, nxi, pg) = (stepper.outputs(), model.stacked_state_len(), self.globals);
@@ -147,14 +166,21 @@ impl LeastSquaresProblem for Shooting<'_> {
                 *slot = if c < pg { c } else { local + c - pg };
             }
             let live = if s.state_at.is_some() { p } else { pg };
-            stepper.run_tangent(self.data.u(), s.start..s.end, &mut xi, &mut t, p, |k, yk, dy| {
-                for o in 0..ny {
-                    let res = y.sample(k)[o] - yk[o];
-                    // J row = −∂ŷ; the sign cancels in JᵀJ and flips Jᵀr.
-                    let g = &dy[o * p..o * p + live];
-                    accumulate(&mut jtj, &mut jtr, &idx[..live], g, -res);
-                }
-            })?;
+            stepper.run_tangent(
+                self.data.u(),
+                s.start..s.end,
+                &mut xi,
+                &mut t,
+                p,
+                |k, yk, dy| {
+                    for o in 0..ny {
+                        let res = y.sample(k)[o] - yk[o];
+                        // J row = −∂ŷ; the sign cancels in JᵀJ and flips Jᵀr.
+                        let g = &dy[o * p..o * p + live];
+                        accumulate(&mut jtj, &mut jtr, &idx[..live], g, -res);
+                    }
+                },
+            )?;
             ends.push((xi, t));
         }
         for (i, s) in self.segments.iter().enumerate() {
@@ -209,6 +235,111 @@ fn accumulate(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, cols: &[usize], g:
         jtr[ca] += ga * res;
         for (b, &cb) in cols.iter().enumerate() {
             jtj[(ca, cb)] += ga * g[b];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::GaussianFeatures;
+    use crate::model::{JointBlock, LftMatrix};
+    use nalgebra::dmatrix;
+    use proptest::prelude::*;
+    use structid_core::{Lft, LftMatrices, Signal};
+
+    /// Two states, an input map feeding a map in series (z₁ = w₀ + x₂) and a latent feedback
+    /// through the second: every kind of coupling the stepper has.
+    fn model(a: [f64; 4], g: f64) -> JointModel {
+        let lft = Lft::new(LftMatrices {
+            a: dmatrix![a[0], a[1]; a[2], a[3]],
+            bu: dmatrix![0.3; 0.0],
+            be: dmatrix![0.0; 0.0],
+            bw: dmatrix![1.0, 0.0; 0.0, -0.4],
+            cy: dmatrix![0.0, 1.0],
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: dmatrix![0.0, g],
+            cz: dmatrix![0.0, 0.0; 0.0, 1.0],
+            dzu: dmatrix![1.0; 0.0],
+            dze: dmatrix![0.0; 0.0],
+            dzw: dmatrix![0.0, 0.0; 0.8, 0.0],
+        })
+        .unwrap();
+        let n0 = GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.6, 1e-3).unwrap();
+        let n1 = GaussianFeatures::on_interval(-2.0, 2.0, 3, 0.9, 1e-2).unwrap();
+        JointModel::new(
+            lft,
+            vec![
+                JointBlock::new("second", vec![1], 1, Box::new(n1)),
+                JointBlock::new("first", vec![0], 0, Box::new(n0)),
+            ],
+        )
+        .unwrap()
+        .with_free_nonzero(LftMatrix::A)
+        .unwrap()
+        .with_free(LftMatrix::Bu, 0, 0)
+        .unwrap()
+        .with_free(LftMatrix::Dzw, 1, 0)
+        .unwrap()
+        .with_free(LftMatrix::Dyw, 0, 1)
+        .unwrap()
+    }
+
+    fn data(len: usize, seed: u64) -> Data {
+        let u = Signal::from_fn(len, 1, |k, _| {
+            ((k as f64 * 0.31 + seed as f64).sin() + 0.5 * (k as f64 * 0.07).cos()).clamp(-1.0, 1.0)
+        });
+        let y = Signal::from_fn(len, 1, |k, _| (k as f64 * 0.13 + seed as f64).sin() * 0.5);
+        Data::from_records(vec![
+            Data::new(u.slice(0..len / 2), y.slice(0..len / 2)).unwrap(),
+            Data::new(u.slice(len / 2..len), y.slice(len / 2..len)).unwrap(),
+        ])
+        .unwrap()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        /// The accumulated normal equations equal JᵀJ and Jᵀr of a Jacobian by central
+        /// differences of the residuals, with segments, fixed and free starts and continuity.
+        #[test]
+        fn normal_equations_match_finite_differences(
+            a0 in 0.2f64..0.7, a1 in -0.3f64..0.3, a2 in -0.3f64..0.3, a3 in 0.2f64..0.7,
+            g in 0.5f64..1.5, seed in 0u64..50, theta_scale in 0.1f64..1.0, free_first: bool,
+        ) {
+            let m = model([a0, a1, a2, a3], g);
+            let d = data(60, seed);
+            let mut th = m.parameters();
+            let offsets = m.parameter_offsets();
+            for (i, v) in th.iter_mut().enumerate().skip(offsets[0]) {
+                *v = theta_scale * ((i as f64) * 1.7).sin();
+            }
+            let m = m.with_parameters(&th).unwrap();
+            let starts: Vec<Vec<f64>> = (0..2).map(|r| vec![0.1 * r as f64, -0.2]).collect();
+            let segs = crate::fit::test_segments(&m, &d, &starts, Some(11), free_first);
+            let mut p = Shooting::new(&m, &d, segs, 1.7);
+            let mut full = m.parameters();
+            for s in &p.segments {
+                if s.state_at.is_some() {
+                    full.extend(s.fixed.iter().map(|v| v + 0.05));
+                }
+            }
+            let r = p.residuals(&full).unwrap();
+            let (jtj, jtr) = p.normal_equations(&full, &r).unwrap();
+            let h = 1e-6;
+            let mut jac = DMatrix::zeros(r.len(), full.len());
+            for c in 0..full.len() {
+                let (mut a, mut b) = (full.clone(), full.clone());
+                a[c] += h;
+                b[c] -= h;
+                let col = (p.residuals(&a).unwrap() - p.residuals(&b).unwrap()) / (2.0 * h);
+                jac.set_column(c, &col);
+            }
+            let fd_jtj = jac.transpose() * &jac;
+            let fd_jtr = jac.transpose() * &r;
+            let scale = fd_jtj.amax().max(1.0);
+            prop_assert!((&jtj - &fd_jtj).amax() < 1e-5 * scale, "JᵀJ off by {}", (&jtj - &fd_jtj).amax());
+            prop_assert!((&jtr - &fd_jtr).amax() < 1e-5 * fd_jtr.amax().max(1.0), "Jᵀr off by {}", (&jtr - &fd_jtr).amax());
         }
     }
 }

@@ -105,7 +105,10 @@ impl<'a> Stepper<'a> {
         let m = LftMatrix::ALL.map(|k| Rows::new(k.of(lm)));
         let mut free: [Free; 9] = Default::default();
         for (j, e) in model.free_entries().iter().enumerate() {
-            let k = LftMatrix::ALL.iter().position(|m| *m == e.matrix).expect("listed");
+            let k = LftMatrix::ALL
+                .iter()
+                .position(|m| *m == e.matrix)
+                .expect("listed");
             free[k].push((e.row, e.col, j));
         }
         let mut state_at = vec![d.states];
@@ -273,7 +276,14 @@ impl<'a> Stepper<'a> {
     }
 
     /// Block `b`'s output and state with their tangents, within [`Self::step_tangent`].
-    fn block_tangent(&self, b: usize, xi: &mut [f64], t: &mut [f64], p: usize, sc: &mut Scratch) -> bool {
+    fn block_tangent(
+        &self,
+        b: usize,
+        xi: &mut [f64],
+        t: &mut [f64],
+        p: usize,
+        sc: &mut Scratch,
+    ) -> bool {
         let block = &self.model.blocks()[b];
         let (s0, s1) = (self.state_at[b], self.state_at[b + 1]);
         let ns = s1 - s0;
@@ -309,10 +319,14 @@ impl<'a> Stepper<'a> {
         let pa = self.param_at[b];
         let out = &mut sc.dw[block.output * p..(block.output + 1) * p];
         for (a, &g) in jac.dw_dz.iter().enumerate() {
-            out.iter_mut().zip(&sc.dargs[a * p..(a + 1) * p]).for_each(|(o, d)| *o += g * d);
+            out.iter_mut()
+                .zip(&sc.dargs[a * p..(a + 1) * p])
+                .for_each(|(o, d)| *o += g * d);
         }
         for (s, &g) in jac.dw_ds.iter().enumerate() {
-            out.iter_mut().zip(&t[(s0 + s) * p..(s0 + s + 1) * p]).for_each(|(o, d)| *o += g * d);
+            out.iter_mut()
+                .zip(&t[(s0 + s) * p..(s0 + s + 1) * p])
+                .for_each(|(o, d)| *o += g * d);
         }
         for (q, &g) in jac.dw_dp.iter().enumerate() {
             out[pa + q] += g;
@@ -325,11 +339,15 @@ impl<'a> Stepper<'a> {
                 let row = &mut sc.ds[r * p..(r + 1) * p];
                 for s in 0..ns {
                     let g = jac.ds_ds[r * ns + s];
-                    row.iter_mut().zip(&t[(s0 + s) * p..(s0 + s + 1) * p]).for_each(|(o, d)| *o += g * d);
+                    row.iter_mut()
+                        .zip(&t[(s0 + s) * p..(s0 + s + 1) * p])
+                        .for_each(|(o, d)| *o += g * d);
                 }
                 for a in 0..pin {
                     let g = jac.ds_dz[r * pin + a];
-                    row.iter_mut().zip(&sc.dargs[a * p..(a + 1) * p]).for_each(|(o, d)| *o += g * d);
+                    row.iter_mut()
+                        .zip(&sc.dargs[a * p..(a + 1) * p])
+                        .for_each(|(o, d)| *o += g * d);
                 }
                 for q in 0..np {
                     row[pa + q] += jac.ds_dp[r * np + q];

@@ -116,8 +116,8 @@ impl Lft {
         // Repeated scans rather than Kahn's queue keep the given order among independent
         // blocks, so that D_zw = 0 leaves the model's order untouched; block counts are small.
         while order.len() < places.len() {
-            let ready = (0..places.len())
-                .find(|&i| left[i] && deps[i].iter().all(|(d, _)| !left[*d]));
+            let ready =
+                (0..places.len()).find(|&i| left[i] && deps[i].iter().all(|(d, _)| !left[*d]));
             match ready {
                 Some(i) => {
                     left[i] = false;
@@ -126,8 +126,10 @@ impl Lft {
                 None => {
                     let cycle = find_cycle(&deps, &left);
                     let (row, col, value) = cycle[0].1;
-                    let mut names: Vec<String> =
-                        cycle.iter().map(|(b, _)| places[*b].name.to_string()).collect();
+                    let mut names: Vec<String> = cycle
+                        .iter()
+                        .map(|(b, _)| places[*b].name.to_string())
+                        .collect();
                     names.push(places[cycle[0].0].name.to_string());
                     return Err(Error::AlgebraicLoop {
                         row,
@@ -229,7 +231,10 @@ mod tests {
         assert_eq!(inner, ["a", "b", "c"]);
         assert!([1.0, 0.25].contains(value));
         let text = e.to_string();
-        assert!(text.starts_with("algebraic loop: D_zw has a non-zero entry"), "{text}");
+        assert!(
+            text.starts_with("algebraic loop: D_zw has a non-zero entry"),
+            "{text}"
+        );
         assert!(text.contains("`a`") && !text.contains("`d`"), "{text}");
     }
 
@@ -238,9 +243,15 @@ mod tests {
         let mut dzw = DMatrix::zeros(2, 2);
         dzw[(1, 1)] = 0.5;
         let e = order_of(dzw).unwrap_err();
-        let Error::AlgebraicLoop { cycle, row, col, .. } = &e else {
+        let Error::AlgebraicLoop {
+            cycle, row, col, ..
+        } = &e
+        else {
             panic!("{e}");
         };
-        assert_eq!((cycle.as_slice(), *row, *col), (&["b".to_string(), "b".into()][..], 1, 1));
+        assert_eq!(
+            (cycle.as_slice(), *row, *col),
+            (&["b".to_string(), "b".into()][..], 1, 1)
+        );
     }
 }

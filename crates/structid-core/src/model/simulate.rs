@@ -197,7 +197,11 @@ impl Lft {
                 // that every channel this map reads through D_zw has been written.
                 arg.extend(m.inputs.iter().map(|&i| {
                     let through_w = if series {
-                        dzw[i * d.w..(i + 1) * d.w].iter().zip(wk.iter()).map(|(a, b)| a * b).sum()
+                        dzw[i * d.w..(i + 1) * d.w]
+                            .iter()
+                            .zip(wk.iter())
+                            .map(|(a, b)| a * b)
+                            .sum()
                     } else {
                         0.0
                     };
