@@ -8,3 +8,4 @@ mod pipeline;
 pub mod silverbox;
 pub mod silverbox_discovery;
 pub mod tanks;
+pub mod tanks_physical;

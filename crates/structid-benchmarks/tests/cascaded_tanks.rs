@@ -49,3 +49,29 @@ fn tanks_pipeline_beats_its_own_linear_baseline_on_the_test_record() {
     // The estimation record is simulated well from its estimated initial state.
     assert!(chosen.estimation_rms < 0.6, "{}", chosen.estimation_rms);
 }
+
+#[test]
+fn the_physical_structure_fitted_jointly_meets_the_test_goal() {
+    use structid_benchmarks::tanks_physical::{PhysicalSettings, run as run_physical};
+    if cfg!(debug_assertions) {
+        eprintln!("skipping: run with --release");
+        return;
+    }
+    let Some(path) = common::tanks_file() else {
+        return;
+    };
+    let tanks = CascadedTanks::load(&path).unwrap();
+    let r = run_physical(&tanks, &PhysicalSettings::default()).unwrap();
+    eprintln!(
+        "physical: β = {:e}, estimation RMS {:.4} V, test RMS {:.4} V, {:.1} s",
+        r.beta, r.estimation_rms, r.test_rms, r.seconds
+    );
+    assert!(r.fit.cost <= r.fit.initial_cost);
+    // β is the one that validated best on the held-out part of the estimation record.
+    let best = r.trials.iter().map(|t| t.validation_rms).fold(f64::INFINITY, f64::min);
+    let chosen = r.trials.iter().find(|t| t.beta == r.beta).unwrap();
+    assert_eq!(chosen.validation_rms, best);
+    assert!(r.seconds < 60.0, "took {:.1} s", r.seconds);
+    assert!(r.estimation_rms < 0.2, "{}", r.estimation_rms);
+    assert!(r.test_rms <= 0.25, "{}", r.test_rms);
+}

@@ -1,0 +1,51 @@
+//! The cascaded tanks from their physical structure: two level states, the outflows as unknown
+//! maps (the upper one of the unmeasured level), the overflows as unknown maps, all fitted with
+//! G's free entries by simulation error.
+//!
+//! ```text
+//! cargo run --release -p structid-benchmarks --example cascaded_tanks_physical -- [PATH/dataBenchmark.csv]
+//! ```
+//!
+//! Prints the β search (validation RMS on the last 25 % of the estimation record), then the
+//! estimation and test RMS of the chosen model next to the published figures.
+
+use structid::io::CascadedTanks;
+use structid_benchmarks::tanks::PUBLISHED;
+use structid_benchmarks::tanks_physical::{PhysicalSettings, run};
+
+mod common;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let (path, _) = common::benchmark_args("cascaded_tanks/dataBenchmark.csv", "cascaded_tanks");
+    let tanks = CascadedTanks::load(&path)?;
+    let mut settings = PhysicalSettings::default();
+    if let Ok(v) = std::env::var("TANKS_BETAS") {
+        settings.betas = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
+    }
+    if let Ok(v) = std::env::var("TANKS_CENTRES") {
+        settings.centres = v.parse()?;
+    }
+    if let Ok(v) = std::env::var("TANKS_SEGMENT") {
+        settings.segment_length = v.parse()?;
+    }
+    if let Ok(v) = std::env::var("TANKS_NONLINEAR") {
+        for (slot, c) in settings.nonlinear.iter_mut().zip(v.chars()) {
+            *slot = c == '1';
+        }
+    }
+    let r = run(&tanks, &settings)?;
+    println!("β search (simulation RMS [V]):");
+    for t in &r.trials {
+        println!("  β = {:<8e} fitting part {:.4}  validation part {:.4}", t.beta, t.fit_rms, t.validation_rms);
+    }
+    println!("chosen β = {:e}; cost {:.4e} from {:.4e}", r.beta, r.fit.cost, r.fit.initial_cost);
+    for s in &r.fit.stages {
+        println!("  {} ({} segments): {} steps, {:?}", s.name, s.segments, s.costs.len() - 1, s.status);
+    }
+    println!("estimation RMS {:.4} V; test RMS {:.4} V ({:.1} s)", r.estimation_rms, r.test_rms, r.seconds);
+    println!("published (test RMS [V]):");
+    for (m, v) in PUBLISHED {
+        println!("  {m:<34} {v}");
+    }
+    Ok(())
+}
