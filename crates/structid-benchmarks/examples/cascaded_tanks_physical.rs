@@ -36,13 +36,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let r = run(&tanks, &settings)?;
     println!("β search (simulation RMS [V]):");
     for t in &r.trials {
-        println!("  β = {:<8e} fitting part {:.4}  validation part {:.4}", t.beta, t.fit_rms, t.validation_rms);
+        println!(
+            "  β = {:<8e} fitting part {:.4}  validation part {:.4}",
+            t.beta, t.fit_rms, t.validation_rms
+        );
     }
-    println!("chosen β = {:e}; cost {:.4e} from {:.4e}", r.beta, r.fit.cost, r.fit.initial_cost);
+    println!(
+        "chosen β = {:e}; cost {:.4e} from {:.4e}",
+        r.beta, r.fit.cost, r.fit.initial_cost
+    );
     for s in &r.fit.stages {
-        println!("  {} ({} segments): {} steps, {:?}", s.name, s.segments, s.costs.len() - 1, s.status);
+        println!(
+            "  {} ({} segments): {} steps, {:?}",
+            s.name,
+            s.segments,
+            s.costs.len() - 1,
+            s.status
+        );
     }
-    println!("estimation RMS {:.4} V; test RMS {:.4} V ({:.1} s)", r.estimation_rms, r.test_rms, r.seconds);
+    println!(
+        "estimation RMS {:.4} V; test RMS {:.4} V ({:.1} s)",
+        r.estimation_rms, r.test_rms, r.seconds
+    );
     println!("published (test RMS [V]):");
     for (m, v) in PUBLISHED {
         println!("  {m:<34} {v}");

@@ -121,9 +121,18 @@ fn lft(g: f64, h: f64) -> structid_core::Result<Lft> {
 }
 
 /// An affine map a₀ + a₁z with centres over [lo, hi].
-fn affine(lo: f64, hi: f64, m: usize, beta: f64, a0: f64, a1: f64) -> Result<GaussianFeatures, JointError> {
+fn affine(
+    lo: f64,
+    hi: f64,
+    m: usize,
+    beta: f64,
+    a0: f64,
+    a1: f64,
+) -> Result<GaussianFeatures, JointError> {
     let f = GaussianFeatures::on_interval(lo, hi, m, 1.5 * (hi - lo) / (m - 1) as f64, beta)?;
-    let z: Vec<Vec<f64>> = (0..20).map(|k| vec![lo + (hi - lo) * k as f64 / 19.0]).collect();
+    let z: Vec<Vec<f64>> = (0..20)
+        .map(|k| vec![lo + (hi - lo) * k as f64 / 19.0])
+        .collect();
     let w: Vec<f64> = z.iter().map(|z| a0 + a1 * z[0]).collect();
     f.fitted_to(&z, &w)
 }
@@ -193,7 +202,10 @@ fn recentred(
     let sim = base.model.simulate(d.u(), Some(&base.initial_states[0]))?;
     let range = |c: usize| {
         let v = sim.z.channel(c);
-        let (lo, hi) = (v.iter().copied().fold(f64::MAX, f64::min), v.iter().copied().fold(f64::MIN, f64::max));
+        let (lo, hi) = (
+            v.iter().copied().fold(f64::MAX, f64::min),
+            v.iter().copied().fold(f64::MIN, f64::max),
+        );
         let pad = 0.1 * (hi - lo).max(1e-3);
         (lo - pad, hi + pad)
     };
@@ -205,10 +217,18 @@ fn recentred(
         let p = b.map.parameters();
         let m = p.len() - 2;
         // The old map's values over the new range, kernel part included.
-        let z: Vec<Vec<f64>> = (0..40).map(|k| vec![lo + (hi - lo) * k as f64 / 39.0]).collect();
+        let z: Vec<Vec<f64>> = (0..40)
+            .map(|k| vec![lo + (hi - lo) * k as f64 / 39.0])
+            .collect();
         let w: Vec<f64> = z.iter().map(|z| b.map.eval(&mut [], z)).collect();
         let _ = m;
-        let f = GaussianFeatures::on_interval(lo, hi, centres, 1.5 * (hi - lo) / (centres - 1) as f64, beta)?;
+        let f = GaussianFeatures::on_interval(
+            lo,
+            hi,
+            centres,
+            1.5 * (hi - lo) / (centres - 1) as f64,
+            beta,
+        )?;
         maps.push(f.fitted_to(&z, &w)?);
     }
     let p = base.model.parameters();
@@ -217,7 +237,10 @@ fn recentred(
 }
 
 /// Runs the pipeline (see the [module documentation](self)).
-pub fn run(tanks: &CascadedTanks, settings: &PhysicalSettings) -> Result<PhysicalResult, JointError> {
+pub fn run(
+    tanks: &CascadedTanks,
+    settings: &PhysicalSettings,
+) -> Result<PhysicalResult, JointError> {
     let t0 = Instant::now();
     let est = &tanks.estimation;
     let n_fit = ((1.0 - settings.validation_fraction) * est.len() as f64).round() as usize;
@@ -232,7 +255,13 @@ pub fn run(tanks: &CascadedTanks, settings: &PhysicalSettings) -> Result<Physica
     let mut trials = Vec::new();
     let mut best: Option<(f64, f64)> = None;
     for &beta in &settings.betas {
-        let (start, x0) = recentred(&linear, &fit_data, settings.centres, beta, settings.nonlinear)?;
+        let (start, x0) = recentred(
+            &linear,
+            &fit_data,
+            settings.centres,
+            beta,
+            settings.nonlinear,
+        )?;
         let x0: Vec<Vec<f64>> = x0.iter().map(|x| x[..2].to_vec()).collect();
         let f = fit(&start, &fit_data, Some(&x0), &shooting)?;
         // Simulated through the whole estimation record from the fitted start: the validation
@@ -251,13 +280,23 @@ pub fn run(tanks: &CascadedTanks, settings: &PhysicalSettings) -> Result<Physica
     }
     let beta = best.expect("at least one β").0;
     let linear_all = linear_start(&all, &single)?;
-    let (start, x0) = recentred(&linear_all, &all, settings.centres, beta, settings.nonlinear)?;
+    let (start, x0) = recentred(
+        &linear_all,
+        &all,
+        settings.centres,
+        beta,
+        settings.nonlinear,
+    )?;
     let x0: Vec<Vec<f64>> = x0.iter().map(|x| x[..2].to_vec()).collect();
     let fitted = fit(&start, &all, Some(&x0), &shooting)?;
-    let sim = fitted.model.simulate(all.u(), Some(&fitted.initial_states[0]))?;
+    let sim = fitted
+        .model
+        .simulate(all.u(), Some(&fitted.initial_states[0]))?;
     let estimation_rms = rms(&est.y, &sim.y.channel(0));
     let test_u = Signal::new(1, tanks.test.u.clone()).map_err(structid_core::Error::from)?;
-    let test = fitted.model.simulate(&test_u, Some(&fitted.initial_states[0]))?;
+    let test = fitted
+        .model
+        .simulate(&test_u, Some(&fitted.initial_states[0]))?;
     let test_simulation = test.y.channel(0);
     let test_rms = rms(&tanks.test.y, &test_simulation);
     Ok(PhysicalResult {

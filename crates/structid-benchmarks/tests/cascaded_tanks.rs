@@ -68,7 +68,11 @@ fn the_physical_structure_fitted_jointly_meets_the_test_goal() {
     );
     assert!(r.fit.cost <= r.fit.initial_cost);
     // β is the one that validated best on the held-out part of the estimation record.
-    let best = r.trials.iter().map(|t| t.validation_rms).fold(f64::INFINITY, f64::min);
+    let best = r
+        .trials
+        .iter()
+        .map(|t| t.validation_rms)
+        .fold(f64::INFINITY, f64::min);
     let chosen = r.trials.iter().find(|t| t.beta == r.beta).unwrap();
     assert_eq!(chosen.validation_rms, best);
     assert!(r.seconds < 60.0, "took {:.1} s", r.seconds);

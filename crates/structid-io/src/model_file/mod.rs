@@ -124,8 +124,7 @@ use nalgebra::DMatrix;
 use serde::Deserialize;
 use structid_core::paper::gaussian_noise;
 use structid_core::{
-    BlockPlace,
-    Data, Interpolant, Lft, LftMatrices, MapBinding, Model, NonlinearBlock, Simulation,
+    BlockPlace, Data, Interpolant, Lft, LftMatrices, MapBinding, Model, NonlinearBlock, Simulation,
 };
 use structid_lti::Signal;
 use toml::Spanned;
