@@ -75,7 +75,7 @@
 //!
 //! | module | what lives there |
 //! |---|---|
-//! | [`model`] | the LFT ([`model::lft`]), measurability, simulation with maps in the loop, where blocks sit ([`model::structure`]: [`Site`], [`Structure`]), the `Model` and its `Data`, interpolants, known maps (expressions, tables) |
+//! | [`model`] | the LFT ([`model::lft`]), measurability, simulation with maps in the loop, hysteresis operators ([`model::hysteresis`]), where blocks sit ([`model::structure`]: [`Site`], [`Structure`]), the `Model` and its `Data`, interpolants, known maps (expressions, tables) |
 //! | [`dispersion`] | the `Dispersion`/`Penalty` vocabulary and every family: kernels, Fourier features, low rank, polynomial, sums, total variation with its graph and scattered interpolants ([`dispersion::neighbours`]) |
 //! | [`identify`](mod@identify) | the executor, its settings and results, the operator-form problem, posterior bands |
 //! | [`solver`] | exact, features, conic (Clarabel), ADMM with its proximal operators |
@@ -154,3 +154,8 @@ pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation,
 #[allow(deprecated)]
 pub use validation::ValidationInitialState;
 pub use validation::{ValidationReport, ValidationSettings, validate};
+
+// Dynamic scalar blocks (operators with memory).
+pub use model::hysteresis::{
+    BoucWen, HysteresisOperator, OperatorJacobian, Play, PrandtlIshlinskii, Stop,
+};
