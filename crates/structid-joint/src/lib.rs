@@ -62,6 +62,7 @@ pub mod error;
 pub mod features;
 pub mod fit;
 pub mod model;
+pub mod operator;
 pub mod shooting;
 pub mod step;
 
@@ -70,3 +71,4 @@ pub use error::{JointError, Result};
 pub use features::GaussianFeatures;
 pub use fit::{JointFit, JointSettings, JointSettingsBuilder, Stage, fit};
 pub use model::{JointBlock, JointModel, LftEntry, LftMatrix};
+pub use operator::OperatorBlock;

@@ -332,3 +332,63 @@ fn a_cycle_of_maps_and_bad_settings_are_clear_errors() {
     );
     assert!(JointSettings::builder().tolerance(0.0).build().is_err());
 }
+
+/// A backlash (play) in front of a first-order plant: its half-width is fitted with the pole,
+/// from a start a third of the truth, and the play's memory is a fitted initial state.
+#[test]
+fn a_play_at_the_input_is_fitted_with_the_plant() {
+    use structid_core::Play;
+    use structid_joint::OperatorBlock;
+    let plant = |a: f64| {
+        let mut m = hammerstein(a, 1.0 - a).matrices().clone();
+        m.bw = dmatrix![1.0 - a];
+        Lft::new(m).unwrap()
+    };
+    let len = 2000;
+    let u = input(len, 1.0, 4001);
+    let truth = JointModel::new(
+        plant(0.9),
+        vec![JointBlock::new(
+            "backlash",
+            vec![0],
+            0,
+            Box::new(OperatorBlock::new(Box::new(Play::new(0.3).unwrap()))),
+        )],
+    )
+    .unwrap();
+    let sim = truth.simulate(&u, None).unwrap();
+    let e = noise(len, 0.01, 4002);
+    let data = Data::new(u, Signal::from_fn(len, 1, |k, _| sim.y.get(k, 0) + e[k])).unwrap();
+    let start = JointModel::new(
+        plant(0.8),
+        vec![JointBlock::new(
+            "backlash",
+            vec![0],
+            0,
+            Box::new(OperatorBlock::new(Box::new(Play::new(0.1).unwrap()))),
+        )],
+    )
+    .unwrap()
+    .with_free(LftMatrix::A, 0, 0)
+    .unwrap()
+    .with_free(LftMatrix::Bw, 0, 0)
+    .unwrap();
+    let out = fit(
+        &start,
+        &data,
+        None,
+        &JointSettings::builder()
+            .segment_length(200)
+            .build()
+            .unwrap(),
+    )
+    .unwrap();
+    let p = out.model.parameters();
+    println!(
+        "play: pole {:.4}, gain {:.4}, half-width {:.4}; rms {:?}",
+        p[0], p[1], p[2], out.rms
+    );
+    assert!((p[2] - 0.3).abs() < 0.03, "half-width {}", p[2]);
+    assert!((p[0] - 0.9).abs() < 0.01, "pole {}", p[0]);
+    assert!(out.rms[0] < 0.0125, "{:?}", out.rms);
+}
