@@ -102,6 +102,7 @@ impl Model {
                 output: 0,
                 dispersion: convert::dispersion(dispersion)?,
                 truth: None,
+                operator: None,
             }],
         };
         Self::checked(&ModelFile {

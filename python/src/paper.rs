@@ -42,6 +42,7 @@ fn experiment<'py>(
                 output: b.output,
                 dispersion: dispersion.clone(),
                 truth: None,
+                operator: None,
             })
             .collect(),
         discover: None,

@@ -92,6 +92,7 @@ fn gaussian_block(
         output,
         dispersion: DispersionSpec::Gaussian { sigma: Some(sigma) },
         truth: Some(TruthSpec::Expression(truth.into())),
+        operator: None,
     }
 }
 

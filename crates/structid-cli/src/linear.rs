@@ -470,6 +470,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             output: 0,
             dispersion: map_dispersion(&a)?,
             truth: None,
+            operator: None,
         }],
     };
     let mf = ModelFile {

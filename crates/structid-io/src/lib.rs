@@ -70,8 +70,8 @@ pub use error::{ErrorChain, IoError, core_is_input_error};
 pub use estimate_file::{estimate_json, read_estimate};
 pub use model_file::{
     BUILT_IN_LOCATIONS, BlockSpec, DeclaredLocationSpec, DiscoverSpec, DispersionSpec,
-    LINEAR_STRUCTURES, LinearSpec, ModelFile, NamedStateSpec, SIGMA_SPAN, SUPPORTED_DISPERSIONS,
-    SignalNames, TruthSpec, default_sigma, parse_linear_structure,
+    LINEAR_STRUCTURES, LinearSpec, ModelFile, NamedStateSpec, OperatorSpec, SIGMA_SPAN,
+    SUPPORTED_DISPERSIONS, SignalNames, TruthSpec, default_sigma, parse_linear_structure,
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{

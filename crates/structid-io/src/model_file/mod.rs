@@ -114,6 +114,7 @@ mod dispersion;
 mod lft;
 mod linear;
 mod nonlinearity;
+mod operator;
 mod signals;
 mod source;
 mod write;
@@ -137,6 +138,7 @@ pub use dispersion::{DispersionSpec, SUPPORTED_DISPERSIONS, default_sigma};
 pub(crate) use dispersion::{dispersion_from_table, dispersion_keys};
 pub use linear::{LINEAR_STRUCTURES, LinearSpec, parse_linear_structure};
 pub use nonlinearity::{BlockSpec, TruthSpec};
+pub use operator::OperatorSpec;
 pub use signals::SignalNames;
 pub(crate) use source::{Source, err_at, toml_error, value_kind};
 
@@ -358,12 +360,29 @@ impl ModelFile {
             owner[output] = Some(blocks.len());
             let dispersion = parse_dispersion(rb.dispersion.as_ref(), &name, &src)?;
             let truth = parse_truth(rb, &name, inputs.len(), base_dir, &src)?;
+            let operator = match &rb.operator {
+                Some(op) => {
+                    let line = src.line(op.span().start);
+                    if truth.is_some() || rb.dispersion.is_some() || inputs.len() != 1 {
+                        return Err(err_at(
+                            line,
+                            format!(
+                                "block `{name}` is a hysteresis operator: it reads exactly one z \
+                                 channel and has no truth, table or dispersion"
+                            ),
+                        ));
+                    }
+                    Some(operator::parse_operator(op.get_ref(), &name, line)?)
+                }
+                None => None,
+            };
             blocks.push(BlockSpec {
                 name,
                 inputs,
                 output,
                 dispersion,
                 truth,
+                operator,
             });
             block_lines.push(entry_line);
         }
@@ -418,8 +437,9 @@ impl ModelFile {
             discover,
             path: None,
         };
-        // Safety net: the core's own validation must agree.
-        mf.to_model(Some(1.0), None)?;
+        // Safety net: the core's own validation must agree (an operator block is checked for
+        // its place like a static one).
+        mf.build_model(Some(1.0), None)?;
         Ok(mf)
     }
 
@@ -448,6 +468,22 @@ impl ModelFile {
                 z.channels()
             )));
         }
+        if let Some(b) = self.blocks.iter().find(|b| b.operator.is_some()) {
+            return Err(IoError::InvalidArgument(format!(
+                "block `{}` is a hysteresis operator, which identification by the dispersion \
+                 criterion cannot fit (it fits static maps); fit the model by its simulation \
+                 error with `structid refine --joint`",
+                b.name
+            )));
+        }
+        self.build_model(sigma_override, z_for_defaults)
+    }
+
+    fn build_model(
+        &self,
+        sigma_override: Option<f64>,
+        z_for_defaults: Option<&Signal>,
+    ) -> Result<Model, IoError> {
         let mut blocks = Vec::with_capacity(self.blocks.len());
         for b in &self.blocks {
             let bz = z_for_defaults.map(|z| z.select_channels(&b.inputs));

@@ -66,6 +66,8 @@ pub struct BlockSpec {
     pub dispersion: DispersionSpec,
     /// Its true map, if known.
     pub truth: Option<TruthSpec>,
+    /// A hysteresis operator instead of a static map (`operator = { kind = … }`).
+    pub operator: Option<super::operator::OperatorSpec>,
 }
 
 impl BlockSpec {
@@ -87,6 +89,7 @@ pub(super) struct RawBlock {
     pub(super) dispersion: Option<Spanned<toml::Value>>,
     truth: Option<Spanned<toml::Value>>,
     table: Option<Spanned<String>>,
+    pub(super) operator: Option<Spanned<toml::Value>>,
 }
 
 fn load_table_truth(

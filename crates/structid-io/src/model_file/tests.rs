@@ -60,6 +60,7 @@ fn canonical_form_parses_exactly_as_written() {
             output: 0,
             dispersion: DispersionSpec::Gaussian { sigma: Some(0.4) },
             truth: Some(TruthSpec::Expression("tanh(z0)".into())),
+            operator: None,
         }]
     );
     let truth = m.truth_maps().unwrap().unwrap();

@@ -48,6 +48,10 @@ impl ModelFile {
                     .join(", ")
             );
             let _ = writeln!(s, "output = {}", b.output);
+            if let Some(op) = &b.operator {
+                let _ = writeln!(s, "operator = {}", op.to_toml());
+                continue;
+            }
             match &b.dispersion {
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");

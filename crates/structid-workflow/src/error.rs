@@ -1,0 +1,23 @@
+//! The error type of `structid-workflow`: the layers' errors, kept as sources, and the
+//! request's own.
+
+/// What can go wrong in a workflow.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WorkflowError {
+    /// Reading or writing files, or a malformed model file.
+    #[error(transparent)]
+    Io(#[from] structid_io::IoError),
+    /// The model layer.
+    #[error(transparent)]
+    Core(#[from] structid_core::Error),
+    /// The joint fit.
+    #[error(transparent)]
+    Joint(#[from] structid_joint::JointError),
+    /// A request that cannot be carried out as given; the message says what to change.
+    #[error("{0}")]
+    Request(String),
+}
+
+/// `Result` with [`WorkflowError`].
+pub type Result<T> = std::result::Result<T, WorkflowError>;

@@ -1,0 +1,473 @@
+//! A model file fitted as a whole by its simulation error (`structid refine --joint`).
+//!
+//! From the file: the LFT (its entries named free in the request move, the others stay), each
+//! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]) and each
+//! `operator` block as the hysteresis operator it declares. A static block starts from its
+//! `truth` when the file gives one (a previous estimate written as a table, a guess), from zero
+//! otherwise. Its centres are spread over the range its input covers when the starting model
+//! is simulated on the estimation data, so a block of an unmeasured signal gets centres where
+//! that signal goes. [`structid_joint::fit`] then fits everything at once.
+//!
+//! β is given, or chosen from a grid by the simulation RMS on a validation record, simulated
+//! from rest. The fitted model is written back as a model file: the LFT with its fitted
+//! entries, each static map as a table of its values over its input's range, each operator
+//! with its fitted parameters.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
+use structid_io::{BlockSpec, ModelFile, OutputGuard, TruthSpec};
+use structid_joint::{
+    BlockMap, FixedMap, GaussianFeatures, JointBlock, JointFit, JointModel, JointSettings,
+    OperatorBlock, fit,
+};
+
+use crate::error::{Result, WorkflowError};
+use crate::free::parse_free;
+
+/// How β, the weight of every static map's dispersion, is set.
+#[derive(Clone, Debug)]
+pub enum BetaChoice {
+    /// This β.
+    Fixed(f64),
+    /// The β of `grid` whose fit simulates `validation` (from rest) with the smallest RMS.
+    Validated {
+        /// Candidate values.
+        grid: Vec<f64>,
+        /// The validation record(s).
+        validation: Data,
+    },
+}
+
+/// Settings of [`refine_joint`].
+#[derive(Clone, Debug)]
+pub struct JointWorkflowSettings {
+    /// β.
+    pub beta: BetaChoice,
+    /// Centres per static map (per input dimension for a map of two inputs).
+    pub centres: usize,
+    /// The kernel width σ as a multiple of the spacing of the centres.
+    pub width: f64,
+    /// The free entries of G ([`parse_free`]).
+    pub free: Vec<String>,
+    /// The fit's own settings (segments, iterations, initial states).
+    pub fit: JointSettings,
+}
+
+impl Default for JointWorkflowSettings {
+    /// β = 10⁻⁶, 15 centres, σ = 1.5 spacings, nothing of G free, the fit's defaults.
+    fn default() -> Self {
+        Self {
+            beta: BetaChoice::Fixed(1e-6),
+            centres: 15,
+            width: 1.5,
+            free: Vec::new(),
+            fit: JointSettings::default(),
+        }
+    }
+}
+
+/// What [`refine_joint`] asks for.
+#[derive(Clone, Debug)]
+pub struct JointRequest<'a> {
+    /// The model file.
+    pub model: &'a ModelFile,
+    /// The estimation data (one or several records).
+    pub data: &'a Data,
+    /// Settings.
+    pub settings: JointWorkflowSettings,
+}
+
+/// One β tried and its validation RMS.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BetaTrial {
+    /// β.
+    pub beta: f64,
+    /// Simulation RMS on the validation record(s), per output.
+    pub validation_rms: Vec<f64>,
+}
+
+/// A static map's values, written as `map_<block>.csv`.
+#[derive(Clone, Debug)]
+pub struct MapTable {
+    /// The block.
+    pub block: String,
+    /// File name (relative to the output directory).
+    pub file: String,
+    /// Column names: the block's z names, then `value`.
+    pub names: Vec<String>,
+    /// The columns.
+    pub columns: Vec<Vec<f64>>,
+}
+
+/// The fitted model and how it was found.
+#[derive(Clone, Debug)]
+pub struct JointOutcome {
+    /// The fit with the chosen β.
+    pub fit: JointFit,
+    /// The chosen β.
+    pub beta: f64,
+    /// Every β tried (one when β was given).
+    pub trials: Vec<BetaTrial>,
+    /// The fitted model as a model file (static maps as tables, see [`JointOutcome::tables`]).
+    pub model_file: ModelFile,
+    /// The static maps' tables.
+    pub tables: Vec<MapTable>,
+}
+
+fn block_map(b: &BlockSpec, fixed: bool) -> Result<Box<dyn BlockMap>> {
+    if let Some(op) = &b.operator {
+        return Ok(Box::new(OperatorBlock::new(op.to_operator()?)));
+    }
+    let truth: Arc<dyn Interpolant> = match b.truth_map()? {
+        Some(m) => Arc::from(m),
+        None if fixed => {
+            return Err(WorkflowError::Request(format!(
+                "block `{}` has no `truth`; simulation needs the map of every static block",
+                b.name
+            )));
+        }
+        None => Arc::new(|_: &[f64]| 0.0),
+    };
+    Ok(Box::new(FixedMap::new(truth, b.inputs.len())))
+}
+
+/// The model file as a joint model with every static block a fixed map: its truth, or zero
+/// unless `require_truth`.
+fn fixed_model(mf: &ModelFile, require_truth: bool) -> Result<JointModel> {
+    let blocks = mf
+        .blocks
+        .iter()
+        .map(|b| {
+            Ok(JointBlock::new(
+                b.name.clone(),
+                b.inputs.clone(),
+                b.output,
+                block_map(b, require_truth)?,
+            ))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(JointModel::new(mf.model_lft()?, blocks)?)
+}
+
+/// Simulates a model file from u alone, with operators and maps in series: each static block
+/// by its `truth`, each operator as declared. `x0` is the LFT's initial state (zero by
+/// default); operators start at rest.
+///
+/// ```
+/// use structid_io::ModelFile;
+/// use structid_core::Signal;
+/// let m = ModelFile::parse(r#"
+///     [lft]
+///     A = []
+///     Dye = [[1.0]]
+///     Dyw = [[1.0]]
+///     Dzu = [[1.0]]
+///     [signals]
+///     u = ["u"]
+///     y = ["y"]
+///     [[nonlinearity]]
+///     name = "backlash"
+///     inputs = [0]
+///     output = 0
+///     operator = { kind = "play", half_width = 0.5 }
+/// "#, None).unwrap();
+/// let u = Signal::new(1, vec![0.0, 1.0, 0.8, -1.0]).unwrap();
+/// let sim = structid_workflow::simulate_model_file(&m, &u, None).unwrap();
+/// assert_eq!(sim.y.channel(0), vec![0.0, 0.5, 0.5, -0.5]);
+/// ```
+pub fn simulate_model_file(mf: &ModelFile, u: &Signal, x0: Option<&[f64]>) -> Result<Simulation> {
+    let model = fixed_model(mf, true)?;
+    if u.is_empty() {
+        return Err(WorkflowError::Request("the input has no samples".into()));
+    }
+    let xi0 = model.rest_state(u.sample(0), x0)?;
+    Ok(model.simulate(u, Some(&xi0))?)
+}
+
+/// Each block input's range over simulations of every record of `data` from rest.
+fn input_ranges(model: &JointModel, data: &Data) -> Result<Vec<(f64, f64)>> {
+    let nz = model.lft().dims().z;
+    let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); nz];
+    for r in data.records() {
+        let sim = model.simulate(r.u(), None).map_err(|e| {
+            WorkflowError::Request(format!(
+                "the starting model cannot be simulated on the estimation data ({e}); give a stable \
+                 starting G or starting maps (`truth`) that keep it stable"
+            ))
+        })?;
+        for (c, range) in ranges.iter_mut().enumerate() {
+            for v in sim.z.channel(c) {
+                range.0 = range.0.min(v);
+                range.1 = range.1.max(v);
+            }
+        }
+    }
+    Ok(ranges)
+}
+
+/// Centres over `ranges` (one per input): `m` per dimension, a grid for several inputs.
+fn features(ranges: &[(f64, f64)], m: usize, width: f64, beta: f64) -> Result<GaussianFeatures> {
+    let axes: Vec<Vec<f64>> = ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            let pad = 0.05 * (hi - lo).max(1e-6);
+            let (lo, hi) = (lo - pad, hi + pad);
+            (0..m)
+                .map(|j| lo + (hi - lo) * j as f64 / (m - 1) as f64)
+                .collect()
+        })
+        .collect();
+    let spacing = axes
+        .iter()
+        .map(|a| a[1] - a[0])
+        .fold(f64::INFINITY, f64::min);
+    let mut centres: Vec<Vec<f64>> = vec![Vec::new()];
+    for axis in &axes {
+        centres = centres
+            .iter()
+            .flat_map(|c| axis.iter().map(move |v| [c.as_slice(), &[*v]].concat()))
+            .collect();
+    }
+    Ok(GaussianFeatures::new(centres, width * spacing, beta)?)
+}
+
+/// The starting joint model: static blocks as features fitted to their start maps over the
+/// ranges the start's simulation covers.
+fn start_model(
+    mf: &ModelFile,
+    data: &Data,
+    s: &JointWorkflowSettings,
+    beta: f64,
+) -> Result<JointModel> {
+    let fixed = fixed_model(mf, false)?;
+    let ranges = input_ranges(&fixed, data)?;
+    let mut blocks = Vec::with_capacity(mf.blocks.len());
+    for (spec, b) in mf.blocks.iter().zip(fixed.blocks()) {
+        if spec.operator.is_some() {
+            blocks.push(b.clone());
+            continue;
+        }
+        let r: Vec<(f64, f64)> = spec.inputs.iter().map(|&i| ranges[i]).collect();
+        if r.iter().any(|(lo, hi)| !(hi > lo)) {
+            return Err(WorkflowError::Request(format!(
+                "block `{}`: its input does not move when the starting model is simulated on the \
+                 estimation data, so its map cannot be placed; a latent block needs an input that \
+                 the data excite (check its z row, or start it from a `truth`)",
+                spec.name
+            )));
+        }
+        let f = features(&r, s.centres, s.width, beta)?;
+        let points: Vec<Vec<f64>> = f.centres().to_vec();
+        let values: Vec<f64> = points.iter().map(|z| b.map.eval(&mut [], z)).collect();
+        blocks.push(JointBlock::new(
+            spec.name.clone(),
+            spec.inputs.clone(),
+            spec.output,
+            Box::new(f.fitted_to(&points, &values)?),
+        ));
+    }
+    let model = JointModel::new(mf.model_lft()?, blocks)?;
+    parse_free(model, &s.free)
+}
+
+fn validation_rms(model: &JointModel, validation: &Data) -> Vec<f64> {
+    let ny = validation.y().channels();
+    let mut sum = vec![0.0; ny];
+    for r in validation.records() {
+        let Ok(sim) = model.simulate(r.u(), None) else {
+            return vec![f64::INFINITY; ny];
+        };
+        for (c, s) in sum.iter_mut().enumerate() {
+            *s += r
+                .y()
+                .channel(c)
+                .iter()
+                .zip(sim.y.channel(c))
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>();
+        }
+    }
+    sum.iter()
+        .map(|s| (s / validation.len() as f64).sqrt())
+        .collect()
+}
+
+/// Fits the model file as a whole; see the [module documentation](self).
+///
+/// # Errors
+/// A model file whose static block has more than two inputs, a starting model that cannot be
+/// simulated, a block whose input does not move, bad free entries, and the fit's errors.
+pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
+    let mf = req.model;
+    let s = &req.settings;
+    if let Some(b) = mf
+        .blocks
+        .iter()
+        .find(|b| b.operator.is_none() && b.inputs.len() > 2)
+    {
+        return Err(WorkflowError::Request(format!(
+            "block `{}` reads {} inputs; the joint fit places its centres on a grid, for maps of one or two inputs",
+            b.name,
+            b.inputs.len()
+        )));
+    }
+    if s.centres < 2 || !(s.width.is_finite() && s.width > 0.0) {
+        return Err(WorkflowError::Request(
+            "centres must be at least 2 and the width positive".into(),
+        ));
+    }
+    let (grid, validation) = match &s.beta {
+        BetaChoice::Fixed(b) => (vec![*b], None),
+        BetaChoice::Validated { grid, validation } => (grid.clone(), Some(validation)),
+    };
+    let mut trials = Vec::new();
+    let mut best: Option<(f64, JointFit, f64)> = None;
+    for &beta in &grid {
+        let start = start_model(mf, req.data, s, beta)?;
+        let f = fit(&start, req.data, None, &s.fit)?;
+        let score = match validation {
+            Some(v) => {
+                let rms = validation_rms(&f.model, v);
+                let total = rms.iter().map(|r| r * r).sum::<f64>();
+                trials.push(BetaTrial {
+                    beta,
+                    validation_rms: rms,
+                });
+                total
+            }
+            None => f.cost,
+        };
+        if best.as_ref().is_none_or(|(_, _, b)| score < *b) {
+            best = Some((beta, f, score));
+        }
+    }
+    let (beta, fit, _) =
+        best.ok_or_else(|| WorkflowError::Request("the β grid is empty".into()))?;
+    let (model_file, tables) = written(mf, &fit, req.data)?;
+    Ok(JointOutcome {
+        fit,
+        beta,
+        trials,
+        model_file,
+        tables,
+    })
+}
+
+/// The fitted model as a model file, with each static map tabulated over the range its input
+/// covers in the fitted model's simulation of the data.
+fn written(mf: &ModelFile, f: &JointFit, data: &Data) -> Result<(ModelFile, Vec<MapTable>)> {
+    let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); f.model.lft().dims().z];
+    let bounds = data.record_bounds();
+    for (r, rec) in data.records().iter().enumerate() {
+        let _ = bounds;
+        let sim = f.model.simulate(rec.u(), Some(&f.initial_states[r]))?;
+        for (c, range) in ranges.iter_mut().enumerate() {
+            for v in sim.z.channel(c) {
+                range.0 = range.0.min(v);
+                range.1 = range.1.max(v);
+            }
+        }
+    }
+    let z_names = mf.z_names();
+    let mut out = mf.clone();
+    out.lft = f.model.lft().clone();
+    out.linear = None;
+    out.path = None;
+    let mut tables = Vec::new();
+    for (spec, b) in out.blocks.iter_mut().zip(f.model.blocks()) {
+        if let Some(op) = &spec.operator {
+            spec.operator = Some(op.with_parameters(&b.map.parameters()));
+            continue;
+        }
+        // 401 points along one input, a 41 × 41 grid over two: far finer than the centres, so
+        // the table keeps the fitted map.
+        let per_axis = if spec.inputs.len() == 1 { 401 } else { 41 };
+        let axes: Vec<Vec<f64>> = spec
+            .inputs
+            .iter()
+            .map(|&i| {
+                let (lo, hi) = ranges[i];
+                let hi = if hi > lo { hi } else { lo + 1.0 };
+                (0..per_axis)
+                    .map(|j| lo + (hi - lo) * j as f64 / (per_axis - 1) as f64)
+                    .collect()
+            })
+            .collect();
+        let mut rows: Vec<Vec<f64>> = vec![Vec::new()];
+        for axis in &axes {
+            rows = rows
+                .iter()
+                .flat_map(|r| axis.iter().map(move |v| [r.as_slice(), &[*v]].concat()))
+                .collect();
+        }
+        for r in &mut rows {
+            let v = b.map.eval(&mut [], r);
+            r.push(v);
+        }
+        let table = LookupTable::from_rows(&rows)?;
+        let file = format!("map_{}.csv", spec.name);
+        let mut names: Vec<String> = spec.inputs.iter().map(|&i| z_names[i].clone()).collect();
+        names.push("value".into());
+        let columns = (0..names.len())
+            .map(|c| rows.iter().map(|r| r[c]).collect())
+            .collect();
+        tables.push(MapTable {
+            block: spec.name.clone(),
+            file: file.clone(),
+            names,
+            columns,
+        });
+        spec.truth = Some(TruthSpec::Table { file, table });
+    }
+    Ok((out, tables))
+}
+
+/// Writes `model.toml`, the map tables and `joint.json` into `dir` (atomically, never over a
+/// protected input of `guard`).
+pub fn write_joint_outputs(outcome: &JointOutcome, dir: &Path, guard: &OutputGuard) -> Result<()> {
+    guard.create_dir(dir)?;
+    for t in &outcome.tables {
+        guard.write_csv(&dir.join(&t.file), &t.names, &t.columns)?;
+    }
+    guard.write(
+        &dir.join("model.toml"),
+        outcome.model_file.to_toml_string().as_bytes(),
+    )?;
+    let stages: Vec<serde_json::Value> = outcome
+        .fit
+        .stages
+        .iter()
+        .map(|s| {
+            serde_json::json!({
+                "name": s.name,
+                "segments": s.segments,
+                "costs": s.costs,
+                "status": format!("{:?}", s.status),
+            })
+        })
+        .collect();
+    let free: Vec<serde_json::Value> = outcome
+        .fit
+        .model
+        .free_entries()
+        .iter()
+        .zip(outcome.fit.model.parameters())
+        .map(|(e, v)| serde_json::json!({"matrix": format!("{:?}", e.matrix), "row": e.row, "col": e.col, "value": v}))
+        .collect();
+    let json = serde_json::json!({
+        "beta": outcome.beta,
+        "trials": outcome.trials,
+        "initial_cost": outcome.fit.initial_cost,
+        "cost": outcome.fit.cost,
+        "rms": outcome.fit.rms,
+        "initial_states": outcome.fit.initial_states,
+        "free": free,
+        "stages": stages,
+    });
+    let text =
+        serde_json::to_string_pretty(&json).map_err(|e| WorkflowError::Request(e.to_string()))?;
+    guard.write(&dir.join("joint.json"), text.as_bytes())?;
+    Ok(())
+}

@@ -1,0 +1,21 @@
+//! # structid-workflow: the workflows under the command-line tool and Python
+//!
+//! Each workflow is a typed request in, a typed result out, and a writer of its output files,
+//! so that `structid` (the CLI) only parses arguments and prints, and the Python package only
+//! converts arrays: both run the same code and get the same numbers.
+//!
+//! | module | workflow |
+//! |---|---|
+//! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
+//! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
+
+pub mod error;
+pub mod free;
+pub mod joint;
+
+pub use error::{Result, WorkflowError};
+pub use free::parse_free;
+pub use joint::{
+    BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
+    refine_joint, simulate_model_file, write_joint_outputs,
+};

@@ -1,0 +1,152 @@
+//! `refine_joint` from a model file: the fit recovers what generated the data, and the model
+//! file it writes simulates as the fitted model does.
+
+use structid_core::{Data, Signal};
+use structid_io::ModelFile;
+use structid_workflow::{
+    BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, simulate_model_file,
+    write_joint_outputs,
+};
+
+/// y = G·w₁ with w₁ = sat(w₀), w₀ = play(u): an operator and a static map in series through
+/// D_zw, behind a first-order G whose pole is free.
+const TRUTH: &str = r#"
+[lft]
+A = [[0.85]]
+Bu = [[0.0]]
+Bw = [[0.0, 0.15]]
+Cy = [[1.0]]
+Dye = [[1.0]]
+Cz = [[0.0], [0.0]]
+Dzu = [[1.0], [0.0]]
+Dzw = [[0.0, 0.0], [1.0, 0.0]]
+[signals]
+u = ["u"]
+y = ["y"]
+[[nonlinearity]]
+name = "backlash"
+inputs = [0]
+output = 0
+operator = { kind = "play", half_width = 0.2 }
+[[nonlinearity]]
+name = "limit"
+inputs = [1]
+output = 1
+truth = "0.8*tanh(z0/0.8)"
+"#;
+
+fn input(len: usize) -> Signal {
+    Signal::from_fn(len, 1, |k, _| {
+        let t = k as f64;
+        1.2 * ((0.011 * t).sin() * (0.053 * t).cos() + 0.4 * (0.0071 * t + 1.0).sin())
+    })
+}
+
+#[test]
+fn an_operator_and_a_map_in_series_are_fitted_from_a_model_file_and_written_back() {
+    let truth = ModelFile::parse(TRUTH, None).unwrap();
+    let u = input(3000);
+    let sim = simulate_model_file(&truth, &u, None).unwrap();
+    let data = Data::new(u.clone(), sim.y.clone()).unwrap();
+    // The start: the pole off by 0.1, the play a quarter of its width, the map unknown
+    // (no truth: it starts at zero).
+    let start_text = TRUTH
+        .replace("A = [[0.85]]", "A = [[0.75]]")
+        .replace("half_width = 0.2", "half_width = 0.05")
+        .replace("truth = \"0.8*tanh(z0/0.8)\"\n", "");
+    let start = ModelFile::parse(&start_text, None).unwrap();
+    let settings = JointWorkflowSettings {
+        beta: BetaChoice::Fixed(1e-8),
+        free: vec!["A".into()],
+        ..JointWorkflowSettings::default()
+    };
+    let out = refine_joint(&JointRequest {
+        model: &start,
+        data: &data,
+        settings,
+    })
+    .unwrap();
+    let p = out.fit.model.parameters();
+    println!(
+        "pole {:.4}, half-width {:.4}, rms {:?}",
+        p[0], p[1], out.fit.rms
+    );
+    assert!((p[0] - 0.85).abs() < 0.01, "pole {}", p[0]);
+    assert!((p[1] - 0.2).abs() < 0.02, "half-width {}", p[1]);
+    assert!(out.fit.rms[0] < 0.01 * 0.8, "{:?}", out.fit.rms);
+    // The written model file, read back, simulates as the fitted model (its map as a table).
+    let dir = tempfile::tempdir().unwrap();
+    write_joint_outputs(&out, dir.path(), &structid_io::OutputGuard::new()).unwrap();
+    let back = ModelFile::from_path(&dir.path().join("model.toml")).unwrap();
+    assert_eq!(back.blocks[0].operator, out.model_file.blocks[0].operator);
+    let x0 = &out.fit.initial_states[0][..1];
+    let from_file = simulate_model_file(&back, &u, Some(x0)).unwrap();
+    let fitted = out
+        .fit
+        .model
+        .simulate(&u, Some(&out.fit.initial_states[0]))
+        .unwrap();
+    let diff = from_file
+        .y
+        .channel(0)
+        .iter()
+        .zip(fitted.y.channel(0))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(diff < 1e-3, "written model differs by {diff}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("joint.json")).unwrap())
+            .unwrap();
+    assert!(json["cost"].as_f64().unwrap() <= json["initial_cost"].as_f64().unwrap());
+}
+
+#[test]
+fn beta_is_chosen_on_the_validation_record_and_bad_requests_are_clear() {
+    let truth = ModelFile::parse(TRUTH, None).unwrap();
+    let (u, v) = (
+        input(1500),
+        Signal::from_fn(800, 1, |k, _| 0.9 * (0.02 * k as f64).sin()),
+    );
+    let est = Data::new(u.clone(), simulate_model_file(&truth, &u, None).unwrap().y).unwrap();
+    let val = Data::new(v.clone(), simulate_model_file(&truth, &v, None).unwrap().y).unwrap();
+    let start =
+        ModelFile::parse(&TRUTH.replace("truth = \"0.8*tanh(z0/0.8)\"\n", ""), None).unwrap();
+    let settings = JointWorkflowSettings {
+        beta: BetaChoice::Validated {
+            grid: vec![1e-8, 1e2],
+            validation: val,
+        },
+        ..JointWorkflowSettings::default()
+    };
+    let out = refine_joint(&JointRequest {
+        model: &start,
+        data: &est,
+        settings,
+    })
+    .unwrap();
+    assert_eq!(out.trials.len(), 2);
+    let best = out
+        .trials
+        .iter()
+        .min_by(|a, b| a.validation_rms[0].total_cmp(&b.validation_rms[0]))
+        .unwrap();
+    assert_eq!(best.beta, out.beta);
+    // A huge β flattens the map: it must validate worse than the small one.
+    assert_eq!(out.beta, 1e-8, "{:?}", out.trials);
+    // A free entry that does not exist, and a static block without truth in simulation.
+    let e = refine_joint(&JointRequest {
+        model: &start,
+        data: &est,
+        settings: JointWorkflowSettings {
+            free: vec!["Bq".into()],
+            ..JointWorkflowSettings::default()
+        },
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("free entry `Bq`"), "{e}");
+    let e = simulate_model_file(&start, &u, None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("block `limit` has no `truth`"), "{e}");
+}
