@@ -86,6 +86,22 @@ impl From<IoError> for CliError {
     }
 }
 
+impl From<structid_workflow::WorkflowError> for CliError {
+    fn from(e: structid_workflow::WorkflowError) -> Self {
+        use structid_workflow::WorkflowError as W;
+        match e {
+            W::Io(e) => e.into(),
+            W::Core(e) => e.into(),
+            W::Request(m) => Self::input(m),
+            other => Self {
+                code: EXIT_RUNTIME,
+                context: None,
+                error: Box::new(other),
+            },
+        }
+    }
+}
+
 impl From<structid_core::Error> for CliError {
     fn from(e: structid_core::Error) -> Self {
         Self {

@@ -54,9 +54,10 @@ pub struct RefineArgs {
     /// Leading validation samples that only settle the state and are not scored.
     #[arg(long, value_name = "N", default_value_t = 0)]
     settle: usize,
-    /// Largest number of alternations.
-    #[arg(long, value_name = "N", default_value_t = 10)]
-    iterations: usize,
+    /// Largest number of alternations (default 10); with --joint, of Levenberg–Marquardt
+    /// iterations per stage (default 100).
+    #[arg(long, value_name = "N")]
+    iterations: Option<usize>,
     /// Stop when the validation error (without one, J) improves by less than this fraction.
     #[arg(long, value_name = "TOL", default_value_t = 1e-3)]
     tolerance: f64,
@@ -83,6 +84,24 @@ pub struct RefineArgs {
     /// Skip the posterior uncertainty band of the map.
     #[arg(long)]
     no_bands: bool,
+    /// Fit the whole model at once by its simulation error instead of alternating: G's free
+    /// entries (--free), every static map as a Gaussian kernel expansion, every `operator`
+    /// block's parameters and the initial state, by Levenberg–Marquardt. Takes any `[lft]` or
+    /// `[linear]` model file: maps in series, maps of unmeasured states, hysteresis operators.
+    /// β: a number, or `auto` with --validation-data (the best of 10⁻¹⁰ … 10⁻² by the
+    /// validation simulation RMS).
+    #[arg(long)]
+    joint: bool,
+    /// With --joint: an entry of G to fit, `Bw[1][0]`, or a matrix name (`A`) for all its
+    /// non-zero entries. Repeat it. The others stay as the model file gives them.
+    #[arg(long, value_name = "ENTRY", requires = "joint")]
+    free: Vec<String>,
+    /// With --joint: kernel centres per static map (per input for a map of two inputs).
+    #[arg(long, value_name = "N", default_value_t = 15, requires = "joint")]
+    centres: usize,
+    /// With --joint: samples per multiple-shooting segment (default: single shooting).
+    #[arg(long, value_name = "N", requires = "joint")]
+    segment_length: Option<usize>,
 }
 
 /// Values of `refine --selection`.
@@ -156,7 +175,11 @@ fn as_linear(
 
 /// Runs `structid refine`.
 pub fn run(a: RefineArgs) -> Result<(), CliError> {
+    if a.joint {
+        return run_joint(a);
+    }
     let t0 = Instant::now();
+    let iterations = a.iterations.unwrap_or(10);
     let read = ModelFile::from_path(&a.model)?;
     let (mf, spec, recognised) = match read.linear.clone() {
         Some(spec) => (read, spec, None),
@@ -184,7 +207,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             spec.structure_name()
         ))
     })?;
-    if a.iterations == 0 {
+    if iterations == 0 {
         return Err(CliError::input("--iterations must be at least 1"));
     }
     if !(a.tolerance.is_finite() && a.tolerance >= 0.0) {
@@ -332,7 +355,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         .initial_state(initial_state)
         .posterior(!a.no_bands)
         .build()?;
-    let pb = crate::progress::bar(Some(a.iterations as u64), "alternations");
+    let pb = crate::progress::bar(Some(iterations as u64), "alternations");
     let selection = if auto_beta || auto_sigma {
         Some(
             SelectionSettings::builder()
@@ -357,7 +380,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         None => a.settle,
     };
     let settings = RefineSettings::builder()
-        .max_iterations(a.iterations)
+        .max_iterations(iterations)
         .tolerance(a.tolerance)
         .identify(identify_settings.clone())
         .selection(selection)
@@ -568,4 +591,80 @@ fn summary(r: &structid_core::refine::Refinement, written: &[PathBuf], seconds: 
         let _ = writeln!(s, "  {}", p.display());
     }
     s
+}
+
+/// `structid refine --joint`: parses the arguments into a request for
+/// [`structid_workflow::refine_joint`], writes its outputs and prints a summary.
+fn run_joint(a: RefineArgs) -> Result<(), CliError> {
+    use structid_workflow::{BetaChoice, JointRequest, JointWorkflowSettings};
+    let t0 = Instant::now();
+    let mf = ModelFile::from_path(&a.model)?;
+    if a.validation_fraction.is_some() {
+        return Err(CliError::input(
+            "--joint scores β on whole validation records: pass them as --validation-data V.csv",
+        ));
+    }
+    let mut guard = OutputGuard::new();
+    guard.protect(&a.model);
+    for d in a.data.iter().chain(&a.validation_data) {
+        guard.protect(d);
+    }
+    let data = crate::identify::read_records(&mf, &a.data)?;
+    let beta = match (a.beta, a.validation_data.is_empty()) {
+        (AutoOr::Value(b), _) => BetaChoice::Fixed(b),
+        (AutoOr::Auto, false) => BetaChoice::Validated {
+            grid: (0..9).map(|i| 10f64.powi(i - 10)).collect(),
+            validation: crate::identify::read_records(&mf, &a.validation_data)?,
+        },
+        (AutoOr::Auto, true) => {
+            return Err(CliError::input(
+                "--joint needs --beta B, or --validation-data V.csv to choose β on",
+            ));
+        }
+    };
+    let mut fit = structid_joint::JointSettings::builder()
+        .max_iterations(a.iterations.unwrap_or(100))
+        .estimate_initial_state(matches!(a.initial_state, InitialStateArg::Estimate));
+    if let Some(l) = a.segment_length {
+        fit = fit.segment_length(l);
+    }
+    let settings = JointWorkflowSettings {
+        beta,
+        centres: a.centres,
+        free: a.free.clone(),
+        fit: fit.build().map_err(|e| CliError::input(e.to_string()))?,
+        ..JointWorkflowSettings::default()
+    };
+    let out = structid_workflow::refine_joint(&JointRequest {
+        model: &mf,
+        data: &data,
+        settings,
+    })
+    .map_err(|e| {
+        CliError::from(e).context(format!("cannot refine `{}` jointly", a.model.display()))
+    })?;
+    structid_workflow::write_joint_outputs(&out, &a.out, &guard)?;
+    println!(
+        "joint fit of {} by simulation error: cost {:.4e} → {:.4e} (β = {:.1e}, {} parameters, {:.2} s)",
+        a.model.display(),
+        out.fit.initial_cost,
+        out.fit.cost,
+        out.beta,
+        out.fit.model.parameters().len(),
+        t0.elapsed().as_secs_f64()
+    );
+    for (name, rms) in mf.signals.y.iter().zip(&out.fit.rms) {
+        println!("  {name}: simulation RMS {rms:.4e}");
+    }
+    for t in &out.trials {
+        println!(
+            "  β = {:.1e}: validation RMS {:?}",
+            t.beta, t.validation_rms
+        );
+    }
+    println!(
+        "wrote {}/model.toml, joint.json and the map tables",
+        a.out.display()
+    );
+    Ok(())
 }

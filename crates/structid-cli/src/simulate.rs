@@ -1,6 +1,5 @@
 //! `structid simulate`.
 
-use structid_core::Interpolant;
 use structid_io::{ModelFile, OutputGuard};
 
 use crate::SimulateArgs;
@@ -32,7 +31,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     let missing: Vec<String> = mf
         .blocks
         .iter()
-        .filter(|b| b.truth.is_none())
+        .filter(|b| b.truth.is_none() && b.operator.is_none())
         .map(|b| format!("`{}`", b.name))
         .collect();
     if !missing.is_empty() {
@@ -43,10 +42,6 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
             missing.join(", ")
         )));
     }
-    let maps = mf
-        .truth_maps()?
-        .ok_or_else(|| CliError::runtime("a block has no truth map"))?;
-
     // Output column names: u, y, z, w_<block>; they must be distinct.
     let z_names = mf.z_names();
     let mut names: Vec<String> = Vec::new();
@@ -71,8 +66,7 @@ pub fn run(a: SimulateArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::from(e).context("reading the inputs named in [signals].u"))?;
     let len = u.len();
     let dims = lft.dims();
-    let maps: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
-    let sim = mf.simulate(&maps, &u, noise_std, a.seed)?;
+    let sim = structid_workflow::simulate_model_file_noisy(&mf, &u, noise_std, a.seed)?;
 
     let mut columns: Vec<Vec<f64>> = Vec::with_capacity(names.len());
     columns.extend((0..dims.u).map(|c| u.channel(c)));

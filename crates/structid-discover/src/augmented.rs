@@ -139,6 +139,7 @@ pub fn model_file(
             output: 0,
             dispersion,
             truth: Some(truth),
+            operator: None,
         })
         .chain(known_blocks(nominal_file)?)
         .collect(),
@@ -188,6 +189,7 @@ fn known_blocks(nominal_file: &ModelFile) -> std::result::Result<Vec<BlockSpec>,
                 output: i + 1,
                 dispersion: b.dispersion.clone(),
                 truth: Some(truth),
+                operator: b.operator.clone(),
             })
         })
         .collect()

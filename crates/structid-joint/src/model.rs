@@ -340,8 +340,30 @@ impl JointModel {
     }
 
     /// Simulates the model from u alone, with the stacked initial state `xi0` (default: the
-    /// zero state, blocks at rest).
+    /// zero state, blocks at rest). `Simulation::final_state` is the stacked state.
     pub fn simulate(&self, u: &Signal, xi0: Option<&[f64]>) -> Result<Simulation> {
+        self.simulate_noisy(u, None, xi0)
+    }
+
+    /// [`JointModel::simulate`] with the noise `e` (L × n_e) entering through B_e, D_ye and D_ze.
+    pub fn simulate_noisy(
+        &self,
+        u: &Signal,
+        e: Option<&Signal>,
+        xi0: Option<&[f64]>,
+    ) -> Result<Simulation> {
+        let d = self.lft.dims();
+        if let Some(e) = e
+            && (e.len() != u.len() || e.channels() != d.e)
+        {
+            return Err(JointError::InvalidModel(format!(
+                "the noise has {} samples × {} channels; the input {} samples and the LFT {} noise channels",
+                e.len(),
+                e.channels(),
+                u.len(),
+                d.e
+            )));
+        }
         let d = self.lft.dims();
         if u.channels() != d.u {
             return Err(JointError::InvalidModel(format!(
@@ -364,6 +386,6 @@ impl JointModel {
             Some(x) => x.to_vec(),
             None => self.rest_state(u.sample(0), None)?,
         };
-        Stepper::new(self).simulate(u, &xi0)
+        Stepper::new(self).simulate(u, e, &xi0)
     }
 }

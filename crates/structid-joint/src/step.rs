@@ -71,6 +71,8 @@ type Free = Vec<(usize, usize, usize)>;
 pub(crate) struct Stepper<'a> {
     model: &'a JointModel,
     m: [Rows; 9],
+    /// B_e, D_ye, D_ze: only a simulation with noise uses them.
+    noise: [Rows; 3],
     free: [Free; 9],
     /// Where each block's state starts in ξ.
     state_at: Vec<usize>,
@@ -119,6 +121,7 @@ impl<'a> Stepper<'a> {
             model,
             series: lm.dzw.iter().any(|v| *v != 0.0),
             m,
+            noise: [Rows::new(&lm.be), Rows::new(&lm.dye), Rows::new(&lm.dze)],
             free,
             state_at,
             param_at: model.parameter_offsets(),
@@ -195,8 +198,23 @@ impl<'a> Stepper<'a> {
 
     /// One sample without tangents: writes y, advances ξ; `false` when a value is not finite.
     fn step(&self, xi: &mut [f64], u: &[f64], y: &mut [f64], sc: &mut Scratch) -> bool {
+        self.step_noisy(xi, u, None, y, sc)
+    }
+
+    /// [`Self::step`] with the noise e_k entering through B_e, D_ye and D_ze.
+    fn step_noisy(
+        &self,
+        xi: &mut [f64],
+        u: &[f64],
+        e: Option<&[f64]>,
+        y: &mut [f64],
+        sc: &mut Scratch,
+    ) -> bool {
         let n = self.n;
         self.base_z(&xi[..n], u, &mut sc.z);
+        if let Some(e) = e {
+            self.noise[2].mul_add(e, &mut sc.z);
+        }
         sc.w.iter_mut().for_each(|v| *v = 0.0);
         for &b in self.model.evaluation_order() {
             let block = &self.model.blocks()[b];
@@ -213,6 +231,10 @@ impl<'a> Stepper<'a> {
         self.m[0].mul_add(x, &mut sc.xn);
         self.m[1].mul_add(u, &mut sc.xn);
         self.m[2].mul_add(&sc.w, &mut sc.xn);
+        if let Some(e) = e {
+            self.noise[1].mul_add(e, y);
+            self.noise[0].mul_add(e, &mut sc.xn);
+        }
         xi[..n].copy_from_slice(&sc.xn);
         sc.w.iter().all(|v| v.is_finite()) && xi.iter().all(|v| v.is_finite())
     }
@@ -400,8 +422,14 @@ impl<'a> Stepper<'a> {
         Some(())
     }
 
-    /// A whole simulation, with z and w recorded.
-    pub(crate) fn simulate(&self, u: &Signal, xi0: &[f64]) -> Result<Simulation> {
+    /// A whole simulation, with z and w recorded; `e` (when given) enters through B_e, D_ye
+    /// and D_ze.
+    pub(crate) fn simulate(
+        &self,
+        u: &Signal,
+        e: Option<&Signal>,
+        xi0: &[f64],
+    ) -> Result<Simulation> {
         let len = u.len();
         let (mut ys, mut zs, mut ws) = (
             Signal::zeros(len, self.ny),
@@ -413,7 +441,8 @@ impl<'a> Stepper<'a> {
         for k in 0..len {
             let x = xi[..self.n].to_vec();
             let mut y = vec![0.0; self.ny];
-            if !self.step(&mut xi, u.sample(k), &mut y, &mut sc) {
+            let ek = e.map(|e| e.sample(k));
+            if !self.step_noisy(&mut xi, u.sample(k), ek, &mut y, &mut sc) {
                 return Err(JointError::Core(structid_core::Error::Unstable(format!(
                     "the simulation diverged: a state or a block output became non-finite at sample {k}"
                 ))));
@@ -423,6 +452,9 @@ impl<'a> Stepper<'a> {
             let z = zs.sample_mut(k);
             self.base_z(&x, u.sample(k), z);
             self.m[8].mul_add(&sc.w, z);
+            if let Some(ek) = ek {
+                self.noise[2].mul_add(ek, z);
+            }
         }
         Ok(Simulation {
             y: ys,

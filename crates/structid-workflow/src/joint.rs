@@ -153,7 +153,7 @@ fn fixed_model(mf: &ModelFile, require_truth: bool) -> Result<JointModel> {
 
 /// Simulates a model file from u alone, with operators and maps in series: each static block
 /// by its `truth`, each operator as declared. `x0` is the LFT's initial state (zero by
-/// default); operators start at rest.
+/// default); operators start at rest. See [`simulate_model_file_noisy`] for noise.
 ///
 /// ```
 /// use structid_io::ModelFile;
@@ -184,6 +184,37 @@ pub fn simulate_model_file(mf: &ModelFile, u: &Signal, x0: Option<&[f64]>) -> Re
     }
     let xi0 = model.rest_state(u.sample(0), x0)?;
     Ok(model.simulate(u, Some(&xi0))?)
+}
+
+/// What `structid simulate` writes: the model file simulated from rest with white Gaussian
+/// noise e of standard deviation `noise_std` drawn from `seed`
+/// ([`structid_core::paper::gaussian_noise`], the same draw for every kind of model). A model
+/// of static maps goes through [`ModelFile::simulate`]; one with hysteresis operators through
+/// the joint model, which steps their memory.
+pub fn simulate_model_file_noisy(
+    mf: &ModelFile,
+    u: &Signal,
+    noise_std: f64,
+    seed: u64,
+) -> Result<Simulation> {
+    if mf.blocks.iter().all(|b| b.operator.is_none()) {
+        let maps = mf.truth_maps()?.ok_or_else(|| {
+            WorkflowError::Request(
+                "a block has no `truth`; simulation needs the map of every block".into(),
+            )
+        })?;
+        let maps: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
+        return Ok(mf.simulate(&maps, u, noise_std, seed)?);
+    }
+    let model = fixed_model(mf, true)?;
+    if u.is_empty() {
+        return Err(WorkflowError::Request("the input has no samples".into()));
+    }
+    let ne = model.lft().dims().e;
+    let e = (noise_std > 0.0)
+        .then(|| structid_core::paper::gaussian_noise(u.len(), ne, noise_std, seed));
+    let xi0 = model.rest_state(u.sample(0), None)?;
+    Ok(model.simulate_noisy(u, e.as_ref(), Some(&xi0))?)
 }
 
 /// Each block input's range over simulations of every record of `data` from rest.

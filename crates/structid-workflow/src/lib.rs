@@ -17,5 +17,5 @@ pub use error::{Result, WorkflowError};
 pub use free::parse_free;
 pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
-    refine_joint, simulate_model_file, write_joint_outputs,
+    refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
 };

@@ -472,7 +472,7 @@ impl ModelFile {
             return Err(IoError::InvalidArgument(format!(
                 "block `{}` is a hysteresis operator, which identification by the dispersion \
                  criterion cannot fit (it fits static maps); fit the model by its simulation \
-                 error with `structid refine --joint`",
+                 error with the joint fit",
                 b.name
             )));
         }

@@ -1,0 +1,265 @@
+//! `structid simulate` of a model with a hysteresis operator and a map in series, then
+//! `structid refine --joint` from a wrong start; and the errors a user meets on the way.
+
+mod common;
+
+use std::path::Path;
+
+use common::{input_error, ok, p};
+
+/// y = G·sat(play(u)) + e, the saturation reading the play's output through D_zw.
+const TRUTH: &str = r#"[lft]
+A = [[0.85]]
+Bu = [[0.0]]
+Be = [[0.0]]
+Bw = [[0.0, 0.15]]
+Cy = [[1.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[0.0, 0.0]]
+Cz = [[0.0], [0.0]]
+Dzu = [[1.0], [0.0]]
+Dze = [[0.0], [0.0]]
+Dzw = [[0.0, 0.0], [1.0, 0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "backlash"
+inputs = [0]
+output = 0
+operator = { kind = "play", half_width = 0.2 }
+
+[[nonlinearity]]
+name = "limit"
+inputs = [1]
+output = 1
+truth = "0.8*tanh(z0/0.8)"
+"#;
+
+fn write_input(path: &Path, len: usize, phase: f64) {
+    let mut text = String::from("u\n");
+    for k in 0..len {
+        let t = k as f64;
+        let u =
+            1.2 * ((0.011 * t + phase).sin() * (0.053 * t).cos() + 0.4 * (0.0071 * t + 1.0).sin());
+        text.push_str(&format!("{u}\n"));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = d.join("truth.toml");
+    std::fs::write(&truth, TRUTH).unwrap();
+    for (name, len, phase) in [("est", 3000, 0.0), ("val", 1500, 1.3)] {
+        let u = d.join(format!("u_{name}.csv"));
+        write_input(&u, len, phase);
+        ok(&[
+            "simulate",
+            "--model",
+            p(&truth),
+            "--input",
+            p(&u),
+            "--out",
+            p(&d.join(format!("{name}.csv"))),
+            "--noise-std",
+            "0.005",
+            "--seed",
+            "3",
+        ]);
+    }
+    // The simulated w of the play follows the play's definition sample by sample.
+    let sim = std::fs::read_to_string(d.join("est.csv")).unwrap();
+    let mut b = 0.0f64;
+    for (k, line) in sim.lines().skip(1).enumerate() {
+        let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        let (u, w0) = (v[0], v[4]);
+        b = if k == 0 {
+            w0
+        } else {
+            b.max(u - 0.2).min(u + 0.2)
+        };
+        assert!((w0 - b).abs() < 1e-12, "play at {k}: {w0} vs {b}");
+    }
+    // Start: the pole and the play wrong, the map unknown.
+    let start = d.join("start.toml");
+    std::fs::write(
+        &start,
+        TRUTH
+            .replace("A = [[0.85]]", "A = [[0.75]]")
+            .replace("half_width = 0.2", "half_width = 0.05")
+            .replace("truth = \"0.8*tanh(z0/0.8)\"\n", ""),
+    )
+    .unwrap();
+    let out = d.join("fit");
+    let o = ok(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&start),
+        "--data",
+        p(&d.join("est.csv")),
+        "--validation-data",
+        p(&d.join("val.csv")),
+        "--free",
+        "A",
+        "--out",
+        p(&out),
+    ]);
+    assert!(o.stdout.contains("joint fit of"), "{}", o.stdout);
+    let j = json(&out.join("joint.json"));
+    let pole = j["free"][0]["value"].as_f64().unwrap();
+    assert!((pole - 0.85).abs() < 0.01, "pole {pole}");
+    assert!(j["cost"].as_f64().unwrap() <= j["initial_cost"].as_f64().unwrap());
+    assert_eq!(j["trials"].as_array().unwrap().len(), 9);
+    assert!(j["rms"][0].as_f64().unwrap() < 1.5 * 0.005, "{}", j["rms"]);
+    // The written model names the play with its fitted half-width and reads back.
+    let written = std::fs::read_to_string(out.join("model.toml")).unwrap();
+    let line = written.lines().find(|l| l.starts_with("operator")).unwrap();
+    let c: f64 = line
+        .split("half_width = ")
+        .nth(1)
+        .unwrap()
+        .trim_end_matches(" }")
+        .parse()
+        .unwrap();
+    assert!((c - 0.2).abs() < 0.02, "{line}");
+    ok(&[
+        "simulate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--input",
+        p(&d.join("u_val.csv")),
+        "--out",
+        p(&d.join("again.csv")),
+    ]);
+}
+
+#[test]
+fn joint_errors_are_clear() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let u = d.join("u.csv");
+    write_input(&u, 200, 0.0);
+    // An operator out of range, with the line of its declaration.
+    let bad = d.join("bad.toml");
+    std::fs::write(&bad, TRUTH.replace("half_width = 0.2", "half_width = -0.2")).unwrap();
+    let e = input_error(&[
+        "simulate",
+        "--model",
+        p(&bad),
+        "--input",
+        p(&u),
+        "--out",
+        p(&d.join("s.csv")),
+    ]);
+    assert!(e.contains("line 23") && e.contains("half_width"), "{e}");
+    // A cycle of maps names both blocks.
+    let cyc = d.join("cycle.toml");
+    std::fs::write(
+        &cyc,
+        TRUTH.replace(
+            "Dzw = [[0.0, 0.0], [1.0, 0.0]]",
+            "Dzw = [[0.0, 0.5], [1.0, 0.0]]",
+        ),
+    )
+    .unwrap();
+    let e = input_error(&[
+        "simulate",
+        "--model",
+        p(&cyc),
+        "--input",
+        p(&u),
+        "--out",
+        p(&d.join("s.csv")),
+    ]);
+    assert!(
+        e.contains("algebraic loop") && e.contains("`backlash`") && e.contains("`limit`"),
+        "{e}"
+    );
+    // identify refuses an operator and says what to use instead; --joint needs a β.
+    let good = d.join("good.toml");
+    std::fs::write(&good, TRUTH).unwrap();
+    let data = d.join("data.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        p(&good),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+    ]);
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&good),
+        "--data",
+        p(&data),
+        "--out",
+        p(&d.join("i")),
+    ]);
+    assert!(
+        e.contains("maps in series") && e.contains("joint fit"),
+        "{e}"
+    );
+    let play_only = d.join("play.toml");
+    std::fs::write(
+        &play_only,
+        TRUTH
+            .replace(
+                "Dzw = [[0.0, 0.0], [1.0, 0.0]]",
+                "Dzw = [[0.0, 0.0], [0.0, 0.0]]",
+            )
+            .replace("Dzu = [[1.0], [0.0]]", "Dzu = [[1.0], [1.0]]"),
+    )
+    .unwrap();
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&play_only),
+        "--data",
+        p(&data),
+        "--out",
+        p(&d.join("i")),
+    ]);
+    assert!(
+        e.contains("hysteresis operator") && e.contains("joint fit"),
+        "{e}"
+    );
+    let e = input_error(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&good),
+        "--data",
+        p(&data),
+        "--out",
+        p(&d.join("r")),
+    ]);
+    assert!(e.contains("--beta"), "{e}");
+    let e = input_error(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&good),
+        "--data",
+        p(&data),
+        "--beta",
+        "1e-6",
+        "--free",
+        "Q[0][0]",
+        "--out",
+        p(&d.join("r")),
+    ]);
+    assert!(e.contains("free entry `Q[0][0]`"), "{e}");
+}
