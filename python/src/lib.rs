@@ -10,6 +10,7 @@ mod design;
 mod discover;
 mod estimate;
 mod identify;
+mod joint;
 mod linear;
 mod model;
 mod paper;
@@ -26,6 +27,7 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<estimate::Fitted>()?;
     m.add_function(wrap_pyfunction!(identify::identify_columns, m)?)?;
     m.add_function(wrap_pyfunction!(refine::refine_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(joint::refine_joint_columns, m)?)?;
     m.add_function(wrap_pyfunction!(discover::discover_columns, m)?)?;
     m.add_function(wrap_pyfunction!(discover::silverbox_discovery, m)?)?;
     m.add_function(wrap_pyfunction!(staticness::staticness_columns, m)?)?;

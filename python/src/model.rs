@@ -31,6 +31,12 @@ impl Model {
     }
 
     /// The model's blocks that use a total-variation dispersion exist.
+    /// A model from a model file that a workflow produced (already checked, its tables in
+    /// memory).
+    pub(crate) fn from_file_value(file: ModelFile) -> PyResult<Self> {
+        Ok(Self { file })
+    }
+
     pub(crate) fn has_total_variation(&self) -> bool {
         self.file.blocks.iter().any(|b| {
             matches!(
@@ -209,15 +215,12 @@ impl Model {
             )));
         }
         let u: Signal = convert::signal(&u, "u")?;
-        let maps = self.file.truth_maps().map_err(error)?.ok_or_else(|| {
-            invalid("simulation needs a truth for every block (Model.with_truth)")
-        })?;
+        if self.file.blocks.iter().any(|b| b.truth.is_none() && b.operator.is_none()) {
+            return Err(invalid("simulation needs a truth for every block (Model.with_truth)"));
+        }
         let file = self.file.clone();
         let sim = py
-            .detach(move || {
-                let maps: Vec<_> = maps.iter().map(|m| m.as_ref()).collect();
-                file.simulate(&maps, &u, noise_std, seed)
-            })
+            .detach(move || structid_workflow::simulate_model_file_noisy(&file, &u, noise_std, seed))
             .map_err(error)?;
         let d = PyDict::new(py);
         d.set_item("y", convert::array(py, &sim.y))?;

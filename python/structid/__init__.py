@@ -28,8 +28,8 @@ from ._structid import StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, RecordsValidation, Validation
-from ._workflows import (Discovery, Finding, Refinement, discover, refine, silverbox_data,
-                         silverbox_discovery)
+from ._workflows import (Discovery, Finding, JointRefinement, Refinement, discover, refine,
+                         refine_joint, silverbox_data, silverbox_discovery)
 from ._staticness import Staticness, staticness
 from ._linear import LinearFit, Response, linear, read_data, response
 from . import input, paper, scenarios
@@ -47,6 +47,8 @@ __all__ = [
     "load",
     "refine",
     "Refinement",
+    "refine_joint",
+    "JointRefinement",
     "discover",
     "Discovery",
     "Finding",

@@ -71,6 +71,12 @@ def refine_columns(model: Model, records: List[Columns],
                    sigma_auto: bool = False, selection: str = "ml", iterations: int = 10,
                    tolerance: float = 1e-3, settle: int = 0, initial_state: str = "zero",
                    bands: bool = True) -> Dict[str, Any]: ...
+def refine_joint_columns(model: Model, columns: List[Columns],
+                         validation: Optional[List[Columns]] = None,
+                         beta: Optional[float] = None, free: List[str] = ...,
+                         centres: int = 15, segment_length: Optional[int] = None,
+                         iterations: int = 100, initial_state: str = "estimate",
+                         out: Optional[str] = None) -> Dict[str, Any]: ...
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -64,6 +64,59 @@ def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[obj
     r = fit.report["refinement"]
     return Refinement(model=refined, fit=fit, iterations=r["iterations"], best=r["best"],
                       stop_reason=r["stop_reason"])
+
+
+@dataclass
+class JointRefinement:
+    """The result of :func:`refine_joint`: the model fitted as a whole by its simulation error."""
+
+    model: Model
+    """The fitted model (``structid refine --joint``'s model.toml): G with its fitted free
+    entries, each static map as a table of its values, each operator with its parameters."""
+    beta: float
+    trials: List[Tuple[float, List[float]]]
+    """Each β tried with its validation RMS per output (empty when β was given)."""
+    cost: float
+    """The criterion Σ|y − ŷ|² + L·Σβ·D at the end (never above ``initial_cost``)."""
+    initial_cost: float
+    rms: List[float]
+    """Simulation RMS per output on the estimation records."""
+    initial_states: List[List[float]]
+    """Each record's fitted initial state (the LFT's states, then each operator's memory)."""
+    free: List[Tuple[str, int, int, float]]
+    """Each free entry of G: matrix, row, column, fitted value."""
+    stages: List[Tuple[str, int, List[float], str]]
+    """Each stage: name, segments, its cost after each accepted step, how it ended."""
+
+
+def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tuple[object, object]] = None,
+                 beta: Union[float, str] = "auto", free: Sequence[str] = (), centres: int = 15,
+                 segment_length: Optional[int] = None, iterations: int = 100,
+                 initial_state: str = "estimate",
+                 out: Optional[Union[str, os.PathLike]] = None) -> JointRefinement:
+    """Fits the whole model at once by its simulation error (``structid refine --joint``):
+    the entries of G named in ``free`` (``"A"`` for every non-zero entry of A, ``"Bw[1][0]"``
+    for one), every static map as a Gaussian kernel expansion, every hysteresis operator's
+    parameters and each record's initial state, by Levenberg–Marquardt (multiple shooting
+    with ``segment_length``). It takes maps in series, maps of unmeasured states and
+    operators. ``beta`` is a number, or ``"auto"`` with ``validation=(u_val, y_val)``: the
+    best of 10⁻¹⁰ … 10⁻² by the validation simulation RMS. ``out`` writes the CLI's output
+    directory (model.toml, the map tables, joint.json)."""
+    if isinstance(beta, str) and beta != "auto":
+        raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")
+    val = None
+    if validation is not None:
+        if len(validation) != 2:
+            raise _structid.StructidError("validation is a pair (u_val, y_val)")
+        val = _records_columns(model, validation[0], validation[1], "validation ")
+    o = _structid.refine_joint_columns(
+        model._native, _records_columns(model, u, y, ""), val,
+        None if isinstance(beta, str) else float(beta), [str(f) for f in free], int(centres),
+        None if segment_length is None else int(segment_length), int(iterations), initial_state,
+        None if out is None else os.fspath(out))
+    return JointRefinement(model=Model(o["model"]), beta=o["beta"], trials=o["trials"], cost=o["cost"],
+                           initial_cost=o["initial_cost"], rms=o["rms"],
+                           initial_states=o["initial_states"], free=o["free"], stages=o["stages"])
 
 
 def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:
