@@ -20,7 +20,8 @@
 
 use std::sync::Arc;
 
-use structid_core::{Data, PolynomialDispersion, Result, Signal};
+use structid_core::model::hysteresis::apply_from_rest_into;
+use structid_core::{Data, Play, PolynomialDispersion, Result, Signal, Stop};
 use structid_linear::{OeSettings, PolynomialModel, output_error_records};
 
 use crate::hypotheses::{Location, Nominal};
@@ -90,6 +91,8 @@ impl InputHysteresis {
 /// The play operator of half-width `half_width` on `u`, into `out` (same length), its
 /// follower starting at u₀: u − [`stop_into`] with the same threshold.
 ///
+/// The core [`Play`] operator from rest at u₀, with |`half_width`| as its half-width.
+///
 /// ```
 /// use structid_discover::discover::play_into;
 /// let u = [0.0, 1.0, 2.0, 1.5, 1.0, 0.0];
@@ -99,22 +102,26 @@ impl InputHysteresis {
 /// ```
 ///
 /// # Panics
-/// When `out` is not as long as `u`.
+/// When `out` is not as long as `u`, or `half_width` is NaN and `u` is not empty.
 pub fn play_into(u: &[f64], half_width: f64, out: &mut [f64]) {
     assert_eq!(u.len(), out.len(), "play_into: lengths differ");
     let Some(&first) = u.first() else {
         return;
     };
     let c = half_width.abs();
-    let mut b = first;
-    for (o, &x) in out.iter_mut().zip(u) {
-        b = b.clamp(x - c, x + c);
-        *o = b;
+    if c == f64::INFINITY {
+        // The core operator takes finite widths only; an infinite gap is never crossed.
+        out.fill(first);
+        return;
     }
+    let play = Play::new(c).expect("play_into: the half-width is NaN");
+    apply_from_rest_into(&play, u, out);
 }
 
 /// The stop operator of threshold `threshold` on `u`, into `out` (same length), from s₀ = 0:
 /// s_k = clamp(s_(k−1) + u_k − u_(k−1), −c, c).
+///
+/// The core [`Stop`] operator from rest at u₀, with |`threshold`| as its threshold.
 ///
 /// ```
 /// use structid_discover::discover::stop_into;
@@ -125,18 +132,21 @@ pub fn play_into(u: &[f64], half_width: f64, out: &mut [f64]) {
 /// ```
 ///
 /// # Panics
-/// When `out` is not as long as `u`.
+/// When `out` is not as long as `u`, or `threshold` is NaN and `u` is not empty.
 pub fn stop_into(u: &[f64], threshold: f64, out: &mut [f64]) {
     assert_eq!(u.len(), out.len(), "stop_into: lengths differ");
     let Some(&first) = u.first() else {
         return;
     };
-    let c = threshold.abs();
-    let (mut s, mut prev) = (0.0, first);
-    for (o, &x) in out.iter_mut().zip(u) {
-        s = (s + x - prev).clamp(-c, c);
-        prev = x;
-        *o = s;
+    // The core operator takes thresholds in (0, ∞); the search here starts at c = 0, where the
+    // stop yields at once, and an infinite threshold never yields.
+    match threshold.abs() {
+        0.0 => out.fill(0.0),
+        f64::INFINITY => out.iter_mut().zip(u).for_each(|(o, x)| *o = x - first),
+        c => {
+            let stop = Stop::new(c).expect("stop_into: the threshold is NaN");
+            apply_from_rest_into(&stop, u, out);
+        }
     }
 }
 
