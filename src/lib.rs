@@ -61,6 +61,10 @@ pub mod prelude {
     pub use structid_linear::PolynomialModel;
 }
 pub use structid_io as io;
+/// Whole-model fitting by simulation error: maps in series, latent maps, hysteresis operators.
+pub use structid_joint as joint;
 pub use structid_linear as linear;
 pub use structid_lti as lti;
 pub use structid_plot as plot;
+/// The workflows under the command-line tool and Python, as typed requests and results.
+pub use structid_workflow as workflow;

@@ -30,7 +30,7 @@ fn records(mf: &ModelFile, named: Vec<Named>, what: &str) -> PyResult<structid_c
 /// `initial_states`, `free` (each free entry with its value) and `stages`; writes the output
 /// directory `out` when given.
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation=None, beta=None, free=Vec::new(), centres=15, segment_length=None, iterations=100, initial_state="estimate", out=None))]
+#[pyo3(signature = (model, columns, validation=None, beta=None, free=Vec::new(), centres=15, segment_length=None, iterations=100, initial_state="zero", out=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn refine_joint_columns<'py>(
     py: Python<'py>,

@@ -75,7 +75,7 @@ def refine_joint_columns(model: Model, columns: List[Columns],
                          validation: Optional[List[Columns]] = None,
                          beta: Optional[float] = None, free: List[str] = ...,
                          centres: int = 15, segment_length: Optional[int] = None,
-                         iterations: int = 100, initial_state: str = "estimate",
+                         iterations: int = 100, initial_state: str = "zero",
                          out: Optional[str] = None) -> Dict[str, Any]: ...
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,

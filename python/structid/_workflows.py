@@ -92,7 +92,7 @@ class JointRefinement:
 def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tuple[object, object]] = None,
                  beta: Union[float, str] = "auto", free: Sequence[str] = (), centres: int = 15,
                  segment_length: Optional[int] = None, iterations: int = 100,
-                 initial_state: str = "estimate",
+                 initial_state: str = "zero",
                  out: Optional[Union[str, os.PathLike]] = None) -> JointRefinement:
     """Fits the whole model at once by its simulation error (``structid refine --joint``):
     the entries of G named in ``free`` (``"A"`` for every non-zero entry of A, ``"Bw[1][0]"``
@@ -100,7 +100,8 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
     parameters and each record's initial state, by Levenberg–Marquardt (multiple shooting
     with ``segment_length``). It takes maps in series, maps of unmeasured states and
     operators. ``beta`` is a number, or ``"auto"`` with ``validation=(u_val, y_val)``: the
-    best of 10⁻¹⁰ … 10⁻² by the validation simulation RMS. ``out`` writes the CLI's output
+    best of 10⁻¹⁰ … 10⁻² by the validation simulation RMS. ``initial_state`` is ``"zero"``
+    (each record starts at rest) or ``"estimate"`` (fitted). ``out`` writes the CLI's output
     directory (model.toml, the map tables, joint.json)."""
     if isinstance(beta, str) and beta != "auto":
         raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")

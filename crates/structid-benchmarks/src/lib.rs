@@ -7,5 +7,6 @@
 mod pipeline;
 pub mod silverbox;
 pub mod silverbox_discovery;
+pub mod silverbox_joint;
 pub mod tanks;
 pub mod tanks_physical;

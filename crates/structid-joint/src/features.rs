@@ -11,7 +11,10 @@
 //! centres the map falls back to that affine part, which extrapolates a tank's outflow or a
 //! spring better than a kernel sum decaying to zero.
 //!
-//! Parameter order: θ₁ … θ_m, a₀, a₁ … a_p.
+//! Parameter order: θ₁ … θ_m, a₀, a₁ … a_p. For a scalar input the trend may be a polynomial
+//! of higher degree d ([`GaussianFeatures::with_trend_degree`]): a₀ + a₁z + … + a_d·z^d, the
+//! order of the physics of a stiffness (a cubic spring carries on as a cubic where the data
+//! end).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -26,6 +29,7 @@ pub struct GaussianFeatures {
     beta: f64,
     theta: Vec<f64>,
     affine: Vec<f64>,
+    degree: usize,
 }
 
 impl GaussianFeatures {
@@ -74,7 +78,31 @@ impl GaussianFeatures {
             beta,
             theta: vec![0.0; m],
             affine: vec![0.0; p + 1],
+            degree: 1,
         })
+    }
+
+    /// The same map with an unpenalised polynomial trend of degree `d` ≥ 1 (scalar input only;
+    /// new coefficients start at zero).
+    ///
+    /// ```
+    /// use structid_joint::{BlockMap, GaussianFeatures};
+    /// let f = GaussianFeatures::on_interval(-1.0, 1.0, 3, 0.5, 0.0).unwrap().with_trend_degree(3).unwrap();
+    /// assert_eq!(f.parameters().len(), 3 + 4);
+    /// let f = f.with_parameters(&[0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 2.0]).unwrap();
+    /// assert_eq!(f.eval(&mut [], &[3.0]), 3.0 + 2.0 * 27.0);
+    /// ```
+    pub fn with_trend_degree(mut self, d: usize) -> Result<Self> {
+        if d == 0 || (d > 1 && self.centres[0].len() != 1) {
+            return Err(invalid(
+                "trend degree",
+                d as f64,
+                "must be at least 1, and 1 for a map of several inputs",
+            ));
+        }
+        self.degree = d;
+        self.affine.resize(d + 1, 0.0);
+        Ok(self)
     }
 
     /// `count` centres spread evenly over [lo, hi] for a scalar input.
@@ -147,7 +175,7 @@ impl GaussianFeatures {
             ));
         }
         let (m, p) = (self.centres.len(), self.centres[0].len());
-        let np = m + 1 + p;
+        let np = m + self.affine.len();
         let mut gram = DMatrix::zeros(np, np);
         let mut rhs = DVector::zeros(np);
         let mut row = vec![0.0; np];
@@ -188,7 +216,7 @@ impl GaussianFeatures {
             .solve(&rhs);
         let mut out = self.clone();
         out.theta = sol.rows(0, m).iter().copied().collect();
-        out.affine = sol.rows(m, p + 1).iter().copied().collect();
+        out.affine = sol.rows(m, np - m).iter().copied().collect();
         Ok(out)
     }
 
@@ -198,8 +226,38 @@ impl GaussianFeatures {
         for (o, c) in out.iter_mut().zip(&self.centres) {
             *o = self.kernel(z, c);
         }
-        out[m] = 1.0;
-        out[m + 1..].copy_from_slice(z);
+        if self.degree == 1 {
+            out[m] = 1.0;
+            out[m + 1..].copy_from_slice(z);
+        } else {
+            let mut power = 1.0;
+            for o in &mut out[m..] {
+                *o = power;
+                power *= z[0];
+            }
+        }
+    }
+
+    /// The trend a₀ + a₁z (+ … + a_d·z^d) and its gradient in z.
+    fn trend(&self, z: &[f64], grad: &mut [f64]) -> f64 {
+        if self.degree == 1 {
+            grad.copy_from_slice(&self.affine[1..]);
+            return self.affine[0]
+                + z.iter()
+                    .zip(&self.affine[1..])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>();
+        }
+        let (mut value, mut slope, mut power) = (0.0, 0.0, 1.0);
+        for (k, a) in self.affine.iter().enumerate() {
+            value += a * power;
+            if k + 1 < self.affine.len() {
+                slope += (k + 1) as f64 * self.affine[k + 1] * power;
+            }
+            power *= z[0];
+        }
+        grad[0] = slope;
+        value
     }
 }
 
@@ -241,15 +299,20 @@ impl BlockMap for GaussianFeatures {
             .zip(&self.theta)
             .map(|(c, t)| t * self.kernel(z, c))
             .sum();
-        let lin: f64 = z.iter().zip(&self.affine[1..]).map(|(a, b)| a * b).sum();
-        kernel + self.affine[0] + lin
+        let mut grad = [0.0; 8];
+        let trend = if z.len() <= grad.len() {
+            self.trend(z, &mut grad[..z.len()])
+        } else {
+            self.trend(z, &mut vec![0.0; z.len()])
+        };
+        kernel + trend
     }
 
     fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
         let m = self.centres.len();
         self.features(z, &mut jac.dw_dp);
         let s2 = self.sigma * self.sigma;
-        jac.dw_dz.copy_from_slice(&self.affine[1..]);
+        self.trend(z, &mut jac.dw_dz);
         for ((c, t), k) in self.centres.iter().zip(&self.theta).zip(&jac.dw_dp[..m]) {
             for (d, (zi, ci)) in jac.dw_dz.iter_mut().zip(z.iter().zip(c)) {
                 *d -= t * k * (zi - ci) / s2;
@@ -338,5 +401,34 @@ mod tests {
             let fb = f.with_parameters(&b).unwrap().eval(&mut [], &z);
             assert!(((fa - fb) / (2.0 * h) - jac.dw_dp[i]).abs() < 1e-7, "θ{i}");
         }
+    }
+}
+
+#[cfg(test)]
+mod trend_tests {
+    use super::*;
+
+    #[test]
+    fn a_cubic_trend_has_exact_derivatives() {
+        let f = GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.5, 0.0)
+            .unwrap()
+            .with_trend_degree(3)
+            .unwrap();
+        let p = [0.3, -0.2, 0.5, 0.1, 0.2, -1.0, 0.4, 2.0];
+        let f = f.with_parameters(&p).unwrap();
+        let mut jac = BlockJacobian::for_map(f.as_ref());
+        let z = [0.7];
+        f.eval_jacobian(&mut [], &z, &mut jac);
+        let h = 1e-6;
+        let fd = (f.eval(&mut [], &[z[0] + h]) - f.eval(&mut [], &[z[0] - h])) / (2.0 * h);
+        assert!((fd - jac.dw_dz[0]).abs() < 1e-7, "{fd} vs {}", jac.dw_dz[0]);
+        // The trend's regressors are 1, z, z², z³.
+        assert_eq!(&jac.dw_dp[4..], &[1.0, 0.7, 0.7 * 0.7, 0.7 * 0.7 * 0.7]);
+        assert!(
+            GaussianFeatures::new(vec![vec![0.0, 0.0]], 0.5, 0.0)
+                .unwrap()
+                .with_trend_degree(2)
+                .is_err()
+        );
     }
 }

@@ -221,20 +221,32 @@ impl LeastSquaresProblem for Shooting<'_> {
                 accumulate(&mut jtj, &mut jtr, &cols, &row, res[i]);
             }
         }
+        symmetrise(&mut jtj);
         Some((jtj, jtr))
     }
 }
 
-/// Adds one residual's row `g` (on columns `cols`) to JᵀJ and g·res to Jᵀr.
+/// Adds one residual's row `g` (on columns `cols`, increasing) to the upper triangle of JᵀJ
+/// and g·res to Jᵀr; [`symmetrise`] fills the lower triangle once at the end.
 fn accumulate(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, cols: &[usize], g: &[f64], res: f64) {
+    debug_assert!(cols.windows(2).all(|w| w[0] < w[1]));
     for (a, &ca) in cols.iter().enumerate() {
         let ga = g[a];
         if ga == 0.0 {
             continue;
         }
         jtr[ca] += ga * res;
-        for (b, &cb) in cols.iter().enumerate() {
+        for (b, &cb) in cols.iter().enumerate().skip(a) {
             jtj[(ca, cb)] += ga * g[b];
+        }
+    }
+}
+
+/// Copies the upper triangle of `m` into its lower triangle.
+fn symmetrise(m: &mut DMatrix<f64>) {
+    for j in 0..m.ncols() {
+        for i in j + 1..m.nrows() {
+            m[(i, j)] = m[(j, i)];
         }
     }
 }
