@@ -5,8 +5,11 @@
 //! its map, re-expressed as a Gaussian kernel expansion with an unpenalised cubic trend (the
 //! physics' stiffness, which carries the map beyond the estimation amplitudes the arrow test
 //! reaches). β is chosen from a grid by the simulation RMS on the last 20 % of the estimation
-//! split (simulated on from the fitted part's start); the model is then refitted on the whole
-//! estimation split with that β. The test splits are simulated once, from rest, as the
+//! split (simulated on from the fitted part's start): the largest β whose validation RMS is
+//! within [`JointSilverboxSettings::tie`] of the best, since a smaller difference does not
+//! tell the maps apart and the smoother one extrapolates more safely (the validation part has
+//! the estimation amplitudes and cannot judge extrapolation). The model is then refitted on
+//! the whole estimation split with that β. The test splits are simulated once, from rest, as the
 //! pipeline scores them.
 
 use std::time::Instant;
@@ -38,16 +41,20 @@ pub struct JointSilverboxSettings {
     pub validation_fraction: f64,
     /// Levenberg–Marquardt iterations per stage.
     pub max_iterations: usize,
+    /// Relative difference of validation RMS below which two β are a tie (then the larger,
+    /// smoother one is chosen).
+    pub tie: f64,
 }
 
 impl Default for JointSilverboxSettings {
     fn default() -> Self {
         Self {
-            betas: vec![1e-10, 1e-8, 1e-6],
+            betas: vec![1e-6, 1e-2, 1.0],
             centres: 15,
             trend_degree: 3,
             validation_fraction: 0.2,
-            max_iterations: 40,
+            max_iterations: 30,
+            tie: 0.01,
         }
     }
 }
@@ -148,11 +155,17 @@ pub fn run_joint(
             .map_err(joint)?;
         trials.push((beta, rms_after(&sim.y.channel(0), &est.y().channel(0), cut)));
     }
+    let best = trials.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
     let beta = trials
         .iter()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .filter(|t| t.1 <= (1.0 + s.tie) * best)
         .map(|t| t.0)
-        .ok_or_else(|| structid_core::Error::InvalidStructure("no β to try".into()))?;
+        .fold(f64::NAN, f64::max);
+    if !beta.is_finite() {
+        return Err(structid_core::Error::InvalidStructure(
+            "no β validated".into(),
+        ));
+    }
     let f = fit(&start(base, est.y(), s, beta)?, &est, None, &settings).map_err(joint)?;
     let mut tests = Vec::new();
     for split in [

@@ -50,3 +50,35 @@ fn silverbox_full_arrow_test_is_below_one_millivolt() {
     let c = &r.candidates[r.chosen];
     assert!(c.validation_rms < 0.2 * c.bla_validation_rms, "{c:?}");
 }
+
+#[test]
+fn the_joint_fit_by_simulation_error_improves_every_test_split() {
+    use structid_benchmarks::silverbox_joint::{JointSilverboxSettings, run_joint};
+    let Some(path) = common::silverbox_file() else {
+        return;
+    };
+    let sb = Silverbox::load(&path).unwrap();
+    let settings = SilverboxSettings {
+        orders: vec![6],
+        numerators: vec![true],
+        kernel_margin: f64::INFINITY,
+        ..SilverboxSettings::default()
+    };
+    let base = run(&sb, &settings).unwrap();
+    let j = run_joint(&sb, &base, &JointSilverboxSettings::default()).unwrap();
+    assert!(j.fit.cost <= j.fit.initial_cost);
+    for ((split, rms), t) in j.tests.iter().zip(&base.tests) {
+        eprintln!(
+            "silverbox joint: {split} {:.4} mV (alternation {:.4} mV)",
+            1e3 * rms,
+            1e3 * t.rms
+        );
+        assert_eq!(split, &t.split);
+        assert!(*rms < t.rms, "{split}: {rms} ≥ {}", t.rms);
+    }
+    // β is the largest that validated within the tie of the best.
+    let best = j.trials.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
+    let chosen = j.trials.iter().find(|t| t.0 == j.beta).unwrap();
+    assert!(chosen.1 <= 1.01 * best);
+    assert!(j.trials.iter().all(|t| t.0 <= j.beta || t.1 > 1.01 * best));
+}
