@@ -50,7 +50,7 @@ pub fn refine_joint_columns<'py>(
     let beta = match (beta, validation) {
         (Some(b), _) => BetaChoice::Fixed(b),
         (None, Some(v)) => BetaChoice::Validated {
-            grid: (0..9).map(|i| 10f64.powi(i - 10)).collect(),
+            grid: structid_workflow::joint::default_beta_grid(),
             validation: records(&mf, v, "validation")?,
         },
         (None, None) => return Err(invalid("the joint fit needs beta, or validation records to choose it on")),

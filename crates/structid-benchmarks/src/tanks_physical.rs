@@ -214,14 +214,11 @@ fn recentred(
     for (b, &free) in blocks.iter().zip(&nonlinear) {
         let beta = if free { beta } else { 1e3 };
         let (lo, hi) = range(b.inputs[0]);
-        let p = b.map.parameters();
-        let m = p.len() - 2;
         // The old map's values over the new range, kernel part included.
         let z: Vec<Vec<f64>> = (0..40)
             .map(|k| vec![lo + (hi - lo) * k as f64 / 39.0])
             .collect();
         let w: Vec<f64> = z.iter().map(|z| b.map.eval(&mut [], z)).collect();
-        let _ = m;
         let f = GaussianFeatures::on_interval(
             lo,
             hi,

@@ -613,7 +613,7 @@ fn run_joint(a: RefineArgs) -> Result<(), CliError> {
     let beta = match (a.beta, a.validation_data.is_empty()) {
         (AutoOr::Value(b), _) => BetaChoice::Fixed(b),
         (AutoOr::Auto, false) => BetaChoice::Validated {
-            grid: (0..9).map(|i| 10f64.powi(i - 10)).collect(),
+            grid: structid_workflow::joint::default_beta_grid(),
             validation: crate::identify::read_records(&mf, &a.validation_data)?,
         },
         (AutoOr::Auto, true) => {

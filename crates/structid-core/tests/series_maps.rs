@@ -26,7 +26,7 @@ fn a(z: &[f64]) -> f64 {
     z[0].tanh()
 }
 fn b(z: &[f64]) -> f64 {
-    z[0] * z[0] - 0.2
+    z[0].sin() - 0.2
 }
 fn c(z: &[f64]) -> f64 {
     z[0].clamp(-0.5, 0.5)
@@ -76,7 +76,9 @@ fn series_maps_are_simulated_as_an_ordered_evaluation_written_by_hand() {
             (sim.z.get(k, 1) - z1).abs() < 1e-12 && (sim.z.get(k, 2) - z2).abs() < 1e-12,
             "z at {k}"
         );
-        assert_eq!(sim.w.sample(k), &[w0, w1, w2][..]);
+        for (got, want) in sim.w.sample(k).iter().zip([w0, w1, w2]) {
+            assert!((got - want).abs() < 1e-12, "w at {k}: {got} vs {want}");
+        }
         let n1 = 0.7 * x1 + 0.2 * x2 + 0.3 * uk + w0;
         let n2 = -0.1 * x1 + 0.5 * x2 + 0.5 * w1 + 0.4 * w2;
         (x1, x2) = (n1, n2);
@@ -115,8 +117,10 @@ fn a_cycle_through_d_zw_is_refused_and_series_maps_cannot_be_predicted() {
     let Error::AlgebraicLoop { cycle, .. } = &e else {
         panic!("{e}")
     };
-    assert_eq!(cycle.len(), 4, "{cycle:?}");
-    for w in ["w[0]", "w[1]", "w[2]"] {
+    // a reads c directly (0.1) and c reads a (−0.3): the cycle found is a ← c ← a, or the
+    // longer a ← c ← b ← a; either way it closes on itself and passes through a and c.
+    assert_eq!(cycle.first(), cycle.last(), "{cycle:?}");
+    for w in ["w[0]", "w[2]"] {
         assert!(cycle.iter().any(|c| c == w), "{cycle:?}");
     }
     // Computing z from u and y needs D_zw = 0.

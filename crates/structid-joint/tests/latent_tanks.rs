@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
 use structid_core::{Data, Lft, LftMatrices, Signal};
-use structid_joint::{BlockMap, GaussianFeatures, JointBlock, JointModel, JointSettings, fit};
+use structid_joint::{GaussianFeatures, JointBlock, JointModel, JointSettings, fit};
 
 const TS: f64 = 0.1;
 const K1: f64 = 0.5;

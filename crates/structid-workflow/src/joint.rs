@@ -26,6 +26,17 @@ use structid_joint::{
 use crate::error::{Result, WorkflowError};
 use crate::free::parse_free;
 
+/// The β grid that `auto` searches on validation records: 10⁻¹⁰, 10⁻⁹, …, 10⁻² (a decade
+/// apart, since the validation error changes little within one).
+///
+/// ```
+/// let g = structid_workflow::joint::default_beta_grid();
+/// assert_eq!((g.len(), g[0], g[8]), (9, 1e-10, 1e-2));
+/// ```
+pub fn default_beta_grid() -> Vec<f64> {
+    (0..9).map(|i| 10f64.powi(i - 10)).collect()
+}
+
 /// How β, the weight of every static map's dispersion, is set.
 #[derive(Clone, Debug)]
 pub enum BetaChoice {
@@ -390,9 +401,7 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
 /// covers in the fitted model's simulation of the data.
 fn written(mf: &ModelFile, f: &JointFit, data: &Data) -> Result<(ModelFile, Vec<MapTable>)> {
     let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); f.model.lft().dims().z];
-    let bounds = data.record_bounds();
     for (r, rec) in data.records().iter().enumerate() {
-        let _ = bounds;
         let sim = f.model.simulate(rec.u(), Some(&f.initial_states[r]))?;
         for (c, range) in ranges.iter_mut().enumerate() {
             for v in sim.z.channel(c) {
