@@ -215,9 +215,7 @@ fn run_records(
             "invalid sigma {s}: it must be a finite number greater than zero"
         )));
     }
-    if mf.signals.z.is_none() {
-        mf.lft.check_no_algebraic_loop().map_err(error)?;
-    }
+    mf.check_z_computable().map_err(error)?;
     mf.lft.check_residual_stable().map_err(error)?;
     let auto_beta = r.beta.is_none();
     if r.selection.as_deref() == Some("cv") && r.folds < 2 {

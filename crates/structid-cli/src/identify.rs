@@ -360,13 +360,9 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let cannot = |e: structid_core::Error| {
         CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
     };
-    // z computed from u and y: D_zw ≠ 0 makes z_k depend on other maps' w_k.
-    if mf.signals.z.is_none() {
-        mf.evaluation_order().map_err(|e| {
-            CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
-        })?;
-        mf.lft.check_no_algebraic_loop().map_err(cannot)?;
-    }
+    mf.check_z_computable().map_err(|e| {
+        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
+    })?;
     mf.lft.check_residual_stable().map_err(cannot)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
     let auto_beta = a.beta == crate::AutoOr::Auto;

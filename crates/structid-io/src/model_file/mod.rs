@@ -606,6 +606,17 @@ impl ModelFile {
         Ok(self.model_lft()?.evaluation_order(&places)?)
     }
 
+    /// Whether identification can compute z from u and y: with measured z always; otherwise
+    /// the maps must not form a cycle (an algebraic loop, naming its blocks) nor sit in series
+    /// through D_zw (which the joint fit handles instead).
+    pub fn check_z_computable(&self) -> Result<(), IoError> {
+        if self.signals.z.is_none() {
+            self.evaluation_order()?;
+            self.lft.check_no_algebraic_loop()?;
+        }
+        Ok(())
+    }
+
     /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a
     /// nominal model (no blocks), whose w columns — injection points declared for
     /// `structid discover` — are dropped (w = 0; the z rows are kept).
