@@ -47,14 +47,8 @@ pub fn refine_joint_columns<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let data = records(&mf, columns, "estimation")?;
-    let beta = match (beta, validation) {
-        (Some(b), _) => BetaChoice::Fixed(b),
-        (None, Some(v)) => BetaChoice::Validated {
-            grid: structid_workflow::joint::default_beta_grid(),
-            validation: records(&mf, v, "validation")?,
-        },
-        (None, None) => return Err(invalid("the joint fit needs beta, or validation records to choose it on")),
-    };
+    let validation = validation.map(|v| records(&mf, v, "validation")).transpose()?;
+    let beta = BetaChoice::from_options(beta, validation).map_err(error)?;
     let estimate_x0 = match initial_state {
         "estimate" => true,
         "zero" => false,

@@ -98,7 +98,7 @@ def test_refine_joint_recovers_the_play_and_agrees_with_the_cli(cli, tmp_path):
 def test_refine_joint_errors_are_python_exceptions():
     model = structid.Model.from_toml(START)
     u = inputs(200, 0.0)
-    with pytest.raises(structid.StructidError, match="needs beta"):
+    with pytest.raises(structid.StructidError, match="needs a β"):
         structid.refine_joint(model, u, plant(u))
     with pytest.raises(structid.StructidError, match="free entry `Q"):
         structid.refine_joint(model, u, plant(u), beta=1e-6, free=["Q[0][0]"])

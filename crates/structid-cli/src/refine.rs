@@ -610,18 +610,17 @@ fn run_joint(a: RefineArgs) -> Result<(), CliError> {
         guard.protect(d);
     }
     let data = crate::identify::read_records(&mf, &a.data)?;
-    let beta = match (a.beta, a.validation_data.is_empty()) {
-        (AutoOr::Value(b), _) => BetaChoice::Fixed(b),
-        (AutoOr::Auto, false) => BetaChoice::Validated {
-            grid: structid_workflow::joint::default_beta_grid(),
-            validation: crate::identify::read_records(&mf, &a.validation_data)?,
-        },
-        (AutoOr::Auto, true) => {
-            return Err(CliError::input(
-                "--joint needs --beta B, or --validation-data V.csv to choose β on",
-            ));
-        }
+    let validation = match a.validation_data.is_empty() {
+        true => None,
+        false => Some(crate::identify::read_records(&mf, &a.validation_data)?),
     };
+    let given = match a.beta {
+        AutoOr::Value(b) => Some(b),
+        AutoOr::Auto => None,
+    };
+    let beta = BetaChoice::from_options(given, validation).map_err(|e| {
+        CliError::from(e).context("--joint: give --beta B or --validation-data V.csv")
+    })?;
     let mut fit = structid_joint::JointSettings::builder()
         .max_iterations(a.iterations.unwrap_or(100))
         .estimate_initial_state(matches!(a.initial_state, InitialStateArg::Estimate));

@@ -51,6 +51,29 @@ pub enum BetaChoice {
     },
 }
 
+impl BetaChoice {
+    /// The choice the front ends offer: β when given, else the [`default_beta_grid`] scored on
+    /// `validation`; an error naming both options when neither is given.
+    ///
+    /// ```
+    /// use structid_workflow::BetaChoice;
+    /// assert!(matches!(BetaChoice::from_options(Some(1e-3), None), Ok(BetaChoice::Fixed(b)) if b == 1e-3));
+    /// assert!(BetaChoice::from_options(None, None).is_err());
+    /// ```
+    pub fn from_options(beta: Option<f64>, validation: Option<Data>) -> Result<Self> {
+        match (beta, validation) {
+            (Some(b), _) => Ok(Self::Fixed(b)),
+            (None, Some(validation)) => Ok(Self::Validated {
+                grid: default_beta_grid(),
+                validation,
+            }),
+            (None, None) => Err(WorkflowError::Request(
+                "the joint fit needs a β, or validation records to choose it on".into(),
+            )),
+        }
+    }
+}
+
 /// Settings of [`refine_joint`].
 #[derive(Clone, Debug)]
 pub struct JointWorkflowSettings {
