@@ -12,18 +12,23 @@ mod common;
 use structid::io::Silverbox;
 use structid_benchmarks::silverbox::{SilverboxSettings, run};
 
+/// The structure the full search chooses: sixth order, separate feedback numerator, cubic map.
+fn narrowed() -> SilverboxSettings {
+    SilverboxSettings {
+        orders: vec![6],
+        numerators: vec![true],
+        kernel_margin: f64::INFINITY,
+        ..SilverboxSettings::default()
+    }
+}
+
 #[test]
 fn silverbox_full_arrow_test_is_below_one_millivolt() {
     let Some(path) = common::silverbox_file() else {
         return;
     };
     let sb = Silverbox::load(&path).unwrap();
-    let settings = SilverboxSettings {
-        orders: vec![6],
-        numerators: vec![true],
-        kernel_margin: f64::INFINITY,
-        ..SilverboxSettings::default()
-    };
+    let settings = narrowed();
     let r = run(&sb, &settings).unwrap();
     let score = |name: &str| {
         r.tests
@@ -58,12 +63,7 @@ fn the_joint_fit_by_simulation_error_improves_every_test_split() {
         return;
     };
     let sb = Silverbox::load(&path).unwrap();
-    let settings = SilverboxSettings {
-        orders: vec![6],
-        numerators: vec![true],
-        kernel_margin: f64::INFINITY,
-        ..SilverboxSettings::default()
-    };
+    let settings = narrowed();
     let base = run(&sb, &settings).unwrap();
     let j = run_joint(&sb, &base, &JointSilverboxSettings::default()).unwrap();
     assert!(j.fit.cost <= j.fit.initial_cost);
