@@ -10,3 +10,4 @@ pub mod silverbox_discovery;
 pub mod silverbox_joint;
 pub mod tanks;
 pub mod tanks_physical;
+pub mod wiener_hammerstein;

@@ -167,7 +167,38 @@ impl GaussianFeatures {
     /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
     /// ```
     pub fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
-        if z.len() != w.len() || z.is_empty() {
+        self.fitted_through(z, w, &mut |column| column.to_vec())
+    }
+
+    /// The coefficients for which the map's output seen through the linear operator `filter`
+    /// fits `y`: min Σ_k (y_k − (H·N(z))_k)² + n·β·θᵀK_ccθ, where `filter` applies H to one
+    /// signal (a block G₂ behind the map, simulated from rest). N is linear in its
+    /// coefficients, so H·N(z) is the sum of the filtered regressor columns and the fit is one
+    /// least-squares solve; this is how a Hammerstein or Wiener–Hammerstein start gets its map.
+    ///
+    /// ```
+    /// use structid_joint::{BlockMap, GaussianFeatures};
+    /// // y = (0.5 + 0.5 q⁻¹)·tanh(z): the map is found behind the known filter.
+    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-10).unwrap();
+    /// let z: Vec<Vec<f64>> = (0..300).map(|k| vec![2.0 * (0.37 * k as f64).sin()]).collect();
+    /// let avg = |s: &[f64]| -> Vec<f64> {
+    ///     (0..s.len()).map(|k| 0.5 * s[k] + if k > 0 { 0.5 * s[k - 1] } else { 0.0 }).collect()
+    /// };
+    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
+    /// let f = f.fitted_through(&z, &avg(&w), &mut |s| avg(s)).unwrap();
+    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
+    /// ```
+    ///
+    /// # Errors
+    /// Mismatched lengths, non-finite values, or normal equations that are not positive
+    /// definite.
+    pub fn fitted_through(
+        &self,
+        z: &[Vec<f64>],
+        y: &[f64],
+        filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
+    ) -> Result<Self> {
+        if z.len() != y.len() || z.is_empty() {
             return Err(invalid(
                 "points",
                 z.len() as f64,
@@ -176,26 +207,37 @@ impl GaussianFeatures {
         }
         let (m, p) = (self.centres.len(), self.centres[0].len());
         let np = m + self.affine.len();
-        let mut gram = DMatrix::zeros(np, np);
-        let mut rhs = DVector::zeros(np);
+        let n = z.len();
+        let mut columns = vec![vec![0.0; n]; np];
         let mut row = vec![0.0; np];
-        for (zk, &wk) in z.iter().zip(w) {
-            if zk.len() != p || !wk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
+        for (k, (zk, &yk)) in z.iter().zip(y).enumerate() {
+            if zk.len() != p || !yk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
                 return Err(invalid(
                     "points",
-                    wk,
+                    yk,
                     "points need the centres' dimension and finite values",
                 ));
             }
             self.features(zk, &mut row);
-            for i in 0..np {
-                rhs[i] += row[i] * wk;
-                for j in 0..np {
-                    gram[(i, j)] += row[i] * row[j];
-                }
+            for (c, r) in columns.iter_mut().zip(&row) {
+                c[k] = *r;
             }
         }
-        let reg = self.gram() * (self.beta * z.len() as f64);
+        let columns: Vec<Vec<f64>> = columns.iter().map(|c| filter(c)).collect();
+        if columns.iter().any(|c| c.len() != n) {
+            return Err(invalid(
+                "filter",
+                n as f64,
+                "the filter must return a signal as long as its input",
+            ));
+        }
+        let mut gram = DMatrix::from_fn(np, np, |i, j| {
+            columns[i].iter().zip(&columns[j]).map(|(a, b)| a * b).sum()
+        });
+        let rhs = DVector::from_fn(np, |i, _| {
+            columns[i].iter().zip(y).map(|(a, b)| a * b).sum()
+        });
+        let reg = self.gram() * (self.beta * n as f64);
         let mut kk = gram.view_mut((0, 0), (m, m));
         kk += &reg;
         // A small ridge on everything keeps the solve defined when points do not reach every
@@ -209,7 +251,7 @@ impl GaussianFeatures {
             .ok_or_else(|| {
                 invalid(
                     "points",
-                    z.len() as f64,
+                    n as f64,
                     "the fit's normal equations are not positive definite",
                 )
             })?

@@ -66,6 +66,7 @@ pub mod model;
 pub mod operator;
 pub mod shooting;
 pub mod step;
+pub mod wiener_hammerstein;
 
 pub use block::{BlockJacobian, BlockMap};
 pub use error::{JointError, Result};
@@ -74,3 +75,7 @@ pub use fit::{JointFit, JointSettings, JointSettingsBuilder, Stage, fit};
 pub use fixed::FixedMap;
 pub use model::{JointBlock, JointModel, LftEntry, LftMatrix};
 pub use operator::OperatorBlock;
+pub use wiener_hammerstein::{
+    SplitScore, WienerHammersteinSettings, WienerHammersteinSettingsBuilder,
+    WienerHammersteinStart, wiener_hammerstein_model, wiener_hammerstein_start,
+};

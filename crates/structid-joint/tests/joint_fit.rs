@@ -392,3 +392,63 @@ fn a_play_at_the_input_is_fitted_with_the_plant() {
     assert!((p[0] - 0.9).abs() < 0.01, "pole {}", p[0]);
     assert!(out.rms[0] < 0.0125, "{:?}", out.rms);
 }
+
+/// A discrete Wiener–Hammerstein plant x₁⁺ = 0.8x₁ + u, w = tanh(0.7x₁), x₂⁺ = 0.3x₂ + w, y = x₂:
+/// its best linear approximation has the poles 0.8 and 0.3, and of the four divisions the
+/// one that puts 0.8 in front must explain the data best (the other three cannot, with any
+/// map).
+#[test]
+fn the_wiener_hammerstein_start_puts_each_pole_in_its_block() {
+    use structid_joint::{WienerHammersteinSettings, wiener_hammerstein_start};
+    use structid_linear::{OeSettings, Orders, oe};
+    let len = 3000;
+    let u = input(len, 0.5, 77);
+    let (mut x1, mut x2) = (0.0f64, 0.0f64);
+    let y: Vec<f64> = (0..len)
+        .map(|k| {
+            let y = x2;
+            let w = (0.7 * x1).tanh();
+            x1 = 0.8 * x1 + u.get(k, 0);
+            x2 = 0.3 * x2 + w;
+            y
+        })
+        .collect();
+    let data = Data::new(u.clone(), Signal::from_fn(len, 1, |k, _| y[k])).unwrap();
+    let bla = oe(
+        data.u(),
+        data.y(),
+        &Orders::siso(2, 1, 2),
+        &OeSettings::default(),
+    )
+    .unwrap()
+    .model;
+    let start =
+        wiener_hammerstein_start(&bla, &data, &WienerHammersteinSettings::default()).unwrap();
+    assert_eq!(start.splits.len(), 4);
+    let best = &start.splits[0];
+    // The front block's single pole is near 0.8, the back block's near 0.3.
+    assert_eq!(best.split.front.den.len(), 2, "{best:?}");
+    assert!((best.split.front.den[1] + 0.8).abs() < 0.05, "{best:?}");
+    assert!((best.split.back.den[1] + 0.3).abs() < 0.1, "{best:?}");
+    // Scores are sorted and the best is clearly better than the swapped division.
+    assert!(start.splits.windows(2).all(|p| p[0].rms <= p[1].rms));
+    let swapped = start
+        .splits
+        .iter()
+        .find(|s| s.split.front.den.len() == 2 && (s.split.front.den[1] + 0.3).abs() < 0.1)
+        .unwrap();
+    assert!(
+        best.rms < 0.5 * swapped.rms,
+        "{} vs {}",
+        best.rms,
+        swapped.rms
+    );
+    // The joint fit from it ends near the noise-free truth.
+    let out = fit(&start.model, &data, None, &JointSettings::default()).unwrap();
+    let y_rms = (y.iter().map(|v| v * v).sum::<f64>() / len as f64).sqrt();
+    assert!(
+        out.rms[0] < 0.01 * y_rms,
+        "{:?} vs output RMS {y_rms}",
+        out.rms
+    );
+}

@@ -101,6 +101,7 @@ pub mod output_error;
 pub mod polynomial;
 pub mod response;
 pub mod selection;
+pub mod split;
 
 pub use arx::{ArxFit, ArxSettings, ArxSettingsBuilder, arx, arx_records};
 pub use bla::{FrequencyResponse, bla_periodic};
@@ -120,6 +121,7 @@ pub use selection::{
     OrderCriterion, OrderGrid, OrderSelection, select_orders, select_orders_observed,
     select_orders_records,
 };
+pub use split::{BlockSplit, block_splits};
 
 #[cfg(test)]
 mod properties;

@@ -46,7 +46,7 @@ pub fn parse_free(mut model: JointModel, specs: &[String]) -> Result<JointModel>
             continue;
         }
         let digits: Vec<&str> = rest
-            .split(|c| c == '[' || c == ']' || c == ',')
+            .split(['[', ']', ','])
             .map(str::trim)
             .filter(|t| !t.is_empty())
             .collect();

@@ -315,7 +315,9 @@ fn start_model(
             continue;
         }
         let r: Vec<(f64, f64)> = spec.inputs.iter().map(|&i| ranges[i]).collect();
-        if r.iter().any(|(lo, hi)| !(hi > lo)) {
+        if r.iter()
+            .any(|(lo, hi)| hi.partial_cmp(lo) != Some(std::cmp::Ordering::Greater))
+        {
             return Err(WorkflowError::Request(format!(
                 "block `{}`: its input does not move when the starting model is simulated on the \
                  estimation data, so its map cannot be placed; a latent block needs an input that \

@@ -30,10 +30,13 @@ pub struct BlockPlace<'a> {
     pub output: usize,
 }
 
+/// One dependency: the block read, and the (row, column, value) of a D_zw entry that makes it so.
+type Dependency = (usize, (usize, usize, f64));
+
 /// The blocks' dependencies through D_zw: `deps[i]` lists the blocks whose output block `i`
 /// reads in the same sample, each with the (row, column, value) of one D_zw entry that makes it
 /// so. Places must write distinct w channels within the LFT's range.
-fn dependencies(lft: &Lft, places: &[BlockPlace<'_>]) -> Vec<Vec<(usize, (usize, usize, f64))>> {
+fn dependencies(lft: &Lft, places: &[BlockPlace<'_>]) -> Vec<Vec<Dependency>> {
     let dzw = &lft.matrices().dzw;
     let mut writer = vec![None; lft.dims().w];
     for (j, p) in places.iter().enumerate() {
@@ -65,10 +68,7 @@ fn dependencies(lft: &Lft, places: &[BlockPlace<'_>]) -> Vec<Vec<(usize, (usize,
 
 /// Follows dependencies from a block left over by the topological sort until a block repeats:
 /// every block left over depends on another block left over, so the walk must close a cycle.
-fn find_cycle(
-    deps: &[Vec<(usize, (usize, usize, f64))>],
-    left: &[bool],
-) -> Vec<(usize, (usize, usize, f64))> {
+fn find_cycle(deps: &[Vec<Dependency>], left: &[bool]) -> Vec<(usize, (usize, usize, f64))> {
     let start = left.iter().position(|&l| l).expect("a block is left over");
     let mut path: Vec<(usize, (usize, usize, f64))> = Vec::new();
     let mut at = start;
