@@ -72,6 +72,13 @@ pub fn refine_joint_columns<'py>(
         write_joint_outputs(&outcome, dir, &OutputGuard::new()).map_err(error)?;
     }
     let d = PyDict::new(py);
+    joint_items(&d, &outcome)?;
+    Ok(d)
+}
+
+/// The items both joint workflows return: the fitted `model`, `beta`, `trials`, `cost`,
+/// `initial_cost`, `rms`, `initial_states`, `free` and `stages`.
+fn joint_items(d: &Bound<'_, PyDict>, outcome: &structid_workflow::JointOutcome) -> PyResult<()> {
     d.set_item("model", Model::from_file_value(outcome.model_file.clone())?)?;
     d.set_item("beta", outcome.beta)?;
     let trials: Vec<(f64, Vec<f64>)> = outcome.trials.iter().map(|t| (t.beta, t.validation_rms.clone())).collect();
@@ -96,5 +103,89 @@ pub fn refine_joint_columns<'py>(
         .map(|s| (s.name.to_string(), s.segments, s.costs.clone(), format!("{:?}", s.status)))
         .collect();
     d.set_item("stages", stages)?;
+    Ok(())
+}
+
+fn wh_records(records: Vec<(Vec<f64>, Vec<f64>)>, what: &str) -> PyResult<structid_core::Data> {
+    let data = records
+        .into_iter()
+        .map(|(u, y)| {
+            let n = u.len();
+            let u = structid_core::Signal::new(1, u).map_err(error)?;
+            let y = structid_core::Signal::new(1, y).map_err(error)?;
+            if y.len() != n {
+                return Err(invalid(format!("{what}: u has {n} samples and y {}", y.len())));
+            }
+            structid_core::Data::new(u, y).map_err(error)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    if data.is_empty() {
+        return Err(invalid(format!("no {what} record was given")));
+    }
+    structid_core::Data::from_records(data).map_err(error)
+}
+
+/// A Wiener–Hammerstein model with both blocks unknown (see `structid wiener-hammerstein`).
+/// Records are (u, y) pairs of 1-D arrays. Returns a dict with the fitted `model`, `bla`
+/// (num, den), `divisions` (front num/den, back num/den, rms; best first), `beta`, `trials`,
+/// `cost`, `initial_cost`, `rms`, `initial_states`, `free` and `stages`; writes `out` when given.
+#[pyfunction]
+#[pyo3(signature = (records, orders, validation=None, beta=None, centres=15, segment_length=None, iterations=100, initial_state="zero", out=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn wiener_hammerstein_records<'py>(
+    py: Python<'py>,
+    records: Vec<(Vec<f64>, Vec<f64>)>,
+    orders: (usize, usize, usize),
+    validation: Option<Vec<(Vec<f64>, Vec<f64>)>>,
+    beta: Option<f64>,
+    centres: usize,
+    segment_length: Option<usize>,
+    iterations: usize,
+    initial_state: &str,
+    out: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use structid_joint::WienerHammersteinSettings;
+    use structid_workflow::{WienerHammersteinRequest, wiener_hammerstein, write_wiener_hammerstein_outputs};
+    let data = wh_records(records, "estimation")?;
+    let validation = validation.map(|v| wh_records(v, "validation")).transpose()?;
+    let estimate_x0 = match initial_state {
+        "estimate" => true,
+        "zero" => false,
+        other => return Err(invalid(format!("initial_state `{other}` is neither \"zero\" nor \"estimate\""))),
+    };
+    let start = WienerHammersteinSettings::builder().centres(centres).build().map_err(error)?;
+    let mut fit = JointSettings::builder().max_iterations(iterations).estimate_initial_state(estimate_x0);
+    if let Some(l) = segment_length {
+        fit = fit.segment_length(l);
+    }
+    let req = WienerHammersteinRequest {
+        data: &data,
+        names: structid_io::SignalNames { u: vec!["u".into()], y: vec!["y".into()], z: None },
+        orders: [orders.0, orders.1, orders.2],
+        beta: BetaChoice::from_options_or(beta, validation, start.beta()),
+        start,
+        fit: fit.build().map_err(error)?,
+    };
+    let outcome = py.detach(|| wiener_hammerstein(&req)).map_err(error)?;
+    if let Some(dir) = &out {
+        write_wiener_hammerstein_outputs(&outcome, dir, &OutputGuard::new()).map_err(error)?;
+    }
+    let d = PyDict::new(py);
+    joint_items(&d, &outcome.joint)?;
+    d.set_item("bla", (outcome.bla.num[0].clone(), outcome.bla.den.clone()))?;
+    let divisions: Vec<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64)> = outcome
+        .divisions
+        .iter()
+        .map(|s| {
+            (
+                s.split.front.num[0].clone(),
+                s.split.front.den.clone(),
+                s.split.back.num[0].clone(),
+                s.split.back.den.clone(),
+                s.rms,
+            )
+        })
+        .collect();
+    d.set_item("divisions", divisions)?;
     Ok(d)
 }

@@ -28,6 +28,7 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify::identify_columns, m)?)?;
     m.add_function(wrap_pyfunction!(refine::refine_columns, m)?)?;
     m.add_function(wrap_pyfunction!(joint::refine_joint_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(joint::wiener_hammerstein_records, m)?)?;
     m.add_function(wrap_pyfunction!(discover::discover_columns, m)?)?;
     m.add_function(wrap_pyfunction!(discover::silverbox_discovery, m)?)?;
     m.add_function(wrap_pyfunction!(staticness::staticness_columns, m)?)?;

@@ -28,8 +28,9 @@ from ._structid import StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, RecordsValidation, Validation
-from ._workflows import (Discovery, Finding, JointRefinement, Refinement, discover, refine,
-                         refine_joint, silverbox_data, silverbox_discovery)
+from ._workflows import (Discovery, Finding, JointRefinement, Refinement, WienerHammerstein,
+                         discover, refine, refine_joint, silverbox_data, silverbox_discovery,
+                         wiener_hammerstein)
 from ._staticness import Staticness, staticness
 from ._linear import LinearFit, Response, linear, read_data, response
 from . import input, paper, scenarios
@@ -49,6 +50,8 @@ __all__ = [
     "Refinement",
     "refine_joint",
     "JointRefinement",
+    "wiener_hammerstein",
+    "WienerHammerstein",
     "discover",
     "Discovery",
     "Finding",

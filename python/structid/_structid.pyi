@@ -77,6 +77,13 @@ def refine_joint_columns(model: Model, columns: List[Columns],
                          centres: int = 15, segment_length: Optional[int] = None,
                          iterations: int = 100, initial_state: str = "zero",
                          out: Optional[str] = None) -> Dict[str, Any]: ...
+def wiener_hammerstein_records(records: List[Tuple[List[float], List[float]]],
+                               orders: Tuple[int, int, int],
+                               validation: Optional[List[Tuple[List[float], List[float]]]] = None,
+                               beta: Optional[float] = None, centres: int = 15,
+                               segment_length: Optional[int] = None, iterations: int = 100,
+                               initial_state: str = "zero",
+                               out: Optional[str] = None) -> Dict[str, Any]: ...
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,

@@ -10,7 +10,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _structid
-from ._arrays import records_of
+from ._arrays import as_signal, records_of
 from ._estimate import Estimate
 from ._identify import Fit, _columns, _fit, _is_records
 from ._model import Model
@@ -118,6 +118,65 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
     return JointRefinement(model=Model(o["model"]), beta=o["beta"], trials=o["trials"], cost=o["cost"],
                            initial_cost=o["initial_cost"], rms=o["rms"],
                            initial_states=o["initial_states"], free=o["free"], stages=o["stages"])
+
+
+@dataclass
+class WienerHammerstein:
+    """The result of :func:`wiener_hammerstein`: y = G₂·N(G₁·u) + e with both blocks fitted."""
+
+    model: Model
+    """The fitted model (``structid wiener-hammerstein``'s model.toml): both blocks in one
+    LFT with the state [x₁; x₂], the map ``N`` as a table of its values."""
+    bla: Tuple[List[float], List[float]]
+    """The best linear approximation (num, den) in q⁻¹."""
+    divisions: List[Dict[str, Any]]
+    """Every division of its poles and zeros, best first: ``front`` and ``back`` as (num, den),
+    and ``rms``, the error left by a map fitted behind it."""
+    beta: float
+    trials: List[Tuple[float, List[float]]]
+    cost: float
+    initial_cost: float
+    rms: List[float]
+    initial_states: List[List[float]]
+    free: List[Tuple[str, int, int, float]]
+    stages: List[Tuple[str, int, List[float], str]]
+
+
+def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
+                       validation: Optional[Tuple[object, object]] = None,
+                       beta: Optional[float] = None, centres: int = 15,
+                       segment_length: Optional[int] = None, iterations: int = 100,
+                       initial_state: str = "zero",
+                       out: Optional[Union[str, os.PathLike]] = None) -> WienerHammerstein:
+    """A Wiener–Hammerstein model with both LTI blocks unknown (``structid
+    wiener-hammerstein``): the best linear approximation of ``orders`` = (NA, NB, NK) (both
+    blocks together), every division of its poles and zeros scored by a map fitted behind it,
+    then both blocks, the map and the initial states fitted from the best by simulation error.
+    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``.
+    u and y are 1-D arrays, or lists of them for several records."""
+    def pairs(a: object, b: object, what: str) -> List[Tuple[List[float], List[float]]]:
+        recs = records_of(a, b, what) or [(a, b)]
+        return [(as_signal(ua, f"{what}u", 1)[:, 0].tolist(), as_signal(ya, f"{what}y", 1)[:, 0].tolist())
+                for ua, ya in recs]
+    val = None
+    if validation is not None:
+        if len(validation) != 2:
+            raise _structid.StructidError("validation is a pair (u_val, y_val)")
+        val = pairs(validation[0], validation[1], "validation ")
+    if len(orders) != 3:
+        raise _structid.StructidError("orders are three whole numbers (NA, NB, NK)")
+    o = _structid.wiener_hammerstein_records(
+        pairs(u, y, ""), tuple(int(v) for v in orders), val,
+        None if beta is None else float(beta), int(centres),
+        None if segment_length is None else int(segment_length), int(iterations), initial_state,
+        None if out is None else os.fspath(out))
+    divisions = [{"front": (fn, fd), "back": (bn, bd), "rms": r}
+                 for fn, fd, bn, bd, r in o["divisions"]]
+    return WienerHammerstein(model=Model(o["model"]), bla=o["bla"], divisions=divisions,
+                             beta=o["beta"], trials=o["trials"], cost=o["cost"],
+                             initial_cost=o["initial_cost"], rms=o["rms"],
+                             initial_states=o["initial_states"], free=o["free"],
+                             stages=o["stages"])
 
 
 def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:

@@ -102,3 +102,34 @@ def test_refine_joint_errors_are_python_exceptions():
         structid.refine_joint(model, u, plant(u))
     with pytest.raises(structid.StructidError, match="free entry `Q"):
         structid.refine_joint(model, u, plant(u), beta=1e-6, free=["Q[0][0]"])
+
+
+def wiener_hammerstein_plant(u: np.ndarray) -> np.ndarray:
+    """x₁⁺ = 0.8x₁ + 0.2u, w = tanh(1.5x₁), x₂⁺ = 0.5x₂ + 0.5w, y = x₂, written out."""
+    x1, x2, y = 0.0, 0.0, np.zeros(len(u))
+    for k, uk in enumerate(u):
+        y[k] = x2
+        w = np.tanh(1.5 * x1)
+        x1, x2 = 0.8 * x1 + 0.2 * uk, 0.5 * x2 + 0.5 * w
+    return y
+
+
+def test_wiener_hammerstein_finds_both_blocks_and_agrees_with_the_cli(cli, tmp_path):
+    rng = np.random.default_rng(11)
+    u = np.convolve(rng.uniform(-1, 1, 2000), [1.2, 0.6, 0.3], mode="same")
+    v = np.convolve(rng.uniform(-1, 1, 1000), [1.2, 0.6, 0.3], mode="same")
+    y = wiener_hammerstein_plant(u) + 0.005 * rng.standard_normal(len(u))
+    est = write_csv(tmp_path / "est.csv", {"u": u, "y": y})
+    r = structid.wiener_hammerstein(u, y, (2, 1, 2), out=tmp_path / "py")
+    cli("wiener-hammerstein", "--data", est, "--orders", "2,1,2", "--out", tmp_path / "cli")
+    j = read_json(tmp_path / "cli" / "joint.json")
+    np.testing.assert_allclose(r.cost, j["cost"], rtol=1e-12)
+    assert (tmp_path / "py" / "model.toml").read_text() == (tmp_path / "cli" / "model.toml").read_text()
+    # The pole 0.8 is put in front, and the fit ends at the noise.
+    assert len(r.divisions) == 4
+    assert abs(r.divisions[0]["front"][1][1] + 0.8) < 0.05
+    assert r.rms[0] < 1.5 * 0.005
+    sim = r.model.simulate(v.reshape(-1, 1))
+    assert np.sqrt(np.mean((sim["y"][:, 0] - wiener_hammerstein_plant(v)) ** 2)) < 0.005
+    with pytest.raises(structid.StructidError, match="three whole numbers"):
+        structid.wiener_hammerstein(u, y, (2, 1))

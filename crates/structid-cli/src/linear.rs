@@ -105,7 +105,7 @@ fn differenced(y: &Signal, n: usize) -> Result<Signal, CliError> {
 }
 
 /// `NA,NB,NK` as three whole numbers.
-fn parse_orders(text: &str) -> Result<[usize; 3], String> {
+pub(crate) fn parse_orders(text: &str) -> Result<[usize; 3], String> {
     let v: Vec<usize> = text
         .split(',')
         .map(|x| x.trim().parse::<usize>())

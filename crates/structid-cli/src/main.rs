@@ -43,6 +43,7 @@ mod staticness;
 mod stored;
 mod validate;
 mod validation_files;
+mod wiener_hammerstein;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -148,6 +149,14 @@ enum Command {
     /// --model DIR/model.toml --estimate DIR` reproduces the estimate), DIR/refine.csv and
     /// DIR/refine.svg (costs and errors per iteration) and the files of `structid identify`.
     Refine(refine::RefineArgs),
+    /// Identify a Wiener–Hammerstein model y = G₂·N(G₁·u) + e with both LTI blocks unknown.
+    ///
+    /// Estimates the best linear approximation (output error, --orders NA,NB,NK for both
+    /// blocks together), scores every division of its poles and zeros between G₁ and G₂ by a
+    /// map fitted behind it, and fits both blocks, the map and the initial states from the best
+    /// one by simulation error. Writes DIR/model.toml (both blocks in one LFT, the map as the
+    /// table DIR/map_N.csv), DIR/joint.json and DIR/divisions.json.
+    WienerHammerstein(wiener_hammerstein::WienerHammersteinArgs),
     /// Prepare data files: benchmark splits and column selection from any delimited file.
     ///
     /// `structid data silverbox|tanks --file PATH --split NAME --out OUT.csv` extracts one split
@@ -550,7 +559,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         if !reads_data {
             return Err(CliError::input(
                 "--vars selects the signals of the data files of identify, validate, predict, \
-                 simulate, linear, refine, discover, static and data csv; this command reads none (a sweep \
+                 simulate, linear, refine, wiener-hammerstein, discover, static and data csv; this command reads none (a sweep \
                  configuration of `compare` reads a MAT-file's variables as columns named by \
                  the variables)",
             ));
@@ -567,6 +576,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Compare(a) => compare::run(a),
         Command::Linear(a) => linear::run(a),
         Command::Refine(a) => refine::run(a),
+        Command::WienerHammerstein(a) => wiener_hammerstein::run(a),
         Command::Data(c) => data::run(c),
         Command::Discover(a) => discover::run(a),
         Command::Input(c) => input::run(c),

@@ -72,6 +72,17 @@ impl BetaChoice {
             )),
         }
     }
+
+    /// As [`from_options`](Self::from_options), with `default` when neither is given: for
+    /// a workflow whose map has a β that suits most data.
+    ///
+    /// ```
+    /// use structid_workflow::BetaChoice;
+    /// assert!(matches!(BetaChoice::from_options_or(None, None, 1e-8), BetaChoice::Fixed(b) if b == 1e-8));
+    /// ```
+    pub fn from_options_or(beta: Option<f64>, validation: Option<Data>, default: f64) -> Self {
+        Self::from_options(beta, validation).unwrap_or(Self::Fixed(default))
+    }
 }
 
 /// Settings of [`refine_joint`].
@@ -385,15 +396,34 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
             "centres must be at least 2 and the width positive".into(),
         ));
     }
-    let (grid, validation) = match &s.beta {
+    let (beta, fit, trials) = over_betas(&s.beta, |beta| {
+        let start = start_model(mf, req.data, s, beta)?;
+        Ok(fit(&start, req.data, None, &s.fit)?)
+    })?;
+    let (model_file, tables) = written(mf, &fit, req.data)?;
+    Ok(JointOutcome {
+        fit,
+        beta,
+        trials,
+        model_file,
+        tables,
+    })
+}
+
+/// Runs `fit_with` for each β of `choice` and keeps the fit with the smallest validation RMS
+/// (summed over outputs), or the only one for a fixed β: the chosen β, its fit and every trial.
+pub(crate) fn over_betas(
+    choice: &BetaChoice,
+    mut fit_with: impl FnMut(f64) -> Result<JointFit>,
+) -> Result<(f64, JointFit, Vec<BetaTrial>)> {
+    let (grid, validation) = match choice {
         BetaChoice::Fixed(b) => (vec![*b], None),
         BetaChoice::Validated { grid, validation } => (grid.clone(), Some(validation)),
     };
     let mut trials = Vec::new();
     let mut best: Option<(f64, JointFit, f64)> = None;
     for &beta in &grid {
-        let start = start_model(mf, req.data, s, beta)?;
-        let f = fit(&start, req.data, None, &s.fit)?;
+        let f = fit_with(beta)?;
         let score = match validation {
             Some(v) => {
                 let rms = validation_rms(&f.model, v);
@@ -412,19 +442,16 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
     }
     let (beta, fit, _) =
         best.ok_or_else(|| WorkflowError::Request("the β grid is empty".into()))?;
-    let (model_file, tables) = written(mf, &fit, req.data)?;
-    Ok(JointOutcome {
-        fit,
-        beta,
-        trials,
-        model_file,
-        tables,
-    })
+    Ok((beta, fit, trials))
 }
 
 /// The fitted model as a model file, with each static map tabulated over the range its input
 /// covers in the fitted model's simulation of the data.
-fn written(mf: &ModelFile, f: &JointFit, data: &Data) -> Result<(ModelFile, Vec<MapTable>)> {
+pub(crate) fn written(
+    mf: &ModelFile,
+    f: &JointFit,
+    data: &Data,
+) -> Result<(ModelFile, Vec<MapTable>)> {
     let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); f.model.lft().dims().z];
     for (r, rec) in data.records().iter().enumerate() {
         let sim = f.model.simulate(rec.u(), Some(&f.initial_states[r]))?;

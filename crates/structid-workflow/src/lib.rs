@@ -7,15 +7,21 @@
 //! | module | workflow |
 //! |---|---|
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
+//! | [`wiener_hammerstein`] | a Wiener–Hammerstein model with both LTI blocks unknown, from data (`structid wiener-hammerstein`) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
 pub mod error;
 pub mod free;
 pub mod joint;
+pub mod wiener_hammerstein;
 
 pub use error::{Result, WorkflowError};
 pub use free::parse_free;
 pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
+};
+pub use wiener_hammerstein::{
+    WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,
+    write_wiener_hammerstein_outputs,
 };
