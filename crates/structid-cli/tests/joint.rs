@@ -263,3 +263,97 @@ fn joint_errors_are_clear() {
     ]);
     assert!(e.contains("free entry `Q[0][0]`"), "{e}");
 }
+
+/// Two tanks with only the lower level measured: `identify` names the latent block and points
+/// to the joint fit, which takes the same file.
+#[test]
+fn identify_names_a_latent_block_and_refine_joint_takes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model = d.join("tanks.toml");
+    std::fs::write(
+        &model,
+        r#"[lft]
+A = [[1.0, 0.0], [0.0, 1.0]]
+Bu = [[0.05], [0.0]]
+Be = [[0.0], [0.0]]
+Bw = [[-0.05, 0.0], [0.05, -0.05]]
+Cy = [[0.0, 1.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[0.0, 0.0]]
+Cz = [[1.0, 0.0], [0.0, 1.0]]
+Dzu = [[0.0], [0.0]]
+Dze = [[0.0], [1.0]]
+Dzw = [[0.0, 0.0], [0.0, 0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "upper_outflow"
+inputs = [0]
+output = 0
+truth = "sqrt(abs(z0))"
+
+[[nonlinearity]]
+name = "lower_outflow"
+inputs = [1]
+output = 1
+truth = "sqrt(abs(z0))"
+"#,
+    )
+    .unwrap();
+    let u = d.join("u.csv");
+    let mut text = String::from("u\n");
+    for k in 0..1500 {
+        let t = k as f64;
+        text.push_str(&format!(
+            "{}\n",
+            1.0 + 0.6 * (0.013 * t).sin() + 0.3 * (0.041 * t).sin()
+        ));
+    }
+    std::fs::write(&u, text).unwrap();
+    let data = d.join("data.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.002",
+        "--seed",
+        "1",
+    ]);
+    let e = input_error(&[
+        "identify",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--out",
+        p(&d.join("i")),
+    ]);
+    assert!(
+        e.contains("block `upper_outflow` is latent") && e.contains("refine --joint"),
+        "{e}"
+    );
+    assert!(!e.contains("block `lower_outflow`"), "{e}");
+    let o = ok(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&model),
+        "--data",
+        p(&data),
+        "--beta",
+        "1e-8",
+        "--out",
+        p(&d.join("fit")),
+    ]);
+    assert!(o.stdout.contains("joint fit of"), "{}", o.stdout);
+}

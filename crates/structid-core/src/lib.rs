@@ -140,6 +140,7 @@ pub use lft::{Lft, LftDims, LftMatrices};
 pub use low_rank::{LowRankGaussian, NystromFeatures};
 pub use maps::{ExprMap, LookupTable};
 pub use measurability::ZSource;
+pub use model::access::BlockAccess;
 pub use model::order::BlockPlace;
 pub use model::{Data, Model, NonlinearBlock};
 pub use polynomial::{PolynomialDispersion, PolynomialFeatures};

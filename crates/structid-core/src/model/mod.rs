@@ -1,5 +1,6 @@
 //! The structured model: the known LFT plus its list of unknown static blocks, and the data.
 
+pub mod access;
 pub mod hysteresis;
 pub mod interpolant;
 pub mod lft;

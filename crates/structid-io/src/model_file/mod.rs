@@ -594,27 +594,44 @@ impl ModelFile {
     /// assert_eq!(m.evaluation_order().unwrap(), vec![1, 0]);
     /// ```
     pub fn evaluation_order(&self) -> Result<Vec<usize>, IoError> {
-        let places: Vec<BlockPlace<'_>> = self
-            .blocks
+        Ok(self.model_lft()?.evaluation_order(&self.places())?)
+    }
+
+    /// Whether identification can compute z from u and y: with measured z always; otherwise
+    /// the maps must not form a cycle (an algebraic loop, naming its blocks), and every block's
+    /// input must be computable: an error names each block in series or latent
+    /// ([`ModelFile::block_access`]), which the joint fit handles instead.
+    pub fn check_z_computable(&self) -> Result<(), IoError> {
+        if self.signals.z.is_none() {
+            self.evaluation_order()?;
+            self.model_lft()?.check_blocks_computable(&self.places())?;
+            self.lft.check_no_algebraic_loop()?;
+        }
+        Ok(())
+    }
+
+    /// How the paper's identification reaches each block (in file order): computable from u
+    /// and y, in series after other blocks, or latent ([`structid_core::BlockAccess`]); with
+    /// measured z every block is computable.
+    pub fn block_access(&self) -> Result<Vec<structid_core::BlockAccess>, IoError> {
+        if self.signals.z.is_some() {
+            return Ok(vec![
+                structid_core::BlockAccess::Computable;
+                self.blocks.len()
+            ]);
+        }
+        Ok(self.model_lft()?.block_access(&self.places())?)
+    }
+
+    fn places(&self) -> Vec<BlockPlace<'_>> {
+        self.blocks
             .iter()
             .map(|b| BlockPlace {
                 name: &b.name,
                 inputs: &b.inputs,
                 output: b.output,
             })
-            .collect();
-        Ok(self.model_lft()?.evaluation_order(&places)?)
-    }
-
-    /// Whether identification can compute z from u and y: with measured z always; otherwise
-    /// the maps must not form a cycle (an algebraic loop, naming its blocks) nor sit in series
-    /// through D_zw (which the joint fit handles instead).
-    pub fn check_z_computable(&self) -> Result<(), IoError> {
-        if self.signals.z.is_none() {
-            self.evaluation_order()?;
-            self.lft.check_no_algebraic_loop()?;
-        }
-        Ok(())
+            .collect()
     }
 
     /// The LFT that identification and simulation use: [`ModelFile::lft`] itself, except in a
