@@ -76,6 +76,12 @@ pub trait BlockMap: Send + Sync + fmt::Debug {
     fn regulariser(&self) -> Option<nalgebra::DMatrix<f64>> {
         None
     }
+    /// The map's affine part a₀ + aᵀz when it has one that a linear model can stand in for
+    /// (the unpenalised trend of a kernel expansion): what [`crate::smooth_maps`] closes the
+    /// linear part with. `None` for operators and fixed maps.
+    fn affine_part(&self) -> Option<(f64, Vec<f64>)> {
+        None
+    }
     /// A boxed copy.
     fn boxed(&self) -> Box<dyn BlockMap>;
 }

@@ -8,6 +8,10 @@ pub enum JointError {
     #[error(transparent)]
     Core(#[from] structid_core::Error),
 
+    /// An error of the linear-systems layer (a realisation, a smoother).
+    #[error(transparent)]
+    Lti(#[from] structid_lti::LtiError),
+
     /// A setting or a parameter is outside its range.
     #[error("invalid {name} = {value}: {reason}")]
     InvalidParameter {

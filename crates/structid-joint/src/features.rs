@@ -382,6 +382,11 @@ impl BlockMap for GaussianFeatures {
         Some(r)
     }
 
+    fn affine_part(&self) -> Option<(f64, Vec<f64>)> {
+        let p = self.centres[0].len();
+        Some((self.affine[0], self.affine[1..=p].to_vec()))
+    }
+
     fn boxed(&self) -> Box<dyn BlockMap> {
         Box::new(self.clone())
     }

@@ -62,6 +62,7 @@ pub mod error;
 pub mod features;
 pub mod fit;
 pub mod fixed;
+pub mod latent;
 pub mod model;
 pub mod operator;
 pub mod shooting;
@@ -73,6 +74,7 @@ pub use error::{JointError, Result};
 pub use features::GaussianFeatures;
 pub use fit::{JointFit, JointSettings, JointSettingsBuilder, Stage, fit};
 pub use fixed::FixedMap;
+pub use latent::{SmoothedMaps, smooth_maps};
 pub use model::{JointBlock, JointModel, LftEntry, LftMatrix};
 pub use operator::OperatorBlock;
 pub use wiener_hammerstein::{

@@ -1,5 +1,11 @@
 //! A model file fitted as a whole by its simulation error (`structid refine --joint`).
 //!
+//! A latent block (one whose input u and y do not reveal, [`structid_core::BlockAccess`])
+//! without a `truth` starts in two steps: the model with every map held to its affine part is
+//! fitted by simulation error (the linear start), the maps' inputs and outputs are smoothed
+//! from y with it ([`structid_joint::smooth_maps`]), and the latent map is fitted through the
+//! smoothed pairs with its dispersion.
+//!
 //! From the file: the LFT (its entries named free in the request move, the others stay), each
 //! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]) and each
 //! `operator` block as the hysteresis operator it declares. A static block starts from its
@@ -310,17 +316,46 @@ fn features(ranges: &[(f64, f64)], m: usize, width: f64, beta: f64) -> Result<Ga
 }
 
 /// The starting joint model: static blocks as features fitted to their start maps over the
-/// ranges the start's simulation covers.
+/// ranges the start's simulation covers. With a latent block, the start is found from the
+/// data instead ([`latent_start`]).
 fn start_model(
     mf: &ModelFile,
     data: &Data,
     s: &JointWorkflowSettings,
     beta: f64,
-) -> Result<JointModel> {
+) -> Result<(JointModel, Option<Vec<Vec<f64>>>)> {
     let fixed = fixed_model(mf, false)?;
     let ranges = input_ranges(&fixed, data)?;
+    let access = mf.block_access()?;
+    let latent = mf
+        .blocks
+        .iter()
+        .zip(&access)
+        .any(|(b, a)| *a == structid_core::BlockAccess::Latent && b.operator.is_none());
+    if latent {
+        return latent_start(mf, &fixed, &ranges, data, s, beta);
+    }
+    Ok((
+        assemble(mf, &fixed, &ranges, None, s, beta, mf.model_lft()?)?,
+        None,
+    ))
+}
+
+/// The joint model with each static block as features over `ranges` (of its inputs), fitted
+/// to its start map, or through its smoothed pairs when `smoothed` is given and the block is
+/// latent or has no `truth`; operators as they are.
+fn assemble(
+    mf: &ModelFile,
+    fixed: &JointModel,
+    ranges: &[(f64, f64)],
+    smoothed: Option<&structid_joint::SmoothedMaps>,
+    s: &JointWorkflowSettings,
+    beta: f64,
+    lft: structid_core::Lft,
+) -> Result<JointModel> {
     let mut blocks = Vec::with_capacity(mf.blocks.len());
-    for (spec, b) in mf.blocks.iter().zip(fixed.blocks()) {
+    let access = mf.block_access()?;
+    for ((spec, b), access) in mf.blocks.iter().zip(fixed.blocks()).zip(&access) {
         if spec.operator.is_some() {
             blocks.push(b.clone());
             continue;
@@ -337,18 +372,109 @@ fn start_model(
             )));
         }
         let f = features(&r, s.centres, s.width, beta)?;
-        let points: Vec<Vec<f64>> = f.centres().to_vec();
-        let values: Vec<f64> = points.iter().map(|z| b.map.eval(&mut [], z)).collect();
+        let map = match smoothed {
+            Some(sm) if spec.truth.is_none() || *access == structid_core::BlockAccess::Latent => {
+                let points: Vec<Vec<f64>> = (0..sm.z.len())
+                    .map(|k| spec.inputs.iter().map(|&c| sm.z.get(k, c)).collect())
+                    .collect();
+                f.fitted_to(&points, &sm.w.channel(spec.output))?
+            }
+            _ => {
+                let points: Vec<Vec<f64>> = f.centres().to_vec();
+                let values: Vec<f64> = points.iter().map(|z| b.map.eval(&mut [], z)).collect();
+                f.fitted_to(&points, &values)?
+            }
+        };
         blocks.push(JointBlock::new(
             spec.name.clone(),
             spec.inputs.clone(),
             spec.output,
-            Box::new(f.fitted_to(&points, &values)?),
+            Box::new(map),
         ));
     }
-    let model = JointModel::new(mf.model_lft()?, blocks)?;
-    parse_free(model, &s.free)
+    parse_free(JointModel::new(lft, blocks)?, &s.free)
 }
+
+/// The start of a model with a latent block, in two steps. First the linear start: every
+/// static map held to the affine part of its start (its `truth`, or zero), fitted by simulation
+/// error with G's free entries and multiple shooting (a range its input does not cover at the
+/// start is widened to a unit one: only the affine part moves). Then the maps' inputs and
+/// outputs are smoothed from y with it ([`structid_joint::smooth_maps`]); each map's centres
+/// are placed over its smoothed input, and a latent map, or one without a `truth`, is fitted
+/// through its smoothed pairs with its dispersion. G's free entries start at the linear
+/// start's values, and each record's LFT state starts at its smoothed x̂₀. A latent block whose
+/// input the linear start does not tie to y (its map stayed flat) is an error that asks for a
+/// start.
+fn latent_start(
+    mf: &ModelFile,
+    fixed: &JointModel,
+    ranges: &[(f64, f64)],
+    data: &Data,
+    s: &JointWorkflowSettings,
+    beta: f64,
+) -> Result<(JointModel, Option<Vec<Vec<f64>>>)> {
+    let widened: Vec<(f64, f64)> = ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            if hi > lo {
+                (lo, hi)
+            } else {
+                (lo - 0.5, lo + 0.5)
+            }
+        })
+        .collect();
+    let pinned = assemble(mf, fixed, &widened, None, s, PINNED_BETA, mf.model_lft()?)?;
+    let segment = s
+        .fit
+        .segment_length()
+        .unwrap_or((data.len() / 20).clamp(50, 500));
+    let settings = JointSettings::builder()
+        .segment_length(segment)
+        .continuity_weight(s.fit.continuity_weight())
+        .max_iterations(s.fit.max_iterations())
+        .tolerance(s.fit.tolerance())
+        .estimate_initial_state(true)
+        .build()?;
+    let linear = fit(&pinned, data, None, &settings)?.model;
+    let smoothed = structid_joint::smooth_maps(&linear, data, NOISE_SHARE)?;
+    let access = mf.block_access()?;
+    if let Some(b) = mf.blocks.iter().zip(&access).find_map(|(b, a)| {
+        (*a == structid_core::BlockAccess::Latent
+            && b.inputs.iter().any(|&c| !smoothed.observable[c]))
+        .then_some(b)
+    }) {
+        return Err(WorkflowError::Request(format!(
+            "block `{}` is latent, and the linear start does not tie its input to y (its map \
+             stays flat there, so y carries no trace of that signal): give it a start, a `truth` \
+             with the right sign of slope such as `truth = \"0.1*z0\"`",
+            b.name
+        )));
+    }
+    let ranges: Vec<(f64, f64)> = (0..smoothed.z.channels())
+        .map(|c| {
+            let z = smoothed.z.channel(c);
+            let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
+            (lo, z.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+        })
+        .collect();
+    let model = assemble(
+        mf,
+        fixed,
+        &ranges,
+        Some(&smoothed),
+        s,
+        beta,
+        linear.lft().clone(),
+    )?;
+    Ok((model, Some(smoothed.initial_states)))
+}
+
+/// The β that holds a kernel expansion to its affine part in the linear start of latent blocks.
+const PINNED_BETA: f64 = 1e6;
+
+/// The share of y's standard deviation the latent smoothing expects to be noise (its result
+/// barely moves between 0.01 and 0.3).
+const NOISE_SHARE: f64 = 0.1;
 
 fn validation_rms(model: &JointModel, validation: &Data) -> Vec<f64> {
     let ny = validation.y().channels();
@@ -397,8 +523,8 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
         ));
     }
     let (beta, fit, trials) = over_betas(&s.beta, |beta| {
-        let start = start_model(mf, req.data, s, beta)?;
-        Ok(fit(&start, req.data, None, &s.fit)?)
+        let (start, x0) = start_model(mf, req.data, s, beta)?;
+        Ok(fit(&start, req.data, x0.as_deref(), &s.fit)?)
     })?;
     let (model_file, tables) = written(mf, &fit, req.data)?;
     Ok(JointOutcome {
