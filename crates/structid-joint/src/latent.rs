@@ -78,7 +78,7 @@ fn observable_rows(a: &DMatrix<f64>, c: &DMatrix<f64>, cz: &DMatrix<f64>) -> Vec
         .map(|i| {
             let row = cz.row(i);
             let norm = row.norm();
-            let projected = (&row * basis.transpose()) * basis;
+            let projected = (row * basis.transpose()) * basis;
             norm == 0.0 || (row - projected).norm() <= 1e-6 * norm
         })
         .collect()

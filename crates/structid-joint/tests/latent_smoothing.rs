@@ -4,7 +4,7 @@
 
 use nalgebra::DMatrix;
 use structid_core::{Data, Lft, LftMatrices, MapBinding, Signal};
-use structid_joint::{BlockMap, GaussianFeatures, JointBlock, JointModel, smooth_maps};
+use structid_joint::{GaussianFeatures, JointBlock, JointModel, smooth_maps};
 
 fn lft() -> Lft {
     let m = |r: usize, c: usize, v: &[f64]| DMatrix::from_row_slice(r, c, v);
