@@ -229,6 +229,53 @@ impl Model {
         Ok(d)
     }
 
+    /// Why the model is outside the paper's class (a block in series, latent or an operator),
+    /// or None: then identification and one-step prediction apply.
+    fn outside_paper_class(&self) -> PyResult<Option<String>> {
+        structid_workflow::outside_paper_class(&self.file).map_err(error)
+    }
+
+    /// How identification reaches each block: (name, "computable" | "in series" | "latent",
+    /// the blocks it reads in the same sample).
+    fn block_access(&self) -> PyResult<Vec<(String, String, Vec<String>)>> {
+        use structid_core::BlockAccess;
+        let access = self.file.block_access().map_err(error)?;
+        Ok(self
+            .file
+            .blocks
+            .iter()
+            .zip(access)
+            .map(|(b, a)| match a {
+                BlockAccess::Computable => (b.name.clone(), "computable".into(), Vec::new()),
+                BlockAccess::InSeries { upstream } => (b.name.clone(), "in series".into(), upstream),
+                BlockAccess::Latent => (b.name.clone(), "latent".into(), Vec::new()),
+            })
+            .collect())
+    }
+
+    /// The simulation from rest on (u, y) and its scores after `settle` samples (as `structid
+    /// validate` of a model outside the paper's class): returns (y_sim, rms, fit_percent).
+    #[pyo3(signature = (u, y, settle=0))]
+    fn score_simulation<'py>(
+        &self,
+        py: Python<'py>,
+        u: PyReadonlyArray2<'py, f64>,
+        y: PyReadonlyArray2<'py, f64>,
+        settle: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let data = structid_core::Data::new(convert::signal(&u, "u")?, convert::signal(&y, "y")?)
+            .map_err(error)?;
+        let file = self.file.clone();
+        let s = py
+            .detach(move || structid_workflow::score_simulation(&file, &data, settle))
+            .map_err(error)?;
+        let d = PyDict::new(py);
+        d.set_item("y_sim", convert::array(py, &s.simulated))?;
+        d.set_item("rms", s.rms)?;
+        d.set_item("fit_percent", s.fit_percent)?;
+        Ok(d)
+    }
+
     fn __repr__(&self) -> String {
         let names: Vec<_> = self.file.blocks.iter().map(|b| b.name.as_str()).collect();
         format!(

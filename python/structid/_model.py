@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -160,6 +160,25 @@ class Model:
         """Simulates with every block's truth in the loop (as ``structid simulate``): returns
         ``{"y", "z", "w"}``, each L × channels."""
         return self._native.simulate(as_signal(u, "u", self.dims["u"]), float(noise_std), int(seed))
+
+    def block_access(self) -> List[Tuple[str, str, List[str]]]:
+        """How identification reaches each block: ``(name, kind, upstream)`` with kind
+        ``"computable"`` (from u and y), ``"in series"`` (it reads the blocks ``upstream`` in the
+        same sample) or ``"latent"`` (u and y do not reveal its input). Blocks that are not
+        computable need :func:`refine_joint`."""
+        return self._native.block_access()
+
+    def outside_paper_class(self) -> Optional[str]:
+        """Why the model is outside the paper's class (a block in series, latent, or an
+        operator), or None."""
+        return self._native.outside_paper_class()
+
+    def score_simulation(self, u: object, y: object, settle: int = 0) -> Dict[str, Any]:
+        """The simulation from rest on (u, y) and its scores after ``settle`` samples, as
+        ``structid validate`` scores a model outside the paper's class: ``{"y_sim", "rms",
+        "fit_percent"}`` (``fit_percent`` is 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per output)."""
+        return self._native.score_simulation(as_signal(u, "u", self.dims["u"]),
+                                             as_signal(y, "y", self.dims["y"]), int(settle))
 
     def __getstate__(self) -> str:
         return self.to_toml()

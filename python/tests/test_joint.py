@@ -93,6 +93,16 @@ def test_refine_joint_recovers_the_play_and_agrees_with_the_cli(cli, tmp_path):
     # The fitted model simulates the validation record close to the truth.
     sim = r.model.simulate(v.reshape(-1, 1))
     assert np.sqrt(np.mean((sim["y"][:, 0] - plant(v)) ** 2)) < 0.02
+    # It is outside the paper's class, and scored by its simulation as `structid validate` does.
+    assert "hysteresis operator" in r.model.outside_paper_class()
+    assert [a[1] for a in r.model.block_access()] == ["computable", "in series"]
+    score = r.model.score_simulation(v.reshape(-1, 1), plant(v).reshape(-1, 1))
+    np.testing.assert_allclose(score["y_sim"][:, 0], sim["y"][:, 0], rtol=0, atol=1e-12)
+    expected = np.sqrt(np.mean((plant(v) - sim["y"][:, 0]) ** 2))
+    np.testing.assert_allclose(score["rms"][0], expected, rtol=1e-12)
+    cli("validate", "--model", out / "model.toml", "--data", val, "--out", tmp_path / "v")
+    j = read_json(tmp_path / "v" / "validation.json")
+    assert j["prediction"] is None and "operator" in j["why_no_prediction"]
 
 
 def test_refine_joint_errors_are_python_exceptions():

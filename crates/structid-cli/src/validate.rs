@@ -331,6 +331,9 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         }
         None => {
             let vmf = ModelFile::from_path(model_path)?;
+            if let Some(why) = structid_workflow::outside_paper_class(&vmf)? {
+                return simulation_only(&a, &vmf, model_path, &why);
+            }
             let missing: Vec<&str> = vmf
                 .blocks
                 .iter()
@@ -527,6 +530,91 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
             &written,
             t0.elapsed().as_secs_f64()
         )
+    );
+    Ok(())
+}
+
+/// `structid validate` of a model outside the paper's class (`why`): the simulation from rest
+/// and its scores ([`structid_workflow::score_simulation`]); no one-step prediction.
+fn simulation_only(
+    a: &ValidateArgs,
+    vmf: &ModelFile,
+    model_path: &Path,
+    why: &str,
+) -> Result<(), CliError> {
+    if matches!(a.initial_state, InitialStateArg::Estimate) {
+        return Err(CliError::input(format!(
+            "`{}` is outside the paper's model class ({why}): it is validated by its simulation from \
+             rest; drop --initial-state estimate",
+            model_path.display()
+        )));
+    }
+    let mut guard = OutputGuard::new();
+    protect_inputs(&mut guard, vmf, model_path, &[&a.data[0]]);
+    let files = ["validation.json", "simulation.csv"];
+    guard.check_out_dir(&a.out, &files)?;
+    let table = crate::data::read_table(&a.data[0])?;
+    let vdata = vmf.select_data(&table)?;
+    let score = structid_workflow::score_simulation(vmf, &vdata, a.settle)?;
+    guard.begin_set(&a.out, Some(&files))?;
+    let mut names = vec!["time".to_string()];
+    let mut columns = vec![(0..vdata.len()).map(|k| k as f64).collect::<Vec<f64>>()];
+    for (c, n) in vmf.signals.y.iter().enumerate() {
+        names.extend([
+            n.clone(),
+            format!("{n}_sim"),
+            format!("{n}_simulation_error"),
+        ]);
+        let (y, s) = (vdata.y().channel(c), score.simulated.channel(c));
+        columns.push(y.clone());
+        columns.push(s.clone());
+        columns.push(y.iter().zip(&s).map(|(a, b)| a - b).collect());
+    }
+    let csv = a.out.join("simulation.csv");
+    guard.write_csv(&csv, &names, &columns)?;
+    let outputs: Vec<Value> = vmf
+        .signals
+        .y
+        .iter()
+        .enumerate()
+        .map(|(c, n)| json!({"name": n, "simulation_rms": score.rms[c], "fit_percent": score.fit_percent[c]}))
+        .collect();
+    let doc = json!({
+        "tool": format!("structid {}", env!("CARGO_PKG_VERSION")),
+        "inputs": {
+            "model_file": model_path.display().to_string(),
+            "data_file": a.data[0].display().to_string(),
+            "settle": a.settle,
+        },
+        "maps": "truth",
+        "prediction": Value::Null,
+        "why_no_prediction": format!(
+            "{why}: the one-step predictor and the residual tests need every block's input computable \
+             from u and y and no operator; the model is validated by its simulation from rest"
+        ),
+        "samples": vdata.len(),
+        "outputs": outputs,
+        "files": files,
+    });
+    let json_path = a.out.join("validation.json");
+    let text = serde_json::to_string_pretty(&doc)
+        .map_err(|e| CliError::runtime(format!("cannot serialise the report: {e}")))?;
+    guard.write(&json_path, text.as_bytes())?;
+    guard.finish_set(&a.out, &structid_io::output::file_names(&[csv, json_path]))?;
+    println!(
+        "validation of {} on {} by simulation from rest ({why}; no one-step prediction):",
+        model_path.display(),
+        a.data[0].display()
+    );
+    for (c, n) in vmf.signals.y.iter().enumerate() {
+        println!(
+            "  {n}: simulation RMS {:.4e}, fit {:.1} %",
+            score.rms[c], score.fit_percent[c]
+        );
+    }
+    println!(
+        "wrote {}/validation.json and simulation.csv",
+        a.out.display()
     );
     Ok(())
 }

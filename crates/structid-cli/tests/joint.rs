@@ -142,6 +142,44 @@ fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
         "--out",
         p(&d.join("again.csv")),
     ]);
+    // `validate` scores it by its simulation from rest (it has an operator, so no one-step
+    // prediction): the same simulation as `simulate`, an error at the noise level.
+    let o = ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--data",
+        p(&d.join("val.csv")),
+        "--out",
+        p(&d.join("v")),
+    ]);
+    assert!(o.stdout.contains("no one-step prediction"), "{}", o.stdout);
+    let v = json(&d.join("v").join("validation.json"));
+    assert!(v["prediction"].is_null());
+    let rms = v["outputs"][0]["simulation_rms"].as_f64().unwrap();
+    let col = |file: &Path, name: &str| -> Vec<f64> {
+        let text = std::fs::read_to_string(file).unwrap();
+        let mut lines = text.lines();
+        let c = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .position(|h| h == name)
+            .unwrap();
+        lines
+            .map(|l| l.split(',').nth(c).unwrap().parse().unwrap())
+            .collect()
+    };
+    let (y, again) = (col(&d.join("val.csv"), "y"), col(&d.join("again.csv"), "y"));
+    let direct = (y
+        .iter()
+        .zip(&again)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        / y.len() as f64)
+        .sqrt();
+    assert!((rms - direct).abs() <= 1e-9 * direct, "{rms} vs {direct}");
+    assert!(rms < 1.5 * 0.005, "{rms}");
 }
 
 #[test]

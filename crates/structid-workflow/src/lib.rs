@@ -8,11 +8,13 @@
 //! |---|---|
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`] | a Wiener–Hammerstein model with both LTI blocks unknown, from data (`structid wiener-hammerstein`) |
+//! | [`simulation_score`] | validation by simulation alone of a model outside the paper's class (`structid validate` of such a model) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
 pub mod error;
 pub mod free;
 pub mod joint;
+pub mod simulation_score;
 pub mod wiener_hammerstein;
 
 pub use error::{Result, WorkflowError};
@@ -21,6 +23,7 @@ pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
 };
+pub use simulation_score::{SimulationScore, outside_paper_class, score_simulation};
 pub use wiener_hammerstein::{
     WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,
     write_wiener_hammerstein_outputs,
