@@ -38,20 +38,6 @@ pub enum JointError {
         /// What failed.
         detail: String,
     },
-
-    /// A block's input does not move over the data, so its map is not determined there.
-    #[error(
-        "block `{block}` is not excited: its input spans {span:e} over the data (its features' \
-         width is {width:e}); a latent map needs an input that moves across its centres"
-    )]
-    NotExcited {
-        /// The block.
-        block: String,
-        /// max − min of its input over the starting simulation.
-        span: f64,
-        /// The feature width σ it was given.
-        width: f64,
-    },
 }
 
 /// `Result` with [`JointError`].

@@ -264,3 +264,26 @@ fn a_latent_map_is_recovered_from_the_smoothed_latent_signal() {
     assert!(err < 0.10 * range, "upper outflow {err} vs range {range}");
     assert!(out.fit.rms[0] < 1.5 * 0.005, "{:?}", out.fit.rms);
 }
+
+/// A map whose input the data never move cannot be placed: the error names the block and says
+/// what to check.
+#[test]
+fn a_map_without_excitation_is_a_clear_error() {
+    let start =
+        ModelFile::parse(&TRUTH.replace("truth = \"0.8*tanh(z0/0.8)\"\n", ""), None).unwrap();
+    let u = Signal::from_fn(500, 1, |_, _| 0.0);
+    let y = Signal::from_fn(500, 1, |k, _| 1e-3 * (k as f64).sin());
+    let data = Data::new(u, y).unwrap();
+    let e = refine_joint(&JointRequest {
+        model: &start,
+        data: &data,
+        settings: JointWorkflowSettings::default(),
+    })
+    .err()
+    .expect("a map that the data never excite was accepted")
+    .to_string();
+    assert!(
+        e.contains("block `limit`") && e.contains("does not move") && e.contains("excite"),
+        "{e}"
+    );
+}
