@@ -5,7 +5,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{input_error, ok, p};
+use common::{csv_column, input_error, json, ok, p};
 
 /// y = G·sat(play(u)) + e, the saturation reading the play's output through D_zw.
 const TRUTH: &str = r#"[lft]
@@ -48,10 +48,6 @@ fn write_input(path: &Path, len: usize, phase: f64) {
         text.push_str(&format!("{u}\n"));
     }
     std::fs::write(path, text).unwrap();
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]
@@ -157,20 +153,10 @@ fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
     let v = json(&d.join("v").join("validation.json"));
     assert!(v["prediction"].is_null());
     let rms = v["outputs"][0]["simulation_rms"].as_f64().unwrap();
-    let col = |file: &Path, name: &str| -> Vec<f64> {
-        let text = std::fs::read_to_string(file).unwrap();
-        let mut lines = text.lines();
-        let c = lines
-            .next()
-            .unwrap()
-            .split(',')
-            .position(|h| h == name)
-            .unwrap();
-        lines
-            .map(|l| l.split(',').nth(c).unwrap().parse().unwrap())
-            .collect()
-    };
-    let (y, again) = (col(&d.join("val.csv"), "y"), col(&d.join("again.csv"), "y"));
+    let (y, again) = (
+        csv_column(&d.join("val.csv"), "y"),
+        csv_column(&d.join("again.csv"), "y"),
+    );
     let direct = (y
         .iter()
         .zip(&again)

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{input_error, ok, p};
+use common::{csv_column as column, input_error, json, ok, p};
 
 /// x₁⁺ = 0.8x₁ + 0.2u, z = x₁, w = tanh(1.5z), x₂⁺ = 0.5x₂ + 0.5w, y = x₂ + e.
 const TRUTH: &str = r#"[lft]
@@ -48,24 +48,6 @@ fn write_input(path: &Path, len: usize, seed: u64) {
         text.push_str(&format!("{}\n", 1.2 * v));
     }
     std::fs::write(path, text).unwrap();
-}
-
-fn column(path: &Path, name: &str) -> Vec<f64> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let c = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .position(|h| h == name)
-        .unwrap();
-    lines
-        .map(|l| l.split(',').nth(c).unwrap().parse().unwrap())
-        .collect()
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]

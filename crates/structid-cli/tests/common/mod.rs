@@ -80,3 +80,23 @@ pub fn example_model(name: &str) -> PathBuf {
 /// skip-or-fail-under-CI rule; shared with the tests of `structid-io`.
 #[path = "../../../structid-io/tests/common/mod.rs"]
 pub mod benchmark_data;
+
+/// A JSON file the binary wrote.
+pub fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The column `name` of a CSV file with a header row.
+pub fn csv_column(path: &Path, name: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let c = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column `{name}` in {}", path.display()));
+    lines
+        .map(|l| l.split(',').nth(c).unwrap().parse().unwrap())
+        .collect()
+}
