@@ -130,7 +130,7 @@ fn wh_records(records: Vec<(Vec<f64>, Vec<f64>)>, what: &str) -> PyResult<struct
 /// (num, den), `divisions` (front num/den, back num/den, rms; best first), `beta`, `trials`,
 /// `cost`, `initial_cost`, `rms`, `initial_states`, `free` and `stages`; writes `out` when given.
 #[pyfunction]
-#[pyo3(signature = (records, orders, validation=None, beta=None, centres=15, segment_length=None, iterations=100, initial_state="zero", out=None))]
+#[pyo3(signature = (records, orders, validation=None, beta=None, centres=15, segment_length=None, iterations=100, initial_state="zero", out=None, structure="wiener-hammerstein"))]
 #[allow(clippy::too_many_arguments)]
 pub fn wiener_hammerstein_records<'py>(
     py: Python<'py>,
@@ -143,8 +143,19 @@ pub fn wiener_hammerstein_records<'py>(
     iterations: usize,
     initial_state: &str,
     out: Option<PathBuf>,
+    structure: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     use structid_joint::WienerHammersteinSettings;
+    use structid_workflow::BlockStructure;
+    let structure = match structure {
+        "wiener-hammerstein" => BlockStructure::WienerHammerstein,
+        "hammerstein-wiener" => BlockStructure::HammersteinWiener,
+        other => {
+            return Err(invalid(format!(
+                "structure `{other}` is neither \"wiener-hammerstein\" nor \"hammerstein-wiener\""
+            )));
+        }
+    };
     use structid_workflow::{WienerHammersteinRequest, wiener_hammerstein, write_wiener_hammerstein_outputs};
     let data = wh_records(records, "estimation")?;
     let validation = validation.map(|v| wh_records(v, "validation")).transpose()?;
@@ -159,6 +170,7 @@ pub fn wiener_hammerstein_records<'py>(
         fit = fit.segment_length(l);
     }
     let req = WienerHammersteinRequest {
+        structure,
         data: &data,
         names: structid_io::SignalNames { u: vec!["u".into()], y: vec!["y".into()], z: None },
         orders: [orders.0, orders.1, orders.2],

@@ -28,9 +28,9 @@ from ._structid import StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, RecordsValidation, Validation
-from ._workflows import (Discovery, Finding, JointRefinement, Refinement, WienerHammerstein,
+from ._workflows import (BlockStructured, Discovery, Finding, JointRefinement, Refinement,
                          discover, refine, refine_joint, silverbox_data, silverbox_discovery,
-                         wiener_hammerstein)
+                         hammerstein_wiener, wiener_hammerstein)
 from ._staticness import Staticness, staticness
 from ._linear import LinearFit, Response, linear, read_data, response
 from . import input, paper, scenarios
@@ -51,7 +51,8 @@ __all__ = [
     "refine_joint",
     "JointRefinement",
     "wiener_hammerstein",
-    "WienerHammerstein",
+    "hammerstein_wiener",
+    "BlockStructured",
     "discover",
     "Discovery",
     "Finding",

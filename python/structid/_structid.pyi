@@ -86,7 +86,8 @@ def wiener_hammerstein_records(records: List[Tuple[List[float], List[float]]],
                                beta: Optional[float] = None, centres: int = 15,
                                segment_length: Optional[int] = None, iterations: int = 100,
                                initial_state: str = "zero",
-                               out: Optional[str] = None) -> Dict[str, Any]: ...
+                               out: Optional[str] = None,
+                               structure: str = "wiener-hammerstein") -> Dict[str, Any]: ...
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,

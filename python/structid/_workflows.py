@@ -121,17 +121,19 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
 
 
 @dataclass
-class WienerHammerstein:
-    """The result of :func:`wiener_hammerstein`: y = G₂·N(G₁·u) + e with both blocks fitted."""
+class BlockStructured:
+    """The result of :func:`wiener_hammerstein` (y = G₂·N(G₁·u) + e) and
+    :func:`hammerstein_wiener` (y = N₂(G·N₁(u)) + e), every block fitted."""
 
     model: Model
-    """The fitted model (``structid wiener-hammerstein``'s model.toml): both blocks in one
-    LFT with the state [x₁; x₂], the map ``N`` as a table of its values."""
+    """The fitted model (the CLI's model.toml): the LTI block(s) in one LFT, each map as a table
+    of its values (``N``; or ``input`` and ``output``)."""
     bla: Tuple[List[float], List[float]]
     """The best linear approximation (num, den) in q⁻¹."""
     divisions: List[Dict[str, Any]]
-    """Every division of its poles and zeros, best first: ``front`` and ``back`` as (num, den),
-    and ``rms``, the error left by a map fitted behind it."""
+    """Wiener–Hammerstein: every division of its poles and zeros, best first: ``front`` and
+    ``back`` as (num, den), and ``rms``, the error left by a map fitted behind it. Empty for
+    Hammerstein–Wiener."""
     beta: float
     trials: List[Tuple[float, List[float]]]
     cost: float
@@ -142,18 +144,11 @@ class WienerHammerstein:
     stages: List[Tuple[str, int, List[float], str]]
 
 
-def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
-                       validation: Optional[Tuple[object, object]] = None,
-                       beta: Optional[float] = None, centres: int = 15,
-                       segment_length: Optional[int] = None, iterations: int = 100,
-                       initial_state: str = "zero",
-                       out: Optional[Union[str, os.PathLike]] = None) -> WienerHammerstein:
-    """A Wiener–Hammerstein model with both LTI blocks unknown (``structid
-    wiener-hammerstein``): the best linear approximation of ``orders`` = (NA, NB, NK) (both
-    blocks together), every division of its poles and zeros scored by a map fitted behind it,
-    then both blocks, the map and the initial states fitted from the best by simulation error.
-    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``.
-    u and y are 1-D arrays, or lists of them for several records."""
+def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, int, int],
+                      validation: Optional[Tuple[object, object]], beta: Optional[float],
+                      centres: int, segment_length: Optional[int], iterations: int,
+                      initial_state: str,
+                      out: Optional[Union[str, os.PathLike]]) -> BlockStructured:
     def pairs(a: object, b: object, what: str) -> List[Tuple[List[float], List[float]]]:
         recs = records_of(a, b, what) or [(a, b)]
         return [(as_signal(ua, f"{what}u", 1)[:, 0].tolist(), as_signal(ya, f"{what}y", 1)[:, 0].tolist())
@@ -169,14 +164,44 @@ def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
         pairs(u, y, ""), tuple(int(v) for v in orders), val,
         None if beta is None else float(beta), int(centres),
         None if segment_length is None else int(segment_length), int(iterations), initial_state,
-        None if out is None else os.fspath(out))
+        None if out is None else os.fspath(out), structure)
     divisions = [{"front": (fn, fd), "back": (bn, bd), "rms": r}
                  for fn, fd, bn, bd, r in o["divisions"]]
-    return WienerHammerstein(model=Model(o["model"]), bla=o["bla"], divisions=divisions,
-                             beta=o["beta"], trials=o["trials"], cost=o["cost"],
-                             initial_cost=o["initial_cost"], rms=o["rms"],
-                             initial_states=o["initial_states"], free=o["free"],
-                             stages=o["stages"])
+    return BlockStructured(model=Model(o["model"]), bla=o["bla"], divisions=divisions,
+                           beta=o["beta"], trials=o["trials"], cost=o["cost"],
+                           initial_cost=o["initial_cost"], rms=o["rms"],
+                           initial_states=o["initial_states"], free=o["free"],
+                           stages=o["stages"])
+
+
+def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
+                       validation: Optional[Tuple[object, object]] = None,
+                       beta: Optional[float] = None, centres: int = 15,
+                       segment_length: Optional[int] = None, iterations: int = 100,
+                       initial_state: str = "zero",
+                       out: Optional[Union[str, os.PathLike]] = None) -> BlockStructured:
+    """A Wiener–Hammerstein model with both LTI blocks unknown (``structid
+    wiener-hammerstein``): the best linear approximation of ``orders`` = (NA, NB, NK) (both
+    blocks together), every division of its poles and zeros scored by a map fitted behind it,
+    then both blocks, the map and the initial states fitted from the best by simulation error.
+    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``.
+    u and y are 1-D arrays, or lists of them for several records."""
+    return _block_structured("wiener-hammerstein", u, y, orders, validation, beta, centres,
+                             segment_length, iterations, initial_state, out)
+
+
+def hammerstein_wiener(u: object, y: object, orders: Tuple[int, int, int], *,
+                       validation: Optional[Tuple[object, object]] = None,
+                       beta: Optional[float] = None, centres: int = 15,
+                       segment_length: Optional[int] = None, iterations: int = 100,
+                       initial_state: str = "zero",
+                       out: Optional[Union[str, os.PathLike]] = None) -> BlockStructured:
+    """A Hammerstein–Wiener model y = N₂(G·N₁(u)) + e with G and both maps unknown
+    (``structid hammerstein-wiener``, MATLAB's ``nlhw``): G starts as the best linear
+    approximation of ``orders`` = (NA, NB, NK), both maps as the identity, then everything is
+    fitted by simulation error. Options as :func:`wiener_hammerstein`."""
+    return _block_structured("hammerstein-wiener", u, y, orders, validation, beta, centres,
+                             segment_length, iterations, initial_state, out)
 
 
 def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:

@@ -143,3 +143,26 @@ def test_wiener_hammerstein_finds_both_blocks_and_agrees_with_the_cli(cli, tmp_p
     assert np.sqrt(np.mean((sim["y"][:, 0] - wiener_hammerstein_plant(v)) ** 2)) < 0.005
     with pytest.raises(structid.StructidError, match="three whole numbers"):
         structid.wiener_hammerstein(u, y, (2, 1))
+
+
+def test_hammerstein_wiener_fits_both_maps_and_agrees_with_the_cli(cli, tmp_path):
+    def plant(u: np.ndarray) -> np.ndarray:
+        x, y = 0.0, np.zeros(len(u))
+        for k, uk in enumerate(u):
+            y[k] = 0.8 * np.tanh(x / 0.8) + 0.2 * x
+            x = 0.7 * x + 0.3 * np.tanh(1.2 * uk)
+        return y
+    rng = np.random.default_rng(21)
+    u = np.convolve(rng.uniform(-1.5, 1.5, 2000), [1.0, 0.5], mode="same")
+    v = np.convolve(rng.uniform(-1.5, 1.5, 1000), [1.0, 0.5], mode="same")
+    y = plant(u) + 0.005 * rng.standard_normal(len(u))
+    est = write_csv(tmp_path / "est.csv", {"u": u, "y": y})
+    r = structid.hammerstein_wiener(u, y, (1, 1, 1), out=tmp_path / "py")
+    cli("hammerstein-wiener", "--data", est, "--orders", "1,1,1", "--out", tmp_path / "cli")
+    assert (tmp_path / "py" / "model.toml").read_text() == (tmp_path / "cli" / "model.toml").read_text()
+    assert r.divisions == [] and r.rms[0] < 1.5 * 0.005
+    assert [b[0] for b in r.model.block_access()] == ["input", "output"]
+    sim = r.model.simulate(v.reshape(-1, 1))
+    assert np.sqrt(np.mean((sim["y"][:, 0] - plant(v)) ** 2)) < 0.005
+    with pytest.raises(structid.StructidError, match="channel"):
+        structid.hammerstein_wiener(np.c_[u, u], y, (1, 1, 1))

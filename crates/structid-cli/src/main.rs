@@ -157,6 +157,14 @@ enum Command {
     /// one by simulation error. Writes DIR/model.toml (both blocks in one LFT, the map as the
     /// table DIR/map_N.csv), DIR/joint.json and DIR/divisions.json.
     WienerHammerstein(wiener_hammerstein::WienerHammersteinArgs),
+    /// Identify a Hammerstein–Wiener model y = N₂(G·N₁(u)) + e with G and both maps unknown.
+    ///
+    /// Estimates the best linear approximation (output error, --orders NA,NB,NK), starts both
+    /// maps as the identity, and fits G's coefficients (its gain held), both maps and the
+    /// initial states by simulation error. Writes DIR/model.toml (the maps `input` and
+    /// `output` as the tables DIR/map_input.csv and DIR/map_output.csv), DIR/joint.json and
+    /// DIR/divisions.json (the linear approximation). Same options as `wiener-hammerstein`.
+    HammersteinWiener(wiener_hammerstein::WienerHammersteinArgs),
     /// Prepare data files: benchmark splits and column selection from any delimited file.
     ///
     /// `structid data silverbox|tanks --file PATH --split NAME --out OUT.csv` extracts one split
@@ -559,7 +567,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         if !reads_data {
             return Err(CliError::input(
                 "--vars selects the signals of the data files of identify, validate, predict, \
-                 simulate, linear, refine, wiener-hammerstein, discover, static and data csv; this command reads none (a sweep \
+                 simulate, linear, refine, wiener-hammerstein, hammerstein-wiener, discover, static and data csv; this command reads none (a sweep \
                  configuration of `compare` reads a MAT-file's variables as columns named by \
                  the variables)",
             ));
@@ -576,7 +584,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Compare(a) => compare::run(a),
         Command::Linear(a) => linear::run(a),
         Command::Refine(a) => refine::run(a),
-        Command::WienerHammerstein(a) => wiener_hammerstein::run(a),
+        Command::WienerHammerstein(a) => {
+            wiener_hammerstein::run(a, structid_workflow::BlockStructure::WienerHammerstein)
+        }
+        Command::HammersteinWiener(a) => {
+            wiener_hammerstein::run(a, structid_workflow::BlockStructure::HammersteinWiener)
+        }
         Command::Data(c) => data::run(c),
         Command::Discover(a) => discover::run(a),
         Command::Input(c) => input::run(c),

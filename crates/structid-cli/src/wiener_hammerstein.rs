@@ -1,5 +1,6 @@
-//! `structid wiener-hammerstein`: a Wiener–Hammerstein model with both LTI blocks unknown, from
-//! data. Arguments are parsed here; the workflow is `structid_workflow::wiener_hammerstein`.
+//! `structid wiener-hammerstein` and `structid hammerstein-wiener`: block-structured models with
+//! every block unknown, from data. Arguments are parsed here; the workflow is
+//! `structid_workflow::wiener_hammerstein`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,12 +9,12 @@ use clap::Args;
 use structid_core::Data;
 use structid_io::{OutputGuard, SignalNames};
 use structid_joint::{JointSettings, WienerHammersteinSettings};
-use structid_workflow::{BetaChoice, WienerHammersteinRequest};
+use structid_workflow::{BetaChoice, BlockStructure, WienerHammersteinRequest};
 
 use crate::InitialStateArg;
 use crate::error::CliError;
 
-/// Arguments of `structid wiener-hammerstein`.
+/// Arguments of `structid wiener-hammerstein` and `structid hammerstein-wiener`.
 #[derive(Debug, Args)]
 pub struct WienerHammersteinArgs {
     /// The estimation data (CSV with a header row); repeat it for several records.
@@ -26,7 +27,7 @@ pub struct WienerHammersteinArgs {
     #[arg(long, value_name = "COL", default_value = "y")]
     output: String,
     /// Orders `NA,NB,NK` of the best linear approximation (MATLAB's convention): the poles of
-    /// both blocks together, the numerator's coefficients, the delay.
+    /// the LTI block(s), the numerator's coefficients, the delay.
     #[arg(long, value_name = "NA,NB,NK", value_parser = crate::linear::parse_orders, required = true)]
     orders: [usize; 3],
     /// Validation records: β is then chosen on them from 10⁻¹⁰ … 10⁻² unless --beta is given.
@@ -35,7 +36,7 @@ pub struct WienerHammersteinArgs {
     /// The map's dispersion weight β (default 1e-8 without validation records).
     #[arg(long, value_name = "B")]
     beta: Option<f64>,
-    /// Kernel centres of the map, over the range of its input plus 10 % on each side.
+    /// Kernel centres of each map, over the range of its input plus 10 % on each side.
     #[arg(long, value_name = "N", default_value_t = 15)]
     centres: usize,
     /// Levenberg–Marquardt iterations per stage.
@@ -47,7 +48,7 @@ pub struct WienerHammersteinArgs {
     /// `zero` (each record starts at rest) or `estimate` (each record's initial state fitted).
     #[arg(long, value_name = "zero|estimate", default_value = "zero")]
     initial_state: InitialStateArg,
-    /// Output directory: model.toml, map_N.csv, joint.json, divisions.json.
+    /// Output directory: model.toml, the maps' tables, joint.json, divisions.json.
     #[arg(long, short = 'o', value_name = "DIR")]
     out: PathBuf,
 }
@@ -65,8 +66,8 @@ fn records(paths: &[PathBuf], a: &WienerHammersteinArgs) -> Result<Data, CliErro
     Ok(Data::from_records(records)?)
 }
 
-/// Runs `structid wiener-hammerstein`.
-pub fn run(a: WienerHammersteinArgs) -> Result<(), CliError> {
+/// Runs `structid wiener-hammerstein` or `structid hammerstein-wiener`.
+pub fn run(a: WienerHammersteinArgs, structure: BlockStructure) -> Result<(), CliError> {
     let t0 = Instant::now();
     let mut guard = OutputGuard::new();
     for d in a.data.iter().chain(&a.validation_data) {
@@ -88,6 +89,7 @@ pub fn run(a: WienerHammersteinArgs) -> Result<(), CliError> {
         fit = fit.segment_length(l);
     }
     let req = WienerHammersteinRequest {
+        structure,
         data: &data,
         names: SignalNames {
             u: vec![a.input.clone()],
@@ -100,13 +102,15 @@ pub fn run(a: WienerHammersteinArgs) -> Result<(), CliError> {
         fit: fit.build().map_err(|e| CliError::input(e.to_string()))?,
     };
     let out = structid_workflow::wiener_hammerstein(&req)
-        .map_err(|e| CliError::from(e).context("cannot identify the Wiener–Hammerstein model"))?;
+        .map_err(|e| CliError::from(e).context("cannot identify the block-structured model"))?;
     structid_workflow::write_wiener_hammerstein_outputs(&out, &a.out, &guard)?;
-    let best = out.divisions.first().map_or(f64::NAN, |d| d.rms);
-    println!(
-        "Wiener–Hammerstein model: {} divisions of the linear approximation scored, best start RMS {best:.4e}",
-        out.divisions.len()
-    );
+    if let Some(best) = out.divisions.first() {
+        println!(
+            "Wiener–Hammerstein model: {} divisions of the linear approximation scored, best start RMS {:.4e}",
+            out.divisions.len(),
+            best.rms
+        );
+    }
     println!(
         "joint fit: cost {:.4e} → {:.4e}, simulation RMS {:.4e} (β = {:.1e}, {:.2} s)",
         out.joint.fit.initial_cost,
@@ -122,7 +126,7 @@ pub fn run(a: WienerHammersteinArgs) -> Result<(), CliError> {
         );
     }
     println!(
-        "wrote {}/model.toml, map_N.csv, joint.json and divisions.json",
+        "wrote {}/model.toml, the map tables, joint.json and divisions.json",
         a.out.display()
     );
     Ok(())

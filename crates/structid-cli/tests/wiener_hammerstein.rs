@@ -162,3 +162,108 @@ fn wiener_hammerstein_errors_are_clear() {
         "{e}"
     );
 }
+
+/// w₁ = tanh(1.2u), x⁺ = 0.7x + 0.3w₁, w₂ = 0.8·tanh(x/0.8) + 0.2x, y = w₂ + e.
+const HW_TRUTH: &str = r#"[lft]
+A = [[0.7]]
+Bu = [[0.0]]
+Be = [[0.0]]
+Bw = [[0.3, 0.0]]
+Cy = [[0.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[0.0, 1.0]]
+Cz = [[0.0], [1.0]]
+Dzu = [[1.0], [0.0]]
+Dze = [[0.0], [0.0]]
+Dzw = [[0.0, 0.0], [0.0, 0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "input"
+inputs = [0]
+output = 0
+truth = "tanh(1.2*z0)"
+
+[[nonlinearity]]
+name = "output"
+inputs = [1]
+output = 1
+truth = "0.8*tanh(z0/0.8) + 0.2*z0"
+"#;
+
+#[test]
+fn a_hammerstein_wiener_model_is_identified_with_every_block_unknown() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = d.join("truth.toml");
+    std::fs::write(&truth, HW_TRUTH).unwrap();
+    for (name, seed, noise) in [
+        ("est", 11, "0.005"),
+        ("val", 12, "0.005"),
+        ("clean", 12, "0"),
+    ] {
+        let u = d.join(format!("u_{name}.csv"));
+        write_input(&u, 2000, seed);
+        ok(&[
+            "simulate",
+            "--model",
+            p(&truth),
+            "--input",
+            p(&u),
+            "--out",
+            p(&d.join(format!("{name}.csv"))),
+            "--noise-std",
+            noise,
+            "--seed",
+            "5",
+        ]);
+    }
+    let out = d.join("hw");
+    ok(&[
+        "hammerstein-wiener",
+        "--data",
+        p(&d.join("est.csv")),
+        "--orders",
+        "1,1,1",
+        "--out",
+        p(&out),
+    ]);
+    let j = json(&out.join("joint.json"));
+    assert!(j["rms"][0].as_f64().unwrap() < 1.5 * 0.005, "{j}");
+    assert!(
+        json(&out.join("divisions.json"))["divisions"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+    ok(&[
+        "simulate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--input",
+        p(&d.join("u_val.csv")),
+        "--out",
+        p(&d.join("again.csv")),
+    ]);
+    let (a, b) = (
+        column(&d.join("again.csv"), "y"),
+        column(&d.join("clean.csv"), "y"),
+    );
+    let err = (a.iter().zip(&b).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
+    assert!(err < 0.005, "simulation error against the truth {err}");
+    // The written model has both maps in it, and `validate` scores it by simulation.
+    let o = ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--data",
+        p(&d.join("val.csv")),
+        "--out",
+        p(&d.join("v")),
+    ]);
+    assert!(o.stdout.contains("simulation RMS"), "{}", o.stdout);
+}

@@ -284,25 +284,35 @@ pub fn wiener_hammerstein_model(split: &BlockSplit, map: GaussianFeatures) -> Re
         dze: DMatrix::zeros(1, 1),
         dzw: DMatrix::zeros(1, 1),
     })?;
-    let mut model = JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, Box::new(map))])?;
-    // Each block's leading numerator coefficient stays fixed: it sets the block's gain, which
-    // the map's scales would otherwise trade against it without changing the output.
-    let delay = split.front.num[0].iter().take_while(|v| **v == 0.0).count();
-    for r in 0..n1 {
-        model = model.with_free(LftMatrix::A, r, 0)?;
-        if delay > 0 && r >= delay {
-            model = model.with_free(LftMatrix::Bu, r, 0)?;
+    let model = JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, Box::new(map))])?;
+    let model = free_canonical(model, 0, n1, LftMatrix::Bu, leading_delay(&split.front))?;
+    let model = free_canonical(model, n1, n2, LftMatrix::Bw, leading_delay(&split.back))?;
+    Ok(model)
+}
+
+/// The number of leading zero coefficients of a SISO numerator (its delay).
+pub(crate) fn leading_delay(m: &PolynomialModel) -> usize {
+    m.num[0].iter().take_while(|v| **v == 0.0).count()
+}
+
+/// Frees the coefficients of one block realised in observable canonical form at states
+/// `offset .. offset + order` of the model, whose input column of `b` is 0: A's first column of
+/// the block, and the rows of B after its leading numerator coefficient. That coefficient (D
+/// without a delay, else the B row of the delay) stays fixed: it is the block's gain, which the
+/// maps' scales would otherwise trade against it without changing the output; the delay stays
+/// too.
+pub(crate) fn free_canonical(
+    mut model: JointModel,
+    offset: usize,
+    order: usize,
+    b: LftMatrix,
+    delay: usize,
+) -> Result<JointModel> {
+    for r in 0..order {
+        model = model.with_free(LftMatrix::A, offset + r, offset)?;
+        if delay == 0 || r >= delay {
+            model = model.with_free(b, offset + r, 0)?;
         }
-    }
-    if delay == 0 {
-        for r in 0..n1 {
-            model = model.with_free(LftMatrix::Bu, r, 0)?;
-        }
-    }
-    for r in 0..n2 {
-        model = model
-            .with_free(LftMatrix::A, n1 + r, n1)?
-            .with_free(LftMatrix::Bw, n1 + r, 0)?;
     }
     Ok(model)
 }

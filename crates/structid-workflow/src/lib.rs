@@ -7,7 +7,7 @@
 //! | module | workflow |
 //! |---|---|
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
-//! | [`wiener_hammerstein`] | a Wiener–Hammerstein model with both LTI blocks unknown, from data (`structid wiener-hammerstein`) |
+//! | [`wiener_hammerstein`] | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model outside the paper's class (`structid validate` of such a model) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
@@ -25,6 +25,6 @@ pub use joint::{
 };
 pub use simulation_score::{SimulationScore, outside_paper_class, score_simulation};
 pub use wiener_hammerstein::{
-    WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,
+    BlockStructure, WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,
     write_wiener_hammerstein_outputs,
 };

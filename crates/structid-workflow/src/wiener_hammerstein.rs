@@ -1,5 +1,9 @@
-//! A Wiener–Hammerstein model identified from input–output data with both LTI blocks unknown
-//! (`structid wiener-hammerstein`).
+//! Block-structured models identified from input–output data with every block unknown: a
+//! Wiener–Hammerstein model y = G₂·N(G₁·u) + e (`structid wiener-hammerstein`) or a
+//! Hammerstein–Wiener model y = N₂(G·N₁(u)) + e (`structid hammerstein-wiener`, MATLAB's
+//! `nlhw`).
+//!
+//! For Wiener–Hammerstein:
 //!
 //! 1. The best linear approximation: an output-error model of the given orders (those of the
 //!    two blocks together) over every record.
@@ -8,6 +12,9 @@
 //!    ([`structid_joint::wiener_hammerstein`]).
 //! 3. The joint fit of both blocks, the map and the records' initial states by simulation
 //!    error; β is given or chosen on validation records, as for `refine --joint`.
+//!
+//! For Hammerstein–Wiener, G starts as the best linear approximation and both maps as the
+//! identity ([`structid_joint::hammerstein_wiener`]), then the same joint fit.
 //!
 //! The result is written like `refine --joint`'s: a model file whose LFT holds both blocks
 //! (state x = [x₁; x₂]) and whose one block `N` is the map as a table, `joint.json`, and
@@ -18,16 +25,28 @@ use std::path::Path;
 use structid_core::Data;
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, SignalNames};
 use structid_joint::{
-    JointSettings, SplitScore, WienerHammersteinSettings, fit, wiener_hammerstein_start,
+    JointSettings, SplitScore, WienerHammersteinSettings, fit, hammerstein_wiener_start,
+    wiener_hammerstein_start,
 };
 use structid_linear::{OeSettings, Orders, PolynomialModel, oe_records};
 
 use crate::error::{Result, WorkflowError};
 use crate::joint::{BetaChoice, JointOutcome, over_betas, write_joint_outputs, written};
 
+/// Which block structure [`wiener_hammerstein`] identifies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockStructure {
+    /// y = G₂·N(G₁·u) + e.
+    WienerHammerstein,
+    /// y = N₂(G·N₁(u)) + e.
+    HammersteinWiener,
+}
+
 /// What [`wiener_hammerstein`] asks for.
 #[derive(Clone, Debug)]
 pub struct WienerHammersteinRequest<'a> {
+    /// The structure.
+    pub structure: BlockStructure,
     /// The estimation data: one input, one output, one or several records.
     pub data: &'a Data,
     /// The data's column names (one u, one y), for the model file.
@@ -48,13 +67,14 @@ pub struct WienerHammersteinRequest<'a> {
 pub struct WienerHammersteinOutcome {
     /// The best linear approximation.
     pub bla: PolynomialModel,
-    /// Every division of its poles and zeros with its score, best first (for the chosen β).
+    /// Wiener–Hammerstein: every division of its poles and zeros with its score, best first
+    /// (for the chosen β); empty for Hammerstein–Wiener.
     pub divisions: Vec<SplitScore>,
     /// The joint fit from the best division, with the model file it is written as.
     pub joint: JointOutcome,
 }
 
-/// Identifies a Wiener–Hammerstein model; see the [module documentation](self).
+/// Identifies the block-structured model; see the [module documentation](self).
 ///
 /// # Errors
 /// Data with more than one input or output, bad orders, a failed linear fit, no division that
@@ -63,7 +83,7 @@ pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHa
     let data = req.data;
     if data.u().channels() != 1 || data.y().channels() != 1 || req.names.u.len() != 1 {
         return Err(WorkflowError::Request(format!(
-            "a Wiener–Hammerstein model has one input and one output; the data have {} and {}",
+            "a block-structured model has one input and one output; the data have {} and {}",
             data.u().channels(),
             data.y().channels()
         )));
@@ -81,28 +101,38 @@ pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHa
             .margin(req.start.margin())
             .beta(beta)
             .build()?;
-        let start = wiener_hammerstein_start(&bla, data, &settings)?;
-        let f = fit(&start.model, data, None, &req.fit)?;
-        divisions.push((beta, start.splits));
-        Ok(f)
+        let start = match req.structure {
+            BlockStructure::WienerHammerstein => {
+                let start = wiener_hammerstein_start(&bla, data, &settings)?;
+                divisions.push((beta, start.splits));
+                start.model
+            }
+            BlockStructure::HammersteinWiener => hammerstein_wiener_start(&bla, data, &settings)?,
+        };
+        Ok(fit(&start, data, None, &req.fit)?)
     })?;
     let divisions = divisions
         .into_iter()
         .find(|(b, _)| *b == beta)
         .map(|(_, d)| d)
         .unwrap_or_default();
+    let block = |name: &str, input: usize| BlockSpec {
+        name: name.into(),
+        inputs: vec![input],
+        output: input,
+        dispersion: DispersionSpec::Gaussian { sigma: None },
+        truth: None,
+        operator: None,
+    };
+    let blocks = match req.structure {
+        BlockStructure::WienerHammerstein => vec![block("N", 0)],
+        BlockStructure::HammersteinWiener => vec![block("input", 0), block("output", 1)],
+    };
     let mf = ModelFile {
         lft: fitted.model.lft().clone(),
         linear: None,
         signals: req.names.clone(),
-        blocks: vec![BlockSpec {
-            name: "N".into(),
-            inputs: vec![0],
-            output: 0,
-            dispersion: DispersionSpec::Gaussian { sigma: None },
-            truth: None,
-            operator: None,
-        }],
+        blocks,
         discover: None,
         path: None,
     };
