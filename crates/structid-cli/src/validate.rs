@@ -552,7 +552,7 @@ fn simulation_only(
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, vmf, model_path, &[&a.data[0]]);
     let files = ["validation.json", "simulation.csv"];
-    guard.check_out_dir(&a.out, &files)?;
+    guard.check_out_dir(&a.out, files)?;
     let table = crate::data::read_table(&a.data[0])?;
     let vdata = vmf.select_data(&table)?;
     let score = structid_workflow::score_simulation(vmf, &vdata, a.settle)?;
