@@ -19,6 +19,7 @@ use structid_core::{Data, Lft, LftMatrices};
 use structid_linear::PolynomialModel;
 use structid_lti::Signal;
 
+use crate::block::BlockMap;
 use crate::error::{JointError, Result};
 use crate::features::GaussianFeatures;
 use crate::model::{JointBlock, JointModel, LftMatrix};
@@ -50,15 +51,16 @@ fn span(v: &[f64]) -> Result<(f64, f64)> {
     }
 }
 
-/// The Hammerstein–Wiener LFT of `g` with maps `input` and `output`, G's coefficients free
-/// but its gain (see the [module docs](self)).
+/// The Hammerstein–Wiener LFT of `g` with blocks `input` and `output`, G's coefficients free
+/// but its gain (see the [module docs](self)). Either block may be any [`BlockMap`] of one
+/// input: a kernel expansion, or a hysteresis operator (a backlash ahead of G, say).
 ///
 /// ```
 /// use structid_joint::{GaussianFeatures, hammerstein_wiener_model};
 /// use structid_linear::PolynomialModel;
 /// let g = PolynomialModel::new(vec![vec![0.0, 0.5]], vec![1.0, -0.5], None).unwrap();
 /// let n = || GaussianFeatures::on_interval(-1.0, 1.0, 5, 0.5, 1e-8).unwrap();
-/// let model = hammerstein_wiener_model(&g, n(), n()).unwrap();
+/// let model = hammerstein_wiener_model(&g, Box::new(n()), Box::new(n())).unwrap();
 /// assert_eq!(model.blocks().len(), 2);
 /// assert_eq!(model.free_entries().len(), 1); // the pole; the gain 0.5 stays
 /// ```
@@ -67,13 +69,15 @@ fn span(v: &[f64]) -> Result<(f64, f64)> {
 /// A G with several inputs, or one that cannot be realised.
 pub fn hammerstein_wiener_model(
     g: &PolynomialModel,
-    input: GaussianFeatures,
-    output: GaussianFeatures,
+    input: Box<dyn BlockMap>,
+    output: Box<dyn BlockMap>,
 ) -> Result<JointModel> {
-    if g.inputs() != 1 {
+    if g.inputs() != 1 || input.input_len() != 1 || output.input_len() != 1 {
         return Err(JointError::InvalidModel(format!(
-            "a Hammerstein–Wiener model has one input; G has {}",
-            g.inputs()
+            "a Hammerstein–Wiener model has one input and scalar maps; G has {} input(s), the maps {} and {}",
+            g.inputs(),
+            input.input_len(),
+            output.input_len()
         )));
     }
     let ss = g
@@ -97,8 +101,8 @@ pub fn hammerstein_wiener_model(
     let model = JointModel::new(
         lft,
         vec![
-            JointBlock::new("input", vec![0], 0, Box::new(input)),
-            JointBlock::new("output", vec![1], 1, Box::new(output)),
+            JointBlock::new("input", vec![0], 0, input),
+            JointBlock::new("output", vec![1], 1, output),
         ],
     )?;
     free_canonical(model, 0, n, LftMatrix::Bw, leading_delay(g))
@@ -136,7 +140,7 @@ pub fn hammerstein_wiener_start(
     let (z_lo, z_hi) = span(&z)?;
     hammerstein_wiener_model(
         bla,
-        identity(u_lo, u_hi, settings)?,
-        identity(z_lo, z_hi, settings)?,
+        Box::new(identity(u_lo, u_hi, settings)?),
+        Box::new(identity(z_lo, z_hi, settings)?),
     )
 }

@@ -68,14 +68,26 @@ impl BlockMap for OperatorBlock {
     }
 
     fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
-        let mut oj = OperatorJacobian::for_operator(self.op.as_ref());
+        // The block's buffers have the operator's sizes (n_s, one input, n_p): lend them to the
+        // operator, zeroed as `OperatorJacobian::for_operator` gives them, instead of
+        // allocating a Jacobian every sample.
+        let take = |v: &mut Vec<f64>| {
+            let mut v = std::mem::take(v);
+            v.fill(0.0);
+            v
+        };
+        let mut oj = OperatorJacobian {
+            ds_ds: take(&mut jac.ds_ds),
+            ds_dz: take(&mut jac.ds_dz),
+            ds_dp: take(&mut jac.ds_dp),
+            dw_ds: take(&mut jac.dw_ds),
+            dw_dz: 0.0,
+            dw_dp: take(&mut jac.dw_dp),
+        };
         let w = self.op.step_jacobian(state, z[0], &mut oj);
         jac.dw_dz[0] = oj.dw_dz;
-        jac.dw_ds.copy_from_slice(&oj.dw_ds);
-        jac.dw_dp.copy_from_slice(&oj.dw_dp);
-        jac.ds_ds.copy_from_slice(&oj.ds_ds);
-        jac.ds_dz.copy_from_slice(&oj.ds_dz);
-        jac.ds_dp.copy_from_slice(&oj.ds_dp);
+        (jac.ds_ds, jac.ds_dz, jac.ds_dp) = (oj.ds_ds, oj.ds_dz, oj.ds_dp);
+        (jac.dw_ds, jac.dw_dp) = (oj.dw_ds, oj.dw_dp);
         w
     }
 

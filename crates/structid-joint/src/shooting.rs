@@ -263,6 +263,12 @@ mod tests {
     /// Two states, an input map feeding a map in series (z₁ = w₀ + x₂) and a latent feedback
     /// through the second: every kind of coupling the stepper has.
     fn model(a: [f64; 4], g: f64) -> JointModel {
+        model_with(a, g, false)
+    }
+
+    /// As [`model`], with the first block a Bouc–Wen operator (state and parameters of its own)
+    /// when `operator`.
+    fn model_with(a: [f64; 4], g: f64, operator: bool) -> JointModel {
         let lft = Lft::new(LftMatrices {
             a: dmatrix![a[0], a[1]; a[2], a[3]],
             bu: dmatrix![0.3; 0.0],
@@ -278,13 +284,18 @@ mod tests {
             dzw: dmatrix![0.0, 0.0; 0.8, 0.0],
         })
         .unwrap();
-        let n0 = GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.6, 1e-3).unwrap();
+        let n0: Box<dyn crate::block::BlockMap> = if operator {
+            let bw = structid_core::BoucWen::new(0.8, 0.5, 0.6, 0.2).unwrap();
+            Box::new(crate::operator::OperatorBlock::new(Box::new(bw)))
+        } else {
+            Box::new(GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.6, 1e-3).unwrap())
+        };
         let n1 = GaussianFeatures::on_interval(-2.0, 2.0, 3, 0.9, 1e-2).unwrap();
         JointModel::new(
             lft,
             vec![
                 JointBlock::new("second", vec![1], 1, Box::new(n1)),
-                JointBlock::new("first", vec![0], 0, Box::new(n0)),
+                JointBlock::new("first", vec![0], 0, n0),
             ],
         )
         .unwrap()
@@ -318,16 +329,22 @@ mod tests {
         fn normal_equations_match_finite_differences(
             a0 in 0.2f64..0.7, a1 in -0.3f64..0.3, a2 in -0.3f64..0.3, a3 in 0.2f64..0.7,
             g in 0.5f64..1.5, seed in 0u64..50, theta_scale in 0.1f64..1.0, free_first: bool,
+            operator: bool,
         ) {
-            let m = model([a0, a1, a2, a3], g);
+            let m = model_with([a0, a1, a2, a3], g, operator);
             let d = data(60, seed);
             let mut th = m.parameters();
             let offsets = m.parameter_offsets();
-            for (i, v) in th.iter_mut().enumerate().skip(offsets[0]) {
+            // The kernel maps' coefficients (an operator keeps its valid parameters).
+            let end = if operator { offsets[1] } else { th.len() };
+            for (i, v) in th.iter_mut().enumerate().take(end).skip(offsets[0]) {
                 *v = theta_scale * ((i as f64) * 1.7).sin();
             }
             let m = m.with_parameters(&th).unwrap();
-            let starts: Vec<Vec<f64>> = (0..2).map(|r| vec![0.1 * r as f64, -0.2]).collect();
+            let mut starts: Vec<Vec<f64>> = (0..2).map(|r| vec![0.1 * r as f64, -0.2]).collect();
+            for s in &mut starts {
+                s.resize(m.stacked_state_len(), 0.05);
+            }
             let segs = crate::fit::test_segments(&m, &d, &starts, Some(11), free_first);
             let mut p = Shooting::new(&m, &d, segs, 1.7);
             let mut full = m.parameters();
