@@ -262,12 +262,8 @@ mod tests {
 
     /// Two states, an input map feeding a map in series (z₁ = w₀ + x₂) and a latent feedback
     /// through the second: every kind of coupling the stepper has.
-    fn model(a: [f64; 4], g: f64) -> JointModel {
-        model_with(a, g, false)
-    }
-
-    /// As [`model`], with the first block a Bouc–Wen operator (state and parameters of its own)
-    /// when `operator`.
+    /// With `operator`, the first block is a Bouc–Wen operator (a state and parameters of its
+    /// own) instead of a kernel expansion.
     fn model_with(a: [f64; 4], g: f64, operator: bool) -> JointModel {
         let lft = Lft::new(LftMatrices {
             a: dmatrix![a[0], a[1]; a[2], a[3]],
