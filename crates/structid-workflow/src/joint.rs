@@ -1,10 +1,11 @@
 //! A model file fitted as a whole by its simulation error (`structid refine --joint`).
 //!
-//! A latent block (one whose input u and y do not reveal, [`structid_core::BlockAccess`])
-//! without a `truth` starts in two steps: the model with every map held to its affine part is
-//! fitted by simulation error (the linear start), the maps' inputs and outputs are smoothed
-//! from y with it ([`structid_joint::smooth_maps`]), and the latent map is fitted through the
-//! smoothed pairs with its dispersion.
+//! A model with a latent block (one whose input u and y do not reveal,
+//! [`structid_core::BlockAccess`]) starts in two steps: the model with every map held to the
+//! affine part of its start is fitted by simulation error (the linear start), the maps' inputs
+//! and outputs are smoothed from y with it ([`structid_joint::smooth_maps`]), and each latent
+//! map, and each map without a `truth`, is fitted through its smoothed pairs with its
+//! dispersion. A latent block's `truth` is then only the guess the linear start begins from.
 //!
 //! From the file: the LFT (its entries named free in the request move, the others stay), each
 //! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]) and each
