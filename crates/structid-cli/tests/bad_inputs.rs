@@ -486,10 +486,22 @@ fn corpus(f: &Fixtures) -> Vec<Case> {
             "z is not measurable",
         )
         .absent(&out_dir),
+        // A latent model is validated by its simulation from rest, which has no initial state
+        // to estimate.
         case(
-            "validate / z not measurable",
-            &["validate", "--model", &hidden, "--data", &data, "--out", &o],
-            "z is not measurable",
+            "validate / latent model with an estimated initial state",
+            &[
+                "validate",
+                "--model",
+                &hidden,
+                "--data",
+                &data,
+                "--out",
+                &o,
+                "--initial-state",
+                "estimate",
+            ],
+            "outside the paper's model class (block `N` is latent)",
         )
         .absent(&out_dir),
         case(

@@ -105,7 +105,14 @@ pub fn hammerstein_wiener_model(
             JointBlock::new("output", vec![1], 1, output),
         ],
     )?;
-    free_canonical(model, 0, n, LftMatrix::Bw, leading_delay(g))
+    free_canonical(
+        model,
+        0,
+        n,
+        g.den.len() - 1,
+        LftMatrix::Bw,
+        leading_delay(g),
+    )
 }
 
 /// The start of a Hammerstein–Wiener fit from the best linear approximation `bla`: G = the

@@ -4,7 +4,9 @@
 //! A latent block reads a signal that y does not reveal, so the paper's identification cannot
 //! place it. The linear part can still say where that signal probably went. Each map with an
 //! affine part ([`crate::BlockMap::affine_part`]) is written w = a + B·z + δ, its departure δ from that
-//! part unknown; a map without one is all departure. Closing the LFT with the affine parts gives
+//! part unknown; a map without one (an operator, a fixed map) is all departure, so a map that
+//! reaches y only through such a block does not reach it in the closed linear model and cannot
+//! be smoothed. Closing the LFT with the affine parts gives
 //! a linear model driven by u, the constant 1, δ and the noise e; the disturbance smoother of
 //! `structid-lti` (initial state free) finds the most likely δ and e given y:
 //!

@@ -285,8 +285,23 @@ pub fn wiener_hammerstein_model(split: &BlockSplit, map: GaussianFeatures) -> Re
         dzw: DMatrix::zeros(1, 1),
     })?;
     let model = JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, Box::new(map))])?;
-    let model = free_canonical(model, 0, n1, LftMatrix::Bu, leading_delay(&split.front))?;
-    let model = free_canonical(model, n1, n2, LftMatrix::Bw, leading_delay(&split.back))?;
+    let poles = |m: &PolynomialModel| m.den.len() - 1;
+    let model = free_canonical(
+        model,
+        0,
+        n1,
+        poles(&split.front),
+        LftMatrix::Bu,
+        leading_delay(&split.front),
+    )?;
+    let model = free_canonical(
+        model,
+        n1,
+        n2,
+        poles(&split.back),
+        LftMatrix::Bw,
+        leading_delay(&split.back),
+    )?;
     Ok(model)
 }
 
@@ -296,20 +311,24 @@ pub(crate) fn leading_delay(m: &PolynomialModel) -> usize {
 }
 
 /// Frees the coefficients of one block realised in observable canonical form at states
-/// `offset .. offset + order` of the model, whose input column of `b` is 0: A's first column of
-/// the block, and the rows of B after its leading numerator coefficient. That coefficient (D
-/// without a delay, else the B row of the delay) stays fixed: it is the block's gain, which the
-/// maps' scales would otherwise trade against it without changing the output; the delay stays
-/// too.
+/// `offset .. offset + order` of the model, whose input column of `b` is 0: the block's
+/// `poles` denominator coefficients (A's first column; states beyond them carry the delay and
+/// stay pure delays), and the rows of B after its leading numerator coefficient. That
+/// coefficient (D without a delay, else the B row of the delay) stays fixed: it is the block's
+/// gain, which the maps' scales would otherwise trade against it without changing the output;
+/// the delay stays too.
 pub(crate) fn free_canonical(
     mut model: JointModel,
     offset: usize,
     order: usize,
+    poles: usize,
     b: LftMatrix,
     delay: usize,
 ) -> Result<JointModel> {
     for r in 0..order {
-        model = model.with_free(LftMatrix::A, offset + r, offset)?;
+        if r < poles {
+            model = model.with_free(LftMatrix::A, offset + r, offset)?;
+        }
         if delay == 0 || r >= delay {
             model = model.with_free(b, offset + r, 0)?;
         }

@@ -13,7 +13,8 @@
 //!
 //! with complex-conjugate pairs kept together so that both blocks have real coefficients, the
 //! delay given to the front block, and `c` chosen so that G₁ has unit gain at DC (the signal
-//! between the blocks then has the input's scale; when G₁ has a zero at DC, `c = 1`).
+//! between the blocks then has the input's scale). When G₁'s DC gain is zero, infinite or below
+//! 10⁻⁸ in size (a zero or a pole at z = 1), `c = 1` instead.
 //! [`block_splits`] lists every allocation: 2^g of them for g groups (a real root or a
 //! conjugate pair), the two extremes being the Wiener (`G₂ = gain`) and Hammerstein
 //! (`G₁ = q^{−nk}`) structures.

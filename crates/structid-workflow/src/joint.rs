@@ -316,30 +316,61 @@ fn features(ranges: &[(f64, f64)], m: usize, width: f64, beta: f64) -> Result<Ga
     Ok(GaussianFeatures::new(centres, width * spacing, beta)?)
 }
 
-/// The starting joint model: static blocks as features fitted to their start maps over the
-/// ranges the start's simulation covers. With a latent block, the start is found from the
-/// data instead ([`latent_start`]).
-fn start_model(
-    mf: &ModelFile,
-    data: &Data,
-    s: &JointWorkflowSettings,
-    beta: f64,
-) -> Result<(JointModel, Option<Vec<Vec<f64>>>)> {
-    let fixed = fixed_model(mf, false)?;
-    let ranges = input_ranges(&fixed, data)?;
-    let access = mf.block_access()?;
-    let latent = mf
-        .blocks
-        .iter()
-        .zip(&access)
-        .any(|(b, a)| *a == structid_core::BlockAccess::Latent && b.operator.is_none());
-    if latent {
-        return latent_start(mf, &fixed, &ranges, data, s, beta);
+/// What every β's start shares: the blocks' start maps (their `truth`, or zero), the ranges
+/// their inputs cover, the LFT; and, with a latent block, the linear start and the smoothed
+/// signals ([`Base::latent`]), which do not depend on β either.
+struct Base {
+    fixed: JointModel,
+    ranges: Vec<(f64, f64)>,
+    lft: structid_core::Lft,
+    smoothed: Option<structid_joint::SmoothedMaps>,
+}
+
+impl Base {
+    fn of(mf: &ModelFile, data: &Data, s: &JointWorkflowSettings) -> Result<Self> {
+        let fixed = fixed_model(mf, false)?;
+        let ranges = input_ranges(&fixed, data)?;
+        let access = mf.block_access()?;
+        let latent = mf
+            .blocks
+            .iter()
+            .zip(&access)
+            .any(|(b, a)| *a == structid_core::BlockAccess::Latent && b.operator.is_none());
+        let base = Self {
+            fixed,
+            ranges,
+            lft: mf.model_lft()?,
+            smoothed: None,
+        };
+        if latent {
+            return base.latent(mf, data, s);
+        }
+        Ok(base)
     }
-    Ok((
-        assemble(mf, &fixed, &ranges, None, s, beta, mf.model_lft()?)?,
-        None,
-    ))
+
+    /// The starting joint model for `beta`: static blocks as features fitted to their start
+    /// maps (or, with a latent block, through their smoothed pairs), and each record's start
+    /// state when the smoothing gave one.
+    fn start(
+        &self,
+        mf: &ModelFile,
+        s: &JointWorkflowSettings,
+        beta: f64,
+    ) -> Result<(JointModel, Option<Vec<Vec<f64>>>)> {
+        let model = assemble(
+            mf,
+            &self.fixed,
+            &self.ranges,
+            self.smoothed.as_ref(),
+            s,
+            beta,
+            self.lft.clone(),
+        )?;
+        Ok((
+            model,
+            self.smoothed.as_ref().map(|m| m.initial_states.clone()),
+        ))
+    }
 }
 
 /// The joint model with each static block as features over `ranges` (of its inputs), fitted
@@ -396,78 +427,78 @@ fn assemble(
     parse_free(JointModel::new(lft, blocks)?, &s.free)
 }
 
-/// The start of a model with a latent block, in two steps. First the linear start: every
-/// static map held to the affine part of its start (its `truth`, or zero), fitted by simulation
-/// error with G's free entries and multiple shooting (a range its input does not cover at the
-/// start is widened to a unit one: only the affine part moves). Then the maps' inputs and
-/// outputs are smoothed from y with it ([`structid_joint::smooth_maps`]); each map's centres
-/// are placed over its smoothed input, and a latent map, or one without a `truth`, is fitted
-/// through its smoothed pairs with its dispersion. G's free entries start at the linear
-/// start's values, and each record's LFT state starts at its smoothed x̂₀. A latent block whose
-/// input the linear start does not tie to y (its map stayed flat) is an error that asks for a
-/// start.
-fn latent_start(
-    mf: &ModelFile,
-    fixed: &JointModel,
-    ranges: &[(f64, f64)],
-    data: &Data,
-    s: &JointWorkflowSettings,
-    beta: f64,
-) -> Result<(JointModel, Option<Vec<Vec<f64>>>)> {
-    let widened: Vec<(f64, f64)> = ranges
-        .iter()
-        .map(|&(lo, hi)| {
-            if hi > lo {
-                (lo, hi)
-            } else {
-                (lo - 0.5, lo + 0.5)
-            }
+impl Base {
+    /// The start of a model with a latent block, in two steps. First the linear start: every
+    /// static map held to the affine part of its start (its `truth`, or zero), fitted by
+    /// simulation error with G's free entries and multiple shooting (a range its input does not
+    /// cover at the start is widened to a unit one: only the affine part moves). Then the maps'
+    /// inputs and outputs are smoothed from y with it ([`structid_joint::smooth_maps`]); each
+    /// map's centres are placed over its smoothed input, and a latent map, or one without a
+    /// `truth`, is fitted through its smoothed pairs with its dispersion. G's free entries start
+    /// at the linear start's values, and each record's LFT state starts at its smoothed x̂₀. A
+    /// latent block whose input the linear start does not tie to y (its map stayed flat) is an
+    /// error that asks for a start.
+    fn latent(self, mf: &ModelFile, data: &Data, s: &JointWorkflowSettings) -> Result<Self> {
+        let widened: Vec<(f64, f64)> = self
+            .ranges
+            .iter()
+            .map(|&(lo, hi)| {
+                if hi > lo {
+                    (lo, hi)
+                } else {
+                    (lo - 0.5, lo + 0.5)
+                }
+            })
+            .collect();
+        let pinned = assemble(
+            mf,
+            &self.fixed,
+            &widened,
+            None,
+            s,
+            PINNED_BETA,
+            self.lft.clone(),
+        )?;
+        let segment = s
+            .fit
+            .segment_length()
+            .unwrap_or((data.len() / 20).clamp(50, 500));
+        let settings = JointSettings::builder()
+            .segment_length(segment)
+            .continuity_weight(s.fit.continuity_weight())
+            .max_iterations(s.fit.max_iterations())
+            .tolerance(s.fit.tolerance())
+            .estimate_initial_state(true)
+            .build()?;
+        let linear = fit(&pinned, data, None, &settings)?.model;
+        let smoothed = structid_joint::smooth_maps(&linear, data, NOISE_SHARE)?;
+        let access = mf.block_access()?;
+        if let Some(b) = mf.blocks.iter().zip(&access).find_map(|(b, a)| {
+            (*a == structid_core::BlockAccess::Latent
+                && b.inputs.iter().any(|&c| !smoothed.observable[c]))
+            .then_some(b)
+        }) {
+            return Err(WorkflowError::Request(format!(
+                "block `{}` is latent, and the linear start does not tie its input to y (its map \
+                 stays flat there, so y carries no trace of that signal): give it a start, a \
+                 `truth` with the right sign of slope such as `truth = \"0.1*z0\"`",
+                b.name
+            )));
+        }
+        let ranges = (0..smoothed.z.channels())
+            .map(|c| {
+                let z = smoothed.z.channel(c);
+                let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
+                (lo, z.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+            })
+            .collect();
+        Ok(Self {
+            fixed: self.fixed,
+            ranges,
+            lft: linear.lft().clone(),
+            smoothed: Some(smoothed),
         })
-        .collect();
-    let pinned = assemble(mf, fixed, &widened, None, s, PINNED_BETA, mf.model_lft()?)?;
-    let segment = s
-        .fit
-        .segment_length()
-        .unwrap_or((data.len() / 20).clamp(50, 500));
-    let settings = JointSettings::builder()
-        .segment_length(segment)
-        .continuity_weight(s.fit.continuity_weight())
-        .max_iterations(s.fit.max_iterations())
-        .tolerance(s.fit.tolerance())
-        .estimate_initial_state(true)
-        .build()?;
-    let linear = fit(&pinned, data, None, &settings)?.model;
-    let smoothed = structid_joint::smooth_maps(&linear, data, NOISE_SHARE)?;
-    let access = mf.block_access()?;
-    if let Some(b) = mf.blocks.iter().zip(&access).find_map(|(b, a)| {
-        (*a == structid_core::BlockAccess::Latent
-            && b.inputs.iter().any(|&c| !smoothed.observable[c]))
-        .then_some(b)
-    }) {
-        return Err(WorkflowError::Request(format!(
-            "block `{}` is latent, and the linear start does not tie its input to y (its map \
-             stays flat there, so y carries no trace of that signal): give it a start, a `truth` \
-             with the right sign of slope such as `truth = \"0.1*z0\"`",
-            b.name
-        )));
     }
-    let ranges: Vec<(f64, f64)> = (0..smoothed.z.channels())
-        .map(|c| {
-            let z = smoothed.z.channel(c);
-            let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
-            (lo, z.iter().copied().fold(f64::NEG_INFINITY, f64::max))
-        })
-        .collect();
-    let model = assemble(
-        mf,
-        fixed,
-        &ranges,
-        Some(&smoothed),
-        s,
-        beta,
-        linear.lft().clone(),
-    )?;
-    Ok((model, Some(smoothed.initial_states)))
 }
 
 /// The β that holds a kernel expansion to its affine part in the linear start of latent blocks.
@@ -523,8 +554,9 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
             "centres must be at least 2 and the width positive".into(),
         ));
     }
+    let base = Base::of(mf, req.data, s)?;
     let (beta, fit, trials) = over_betas(&s.beta, |beta| {
-        let (start, x0) = start_model(mf, req.data, s, beta)?;
+        let (start, x0) = base.start(mf, s, beta)?;
         Ok(fit(&start, req.data, x0.as_deref(), &s.fit)?)
     })?;
     let (model_file, tables) = written(mf, &fit, req.data)?;

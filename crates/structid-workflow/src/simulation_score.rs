@@ -37,18 +37,19 @@ pub fn outside_paper_class(mf: &ModelFile) -> Result<Option<String>> {
 /// A model's simulation of one record and its scores.
 #[derive(Clone, Debug)]
 pub struct SimulationScore {
-    /// ŷ from u alone, from rest (L × n_y).
+    /// ŷ from u alone, each record from rest (L × n_y, the records one after the other).
     pub simulated: Signal,
-    /// RMS of y − ŷ per output over the samples from `settle` on.
+    /// RMS of y − ŷ per output over the samples from `settle` on in each record.
     pub rms: Vec<f64>,
-    /// 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per output over the same samples (MATLAB's `compare` fit).
+    /// 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per output over the same samples (MATLAB's `compare` fit);
+    /// NaN when y does not move there.
     pub fit_percent: Vec<f64>,
-    /// Leading samples left out of the scores.
+    /// Leading samples of each record left out of the scores.
     pub settle: usize,
 }
 
-/// Simulates `mf` (every static block by its `truth`, operators as declared) on `data` from
-/// rest and scores it after `settle` samples.
+/// Simulates `mf` (every static block by its `truth`, operators as declared) on each record of
+/// `data` from rest and scores it after `settle` samples of each record.
 ///
 /// ```
 /// use structid_core::{Data, Signal};
@@ -77,26 +78,40 @@ pub struct SimulationScore {
 /// # Errors
 /// `settle` not below the record's length, and the simulation's errors.
 pub fn score_simulation(mf: &ModelFile, data: &Data, settle: usize) -> Result<SimulationScore> {
-    if settle >= data.len() {
+    let records = data.records();
+    if let Some(r) = records.iter().position(|r| settle >= r.len()) {
         return Err(WorkflowError::Request(format!(
-            "settle = {settle} leaves none of the {} samples to score",
-            data.len()
+            "settle = {settle} leaves none of the {} samples of record {} to score",
+            records[r].len(),
+            r + 1
         )));
     }
-    let sim = simulate_model_file(mf, data.u(), None)?;
     let ny = data.y().channels();
+    let mut simulated = Vec::with_capacity(data.len() * ny);
+    let (mut y, mut s) = (vec![Vec::new(); ny], vec![Vec::new(); ny]);
+    for rec in &records {
+        let sim = simulate_model_file(mf, rec.u(), None)?;
+        simulated.extend_from_slice(sim.y.as_slice());
+        for c in 0..ny {
+            y[c].extend_from_slice(&rec.y().channel(c)[settle..]);
+            s[c].extend_from_slice(&sim.y.channel(c)[settle..]);
+        }
+    }
     let (mut rms, mut fit) = (Vec::with_capacity(ny), Vec::with_capacity(ny));
-    for c in 0..ny {
-        let (y, s) = (&data.y().channel(c)[settle..], &sim.y.channel(c)[settle..]);
+    for (y, s) in y.iter().zip(&s) {
         let n = y.len() as f64;
         let mean = y.iter().sum::<f64>() / n;
         let err: f64 = y.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum();
         let spread: f64 = y.iter().map(|a| (a - mean).powi(2)).sum();
         rms.push((err / n).sqrt());
-        fit.push(100.0 * (1.0 - (err / spread).sqrt()));
+        fit.push(if spread > 0.0 {
+            100.0 * (1.0 - (err / spread).sqrt())
+        } else {
+            f64::NAN
+        });
     }
     Ok(SimulationScore {
-        simulated: sim.y,
+        simulated: Signal::new(ny, simulated).map_err(structid_core::Error::from)?,
         rms,
         fit_percent: fit,
         settle,

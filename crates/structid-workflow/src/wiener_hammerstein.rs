@@ -81,11 +81,18 @@ pub struct WienerHammersteinOutcome {
 /// gives a finite start, and the joint fit's errors.
 pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHammersteinOutcome> {
     let data = req.data;
-    if data.u().channels() != 1 || data.y().channels() != 1 || req.names.u.len() != 1 {
+    if data.u().channels() != 1 || data.y().channels() != 1 {
         return Err(WorkflowError::Request(format!(
             "a block-structured model has one input and one output; the data have {} and {}",
             data.u().channels(),
             data.y().channels()
+        )));
+    }
+    if req.names.u.len() != 1 || req.names.y.len() != 1 {
+        return Err(WorkflowError::Request(format!(
+            "a block-structured model has one input and one output; {} input and {} output name(s) were given",
+            req.names.u.len(),
+            req.names.y.len()
         )));
     }
     let [na, nb, nk] = req.orders;

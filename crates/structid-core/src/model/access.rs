@@ -21,8 +21,8 @@ pub enum BlockAccess {
         /// The blocks it reads.
         upstream: Vec<String>,
     },
-    /// Its input is a signal that u and y do not reveal (an unmeasured state, say): a latent
-    /// block.
+    /// Its input is a signal that u and y do not reveal (an unmeasured state, say), whether or
+    /// not it also reads other maps: a latent block.
     Latent,
 }
 
@@ -84,18 +84,19 @@ impl Lft {
                         }
                     }
                 }
-                if !upstream.is_empty() {
-                    return Ok(BlockAccess::InSeries { upstream });
-                }
+                // The block's own z rows without the same-sample terms of other maps: latent
+                // when even these are not computable (in series or not: latent is what needs the
+                // smoothed start), in series when only the other maps' outputs are missing.
                 let own = Lft::new(LftMatrices {
                     cz: rows(&m.cz, p.inputs),
                     dzu: rows(&m.dzu, p.inputs),
                     dze: rows(&m.dze, p.inputs),
-                    dzw: rows(&m.dzw, p.inputs),
+                    dzw: DMatrix::zeros(p.inputs.len(), d.w),
                     ..m.clone()
                 })?;
                 match own.measurability() {
-                    Ok(_) => Ok(BlockAccess::Computable),
+                    Ok(_) if upstream.is_empty() => Ok(BlockAccess::Computable),
+                    Ok(_) => Ok(BlockAccess::InSeries { upstream }),
                     Err(Error::NotMeasurable { .. }) => Ok(BlockAccess::Latent),
                     Err(e) => Err(e),
                 }
