@@ -50,13 +50,16 @@ fn write_input(path: &Path, len: usize, seed: u64) {
     std::fs::write(path, text).unwrap();
 }
 
-#[test]
-fn a_wiener_hammerstein_model_is_identified_with_both_blocks_unknown() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
+/// Writes `truth.toml` from `model` and simulates it into `est.csv` and `val.csv` (noise 0.005)
+/// and the noise-free `clean.csv` (the validation input), from inputs drawn with `seeds`.
+fn records(d: &Path, model: &str, seeds: [u64; 2]) {
     let truth = d.join("truth.toml");
-    std::fs::write(&truth, TRUTH).unwrap();
-    for (name, seed, noise) in [("est", 1, "0.005"), ("val", 2, "0.005"), ("clean", 2, "0")] {
+    std::fs::write(&truth, model).unwrap();
+    for (name, seed, noise) in [
+        ("est", seeds[0], "0.005"),
+        ("val", seeds[1], "0.005"),
+        ("clean", seeds[1], "0"),
+    ] {
         let u = d.join(format!("u_{name}.csv"));
         write_input(&u, 2000, seed);
         ok(&[
@@ -73,6 +76,13 @@ fn a_wiener_hammerstein_model_is_identified_with_both_blocks_unknown() {
             "5",
         ]);
     }
+}
+
+#[test]
+fn a_wiener_hammerstein_model_is_identified_with_both_blocks_unknown() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    records(d, TRUTH, [1, 2]);
     let out = d.join("wh");
     let o = ok(&[
         "wiener-hammerstein",
@@ -199,29 +209,7 @@ truth = "0.8*tanh(z0/0.8) + 0.2*z0"
 fn a_hammerstein_wiener_model_is_identified_with_every_block_unknown() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let truth = d.join("truth.toml");
-    std::fs::write(&truth, HW_TRUTH).unwrap();
-    for (name, seed, noise) in [
-        ("est", 11, "0.005"),
-        ("val", 12, "0.005"),
-        ("clean", 12, "0"),
-    ] {
-        let u = d.join(format!("u_{name}.csv"));
-        write_input(&u, 2000, seed);
-        ok(&[
-            "simulate",
-            "--model",
-            p(&truth),
-            "--input",
-            p(&u),
-            "--out",
-            p(&d.join(format!("{name}.csv"))),
-            "--noise-std",
-            noise,
-            "--seed",
-            "5",
-        ]);
-    }
+    records(d, HW_TRUTH, [11, 12]);
     let out = d.join("hw");
     ok(&[
         "hammerstein-wiener",
