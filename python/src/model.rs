@@ -229,10 +229,10 @@ impl Model {
         Ok(d)
     }
 
-    /// Why the model is outside the paper's class (a block in series, latent or an operator),
-    /// or None: then identification and one-step prediction apply.
-    fn outside_paper_class(&self) -> PyResult<Option<String>> {
-        structid_workflow::outside_paper_class(&self.file).map_err(error)
+    /// Why `validate` scores the model by simulation alone (a latent block or an operator), or
+    /// None: then the one-step predictor applies.
+    fn why_simulation_only(&self) -> PyResult<Option<String>> {
+        structid_workflow::why_simulation_only(&self.file).map_err(error)
     }
 
     /// How identification reaches each block: (name, "computable" | "in series" | "latent",
@@ -254,7 +254,7 @@ impl Model {
     }
 
     /// The simulation from rest on (u, y) and its scores after `settle` samples (as `structid
-    /// validate` of a model outside the paper's class): returns (y_sim, rms, fit_percent).
+    /// validate` of a model without a one-step predictor): returns (y_sim, rms, fit_percent).
     #[pyo3(signature = (u, y, settle=0))]
     fn score_simulation<'py>(
         &self,

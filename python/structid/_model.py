@@ -168,14 +168,15 @@ class Model:
         computable need :func:`refine_joint`."""
         return self._native.block_access()
 
-    def outside_paper_class(self) -> Optional[str]:
-        """Why the model is outside the paper's class (a block in series, latent, or an
-        operator), or None."""
-        return self._native.outside_paper_class()
+    def why_simulation_only(self) -> Optional[str]:
+        """Why ``validate`` scores the model by its simulation alone (a latent block or a
+        hysteresis operator), or None when the one-step predictor applies (maps in series are
+        evaluated in order)."""
+        return self._native.why_simulation_only()
 
     def score_simulation(self, u: object, y: object, settle: int = 0) -> Dict[str, Any]:
         """The simulation from rest on (u, y) and its scores after ``settle`` samples, as
-        ``structid validate`` scores a model outside the paper's class: ``{"y_sim", "rms",
+        ``structid validate`` scores a model without a one-step predictor: ``{"y_sim", "rms",
         "fit_percent"}`` (``fit_percent`` is 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per output)."""
         return self._native.score_simulation(as_signal(u, "u", self.dims["u"]),
                                              as_signal(y, "y", self.dims["y"]), int(settle))

@@ -93,8 +93,8 @@ def test_refine_joint_recovers_the_play_and_agrees_with_the_cli(cli, tmp_path):
     # The fitted model simulates the validation record close to the truth.
     sim = r.model.simulate(v.reshape(-1, 1))
     assert np.sqrt(np.mean((sim["y"][:, 0] - plant(v)) ** 2)) < 0.02
-    # It is outside the paper's class, and scored by its simulation as `structid validate` does.
-    assert "hysteresis operator" in r.model.outside_paper_class()
+    # It has no one-step predictor, and is scored by its simulation as `structid validate` does.
+    assert "hysteresis operator" in r.model.why_simulation_only()
     assert [a[1] for a in r.model.block_access()] == ["computable", "in series"]
     score = r.model.score_simulation(v.reshape(-1, 1), plant(v).reshape(-1, 1))
     np.testing.assert_allclose(score["y_sim"][:, 0], sim["y"][:, 0], rtol=0, atol=1e-12)

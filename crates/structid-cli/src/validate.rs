@@ -331,7 +331,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
         }
         None => {
             let vmf = ModelFile::from_path(model_path)?;
-            if let Some(why) = structid_workflow::outside_paper_class(&vmf)? {
+            if let Some(why) = structid_workflow::why_simulation_only(&vmf)? {
                 return simulation_only(&a, &vmf, model_path, &why);
             }
             let missing: Vec<&str> = vmf
@@ -534,7 +534,7 @@ pub fn run(a: ValidateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// `structid validate` of a model outside the paper's class (`why`): the simulation from rest
+/// `structid validate` of a model without a one-step predictor (`why`): the simulation from rest
 /// and its scores ([`structid_workflow::score_simulation`]); no one-step prediction.
 fn simulation_only(
     a: &ValidateArgs,
@@ -544,7 +544,7 @@ fn simulation_only(
 ) -> Result<(), CliError> {
     if matches!(a.initial_state, InitialStateArg::Estimate) {
         return Err(CliError::input(format!(
-            "`{}` is outside the paper's model class ({why}): it is validated by its simulation from \
+            "`{}` has no one-step predictor ({why}): it is validated by its simulation from \
              rest; drop --initial-state estimate",
             model_path.display()
         )));
@@ -590,7 +590,7 @@ fn simulation_only(
         "prediction": Value::Null,
         "why_no_prediction": format!(
             "{why}: the one-step predictor and the residual tests need every block's input computable \
-             from u and y and no operator; the model is validated by its simulation from rest"
+             from u and y (maps in series evaluated in order) and no operator; the model is validated by its simulation from rest"
         ),
         "samples": vdata.len(),
         "outputs": outputs,

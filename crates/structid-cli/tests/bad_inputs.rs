@@ -501,7 +501,7 @@ fn corpus(f: &Fixtures) -> Vec<Case> {
                 "--initial-state",
                 "estimate",
             ],
-            "outside the paper's model class (block `N` is latent)",
+            "has no one-step predictor (block `N` is latent)",
         )
         .absent(&out_dir),
         case(

@@ -86,7 +86,7 @@ fn series_maps_are_simulated_as_an_ordered_evaluation_written_by_hand() {
 }
 
 #[test]
-fn a_cycle_through_d_zw_is_refused_and_series_maps_cannot_be_predicted() {
+fn a_cycle_through_d_zw_is_refused_and_d_zw_is_named_where_z_must_be_free_of_w() {
     let mut m = lft().matrices().clone();
     m.dzw[(0, 2)] = 0.1; // a now reads c's output: a → b → c → a
     let e = Lft::new(m)
@@ -123,7 +123,7 @@ fn a_cycle_through_d_zw_is_refused_and_series_maps_cannot_be_predicted() {
     for w in ["w[0]", "w[2]"] {
         assert!(cycle.iter().any(|c| c == w), "{cycle:?}");
     }
-    // Computing z from u and y needs D_zw = 0.
+    // Computing z from u and y alone (the maps unknown) needs D_zw = 0.
     assert!(matches!(
         lft().check_no_algebraic_loop(),
         Err(Error::SeriesMaps { .. })

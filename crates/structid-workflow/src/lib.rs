@@ -8,7 +8,7 @@
 //! |---|---|
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`] | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
-//! | [`simulation_score`] | validation by simulation alone of a model outside the paper's class (`structid validate` of such a model) |
+//! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
 pub mod error;
@@ -23,7 +23,7 @@ pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
 };
-pub use simulation_score::{SimulationScore, outside_paper_class, score_simulation};
+pub use simulation_score::{SimulationScore, score_simulation, why_simulation_only};
 pub use wiener_hammerstein::{
     BlockStructure, WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,
     write_wiener_hammerstein_outputs,

@@ -1,8 +1,9 @@
-//! Validation by simulation alone, for models outside the paper's class.
+//! Validation by simulation alone, for models without a one-step predictor.
 //!
 //! The one-step predictor and the residual tests of `structid validate` need every block's
-//! input computable from u and y and no block with memory. A model with maps in series, latent
-//! blocks or hysteresis operators (what `refine --joint` and `wiener-hammerstein` write) is
+//! input computable from u and y once the maps are known (maps in series are evaluated in
+//! order, [`structid_core::Model::compute_z_with_maps`]) and no block with memory. A model with
+//! a latent block or a hysteresis operator (what `refine --joint` writes for such plants) is
 //! validated by what it can do: simulate the record from u alone, from rest, and score the
 //! simulation error after `settle` samples.
 
@@ -12,26 +13,23 @@ use structid_io::ModelFile;
 use crate::error::{Result, WorkflowError};
 use crate::joint::simulate_model_file;
 
-/// Why a model file is outside the paper's class, or `None` when it is inside (every block
-/// computable from u and y, no operator).
+/// Why `structid validate` scores `mf` by its simulation alone (a latent block, a hysteresis
+/// operator), or `None` when the one-step predictor applies.
 ///
 /// # Errors
 /// A malformed model (a cycle of maps, channels out of range).
-pub fn outside_paper_class(mf: &ModelFile) -> Result<Option<String>> {
+pub fn why_simulation_only(mf: &ModelFile) -> Result<Option<String>> {
     if let Some(b) = mf.blocks.iter().find(|b| b.operator.is_some()) {
         return Ok(Some(format!("block `{}` is a hysteresis operator", b.name)));
     }
     mf.evaluation_order()?;
     let access = mf.block_access()?;
-    Ok(mf.blocks.iter().zip(&access).find_map(|(b, a)| match a {
-        BlockAccess::Computable => None,
-        BlockAccess::InSeries { upstream } => Some(format!(
-            "block `{}` reads the output of `{}` in the same sample (maps in series)",
-            b.name,
-            upstream.join("`, `")
-        )),
-        BlockAccess::Latent => Some(format!("block `{}` is latent", b.name)),
-    }))
+    Ok(mf
+        .blocks
+        .iter()
+        .zip(&access)
+        .find(|(_, a)| **a == BlockAccess::Latent)
+        .map(|(b, _)| format!("block `{}` is latent", b.name)))
 }
 
 /// A model's simulation of one record and its scores.

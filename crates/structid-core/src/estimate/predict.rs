@@ -141,6 +141,7 @@ struct Stepper {
     dyw: Vec<f64>,
     cz: Vec<f64>,
     dzu: Vec<f64>,
+    dzw: Vec<f64>,
 }
 
 fn rows(m: &nalgebra::DMatrix<f64>) -> Vec<f64> {
@@ -159,7 +160,8 @@ fn gemv(m: &[f64], x: &[f64], out: &mut [f64]) {
 }
 
 impl Stepper {
-    /// z = C_z·x + D_zu·u (e = 0 and D_zw = 0 in a simulation).
+    /// z = C_z·x + D_zu·u (e = 0 in a simulation; the maps' same-sample terms D_zw·w are
+    /// added block by block, in evaluation order).
     fn z(&self, x: &[f64], u: &[f64], z: &mut [f64]) {
         z.fill(0.0);
         gemv(&self.cz, x, z);
@@ -190,8 +192,8 @@ impl Stepper {
 ///
 /// # Errors
 /// [`Error::DimensionMismatch`] for a wrong number of maps or channels,
-/// [`Error::AlgebraicLoop`] for a cycle of maps, [`Error::SeriesMaps`] for maps in series, [`Error::NotMeasurable`] when z cannot be computed
-/// from the record, [`Error::InvalidParameter`] when `settle` is not less than the record
+/// [`Error::AlgebraicLoop`] for a cycle of maps, [`Error::NotMeasurable`] when z cannot be
+/// computed from the record (maps in series are evaluated in order; a latent block has no z), [`Error::InvalidParameter`] when `settle` is not less than the record
 /// length, [`Error::Numerical`] when a map returns a non-finite value or the prediction
 /// diverges.
 pub fn predict(
@@ -202,7 +204,7 @@ pub fn predict(
 ) -> Result<Prediction> {
     check_record(model, maps, data, settings.settle, "prediction")?;
     let lft = model.lft();
-    model.check_z_free_of_w()?;
+    let order = model.evaluation_order()?;
     let blocks = model.blocks();
     let len = data.len();
     let m = lft.matrices();
@@ -221,6 +223,7 @@ pub fn predict(
         dyw: rows(&m.dyw),
         cz: rows(&m.cz),
         dzu: rows(&m.dzu),
+        dzw: rows(&m.dzw),
     };
     let meas = measured_residual(model, maps, data, settings.initial_state)?;
     let n = st.n;
@@ -246,17 +249,21 @@ pub fn predict(
     }
 
     let k = settings.horizon;
-    let bindings: Vec<(&[usize], usize, &dyn Interpolant)> = blocks
+    // In evaluation order: a map in series reads, through D_zw, outputs already computed in
+    // this sample (its D_zw row is zero in the columns of the blocks still to come).
+    let bindings: Vec<(&[usize], usize, &dyn Interpolant)> = order
         .iter()
-        .zip(maps)
-        .map(|(b, m)| (b.inputs.as_slice(), b.output, *m))
+        .map(|&b| (blocks[b].inputs.as_slice(), blocks[b].output, maps[b]))
         .collect();
     let (mut z, mut w, mut zin) = (vec![0.0; st.nz], vec![0.0; st.nw], Vec::new());
     let mut eval_maps = |x: &[f64], u: &[f64], w: &mut [f64]| {
         st.z(x, u, &mut z);
         for &(inputs, output, map) in &bindings {
             zin.clear();
-            zin.extend(inputs.iter().map(|&i| z[i]));
+            zin.extend(inputs.iter().map(|&i| {
+                let series: f64 = (0..st.nw).map(|j| st.dzw[i * st.nw + j] * w[j]).sum();
+                z[i] + series
+            }));
             w[output] = map.eval(&zin);
         }
     };

@@ -38,6 +38,19 @@ fn rows(m: &DMatrix<f64>, r: &[usize]) -> DMatrix<f64> {
 }
 
 impl Lft {
+    /// The LFT restricted to the z rows `inputs`, without their same-sample terms D_zw: the
+    /// part of a block's input that u and y must reveal ([module docs](self)).
+    pub(crate) fn own_rows(&self, inputs: &[usize]) -> Result<Lft> {
+        let m = self.matrices();
+        Lft::new(LftMatrices {
+            cz: rows(&m.cz, inputs),
+            dzu: rows(&m.dzu, inputs),
+            dze: rows(&m.dze, inputs),
+            dzw: DMatrix::zeros(inputs.len(), self.dims().w),
+            ..m.clone()
+        })
+    }
+
     /// How each block in `places` is reached (see the [module docs](self)).
     ///
     /// ```
@@ -87,14 +100,7 @@ impl Lft {
                 // The block's own z rows without the same-sample terms of other maps: latent
                 // when even these are not computable (in series or not: latent is what needs the
                 // smoothed start), in series when only the other maps' outputs are missing.
-                let own = Lft::new(LftMatrices {
-                    cz: rows(&m.cz, p.inputs),
-                    dzu: rows(&m.dzu, p.inputs),
-                    dze: rows(&m.dze, p.inputs),
-                    dzw: DMatrix::zeros(p.inputs.len(), d.w),
-                    ..m.clone()
-                })?;
-                match own.measurability() {
+                match self.own_rows(p.inputs)?.measurability() {
                     Ok(_) if upstream.is_empty() => Ok(BlockAccess::Computable),
                     Ok(_) => Ok(BlockAccess::InSeries { upstream }),
                     Err(Error::NotMeasurable { .. }) => Ok(BlockAccess::Latent),

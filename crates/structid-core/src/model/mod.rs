@@ -7,6 +7,7 @@ pub mod lft;
 pub mod maps;
 pub mod measurability;
 pub mod order;
+pub mod series;
 pub mod simulate;
 pub mod structure;
 
@@ -165,13 +166,6 @@ impl Model {
                 output: b.output,
             })
             .collect()
-    }
-
-    /// Refuses D_zw ≠ 0 where z must be computed from u and y: a cycle as
-    /// [`Error::AlgebraicLoop`] (naming its blocks), maps in series as [`Error::SeriesMaps`].
-    pub fn check_z_free_of_w(&self) -> Result<()> {
-        self.evaluation_order()?;
-        self.lft.check_no_algebraic_loop()
     }
 
     /// A copy with every block's dispersion replaced by `f(block)`.

@@ -276,8 +276,8 @@ impl ValidationReport {
 /// Errors: [`Error::DimensionMismatch`] when the number of maps differs from the number of
 /// blocks or the data's channels do not fit the model; [`Error::InvalidParameter`] when
 /// `max_lag` is not less than the record length; [`Error::AlgebraicLoop`] for a cycle of
-/// maps and [`Error::SeriesMaps`] for maps in series (the one-step predictor computes z from the
-/// data); [`Error::NotMeasurable`] when z cannot be computed from the data (or,
+/// maps; [`Error::NotMeasurable`] when z cannot be computed from the data, with maps in series
+/// evaluated in order ([`Model::compute_z_with_maps`]; a latent block has no such z), (or,
 /// with an estimated x₀, when x₀ reaches z and y differently); [`Error::Numerical`] when a map
 /// returns a non-finite value; [`Error::Unstable`] when the simulation or the one-step
 /// predictor diverges; [`Error::InvalidStructure`] when the
@@ -329,8 +329,8 @@ pub fn validate(
             ),
         });
     }
-    // The predictor computes z from u and y; check before the (longer) prediction work.
-    model.check_z_free_of_w()?;
+    // A cycle of maps has no z at all; refuse it before the (longer) prediction work.
+    model.evaluation_order()?;
     let MeasuredResidual {
         v,
         whitener,
@@ -363,7 +363,7 @@ pub fn validate(
     // simulation does not start with a spurious jump.
     let x0 = match x0 {
         Some(x) if !x.is_empty() => {
-            let z = windows::measured_z(model, data)?;
+            let z = windows::measured_z(model, maps, data)?;
             let head = 0..len.min(x.len().max(1) * 50).max(1);
             Some(windows::window_state(
                 model,
@@ -485,8 +485,17 @@ pub(crate) fn measured_residual(
     // A z filtered from y through a dynamic Ψ(q) with states of its own (a measured rate's
     // memory of the previous output) would depend on the unknown x₀; it is computed from the
     // record with Ψ at rest instead, i.e. taken as measured, as identification takes it.
+    // Maps in series: z is computed once, with the maps evaluated in order, and then taken as
+    // measured (the one-step predictor needs only z and ŵ = N̂(z), whatever D_zw is).
     let with_z;
+    let series = lft.matrices().dzw.iter().any(|v| *v != 0.0);
     let data = match (initial_state, data.z()) {
+        (_, None) if series => {
+            with_z = data
+                .clone()
+                .with_z(model.compute_z_with_maps(data.u(), data.y(), maps)?)?;
+            &with_z
+        }
         (InitialState::Estimate, None) if matches!(lft.measurability(), Ok(crate::ZSource::Dynamic { ref system }) if system.order() > 0) =>
         {
             with_z = data.clone().with_z(lft.compute_z(data.u(), data.y())?.0)?;

@@ -209,13 +209,13 @@ impl ScoredSimulation {
     }
 }
 
-/// The measured z of `data` for `model`: the data's own z columns, or z computed from u and y
-/// ([`crate::Lft::compute_z`]).
-pub(crate) fn measured_z(model: &Model, data: &Data) -> Result<Signal> {
+/// The measured z of `data` for `model`: the data's own z columns, or z computed from u and y,
+/// with `maps` evaluated in order where blocks are in series ([`Model::compute_z_with_maps`]).
+pub(crate) fn measured_z(model: &Model, maps: &[&dyn Interpolant], data: &Data) -> Result<Signal> {
     match data.z() {
         Some(z) => Ok(z.clone()),
         None if model.lft().dims().z == 0 => Ok(Signal::zeros(data.len(), 0)),
-        None => Ok(model.lft().compute_z(data.u(), data.y())?.0),
+        None => model.compute_z_with_maps(data.u(), data.y(), maps),
     }
 }
 
@@ -377,7 +377,7 @@ pub fn state_from_record(
     init: usize,
 ) -> Result<Vec<f64>> {
     crate::validation::check_record(model, maps, data, 0, "the state estimate")?;
-    let z = measured_z(model, data)?;
+    let z = measured_z(model, maps, data)?;
     let w = opened_w(model, maps, &z)?;
     window_state(model, data, &z, &w, 0..init.clamp(1, data.len()), None)
 }
@@ -434,7 +434,7 @@ pub fn simulate_scored(
             (sim.y, scored, vec![x0.map(<[f64]>::to_vec)])
         }
         Scoring::Windowed(windows) => {
-            let z = measured_z(model, data)?;
+            let z = measured_z(model, maps, data)?;
             let w = opened_w(model, maps, &z)?;
             let mut simulated = Signal::zeros(len, ny);
             let mut scored = Vec::new();
