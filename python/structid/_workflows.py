@@ -96,7 +96,8 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
                  out: Optional[Union[str, os.PathLike]] = None) -> JointRefinement:
     """Fits the whole model at once by its simulation error (``structid refine --joint``):
     the entries of G named in ``free`` (``"A"`` for every non-zero entry of A, ``"Bw[1][0]"``
-    for one), every static map as a Gaussian kernel expansion, every hysteresis operator's
+    for one), every static map as a Gaussian kernel expansion (or, when its ``truth`` declares
+    ``parameters``, that parametric family's parameters), every hysteresis operator's
     parameters and each record's initial state, by Levenberg–Marquardt (multiple shooting
     with ``segment_length``). It takes maps in series, maps of unmeasured states and
     operators. ``beta`` is a number, or ``"auto"`` with ``validation=(u_val, y_val)``: the

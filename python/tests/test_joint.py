@@ -105,6 +105,19 @@ def test_refine_joint_recovers_the_play_and_agrees_with_the_cli(cli, tmp_path):
     assert j["prediction"] is None and "operator" in j["why_no_prediction"]
 
 
+def test_a_named_family_is_fitted_from_python_and_written_back_with_its_parameter():
+    # The sensor law s·tanh(z/s) with the level s as a parameter, starting from s = 0.4.
+    family = TRUTH.replace('truth = "0.8*tanh(z0/0.8)"',
+                           'truth = "s*tanh(z0/s)"\nparameters = { s = 0.4 }')
+    u = inputs(3000, 0.0)
+    r = structid.refine_joint(structid.Model.from_toml(family), u, plant(u), beta=1e-6)
+    text = r.model.to_toml()
+    line = next(l for l in text.splitlines() if l.startswith("parameters"))
+    s = float(line.split("{ s = ")[1].rstrip(" }"))
+    assert abs(s - 0.8) < 0.01 * 0.8, line
+    assert r.cost <= r.initial_cost
+
+
 def test_refine_joint_errors_are_python_exceptions():
     model = structid.Model.from_toml(START)
     u = inputs(200, 0.0)

@@ -434,3 +434,85 @@ fn maps_in_series_are_validated_with_their_one_step_prediction() {
     assert!((sim - pred).abs() <= 1e-12 * sim, "{sim} vs {pred}");
     assert!((0.0045..0.0055).contains(&pred), "{pred}");
 }
+
+#[test]
+fn a_named_family_is_fitted_with_the_play_and_g_and_written_back() {
+    // The sensor law is a family s·tanh(z/s) with its level s unknown: `refine --joint` fits s
+    // with the play's half-width and the pole, and writes the law back with the fitted s.
+    let family = |s: f64| {
+        TRUTH.replace(
+            "truth = \"0.8*tanh(z0/0.8)\"",
+            &format!("truth = \"s*tanh(z0/s)\"\nparameters = {{ s = {s} }}"),
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = d.join("truth.toml");
+    std::fs::write(&truth, family(0.8)).unwrap();
+    let u = d.join("u.csv");
+    write_input(&u, 3000, 0.0);
+    let data = d.join("est.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        p(&truth),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.005",
+        "--seed",
+        "11",
+    ]);
+    let start = d.join("start.toml");
+    std::fs::write(
+        &start,
+        family(0.4)
+            .replace("half_width = 0.2", "half_width = 0.05")
+            .replace("A = [[0.85]]", "A = [[0.7]]"),
+    )
+    .unwrap();
+    let out = d.join("fit");
+    ok(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&start),
+        "--data",
+        p(&data),
+        "--free",
+        "A",
+        "--beta",
+        "1e-6",
+        "--out",
+        p(&out),
+    ]);
+    let j = json(&out.join("joint.json"));
+    let pole = j["free"][0]["value"].as_f64().unwrap();
+    assert!((pole - 0.85).abs() < 0.01, "pole {pole}");
+    let written = std::fs::read_to_string(out.join("model.toml")).unwrap();
+    let line = written
+        .lines()
+        .find(|l| l.starts_with("parameters"))
+        .unwrap_or_else(|| panic!("{written}"));
+    let s: f64 = line
+        .split("{ s = ")
+        .nth(1)
+        .unwrap()
+        .trim_end_matches(" }")
+        .parse()
+        .unwrap();
+    assert!((s - 0.8).abs() < 0.03 * 0.8, "{line}");
+    assert!(written.contains("truth = \"s*tanh(z0/s)\""), "{written}");
+    assert!(!out.join("map_limit.csv").exists());
+    ok(&[
+        "simulate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--input",
+        p(&u),
+        "--out",
+        p(&d.join("again.csv")),
+    ]);
+}

@@ -142,6 +142,7 @@ pub use maps::{ExprMap, LookupTable};
 pub use measurability::ZSource;
 pub use model::access::BlockAccess;
 pub use model::order::BlockPlace;
+pub use model::parametric::ParametricMap;
 pub use model::{Data, Model, NonlinearBlock};
 pub use polynomial::{PolynomialDispersion, PolynomialFeatures};
 pub use posterior::Posterior;

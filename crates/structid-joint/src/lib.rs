@@ -59,6 +59,7 @@
 
 pub mod block;
 pub mod error;
+pub mod family;
 pub mod features;
 pub mod fit;
 pub mod fixed;
@@ -72,6 +73,7 @@ pub mod wiener_hammerstein;
 
 pub use block::{BlockJacobian, BlockMap};
 pub use error::{JointError, Result};
+pub use family::FamilyMap;
 pub use features::GaussianFeatures;
 pub use fit::{JointFit, JointSettings, JointSettingsBuilder, Stage, fit};
 pub use fixed::FixedMap;

@@ -262,9 +262,9 @@ mod tests {
 
     /// Two states, an input map feeding a map in series (z₁ = w₀ + x₂) and a latent feedback
     /// through the second: every kind of coupling the stepper has.
-    /// With `operator`, the first block is a Bouc–Wen operator (a state and parameters of its
-    /// own) instead of a kernel expansion.
-    fn model_with(a: [f64; 4], g: f64, operator: bool) -> JointModel {
+    /// The first block is a kernel expansion (`first` = 0), a Bouc–Wen operator (1: a state
+    /// and parameters of its own) or a parametric family (2: derivatives by dual numbers).
+    fn model_with(a: [f64; 4], g: f64, first: u8) -> JointModel {
         let lft = Lft::new(LftMatrices {
             a: dmatrix![a[0], a[1]; a[2], a[3]],
             bu: dmatrix![0.3; 0.0],
@@ -280,11 +280,21 @@ mod tests {
             dzw: dmatrix![0.0, 0.0; 0.8, 0.0],
         })
         .unwrap();
-        let n0: Box<dyn crate::block::BlockMap> = if operator {
-            let bw = structid_core::BoucWen::new(0.8, 0.5, 0.6, 0.2).unwrap();
-            Box::new(crate::operator::OperatorBlock::new(Box::new(bw)))
-        } else {
-            Box::new(GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.6, 1e-3).unwrap())
+        let n0: Box<dyn crate::block::BlockMap> = match first {
+            1 => {
+                let bw = structid_core::BoucWen::new(0.8, 0.5, 0.6, 0.2).unwrap();
+                Box::new(crate::operator::OperatorBlock::new(Box::new(bw)))
+            }
+            2 => {
+                let law = structid_core::ParametricMap::parse(
+                    "a*tanh(b*z0) + c*z0*abs(z0)",
+                    1,
+                    vec![("a".into(), 0.7), ("b".into(), 1.2), ("c".into(), 0.1)],
+                )
+                .unwrap();
+                Box::new(crate::family::FamilyMap::new(law))
+            }
+            _ => Box::new(GaussianFeatures::on_interval(-1.0, 1.0, 4, 0.6, 1e-3).unwrap()),
         };
         let n1 = GaussianFeatures::on_interval(-2.0, 2.0, 3, 0.9, 1e-2).unwrap();
         JointModel::new(
@@ -325,14 +335,14 @@ mod tests {
         fn normal_equations_match_finite_differences(
             a0 in 0.2f64..0.7, a1 in -0.3f64..0.3, a2 in -0.3f64..0.3, a3 in 0.2f64..0.7,
             g in 0.5f64..1.5, seed in 0u64..50, theta_scale in 0.1f64..1.0, free_first: bool,
-            operator: bool,
+            first in 0u8..3,
         ) {
-            let m = model_with([a0, a1, a2, a3], g, operator);
+            let m = model_with([a0, a1, a2, a3], g, first);
             let d = data(60, seed);
             let mut th = m.parameters();
             let offsets = m.parameter_offsets();
-            // The kernel maps' coefficients (an operator keeps its valid parameters).
-            let end = if operator { offsets[1] } else { th.len() };
+            // The kernel maps' coefficients (an operator or a family keeps its parameters).
+            let end = if first == 0 { th.len() } else { offsets[1] };
             for (i, v) in th.iter_mut().enumerate().take(end).skip(offsets[0]) {
                 *v = theta_scale * ((i as f64) * 1.7).sin();
             }

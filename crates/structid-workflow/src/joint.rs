@@ -8,8 +8,10 @@
 //! dispersion. A latent block's `truth` is then only the guess the linear start begins from.
 //!
 //! From the file: the LFT (its entries named free in the request move, the others stay), each
-//! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]) and each
-//! `operator` block as the hysteresis operator it declares. A static block starts from its
+//! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]), each
+//! block whose `truth` declares `parameters` as that parametric family ([`FamilyMap`], its
+//! parameters fitted and written back), and each `operator` block as the hysteresis operator it
+//! declares. A static block starts from its
 //! `truth` when the file gives one (a previous estimate written as a table, a guess), from zero
 //! otherwise. Its centres are spread over the range its input covers when the starting model
 //! is simulated on the estimation data, so a block of an unmeasured signal gets centres where
@@ -26,8 +28,8 @@ use std::sync::Arc;
 use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
 use structid_io::{BlockSpec, ModelFile, OutputGuard, TruthSpec};
 use structid_joint::{
-    BlockMap, FixedMap, GaussianFeatures, JointBlock, JointFit, JointModel, JointSettings,
-    OperatorBlock, fit,
+    BlockMap, FamilyMap, FixedMap, GaussianFeatures, JointBlock, JointFit, JointModel,
+    JointSettings, OperatorBlock, fit,
 };
 
 use crate::error::{Result, WorkflowError};
@@ -392,6 +394,22 @@ fn assemble(
             blocks.push(b.clone());
             continue;
         }
+        if let Some(law) = spec
+            .truth
+            .as_ref()
+            .map(|t| t.family(spec.inputs.len()))
+            .transpose()?
+            .flatten()
+        {
+            // A named family keeps its law and starts from the values declared.
+            blocks.push(JointBlock::new(
+                spec.name.clone(),
+                spec.inputs.clone(),
+                spec.output,
+                Box::new(FamilyMap::new(law)),
+            ));
+            continue;
+        }
         let r: Vec<(f64, f64)> = spec.inputs.iter().map(|&i| ranges[i]).collect();
         if r.iter()
             .any(|(lo, hi)| hi.partial_cmp(lo) != Some(std::cmp::Ordering::Greater))
@@ -630,6 +648,12 @@ pub(crate) fn written(
     for (spec, b) in out.blocks.iter_mut().zip(f.model.blocks()) {
         if let Some(op) = &spec.operator {
             spec.operator = Some(op.with_parameters(&b.map.parameters()));
+            continue;
+        }
+        if let Some(TruthSpec::Family { parameters, .. }) = &mut spec.truth {
+            for ((_, v), fitted) in parameters.iter_mut().zip(b.map.parameters()) {
+                *v = fitted;
+            }
             continue;
         }
         // 401 points along one input, a 41 × 41 grid over two: far finer than the centres, so

@@ -81,7 +81,7 @@ impl ExprMap {
 
 /// The names the expression parser knows as functions: the unary ones (`sin`, `tanh`, …) and
 /// the binary ones written as calls (`min`, `max`, `atan2`).
-fn function_names() -> Vec<&'static str> {
+pub(crate) fn function_names() -> Vec<&'static str> {
     <exmex::FloatOpsFactory<f64> as exmex::MakeOperators<f64>>::make()
         .iter()
         .filter(|op| op.constant().is_none())
@@ -92,7 +92,7 @@ fn function_names() -> Vec<&'static str> {
 
 /// The first name of `text` written as a call, `name(`, that is not a function of the parser
 /// (which would otherwise report it in terms of its own grammar).
-fn unknown_function(text: &str) -> Option<&str> {
+pub(crate) fn unknown_function(text: &str) -> Option<&str> {
     let known = function_names();
     let bytes = text.as_bytes();
     let mut i = 0;

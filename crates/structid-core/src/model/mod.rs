@@ -7,6 +7,7 @@ pub mod lft;
 pub mod maps;
 pub mod measurability;
 pub mod order;
+pub mod parametric;
 pub mod series;
 pub mod simulate;
 pub mod structure;

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
-use structid_core::{ExprMap, Interpolant, LookupTable};
+use structid_core::{ExprMap, Interpolant, LookupTable, ParametricMap};
 use toml::Spanned;
 
 use super::dispersion::DispersionSpec;
@@ -18,6 +18,15 @@ use crate::error::IoError;
 pub enum TruthSpec {
     /// An expression in `z0, z1, …` (see [`structid_core::ExprMap`]).
     Expression(String),
+    /// A parametric family: an expression in `z0, z1, …` and named parameters with their
+    /// values (`parameters = { k = 0.3 }` beside `truth`; see
+    /// [`structid_core::ParametricMap`]). `refine --joint` fits the parameters.
+    Family {
+        /// The expression.
+        expression: String,
+        /// (name, value) of each parameter, sorted by name.
+        parameters: Vec<(String, f64)>,
+    },
     /// A lookup table read from a CSV file.
     Table {
         /// The file name as written in the model file (relative to its directory).
@@ -32,6 +41,7 @@ impl TruthSpec {
     pub fn to_interpolant(&self, dim: usize) -> Result<Box<dyn Interpolant>, IoError> {
         match self {
             TruthSpec::Expression(text) => Ok(Box::new(ExprMap::parse(text, dim)?)),
+            TruthSpec::Family { .. } => Ok(Box::new(self.family(dim)?.expect("a family"))),
             TruthSpec::Table { table, file } => {
                 if table.dim() != dim {
                     return Err(IoError::InvalidArgument(format!(
@@ -44,10 +54,37 @@ impl TruthSpec {
         }
     }
 
-    /// A one-line description: the expression, or `table <file>`.
+    /// The parametric family of `dim` inputs, when this truth is one.
+    pub fn family(&self, dim: usize) -> Result<Option<ParametricMap>, IoError> {
+        match self {
+            TruthSpec::Family {
+                expression,
+                parameters,
+            } => Ok(Some(ParametricMap::parse(
+                expression,
+                dim,
+                parameters.clone(),
+            )?)),
+            _ => Ok(None),
+        }
+    }
+
+    /// A one-line description: the expression (with its parameters' values), or
+    /// `table <file>`.
     pub fn describe(&self) -> String {
         match self {
             TruthSpec::Expression(t) => t.clone(),
+            TruthSpec::Family {
+                expression,
+                parameters,
+            } => format!(
+                "{expression} with {}",
+                parameters
+                    .iter()
+                    .map(|(n, v)| format!("{n} = {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
             TruthSpec::Table { file, .. } => format!("table {file}"),
         }
     }
@@ -89,6 +126,7 @@ pub(super) struct RawBlock {
     pub(super) dispersion: Option<Spanned<toml::Value>>,
     truth: Option<Spanned<toml::Value>>,
     table: Option<Spanned<String>>,
+    parameters: Option<Spanned<toml::Value>>,
     pub(super) operator: Option<Spanned<toml::Value>>,
 }
 
@@ -176,17 +214,42 @@ pub(super) fn parse_truth(
         return load_table_truth(t.get_ref(), dim, block, base_dir, src.line(t.span().start))
             .map(Some);
     }
+    let parameters = raw
+        .parameters
+        .as_ref()
+        .map(|p| parse_parameters(p, block, src))
+        .transpose()?;
     let Some(truth) = truth else {
+        if let Some(p) = &raw.parameters {
+            return Err(err_at(
+                src.line(p.span().start),
+                format!(
+                    "block `{block}` declares `parameters` without a `truth` expression that uses them"
+                ),
+            ));
+        }
         return Ok(None);
     };
     let line = src.line(truth.span().start);
-    match truth.get_ref() {
-        toml::Value::String(expr) => {
+    match (truth.get_ref(), parameters) {
+        (toml::Value::String(expr), Some(parameters)) => {
+            ParametricMap::parse(expr, dim, parameters.clone())
+                .map_err(|e| err_at(line, format!("truth of block `{block}`: {e}")))?;
+            Ok(Some(TruthSpec::Family {
+                expression: expr.clone(),
+                parameters,
+            }))
+        }
+        (_, Some(_)) => Err(err_at(
+            line,
+            format!("block `{block}`: `parameters` go with a truth expression, not a table"),
+        )),
+        (toml::Value::String(expr), None) => {
             ExprMap::parse(expr, dim)
                 .map_err(|e| err_at(line, format!("truth of block `{block}`: {e}")))?;
             Ok(Some(TruthSpec::Expression(expr.clone())))
         }
-        toml::Value::Table(t) => {
+        (toml::Value::Table(t), None) => {
             if let Some(key) = t.keys().find(|k| k.as_str() != "table") {
                 return Err(err_at(
                     line,
@@ -207,7 +270,7 @@ pub(super) fn parse_truth(
                 )),
             }
         }
-        other => Err(err_at(
+        (other, None) => Err(err_at(
             line,
             format!(
                 "block `{block}`: truth must be an expression string or {{ table = \"file.csv\" }}, not {}",
@@ -262,4 +325,49 @@ pub(super) fn parse_index_list(
         return Err(bad("is empty; a block reads at least one z channel".into()));
     }
     Ok(out)
+}
+
+/// `parameters = { name = value, … }`: finite numbers, sorted by name.
+fn parse_parameters(
+    p: &Spanned<toml::Value>,
+    block: &str,
+    src: &Source<'_>,
+) -> Result<Vec<(String, f64)>, IoError> {
+    let line = src.line(p.span().start);
+    let toml::Value::Table(t) = p.get_ref() else {
+        return Err(err_at(
+            line,
+            format!("block `{block}`: parameters must be a table such as {{ k = 0.3, c = 1.0 }}"),
+        ));
+    };
+    if t.is_empty() {
+        return Err(err_at(
+            line,
+            format!("block `{block}`: `parameters` is empty; drop it for a fixed expression"),
+        ));
+    }
+    t.iter()
+        .map(|(name, v)| {
+            let value = match v {
+                toml::Value::Float(f) => *f,
+                toml::Value::Integer(i) => *i as f64,
+                other => {
+                    return Err(err_at(
+                        line,
+                        format!(
+                            "block `{block}`: parameter `{name}` must be a number, not {}",
+                            value_kind(other)
+                        ),
+                    ));
+                }
+            };
+            if !value.is_finite() {
+                return Err(err_at(
+                    line,
+                    format!("block `{block}`: parameter `{name}` = {value} is not finite"),
+                ));
+            }
+            Ok((name.clone(), value))
+        })
+        .collect()
 }

@@ -1088,3 +1088,53 @@ fn discover_errors_name_the_line() {
         "{e}"
     );
 }
+
+#[test]
+fn a_parametric_family_parses_evaluates_round_trips_and_its_errors_name_the_line() {
+    let text = CANONICAL.replace(
+        "truth = \"tanh(z0)\"         # optional, used by `simulate` and for error reports",
+        "truth = \"k*tanh(z0/k) + c\"\nparameters = { k = 2, c = -0.25 }",
+    );
+    let m = ModelFile::parse(&text, None).unwrap();
+    let Some(TruthSpec::Family { parameters, .. }) = &m.blocks[0].truth else {
+        panic!("{:?}", m.blocks[0].truth)
+    };
+    // Sorted by name.
+    assert_eq!(
+        parameters,
+        &[("c".to_string(), -0.25), ("k".to_string(), 2.0)]
+    );
+    let f = m.blocks[0].truth_map().unwrap().unwrap();
+    assert!((f.eval(&[1.0]) - (2.0 * 0.5f64.tanh() - 0.25)).abs() < 1e-15);
+    let again = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(again.blocks[0].truth, m.blocks[0].truth);
+
+    let with = |params: &str| {
+        CANONICAL.replace(
+            "truth = \"tanh(z0)\"         # optional, used by `simulate` and for error reports",
+            &format!("truth = \"k*tanh(z0)\"\n{params}"),
+        )
+    };
+    // The expression's errors point at `truth` (line 26), the values' at `parameters` (27).
+    for (bad, needle, line) in [
+        (with("parameters = { c = 1.0 }"), "`k`", 26),
+        (with("parameters = { k = 1.0, z0 = 2.0 }"), "`z0`", 26),
+        (with("parameters = { k = \"big\" }"), "must be a number", 27),
+        (with("parameters = {}"), "empty", 27),
+        (with("parameters = [1.0]"), "must be a table", 27),
+    ] {
+        let e = err(&bad);
+        assert!(
+            e.contains(needle) && e.contains(&format!("line {line}")),
+            "{needle}: {e}"
+        );
+    }
+    let e = err(&CANONICAL.replace(
+        "truth = \"tanh(z0)\"         # optional, used by `simulate` and for error reports",
+        "parameters = { k = 1.0 }",
+    ));
+    assert!(
+        e.contains("without a `truth`") && e.contains("line 26"),
+        "{e}"
+    );
+}

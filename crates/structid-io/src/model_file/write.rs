@@ -71,6 +71,17 @@ impl ModelFile {
                 Some(TruthSpec::Table { file, .. }) => {
                     let _ = writeln!(s, "truth = {{ table = {} }}", toml_string(file));
                 }
+                Some(TruthSpec::Family {
+                    expression,
+                    parameters,
+                }) => {
+                    let _ = writeln!(s, "truth = {}", toml_string(expression));
+                    let values: Vec<String> = parameters
+                        .iter()
+                        .map(|(n, v)| format!("{n} = {}", format_number(*v)))
+                        .collect();
+                    let _ = writeln!(s, "parameters = {{ {} }}", values.join(", "));
+                }
                 None => {}
             }
         }
