@@ -516,3 +516,45 @@ fn a_named_family_is_fitted_with_the_play_and_g_and_written_back() {
         p(&d.join("again.csv")),
     ]);
 }
+
+#[test]
+fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = d.join("truth.toml");
+    std::fs::write(&truth, TRUTH).unwrap();
+    let u = d.join("u.csv");
+    write_input(&u, 3000, 0.0);
+    let data = d.join("est.csv");
+    ok(&[
+        "simulate", "--model", p(&truth), "--input", p(&u), "--out", p(&data),
+        "--noise-std", "0.005", "--seed", "12",
+    ]);
+    let start = d.join("start.toml");
+    std::fs::write(
+        &start,
+        TRUTH.replace(
+            "truth = \"0.8*tanh(z0/0.8)\"",
+            "dispersion = { kind = \"fourier\", sigma = 0.4, harmonics = 5 }",
+        ),
+    )
+    .unwrap();
+    let out = d.join("fit");
+    let o = ok(&[
+        "refine", "--joint", "--model", p(&start), "--data", p(&data), "--beta", "1e-8",
+        "--out", p(&out),
+    ]);
+    // The play's half-width, and 2·5 + 1 Fourier coefficients plus an affine part (a Gaussian
+    // expansion would have 15 + 2).
+    assert!(o.stdout.contains("14 parameters"), "{}", o.stdout);
+    let z = csv_column(&out.join("map_limit.csv"), "z1");
+    let v = csv_column(&out.join("map_limit.csv"), "value");
+    let err = z
+        .iter()
+        .zip(&v)
+        .map(|(z, v)| (v - 0.8 * (z / 0.8).tanh()).powi(2))
+        .sum::<f64>()
+        / z.len() as f64;
+    let range = v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(err.sqrt() < 0.05 * range, "map error {} of range {range}", err.sqrt());
+}

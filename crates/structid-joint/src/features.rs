@@ -198,64 +198,11 @@ impl GaussianFeatures {
         y: &[f64],
         filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
     ) -> Result<Self> {
-        if z.len() != y.len() || z.is_empty() {
-            return Err(invalid(
-                "points",
-                z.len() as f64,
-                "need as many values as points, and at least one",
-            ));
-        }
         let (m, p) = (self.centres.len(), self.centres[0].len());
         let np = m + self.affine.len();
+        let columns = regressor_columns(z, y, p, np, &|zk, row| self.features(zk, row))?;
         let n = z.len();
-        let mut columns = vec![vec![0.0; n]; np];
-        let mut row = vec![0.0; np];
-        for (k, (zk, &yk)) in z.iter().zip(y).enumerate() {
-            if zk.len() != p || !yk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
-                return Err(invalid(
-                    "points",
-                    yk,
-                    "points need the centres' dimension and finite values",
-                ));
-            }
-            self.features(zk, &mut row);
-            for (c, r) in columns.iter_mut().zip(&row) {
-                c[k] = *r;
-            }
-        }
-        let columns: Vec<Vec<f64>> = columns.iter().map(|c| filter(c)).collect();
-        if columns.iter().any(|c| c.len() != n) {
-            return Err(invalid(
-                "filter",
-                n as f64,
-                "the filter must return a signal as long as its input",
-            ));
-        }
-        let mut gram = DMatrix::from_fn(np, np, |i, j| {
-            columns[i].iter().zip(&columns[j]).map(|(a, b)| a * b).sum()
-        });
-        let rhs = DVector::from_fn(np, |i, _| {
-            columns[i].iter().zip(y).map(|(a, b)| a * b).sum()
-        });
-        let reg = self.gram() * (self.beta * n as f64);
-        let mut kk = gram.view_mut((0, 0), (m, m));
-        kk += &reg;
-        // A small ridge on everything keeps the solve defined when points do not reach every
-        // centre (then the coefficient of an unreached centre is left near zero).
-        let ridge = 1e-10 * (0..np).map(|i| gram[(i, i)]).fold(1e-300, f64::max);
-        for i in 0..np {
-            gram[(i, i)] += ridge;
-        }
-        let sol = gram
-            .cholesky()
-            .ok_or_else(|| {
-                invalid(
-                    "points",
-                    n as f64,
-                    "the fit's normal equations are not positive definite",
-                )
-            })?
-            .solve(&rhs);
+        let sol = regularised_fit(columns, y, filter, &(self.gram() * (self.beta * n as f64)))?;
         let mut out = self.clone();
         out.theta = sol.rows(0, m).iter().copied().collect();
         out.affine = sol.rows(m, np - m).iter().copied().collect();
@@ -263,7 +210,7 @@ impl GaussianFeatures {
     }
 
     /// The regressors [K(z, c_1) … K(z, c_m), 1, z₁ … z_p] of the parameters at `z`.
-    fn features(&self, z: &[f64], out: &mut [f64]) {
+    pub(crate) fn features(&self, z: &[f64], out: &mut [f64]) {
         let m = self.centres.len();
         for (o, c) in out.iter_mut().zip(&self.centres) {
             *o = self.kernel(z, c);
@@ -301,6 +248,84 @@ impl GaussianFeatures {
         grad[0] = slope;
         value
     }
+}
+
+/// The columns φ_i(z_k) of the `np` regressors `features` writes at each point, after
+/// checking the points (p inputs each, finite, one value each).
+pub(crate) fn regressor_columns(
+    z: &[Vec<f64>],
+    y: &[f64],
+    p: usize,
+    np: usize,
+    features: &dyn Fn(&[f64], &mut [f64]),
+) -> Result<Vec<Vec<f64>>> {
+    if z.len() != y.len() || z.is_empty() {
+        return Err(invalid(
+            "points",
+            z.len() as f64,
+            "need as many values as points, and at least one",
+        ));
+    }
+    let mut columns = vec![vec![0.0; z.len()]; np];
+    let mut row = vec![0.0; np];
+    for (k, (zk, &yk)) in z.iter().zip(y).enumerate() {
+        if zk.len() != p || !yk.is_finite() || zk.iter().any(|v| !v.is_finite()) {
+            return Err(invalid(
+                "points",
+                yk,
+                "points need the map's input dimension and finite values",
+            ));
+        }
+        features(zk, &mut row);
+        for (c, r) in columns.iter_mut().zip(&row) {
+            c[k] = *r;
+        }
+    }
+    Ok(columns)
+}
+
+/// The coefficients of a map linear in them, w = Σ_i θ_i·φ_i(z), whose output seen through
+/// `filter` fits `y`: the regressor `columns` φ_i(z_k) are filtered, and the normal equations
+/// get `penalty` (m × m, already scaled) on the first m coefficients (the kernel part; the
+/// trend is not penalised), plus a relative ridge of 10⁻¹⁰ that keeps the solve defined when
+/// the points do not reach every feature.
+pub(crate) fn regularised_fit(
+    columns: Vec<Vec<f64>>,
+    y: &[f64],
+    filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
+    penalty: &DMatrix<f64>,
+) -> Result<DVector<f64>> {
+    let (n, np, m) = (y.len(), columns.len(), penalty.nrows());
+    let columns: Vec<Vec<f64>> = columns.iter().map(|c| filter(c)).collect();
+    if columns.iter().any(|c| c.len() != n) {
+        return Err(invalid(
+            "filter",
+            n as f64,
+            "the filter must return a signal as long as its input",
+        ));
+    }
+    let mut gram = DMatrix::from_fn(np, np, |i, j| {
+        columns[i].iter().zip(&columns[j]).map(|(a, b)| a * b).sum()
+    });
+    let rhs = DVector::from_fn(np, |i, _| {
+        columns[i].iter().zip(y).map(|(a, b)| a * b).sum()
+    });
+    let mut kk = gram.view_mut((0, 0), (m, m));
+    kk += penalty;
+    let ridge = 1e-10 * (0..np).map(|i| gram[(i, i)]).fold(1e-300, f64::max);
+    for i in 0..np {
+        gram[(i, i)] += ridge;
+    }
+    Ok(gram
+        .cholesky()
+        .ok_or_else(|| {
+            invalid(
+                "points",
+                n as f64,
+                "the fit's normal equations are not positive definite",
+            )
+        })?
+        .solve(&rhs))
 }
 
 impl BlockMap for GaussianFeatures {

@@ -8,7 +8,8 @@
 //! dispersion. A latent block's `truth` is then only the guess the linear start begins from.
 //!
 //! From the file: the LFT (its entries named free in the request move, the others stay), each
-//! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]), each
+//! static block as a Gaussian kernel expansion on fixed centres ([`GaussianFeatures`]) or, with
+//! a `fourier` dispersion, as Fourier features on its input's range ([`FourierFeatures`]), each
 //! block whose `truth` declares `parameters` as that parametric family ([`FamilyMap`], its
 //! parameters fitted and written back), and each `operator` block as the hysteresis operator it
 //! declares. A static block starts from its
@@ -26,10 +27,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
-use structid_io::{BlockSpec, ModelFile, OutputGuard, TruthSpec};
+use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, TruthSpec};
 use structid_joint::{
-    BlockMap, FamilyMap, FixedMap, GaussianFeatures, JointBlock, JointFit, JointModel,
-    JointSettings, OperatorBlock, fit,
+    BlockMap, FamilyMap, FixedMap, FourierFeatures, GaussianFeatures, JointBlock, JointFit,
+    JointModel, JointSettings, OperatorBlock, fit,
 };
 
 use crate::error::{Result, WorkflowError};
@@ -318,6 +319,45 @@ fn features(ranges: &[(f64, f64)], m: usize, width: f64, beta: f64) -> Result<Ga
     Ok(GaussianFeatures::new(centres, width * spacing, beta)?)
 }
 
+/// A block with a `fourier` dispersion (with or without a trend) as Fourier features on the
+/// padded `ranges` of its inputs: σ as given or 0.1 × the largest range, the harmonics as given
+/// or as the weights resolve, the combination as given. `None` for the other dispersions.
+fn fourier(
+    d: &DispersionSpec,
+    ranges: &[(f64, f64)],
+    beta: f64,
+) -> Result<Option<FourierFeatures>> {
+    let (sigma, harmonics, additive) = match d {
+        DispersionSpec::Fourier {
+            sigma,
+            harmonics,
+            additive,
+        } => (*sigma, *harmonics, *additive),
+        DispersionSpec::WithTrend { kernel, .. } => return fourier(kernel, ranges, beta),
+        _ => return Ok(None),
+    };
+    let domain: Vec<(f64, f64)> = ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            let pad = 0.05 * (hi - lo).max(1e-6);
+            (lo - pad, hi + pad)
+        })
+        .collect();
+    let widest = domain.iter().map(|(a, b)| b - a).fold(0.0, f64::max);
+    let sigma = sigma.unwrap_or(0.1 * widest);
+    let kernel = structid_core::FourierKernel::new(
+        &structid_core::FourierWeights::GaussianLike { sigma },
+        harmonics,
+        domain,
+        if additive {
+            structid_core::Combination::Additive
+        } else {
+            structid_core::Combination::Tensor
+        },
+    )?;
+    Ok(Some(FourierFeatures::new(kernel, beta)?))
+}
+
 /// What every β's start shares: the blocks' start maps (their `truth`, or zero), the ranges
 /// their inputs cover, the LFT; and, with a latent block, the linear start and the smoothed
 /// signals ([`Base::latent`]), which do not depend on β either.
@@ -422,24 +462,28 @@ fn assemble(
             )));
         }
         let f = features(&r, s.centres, s.width, beta)?;
-        let map = match smoothed {
-            Some(sm) if spec.truth.is_none() || *access == structid_core::BlockAccess::Latent => {
-                let points: Vec<Vec<f64>> = (0..sm.z.len())
+        let (points, values): (Vec<Vec<f64>>, Vec<f64>) = match smoothed {
+            Some(sm) if spec.truth.is_none() || *access == structid_core::BlockAccess::Latent => (
+                (0..sm.z.len())
                     .map(|k| spec.inputs.iter().map(|&c| sm.z.get(k, c)).collect())
-                    .collect();
-                f.fitted_to(&points, &sm.w.channel(spec.output))?
-            }
+                    .collect(),
+                sm.w.channel(spec.output),
+            ),
             _ => {
-                let points: Vec<Vec<f64>> = f.centres().to_vec();
-                let values: Vec<f64> = points.iter().map(|z| b.map.eval(&mut [], z)).collect();
-                f.fitted_to(&points, &values)?
+                let points = f.centres().to_vec();
+                let values = points.iter().map(|z| b.map.eval(&mut [], z)).collect();
+                (points, values)
             }
+        };
+        let map: Box<dyn BlockMap> = match fourier(&spec.dispersion, &r, beta)? {
+            Some(ff) => Box::new(ff.fitted_to(&points, &values)?),
+            None => Box::new(f.fitted_to(&points, &values)?),
         };
         blocks.push(JointBlock::new(
             spec.name.clone(),
             spec.inputs.clone(),
             spec.output,
-            Box::new(map),
+            map,
         ));
     }
     parse_free(JointModel::new(lft, blocks)?, &s.free)
