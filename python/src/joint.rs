@@ -7,7 +7,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_io::{ModelFile, OutputGuard};
 use structid_joint::JointSettings;
-use structid_workflow::{BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs};
+use structid_workflow::{
+    BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs,
+};
 
 use crate::convert::{self, error, invalid};
 use crate::model::Model;
@@ -47,14 +49,22 @@ pub fn refine_joint_columns<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let data = records(&mf, columns, "estimation")?;
-    let validation = validation.map(|v| records(&mf, v, "validation")).transpose()?;
+    let validation = validation
+        .map(|v| records(&mf, v, "validation"))
+        .transpose()?;
     let beta = BetaChoice::from_options(beta, validation).map_err(error)?;
     let estimate_x0 = match initial_state {
         "estimate" => true,
         "zero" => false,
-        other => return Err(invalid(format!("initial_state `{other}` is neither \"zero\" nor \"estimate\""))),
+        other => {
+            return Err(invalid(format!(
+                "initial_state `{other}` is neither \"zero\" nor \"estimate\""
+            )));
+        }
     };
-    let mut fit = JointSettings::builder().max_iterations(iterations).estimate_initial_state(estimate_x0);
+    let mut fit = JointSettings::builder()
+        .max_iterations(iterations)
+        .estimate_initial_state(estimate_x0);
     if let Some(l) = segment_length {
         fit = fit.segment_length(l);
     }
@@ -66,7 +76,13 @@ pub fn refine_joint_columns<'py>(
         ..JointWorkflowSettings::default()
     };
     let outcome = py
-        .detach(|| refine_joint(&JointRequest { model: &mf, data: &data, settings }))
+        .detach(|| {
+            refine_joint(&JointRequest {
+                model: &mf,
+                data: &data,
+                settings,
+            })
+        })
         .map_err(error)?;
     if let Some(dir) = &out {
         write_joint_outputs(&outcome, dir, &OutputGuard::new()).map_err(error)?;
@@ -81,7 +97,11 @@ pub fn refine_joint_columns<'py>(
 fn joint_items(d: &Bound<'_, PyDict>, outcome: &structid_workflow::JointOutcome) -> PyResult<()> {
     d.set_item("model", Model::from_file_value(outcome.model_file.clone())?)?;
     d.set_item("beta", outcome.beta)?;
-    let trials: Vec<(f64, Vec<f64>)> = outcome.trials.iter().map(|t| (t.beta, t.validation_rms.clone())).collect();
+    let trials: Vec<(f64, Vec<f64>)> = outcome
+        .trials
+        .iter()
+        .map(|t| (t.beta, t.validation_rms.clone()))
+        .collect();
     d.set_item("trials", trials)?;
     d.set_item("cost", outcome.fit.cost)?;
     d.set_item("initial_cost", outcome.fit.initial_cost)?;
@@ -100,7 +120,14 @@ fn joint_items(d: &Bound<'_, PyDict>, outcome: &structid_workflow::JointOutcome)
         .fit
         .stages
         .iter()
-        .map(|s| (s.name.to_string(), s.segments, s.costs.clone(), format!("{:?}", s.status)))
+        .map(|s| {
+            (
+                s.name.to_string(),
+                s.segments,
+                s.costs.clone(),
+                format!("{:?}", s.status),
+            )
+        })
         .collect();
     d.set_item("stages", stages)?;
     Ok(())
@@ -114,7 +141,10 @@ fn wh_records(records: Vec<(Vec<f64>, Vec<f64>)>, what: &str) -> PyResult<struct
             let u = structid_core::Signal::new(1, u).map_err(error)?;
             let y = structid_core::Signal::new(1, y).map_err(error)?;
             if y.len() != n {
-                return Err(invalid(format!("{what}: u has {n} samples and y {}", y.len())));
+                return Err(invalid(format!(
+                    "{what}: u has {n} samples and y {}",
+                    y.len()
+                )));
             }
             structid_core::Data::new(u, y).map_err(error)
         })
@@ -156,23 +186,40 @@ pub fn wiener_hammerstein_records<'py>(
             )));
         }
     };
-    use structid_workflow::{WienerHammersteinRequest, wiener_hammerstein, write_wiener_hammerstein_outputs};
+    use structid_workflow::{
+        WienerHammersteinRequest, wiener_hammerstein, write_wiener_hammerstein_outputs,
+    };
     let data = wh_records(records, "estimation")?;
-    let validation = validation.map(|v| wh_records(v, "validation")).transpose()?;
+    let validation = validation
+        .map(|v| wh_records(v, "validation"))
+        .transpose()?;
     let estimate_x0 = match initial_state {
         "estimate" => true,
         "zero" => false,
-        other => return Err(invalid(format!("initial_state `{other}` is neither \"zero\" nor \"estimate\""))),
+        other => {
+            return Err(invalid(format!(
+                "initial_state `{other}` is neither \"zero\" nor \"estimate\""
+            )));
+        }
     };
-    let start = WienerHammersteinSettings::builder().centres(centres).build().map_err(error)?;
-    let mut fit = JointSettings::builder().max_iterations(iterations).estimate_initial_state(estimate_x0);
+    let start = WienerHammersteinSettings::builder()
+        .centres(centres)
+        .build()
+        .map_err(error)?;
+    let mut fit = JointSettings::builder()
+        .max_iterations(iterations)
+        .estimate_initial_state(estimate_x0);
     if let Some(l) = segment_length {
         fit = fit.segment_length(l);
     }
     let req = WienerHammersteinRequest {
         structure,
         data: &data,
-        names: structid_io::SignalNames { u: vec!["u".into()], y: vec!["y".into()], z: None },
+        names: structid_io::SignalNames {
+            u: vec!["u".into()],
+            y: vec!["y".into()],
+            z: None,
+        },
         orders: [orders.0, orders.1, orders.2],
         beta: BetaChoice::from_options_or(beta, validation, start.beta()),
         start,

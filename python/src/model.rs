@@ -7,7 +7,7 @@ use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::Signal;
-use structid_io::{BlockSpec, LinearSpec, ModelFile, SignalNames};
+use structid_io::ModelFile;
 use structid_linear::PolynomialModel;
 
 use crate::convert::{self, error, invalid};
@@ -64,28 +64,47 @@ impl Model {
         Ok(Self { file })
     }
 
-    /// One unknown static map `name` placed at `site` of the linear block
-    /// G(q) = num(q⁻¹)/den(q⁻¹) (`input`: Hammerstein y = G·N(u) + e; `output`: Wiener
-    /// y = N(G·u) + e; `output-feedback`: y = G·(u − N(y)) + e; `rate-feedback`:
-    /// y = G·(u − N(ẏ)) + e; `lti`: no map). `num` lists one numerator per input u.
+    /// Unknown static maps `names` placed at `sites` of the linear block
+    /// G(q) = num(q⁻¹)/den(q⁻¹), in order: the first in G (`input`: Hammerstein y = G·N(u) + e;
+    /// `output`: Wiener y = N(G·u) + e; `output-feedback`: y = G·(u − N(y)) + e;
+    /// `rate-feedback`: y = G·(u − N(ẏ)) + e; `lti` alone: no map), each further one at that
+    /// site of the model built so far (`structid_io::ModelFile::from_structure`). `num` lists
+    /// one numerator per input u; `dispersions` has one entry per site.
     #[staticmethod]
-    #[pyo3(signature = (site, num, den, dispersion, name="N", sample_time=None, inputs=None, output="y"))]
+    #[pyo3(signature = (sites, num, den, dispersions, names, sample_time=None, inputs=None, output="y"))]
+    #[allow(clippy::too_many_arguments)]
     fn structure(
-        site: &str,
+        sites: Vec<String>,
         num: Vec<Vec<f64>>,
         den: Vec<f64>,
-        dispersion: &Bound<'_, PyDict>,
-        name: &str,
+        dispersions: Vec<Bound<'_, PyDict>>,
+        names: Vec<String>,
         sample_time: Option<f64>,
         inputs: Option<Vec<String>>,
         output: &str,
     ) -> PyResult<Self> {
-        let site = structid_io::parse_linear_structure(site).ok_or_else(|| {
-            invalid(format!(
-                "site `{site}` is not one of {}",
-                structid_io::LINEAR_STRUCTURES.join(", ")
-            ))
-        })?;
+        let mut blocks = Vec::new();
+        for ((site, d), name) in sites.iter().zip(&dispersions).zip(&names) {
+            let parsed = structid_io::parse_linear_structure(site).ok_or_else(|| {
+                invalid(format!(
+                    "site `{site}` is not one of {}",
+                    structid_io::LINEAR_STRUCTURES.join(", ")
+                ))
+            })?;
+            match parsed {
+                None if sites.len() == 1 => {}
+                None => {
+                    return Err(invalid(
+                        "`lti` (no map) cannot be combined with other sites",
+                    ));
+                }
+                Some(site) => blocks.push(structid_io::SiteBlock {
+                    name: name.clone(),
+                    site,
+                    dispersion: convert::dispersion(d)?,
+                }),
+            }
+        }
         let inputs = inputs.unwrap_or_else(|| {
             if num.len() == 1 {
                 vec!["u".into()]
@@ -98,31 +117,8 @@ impl Model {
             den,
             sample_time,
         };
-        let spec = LinearSpec::from_linear(&g, site);
-        let lft = spec.lft().map_err(error)?;
-        let blocks = match site {
-            None => Vec::new(),
-            Some(_) => vec![BlockSpec {
-                name: name.into(),
-                inputs: vec![0],
-                output: 0,
-                dispersion: convert::dispersion(dispersion)?,
-                truth: None,
-                operator: None,
-            }],
-        };
-        Self::checked(&ModelFile {
-            lft,
-            linear: Some(spec),
-            signals: SignalNames {
-                u: inputs,
-                y: vec![output.into()],
-                z: None,
-            },
-            blocks,
-            discover: None,
-            path: None,
-        })
+        let file = ModelFile::from_structure(&g, &blocks, inputs, output.into()).map_err(error)?;
+        Ok(Self { file })
     }
 
     /// The model-file text (TOML, canonical form); `Model.from_toml` reads it back.
@@ -215,12 +211,21 @@ impl Model {
             )));
         }
         let u: Signal = convert::signal(&u, "u")?;
-        if self.file.blocks.iter().any(|b| b.truth.is_none() && b.operator.is_none()) {
-            return Err(invalid("simulation needs a truth for every block (Model.with_truth)"));
+        if self
+            .file
+            .blocks
+            .iter()
+            .any(|b| b.truth.is_none() && b.operator.is_none())
+        {
+            return Err(invalid(
+                "simulation needs a truth for every block (Model.with_truth)",
+            ));
         }
         let file = self.file.clone();
         let sim = py
-            .detach(move || structid_workflow::simulate_model_file_noisy(&file, &u, noise_std, seed))
+            .detach(move || {
+                structid_workflow::simulate_model_file_noisy(&file, &u, noise_std, seed)
+            })
             .map_err(error)?;
         let d = PyDict::new(py);
         d.set_item("y", convert::array(py, &sim.y))?;
@@ -247,7 +252,9 @@ impl Model {
             .zip(access)
             .map(|(b, a)| match a {
                 BlockAccess::Computable => (b.name.clone(), "computable".into(), Vec::new()),
-                BlockAccess::InSeries { upstream } => (b.name.clone(), "in series".into(), upstream),
+                BlockAccess::InSeries { upstream } => {
+                    (b.name.clone(), "in series".into(), upstream)
+                }
                 BlockAccess::Latent => (b.name.clone(), "latent".into(), Vec::new()),
             })
             .collect())

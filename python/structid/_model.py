@@ -84,19 +84,34 @@ class Model:
         return cls(_structid.Model.from_file(os.fspath(path)))
 
     @classmethod
-    def structure(cls, site: str, num: Union[Sequence[float], Sequence[Sequence[float]]],
-                  den: Sequence[float], dispersion: Union[Dispersion, str] = "gaussian",
-                  name: str = "N", sample_time: Optional[float] = None,
+    def structure(cls, site: Union[str, Sequence[str]], num: Union[Sequence[float], Sequence[Sequence[float]]],
+                  den: Sequence[float], dispersion: Union[Dispersion, str, Sequence[Union[Dispersion, str]]] = "gaussian",
+                  name: Union[str, Sequence[str], None] = None, sample_time: Optional[float] = None,
                   inputs: Optional[Sequence[str]] = None, output: str = "y") -> "Model":
-        """One unknown map ``name`` at ``site`` of G(q) = num(q⁻¹)/den(q⁻¹): ``"input"``
-        (Hammerstein), ``"output"`` (Wiener), ``"output-feedback"``, ``"rate-feedback"``, or
-        ``"lti"`` (no map). ``num`` is one numerator, or one per input; ``inputs`` and
-        ``output`` name the data columns (default ``u`` or ``u0, u1, …`` and ``y``)."""
+        """Unknown maps at ``site`` of G(q) = num(q⁻¹)/den(q⁻¹): ``"input"`` (Hammerstein),
+        ``"output"`` (Wiener), ``"output-feedback"``, ``"rate-feedback"``, or ``"lti"`` (no
+        map). A list of sites places the first in G and each further one at that site of the
+        model built so far: ``["input", "output"]`` is Hammerstein–Wiener, ``["output-feedback",
+        "rate-feedback"]`` a stiffness and a friction in feedback. ``dispersion`` and ``name``
+        may be lists with one entry per site (names default to ``N``, or ``N1, N2, …``).
+        ``num`` is one numerator, or one per input; ``inputs`` and ``output`` name the data
+        columns (default ``u`` or ``u0, u1, …`` and ``y``)."""
+        sites = [site] if isinstance(site, str) else list(site)
+        if not sites:
+            raise ValueError("site: give at least one site (or \"lti\")")
+        if name is None:
+            names = ["N"] if len(sites) == 1 else [f"N{i + 1}" for i in range(len(sites))]
+        else:
+            names = [name] if isinstance(name, str) else list(name)
+        ds = list(dispersion) if isinstance(dispersion, (list, tuple)) else [dispersion] * len(sites)
+        if len(names) != len(sites) or len(ds) != len(sites):
+            raise ValueError(f"{len(sites)} site(s) need as many names and dispersions "
+                             f"(got {len(names)} and {len(ds)})")
         nested = len(num) > 0 and np.ndim(num[0]) == 1
         nums = [list(map(float, n)) for n in num] if nested else [list(map(float, num))]
         return cls(_structid.Model.structure(
-            site, nums, [float(d) for d in den], _dispersion(dispersion), name, sample_time,
-            None if inputs is None else list(inputs), output))
+            sites, nums, [float(d) for d in den], [_dispersion(d) for d in ds], names,
+            sample_time, None if inputs is None else list(inputs), output))
 
     @classmethod
     def hammerstein(cls, num, den, dispersion: Union[Dispersion, str] = "gaussian", **kw: Any) -> "Model":

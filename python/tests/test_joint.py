@@ -179,3 +179,25 @@ def test_hammerstein_wiener_fits_both_maps_and_agrees_with_the_cli(cli, tmp_path
     assert np.sqrt(np.mean((sim["y"][:, 0] - plant(v)) ** 2)) < 0.005
     with pytest.raises(structid.StructidError, match="channel"):
         structid.hammerstein_wiener(np.c_[u, u], y, (1, 1, 1))
+
+
+def test_a_chain_of_sites_builds_series_and_latent_blocks_as_written_out_in_numpy():
+    # G = q⁻¹/(1 − 0.6q⁻¹); an input map around output feedback: y = G·(N₂(u) − N₁(y)).
+    m = structid.Model.structure(["output-feedback", "input"], [0.0, 1.0], [1.0, -0.6],
+                                 name=["spring", "actuator"])
+    assert [b["name"] for b in m.blocks] == ["spring", "actuator"]
+    assert [a[1] for a in m.block_access()] == ["computable", "computable"]
+    u = inputs(200, 0.3)
+    m = m.with_truth("spring", "0.5*z0^3").with_truth("actuator", "tanh(z0)")
+    x, y = 0.0, np.zeros(len(u))
+    for k, uk in enumerate(u):
+        y[k] = x
+        x = 0.6 * x + np.tanh(uk) - 0.5 * y[k] ** 3
+    np.testing.assert_allclose(m.simulate(u.reshape(-1, 1))["y"][:, 0], y, rtol=0, atol=1e-12)
+    # Hammerstein–Wiener: the sensor reads G's output, which u reveals once the actuator is known.
+    hw = structid.Model.structure(["input", "output"], [0.0, 1.0], [1.0, -0.6])
+    assert [b["name"] for b in hw.blocks] == ["N1", "N2"]
+    with pytest.raises(ValueError, match="names and dispersions"):
+        structid.Model.structure(["input", "output"], [0.0, 1.0], [1.0, -0.6], name="N")
+    with pytest.raises(ValueError, match="lti"):
+        structid.Model.structure(["lti", "input"], [0.0, 1.0], [1.0, -0.6])

@@ -527,8 +527,17 @@ fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
     write_input(&u, 3000, 0.0);
     let data = d.join("est.csv");
     ok(&[
-        "simulate", "--model", p(&truth), "--input", p(&u), "--out", p(&data),
-        "--noise-std", "0.005", "--seed", "12",
+        "simulate",
+        "--model",
+        p(&truth),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.005",
+        "--seed",
+        "12",
     ]);
     let start = d.join("start.toml");
     std::fs::write(
@@ -541,8 +550,16 @@ fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
     .unwrap();
     let out = d.join("fit");
     let o = ok(&[
-        "refine", "--joint", "--model", p(&start), "--data", p(&data), "--beta", "1e-8",
-        "--out", p(&out),
+        "refine",
+        "--joint",
+        "--model",
+        p(&start),
+        "--data",
+        p(&data),
+        "--beta",
+        "1e-8",
+        "--out",
+        p(&out),
     ]);
     // The play's half-width, and 2·5 + 1 Fourier coefficients plus an affine part (a Gaussian
     // expansion would have 15 + 2).
@@ -555,6 +572,11 @@ fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
         .map(|(z, v)| (v - 0.8 * (z / 0.8).tanh()).powi(2))
         .sum::<f64>()
         / z.len() as f64;
-    let range = v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min);
-    assert!(err.sqrt() < 0.05 * range, "map error {} of range {range}", err.sqrt());
+    let range =
+        v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(
+        err.sqrt() < 0.05 * range,
+        "map error {} of range {range}",
+        err.sqrt()
+    );
 }

@@ -71,7 +71,8 @@ pub use estimate_file::{estimate_json, read_estimate};
 pub use model_file::{
     BUILT_IN_LOCATIONS, BlockSpec, DeclaredLocationSpec, DiscoverSpec, DispersionSpec,
     LINEAR_STRUCTURES, LinearSpec, ModelFile, NamedStateSpec, OperatorSpec, SIGMA_SPAN,
-    SUPPORTED_DISPERSIONS, SignalNames, TruthSpec, default_sigma, parse_linear_structure,
+    SUPPORTED_DISPERSIONS, SignalNames, SiteBlock, TruthSpec, default_sigma,
+    parse_linear_structure,
 };
 pub use output::{OutputGuard, write_atomic};
 pub use report::{

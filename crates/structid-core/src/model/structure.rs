@@ -25,7 +25,8 @@
 //! extra state m_k = y_(k−1). The feedback sites need one sample of delay in G (D_yu = 0).
 //!
 //! A [`Structure`] is a linear part (an [`Lft`] or a [`PolynomialModel`], realised with white
-//! output noise) plus the block at its site and its dispersion; [`Structure::model`] gives the
+//! output noise) plus the block at its site and its dispersion, and any further blocks wrapped
+//! around it ([`Structure::then`], [`chain`]); [`Structure::model`] gives the
 //! [`Model`] to identify.
 
 use std::sync::Arc;
@@ -251,11 +252,13 @@ pub struct PlacedBlock {
     pub dispersion: Arc<dyn Dispersion>,
 }
 
-/// A structured model: a linear part, and where the unknown block sits with its dispersion.
+/// A structured model: a linear part, and where the unknown blocks sit with their
+/// dispersions. The first block is placed in the linear part; each further one
+/// ([`Structure::then`]) at a site of the model built so far (see [`chain`]).
 #[derive(Clone, Debug)]
 pub struct Structure {
     linear: LinearPart,
-    block: Option<PlacedBlock>,
+    blocks: Vec<PlacedBlock>,
     path: FeedbackPath,
 }
 
@@ -264,7 +267,7 @@ impl Structure {
     pub fn linear(g: impl Into<LinearPart>) -> Self {
         Self {
             linear: g.into(),
-            block: None,
+            blocks: Vec::new(),
             path: FeedbackPath::Shared,
         }
     }
@@ -273,11 +276,11 @@ impl Structure {
     pub fn new(g: impl Into<LinearPart>, site: Site, dispersion: Arc<dyn Dispersion>) -> Self {
         Self {
             linear: g.into(),
-            block: Some(PlacedBlock {
+            blocks: vec![PlacedBlock {
                 name: "N".into(),
                 site,
                 dispersion,
-            }),
+            }],
             path: FeedbackPath::Shared,
         }
     }
@@ -379,11 +382,43 @@ impl Structure {
         Self::new(g, Site::RateFeedback, dispersion)
     }
 
-    /// Renames the block.
+    /// Renames the block placed last.
     pub fn named(mut self, name: impl Into<String>) -> Self {
-        if let Some(b) = &mut self.block {
+        if let Some(b) = self.blocks.last_mut() {
             b.name = name.into();
         }
+        self
+    }
+
+    /// One more block, called `N<k>` (k its position from 1), at `site` of the model built so
+    /// far: an input map ahead of it, a sensor map behind it, a map in feedback around it (see
+    /// [`chain`]). Maps in series follow from the wrapping; the LFT is checked when it is
+    /// built ([`Structure::lft`], [`Structure::model`]).
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_core::{BlockAccess, KernelDispersion, Signal, Site, Structure};
+    /// use structid_linear::PolynomialModel;
+    /// let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
+    /// // y = N₂(G·N₁(u)) + e: a Hammerstein–Wiener structure.
+    /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: None };
+    /// let s = Structure::hammerstein(&g, d.clone()).named("actuator")
+    ///     .then(Site::Output, d).named("sensor");
+    /// let model = s.model().unwrap();
+    /// let square = |z: &[f64]| z[0] * z[0];
+    /// let half = |z: &[f64]| 0.5 * z[0];
+    /// let u = Signal::new(1, vec![1.0, 2.0, 0.0]).unwrap();
+    /// let y = model.simulate(&[&square, &half], &u, None, None).unwrap().y;
+    /// // G·u² = 0, 1, 0.5 + 4; then halved.
+    /// assert_eq!(y.channel(0), vec![0.0, 0.5, 2.25]);
+    /// ```
+    pub fn then(mut self, site: Site, dispersion: Arc<dyn Dispersion>) -> Self {
+        let name = format!("N{}", self.blocks.len() + 1);
+        self.blocks.push(PlacedBlock {
+            name,
+            site,
+            dispersion,
+        });
         self
     }
 
@@ -392,21 +427,27 @@ impl Structure {
         &self.linear
     }
 
-    /// The block, if any.
+    /// The first block, if any.
     pub fn block(&self) -> Option<&PlacedBlock> {
-        self.block.as_ref()
+        self.blocks.first()
     }
 
-    /// Where the block sits (`None` without a block).
+    /// Every block, in the order placed.
+    pub fn blocks(&self) -> &[PlacedBlock] {
+        &self.blocks
+    }
+
+    /// Where the first block sits (`None` without a block).
     pub fn site(&self) -> Option<Site> {
-        self.block.as_ref().map(|b| b.site)
+        self.blocks.first().map(|b| b.site)
     }
 
-    /// The structure's LFT: the nominal model of the linear part with the block at its site
-    /// (w column 0, z row 0), or without any block.
+    /// The structure's LFT: the nominal model of the linear part with the first block at its
+    /// site (w column 0, z row 0), each further block wrapped around it in turn (w column and
+    /// z row i, see [`chain`]); or without any block.
     pub fn lft(&self) -> Result<Lft> {
         let site = self.site();
-        match &self.linear {
+        let mut lft = match &self.linear {
             LinearPart::Lft(nominal) => match site {
                 None => without_blocks(nominal),
                 Some(s) => s.insert(nominal),
@@ -414,17 +455,29 @@ impl Structure {
             LinearPart::Polynomial(g) => {
                 polynomial_lft(g, site, self.path == FeedbackPath::LastNumerator)
             }
+        }?;
+        for b in self.blocks.iter().skip(1) {
+            lft = chain::wrap(b.site, &lft)?;
         }
+        Ok(lft)
     }
 
-    /// The structured model to identify.
+    /// The structured model to identify (block i reads z row i and writes w column i).
+    ///
+    /// # Errors
+    /// The LFT's, and [`Error::AlgebraicLoop`] when the blocks form a true cycle.
     pub fn model(&self) -> Result<Model> {
         let blocks = self
-            .block
+            .blocks
             .iter()
-            .map(|b| NonlinearBlock::new(b.name.clone(), vec![0], 0, Arc::clone(&b.dispersion)))
+            .enumerate()
+            .map(|(i, b)| {
+                NonlinearBlock::new(b.name.clone(), vec![i], i, Arc::clone(&b.dispersion))
+            })
             .collect();
-        Model::new(self.lft()?, blocks)
+        let model = Model::new(self.lft()?, blocks)?;
+        model.evaluation_order()?;
+        Ok(model)
     }
 }
 
@@ -730,6 +783,8 @@ fn declared(nominal: &Lft, z: usize, w: usize) -> Result<Lft> {
         },
     )
 }
+
+pub mod chain;
 
 #[cfg(test)]
 mod tests;

@@ -117,6 +117,7 @@ mod nonlinearity;
 mod operator;
 mod signals;
 mod source;
+mod structure;
 mod write;
 
 use std::path::{Path, PathBuf};
@@ -141,6 +142,7 @@ pub use nonlinearity::{BlockSpec, TruthSpec};
 pub use operator::OperatorSpec;
 pub use signals::SignalNames;
 pub(crate) use source::{Source, err_at, toml_error, value_kind};
+pub use structure::SiteBlock;
 
 use discover::{RawDiscover, parse_discover};
 use dispersion::parse_dispersion;
