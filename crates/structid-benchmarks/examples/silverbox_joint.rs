@@ -30,6 +30,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("SB_BETAS") {
         js.betas = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
     }
+    if let Ok(v) = std::env::var("SB_SECOND") {
+        js.second_map = v.parse()?;
+    }
     if let Ok(v) = std::env::var("SB_ITERATIONS") {
         js.max_iterations = v.parse()?;
     }

@@ -44,6 +44,8 @@ pub struct JointSilverboxSettings {
     /// Relative difference of validation RMS below which two β are a tie (then the larger,
     /// smoother one is chosen).
     pub tie: f64,
+    /// Centres per axis of a second map N₂(y_k, y_(k−1)) entering beside the first (0: none).
+    pub second_map: usize,
 }
 
 impl Default for JointSilverboxSettings {
@@ -55,6 +57,7 @@ impl Default for JointSilverboxSettings {
             validation_fraction: 0.2,
             max_iterations: 30,
             tie: 0.01,
+            second_map: 0,
         }
     }
 }
@@ -105,20 +108,99 @@ fn start(
     let w: Vec<f64> = z.iter().map(|z| map.eval(z)).collect();
     let f = f.fitted_to(&z, &w).map_err(joint)?;
     let b = &base.refinement.model.blocks()[0];
-    let model = JointModel::new(
-        base.refinement.model.lft().clone(),
-        vec![JointBlock::new(
-            "N",
-            b.inputs.clone(),
-            b.output,
-            Box::new(f),
-        )],
-    )
-    .and_then(|m| m.with_free_nonzero(LftMatrix::A))
-    .and_then(|m| m.with_free_nonzero(LftMatrix::Bu))
-    .and_then(|m| m.with_free_nonzero(LftMatrix::Bw))
-    .map_err(joint)?;
+    let lft = base.refinement.model.lft();
+    let n = lft.dims().states;
+    let mut blocks = vec![JointBlock::new(
+        "N",
+        b.inputs.clone(),
+        b.output,
+        Box::new(f),
+    )];
+    let lft = if s.second_map > 0 {
+        let g2 = GaussianFeatures::new(
+            grid(lo, hi, s.second_map),
+            1.5 * (hi - lo) / (s.second_map - 1) as f64,
+            beta,
+        )
+        .map_err(joint)?;
+        blocks.push(JointBlock::new("N2", vec![1, 2], 1, Box::new(g2)));
+        with_previous_output(lft)?
+    } else {
+        lft.clone()
+    };
+    let mut model = JointModel::new(lft.clone(), blocks).map_err(joint)?;
+    let m = lft.matrices();
+    for (matrix, mat, cols) in [
+        (LftMatrix::A, &m.a, n),
+        (LftMatrix::Bu, &m.bu, m.bu.ncols()),
+        (LftMatrix::Bw, &m.bw, m.bw.ncols()),
+    ] {
+        for i in 0..n {
+            for j in 0..cols {
+                if mat[(i, j)] != 0.0 {
+                    model = model.with_free(matrix, i, j).map_err(joint)?;
+                }
+            }
+        }
+    }
     Ok(model)
+}
+
+/// `m`² points on the square [lo, hi]².
+fn grid(lo: f64, hi: f64, m: usize) -> Vec<Vec<f64>> {
+    let axis: Vec<f64> = (0..m)
+        .map(|j| lo + (hi - lo) * j as f64 / (m - 1) as f64)
+        .collect();
+    axis.iter()
+        .flat_map(|a| axis.iter().map(move |b| vec![*a, *b]))
+        .collect()
+}
+
+/// The LFT with a state m_k = y_(k−1) and two more z rows [y; m] for a second map, whose output
+/// enters as the first map's does.
+fn with_previous_output(lft: &structid_core::Lft) -> Result<structid_core::Lft> {
+    use nalgebra::DMatrix;
+    let m = lft.matrices();
+    let d = lft.dims();
+    let n = d.states;
+    let mut a = DMatrix::zeros(n + 1, n + 1);
+    a.view_mut((0, 0), (n, n)).copy_from(&m.a);
+    a.view_mut((n, 0), (1, n)).copy_from(&m.cy);
+    let stack = |top: &DMatrix<f64>, bottom: &DMatrix<f64>| {
+        let mut out = DMatrix::zeros(top.nrows() + bottom.nrows(), top.ncols());
+        out.view_mut((0, 0), top.shape()).copy_from(top);
+        out.view_mut((top.nrows(), 0), bottom.shape())
+            .copy_from(bottom);
+        out
+    };
+    let twice = |c: &DMatrix<f64>| {
+        let mut out = DMatrix::zeros(c.nrows(), 2);
+        out.set_column(0, &c.column(0));
+        out.set_column(1, &c.column(0));
+        out
+    };
+    let mut cz = DMatrix::zeros(3, n + 1);
+    cz.view_mut((0, 0), (1, n)).copy_from(&m.cz);
+    cz.view_mut((1, 0), (1, n)).copy_from(&m.cz);
+    cz[(2, n)] = 1.0;
+    let lft2 = structid_core::Lft::new(structid_core::LftMatrices {
+        a,
+        bu: stack(&m.bu, &m.dyu),
+        be: stack(&m.be, &m.dye),
+        bw: stack(&twice(&m.bw), &twice(&m.dyw)),
+        cy: stack(&m.cy.transpose(), &DMatrix::zeros(1, 1)).transpose(),
+        dyu: m.dyu.clone(),
+        dye: m.dye.clone(),
+        dyw: twice(&m.dyw),
+        cz,
+        dzu: stack(&stack(&m.dzu, &m.dzu), &DMatrix::zeros(1, d.u)),
+        dze: stack(&stack(&m.dze, &m.dze), &DMatrix::zeros(1, d.e)),
+        dzw: DMatrix::zeros(3, 2),
+    })?;
+    match lft.sample_time() {
+        Some(ts) => lft2.with_sample_time(ts),
+        None => Ok(lft2),
+    }
 }
 
 fn rms_after(a: &[f64], b: &[f64], from: usize) -> f64 {

@@ -50,6 +50,38 @@ fn write_input(path: &Path, len: usize, phase: f64) {
     std::fs::write(path, text).unwrap();
 }
 
+/// Simulates the model `text` (written to `dir/<name>.toml`) on the input of `write_input(len,
+/// phase)` with noise of standard deviation 0.005 and `seed`: the data file `dir/<name>.csv`.
+fn simulated(
+    dir: &Path,
+    name: &str,
+    text: &str,
+    len: usize,
+    phase: f64,
+    seed: u64,
+) -> std::path::PathBuf {
+    let model = dir.join(format!("{name}.toml"));
+    std::fs::write(&model, text).unwrap();
+    let u = dir.join(format!("u_{name}.csv"));
+    write_input(&u, len, phase);
+    let data = dir.join(format!("{name}.csv"));
+    let seed = seed.to_string();
+    ok(&[
+        "simulate",
+        "--model",
+        p(&model),
+        "--input",
+        p(&u),
+        "--out",
+        p(&data),
+        "--noise-std",
+        "0.005",
+        "--seed",
+        &seed,
+    ]);
+    data
+}
+
 #[test]
 fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
     let dir = tempfile::tempdir().unwrap();
@@ -388,31 +420,12 @@ fn maps_in_series_are_validated_with_their_one_step_prediction() {
     // once the upstream map is known, so `validate` predicts, evaluating the maps in order.
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
+    let text = TRUTH.replace(
+        r#"operator = { kind = "play", half_width = 0.2 }"#,
+        r#"truth = "max(z0 - 0.2, 0) + min(z0 + 0.2, 0)""#,
+    );
+    let data = simulated(d, "series", &text, 1500, 0.4, 5);
     let model = d.join("series.toml");
-    std::fs::write(
-        &model,
-        TRUTH.replace(
-            r#"operator = { kind = "play", half_width = 0.2 }"#,
-            r#"truth = "max(z0 - 0.2, 0) + min(z0 + 0.2, 0)""#,
-        ),
-    )
-    .unwrap();
-    let u = d.join("u.csv");
-    write_input(&u, 1500, 0.4);
-    let data = d.join("val.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        p(&model),
-        "--input",
-        p(&u),
-        "--out",
-        p(&data),
-        "--noise-std",
-        "0.005",
-        "--seed",
-        "5",
-    ]);
     let o = ok(&[
         "validate",
         "--model",
@@ -447,24 +460,8 @@ fn a_named_family_is_fitted_with_the_play_and_g_and_written_back() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let truth = d.join("truth.toml");
-    std::fs::write(&truth, family(0.8)).unwrap();
-    let u = d.join("u.csv");
-    write_input(&u, 3000, 0.0);
-    let data = d.join("est.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        p(&truth),
-        "--input",
-        p(&u),
-        "--out",
-        p(&data),
-        "--noise-std",
-        "0.005",
-        "--seed",
-        "11",
-    ]);
+    let data = simulated(d, "est", &family(0.8), 3000, 0.0, 11);
+    let u = d.join("u_est.csv");
     let start = d.join("start.toml");
     std::fs::write(
         &start,
@@ -521,24 +518,7 @@ fn a_named_family_is_fitted_with_the_play_and_g_and_written_back() {
 fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let truth = d.join("truth.toml");
-    std::fs::write(&truth, TRUTH).unwrap();
-    let u = d.join("u.csv");
-    write_input(&u, 3000, 0.0);
-    let data = d.join("est.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        p(&truth),
-        "--input",
-        p(&u),
-        "--out",
-        p(&data),
-        "--noise-std",
-        "0.005",
-        "--seed",
-        "12",
-    ]);
+    let data = simulated(d, "est", TRUTH, 3000, 0.0, 12);
     let start = d.join("start.toml");
     std::fs::write(
         &start,

@@ -250,6 +250,22 @@ impl GaussianFeatures {
     }
 }
 
+/// A feature map's parameters `p` split into its m kernel coefficients and its `trend`
+/// coefficients, after checking their count and that they are finite.
+pub(crate) fn split_parameters(p: &[f64], m: usize, trend: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+    if p.len() != m + trend {
+        return Err(invalid(
+            "parameters",
+            p.len() as f64,
+            "wrong number of parameters for this feature map",
+        ));
+    }
+    if let Some(v) = p.iter().find(|v| !v.is_finite()) {
+        return Err(invalid("parameters", *v, "must be finite"));
+    }
+    Ok((p[..m].to_vec(), p[m..].to_vec()))
+}
+
 /// The columns φ_i(z_k) of the `np` regressors `features` writes at each point, after
 /// checking the points (p inputs each, finite, one value each).
 pub(crate) fn regressor_columns(
@@ -342,21 +358,12 @@ impl BlockMap for GaussianFeatures {
     }
 
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
-        let m = self.centres.len();
-        if p.len() != m + self.affine.len() {
-            return Err(invalid(
-                "parameters",
-                p.len() as f64,
-                "wrong number of parameters for this feature map",
-            ));
-        }
-        if let Some(v) = p.iter().find(|v| !v.is_finite()) {
-            return Err(invalid("parameters", *v, "must be finite"));
-        }
-        let mut out = self.clone();
-        out.theta = p[..m].to_vec();
-        out.affine = p[m..].to_vec();
-        Ok(Box::new(out))
+        let (theta, affine) = split_parameters(p, self.centres.len(), self.affine.len())?;
+        Ok(Box::new(Self {
+            theta,
+            affine,
+            ..self.clone()
+        }))
     }
 
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {

@@ -19,7 +19,7 @@ use structid_core::{Combination, FeatureMap, FourierKernel, FourierWeights};
 
 use crate::block::{BlockJacobian, BlockMap};
 use crate::error::{Result, invalid};
-use crate::features::{regressor_columns, regularised_fit};
+use crate::features::{regressor_columns, regularised_fit, split_parameters};
 
 /// A Fourier-feature map plus an unpenalised affine part.
 #[derive(Clone, Debug, PartialEq)]
@@ -156,21 +156,12 @@ impl BlockMap for FourierFeatures {
     }
 
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
-        let m = self.coef.len();
-        if p.len() != m + self.affine.len() {
-            return Err(invalid(
-                "parameters",
-                p.len() as f64,
-                "wrong number of parameters for this feature map",
-            ));
-        }
-        if let Some(v) = p.iter().find(|v| !v.is_finite()) {
-            return Err(invalid("parameters", *v, "must be finite"));
-        }
-        let mut out = self.clone();
-        out.coef = p[..m].to_vec();
-        out.affine = p[m..].to_vec();
-        Ok(Box::new(out))
+        let (coef, affine) = split_parameters(p, self.coef.len(), self.affine.len())?;
+        Ok(Box::new(Self {
+            coef,
+            affine,
+            ..self.clone()
+        }))
     }
 
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {
