@@ -1,6 +1,6 @@
 //! The whole discovery workflow on a 25 000-sample record (the target: at most 30 s).
 //!
-//! The case is `structid_discover::physics` static case 0 drawn at 25 000 samples per record
+//! The case is `structid_testcases::physics` static case 0 drawn at 25 000 samples per record
 //! (`generate_with_length`): a non-minimum-phase second-order plant simulated in continuous
 //! time and sampled, an actuator saturation at its input, the exact nominal model; the
 //! workflow names the saturation and shrinks the validation gap about 8×. One iteration is `discover`
@@ -19,7 +19,7 @@ use std::time::Duration;
 use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::hypotheses::Nominal;
-use structid_discover::physics::{PhysicsKind, generate_with_length};
+use structid_testcases::physics::{PhysicsKind, generate_with_length};
 
 /// Samples per record.
 const SAMPLES: usize = 25_000;

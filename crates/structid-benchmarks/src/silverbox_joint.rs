@@ -124,7 +124,12 @@ fn start(
         )
         .map_err(joint)?;
         blocks.push(JointBlock::new("N2", vec![1, 2], 1, Box::new(g2)));
-        with_previous_output(lft)?
+        // The second input is the output's increment, scaled to the output's range.
+        let dy = v
+            .windows(2)
+            .map(|p| (p[1] - p[0]).abs())
+            .fold(0.0, f64::max);
+        with_previous_output(lft, (hi - lo) / (2.0 * dy.max(1e-12)))?
     } else {
         lft.clone()
     };
@@ -156,9 +161,9 @@ fn grid(lo: f64, hi: f64, m: usize) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The LFT with a state m_k = y_(k−1) and two more z rows [y; m] for a second map, whose output
-/// enters as the first map's does.
-fn with_previous_output(lft: &structid_core::Lft) -> Result<structid_core::Lft> {
+/// The LFT with a state m_k = y_(k−1) and two more z rows [y; c·(y − m)] for a second map,
+/// whose output enters as the first map's does.
+fn with_previous_output(lft: &structid_core::Lft, c: f64) -> Result<structid_core::Lft> {
     use nalgebra::DMatrix;
     let m = lft.matrices();
     let d = lft.dims();
@@ -182,7 +187,8 @@ fn with_previous_output(lft: &structid_core::Lft) -> Result<structid_core::Lft> 
     let mut cz = DMatrix::zeros(3, n + 1);
     cz.view_mut((0, 0), (1, n)).copy_from(&m.cz);
     cz.view_mut((1, 0), (1, n)).copy_from(&m.cz);
-    cz[(2, n)] = 1.0;
+    cz.view_mut((2, 0), (1, n)).copy_from(&(&m.cz * c));
+    cz[(2, n)] = -c;
     let lft2 = structid_core::Lft::new(structid_core::LftMatrices {
         a,
         bu: stack(&m.bu, &m.dyu),
@@ -194,7 +200,7 @@ fn with_previous_output(lft: &structid_core::Lft) -> Result<structid_core::Lft> 
         dyw: twice(&m.dyw),
         cz,
         dzu: stack(&stack(&m.dzu, &m.dzu), &DMatrix::zeros(1, d.u)),
-        dze: stack(&stack(&m.dze, &m.dze), &DMatrix::zeros(1, d.e)),
+        dze: stack(&stack(&m.dze, &m.dze), &(&m.dze * c)),
         dzw: DMatrix::zeros(3, 2),
     })?;
     match lft.sample_time() {

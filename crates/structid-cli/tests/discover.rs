@@ -518,14 +518,14 @@ fn a_location_the_model_file_declares_is_a_candidate_and_wins_when_the_effect_si
     assert!(mf.linear.is_none() && mf.blocks.len() == 1);
 }
 
-/// A backlash at an actuator, simulated in continuous time (`structid_discover::physics`,
+/// A backlash at an actuator, simulated in continuous time (`structid_testcases::physics`,
 /// dynamic seed 0: a non-minimum-phase plant with an input delay of two samples and coloured
 /// noise), given to `structid discover` with a nominal estimated from the effect-laden
 /// record: the report says dynamic at the input, and report.json carries the play with its
 /// half-width within 10 % of the truth.
 #[test]
 fn a_backlash_behind_an_estimated_nominal_is_reported_with_its_play() {
-    use structid_discover::physics::{PhysicalEffect, PhysicsKind, generate};
+    use structid_testcases::physics::{PhysicalEffect, PhysicsKind, generate};
     let case = generate(PhysicsKind::Dynamic, 0);
     let Some((PhysicalEffect::Backlash { width, .. }, _)) = case.effect else {
         panic!("dynamic seed 0 is a backlash: {:?}", case.effect);

@@ -1,4 +1,4 @@
-//! Writes the closed-loop positioning axis of `structid_discover::physics::positioning_axis`
+//! Writes the closed-loop positioning axis of `structid_testcases::physics::positioning_axis`
 //! (continuous-time physics: M·q̈ + Fv·q̇ + Fc·sign(q̇) + offset = τ under a PD controller,
 //! sampled at 1 kHz) as files for the command-line tool: `DIR/estimation.csv` and
 //! `DIR/validation.csv` (columns `tau`, `q`) and `DIR/nominal.toml`, the physical nominal
@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use structid_core::Data;
 use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::hypotheses::Nominal;
-use structid_discover::physics::positioning_axis;
+use structid_testcases::physics::positioning_axis;
 
 fn csv(d: &Data) -> String {
     let mut s = String::from("tau,q\n");

@@ -18,8 +18,8 @@ use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::effects::Effect;
 use structid_discover::hypotheses::Location;
 use structid_discover::hypotheses::Nominal;
-use structid_discover::synthetic::{Case, CaseKind, Hidden, InputKind, generate};
 use structid_linear::PolynomialModel;
+use structid_testcases::synthetic::{Case, CaseKind, Hidden, InputKind, generate};
 
 /// A nearly integrating plant k/(s·(M·s + F)) (integrator pole at 0.999) with Coulomb +
 /// viscous friction in rate feedback, driven by low-pass noise.

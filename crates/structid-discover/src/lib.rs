@@ -34,13 +34,7 @@
 //! * [`augmented`]: the augmented model of a finding as a model file and as a stored
 //!   estimate;
 //! * [`report`]: the reports of a discovery (Markdown, JSON and the printed summary);
-//! * [`synthetic`]: test cases for the workflow, a random nominal model plus records of a
-//!   system with one hidden effect (a static effect at a location, none, or hysteresis),
-//!   deterministic in a seed;
 //! * [`records`]: several records (experiments): each step runs record by record and pools;
-//! * [`physics`]: test cases from continuous-time physics (integrators in closed loop,
-//!   two-mass plants, delays, coloured noise, estimated nominals), and the closed-loop
-//!   positioning axis.
 //!
 //! ```
 //! use structid_discover::effects::{Effect, NamingSettings, name_effect};
@@ -61,11 +55,9 @@ pub mod hypotheses;
 pub mod hysteresis;
 pub mod known;
 pub mod localise;
-pub mod physics;
 pub mod records;
 pub mod report;
 pub mod staticness;
-pub mod synthetic;
 
 pub use discover::{
     Classification, DiscoverSettings, Discovery, Effects, EffectsSettings, discover,

@@ -1,4 +1,4 @@
-//! The discovery workflow on data with one hidden effect (`structid_discover::synthetic`):
+//! The discovery workflow on data with one hidden effect (`structid_testcases::synthetic`):
 //! the workflow sees only the nominal model and the two records.
 //!
 //! * 30 static cases (every effect/location pair of the generator's schedule): the effect is
@@ -10,7 +10,7 @@
 
 use structid_discover::discover::{Classification, DiscoverSettings, Discovery, discover};
 use structid_discover::hypotheses::Nominal;
-use structid_discover::synthetic::{Case, CaseKind, Hidden, generate};
+use structid_testcases::synthetic::{Case, CaseKind, Hidden, generate};
 
 fn run(case: &Case) -> Discovery {
     let nominal = Nominal::from_polynomial(&case.nominal).unwrap();

@@ -1,6 +1,6 @@
 //! The workflow's noise level σ̂ ([`Discovery::noise`]) against the true noise std of the
 //! generators, white and coloured: 20 static and 10 effect-free cases of
-//! `structid_discover::synthetic` (white output noise) and of `structid_discover::physics`
+//! `structid_testcases::synthetic` (white output noise) and of `structid_testcases::physics`
 //! (white or AR(1) noise, continuous-time plants, half the nominals estimated). σ̂ must be
 //! within 30 % of the true std (of the coloured process itself) in at least 85 % of them
 //! (measured: 53 of 60).
@@ -14,8 +14,8 @@ use structid_core::Data;
 use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::gap::noise_level;
 use structid_discover::hypotheses::Nominal;
-use structid_discover::{physics, synthetic};
 use structid_linear::PolynomialModel;
+use structid_testcases::{physics, synthetic};
 
 /// (σ̂/σ of the workflow, σ̂/σ of the first difference of the nominal model's residual).
 fn ratios(

@@ -1,5 +1,5 @@
 //! The discovery workflow's goals on plants as engineers meet them
-//! (`structid_discover::physics`): continuous-time physics integrated by RK4 and sampled, so
+//! (`structid_testcases::physics`): continuous-time physics integrated by RK4 and sampled, so
 //! that no discrete LFT is exact; integrating axes in open and closed loop, double
 //! integrators, two-mass resonances, input delays, non-minimum-phase zeros, white and coloured
 //! noise, validation records up to 20 % larger than the estimation record, and in about half
@@ -39,7 +39,7 @@ use structid_discover::discover::{
     UNLOCATED_DIRECTION_EFFECT, Verdict, discover, initial_state, rate_explains,
 };
 use structid_discover::hypotheses::Nominal;
-use structid_discover::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
+use structid_testcases::physics::{Expected, NominalSource, PhysicsCase, PhysicsKind, generate};
 
 fn run(case: &PhysicsCase) -> Discovery {
     let nominal = Nominal::from_polynomial(&case.nominal).unwrap();
@@ -681,7 +681,7 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
 #[test]
 fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_parameters() {
     use structid_discover::hypotheses::Location;
-    use structid_discover::physics::PhysicalEffect;
+    use structid_testcases::physics::PhysicalEffect;
     for seed in [0, 9] {
         let (case, d) = dynamic_finding(seed);
         assert_ne!(case.nominal_source, NominalSource::Exact);

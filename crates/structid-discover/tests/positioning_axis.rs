@@ -1,4 +1,4 @@
-//! The closed-loop positioning axis of `structid_discover::physics::positioning_axis`:
+//! The closed-loop positioning axis of `structid_testcases::physics::positioning_axis`:
 //! M·q̈ + Fv·q̇ + Fc·sign(q̇) + offset = τ, simulated in continuous time (RK4, 20 steps per
 //! sample) under a PD position controller on point-to-point moves, sampled at 1 kHz. The
 //! workflow sees the recorded force τ and position q and the physical nominal M·q̈ + Fv·q̇ = τ
@@ -11,7 +11,7 @@ use structid_core::validation::Scoring;
 use structid_discover::discover::{Classification, DiscoverSettings, Verdict, discover};
 use structid_discover::effects::Effect;
 use structid_discover::hypotheses::{Location, Nominal};
-use structid_discover::physics::positioning_axis;
+use structid_testcases::physics::positioning_axis;
 
 #[test]
 fn coulomb_friction_of_a_closed_loop_axis_is_named_in_rate_feedback() {
@@ -63,7 +63,7 @@ fn coulomb_friction_of_a_closed_loop_axis_is_named_in_rate_feedback() {
 fn coulomb_friction_is_named_from_an_estimated_nominal_too() {
     let axis = positioning_axis(1);
     let (g, source) = axis.estimated_nominal();
-    assert_ne!(source, structid_discover::physics::NominalSource::Exact);
+    assert_ne!(source, structid_testcases::physics::NominalSource::Exact);
     let d = discover(
         &Nominal::from_polynomial(&g).unwrap(),
         &axis.estimation,

@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 use structid_core::progress::Progress;
 use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::hypotheses::Nominal;
-use structid_discover::synthetic;
+use structid_testcases::synthetic;
 
 #[test]
 fn discovery_reports_each_location() {

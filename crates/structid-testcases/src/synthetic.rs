@@ -68,7 +68,7 @@
 //! Lengths are 2000–4000 samples, the same for both records.
 //!
 //! ```
-//! use structid_discover::synthetic::{CaseKind, Hidden, generate};
+//! use structid_testcases::synthetic::{CaseKind, Hidden, generate};
 //! let case = generate(CaseKind::Static, 3);
 //! if let Hidden::Static { effect, theta, location } = &case.hidden {
 //!     println!("{} at {location:?} with θ = {theta:?}", effect.name());
@@ -90,8 +90,8 @@ use rand_distr::{Distribution, Normal};
 use structid_core::{Data, Error, PolynomialDispersion, Result, Signal};
 use structid_linear::PolynomialModel;
 
-use crate::effects::Effect;
-use crate::hypotheses::{Location, hypothesis};
+use structid_discover::effects::Effect;
+use structid_discover::hypotheses::{Location, hypothesis};
 
 /// The kind of input signal of a case; its parameters are drawn per case.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -184,7 +184,7 @@ impl Hidden {
     /// the output noise `e` when given (entering the loop as described for each variant).
     ///
     /// ```
-    /// use structid_discover::synthetic::Hidden;
+    /// use structid_testcases::synthetic::Hidden;
     /// use structid_linear::PolynomialModel;
     /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
     /// let y = Hidden::Backlash { width: 0.5 }.simulate(&g, &[1.0, 1.0, 0.0], None).unwrap();
@@ -272,7 +272,7 @@ fn static_pair(seed: u64) -> (Effect, Location) {
 /// see the [module documentation](self) for what is drawn and checked.
 ///
 /// ```
-/// use structid_discover::synthetic::{CaseKind, Hidden, generate};
+/// use structid_testcases::synthetic::{CaseKind, Hidden, generate};
 /// let case = generate(CaseKind::None, 1);
 /// assert_eq!(case.hidden, Hidden::None);
 /// assert!(case.equivalent_locations().is_empty());
@@ -1497,7 +1497,7 @@ mod tests {
             // binned static fit.
             let r = static_residual(&t.z, &t.w);
             assert!(
-                crate::hysteresis::direction_dependence(&t.z, &r, 0.1).dynamic,
+                structid_discover::hysteresis::direction_dependence(&t.z, &r, 0.1).dynamic,
                 "{seed}"
             );
         }
@@ -1535,7 +1535,7 @@ mod tests {
                 let y0 = c.nominal.simulate(c.estimation.u()).unwrap();
                 let ratio = rms_diff(&t.y, &y0) / c.noise_std;
                 let r = static_residual(&t.z, &t.w);
-                let dd = crate::hysteresis::direction_dependence(&t.z, &r, 0.1);
+                let dd = structid_discover::hysteresis::direction_dependence(&t.z, &r, 0.1);
                 let what = match &c.hidden {
                     Hidden::Static {
                         effect, location, ..

@@ -58,7 +58,7 @@
 //! the integrators fixed for integrating plants ([`NominalSource`]).
 //!
 //! ```
-//! use structid_discover::physics::{PhysicsKind, generate};
+//! use structid_testcases::physics::{PhysicsKind, generate};
 //! let case = generate(PhysicsKind::Static, 4);
 //! assert_eq!(case.estimation.len(), case.validation.len());
 //! assert!(case.effect_rms >= 8.0 * case.noise_std);
@@ -74,7 +74,7 @@ use structid_core::{Data, Signal, Site};
 use structid_linear::integrators::{convolve, deflate, integrator_polynomial};
 use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx, oe};
 
-use crate::effects::Effect;
+use structid_discover::effects::Effect;
 
 /// RK4 steps per sample.
 pub const SUBSTEPS: usize = 20;
@@ -442,7 +442,7 @@ pub struct Accepted {
     /// The family.
     pub effect: Effect,
     /// Key parameters by [`Effect::parameter_names`] name (`offset` is the family's constant
-    /// offset) or [derived](crate::effects::EffectFit::derived) name, in the site's map
+    /// offset) or [derived](structid_discover::effects::EffectFit::derived) name, in the site's map
     /// units. A saturation at the input is judged by its knee, the actuator's limit in u,
     /// because its level in w trades with the gain of an estimated G. Empty when the family
     /// only approximates the truth and no parameter of it corresponds to a physical one
@@ -467,7 +467,7 @@ impl Expected {
     /// ```
     /// use structid_core::Site;
     /// use structid_discover::effects::{Effect, fit_effect};
-    /// use structid_discover::physics::{Accepted, Expected};
+    /// use structid_testcases::physics::{Accepted, Expected};
     /// let z: Vec<f64> = (0..200).map(|k| -2.0 + k as f64 / 50.0).collect();
     /// let w: Vec<f64> = z.iter().map(|z| z.clamp(-0.9, 0.9)).collect();
     /// let fit = fit_effect(Effect::Saturation, &z, &w).unwrap();
@@ -481,7 +481,7 @@ impl Expected {
     /// assert!(j.named && j.parameters == Some(true));
     /// assert_eq!(truth.judge(&fit, 0.05).parameters, Some(false));
     /// ```
-    pub fn judge(&self, fit: &crate::effects::EffectFit, tolerance: f64) -> Judgement {
+    pub fn judge(&self, fit: &structid_discover::effects::EffectFit, tolerance: f64) -> Judgement {
         let Some(accepted) = self.accepted.iter().find(|a| a.effect == fit.effect) else {
             return Judgement {
                 named: false,
@@ -1544,7 +1544,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
 /// until the checks of the module docs pass).
 ///
 /// ```
-/// use structid_discover::physics::{PhysicsKind, generate};
+/// use structid_testcases::physics::{PhysicsKind, generate};
 /// let case = generate(PhysicsKind::None, 2);
 /// assert!(case.effect.is_none() && case.expected.is_none());
 /// ```
@@ -1558,7 +1558,7 @@ pub fn generate(kind: PhysicsKind, seed: u64) -> PhysicsCase {
 /// effect kind, with inputs and noise of the new length.
 ///
 /// ```
-/// use structid_discover::physics::{LENGTH, PhysicsKind, generate, generate_with_length};
+/// use structid_testcases::physics::{LENGTH, PhysicsKind, generate, generate_with_length};
 /// let long = generate_with_length(PhysicsKind::None, 2, 4000);
 /// assert_eq!(long.estimation.len(), 4000);
 /// assert_eq!(generate_with_length(PhysicsKind::None, 2, LENGTH), generate(PhysicsKind::None, 2));
@@ -1661,7 +1661,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     let windowed = match s.plant.integrators {
         0 => None,
         _ => {
-            let model = crate::hypotheses::Nominal::from_polynomial(&g)
+            let model = structid_discover::hypotheses::Nominal::from_polynomial(&g)
                 .ok()?
                 .model()
                 .ok()?;
@@ -1845,8 +1845,10 @@ impl PositioningAxis {
 
 impl PhysicsCase {
     /// The nominal given to the workflow, as the discovery workflow takes it.
-    pub fn discover_nominal(&self) -> structid_core::Result<crate::hypotheses::Nominal> {
-        crate::hypotheses::Nominal::from_polynomial(&self.nominal)
+    pub fn discover_nominal(
+        &self,
+    ) -> structid_core::Result<structid_discover::hypotheses::Nominal> {
+        structid_discover::hypotheses::Nominal::from_polynomial(&self.nominal)
     }
 }
 
