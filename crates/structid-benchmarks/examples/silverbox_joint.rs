@@ -30,7 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("SB_BETAS") {
         js.betas = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
     }
-    if let Ok(v) = std::env::var("SB_SECOND") {
+    if let Ok(v) = std::env::var("SB_SECOND_MAP") {
         js.second_map = v.parse()?;
     }
     if let Ok(v) = std::env::var("SB_ITERATIONS") {
