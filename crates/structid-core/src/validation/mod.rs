@@ -46,6 +46,7 @@
 //! O) get the minimum-norm value: they reach neither z nor y, so they change no result.
 //! The simulation then starts from x̂₀ and the prediction uses v with O·x̂₀ removed.
 
+pub mod comparison;
 pub mod metrics;
 pub mod residual_tests;
 pub mod windows;
