@@ -41,7 +41,8 @@ class Validation:
     whiteness_passes: bool
     input_correlation_passes: bool
     whiteness: List[Dict[str, Any]]
-    """Per output: lags, values and the 99 % bound of the autocorrelation of the errors."""
+    """Per output: lags, values, the 99 % bound, and the Ljung–Box statistic with its 1 % critical
+    value of the autocorrelation of the errors."""
     input_correlation: List[List[Dict[str, Any]]]
     """[output][input]: the cross-correlation of the errors with u."""
     initial_state: Optional[List[float]]

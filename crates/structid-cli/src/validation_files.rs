@@ -143,15 +143,18 @@ pub(crate) fn fmt_pct(v: f64) -> String {
 }
 
 pub(crate) fn pass(t: &CorrelationTest) -> String {
-    let n = t.outside().len();
-    let tested = if t.autocorrelation {
-        t.lags.iter().filter(|&&l| l != 0).count()
-    } else {
-        t.lags.len()
-    };
     format!(
-        "{} ({n} of {tested} lags outside the 99 % band)",
-        if n == 0 { "pass" } else { "FAIL" }
+        "{} ({} = {:.1}, 1 % critical value {:.1}; {} of {} lags outside the 99 % band)",
+        if t.passes() { "pass" } else { "FAIL" },
+        if t.autocorrelation {
+            "Ljung–Box Q"
+        } else {
+            "Box–Jenkins Q"
+        },
+        t.statistic,
+        t.critical,
+        t.outside().len(),
+        t.tested()
     )
 }
 

@@ -40,6 +40,7 @@
 use std::ops::Range;
 
 use structid_core::residual_tests::{autocorrelation, cross_correlation};
+use structid_core::validation::distributions::chi_square_quantile;
 use structid_core::validation::{Scoring, ValidationSettings, validate};
 use structid_core::{Data, InitialState, Interpolant, Model, Result};
 
@@ -152,73 +153,6 @@ pub struct RecordGap {
     pub fit_percent: f64,
     /// How many of its samples are scored.
     pub samples: usize,
-}
-
-/// The standard normal quantile Φ⁻¹(p) for 0 < p < 1 (Acklam's rational approximation,
-/// relative error below 1.2e-9).
-///
-/// ```
-/// let z = structid_discover::gap::normal_quantile(0.99);
-/// assert!((z - 2.326_347_874).abs() < 1e-8);
-/// ```
-pub fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [
-        -3.969_683_028_665_376e1,
-        2.209_460_984_245_205e2,
-        -2.759_285_104_469_687e2,
-        1.383_577_518_672_69e2,
-        -3.066_479_806_614_716e1,
-        2.506_628_277_459_239,
-    ];
-    const B: [f64; 5] = [
-        -5.447_609_879_822_406e1,
-        1.615_858_368_580_409e2,
-        -1.556_989_798_598_866e2,
-        6.680_131_188_771_972e1,
-        -1.328_068_155_288_572e1,
-    ];
-    const C: [f64; 6] = [
-        -7.784_894_002_430_293e-3,
-        -3.223_964_580_411_365e-1,
-        -2.400_758_277_161_838,
-        -2.549_732_539_343_734,
-        4.374_664_141_464_968,
-        2.938_163_982_698_783,
-    ];
-    const D: [f64; 4] = [
-        7.784_695_709_041_462e-3,
-        3.224_671_290_700_398e-1,
-        2.445_134_137_142_996,
-        3.754_408_661_907_416,
-    ];
-    let p = p.clamp(1e-300, 1.0 - 1e-16);
-    let tail = |q: f64| {
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    };
-    if p < 0.02425 {
-        tail((-2.0 * p.ln()).sqrt())
-    } else if p > 1.0 - 0.02425 {
-        -tail((-2.0 * (1.0 - p).ln()).sqrt())
-    } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
-    }
-}
-
-/// The `p` quantile of χ² with `k` degrees of freedom (Wilson–Hilferty; within 1 % for k ≥ 5
-/// and p ≤ 0.9999).
-///
-/// ```
-/// let q = structid_discover::gap::chi_square_quantile(0.99, 25);
-/// assert!((q - 44.31).abs() < 0.3);
-/// ```
-pub fn chi_square_quantile(p: f64, k: usize) -> f64 {
-    let k = k.max(1) as f64;
-    let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + normal_quantile(p) * a.sqrt()).powi(3).max(0.0)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -1096,9 +1030,6 @@ mod tests {
         let n = Normal::new(0.0, 0.3).unwrap();
         let e: Vec<f64> = (0..20000).map(|_| n.sample(&mut rng)).collect();
         assert!((noise_level(&e) - 0.3).abs() < 0.01, "{}", noise_level(&e));
-        assert!((chi_square_quantile(0.99, 51) - 77.386).abs() < 0.3);
-        assert!((normal_quantile(0.975) - 1.959_963_985).abs() < 1e-8);
-        assert!((normal_quantile(1e-5) + 4.264_890_794).abs() < 1e-7);
     }
 
     /// White noise plus a slow model error: the error's variogram grows as k² over the fitted

@@ -47,6 +47,7 @@
 //! The simulation then starts from x̂₀ and the prediction uses v with O·x̂₀ removed.
 
 pub mod comparison;
+pub mod distributions;
 pub mod metrics;
 pub mod residual_tests;
 pub mod windows;

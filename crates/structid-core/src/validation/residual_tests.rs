@@ -12,6 +12,20 @@
 //! normalised correlation at a non-zero lag is approximately N(0, 1/N), so the 99 % band is
 //! ±2.576/√N. A positive lag τ in R_εu pairs ε with *past* inputs; correlation at negative lags
 //! points to feedback from ε to u.
+//!
+//! The band is drawn per lag, but the verdict is one test over all lags at the 1 % level: with
+//! 25 lags in a 99 % band, one of them falls outside a fourth of the time for a white residual.
+//! The portmanteau statistics are, over the m tested lags,
+//!
+//! ```text
+//! Q_ε  = N·(N + 2)·Σ_(τ=1..m) R_ε(τ)²/(N − τ)      (Ljung–Box, whiteness)
+//! Q_εu = N·Σ_τ R_εu(τ)²                              (Box–Jenkins, independence of u)
+//! ```
+//!
+//! each approximately χ² with m degrees of freedom under the null hypothesis; a test passes when
+//! its statistic is below the χ² quantile at 0.99.
+
+use crate::validation::distributions::chi_square_quantile;
 
 /// Two-sided 99 % quantile of the standard normal distribution.
 pub const Z_99: f64 = 2.575_829_303_548_901;
@@ -27,6 +41,11 @@ pub struct CorrelationTest {
     pub bound: f64,
     /// Whether this is an autocorrelation (whose lag 0 is 1 by definition and not a test).
     pub autocorrelation: bool,
+    /// The portmanteau statistic over the tested lags (Ljung–Box for an autocorrelation,
+    /// Box–Jenkins for a cross-correlation; see the [module docs](self)).
+    pub statistic: f64,
+    /// The χ² quantile at 0.99 with as many degrees of freedom as tested lags.
+    pub critical: f64,
 }
 
 impl CorrelationTest {
@@ -41,10 +60,44 @@ impl CorrelationTest {
             .collect()
     }
 
-    /// Whether every lag (except an autocorrelation's lag 0) lies inside the band.
-    pub fn passes(&self) -> bool {
-        self.outside().is_empty()
+    /// Number of lags tested (an autocorrelation's positive lags; every lag of a
+    /// cross-correlation).
+    pub fn tested(&self) -> usize {
+        if self.autocorrelation {
+            self.lags.iter().filter(|&&l| l > 0).count()
+        } else {
+            self.lags.len()
+        }
     }
+
+    /// Whether the portmanteau statistic stays below its 1 % critical value: the residual shows
+    /// no correlation over the tested lags taken together.
+    pub fn passes(&self) -> bool {
+        !(self.statistic > self.critical)
+    }
+}
+
+/// The statistic and its critical value for `values` at `lags` over `n` samples.
+fn portmanteau(lags: &[isize], values: &[f64], n: usize, autocorrelation: bool) -> (f64, f64) {
+    let nf = n as f64;
+    let (mut q, mut df) = (0.0, 0usize);
+    for (&l, &r) in lags.iter().zip(values) {
+        if autocorrelation {
+            if l > 0 && (l as usize) < n {
+                q += r * r / (nf - l as f64);
+                df += 1;
+            }
+        } else {
+            q += r * r;
+            df += 1;
+        }
+    }
+    let q = if autocorrelation {
+        nf * (nf + 2.0) * q
+    } else {
+        nf * q
+    };
+    (q, chi_square_quantile(0.99, df.max(1)))
 }
 
 fn centred(x: &[f64]) -> Vec<f64> {
@@ -78,7 +131,7 @@ pub fn autocorrelation(residual: &[f64], max_lag: usize) -> CorrelationTest {
     let e = centred(residual);
     let r0 = covariance(&e, &e, 0);
     let lags: Vec<isize> = (-(max_lag as isize)..=max_lag as isize).collect();
-    let values = lags
+    let values: Vec<f64> = lags
         .iter()
         .map(|&l| {
             if l == 0 {
@@ -90,11 +143,14 @@ pub fn autocorrelation(residual: &[f64], max_lag: usize) -> CorrelationTest {
             }
         })
         .collect();
+    let (statistic, critical) = portmanteau(&lags, &values, e.len(), true);
     CorrelationTest {
         lags,
         values,
         bound: Z_99 / (e.len().max(1) as f64).sqrt(),
         autocorrelation: true,
+        statistic,
+        critical,
     }
 }
 
@@ -105,7 +161,7 @@ pub fn cross_correlation(residual: &[f64], input: &[f64], max_lag: usize) -> Cor
     let (e, u) = (centred(&residual[..n]), centred(&input[..n]));
     let scale = (covariance(&e, &e, 0) * covariance(&u, &u, 0)).sqrt();
     let lags: Vec<isize> = (-(max_lag as isize)..=max_lag as isize).collect();
-    let values = lags
+    let values: Vec<f64> = lags
         .iter()
         .map(|&l| {
             if scale > 0.0 {
@@ -115,11 +171,14 @@ pub fn cross_correlation(residual: &[f64], input: &[f64], max_lag: usize) -> Cor
             }
         })
         .collect();
+    let (statistic, critical) = portmanteau(&lags, &values, n, false);
     CorrelationTest {
         lags,
         values,
         bound: Z_99 / (n.max(1) as f64).sqrt(),
         autocorrelation: false,
+        statistic,
+        critical,
     }
 }
 
@@ -149,6 +208,32 @@ mod tests {
             outside <= 50,
             "{outside} of 2000 lags outside the 99 % band"
         );
+    }
+
+    #[test]
+    fn the_portmanteau_tests_keep_their_one_percent_level_where_single_lags_would_not() {
+        // 200 white records, 25 lags each: a lag outside the 99 % band in about a fifth of
+        // them, the Ljung–Box test failing in about 1 %.
+        let (mut any_lag, mut failed) = (0, 0);
+        for seed in 100..300 {
+            let t = autocorrelation(&white(2000, seed), 25);
+            any_lag += usize::from(!t.outside().is_empty());
+            failed += usize::from(!t.passes());
+        }
+        assert!(any_lag > 20, "{any_lag} of 200 with a lag outside");
+        assert!(failed <= 8, "{failed} of 200 failed the Ljung–Box test");
+        // The statistic is Ljung–Box's, summed here by hand.
+        let e = white(300, 7);
+        let t = autocorrelation(&e, 4);
+        let q: f64 = (1..=4)
+            .map(|l| {
+                let r = t.values[t.lags.iter().position(|&x| x == l).unwrap()];
+                r * r / (300.0 - l as f64)
+            })
+            .sum::<f64>()
+            * 300.0
+            * 302.0;
+        assert!((t.statistic - q).abs() < 1e-9 * q, "{} vs {q}", t.statistic);
     }
 
     #[test]
