@@ -149,7 +149,7 @@ pub(crate) fn pass(t: &CorrelationTest) -> String {
         if t.autocorrelation {
             "Ljung–Box Q"
         } else {
-            "Box–Jenkins Q"
+            "Ljung ζ"
         },
         t.statistic,
         t.critical,

@@ -100,6 +100,14 @@ fn the_one_step_prediction_error_of_the_true_series_model_is_the_noise() {
     // A wrong downstream map is seen by the predictor.
     let wrong = |z: &[f64]| 0.7 * z[0].clamp(-0.5, 0.5);
     let off = validate(&model(), &[&wrong, &a, &b], &data, &settings).unwrap();
+    // An estimated initial state would contradict the z computed from rest: refused.
+    let estimate = ValidationSettings::builder()
+        .max_lag(20)
+        .initial_state(structid_core::InitialState::Estimate)
+        .build()
+        .unwrap();
+    let err = validate(&model(), &MAPS, &data, &estimate).unwrap_err();
+    assert!(matches!(err, Error::NotMeasurable { .. }), "{err}");
     let gap: f64 = (100..600)
         .map(|k| (off.prediction_error.get(k, 0) - e.get(k, 0)).powi(2))
         .sum::<f64>()

@@ -2,7 +2,7 @@
 //! [`crate::GaussianFeatures`]:
 //!
 //! ```text
-//!   N(z) = Σ_j c_j·ψ_j(z) + a₀ + aᵀz,     D = Σ_j c_j²/λ_j
+//!   N(z) = Σ_(j≥1) c_j·ψ_j(z) + a₀ + aᵀz,     D = Σ_(j≥1) c_j²/λ_j
 //! ```
 //!
 //! ψ are the features of the paper's Fourier-series kernel on a fixed domain
@@ -10,9 +10,10 @@
 //! and sines of the harmonics, tensor or additive over several inputs) and λ their weights, so
 //! D is the kernel's RKHS norm and β means what it means in `identify` with a `fourier`
 //! dispersion. The affine part is not penalised, as for the Gaussian features: it carries the
-//! map's level and slope, and its extrapolation beyond the domain.
+//! map's level and slope, and its extrapolation beyond the domain. The constant feature ψ₀ ≡ 1
+//! is left out, since a₀ is the same regressor.
 //!
-//! Parameter order: c₁ … c_m, a₀, a₁ … a_p.
+//! Parameter order: c₁ … c_(m−1), a₀, a₁ … a_p (m the kernel's features).
 
 use nalgebra::DMatrix;
 use structid_core::{Combination, FeatureMap, FourierKernel, FourierWeights};
@@ -40,7 +41,7 @@ impl FourierFeatures {
         Ok(Self {
             kernel,
             beta,
-            coef: vec![0.0; m],
+            coef: vec![0.0; m - 1],
             affine: vec![0.0; p + 1],
         })
     }
@@ -51,7 +52,7 @@ impl FourierFeatures {
     /// ```
     /// use structid_joint::{BlockMap, FourierFeatures};
     /// let f = FourierFeatures::on_interval(-2.0, 2.0, 0.4, Some(6), 1e-8).unwrap();
-    /// assert_eq!(f.parameters().len(), 13 + 2);
+    /// assert_eq!(f.parameters().len(), 12 + 2); // 2·6 harmonics (ψ₀ is a₀) and a₁
     /// let z: Vec<Vec<f64>> = (0..81).map(|k| vec![-2.0 + 0.05 * k as f64]).collect();
     /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
     /// let f = f.fitted_to(&z, &w).unwrap();
@@ -116,7 +117,7 @@ impl FourierFeatures {
         let n = z.len() as f64;
         let penalty = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
             m,
-            self.kernel.weights().iter().map(|l| self.beta * n / l),
+            self.kernel.weights()[1..].iter().map(|l| self.beta * n / l),
         ));
         let sol = regularised_fit(columns, y, filter, &penalty)?;
         let mut out = self.clone();
@@ -125,10 +126,12 @@ impl FourierFeatures {
         Ok(out)
     }
 
-    /// The regressors [ψ₁(z) … ψ_m(z), 1, z₁ … z_p].
+    /// The regressors [ψ₁(z) … ψ_(m−1)(z), 1, z₁ … z_p].
     fn features(&self, z: &[f64], out: &mut [f64]) {
         let m = self.coef.len();
-        self.kernel.eval_into(z, &mut out[..m]);
+        let mut psi = vec![0.0; m + 1];
+        self.kernel.eval_into(z, &mut psi);
+        out[..m].copy_from_slice(&psi[1..]);
         out[m] = 1.0;
         out[m + 1..].copy_from_slice(z);
     }
@@ -165,21 +168,30 @@ impl BlockMap for FourierFeatures {
     }
 
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {
-        let mut psi = vec![0.0; self.coef.len()];
+        let mut psi = vec![0.0; self.coef.len() + 1];
         self.kernel.eval_into(z, &mut psi);
-        psi.iter().zip(&self.coef).map(|(a, b)| a * b).sum::<f64>() + self.affine_value(z)
+        psi[1..]
+            .iter()
+            .zip(&self.coef)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            + self.affine_value(z)
     }
 
     fn eval_jacobian(&self, _state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
         let (m, p) = (self.coef.len(), z.len());
-        let mut grad = vec![0.0; m * p];
-        self.kernel.gradient_into(z, &mut jac.dw_dp[..m], &mut grad);
+        let (mut psi, mut grad) = (vec![0.0; m + 1], vec![0.0; (m + 1) * p]);
+        self.kernel.gradient_into(z, &mut psi, &mut grad);
+        jac.dw_dp[..m].copy_from_slice(&psi[1..]);
         jac.dw_dp[m] = 1.0;
         jac.dw_dp[m + 1..].copy_from_slice(z);
         for (i, d) in jac.dw_dz.iter_mut().enumerate() {
-            *d = self.affine[1 + i] + (0..m).map(|j| self.coef[j] * grad[j * p + i]).sum::<f64>();
+            *d = self.affine[1 + i]
+                + (0..m)
+                    .map(|j| self.coef[j] * grad[(j + 1) * p + i])
+                    .sum::<f64>();
         }
-        jac.dw_dp[..m]
+        psi[1..]
             .iter()
             .zip(&self.coef)
             .map(|(a, b)| a * b)
@@ -193,7 +205,7 @@ impl BlockMap for FourierFeatures {
         }
         let m = self.coef.len();
         let mut r = DMatrix::zeros(m, m + self.affine.len());
-        for (j, l) in self.kernel.weights().iter().enumerate() {
+        for (j, l) in self.kernel.weights()[1..].iter().enumerate() {
             r[(j, j)] = (self.beta / l).sqrt();
         }
         Some(r)
@@ -268,22 +280,18 @@ mod tests {
 
     #[test]
     fn the_regulariser_squares_to_beta_times_the_kernel_norm_of_the_expansion() {
-        // For f = Σ c_j ψ_j, ‖f‖² = Σ c_j²/λ_j; check against the kernel: with c = Λ·ψ(z₀)
-        // (f = K(·, z₀)), ‖f‖² = K(z₀, z₀).
+        // For f = Σ c_j ψ_j, ‖f‖² = Σ c_j²/λ_j; with c = Λ·ψ(z₀), f = K(·, z₀) and
+        // ‖f‖² = K(z₀, z₀). The constant part λ₀ψ₀(z₀)ψ₀ is a₀'s, unpenalised.
         let f = FourierFeatures::on_interval(-1.0, 1.0, 0.3, Some(8), 0.7).unwrap();
         let z0 = [0.25];
         let mut psi = vec![0.0; f.kernel().dim()];
         f.kernel().eval_into(&z0, &mut psi);
-        let c: Vec<f64> = psi
-            .iter()
-            .zip(f.kernel().weights())
-            .map(|(p, l)| p * l)
-            .collect();
-        let mut theta = c.clone();
+        let w = f.kernel().weights();
+        let mut theta: Vec<f64> = psi[1..].iter().zip(&w[1..]).map(|(p, l)| p * l).collect();
         theta.extend([0.0, 0.0]);
         let r = f.regulariser().unwrap();
         let norm = (&r * nalgebra::DVector::from_vec(theta)).norm_squared();
-        let k = structid_core::Kernel::eval(f.kernel(), &z0, &z0);
+        let k = structid_core::Kernel::eval(f.kernel(), &z0, &z0) - w[0] * psi[0] * psi[0];
         assert!((norm - 0.7 * k).abs() < 1e-10 * k, "{norm} vs {}", 0.7 * k);
     }
 }

@@ -343,7 +343,8 @@ fn fourier(
             (lo - pad, hi + pad)
         })
         .collect();
-    let widest = domain.iter().map(|(a, b)| b - a).fold(0.0, f64::max);
+    // σ as the Gaussian's default: 0.1 × the largest range of the block's inputs.
+    let widest = ranges.iter().map(|(a, b)| b - a).fold(0.0, f64::max);
     let sigma = sigma.unwrap_or(0.1 * widest);
     let kernel = structid_core::FourierKernel::new(
         &structid_core::FourierWeights::GaussianLike { sigma },

@@ -9,7 +9,8 @@
 //! a + b·ε (ε² = 0), one input or parameter direction at a time, which carries the derivative
 //! through every function of the parser by the chain rule. Functions with jumps (`signum`,
 //! `floor`, `round`, …) have derivative zero away from their jumps, as their one-sided
-//! derivatives are; `abs`, `min` and `max` take the derivative of the branch they select.
+//! derivatives are; `abs`, `min` and `max` take the derivative of the branch they select. Where
+//! a derivative is infinite or undefined (√|z| at z = 0), it is taken as zero.
 
 use std::str::FromStr;
 
@@ -256,16 +257,16 @@ impl ParametricMap {
                 || name
                     .strip_prefix('z')
                     .is_some_and(|s| s.parse::<usize>().is_ok());
-            let ident = name.starts_with(|c: char| c.is_alphabetic() || c == '_')
-                && name.chars().all(|c| c.is_alphanumeric() || c == '_');
+            let ident = name.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_')
+                && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
             if !ident
                 || input_like
                 || constants.contains(&name.as_str())
                 || function_names().contains(&name.as_str())
             {
                 return Err(err(format!(
-                    "`{name}` cannot name a parameter: a parameter is an identifier other than \
-                     the inputs z, z0, z1, …, the constants and the functions"
+                    "`{name}` cannot name a parameter: a parameter is an ASCII identifier other \
+                     than the inputs z, z0, z1, …, the constants and the functions"
                 )));
             }
             if parameters[..i].iter().any(|(n, _)| n == name) {
@@ -389,6 +390,9 @@ impl ParametricMap {
             vars[k].d = 1.0;
             let d = self.dual.eval(&vars).map_or(f64::NAN, |r| r.d);
             vars[k].d = 0.0;
+            // Where the law has no finite derivative (√|z| at 0), its one-sided slopes are
+            // infinite; a zero keeps the sensitivities finite, as for a jump.
+            let d = if d.is_finite() { d } else { 0.0 };
             match *slot {
                 Slot::Input(i) if i < dw_dz.len() => dw_dz[i] += d,
                 Slot::Parameter(p) if p < dw_dp.len() => dw_dp[p] += d,
@@ -463,6 +467,14 @@ mod tests {
     }
 
     #[test]
+    fn an_infinite_slope_is_taken_as_zero() {
+        let f = ParametricMap::parse("k*sqrt(abs(z0))", 1, vec![("k".into(), 0.5)]).unwrap();
+        let (mut dz, mut dp) = ([1.0], [1.0]);
+        assert_eq!(f.gradient(&[0.0], &mut dz, &mut dp), 0.0);
+        assert_eq!((dz[0], dp[0]), (0.0, 0.0));
+    }
+
+    #[test]
     fn a_parameter_used_twice_and_the_single_input_z_sum_their_derivatives() {
         let f = ParametricMap::parse("k*z + k^2", 1, vec![("k".into(), 3.0)]).unwrap();
         let (mut dz, mut dp) = ([0.0], [0.0]);
@@ -479,6 +491,7 @@ mod tests {
             ("z0", p("e"), "`e`"),
             ("z0", p("sin"), "`sin`"),
             ("z0", p("2k"), "`2k`"),
+            ("z0", p("ω"), "`ω`"),
             ("z2*k", p("k"), "z2"),
             ("k*z0", vec![("k".into(), 1.0), ("k".into(), 2.0)], "twice"),
             ("frob(z0)*k", p("k"), "frob"),

@@ -492,6 +492,15 @@ pub(crate) fn measured_residual(
     let with_z;
     let series = lft.matrices().dzw.iter().any(|v| *v != 0.0);
     let data = match (initial_state, data.z()) {
+        (InitialState::Estimate, None) if series => {
+            return Err(Error::NotMeasurable {
+                explanation: "maps in series are predicted from a record at rest: their z is \
+                              computed from u, y and the maps upstream from a zero state, which an \
+                              estimated initial state would contradict; use the zero initial \
+                              state with a settling period instead"
+                    .into(),
+            });
+        }
         (_, None) if series => {
             with_z = data
                 .clone()

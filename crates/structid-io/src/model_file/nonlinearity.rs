@@ -211,6 +211,12 @@ pub(super) fn parse_truth(
         ));
     }
     if let Some(t) = table {
+        if let Some(p) = &raw.parameters {
+            return Err(err_at(
+                src.line(p.span().start),
+                format!("block `{block}`: `parameters` go with a truth expression, not a table"),
+            ));
+        }
         return load_table_truth(t.get_ref(), dim, block, base_dir, src.line(t.span().start))
             .map(Some);
     }

@@ -1137,4 +1137,9 @@ fn a_parametric_family_parses_evaluates_round_trips_and_its_errors_name_the_line
         e.contains("without a `truth`") && e.contains("line 26"),
         "{e}"
     );
+    let e = err(&CANONICAL.replace(
+        "truth = \"tanh(z0)\"         # optional, used by `simulate` and for error reports",
+        "table = \"map.csv\"\nparameters = { k = 1.0 }",
+    ));
+    assert!(e.contains("not a table") && e.contains("line 27"), "{e}");
 }
