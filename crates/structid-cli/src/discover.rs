@@ -119,15 +119,16 @@ pub struct DiscoverArgs {
     /// Tune σ with β by marginal likelihood (default: σ fixed, β tuned).
     #[arg(long)]
     tune_sigma: bool,
-    /// A family is named when the validation RMS with its parametric map is at most T times
-    /// that with the nonparametric map (or within 1.5 × the noise level); T ≥ 1.
+    /// Significance level α of the candidate table's selection rule (0 < α ≤ 0.5): a row is
+    /// as good as the best unless the paired Diebold–Mariano test of the validation errors
+    /// says it is worse at α; the simplest row as good as the best is chosen.
     #[arg(
         long,
-        value_name = "T",
+        value_name = "ALPHA",
         allow_negative_numbers = true,
-        default_value_t = DiscoverSettings::default().naming_tolerance()
+        default_value_t = DiscoverSettings::default().significance()
     )]
-    naming_tolerance: f64,
+    significance: f64,
     /// Share of the deconvolved residual energy (0 < T < 1) that the direction of z must
     /// explain for the effect to be reported as dynamic (hysteresis or backlash suspected).
     #[arg(
@@ -312,13 +313,6 @@ fn settings(
             a.trend
         )));
     }
-    if !(a.naming_tolerance.is_finite() && a.naming_tolerance >= 1.0) {
-        return Err(CliError::input(format!(
-            "invalid value {} for --naming-tolerance: it is a ratio of validation RMS values and \
-             must be at least 1",
-            a.naming_tolerance
-        )));
-    }
     if !(a.hysteresis_threshold > 0.0 && a.hysteresis_threshold < 1.0) {
         return Err(CliError::input(format!(
             "invalid value {} for --hysteresis-threshold: it is a share of the residual energy \
@@ -332,7 +326,7 @@ fn settings(
         .sigma_fraction(a.sigma_fraction)
         .trend_degree(a.trend)
         .tune_sigma(a.tune_sigma)
-        .naming_tolerance(a.naming_tolerance)
+        .significance(a.significance)
         .hysteresis_threshold(a.hysteresis_threshold)
         .refine_nominal(a.refine_nominal || !a.keep_nominal);
     if let Some(l) = locations {

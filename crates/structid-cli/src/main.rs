@@ -13,7 +13,7 @@
 //!                   [--offset U0] [--band LOW,HIGH] [--seed N] [--name u] [--time] --out U.csv
 //! structid discover --model NOMINAL.toml --data EST.csv… --validation-data VAL.csv… --out DIR [--locations L1,L2]
 //!                   [--no-tv] [--settle N] [--sigma-fraction F] [--trend D] [--tune-sigma]
-//!                   [--naming-tolerance T] [--hysteresis-threshold T]
+//!                   [--significance ALPHA] [--hysteresis-threshold T]
 //! structid static --data D.csv --z COL --w COL [--noise-std S] [--out DIR]
 //! ```
 //!

@@ -394,8 +394,8 @@ fn bad_models_and_arguments_are_input_errors() {
         e.contains("elsewhere") && e.contains("output-feedback"),
         "{e}"
     );
-    let e = run(&nominal, &est, &["--naming-tolerance", "0.5"]);
-    assert!(e.contains("--naming-tolerance"), "{e}");
+    let e = run(&nominal, &est, &["--significance", "0.9"]);
+    assert!(e.contains("significance") && e.contains("0.9"), "{e}");
     let e = run(&nominal, &est, &["--hysteresis-threshold", "1.5"]);
     assert!(e.contains("--hysteresis-threshold"), "{e}");
     let e = run(&nominal, &est, &["--settle", "300"]);

@@ -58,6 +58,7 @@ pub mod localise;
 pub mod records;
 pub mod report;
 pub mod staticness;
+pub mod table;
 
 pub use discover::{
     Classification, DiscoverSettings, Discovery, Effects, EffectsSettings, discover,

@@ -392,6 +392,45 @@ fn regions_section(s: &mut String, estimation: &Gap, validation: &Gap) {
     s.push('\n');
 }
 
+/// The candidate table of the naming step and the rule's decision, as report.md shows them.
+fn candidate_table(s: &mut String, f: &Finding, alpha: f64) {
+    let sel = &f.selection;
+    let _ = writeln!(
+        s,
+        "Candidate table at this location. The best row has the smallest validation RMS; a row \
+         is as good as the best unless the Diebold–Mariano test of the squared validation \
+         errors (Newey–West variance) says it is worse at α = {alpha}; among the rows as good \
+         as the best that may be named, the simplest is chosen (a family before the \
+         nonparametric map, then fewer parameters):\n"
+    );
+    let _ = writeln!(
+        s,
+        "| row | parameters | validation RMS | p (worse than the best) | as good | chosen |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for (i, row) in f.table.iter().enumerate() {
+        let p = match sel.p_worse_than_best.get(i).copied().flatten() {
+            _ if i == sel.best => "best".to_string(),
+            Some(p) => format!("{p:.3}"),
+            None => "—".into(),
+        };
+        let parameters = match row.form {
+            crate::table::Form::Nonparametric { .. } => "—".to_string(),
+            _ => row.parameters.to_string(),
+        };
+        let _ = writeln!(
+            s,
+            "| {}{} | {parameters} | {} | {p} | {} | {} |",
+            cell(&row.label),
+            if row.eligible { "" } else { " (may not be named)" },
+            e(row.validation_rms),
+            if sel.as_good.get(i).copied().unwrap_or(false) { "yes" } else { "no" },
+            if sel.chosen == Some(i) { "**yes**" } else { "" }
+        );
+    }
+    s.push('\n');
+}
+
 fn parameters_text(fit: &EffectFit) -> String {
     // Derived quantities (a saturation's knee) follow the fitted parameters.
     fit.parameters
@@ -738,12 +777,11 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         }
     );
     s.push('\n');
+    candidate_table(s, f, r.settings.significance());
     let _ = writeln!(
         s,
         "Families fitted to the points (z_k, ŵ_k), best BIC first (validation RMS for those \
-         simulated; a family is named when it is within {}× the nonparametric map's, or within \
-         1.5 σ̂):\n",
-        r.settings.naming_tolerance()
+         refined and simulated):\n"
     );
     let _ = writeln!(
         s,
@@ -1008,6 +1046,8 @@ pub fn json(
                 "nonparametric_validation_rms": f.nonparametric_rms,
                 "total_variation_validation_rms": f.total_variation_rms,
                 "families": families,
+                "candidate_table": json_value(&f.table)?,
+                "selection": json_value(&f.selection)?,
                 "direction": json_value(&f.direction)?,
                 "input_hysteresis": json_value(&f.input_hysteresis)?,
                 "remarks": f.remarks,
@@ -1062,7 +1102,7 @@ pub fn json(
             "sigma_fraction": s.sigma_fraction(),
             "trend_degree": s.trend_degree(),
             "tune_sigma": s.tune_sigma(),
-            "naming_tolerance": s.naming_tolerance(),
+            "significance": s.significance(),
             "hysteresis_threshold": s.hysteresis_threshold(),
             "band": s.gap().band,
             "noise_ratio": s.gap().noise_ratio,

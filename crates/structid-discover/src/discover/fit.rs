@@ -269,6 +269,18 @@ pub(super) fn simulation_rms(
     simulated(h, map, data, settings).map_or(f64::INFINITY, |v| v.rms)
 }
 
+/// The validation errors y − ŷ of `h` with `map` at the scored samples of every record of
+/// `data`, records stacked (the rows of the candidate table, [`crate::table`]); empty when the
+/// simulation failed or diverged.
+pub(super) fn simulation_errors(
+    h: &Hypothesis,
+    map: &dyn Interpolant,
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> Vec<f64> {
+    simulated(h, map, data, settings).map_or_else(Vec::new, |v| v.scored_residual())
+}
+
 /// The simulation of [`simulation_rms`] on every record of `data`, `None` when it fails or
 /// diverges.
 fn simulated(

@@ -229,6 +229,11 @@ pub struct Finding {
     /// ([`HYSTERESIS_OVER_STATIC`]); the finding is then dynamic at the input. It is fitted
     /// when a static finding, or a dynamic one at the input, leaves a gap above the noise.
     pub input_hysteresis: Option<InputHysteresis>,
+    /// The candidate table of the naming step at this location: the nonparametric map and
+    /// every refined family, each with its validation errors ([`crate::table`]).
+    pub table: Vec<crate::table::Candidate>,
+    /// What the selection rule decided on [`Finding::table`].
+    pub selection: crate::table::Selection,
 }
 
 /// A hysteresis at the input fitted with G ([`InputHysteresis`]) makes the finding dynamic
@@ -799,7 +804,6 @@ fn discover_once(
             }
         }
     }
-    let sigma = noise.std;
     // Direction dependence of every fit that explains the data about as well as the best: a
     // hysteresis may be best approximated statically at a location other than its own.
     let best_rms = fitted
@@ -917,7 +921,6 @@ fn discover_once(
             &val_candidates,
             &gap_settings,
             &validation_gap,
-            sigma,
             settings,
         )?;
         if let (Some(j), Some(g)) = (joint, given.polynomial()) {
@@ -1621,12 +1624,14 @@ mod tests {
                 .is_err()
         );
         assert!(DiscoverSettings::builder().library(vec![]).build().is_err());
-        assert!(
-            DiscoverSettings::builder()
-                .naming_tolerance(0.9)
-                .build()
-                .is_err()
-        );
+        for alpha in [0.0, 0.6, f64::NAN] {
+            assert!(
+                DiscoverSettings::builder()
+                    .significance(alpha)
+                    .build()
+                    .is_err()
+            );
+        }
         assert!(
             DiscoverSettings::builder()
                 .hysteresis_threshold(1.0)

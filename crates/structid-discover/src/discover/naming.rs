@@ -8,7 +8,8 @@ use crate::gap::{Gap, GapSettings, gap};
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
-use super::fit::{Fitted, simulation_rms};
+use super::fit::{Fitted, simulation_errors};
+use crate::table::{Candidate, Form, select};
 use super::fit::{even_indices, minmax, scoring_settings};
 use super::polish::{polish, polish_jointly};
 use super::{Augmented, AugmentedMap, Classification, DiscoverSettings, Finding};
@@ -150,52 +151,89 @@ fn relay_start(fit: &EffectFit, location: Location) -> Option<(f64, f64)> {
     (level.is_finite() && offset.is_finite() && level > 0.0).then_some((level, offset))
 }
 
-/// The cap of the noise escape of [`validates`]: a family within 1.5·σ̂ is accepted only
-/// when its validation RMS is also within this factor of the nonparametric map's.
-///
-/// Both RMS values contain the noise. With the nonparametric map at RMS ρ (noise plus its own
-/// map error) a family at 1.5·ρ has a map error of at most √(1.5² − 1)·ρ ≈ 1.1·ρ: no larger
-/// than the nonparametric map's whole residual, so still "as good as the data can tell" when
-/// ρ is close to the noise. A family 4× worse (the issue's case, accepted because σ̂ was 2–5×
-/// too high) is refused whatever σ̂ says.
-pub(crate) const NOISE_ESCAPE_CAP: f64 = 1.5;
-
-/// Whether a family whose simulation has validation RMS `rms` validates: within
-/// `tolerance` × the nonparametric map's RMS, or within 1.5·σ̂ (`noise`) provided it is also
-/// within [`NOISE_ESCAPE_CAP`] × the nonparametric map's RMS.
-pub(crate) fn validates(rms: f64, nonparametric_rms: f64, noise: f64, tolerance: f64) -> bool {
-    rms <= tolerance * nonparametric_rms
-        || (rms <= 1.5 * noise && rms <= NOISE_ESCAPE_CAP * nonparametric_rms)
+/// The table's row of the nonparametric map `best` at its own hypothesis.
+fn nonparametric_row(best: &Fitted, h: &Hypothesis, val_h: &Data, s: &DiscoverSettings) -> Candidate {
+    let mut row = Candidate::new(
+        format!("nonparametric ({})", best.estimator),
+        Form::Nonparametric {
+            estimator: best.estimator.to_string(),
+        },
+        0,
+    )
+    .with_errors(simulation_errors(h, best.map.as_ref(), val_h, s));
+    row.location = Some(best.result.location);
+    row.estimation_rms = Some(best.result.estimation_rms);
+    row
 }
 
-/// Which of the refined families names the effect: among those that may name it
-/// ([`EffectFit::nameable`]: identifiable parameters, a refit that converged) and that
-/// [`validates`], the first (simplest), unless a later one cuts its validation RMS by a fifth
-/// (a Stribeck hump is a Coulomb level plus something the data can see), or a later one with
-/// fewer parameters validates at least as well (the families beyond the 25 % group of
-/// [`parsimonious`] come by BIC, not by size: a tanh saturation whose map fit was twice a
-/// four-parameter power law's validated better than it, and is the better name). `refined`
-/// is (index, fit, validation RMS) in parsimonious order.
-pub(super) fn choose_family(
-    refined: &[(usize, &EffectFit, f64)],
-    nonparametric_rms: f64,
-    noise: f64,
-    tolerance: f64,
-) -> Option<usize> {
-    let mut chosen: Option<(usize, f64, (usize, bool))> = None;
-    for &(i, fit, rms) in refined {
-        let passes = fit.nameable() && validates(rms, nonparametric_rms, noise, tolerance);
-        let size = parsimony(fit);
-        chosen = match chosen {
-            None if passes => Some((i, rms, size)),
-            Some((_, best, _)) if passes && rms < 0.8 * best => Some((i, rms, size)),
-            Some((_, best, best_size)) if passes && size < best_size && rms <= best => {
-                Some((i, rms, size))
-            }
-            other => other,
-        };
+/// Refines `fit` by output error at `h` (jointly with the named known maps when that
+/// validates better) and returns its row of the table, with the hypothesis of the refitted
+/// known maps when those were kept.
+fn family_row(
+    fit: &mut EffectFit,
+    h: &Hypothesis,
+    est_h: &Data,
+    val_h: &Data,
+    settings: &DiscoverSettings,
+) -> (Candidate, Option<Hypothesis>) {
+    *fit = polish(fit, h, est_h, settings);
+    let mut errors = ExprMap::parse(&fit.expression, 1)
+        .map(|m| simulation_errors(h, &m, val_h, settings))
+        .unwrap_or_default();
+    let mut joint = None;
+    // With maps named by earlier steps, each family is also refitted together with them, so
+    // that the families are compared without the earlier maps' bias.
+    if let Some((refitted, known, joint_errors)) = refit_with_known(fit, h, est_h, val_h, settings)
+        && rms_of(&joint_errors) < rms_of(&errors)
+    {
+        *fit = refitted;
+        errors = joint_errors;
+        joint = Some(known);
     }
-    chosen.map(|(i, _, _)| i)
+    let (parameters, approximate) = parsimony(fit);
+    let mut row = Candidate::new(fit.effect.name(), Form::Family { approximate }, parameters)
+        .with_errors(errors);
+    row.location = Some(h.location);
+    row.eligible = fit.nameable();
+    (row, joint)
+}
+
+/// The RMS of `errors`, infinite when there are none (a failed simulation).
+fn rms_of(errors: &[f64]) -> f64 {
+    if errors.is_empty() {
+        f64::INFINITY
+    } else {
+        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
+    }
+}
+
+/// The Coulomb family started at the relay that a saturation-like fit among `targets` (or
+/// any fit) describes ([`relay_start`]), written into `naming`; its index, or `None`.
+fn relay_family(
+    naming: &mut Naming,
+    targets: &[usize],
+    zs: &[f64],
+    ws: &[f64],
+    location: Location,
+) -> Option<usize> {
+    let (level, offset) = targets
+        .iter()
+        .find_map(|&i| relay_start(&naming.ranked[i], location))
+        .or_else(|| naming.ranked.iter().find_map(|f| relay_start(f, location)))?;
+    let i = naming
+        .ranked
+        .iter()
+        .position(|f| f.effect == Effect::Coulomb)?;
+    if targets.contains(&i) {
+        return None;
+    }
+    let mut start = fit_effect_with(Effect::Coulomb, true, zs, ws).ok()?;
+    start.parameters[0].value = level;
+    if let Some(o) = start.offset.as_mut() {
+        o.value = offset;
+    }
+    naming.ranked[i] = start;
+    Some(i)
 }
 
 pub(super) fn subsample(z: &[f64], w: &[f64], max: usize) -> (Vec<f64>, Vec<f64>) {
@@ -350,14 +388,14 @@ pub(super) fn recover_families(
 
 /// The family `fit` refitted jointly with the named known maps of `h`
 /// ([`polish_jointly`]): the refitted family, the hypothesis with the refitted known maps, and
-/// the validation RMS; `None` when `h` has no named known map or the refit failed.
+/// the validation errors; `None` when `h` has no named known map or the refit failed.
 fn refit_with_known(
     fit: &EffectFit,
     h: &Hypothesis,
     est_h: &Data,
     val_h: &Data,
     settings: &DiscoverSettings,
-) -> Option<(EffectFit, Hypothesis, f64)> {
+) -> Option<(EffectFit, Hypothesis, Vec<f64>)> {
     if !h.known.iter().any(|k| k.fit.is_some()) {
         return None;
     }
@@ -374,8 +412,8 @@ fn refit_with_known(
         }
     }
     let m = ExprMap::parse(&new_fit.expression, 1).ok()?;
-    let rms = simulation_rms(&joint, &m, val_h, settings);
-    Some((new_fit, joint, rms))
+    let errors = simulation_errors(&joint, &m, val_h, settings);
+    Some((new_fit, joint, errors))
 }
 
 /// The most breakpoints a written table gets, whatever the kernel's width.
@@ -392,7 +430,6 @@ pub(super) fn name_and_add(
     val_candidates: &[(String, Vec<f64>)],
     gap_settings: &GapSettings,
     before: &Gap,
-    noise: f64,
     settings: &DiscoverSettings,
 ) -> Result<Finding> {
     let location = best.result.location;
@@ -410,84 +447,38 @@ pub(super) fn name_and_add(
     let mut joint_known: Vec<Option<Hypothesis>> = vec![None; naming.ranked.len()];
     let mut classification = Classification::Unnamed;
     let mut chosen_joint: Option<Hypothesis> = None;
+    let mut rows = vec![nonparametric_row(&best, &h, &val_h, settings)];
+    let mut row_family: Vec<Option<usize>> = vec![None];
     if direction.dynamic {
         classification = Classification::Dynamic;
     } else {
         // The first families in parsimonious order whose map fit is not flagged are refined
-        // and simulated; flagged ones stay in the table with their flags.
+        // and simulated; flagged ones stay in the naming table with their flags.
         let targets: Vec<usize> = (0..naming.ranked.len())
             .filter(|&i| naming.ranked[i].nameable())
             .take(REFINED_FAMILIES)
             .collect();
-        let mut simulated = Vec::new();
+        let mut family = |i: usize, naming: &mut Naming| {
+            let (row, joint) = family_row(&mut naming.ranked[i], &h, &est_h, &val_h, settings);
+            family_rms[i] = Some(row.validation_rms);
+            joint_known[i] = joint;
+            rows.push(row);
+            row_family.push(Some(i));
+        };
         for &i in &targets {
-            let fit = polish(&naming.ranked[i], &h, &est_h, settings);
-            naming.ranked[i] = fit;
-            let Ok(m) = ExprMap::parse(&naming.ranked[i].expression, 1) else {
-                continue;
-            };
-            let mut rms = simulation_rms(&h, &m, &val_h, settings);
-            // With maps named by earlier steps, each family is also refitted together with
-            // them, so that the families are compared without the earlier maps' bias.
-            if let Some((fit, known, joint_rms)) =
-                refit_with_known(&naming.ranked[i], &h, &est_h, &val_h, settings)
-                && joint_rms < rms
-            {
-                naming.ranked[i] = fit;
-                rms = joint_rms;
-                joint_known[i] = Some(known);
-            }
-            family_rms[i] = Some(rms);
-            simulated.push((i, rms));
+            family(i, &mut naming);
         }
-        // A saturation flagged as a relay says "Coulomb" with its level and offset: refine
-        // the relay itself from there (its map fit to a smoothed jump is poor, its refit is
+        // A saturation flagged as a relay says "Coulomb" with its level and offset: the relay
+        // itself is refined from there (its map fit to a smoothed jump is poor, its refit is
         // not).
-        let relay = targets
-            .iter()
-            .chain(simulated.iter().map(|(i, _)| i))
-            .find_map(|&i| relay_start(&naming.ranked[i], location))
-            .or_else(|| naming.ranked.iter().find_map(|f| relay_start(f, location)));
-        if let Some((level, offset)) = relay
-            && let Some(i) = naming
-                .ranked
-                .iter()
-                .position(|f| f.effect == Effect::Coulomb)
-            && family_rms[i].is_none()
-            && let Ok(mut start) = fit_effect_with(Effect::Coulomb, true, &zs, &ws)
-        {
-            start.parameters[0].value = level;
-            if let Some(o) = start.offset.as_mut() {
-                o.value = offset;
-            }
-            let fit = polish(&start, &h, &est_h, settings);
-            if let Ok(m) = ExprMap::parse(&fit.expression, 1) {
-                let rms = simulation_rms(&h, &m, &val_h, settings);
-                naming.ranked[i] = fit;
-                family_rms[i] = Some(rms);
-                // In rate feedback the relay is the simplest friction and is offered first;
-                // a relay met elsewhere (a flagged saturation) only wins by validating
-                // clearly better than the families before it.
-                if location == Location::RateFeedback {
-                    simulated.insert(0, (i, rms));
-                } else {
-                    simulated.push((i, rms));
-                }
-            }
+        if let Some(i) = relay_family(&mut naming, &targets, &zs, &ws, location) {
+            family(i, &mut naming);
         }
-        let refined: Vec<(usize, &EffectFit, f64)> = simulated
-            .iter()
-            .map(|&(i, rms)| (i, &naming.ranked[i], rms))
-            .collect();
-        if let Some(i) = choose_family(
-            &refined,
-            nonparametric_rms,
-            noise,
-            settings.naming_tolerance,
-        ) {
-            classification = Classification::Named(naming.ranked[i].clone());
-            chosen_joint = joint_known[i].take();
-        }
+    }
+    let selection = select(&rows, None, settings.significance);
+    if let Some(i) = selection.chosen.and_then(|c| row_family[c]) {
+        classification = Classification::Named(naming.ranked[i].clone());
+        chosen_joint = joint_known[i].take();
     }
     // The maps found by earlier steps were fitted while this effect was unmodelled: when the
     // named family was refitted together with them, the augmented model carries them so.
@@ -519,14 +510,11 @@ pub(super) fn name_and_add(
         Classification::Named(_) => {}
         Classification::Unnamed => {
             remarks.push(format!(
-                "no family validates within {}× the nonparametric map's RMS (best: {}), so the \
+                "no family is as good as the best row of the candidate table (`{}`: the \
+                 Diebold–Mariano test of the validation errors rejects each at α = {}), so the \
                  map is kept as a table",
-                settings.naming_tolerance,
-                naming
-                    .ranked
-                    .first()
-                    .map(|f| f.effect.name())
-                    .unwrap_or_else(|| "none".into())
+                rows[selection.best].label,
+                settings.significance
             ));
             remarks.extend(flag_remarks(&naming));
         }
@@ -608,6 +596,8 @@ pub(super) fn name_and_add(
         shrink,
         nominal_refinement: None,
         input_hysteresis: None,
+        table: rows,
+        selection,
     })
 }
 
@@ -617,55 +607,25 @@ mod tests {
     use crate::effects::{Refit, fit_effect};
 
     #[test]
-    fn the_noise_escape_is_capped_by_the_nonparametric_rms() {
-        // The issue's case: σ̂ three times too high lets a family 4× worse than the
-        // nonparametric map sit "within 1.5·σ̂".
-        let (nonparametric, true_noise) = (0.010, 0.010);
-        let sigma_hat = 3.0 * true_noise;
-        assert!(!validates(0.040, nonparametric, sigma_hat, 1.15));
-        // Within the tolerance of the nonparametric map: named whatever σ̂ says.
-        assert!(validates(0.0114, nonparametric, 0.001, 1.15));
-        // The escape still works where it is meant to: a family at 1.3× the nonparametric
-        // map, both at the noise level.
-        assert!(validates(0.013, nonparametric, 0.010, 1.15));
-        assert!(!validates(0.016, nonparametric, 0.020, 1.15));
-    }
-
-    fn gain_fit() -> EffectFit {
-        let z: Vec<f64> = (0..50).map(|k| k as f64 / 10.0 - 2.5).collect();
-        let w: Vec<f64> = z.iter().map(|z| 2.0 * z).collect();
-        fit_effect(Effect::Gain, &z, &w).unwrap()
-    }
-
-    #[test]
-    fn an_unconverged_refit_is_not_named_even_when_it_validates() {
-        let good = gain_fit();
-        let mut stuck = gain_fit();
-        stuck.refit = Some(Box::new(Refit::failed("stopped at the iteration limit")));
-        // The unconverged family is the simplest and validates best, yet the next is named.
-        let refined = [(0, &stuck, 0.010), (1, &good, 0.011)];
-        assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(1));
-        assert_eq!(choose_family(&refined[..1], 0.010, 0.010, 1.15), None);
-        // A richer family that cuts the RMS by more than a fifth replaces the simplest.
-        let refined = [(0, &good, 0.011), (1, &good, 0.008)];
-        assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(1));
-        let refined = [(0, &good, 0.011), (1, &good, 0.0095)];
-        assert_eq!(choose_family(&refined, 0.010, 0.010, 1.15), Some(0));
-    }
-
-    #[test]
-    fn a_later_family_with_fewer_parameters_that_validates_as_well_is_the_name() {
+    fn the_complexity_order_puts_exact_forms_and_fewer_parameters_first() {
         let z: Vec<f64> = (0..80).map(|k| k as f64 / 10.0 - 4.0).collect();
         let w: Vec<f64> = z.iter().map(|z| 2.0 * (z / 2.0).tanh()).collect();
         let tanh = fit_effect(Effect::SmoothSaturation, &z, &w).unwrap();
         let power = fit_effect(Effect::PowerLaw { linear: true }, &z, &w).unwrap();
+        let saturation = fit_effect(Effect::Saturation, &z, &w).unwrap();
         assert!(parsimony(&tanh) < parsimony(&power));
-        // The richer family came first (by BIC) and validates; the simpler one validates
-        // slightly better and is the name.
-        let refined = [(0, &power, 0.0075), (1, &tanh, 0.0071)];
-        assert_eq!(choose_family(&refined, 0.0072, 0.005, 1.15), Some(1));
-        // Not when it validates worse: the first stays.
-        let refined = [(0, &power, 0.0071), (1, &tanh, 0.0075)];
-        assert_eq!(choose_family(&refined, 0.0072, 0.005, 1.15), Some(0));
+        // As many parameters: the exact saturation before its tanh approximation.
+        assert_eq!(parsimony(&saturation).0, parsimony(&tanh).0);
+        assert!(parsimony(&saturation) < parsimony(&tanh));
+    }
+
+    #[test]
+    fn an_unconverged_refit_may_not_be_chosen() {
+        let z: Vec<f64> = (0..50).map(|k| k as f64 / 10.0 - 2.5).collect();
+        let w: Vec<f64> = z.iter().map(|z| 2.0 * z).collect();
+        let mut stuck = fit_effect(Effect::Gain, &z, &w).unwrap();
+        assert!(stuck.nameable());
+        stuck.refit = Some(Box::new(Refit::failed("stopped at the iteration limit")));
+        assert!(!stuck.nameable());
     }
 }

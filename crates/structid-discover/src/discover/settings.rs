@@ -18,7 +18,7 @@ pub struct DiscoverSettings {
     pub(super) trend_degree: usize,
     pub(super) tune_sigma: bool,
     pub(super) total_variation: bool,
-    pub(super) naming_tolerance: f64,
+    pub(super) significance: f64,
     pub(super) naming_points: usize,
     pub(super) hysteresis_threshold: f64,
     pub(super) table_points: usize,
@@ -30,8 +30,8 @@ pub struct DiscoverSettings {
 
 impl Default for DiscoverSettings {
     /// Every location of the nominal model, the whole effect library, σ = 0.1 × the range of z with a cubic trend,
-    /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, naming
-    /// tolerance 1.15, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
+    /// σ fixed (β by marginal likelihood), total variation for non-smooth estimates, selection
+    /// at the 5 % level, 3000 naming points, hysteresis threshold 0.1, 201-point tables, no
     /// settling samples, the scoring chosen from the nominal model (windows for integrators).
     fn default() -> Self {
         Self {
@@ -42,7 +42,7 @@ impl Default for DiscoverSettings {
             trend_degree: 3,
             tune_sigma: false,
             total_variation: true,
-            naming_tolerance: 1.15,
+            significance: crate::table::DEFAULT_SIGNIFICANCE,
             naming_points: 3000,
             hysteresis_threshold: 0.1,
             table_points: 201,
@@ -130,10 +130,10 @@ impl DiscoverSettings {
         self.total_variation
     }
 
-    /// A family is named when the validation RMS with its parametric map is at most this
-    /// factor times that with the nonparametric map (or within 1.5 × the noise level).
-    pub fn naming_tolerance(&self) -> f64 {
-        self.naming_tolerance
+    /// The significance level α of the candidate table's selection rule
+    /// ([`crate::table::select`]): the chance of dismissing a row that is as good as the best.
+    pub fn significance(&self) -> f64 {
+        self.significance
     }
 
     /// Largest number of points (z_k, ŵ_k) the families are fitted to (evenly spaced in time).
@@ -227,9 +227,11 @@ impl DiscoverSettingsBuilder {
         self
     }
 
-    /// Naming tolerance on the validation RMS (default 1.15).
-    pub fn naming_tolerance(mut self, t: f64) -> Self {
-        self.inner.naming_tolerance = t;
+    /// The significance level α of the selection rule (default
+    /// [`DEFAULT_SIGNIFICANCE`](crate::table::DEFAULT_SIGNIFICANCE), 0.05); it must lie in
+    /// (0, 0.5].
+    pub fn significance(mut self, alpha: f64) -> Self {
+        self.inner.significance = alpha;
         self
     }
 
@@ -315,11 +317,11 @@ impl DiscoverSettingsBuilder {
                 "must be a positive fraction of the range of z",
             ));
         }
-        if !(s.naming_tolerance.is_finite() && s.naming_tolerance >= 1.0) {
+        if !(s.significance > 0.0 && s.significance <= 0.5) {
             return Err(bad(
-                "naming_tolerance",
-                s.naming_tolerance,
-                "must be at least 1 (a ratio of validation RMS values)",
+                "significance",
+                s.significance,
+                "must be a probability in (0, 0.5]",
             ));
         }
         if s.naming_points < 20 {
