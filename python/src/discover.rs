@@ -117,6 +117,37 @@ fn discovery_dict<'py>(
             x.set_item("validation_rms", f.augmented.validation_gap.rms)?;
             x.set_item("remarks", f.remarks.clone())?;
             x.set_item("shrink", f.shrink)?;
+            x.set_item(
+                "time_varying",
+                matches!(
+                    f.classification,
+                    structid_discover::discover::Classification::TimeVarying(_)
+                ),
+            )?;
+            x.set_item(
+                "stationarity",
+                f.stationarity.as_ref().map(|s| s.describe()),
+            )?;
+            let table = f
+                .table
+                .iter()
+                .enumerate()
+                .map(|(i, row)| {
+                    let r = PyDict::new(py);
+                    r.set_item("label", &row.label)?;
+                    r.set_item("parameters", row.parameters)?;
+                    r.set_item("validation_rms", row.validation_rms)?;
+                    r.set_item("eligible", row.eligible)?;
+                    r.set_item(
+                        "p_worse_than_best",
+                        f.selection.p_worse_than_best.get(i).copied().flatten(),
+                    )?;
+                    r.set_item("as_good", f.selection.as_good.get(i).copied())?;
+                    r.set_item("chosen", f.selection.chosen == Some(i))?;
+                    Ok(r)
+                })
+                .collect::<PyResult<Vec<_>>>()?;
+            x.set_item("table", table)?;
             let hysteresis = match &f.input_hysteresis {
                 None => None,
                 Some(h) => {
@@ -200,7 +231,7 @@ fn records<'py>(
 /// Runs the discovery workflow from a nominal model on an estimation and a validation record,
 /// or on several of each (`more_records`, `more_validation`: the records after the first).
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false, more_records=None, more_validation=None))]
+#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false, more_records=None, more_validation=None, significance=0.05))]
 #[allow(clippy::too_many_arguments)]
 pub fn discover_columns<'py>(
     py: Python<'py>,
@@ -212,6 +243,7 @@ pub fn discover_columns<'py>(
     tune_sigma: bool,
     more_records: Option<Vec<Columns<'py>>>,
     more_validation: Option<Vec<Columns<'py>>>,
+    significance: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let nominal = nominal(&mf)?;
@@ -227,6 +259,7 @@ pub fn discover_columns<'py>(
         .total_variation(total_variation)
         .settle(settle)
         .tune_sigma(tune_sigma)
+        .significance(significance)
         .build()
         .map_err(error)?;
     let n = nominal.clone();

@@ -92,7 +92,8 @@ def wiener_hammerstein_records(records: List[Tuple[List[float], List[float]]],
 def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,
-                     more_validation: Optional[List[Columns]] = None) -> Dict[str, Any]: ...
+                     more_validation: Optional[List[Columns]] = None,
+                     significance: float = 0.05) -> Dict[str, Any]: ...
 def staticness_columns(z: Array1, w: Array1, sigma_fraction: Optional[float] = None,
                        sigma: Optional[float] = None, noise_std: Optional[float] = None,
                        ratio_limit: Optional[float] = None,

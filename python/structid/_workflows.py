@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -221,7 +221,8 @@ class Finding:
     location: str
     description: str
     effect: str
-    """The named family (e.g. ``cubic stiffness``), ``unnamed`` or ``dynamic``."""
+    """The named family (e.g. ``cubic stiffness``), ``unnamed static effect``, ``dynamic: …``
+    or ``time-varying: …``."""
     estimator: str
     nonparametric_rms: float
     validation_rms: float
@@ -241,6 +242,15 @@ class Finding:
     operator of threshold c): ``threshold``, ``weight`` (λ), ``play`` (λ near −1, a
     backlash), ``description``, ``validation_rms`` and ``without_hysteresis_rms``; None when
     none was fitted or it did not explain the gap."""
+    time_varying: bool = False
+    """Whether the map changes over the estimation record (its parameters, re-estimated on
+    consecutive segments, follow a trend larger than their scatter allows)."""
+    stationarity: Optional[str] = None
+    """That test in one sentence (None when no family was tested)."""
+    table: List[Dict[str, Any]] = field(default_factory=list)
+    """The candidate table at the finding's location, one dict per row: ``label``,
+    ``parameters``, ``validation_rms``, ``eligible``, ``p_worse_than_best`` (the
+    Diebold–Mariano p-value against the best row), ``as_good`` and ``chosen``."""
 
 
 @dataclass
@@ -271,7 +281,8 @@ def _discovery(out: Dict[str, Any]) -> Discovery:
 
 
 def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object, *,
-             total_variation: bool = True, settle: int = 0, tune_sigma: bool = False) -> Discovery:
+             total_variation: bool = True, settle: int = 0, tune_sigma: bool = False,
+             significance: float = 0.05) -> Discovery:
     """Finds what a nominal linear model (``Model.structure("lti", ...)`` or an ``[lft]``
     without maps) is missing (``structid discover``): tests its residual, inserts one unknown
     map at each candidate location, ranks them on the validation record and names the map.
@@ -280,12 +291,16 @@ def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object,
     (experiments, each simulated from its own initial state):
     ``discover(nominal, [u1, u2], [y1, y2], [u3, u4], [y3, y4])``. The validation RMS is then
     pooled over the validation records; ``extra`` holds each record's
-    (``nominal_validation_rms_records``, ``validation_rms_records``)."""
+    (``nominal_validation_rms_records``, ``validation_rms_records``).
+
+    ``significance`` is the level α of the candidate table's rule: the simplest row that a
+    Diebold–Mariano test of the validation errors does not call worse than the best at α
+    is chosen (``Finding.table``)."""
     est, more = _record_columns(nominal, u, y, "")
     val, more_val = _record_columns(nominal, u_val, y_val, "validation ")
     return _discovery(_structid.discover_columns(
         nominal._native, est, val, bool(total_variation), int(settle), bool(tune_sigma),
-        more, more_val))
+        more, more_val, float(significance)))
 
 
 def _record_columns(model: Model, u: object, y: object, what: str):

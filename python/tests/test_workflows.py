@@ -156,6 +156,29 @@ def test_discover_matches_the_tool(cli, duffing):
     # The augmented model simulates the validation record far better than the nominal one.
     sim = found.finding.estimate.simulate(uv)["y"][:, 0]
     assert np.sqrt(np.mean((sim - yv) ** 2)) < 0.5 * found.nominal_validation_rms
+    # The candidate table is the tool's, and its choice follows the rule: the best row is as
+    # good as itself, the chosen row is as good as the best, and no eligible row as good as
+    # the best has fewer parameters among the families.
+    rows = found.finding.table
+    tool_rows = report["finding"]["candidate_table"]
+    assert [r["label"] for r in rows] == [r["label"] for r in tool_rows]
+    for mine_row, tool_row in zip(rows, tool_rows):
+        np.testing.assert_allclose(mine_row["validation_rms"], tool_row["validation_rms"],
+                                   rtol=1e-6)
+    best = min(range(len(rows)), key=lambda i: rows[i]["validation_rms"])
+    assert rows[best]["as_good"]
+    chosen = [r for r in rows if r["chosen"]]
+    assert len(chosen) == 1 and chosen[0]["as_good"] and chosen[0]["eligible"]
+    for r in rows:
+        if r["p_worse_than_best"] is not None:
+            assert r["as_good"] == (r["p_worse_than_best"] >= 0.05)
+    families = [r for r in rows if not r["label"].startswith("nonparametric")]
+    if not chosen[0]["label"].startswith("nonparametric"):
+        assert all(r["parameters"] >= chosen[0]["parameters"]
+                   for r in families if r["as_good"] and r["eligible"])
+    assert found.finding.time_varying is False
+    with pytest.raises(structid.StructidError, match="significance"):
+        structid.discover(nominal, u, y, uv, yv, significance=0.7)
 
 
 def test_discover_on_several_records_matches_the_tool(cli, tmp_path):

@@ -304,6 +304,7 @@ impl Finding {
             Classification::Named(_) => "named",
             Classification::Unnamed => "unnamed",
             Classification::Dynamic => "dynamic",
+            Classification::TimeVarying(_) => "time-varying",
         };
         let notes = vec![
             ("location".to_string(), nominal.key(self.location)),

@@ -727,6 +727,7 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         Classification::Named(_) => "named",
         Classification::Unnamed => "unnamed",
         Classification::Dynamic => "dynamic",
+        Classification::TimeVarying(_) => "time-varying",
     };
     let _ = writeln!(
         s,
@@ -1021,6 +1022,10 @@ pub fn json(
                 ),
                 Classification::Unnamed => ("unnamed", Value::Null),
                 Classification::Dynamic => ("dynamic", Value::Null),
+                Classification::TimeVarying(fit) => (
+                    "time-varying",
+                    fit_json(fit, Some(f.augmented.validation_gap.rms))?,
+                ),
             };
             let families = f
                 .naming
@@ -1047,6 +1052,7 @@ pub fn json(
                 "total_variation_validation_rms": f.total_variation_rms,
                 "families": families,
                 "candidate_table": json_value(&f.table)?,
+                "stationarity": json_value(&f.stationarity)?,
                 "selection": json_value(&f.selection)?,
                 "direction": json_value(&f.direction)?,
                 "input_hysteresis": json_value(&f.input_hysteresis)?,

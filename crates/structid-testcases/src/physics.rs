@@ -301,10 +301,17 @@ pub enum PhysicalEffect {
         /// n.
         n: f64,
     },
+    /// Input: a gain that drifts over the record, `N(u_k) = (1 + drift·k/L)·u_k`: no static
+    /// map describes it.
+    DriftingGain {
+        /// The gain's relative change from the first to the last sample.
+        drift: f64,
+    },
 }
 
 impl PhysicalEffect {
-    /// Whether no static map describes it.
+    /// Whether no static map describes it (a drifting gain has no static map either, but it
+    /// is not a hysteresis: see [`PhysicalEffect::is_time_varying`]).
     pub fn is_dynamic(&self) -> bool {
         matches!(
             self,
@@ -354,8 +361,13 @@ impl PhysicalEffect {
                 }
             }
             P::OffsetCoulomb { offset, fc } => offset + fc * z.signum(),
-            P::Backlash { .. } | P::BoucWen { .. } => return None,
+            P::Backlash { .. } | P::BoucWen { .. } | P::DriftingGain { .. } => return None,
         })
+    }
+
+    /// Whether the effect changes over the record.
+    pub fn is_time_varying(&self) -> bool {
+        matches!(self, PhysicalEffect::DriftingGain { .. })
     }
 
     /// The map with the Coulomb discontinuity regularised by `tanh(v/v_ε)` (rate feedback;
@@ -540,6 +552,8 @@ pub enum PhysicsKind {
     Dynamic,
     /// LTI plus noise.
     None,
+    /// A gain at the input that drifts by 10–20 % over the record.
+    TimeVarying,
 }
 
 /// A drawn case.
@@ -676,6 +690,7 @@ fn simulate(
                     u_in_prev = ud;
                     alpha * stiffness * ud + (1.0 - alpha) * stiffness * hs
                 }
+                PhysicalEffect::DriftingGain { drift } => ud * (1.0 + drift * k as f64 / len as f64),
                 other => other.eval(ud).unwrap_or(ud),
             },
             _ => ud,
@@ -1128,6 +1143,7 @@ enum Choice {
     BwIn,
     BwOut,
     BwFb,
+    Drift,
 }
 
 const STATIC_CHOICES: [Choice; 14] = [
@@ -1159,7 +1175,7 @@ const DYNAMIC_CHOICES: [Choice; 6] = [
 fn site_of(c: Choice) -> Site {
     use Choice as C;
     match c {
-        C::Sat | C::Dz | C::Clip1 | C::Tanh | C::BlIn | C::BwIn => Site::Input,
+        C::Sat | C::Dz | C::Clip1 | C::Tanh | C::BlIn | C::BwIn | C::Drift => Site::Input,
         C::SClip | C::Rect | C::Quant | C::BlOut | C::BwOut => Site::Output,
         C::Gap | C::Hard | C::Cubic | C::BlFb | C::BwFb => Site::OutputFeedback,
         C::Cv | C::CvAsym | C::Strib | C::OffC => Site::RateFeedback,
@@ -1196,6 +1212,12 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             accepted,
         };
     match c {
+        C::Drift => (
+            P::DriftingGain {
+                drift: uniform(rng, 0.1, 0.2),
+            },
+            exp("time-varying".into(), None, vec![]),
+        ),
         C::Sat => {
             let level = uniform(rng, 0.3, 0.7) * r.u_peak;
             (
@@ -1580,6 +1602,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
         PhysicsKind::Dynamic => {
             Some(DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize])
         }
+        PhysicsKind::TimeVarying => Some(Choice::Drift),
         PhysicsKind::None => None,
     };
     let site = choice.map(site_of);

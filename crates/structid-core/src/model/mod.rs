@@ -370,6 +370,45 @@ impl Data {
             .collect()
     }
 
+    /// The data cut into `n` consecutive segments in time: every record cut into `n` parts
+    /// of (nearly) equal length, and segment i made of the i-th part of every record (each
+    /// part a record of its own). A test of stationarity estimates on each and compares.
+    ///
+    /// ```
+    /// use structid_core::Data;
+    /// use structid_lti::Signal;
+    /// let u = Signal::from_fn(10, 1, |k, _| k as f64);
+    /// let parts = Data::new(u.clone(), u).unwrap().segments(4).unwrap();
+    /// let lengths: Vec<usize> = parts.iter().map(|p| p.len()).collect();
+    /// assert_eq!(lengths, vec![2, 3, 2, 3]);
+    /// assert_eq!(parts[1].u().get(0, 0), 2.0);
+    /// ```
+    ///
+    /// # Errors
+    /// `n` = 0, or a record shorter than `n` samples.
+    pub fn segments(&self, n: usize) -> Result<Vec<Data>> {
+        let mut parts: Vec<Vec<Data>> = vec![Vec::new(); n];
+        for (i, r) in self.records().into_iter().enumerate() {
+            let len = r.len();
+            if n == 0 || len < n {
+                return Err(Error::InvalidStructure(format!(
+                    "record {} has {len} sample(s): it cannot be cut into {n} segments",
+                    i + 1
+                )));
+            }
+            for (j, part) in parts.iter_mut().enumerate() {
+                let range = j * len / n..(j + 1) * len / n;
+                part.push(Data {
+                    u: r.u.slice(range.clone()),
+                    y: r.y.slice(range.clone()),
+                    z: r.z.as_ref().map(|z| z.slice(range.clone())),
+                    bounds: vec![0, range.len()],
+                });
+            }
+        }
+        parts.into_iter().map(Data::from_records).collect()
+    }
+
     /// Refuses data of several records where `what` handles one record only.
     pub fn require_single_record(&self, what: &str) -> Result<()> {
         if self.record_count() > 1 {

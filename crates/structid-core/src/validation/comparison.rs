@@ -69,6 +69,39 @@ pub fn default_bandwidth(d: &[f64]) -> usize {
     h.min((n - 1) / 2)
 }
 
+/// The Newey–West estimate of the long-run variance of the series `d`: its autocovariances
+/// γ̂_j up to lag h (the bandwidth) with Bartlett weights, γ̂₀ + 2·Σ (1 − j/(h+1))·γ̂_j. Its
+/// ratio to γ̂₀ is how many times the variance of a mean of correlated samples exceeds that of
+/// independent ones.
+///
+/// ```
+/// use structid_core::validation::comparison::long_run_variance;
+/// let white: Vec<f64> = (0..1000).map(|k| if k % 2 == 0 { 1.0 } else { -1.0 }).collect();
+/// assert!(long_run_variance(&white, 0) == 1.0);
+/// // Runs of four equal samples: γ̂₁ = ½, so with h = 1 the long-run variance is 1 + 2·½·½.
+/// let runs: Vec<f64> = (0..1000).map(|k| if (k / 4) % 2 == 0 { 1.0 } else { -1.0 }).collect();
+/// assert!((long_run_variance(&runs, 1) - 1.5).abs() < 1e-2);
+/// ```
+pub fn long_run_variance(d: &[f64], bandwidth: usize) -> f64 {
+    let n = d.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let gamma = |j: usize| -> f64 {
+        (j..n)
+            .map(|k| (d[k] - mean) * (d[k - j] - mean))
+            .sum::<f64>()
+            / n as f64
+    };
+    let h = bandwidth.min(n - 1);
+    let mut variance = gamma(0);
+    for j in 1..=h {
+        variance += 2.0 * (1.0 - j as f64 / (h + 1) as f64) * gamma(j);
+    }
+    variance
+}
+
 /// The Diebold–Mariano comparison of the errors `a` and `b` (paired, same samples) with
 /// bandwidth `bandwidth` (`None`: [`default_bandwidth`] of the differential); see the
 /// [module docs](self).
@@ -112,16 +145,7 @@ pub fn diebold_mariano(a: &[f64], b: &[f64], bandwidth: Option<usize>) -> Result
         });
     }
     let mean = d.iter().sum::<f64>() / n as f64;
-    let gamma = |j: usize| -> f64 {
-        (j..n)
-            .map(|k| (d[k] - mean) * (d[k - j] - mean))
-            .sum::<f64>()
-            / n as f64
-    };
-    let mut variance = gamma(0);
-    for j in 1..=h {
-        variance += 2.0 * (1.0 - j as f64 / (h + 1) as f64) * gamma(j);
-    }
+    let variance = long_run_variance(&d, h);
     let statistic = if mean == 0.0 {
         0.0
     } else if variance > 0.0 {

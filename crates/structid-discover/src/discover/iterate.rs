@@ -84,6 +84,9 @@ pub enum StopReason {
     /// The last step found a dynamic effect (hysteresis or backlash suspected): its static
     /// approximation is not adopted as a model to build on.
     Dynamic,
+    /// The last step found a map that changes over the record (time-varying): its static
+    /// approximation is not built on.
+    TimeVarying,
     /// The last step's augmented model cut the validation RMS by less than the required share
     /// ([`EffectsSettings::with_min_improvement`]); `ratio` is its RMS over the RMS it started from.
     NoImprovement {
@@ -106,6 +109,9 @@ impl StopReason {
             }
             StopReason::Dynamic => "the last effect found is dynamic (hysteresis or backlash \
                                     suspected); its static approximation is not built on"
+                .into(),
+            StopReason::TimeVarying => "the last effect found changes over the record \
+                                        (time-varying); its static approximation is not built on"
                 .into(),
             StopReason::NoImprovement { ratio } => format!(
                 "the last step cut the validation RMS by {:.1} %, less than the {:.0} % required",
@@ -213,6 +219,8 @@ pub fn discover_effects(
                 let ratio = f.augmented.validation_gap.rms / d.validation_gap.rms;
                 if matches!(f.classification, Classification::Dynamic) {
                     Err(StopReason::Dynamic)
+                } else if matches!(f.classification, Classification::TimeVarying(_)) {
+                    Err(StopReason::TimeVarying)
                 } else if ratio.is_nan() || ratio > 1.0 - effects.min_improvement {
                     Err(StopReason::NoImprovement { ratio })
                 } else {

@@ -97,15 +97,18 @@
 //!    ([`parsimonious`] order), then the rest by BIC. The first six whose map fit carries no
 //!    flag are refined by output error (Levenberg–Marquardt on the estimation record's
 //!    simulation error with the parametric map in the loop; 95 % intervals from
-//!    s²·(JᵀJ)⁻¹) and simulated on the
-//!    validation record. The simplest that validates within
-//!    [`DiscoverSettings::naming_tolerance`] of the nonparametric map (or within 1.5·σ̂, the
-//!    workflow's noise level [`NoiseLevel`]: the smallest semivariogram estimate over the
-//!    residuals of the nominal model and the smooth hypotheses, which allows for coloured
-//!    noise and is not inflated by the missing effect, and
-//!    1.5× the nonparametric RMS) is
-//!    *named*, unless a richer one that also does is a fifth better. Otherwise the effect is an
-//!    "unnamed static effect" and the nonparametric map is kept as a table.
+//!    s²·(JᵀJ)⁻¹) and simulated on the validation record. Each is a row of the **candidate
+//!    table** ([`crate::table`]) beside the nonparametric map, with its validation errors at
+//!    the scored samples; the one selection rule picks the simplest row that a
+//!    Diebold–Mariano test of the squared errors does not call worse than the best at the
+//!    level α ([`DiscoverSettings::significance`]). A family chosen is *named*; the
+//!    nonparametric map chosen is an "unnamed static effect", kept as a table.
+//!    **Is it stationary?** The named family is refined again on [`SEGMENTS`] consecutive
+//!    segments of the estimation record, and a trend of a parameter over them larger than
+//!    the segments' scatter allows (a t test at α) makes the finding
+//!    [`Classification::TimeVarying`] ([`Stationarity`]). When no block closes a real gap, a
+//!    gain at the best location is tested the same way: a drifting gain that an estimated G
+//!    absorbed on average leaves such a gap.
 //! 6. **How much better is the model with it?** The augmented model (named expression or
 //!    table) is examined like the nominal one on both records: the gap before and after, and
 //!    the shrink of the validation RMS. A gap whose tests failed but which no candidate block
@@ -147,6 +150,7 @@ mod polish;
 mod refine;
 mod restore;
 mod settings;
+mod stationarity;
 mod total_variation;
 
 pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersion_spec};
@@ -156,6 +160,7 @@ pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCu
 pub use naming::parsimonious;
 pub use noise::SMALLER_RATIO;
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
+pub use stationarity::{SEGMENTS, Stationarity};
 
 use std::time::Instant;
 
@@ -234,6 +239,9 @@ pub struct Finding {
     pub table: Vec<crate::table::Candidate>,
     /// What the selection rule decided on [`Finding::table`].
     pub selection: crate::table::Selection,
+    /// The named family re-estimated on consecutive segments of the estimation record, when
+    /// it was named ([`Stationarity`]).
+    pub stationarity: Option<Stationarity>,
 }
 
 /// A hysteresis at the input fitted with G ([`InputHysteresis`]) makes the finding dynamic
@@ -1187,7 +1195,10 @@ fn discover_once(
     } else {
         MIN_CONFIRMING_SHRINK
     };
-    if finding.shrink < confirming && !dynamic_found {
+    if finding.shrink < confirming
+        && !dynamic_found
+        && !(real && drifting_linear_part(&mut finding, nominal, est, settings))
+    {
         // The gap is noise-sized and only a test failed: a false alarm of the test family
         // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
         // is real and unexplained, and the verdict says so.
@@ -1288,6 +1299,7 @@ fn discover_once(
     if let Some(c) = cancelled {
         finding.remarks.push(c);
     }
+    check_stationarity(&mut finding, nominal, est, settings);
     let mut verdict = verdict_text(nominal, &validation_gap, &finding);
     if let Some(h) = &finding.input_hysteresis {
         verdict.push_str(&format!(
@@ -1326,6 +1338,85 @@ fn discover_once(
         verdict,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Re-estimates a named finding's family on consecutive segments of the estimation record
+/// ([`stationarity`](mod@stationarity)); a map that changes over the record makes the finding
+/// [`Classification::TimeVarying`].
+fn check_stationarity(
+    finding: &mut Finding,
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) {
+    let Classification::Named(fit) = &finding.classification else {
+        return;
+    };
+    let h = augmented_hypothesis(finding, nominal);
+    let Some(check) = stationarity::stationarity(fit, &h, est, settings) else {
+        return;
+    };
+    if check.time_varying {
+        finding.remarks.push(format!(
+            "the map is not stationary: {}; a static name would describe neither half",
+            check.describe()
+        ));
+        finding.classification = Classification::TimeVarying(fit.clone());
+    }
+    finding.stationarity = Some(check);
+}
+
+/// Whether a gap that no static block closes is a linear part that changes over the record:
+/// a gain at the finding's location (w = a·z, from a = 1) re-estimated on consecutive segments
+/// of the estimation record ([`stationarity`](mod@stationarity)). A gain that drifts is
+/// absorbed on average by an estimated G, which leaves a residual that no static map
+/// explains; the segments' gains follow the drift. When they do, the finding becomes [`Classification::TimeVarying`].
+fn drifting_linear_part(
+    finding: &mut Finding,
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> bool {
+    let Ok(gain) = crate::effects::fit_effect_with(
+        crate::effects::Effect::Gain,
+        false,
+        &[-1.0, 1.0],
+        &[-1.0, 1.0],
+    ) else {
+        return false;
+    };
+    let h = augmented_hypothesis(finding, nominal);
+    match stationarity::stationarity(&gain, &h, est, settings) {
+        Some(check) if check.time_varying => {
+            finding.remarks.push(format!(
+                "no static block closes the gap, and a gain at this location drifts over the \
+                 estimation record: {}",
+                check.describe()
+            ));
+            let whole = h
+                .data(est)
+                .map(|data| polish::polish(&gain, &h, &data, settings))
+                .unwrap_or(gain);
+            finding.classification = Classification::TimeVarying(whole);
+            finding.stationarity = Some(check);
+            true
+        }
+        _ => false,
+    }
+}
+
+/// The hypothesis of a finding's augmented model (its LFT, location and known maps).
+fn augmented_hypothesis(finding: &Finding, nominal: &Nominal) -> Hypothesis {
+    Hypothesis {
+        location: finding.location,
+        model: finding.augmented.model.clone(),
+        sample_time: nominal
+            .model()
+            .ok()
+            .and_then(|m| m.lft().sample_time())
+            .unwrap_or(1.0),
+        known: finding.augmented.known.clone(),
+    }
 }
 
 /// The remark on a dynamic finding whose static approximation closes little of the gap: the

@@ -65,6 +65,11 @@ pub enum Classification {
     Unnamed,
     /// The effect depends on the direction of z: "dynamic: hysteresis or backlash suspected".
     Dynamic,
+    /// A family was chosen, but re-estimated on consecutive segments of the estimation record
+    /// its parameters follow a trend larger than their scatter allows
+    /// ([`Stationarity`](super::Stationarity)): the effect changes over time. The fit is the
+    /// whole record's, the augmented model's best static approximation.
+    TimeVarying(EffectFit),
 }
 
 impl Classification {
@@ -74,6 +79,9 @@ impl Classification {
             Classification::Named(fit) => fit.effect.name(),
             Classification::Unnamed => "unnamed static effect".into(),
             Classification::Dynamic => "dynamic: hysteresis or backlash suspected".into(),
+            Classification::TimeVarying(fit) => {
+                format!("time-varying: {} whose parameters change over the record", fit.effect.name())
+            }
         }
     }
 }

@@ -120,9 +120,8 @@ pub(super) fn naming_settings_at(
 /// How many families (in parsimonious order, skipping those whose map fit is flagged) are
 /// refined by output error and simulated. The map fit's ranking is only a first sort: a map
 /// estimated from a noisy z (an actuator inside a loop, whose input carries the
-/// differentiated sensor noise) blurs a saturation's corners, and on the physics generator the
-/// family that validates came fourth or later behind a gain error, a clip and a cubic (static
-/// seed 28), or a dead zone behind three power laws (seeds 15, 57).
+/// differentiated sensor noise) blurs a saturation's corners, so the family that validates can
+/// come fourth or later by its map fit (a saturation behind a gain error, a clip and a cubic).
 const REFINED_FAMILIES: usize = 6;
 
 /// How many of the first families a flag remark is written for.
@@ -507,7 +506,7 @@ pub(super) fn name_and_add(
     let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
     remarks.extend(joint_remark);
     match &classification {
-        Classification::Named(_) => {}
+        Classification::Named(_) | Classification::TimeVarying(_) => {}
         Classification::Unnamed => {
             remarks.push(format!(
                 "no family is as good as the best row of the candidate table (`{}`: the \
@@ -598,6 +597,7 @@ pub(super) fn name_and_add(
         input_hysteresis: None,
         table: rows,
         selection,
+        stationarity: None,
     })
 }
 

@@ -736,7 +736,7 @@ pub(crate) mod tests {
         /// range of z is ±2, so the law is well resolved everywhere), and its stiffness within
         /// what that error of p is worth: k·|z|^p and the same law with p + δ agree at the
         /// edge |z| = 2 when k changes by a factor 2^δ, so k is known to δ·ln 2 relative
-        /// (10 % at p = 5; a fixed 3 % failed there, k = 0.2, p = 5.0, seed 425: 4.5 % off).
+        /// (10 % at p = 5, where a fixed 3 % was exceeded: 4.5 % off at k = 0.2).
         #[test]
         fn power_law_parameters_are_recovered_for_any_exponent(
             k in 0.2f64..3.0, p in 1.3f64..5.0, seed in 0u64..500,
