@@ -156,17 +156,18 @@ def test_discover_matches_the_tool(cli, duffing):
     # The augmented model simulates the validation record far better than the nominal one.
     sim = found.finding.estimate.simulate(uv)["y"][:, 0]
     assert np.sqrt(np.mean((sim - yv) ** 2)) < 0.5 * found.nominal_validation_rms
-    # The candidate table is the tool's, and its choice follows the rule: the best row is as
-    # good as itself, the chosen row is as good as the best, and no eligible row as good as
-    # the best has fewer parameters among the families.
+    # The candidate table is the tool's, and its choice follows the rule: the best eligible
+    # row is as good as itself, no ineligible row is, the chosen row is as good as the best,
+    # and no family as good as the best has fewer parameters than a chosen family.
     rows = found.finding.table
     tool_rows = report["finding"]["candidate_table"]
     assert [r["label"] for r in rows] == [r["label"] for r in tool_rows]
     for mine_row, tool_row in zip(rows, tool_rows):
         np.testing.assert_allclose(mine_row["validation_rms"], tool_row["validation_rms"],
                                    rtol=1e-6)
-    best = min(range(len(rows)), key=lambda i: rows[i]["validation_rms"])
-    assert rows[best]["as_good"]
+    eligible = [r for r in rows if r["eligible"]]
+    assert min(eligible, key=lambda r: r["validation_rms"])["as_good"]
+    assert not any(r["as_good"] for r in rows if not r["eligible"])
     chosen = [r for r in rows if r["chosen"]]
     assert len(chosen) == 1 and chosen[0]["as_good"] and chosen[0]["eligible"]
     for r in rows:

@@ -6,13 +6,15 @@
 //! chosen once per run). [`select`] decides among the rows by one rule with a statistical
 //! meaning:
 //!
-//! 1. The best row b has the smallest mean squared validation error.
+//! 1. The best row b has the smallest mean squared validation error among the rows that may
+//!    be chosen (a family with an unidentifiable parameter or a refit that did not converge is
+//!    shown, but is not a candidate: its fit is not a model the data determine).
 //! 2. Row r is *as good as the best* unless the Diebold–Mariano test of the loss
 //!    differential d_k = e_r(k)² − e_b(k)² (a Newey–West HAC variance, so that the serial
 //!    correlation of simulation errors is allowed for:
 //!    [`structid_core::validation::comparison::diebold_mariano`]) says that r is worse at the
 //!    level α (one-sided: P(Z ≥ S) < α).
-//! 3. Among the rows as good as the best that may be named, the simplest in
+//! 3. Among the rows as good as the best, the simplest in
 //!    [`Candidate::complexity`] order is chosen: a named family before a nonparametric map, fewer
 //!    parameters first, the exact forms before the approximate ones.
 //! 4. The chosen row must beat the reference (the model without the block) at the same α:
@@ -146,12 +148,12 @@ impl Candidate {
 pub struct Selection {
     /// The significance level α used.
     pub alpha: f64,
-    /// The row with the smallest validation RMS.
+    /// The eligible row with the smallest validation RMS.
     pub best: usize,
     /// For every row, the one-sided p-value of "worse than the best" (`None` for the best
     /// row itself and for rows that could not be compared).
     pub p_worse_than_best: Vec<Option<f64>>,
-    /// For every row, whether it is as good as the best at α.
+    /// For every row, whether it is eligible and as good as the best at α.
     pub as_good: Vec<bool>,
     /// The chosen row: the simplest eligible row as good as the best (`None` when no row
     /// is eligible and as good).
@@ -173,11 +175,12 @@ impl Selection {
 /// Applies the selection rule (see the [module documentation](self)) to `rows`, against the
 /// errors of `reference` (the model without the block) when given, at significance `alpha`.
 ///
-/// Rows whose simulation failed (no errors) are never as good. When no row was scored, `best`
-/// is 0 and nothing is chosen.
+/// Rows whose simulation failed (no errors) and rows that are not eligible are never as good
+/// (their p-values are still given). When no eligible row was scored, `best` is 0 and nothing
+/// is chosen.
 pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Selection {
     let best = (0..rows.len())
-        .filter(|&i| rows[i].scored())
+        .filter(|&i| rows[i].scored() && rows[i].eligible)
         .min_by(|&a, &b| rows[a].validation_rms.total_cmp(&rows[b].validation_rms));
     let Some(best) = best else {
         return Selection {
@@ -200,10 +203,10 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
         })
         .collect();
     let as_good: Vec<bool> = (0..rows.len())
-        .map(|i| i == best || p[i].is_some_and(|p| p >= alpha))
+        .map(|i| i == best || (rows[i].eligible && p[i].is_some_and(|p| p >= alpha)))
         .collect();
     let chosen = (0..rows.len())
-        .filter(|&i| as_good[i] && rows[i].eligible)
+        .filter(|&i| as_good[i])
         .min_by(|&a, &b| {
             rows[a]
                 .complexity()
@@ -253,7 +256,7 @@ mod tests {
     }
 
     #[test]
-    fn a_failed_row_is_never_chosen_and_an_ineligible_best_yields() {
+    fn failed_and_ineligible_rows_are_never_chosen_nor_the_bar() {
         let e = white(500, 1.0, 2);
         let failed = Candidate::new("failed", Form::Family { approximate: false }, 1);
         let mut flagged = family("flagged", 2, e.iter().map(|v| 0.9 * v).collect());
@@ -261,12 +264,20 @@ mod tests {
         let table = Candidate::new("table", Form::Nonparametric { estimator: "tv".into() }, 0)
             .with_errors(e.clone());
         let s = select(&[failed, flagged, table], None, 0.05);
-        assert_eq!(s.best, 1);
-        assert!(!s.as_good[0]);
-        // d_k = e_k² − 0.81·e_k² > 0 at every sample: the table is significantly worse than
-        // the flagged best, which may not be chosen, so nothing is.
-        assert!(!s.as_good[2], "{:?}", s.p_worse_than_best);
-        assert_eq!(s.chosen, None);
+        // The flagged row validates best but is not a candidate: the table is the best
+        // eligible row and is chosen, and the flagged row's p-value is still reported.
+        assert_eq!(s.best, 2);
+        assert!(!s.as_good[0] && !s.as_good[1]);
+        assert_eq!(s.chosen, Some(2));
+        assert!(s.p_worse_than_best[1].is_some_and(|p| p > 0.5));
+        let only_flagged = select(&rows_without_table(), None, 0.05);
+        assert_eq!(only_flagged.chosen, None);
+    }
+
+    fn rows_without_table() -> Vec<Candidate> {
+        let mut flagged = family("flagged", 2, white(500, 1.0, 2));
+        flagged.eligible = false;
+        vec![flagged]
     }
 
     #[test]
