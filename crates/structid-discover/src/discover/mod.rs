@@ -140,6 +140,7 @@
 //! ```
 
 mod direction;
+mod candidates;
 mod fit;
 mod input_hysteresis;
 mod iterate;
@@ -167,15 +168,15 @@ use std::time::Instant;
 use structid_core::validation::Scoring;
 use structid_core::{Data, Error, Result};
 
-use crate::effects::{Naming, name_effect};
+use crate::effects::Naming;
 use crate::gap::{Gap, gap};
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use direction::direction_test;
-use fit::{Fitted, check_records, identify_hypothesis, resolve_scoring};
-use naming::{name_and_add, naming_settings, non_smooth, subsample, verdict_text};
-use total_variation::total_variation_fit;
+use candidates::by_validation;
+use fit::{Fitted, check_records, resolve_scoring};
+use naming::{name_and_add, verdict_text};
 
 /// The validation RMS must shrink by at least this factor for a detected gap to count as a
 /// missing effect (see [`discover`]).
@@ -618,159 +619,18 @@ fn discover_once(
         });
     }
 
-    // Identify every hypothesis; failures are kept, ranked last.
-    let mut fitted: Vec<Fitted> = Vec::new();
-    let mut failed: Vec<HypothesisResult> = Vec::new();
-    let locations = settings
-        .locations
-        .clone()
-        .unwrap_or_else(|| nominal.locations());
-    // The disturbance path is a noise model like any other: where it cannot be used (its
-    // whitening filter is unstable when an estimated G has a zero outside the unit circle),
-    // the location is identified with the nominal model's own noise path.
-    let identify_at = |location: Location, settings: &DiscoverSettings| -> Result<Fitted> {
-        match identify_hypothesis(nominal, location, est, val, settings) {
-            Err(_) if input_noise.is_some() => {
-                identify_hypothesis(given, location, est, val, settings)
-            }
-            Ok(mut f) => {
-                f.input_noise = input_noise;
-                Ok(match input_noise {
-                    Some(ratio) => noise::with_smaller_ratio(given, f, ratio, est, val, settings),
-                    None => f,
-                })
-            }
-            other => other,
-        }
+    let search = candidates::Search {
+        given,
+        nominal,
+        est,
+        val,
+        settings,
+        input_noise,
+        uncertain_g,
+        cancelled: cancelled.is_some(),
+        gap_rms: validation_gap.rms,
     };
-    for (i, &location) in locations.iter().enumerate() {
-        let t = Instant::now();
-        match identify_at(location, settings) {
-            Ok(f) => fitted.push(f),
-            Err(e) => failed.push(failure(location, "", t, &e)),
-        }
-        settings
-            .progress
-            .report(i as u64 + 1, Some(locations.len() as u64));
-    }
-    let by_validation = |v: &mut Vec<Fitted>| {
-        v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms))
-    };
-    by_validation(&mut fitted);
-    // When the best quadratic estimate closes less than half the gap, the maps may have
-    // more detail than a kernel of the default width resolves (a cogging force with several
-    // periods over the range of z): every location is identified again with σ a
-    // [`FINER_SIGMA`]-th as wide, and validation decides between the two.
-    let coarse = fitted.first().is_none_or(|best| {
-        best.result.validation_rms.is_nan() || best.result.validation_rms > 0.5 * validation_gap.rms
-    });
-    if coarse {
-        let finer = DiscoverSettings {
-            sigma_fraction: settings.sigma_fraction / FINER_SIGMA,
-            ..settings.clone()
-        };
-        // One fit a location: the finer one replaces the default only when it validates
-        // clearly better there (a narrower kernel that merely matches the default one has
-        // only more room to fit the noise).
-        for &location in &locations {
-            let Ok(f) = identify_at(location, &finer) else {
-                continue;
-            };
-            let coarse = fitted.iter().position(|c| c.result.location == location);
-            match coarse {
-                Some(i)
-                    if f.result.validation_rms < FINER_GAIN * fitted[i].result.validation_rms =>
-                {
-                    fitted[i] = f;
-                }
-                None if f.result.validation_rms.is_finite() => fitted.push(f),
-                _ => {}
-            }
-        }
-        by_validation(&mut fitted);
-    }
-    // A nominal G estimated from data is biased by the missing effect itself: the best
-    // hypothesis is refined jointly with G, and keeps the new G when it validates better.
-    // Only the best (but see below): G refitted around a map at the wrong location absorbs
-    // part of the effect too, and would make that location look as good as the right one.
-    if settings.refine_nominal
-        && let Some(g) = given.polynomial()
-        && given.known_maps().is_empty()
-        // A map of the rate depends on the direction of motion and so imitates hysteresis;
-        // with G refitted around it, it imitates a backlash well enough to hide it.
-        && fitted.first().is_some_and(|f| {
-            uncertain_g || cancelled.is_some() || f.result.location != Location::RateFeedback
-        })
-    {
-        // A hysteresis is partly a phase lag, which a refitted G absorbs: when a fit about as
-        // good as the best already depends on the direction of its z, a new G must do much
-        // more than that to be believed.
-        let best_rms = fitted[0].result.validation_rms;
-        for f in fitted.iter_mut() {
-            if f.result.validation_rms <= DIRECTION_WITHIN * best_rms {
-                f.direction = direction_test(f, settings).ok();
-            }
-        }
-        let dynamic = fitted
-            .iter()
-            .any(|f| f.direction.as_ref().is_some_and(|d| d.dynamic));
-        let required = if dynamic { DYNAMIC_JOINT_GAIN } else { 1.0 };
-        // A G whose zero cancels its integrator is the direct fit of a closed-loop record,
-        // wrong at every location (it tends to the controller's negative inverse): each
-        // location is refined with it, its rate included, and the refits compete. The closed
-        // loop itself says little about the direction of motion that a refitted rate map
-        // could hide (on the physics generator no closed-loop backlash is lost so).
-        let joint = if uncertain_g || cancelled.is_some() {
-            fitted.len()
-        } else {
-            1
-        };
-        let refitted: Vec<Fitted> = fitted
-            .drain(..joint)
-            .map(|f| refine::refine_jointly(g, f.input_noise, f, est, val, required, settings))
-            .collect();
-        fitted.extend(refitted);
-        by_validation(&mut fitted);
-    }
-    // Total variation, where a smooth estimate cannot do: at every location when the best
-    // quadratic estimate closes less than half the gap (steps and jumps that a kernel of
-    // width σ smooths away, e.g. a fine quantiser), else at the best location when a family
-    // with a kink or a jump fits it about as well as the best family (a smoothed kink looks
-    // like a cubic too).
-    if settings.total_variation
-        && let Some(best) = fitted.first()
-    {
-        let everywhere = best.result.validation_rms.is_nan()
-            || best.result.validation_rms > 0.5 * validation_gap.rms;
-        let kinked = !everywhere && {
-            let (zs, ws) = subsample(&best.z, &best.w_hat, settings.naming_points);
-            name_effect(&zs, &ws, &naming_settings(settings))
-                .ok()
-                .map(|n| {
-                    let best = n.ranked.iter().map(|f| f.rms).fold(f64::INFINITY, f64::min);
-                    n.ranked
-                        .iter()
-                        .any(|f| f.rms <= 1.25 * best && non_smooth(f.effect))
-                })
-                .unwrap_or(false)
-        };
-        let targets: Vec<Hypothesis> = if everywhere {
-            fitted.iter().map(|f| f.hypothesis.clone()).collect()
-        } else if kinked {
-            vec![best.hypothesis.clone()]
-        } else {
-            Vec::new()
-        };
-
-        for h in targets {
-            let t = Instant::now();
-            match total_variation_fit(&h, est, val, settings) {
-                Ok(f) => fitted.push(f),
-                Err(e) => failed.push(failure(h.location, "tv", t, &e)),
-            }
-        }
-        by_validation(&mut fitted);
-    }
+    let (mut fitted, failed) = search.candidates();
     // Each smooth hypothesis's simulation residual on the estimation record bounds the noise
     // level too. Not a total-variation estimate's, nor one whose β sits on its search bound:
     // with a knot at nearly every sample, a map of z can memorise the noise of y even when z
