@@ -422,9 +422,17 @@ fn candidate_table(s: &mut String, f: &Finding, alpha: f64) {
             s,
             "| {}{} | {parameters} | {} | {p} | {} | {} |",
             cell(&row.label),
-            if row.eligible { "" } else { " (may not be named)" },
+            if row.eligible {
+                ""
+            } else {
+                " (may not be named)"
+            },
             e(row.validation_rms),
-            if sel.as_good.get(i).copied().unwrap_or(false) { "yes" } else { "no" },
+            if sel.as_good.get(i).copied().unwrap_or(false) {
+                "yes"
+            } else {
+                "no"
+            },
             if sel.chosen == Some(i) { "**yes**" } else { "" }
         );
     }

@@ -121,13 +121,12 @@ impl Candidate {
 
     /// The row with validation errors `errors` (and their RMS as its validation RMS).
     pub fn with_errors(mut self, errors: Vec<f64>) -> Self {
-        let finite = !errors.is_empty() && errors.iter().all(|e| e.is_finite());
-        self.validation_rms = if finite {
-            (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
+        self.validation_rms = rms(&errors);
+        self.errors = if self.validation_rms.is_finite() {
+            errors
         } else {
-            f64::INFINITY
+            Vec::new()
         };
-        self.errors = if finite { errors } else { Vec::new() };
         self
     }
 
@@ -141,6 +140,15 @@ impl Candidate {
     fn scored(&self) -> bool {
         !self.errors.is_empty() && self.validation_rms.is_finite()
     }
+}
+
+/// The RMS of `errors`; infinite when there are none or one is not finite (a simulation that
+/// failed or diverged).
+pub(crate) fn rms(errors: &[f64]) -> f64 {
+    if errors.is_empty() || errors.iter().any(|e| !e.is_finite()) {
+        return f64::INFINITY;
+    }
+    (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
 }
 
 /// What [`select`] decided, row by row.
@@ -205,14 +213,12 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
     let as_good: Vec<bool> = (0..rows.len())
         .map(|i| i == best || (rows[i].eligible && p[i].is_some_and(|p| p >= alpha)))
         .collect();
-    let chosen = (0..rows.len())
-        .filter(|&i| as_good[i])
-        .min_by(|&a, &b| {
-            rows[a]
-                .complexity()
-                .cmp(&rows[b].complexity())
-                .then(rows[a].validation_rms.total_cmp(&rows[b].validation_rms))
-        });
+    let chosen = (0..rows.len()).filter(|&i| as_good[i]).min_by(|&a, &b| {
+        rows[a]
+            .complexity()
+            .cmp(&rows[b].complexity())
+            .then(rows[a].validation_rms.total_cmp(&rows[b].validation_rms))
+    });
     let against_reference = match (chosen, reference) {
         (Some(c), Some(reference)) => diebold_mariano(&rows[c].errors, reference, None).ok(),
         _ => None,
@@ -235,7 +241,9 @@ mod tests {
 
     fn white(n: usize, scale: f64, seed: u64) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
-        (0..n).map(|_| scale * (rng.random::<f64>() - 0.5)).collect()
+        (0..n)
+            .map(|_| scale * (rng.random::<f64>() - 0.5))
+            .collect()
     }
 
     fn family(label: &str, k: usize, errors: Vec<f64>) -> Candidate {
@@ -246,7 +254,10 @@ mod tests {
     fn a_clearly_better_rich_row_beats_a_simple_one() {
         // The simple row's errors carry a systematic component larger than the noise's RMS.
         let e = white(2000, 1.0, 1);
-        let biased = e.iter().enumerate().map(|(k, e)| e + if k % 2 == 0 { 0.6 } else { -0.6 });
+        let biased = e
+            .iter()
+            .enumerate()
+            .map(|(k, e)| e + if k % 2 == 0 { 0.6 } else { -0.6 });
         let simple = family("simple", 1, biased.collect());
         let rich = family("rich", 4, e.clone());
         let s = select(&[simple, rich], None, 0.05);
@@ -261,8 +272,14 @@ mod tests {
         let failed = Candidate::new("failed", Form::Family { approximate: false }, 1);
         let mut flagged = family("flagged", 2, e.iter().map(|v| 0.9 * v).collect());
         flagged.eligible = false;
-        let table = Candidate::new("table", Form::Nonparametric { estimator: "tv".into() }, 0)
-            .with_errors(e.clone());
+        let table = Candidate::new(
+            "table",
+            Form::Nonparametric {
+                estimator: "tv".into(),
+            },
+            0,
+        )
+        .with_errors(e.clone());
         let s = select(&[failed, flagged, table], None, 0.05);
         // The flagged row validates best but is not a candidate: the table is the best
         // eligible row and is chosen, and the flagged row's p-value is still reported.

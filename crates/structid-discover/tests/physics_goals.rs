@@ -775,7 +775,16 @@ fn zz_probe() {
         let f = d.finding.as_ref().unwrap();
         eprintln!("seed {seed}: {}", f.classification.describe());
         for (i, r) in f.table.iter().enumerate() {
-            eprintln!("   {:40} k={} rms={:.4e} p={:?} good={} elig={} chosen={}", r.label, r.parameters, r.validation_rms, f.selection.p_worse_than_best[i], f.selection.as_good[i], r.eligible, f.selection.chosen == Some(i));
+            eprintln!(
+                "   {:40} k={} rms={:.4e} p={:?} good={} elig={} chosen={}",
+                r.label,
+                r.parameters,
+                r.validation_rms,
+                f.selection.p_worse_than_best[i],
+                f.selection.as_good[i],
+                r.eligible,
+                f.selection.chosen == Some(i)
+            );
         }
     }
 }

@@ -690,7 +690,9 @@ fn simulate(
                     u_in_prev = ud;
                     alpha * stiffness * ud + (1.0 - alpha) * stiffness * hs
                 }
-                PhysicalEffect::DriftingGain { drift } => ud * (1.0 + drift * k as f64 / len as f64),
+                PhysicalEffect::DriftingGain { drift } => {
+                    ud * (1.0 + drift * k as f64 / len as f64)
+                }
                 other => other.eval(ud).unwrap_or(ud),
             },
             _ => ud,

@@ -139,8 +139,8 @@
 //! println!("{}", d.verdict);
 //! ```
 
-mod direction;
 mod candidates;
+mod direction;
 mod fit;
 mod input_hysteresis;
 mod iterate;
@@ -173,8 +173,8 @@ use crate::gap::{Gap, gap};
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
-use direction::direction_test;
 use candidates::by_validation;
+use direction::direction_test;
 use fit::{Fitted, check_records, resolve_scoring};
 use naming::{name_and_add, verdict_text};
 

@@ -80,7 +80,10 @@ impl Classification {
             Classification::Unnamed => "unnamed static effect".into(),
             Classification::Dynamic => "dynamic: hysteresis or backlash suspected".into(),
             Classification::TimeVarying(fit) => {
-                format!("time-varying: {} whose parameters change over the record", fit.effect.name())
+                format!(
+                    "time-varying: {} whose parameters change over the record",
+                    fit.effect.name()
+                )
             }
         }
     }

@@ -9,10 +9,10 @@ use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
 use super::fit::{Fitted, simulation_errors};
-use crate::table::{Candidate, Form, select};
 use super::fit::{even_indices, minmax, scoring_settings};
 use super::polish::{polish, polish_jointly};
 use super::{Augmented, AugmentedMap, Classification, DiscoverSettings, Finding};
+use crate::table::{Candidate, Form, select};
 
 /// Remarks and equivalent locations for a named effect.
 pub(super) fn structural_remarks(
@@ -151,7 +151,12 @@ fn relay_start(fit: &EffectFit, location: Location) -> Option<(f64, f64)> {
 }
 
 /// The table's row of the nonparametric map `best` at its own hypothesis.
-fn nonparametric_row(best: &Fitted, h: &Hypothesis, val_h: &Data, s: &DiscoverSettings) -> Candidate {
+fn nonparametric_row(
+    best: &Fitted,
+    h: &Hypothesis,
+    val_h: &Data,
+    s: &DiscoverSettings,
+) -> Candidate {
     let mut row = Candidate::new(
         format!("nonparametric ({})", best.estimator),
         Form::Nonparametric {
@@ -183,7 +188,7 @@ fn family_row(
     // With maps named by earlier steps, each family is also refitted together with them, so
     // that the families are compared without the earlier maps' bias.
     if let Some((refitted, known, joint_errors)) = refit_with_known(fit, h, est_h, val_h, settings)
-        && rms_of(&joint_errors) < rms_of(&errors)
+        && crate::table::rms(&joint_errors) < crate::table::rms(&errors)
     {
         *fit = refitted;
         errors = joint_errors;
@@ -195,15 +200,6 @@ fn family_row(
     row.location = Some(h.location);
     row.eligible = fit.nameable();
     (row, joint)
-}
-
-/// The RMS of `errors`, infinite when there are none (a failed simulation).
-fn rms_of(errors: &[f64]) -> f64 {
-    if errors.is_empty() {
-        f64::INFINITY
-    } else {
-        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
-    }
 }
 
 /// The Coulomb family started at the relay that a saturation-like fit among `targets` (or
@@ -512,8 +508,7 @@ pub(super) fn name_and_add(
                 "no family is as good as the best row of the candidate table (`{}`: the \
                  Diebold–Mariano test of the validation errors rejects each at α = {}), so the \
                  map is kept as a table",
-                rows[selection.best].label,
-                settings.significance
+                rows[selection.best].label, settings.significance
             ));
             remarks.extend(flag_remarks(&naming));
         }

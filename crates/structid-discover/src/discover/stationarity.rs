@@ -110,8 +110,7 @@ pub(super) fn stationarity(
     if compared == 0 {
         return None;
     }
-    let critical =
-        student_t2_quantile(1.0 - settings.significance / (2.0 * compared as f64));
+    let critical = student_t2_quantile(1.0 - settings.significance / (2.0 * compared as f64));
     Some(Stationarity {
         segments: fits.into_iter().map(|(f, _)| f).collect(),
         statistic: worst.0,
@@ -219,7 +218,10 @@ mod tests {
         let expected = 0.05 / ((0.002f64 / 1.96).powi(2) / 5.0).sqrt();
         assert!((t - expected).abs() < 1e-6 * expected, "{t} {expected}");
         // The same spread without order in time: scatter about the line as large as the slope.
-        let scatter: Vec<_> = [1.05, 1.15, 1.0, 1.10].iter().map(|v| gain(*v, 0.002)).collect();
+        let scatter: Vec<_> = [1.05, 1.15, 1.0, 1.10]
+            .iter()
+            .map(|v| gain(*v, 0.002))
+            .collect();
         let t = trend_statistic(&scatter, "gain").unwrap();
         assert!(t < student_t2_quantile(0.975), "{t}");
     }
