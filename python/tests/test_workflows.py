@@ -171,7 +171,7 @@ def test_discover_matches_the_tool(cli, duffing):
     chosen = [r for r in rows if r["chosen"]]
     assert len(chosen) == 1 and chosen[0]["as_good"] and chosen[0]["eligible"]
     for r in rows:
-        if r["p_worse_than_best"] is not None:
+        if r["eligible"] and r["p_worse_than_best"] is not None:
             assert r["as_good"] == (r["p_worse_than_best"] >= 0.05)
     families = [r for r in rows if not r["label"].startswith("nonparametric")]
     if not chosen[0]["label"].startswith("nonparametric"):

@@ -787,6 +787,9 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
     );
     s.push('\n');
     candidate_table(s, f, r.settings.significance());
+    if let Some(st) = &f.stationarity {
+        let _ = writeln!(s, "Stationarity: {}.\n", st.describe());
+    }
     let _ = writeln!(
         s,
         "Families fitted to the points (z_k, ŵ_k), best BIC first (validation RMS for those \
@@ -1030,10 +1033,7 @@ pub fn json(
                 ),
                 Classification::Unnamed => ("unnamed", Value::Null),
                 Classification::Dynamic => ("dynamic", Value::Null),
-                Classification::TimeVarying(fit) => (
-                    "time-varying",
-                    fit_json(fit, Some(f.augmented.validation_gap.rms))?,
-                ),
+                Classification::TimeVarying(fit) => ("time-varying", fit_json(fit, None)?),
             };
             let families = f
                 .naming

@@ -17,25 +17,30 @@
 //! 3. Among the rows as good as the best, the simplest in
 //!    [`Candidate::complexity`] order is chosen: a named family before a nonparametric map, fewer
 //!    parameters first, the exact forms before the approximate ones.
-//! 4. The chosen row must beat the reference (the model without the block) at the same α:
-//!    [`Selection::beats_reference`].
 //!
-//! α is the probability of dismissing a row that is in truth as good as the best: the
-//! smaller α, the more rows count as equally good and the simpler the choice.
+//! A caller that also gives the errors of a reference (the model without the block) learns
+//! whether the chosen row beats it at the same α ([`Selection::beats_reference`]).
+//!
+//! α is the level of each row's comparison with the best: the chance of dismissing one row
+//! that is in truth as good as the best. Each row is compared with the best of the table, not
+//! with a fixed model, and no correction is made for the number of rows, so a row as good as
+//! the best is dismissed somewhat more often than α. The smaller α, the more rows count as
+//! equally good and the simpler the choice.
 //!
 //! ```
 //! use structid_discover::table::{Candidate, Form, select};
-//! // Two rows whose errors differ only by a small, insignificant amount, and a much worse one.
-//! let noise: Vec<f64> = (0..400).map(|k| ((k * 7919) % 101) as f64 / 50.0 - 1.0).collect();
-//! let rich = Candidate::new("rich", Form::Nonparametric { estimator: "quadratic".into() }, 40)
-//!     .with_errors(noise.iter().map(|e| 0.99 * e).collect());
+//! // Two rows whose errors are different series of the same size, and a much worse one.
+//! let a: Vec<f64> = (0..400).map(|k| ((k * 7919) % 101) as f64 / 50.0 - 1.0).collect();
+//! let b: Vec<f64> = (0..400).map(|k| ((k * 104_729 + 13) % 101) as f64 / 50.0 - 1.0).collect();
+//! let rich = Candidate::new("rich", Form::Nonparametric { estimator: "quadratic".into() }, 0)
+//!     .with_errors(a.clone());
 //! let simple = Candidate::new("simple", Form::Family { approximate: false }, 2)
-//!     .with_errors(noise.clone());
+//!     .with_errors(b);
 //! let poor = Candidate::new("poor", Form::Family { approximate: false }, 1)
-//!     .with_errors(noise.iter().map(|e| 3.0 * e).collect());
+//!     .with_errors(a.iter().map(|e| 3.0 * e).collect());
 //! let s = select(&[rich, simple, poor], None, 0.05);
-//! assert_eq!(s.best, 0);
-//! assert_eq!(s.chosen, Some(1)); // as good as the best, and simpler
+//! assert!(s.as_good[0] && s.as_good[1]);
+//! assert_eq!(s.chosen, Some(1)); // as good as the best, and simpler than a nonparametric map
 //! assert!(!s.as_good[2]);
 //! ```
 
@@ -169,14 +174,19 @@ pub struct Selection {
     /// The chosen row against the reference, when a reference was given.
     #[serde(skip)]
     pub against_reference: Option<PairedComparison>,
+    /// Whether a reference was given and a row chosen.
+    reference_given: bool,
 }
 
 impl Selection {
-    /// Whether the chosen row beats the reference at α (true when no reference was given).
-    pub fn beats_reference(&self) -> bool {
-        self.against_reference
-            .as_ref()
-            .is_none_or(|c| c.better_at(self.alpha))
+    /// Whether the chosen row beats the reference at α: `None` when no reference was given
+    /// or nothing was chosen, `Some(false)` when the comparison could not be made.
+    pub fn beats_reference(&self) -> Option<bool> {
+        self.reference_given.then(|| {
+            self.against_reference
+                .as_ref()
+                .is_some_and(|c| c.better_at(self.alpha))
+        })
     }
 }
 
@@ -198,6 +208,7 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
             as_good: vec![false; rows.len()],
             chosen: None,
             against_reference: None,
+            reference_given: false,
         };
     };
     let p: Vec<Option<f64>> = rows
@@ -230,6 +241,7 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
         as_good,
         chosen,
         against_reference,
+        reference_given: reference.is_some() && chosen.is_some(),
     }
 }
 
@@ -312,9 +324,16 @@ mod tests {
         let s = select(std::slice::from_ref(&row), Some(&e), 0.05);
         assert_eq!(s.chosen, Some(0));
         // A 2 % gain on a deterministic scaling is significant: d_k = (0.98² − 1)·e_k² < 0.
-        assert!(s.beats_reference());
+        assert_eq!(s.beats_reference(), Some(true));
         let same = select(std::slice::from_ref(&row), Some(&row.errors), 0.05);
-        assert!(!same.beats_reference());
+        assert_eq!(same.beats_reference(), Some(false));
+        // A reference of another length cannot be compared: not beaten.
+        let short = select(std::slice::from_ref(&row), Some(&e[..10]), 0.05);
+        assert_eq!(short.beats_reference(), Some(false));
+        assert_eq!(
+            select(std::slice::from_ref(&row), None, 0.05).beats_reference(),
+            None
+        );
     }
 
     proptest! {

@@ -765,26 +765,3 @@ fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_par
         assert!(d.verdict.contains("at the input"), "{}", d.verdict);
     }
 }
-
-#[test]
-#[ignore]
-fn zz_probe() {
-    for seed in [47u64, 40, 55, 59, 6] {
-        let case = generate(PhysicsKind::Static, seed);
-        let d = run(&case);
-        let f = d.finding.as_ref().unwrap();
-        eprintln!("seed {seed}: {}", f.classification.describe());
-        for (i, r) in f.table.iter().enumerate() {
-            eprintln!(
-                "   {:40} k={} rms={:.4e} p={:?} good={} elig={} chosen={}",
-                r.label,
-                r.parameters,
-                r.validation_rms,
-                f.selection.p_worse_than_best[i],
-                f.selection.as_good[i],
-                r.eligible,
-                f.selection.chosen == Some(i)
-            );
-        }
-    }
-}

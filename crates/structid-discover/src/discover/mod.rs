@@ -1227,7 +1227,8 @@ fn check_stationarity(
 }
 
 /// Whether a gap that no static block closes is a linear part that changes over the record:
-/// a gain at the finding's location (w = a·z, from a = 1) re-estimated on consecutive segments
+/// a gain at the finding's location (w = a·z, from the block's neutral value) re-estimated on
+/// consecutive segments
 /// of the estimation record ([`stationarity`](mod@stationarity)). A gain that drifts is
 /// absorbed on average by an estimated G, which leaves a residual that no static map
 /// explains; the segments' gains follow the drift. When they do, the finding becomes [`Classification::TimeVarying`].
@@ -1237,7 +1238,13 @@ fn drifting_linear_part(
     est: &Data,
     settings: &DiscoverSettings,
 ) -> bool {
-    let Ok(gain) = crate::effects::fit_effect_with(
+    // The block's neutral value: w = z where it passes a signal on (input, output), w = 0
+    // where it feeds back.
+    let neutral = match finding.location {
+        Location::OutputFeedback | Location::RateFeedback => 0.0,
+        _ => 1.0,
+    };
+    let Ok(mut gain) = crate::effects::fit_effect_with(
         crate::effects::Effect::Gain,
         false,
         &[-1.0, 1.0],
@@ -1245,6 +1252,7 @@ fn drifting_linear_part(
     ) else {
         return false;
     };
+    gain.parameters[0].value = neutral;
     let h = augmented_hypothesis(finding, nominal);
     match stationarity::stationarity(&gain, &h, est, settings) {
         Some(check) if check.time_varying => {

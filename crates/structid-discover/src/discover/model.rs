@@ -68,7 +68,8 @@ pub enum Classification {
     /// A family was chosen, but re-estimated on consecutive segments of the estimation record
     /// its parameters follow a trend larger than their scatter allows
     /// ([`Stationarity`](super::Stationarity)): the effect changes over time. The fit is the
-    /// whole record's, the augmented model's best static approximation.
+    /// whole record's; the augmented model carries it, or, when the time variation was found
+    /// in a gain because no block closed the gap, the best static approximation found.
     TimeVarying(EffectFit),
 }
 

@@ -150,13 +150,22 @@ fn relay_start(fit: &EffectFit, location: Location) -> Option<(f64, f64)> {
     (level.is_finite() && offset.is_finite() && level > 0.0).then_some((level, offset))
 }
 
-/// The table's row of the nonparametric map `best` at its own hypothesis.
+/// The table's row of the nonparametric map `best` at its own hypothesis, extrapolated as it
+/// was ranked and as the augmented model writes it (held at its edges when that validated
+/// better).
 fn nonparametric_row(
     best: &Fitted,
     h: &Hypothesis,
     val_h: &Data,
     s: &DiscoverSettings,
 ) -> Candidate {
+    let (lo, hi) = minmax(&best.z);
+    let held = |z: &[f64]| best.map.eval(&[z[0].clamp(lo, hi)]);
+    let errors = if best.hold_edges {
+        simulation_errors(h, &held, val_h, s)
+    } else {
+        simulation_errors(h, best.map.as_ref(), val_h, s)
+    };
     let mut row = Candidate::new(
         format!("nonparametric ({})", best.estimator),
         Form::Nonparametric {
@@ -164,9 +173,10 @@ fn nonparametric_row(
         },
         0,
     )
-    .with_errors(simulation_errors(h, best.map.as_ref(), val_h, s));
+    .with_errors(errors);
     row.location = Some(best.result.location);
     row.estimation_rms = Some(best.result.estimation_rms);
+    row.g_refitted = best.linear.is_some();
     row
 }
 
@@ -443,6 +453,7 @@ pub(super) fn name_and_add(
     let mut classification = Classification::Unnamed;
     let mut chosen_joint: Option<Hypothesis> = None;
     let mut rows = vec![nonparametric_row(&best, &h, &val_h, settings)];
+    let g_refitted = best.linear.is_some();
     let mut row_family: Vec<Option<usize>> = vec![None];
     if direction.dynamic {
         classification = Classification::Dynamic;
@@ -454,7 +465,8 @@ pub(super) fn name_and_add(
             .take(REFINED_FAMILIES)
             .collect();
         let mut family = |i: usize, naming: &mut Naming| {
-            let (row, joint) = family_row(&mut naming.ranked[i], &h, &est_h, &val_h, settings);
+            let (mut row, joint) = family_row(&mut naming.ranked[i], &h, &est_h, &val_h, settings);
+            row.g_refitted = g_refitted;
             family_rms[i] = Some(row.validation_rms);
             joint_known[i] = joint;
             rows.push(row);
@@ -505,9 +517,9 @@ pub(super) fn name_and_add(
         Classification::Named(_) | Classification::TimeVarying(_) => {}
         Classification::Unnamed => {
             remarks.push(format!(
-                "no family is as good as the best row of the candidate table (`{}`: the \
-                 Diebold–Mariano test of the validation errors rejects each at α = {}), so the \
-                 map is kept as a table",
+                "no family refined is as good as the best row of the candidate table (`{}`, by \
+                 the Diebold–Mariano test of the validation errors at α = {}), so the map is \
+                 kept as a table",
                 rows[selection.best].label, settings.significance
             ));
             remarks.extend(flag_remarks(&naming));

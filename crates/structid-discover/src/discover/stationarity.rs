@@ -169,7 +169,9 @@ fn segment_fit(
 ) -> Option<(EffectFit, f64)> {
     let data = h.data(part).ok()?;
     let refined = polish(fit, h, &data, settings);
-    if !refined.nameable() {
+    // A family that output error does not refine (a quantiser's steps) says nothing about
+    // its segments.
+    if !refined.nameable() || refined.refit.is_none() {
         return None;
     }
     let map = ExprMap::parse(&refined.expression, 1).ok()?;
