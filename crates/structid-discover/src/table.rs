@@ -9,11 +9,15 @@
 //! 1. The best row b has the smallest mean squared validation error among the rows that may
 //!    be chosen (a family with an unidentifiable parameter or a refit that did not converge is
 //!    shown, but is not a candidate: its fit is not a model the data determine).
-//! 2. Row r is *as good as the best* unless the Diebold–Mariano test of the loss
-//!    differential d_k = e_r(k)² − e_b(k)² (a Newey–West HAC variance, so that the serial
-//!    correlation of simulation errors is allowed for:
-//!    [`structid_core::validation::comparison::diebold_mariano`]) says that r is worse at the
-//!    level α (one-sided: P(Z ≥ S) < α).
+//! 2. Row r is *as good as the best* unless a paired test over blocks of the validation record
+//!    says that r is worse at the level α ([`compare_blocks`]): the record's scored samples
+//!    are cut into B contiguous blocks, and the log ratios ℓ_j = ln(MSE_r,j / MSE_b,j) of the
+//!    two rows' mean squared errors in each block are tested for a positive mean (one-sided,
+//!    S = mean(ℓ)/(sd(ℓ)/√B), P(Z ≥ S) < α). Blocks allow for the serial correlation of
+//!    simulation errors; the log ratio weighs every block alike, so that a few blocks where a
+//!    simulation nearly diverges neither hide a row that is worse everywhere else nor condemn
+//!    one that is as good everywhere else (a paired test of the squared errors themselves,
+//!    Diebold–Mariano's, is dominated by such blocks).
 //! 3. Among the rows as good as the best, the simplest in
 //!    [`Candidate::complexity`] order is chosen: a named family before a nonparametric map, fewer
 //!    parameters first, the exact forms before the approximate ones.
@@ -44,7 +48,7 @@
 //! assert!(!s.as_good[2]);
 //! ```
 
-use structid_core::validation::comparison::{PairedComparison, diebold_mariano};
+use structid_core::validation::distributions::upper_normal_tail;
 
 use crate::hypotheses::Location;
 
@@ -156,6 +160,82 @@ pub(crate) fn rms(errors: &[f64]) -> f64 {
     (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
 }
 
+/// How many contiguous blocks of the validation record [`compare_blocks`] uses (fewer when
+/// the record is short: at least [`MIN_BLOCK`] samples a block).
+pub const BLOCKS: usize = 20;
+
+/// The fewest samples a block of [`compare_blocks`] holds.
+pub const MIN_BLOCK: usize = 10;
+
+/// The outcome of [`compare_blocks`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct BlockComparison {
+    /// The mean over blocks of ln(MSE_a / MSE_b): positive when a's errors are larger.
+    pub mean_log_ratio: f64,
+    /// S = mean / (sd/√B).
+    pub statistic: f64,
+    /// P(Z ≥ S) for a standard normal Z: small when a is worse than b.
+    pub p_worse: f64,
+    /// The number of blocks B.
+    pub blocks: usize,
+}
+
+impl BlockComparison {
+    /// Whether a is better than b at level α (one-sided).
+    pub fn better_at(&self, alpha: f64) -> bool {
+        1.0 - self.p_worse < alpha
+    }
+}
+
+/// The paired test of two models' errors `a` and `b` on the same samples over contiguous
+/// blocks (see the [module documentation](self)); `None` for unequal lengths, fewer than
+/// three blocks of [`MIN_BLOCK`] samples, or a block where either MSE is not positive and
+/// finite.
+///
+/// ```
+/// use structid_discover::table::compare_blocks;
+/// let b: Vec<f64> = (0..400).map(|k| (0.7 * k as f64).sin()).collect();
+/// let a: Vec<f64> = b.iter().map(|v| 1.5 * v).collect();
+/// let c = compare_blocks(&a, &b).unwrap();
+/// assert!((c.mean_log_ratio - (2.25f64).ln()).abs() < 1e-12 && c.p_worse < 1e-6);
+/// ```
+pub fn compare_blocks(a: &[f64], b: &[f64]) -> Option<BlockComparison> {
+    let n = a.len();
+    if n != b.len() {
+        return None;
+    }
+    let blocks = BLOCKS.min(n / MIN_BLOCK);
+    if blocks < 3 {
+        return None;
+    }
+    let mse = |e: &[f64]| e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64;
+    let ratios: Vec<f64> = (0..blocks)
+        .map(|j| {
+            let r = j * n / blocks..(j + 1) * n / blocks;
+            (mse(&a[r.clone()]) / mse(&b[r])).ln()
+        })
+        .collect();
+    if ratios.iter().any(|l| !l.is_finite()) {
+        return None;
+    }
+    let m = blocks as f64;
+    let mean = ratios.iter().sum::<f64>() / m;
+    let var = ratios.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (m - 1.0);
+    let statistic = if mean == 0.0 {
+        0.0
+    } else if var > 0.0 {
+        mean / (var / m).sqrt()
+    } else {
+        mean.signum() * f64::INFINITY
+    };
+    Some(BlockComparison {
+        mean_log_ratio: mean,
+        statistic,
+        p_worse: upper_normal_tail(statistic),
+        blocks,
+    })
+}
+
 /// What [`select`] decided, row by row.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Selection {
@@ -173,7 +253,7 @@ pub struct Selection {
     pub chosen: Option<usize>,
     /// The chosen row against the reference, when a reference was given.
     #[serde(skip)]
-    pub against_reference: Option<PairedComparison>,
+    pub against_reference: Option<BlockComparison>,
     /// Whether a reference was given and a row chosen.
     reference_given: bool,
 }
@@ -216,7 +296,7 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
         .enumerate()
         .map(|(i, r)| {
             (i != best && r.scored())
-                .then(|| diebold_mariano(&r.errors, &rows[best].errors, None).ok())
+                .then(|| compare_blocks(&r.errors, &rows[best].errors))
                 .flatten()
                 .map(|c| c.p_worse)
         })
@@ -231,7 +311,7 @@ pub fn select(rows: &[Candidate], reference: Option<&[f64]>, alpha: f64) -> Sele
             .then(rows[a].validation_rms.total_cmp(&rows[b].validation_rms))
     });
     let against_reference = match (chosen, reference) {
-        (Some(c), Some(reference)) => diebold_mariano(&rows[c].errors, reference, None).ok(),
+        (Some(c), Some(reference)) => compare_blocks(&rows[c].errors, reference),
         _ => None,
     };
     Selection {
