@@ -250,7 +250,7 @@ class Finding:
     table: List[Dict[str, Any]] = field(default_factory=list)
     """The candidate table at the finding's location, one dict per row: ``label``,
     ``parameters``, ``validation_rms``, ``eligible``, ``p_worse_than_best`` (the
-    Diebold–Mariano p-value against the best row), ``as_good`` and ``chosen``."""
+    p-value of the paired block test against the best row), ``as_good`` and ``chosen``."""
 
 
 @dataclass
@@ -294,7 +294,7 @@ def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object,
     (``nominal_validation_rms_records``, ``validation_rms_records``).
 
     ``significance`` is the level α of the candidate table's rule: the simplest row that a
-    Diebold–Mariano test of the validation errors does not call worse than the best at α
+    paired test of the validation errors over blocks does not call worse than the best at α
     is chosen (``Finding.table``)."""
     est, more = _record_columns(nominal, u, y, "")
     val, more_val = _record_columns(nominal, u_val, y_val, "validation ")

@@ -120,8 +120,8 @@ pub struct DiscoverArgs {
     #[arg(long)]
     tune_sigma: bool,
     /// Significance level α of the candidate table's selection rule (0 < α ≤ 0.5): a row is
-    /// as good as the best unless the paired Diebold–Mariano test of the validation errors
-    /// says it is worse at α; the simplest row as good as the best is chosen.
+    /// as good as the best unless a paired test of the validation errors over blocks of the
+    /// record says it is worse at α; the simplest row as good as the best is chosen.
     #[arg(
         long,
         value_name = "ALPHA",

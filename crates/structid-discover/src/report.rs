@@ -398,9 +398,9 @@ fn candidate_table(s: &mut String, f: &Finding, alpha: f64) {
     let _ = writeln!(
         s,
         "Candidate table at this location. The best row has the smallest validation RMS; a row \
-         is as good as the best unless the Diebold–Mariano test of the squared validation \
-         errors (Newey–West variance) says it is worse at α = {alpha}; among the rows as good \
-         as the best that may be named, the simplest is chosen (a family before the \
+         is as good as the best unless the paired test of the log ratio of their mean squared \
+         validation errors over blocks of the record says it is worse at α = {alpha}; among \
+         the rows as good as the best that may be named, the simplest is chosen (a family before the \
          nonparametric map, then fewer parameters):\n"
     );
     let _ = writeln!(

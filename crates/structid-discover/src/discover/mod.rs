@@ -99,9 +99,9 @@
 //!    simulation error with the parametric map in the loop; 95 % intervals from
 //!    s²·(JᵀJ)⁻¹) and simulated on the validation record. Each is a row of the **candidate
 //!    table** ([`crate::table`]) beside the nonparametric map, with its validation errors at
-//!    the scored samples; the one selection rule picks the simplest row that a
-//!    Diebold–Mariano test of the squared errors does not call worse than the best at the
-//!    level α ([`DiscoverSettings::significance`]). A family chosen is *named*; the
+//!    the scored samples; the one selection rule picks the simplest row that a paired test
+//!    over blocks of the validation record ([`crate::table::compare_blocks`]) does not call
+//!    worse than the best at the level α ([`DiscoverSettings::significance`]). A family chosen is *named*; the
 //!    nonparametric map chosen is an "unnamed static effect", kept as a table.
 //!    **Is it stationary?** The named family is refined again on [`SEGMENTS`] consecutive
 //!    segments of the estimation record, and a trend of a parameter over them larger than

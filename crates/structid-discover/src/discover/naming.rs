@@ -518,7 +518,7 @@ pub(super) fn name_and_add(
         Classification::Unnamed => {
             remarks.push(format!(
                 "no family refined is as good as the best row of the candidate table (`{}`, by \
-                 the Diebold–Mariano test of the validation errors at α = {}), so the map is \
+                 the paired test of the validation errors over blocks at α = {}), so the map is \
                  kept as a table",
                 rows[selection.best].label, settings.significance
             ));
