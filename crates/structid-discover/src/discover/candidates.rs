@@ -10,7 +10,7 @@ use crate::effects::name_effect;
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 
 use super::direction::direction_test;
-use super::fit::{Fitted, identify_hypothesis};
+use super::fit::{Fitted, by_validation, identify_hypothesis};
 use super::naming::{naming_settings, non_smooth, subsample};
 use super::total_variation::total_variation_fit;
 use super::{
@@ -209,9 +209,4 @@ impl Search<'_> {
         }
         by_validation(fitted);
     }
-}
-
-/// Sorts estimates by validation RMS, best first.
-pub(super) fn by_validation(v: &mut [Fitted]) {
-    v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms));
 }

@@ -527,3 +527,8 @@ pub(super) fn identify_hypothesis(
         t0,
     )
 }
+
+/// Sorts estimates by validation RMS, best first.
+pub(super) fn by_validation(v: &mut [Fitted]) {
+    v.sort_by(|a, b| a.result.validation_rms.total_cmp(&b.result.validation_rms));
+}

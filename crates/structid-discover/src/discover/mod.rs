@@ -173,9 +173,8 @@ use crate::gap::{Gap, gap};
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
-use candidates::by_validation;
 use direction::direction_test;
-use fit::{Fitted, check_records, resolve_scoring};
+use fit::{Fitted, by_validation, check_records, resolve_scoring};
 use naming::{name_and_add, verdict_text};
 
 /// The validation RMS must shrink by at least this factor for a detected gap to count as a
