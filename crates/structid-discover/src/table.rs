@@ -48,6 +48,7 @@
 //! assert!(!s.as_good[2]);
 //! ```
 
+use structid_core::validation::comparison::mean_statistic;
 use structid_core::validation::distributions::upper_normal_tail;
 
 use crate::hypotheses::Location;
@@ -221,13 +222,7 @@ pub fn compare_blocks(a: &[f64], b: &[f64]) -> Option<BlockComparison> {
     let m = blocks as f64;
     let mean = ratios.iter().sum::<f64>() / m;
     let var = ratios.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (m - 1.0);
-    let statistic = if mean == 0.0 {
-        0.0
-    } else if var > 0.0 {
-        mean / (var / m).sqrt()
-    } else {
-        mean.signum() * f64::INFINITY
-    };
+    let statistic = mean_statistic(mean, var, blocks);
     Some(BlockComparison {
         mean_log_ratio: mean,
         statistic,

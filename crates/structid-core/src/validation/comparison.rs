@@ -102,6 +102,26 @@ pub fn long_run_variance(d: &[f64], bandwidth: usize) -> f64 {
     variance
 }
 
+/// The statistic S = m / √(v/n) of a mean `mean` of `n` samples whose variance (or long-run
+/// variance) is `variance`: 0 for a zero mean, ±∞ when every sample is the same non-zero value
+/// (as certain as a difference gets).
+///
+/// ```
+/// use structid_core::validation::comparison::mean_statistic;
+/// assert_eq!(mean_statistic(0.5, 1.0, 16), 2.0);
+/// assert_eq!(mean_statistic(-0.1, 0.0, 5), f64::NEG_INFINITY);
+/// assert_eq!(mean_statistic(0.0, 0.0, 5), 0.0);
+/// ```
+pub fn mean_statistic(mean: f64, variance: f64, n: usize) -> f64 {
+    if mean == 0.0 {
+        0.0
+    } else if variance > 0.0 {
+        mean / (variance / n as f64).sqrt()
+    } else {
+        mean.signum() * f64::INFINITY
+    }
+}
+
 /// The Diebold–Mariano comparison of the errors `a` and `b` (paired, same samples) with
 /// bandwidth `bandwidth` (`None`: [`default_bandwidth`] of the differential); see the
 /// [module docs](self).
@@ -146,14 +166,7 @@ pub fn diebold_mariano(a: &[f64], b: &[f64], bandwidth: Option<usize>) -> Result
     }
     let mean = d.iter().sum::<f64>() / n as f64;
     let variance = long_run_variance(&d, h);
-    let statistic = if mean == 0.0 {
-        0.0
-    } else if variance > 0.0 {
-        mean / (variance / n as f64).sqrt()
-    } else {
-        // Every differential equal and non-zero: as certain as a difference gets.
-        mean.signum() * f64::INFINITY
-    };
+    let statistic = mean_statistic(mean, variance, n);
     Ok(PairedComparison {
         mean_difference: mean,
         statistic,
