@@ -554,6 +554,8 @@ pub enum PhysicsKind {
     None,
     /// A gain at the input that drifts by 10–20 % over the record.
     TimeVarying,
+    /// Two static effects at two different sites, each visible on its own.
+    TwoEffects,
 }
 
 /// A drawn case.
@@ -569,6 +571,9 @@ pub struct PhysicsCase {
     pub effect: Option<(PhysicalEffect, Site)>,
     /// What the workflow should report (None for LTI cases).
     pub expected: Option<Expected>,
+    /// A second static effect at another site, and what to report of it
+    /// ([`PhysicsKind::TwoEffects`] only).
+    pub second: Option<((PhysicalEffect, Site), Expected)>,
     /// Open or closed loop.
     pub control: Loop,
     /// The exact discretisation of the true linear part.
@@ -612,11 +617,12 @@ struct Record {
     y_clean: Vec<f64>,
 }
 
-/// Simulates `plant` with `effect` at `site` in continuous time (module docs); `noise` is
-/// added to the sampled output (and seen by the controller).
+/// Simulates `plant` with each of `effects` at its site (at most one a site, and at most one
+/// hysteretic) in continuous time (module docs); `noise` is added to the sampled output (and
+/// seen by the controller).
 fn simulate(
     plant: &Plant,
-    effect: Option<&(PhysicalEffect, Site)>,
+    effects: &[(PhysicalEffect, Site)],
     drive: Drive<'_>,
     noise: &[f64],
     ts: f64,
@@ -634,15 +640,17 @@ fn simulate(
     let mut prev_err = 0.0;
     let mut u_in_prev = 0.0;
     let mass_scale = plant.b.amax().recip();
-    let v_eps = effect
-        .map(|(e, _)| (2.0 * e.coulomb_scale() * h / mass_scale).max(1e-12))
+    let at = |site: Site| effects.iter().find(|(_, s)| *s == site).map(|(e, _)| e);
+    let v_eps = at(Site::RateFeedback)
+        .or(effects.first().map(|(e, _)| e))
+        .map(|e| (2.0 * e.coulomb_scale() * h / mass_scale).max(1e-12))
         .unwrap_or(1e-12);
     let pos = |x: &DVector<f64>| plant.c.dot(x);
     for k in 0..len {
         // sample
         let q = pos(&x);
-        let meas = match effect {
-            Some((e, Site::Output)) => match e {
+        let meas = match at(Site::Output) {
+            Some(e) => match e {
                 PhysicalEffect::Backlash { .. } => hs,
                 PhysicalEffect::BoucWen {
                     stiffness, alpha, ..
@@ -667,8 +675,8 @@ fn simulate(
         held.rotate_right(1);
         held[0] = uk;
         let ud = held[plant.delay];
-        let f_in = match effect {
-            Some((e, Site::Input)) => match e {
+        let f_in = match at(Site::Input) {
+            Some(e) => match e {
                 PhysicalEffect::Backlash { width, .. } => {
                     if ud - hs > *width {
                         hs = ud - width;
@@ -699,32 +707,32 @@ fn simulate(
         };
         for _ in 0..SUBSTEPS {
             let force = |xs: &DVector<f64>, hh: f64| -> f64 {
-                let fb = match effect {
-                    Some((e, Site::OutputFeedback)) => match e {
+                let spring = match at(Site::OutputFeedback) {
+                    Some(e) => match e {
                         PhysicalEffect::Backlash { stiffness, .. } => stiffness * hh,
                         PhysicalEffect::BoucWen {
                             stiffness, alpha, ..
                         } => alpha * stiffness * pos(xs) + (1.0 - alpha) * stiffness * hh,
                         other => other.eval(pos(xs)).unwrap_or(0.0),
                     },
-                    Some((e, Site::RateFeedback)) => {
-                        let v = plant.velocity.map_or(0.0, |i| xs[i]);
-                        e.eval_smooth(v, v_eps)
-                    }
-                    _ => 0.0,
+                    None => 0.0,
                 };
-                f_in - fb
+                let friction = at(Site::RateFeedback).map_or(0.0, |e| {
+                    let v = plant.velocity.map_or(0.0, |i| xs[i]);
+                    e.eval_smooth(v, v_eps)
+                });
+                f_in - spring - friction
             };
             // Bouc–Wen's h is integrated with the plant when it rides on the position
-            let bw = match effect {
-                Some((
+            let bw = effects.iter().find_map(|effect| match effect {
+                (
                     PhysicalEffect::BoucWen {
                         a, beta, gamma, n, ..
                     },
                     Site::OutputFeedback | Site::Output,
-                )) => Some((*a, *beta, *gamma, *n)),
+                ) => Some((*a, *beta, *gamma, *n)),
                 _ => None,
-            };
+            });
             let deriv = |xs: &DVector<f64>, hh: f64| -> (DVector<f64>, f64) {
                 let dx = &plant.a * xs + &plant.b * force(xs, hh);
                 let dh = match bw {
@@ -747,11 +755,12 @@ fn simulate(
                 hs += (l1 + 2.0 * l2 + 2.0 * l3 + l4) * h / 6.0;
             }
             // a play on the position (sensor drive or spring) follows it continuously
-            if let Some((
-                PhysicalEffect::Backlash { width, .. },
-                Site::Output | Site::OutputFeedback,
-            )) = effect
-            {
+            if let Some(width) = effects.iter().find_map(|effect| match effect {
+                (PhysicalEffect::Backlash { width, .. }, Site::Output | Site::OutputFeedback) => {
+                    Some(width)
+                }
+                _ => None,
+            }) {
                 let q = pos(&x);
                 if q - hs > *width {
                     hs = q - width;
@@ -1598,16 +1607,43 @@ pub fn generate_with_length(kind: PhysicsKind, seed: u64, len: usize) -> Physics
     panic!("physics: no valid {kind:?} case for seed {seed} after 1000 draws")
 }
 
-fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option<PhysicsCase> {
-    let choice = match kind {
-        PhysicsKind::Static => Some(STATIC_CHOICES[(seed % STATIC_CHOICES.len() as u64) as usize]),
-        PhysicsKind::Dynamic => {
-            Some(DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize])
+/// The effects of a kind's case: one for most kinds, none for LTI cases, and for two effects
+/// a second static one drawn at another site.
+fn choices(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Vec<Choice> {
+    let first_static = STATIC_CHOICES[(seed % STATIC_CHOICES.len() as u64) as usize];
+    match kind {
+        PhysicsKind::Static => vec![first_static],
+        PhysicsKind::Dynamic => vec![DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize]],
+        PhysicsKind::TimeVarying => vec![Choice::Drift],
+        PhysicsKind::None => vec![],
+        PhysicsKind::TwoEffects => {
+            let others: Vec<Choice> = STATIC_CHOICES
+                .into_iter()
+                .filter(|c| site_of(*c) != site_of(first_static))
+                .collect();
+            vec![first_static, pick(rng, &others)]
         }
-        PhysicsKind::TimeVarying => Some(Choice::Drift),
-        PhysicsKind::None => None,
-    };
-    let site = choice.map(site_of);
+    }
+}
+
+/// The site that constrains a case's plant and loop most: a sensor map needs an open-loop
+/// stable plant, and a map of the velocity or position needs them measured.
+fn governing_site(choices: &[Choice]) -> Option<Site> {
+    let order = [
+        Site::Output,
+        Site::RateFeedback,
+        Site::OutputFeedback,
+        Site::Input,
+    ];
+    order
+        .into_iter()
+        .find(|site| choices.iter().any(|c| site_of(*c) == *site))
+}
+
+fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option<PhysicsCase> {
+    let choices = choices(kind, seed, rng);
+    let site = governing_site(&choices);
+    let sites: Vec<Site> = choices.iter().map(|c| site_of(*c)).collect();
     // plant and loop for the site
     let (integrating, closed) = match site {
         Some(Site::RateFeedback) => pick(
@@ -1627,17 +1663,22 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
         integrating,
         closed,
         slow,
-        site == Some(Site::RateFeedback),
+        sites.contains(&Site::RateFeedback),
         len,
     );
     if !integrating
-        && matches!(site, None | Some(Site::Input) | Some(Site::Output))
+        && sites
+            .iter()
+            .all(|site| matches!(site, Site::Input | Site::Output))
         && rng.random::<f64>() < 0.4
     {
         s.plant.delay = rng.random_range(2..=5);
     }
     // feedback from the plant's own position or velocity needs them measured together
-    if matches!(site, Some(Site::OutputFeedback | Site::RateFeedback)) && s.plant.velocity.is_none()
+    if sites
+        .iter()
+        .any(|site| matches!(site, Site::OutputFeedback | Site::RateFeedback))
+        && s.plant.velocity.is_none()
     {
         return None;
     }
@@ -1646,7 +1687,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     let scaled = |v: &[f64], a: f64| v.iter().map(|x| x * a).collect::<Vec<f64>>();
     let amp = s.scale * uniform(rng, 0.5, 1.0);
     let est_shape = scaled(&s.est, if closed { 1.0 } else { amp });
-    let pilot = simulate(&s.plant, None, s.drive(&est_shape), &zeros, s.ts);
+    let pilot = simulate(&s.plant, &[], s.drive(&est_shape), &zeros, s.ts);
     let v: Vec<f64> = pilot
         .y_clean
         .windows(2)
@@ -1661,15 +1702,14 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     if !(ranges.u_peak > 0.0 && ranges.y_peak > 0.0 && ranges.v_peak > 0.0) {
         return None;
     }
-    let effect = choice.map(|c| {
-        let (e, x) = draw_effect(rng, c, &ranges, s.stiffness);
-        ((e, site_of(c)), x)
-    });
-    let (effect, expected) = match effect {
-        Some((e, x)) => (Some(e), Some(x)),
-        None => (None, None),
-    };
-    let clean = simulate(&s.plant, effect.as_ref(), s.drive(&est_shape), &zeros, s.ts);
+    let (effects, mut expected): (Vec<(PhysicalEffect, Site)>, Vec<Expected>) = choices
+        .iter()
+        .map(|c| {
+            let (e, x) = draw_effect(rng, *c, &ranges, s.stiffness);
+            ((e, site_of(*c)), x)
+        })
+        .unzip();
+    let clean = simulate(&s.plant, &effects, s.drive(&est_shape), &zeros, s.ts);
     if clean.y_clean.iter().any(|v| !v.is_finite()) || peak(&clean.y_clean) > 20.0 * ranges.y_peak {
         return None;
     }
@@ -1710,16 +1750,25 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
             .map(|(a, b)| a - b)
             .collect::<Vec<_>>()))
     };
+    // Each of several effects must be visible on its own: the smallest of their gaps, each
+    // simulated alone from the same noise, sets the noise level.
     let mut est = None;
     for _ in 0..3 {
         let e = noise(rng, len, noise_std, noise_ar);
-        let rec = simulate(&s.plant, effect.as_ref(), s.drive(&est_shape), &e, s.ts);
+        let rec = simulate(&s.plant, &effects, s.drive(&est_shape), &e, s.ts);
         let contribution = gap(&rec)?;
-        if effect.is_none() || contribution >= 8.0 * noise_std {
+        let mut smallest = contribution;
+        if effects.len() > 1 {
+            for one in &effects {
+                let alone = simulate(&s.plant, std::slice::from_ref(one), s.drive(&est_shape), &e, s.ts);
+                smallest = smallest.min(gap(&alone)?);
+            }
+        }
+        if effects.is_empty() || smallest >= 8.0 * noise_std {
             est = Some((rec, contribution));
             break;
         }
-        noise_std = contribution / 10.0;
+        noise_std = smallest / 10.0;
     }
     let (est, effect_rms) = est?;
     if est.y.iter().any(|v| !v.is_finite()) {
@@ -1732,7 +1781,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     };
     let val_shape = scaled(&s.val, validation_scale * if closed { 1.0 } else { amp });
     let ev = noise(rng, len, noise_std, noise_ar);
-    let val = simulate(&s.plant, effect.as_ref(), s.drive(&val_shape), &ev, s.ts);
+    let val = simulate(&s.plant, &effects, s.drive(&val_shape), &ev, s.ts);
     if val.y.iter().any(|v| !v.is_finite()) || peak(&val.y_clean) > 40.0 * ranges.y_peak {
         return None;
     }
@@ -1749,12 +1798,17 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     } else {
         (g.clone(), NominalSource::Exact)
     };
+    let mut effects = effects.into_iter();
+    let effect = effects.next();
+    let second = effects.next().zip(expected.get(1).cloned());
+    expected.truncate(1);
     Some(PhysicsCase {
         seed,
         kind,
         plant: s.plant,
         effect,
-        expected,
+        expected: expected.pop(),
+        second,
         control: s.control,
         true_nominal: g,
         nominal,
@@ -1900,7 +1954,7 @@ pub fn positioning_axis(seed: u64) -> PositioningAxis {
         let e = noise(rng, len, noise_std, None);
         let rec = simulate(
             &plant,
-            Some(&(truth.clone(), Site::RateFeedback)),
+            &[(truth.clone(), Site::RateFeedback)],
             Drive::Reference(&r, kp, kd),
             &e,
             ts,
@@ -1955,7 +2009,7 @@ mod tests {
         plants.push(delayed);
         for plant in plants {
             let u = filtered_noise(&mut rng, 1500, 0.3);
-            let rec = simulate(&plant, None, Drive::Force(&u), &vec![0.0; 1500], ts);
+            let rec = simulate(&plant, &[], Drive::Force(&u), &vec![0.0; 1500], ts);
             let yd = sim_g(&plant.discretise(ts), &rec.u);
             let err = rec
                 .y
@@ -2027,7 +2081,7 @@ mod tests {
         let r = ax.references.0.clone();
         let rec = simulate(
             &plant,
-            Some(&(ax.truth.clone(), Site::RateFeedback)),
+            &[(ax.truth.clone(), Site::RateFeedback)],
             Drive::Reference(&r, kp, kd),
             &vec![0.0; r.len()],
             ts,
