@@ -226,7 +226,12 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
         .zip(&dots)
         .map(|(r, (fd, gd))| {
             Chart::new(
-                format!("β = {} (RMS f {:.3}, g {:.3})", r.beta, r.rms_f, r.rms_g),
+                format!(
+                    "β = {} (RMS f {:.3}, g {:.3})",
+                    crate::compare::results::short(r.beta),
+                    r.rms_f,
+                    r.rms_g
+                ),
                 "z = u",
                 "map value (centred)",
             )

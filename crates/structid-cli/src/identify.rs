@@ -649,7 +649,7 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
         "identified {} block(s) from {} samples with β = {} ({} solver, {:.2} s)",
         id.blocks.len(),
         report.samples,
-        report.settings.beta,
+        crate::compare::results::short(report.settings.beta),
         d.solver,
         seconds
     );

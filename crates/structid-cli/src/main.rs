@@ -417,9 +417,9 @@ struct ValidateArgs {
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: Option<PathBuf>,
     /// The estimate: a stored estimate file (DIR/estimate.json, written by `identify`,
-    /// `refine` and `discover`; it needs neither --model nor the estimation data), or the
-    /// output directory of an older `structid identify`, rebuilt by re-running the
-    /// identification it records. Without it, the model is validated with its true maps:
+    /// `refine` and `discover`; it needs neither --model nor the estimation data), or an
+    /// output directory: its estimate.json when it has one, otherwise (a directory of an older
+    /// `structid identify`) the estimate rebuilt by re-running the identification it records. Without it, the model is validated with its true maps:
     /// every block of --model needs a `truth`.
     #[arg(long, short = 'e', value_name = "FILE.json|DIR")]
     estimate: Option<PathBuf>,

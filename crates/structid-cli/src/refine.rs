@@ -10,9 +10,7 @@ use clap::Args;
 use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{LinearStructure, RefineSettings, refine};
 use structid_core::{Data, IdentifySettings, InitialState};
-use structid_io::{
-    LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction, format_number,
-};
+use structid_io::{LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction};
 use structid_linear::OeSettings;
 use structid_plot::{Chart, Series, render_chart_svg};
 
@@ -560,7 +558,7 @@ fn summary(r: &structid_core::refine::Refinement, written: &[PathBuf], seconds: 
         r.iterations.len(),
         r.best,
         r.stop_reason,
-        format_number(r.beta)
+        crate::compare::results::short(r.beta)
     );
     let _ = writeln!(
         s,

@@ -274,7 +274,15 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
 }
 
 /// Runs `structid validate`.
-pub fn run(a: ValidateArgs) -> Result<(), CliError> {
+pub fn run(mut a: ValidateArgs) -> Result<(), CliError> {
+    // An output directory of this version carries its estimate as a file: that file is the
+    // estimate, and the estimation data need not exist any more.
+    if let Some(dir) = &a.estimate
+        && dir.is_dir()
+        && dir.join("estimate.json").is_file()
+    {
+        a.estimate = Some(dir.join("estimate.json"));
+    }
     if a.data.len() > 1 {
         return run_records(a);
     }

@@ -87,7 +87,10 @@ fn identify_writes_an_estimate_that_validates_simulates_and_predicts_without_the
     let stored = out.join("estimate.json");
     assert!(stored.is_file());
 
-    // The validation that re-runs the identification, while the data still exist.
+    // The validation that re-runs the identification, while the data still exist, from the
+    // directory as an older `identify` wrote it (without estimate.json).
+    let aside = dir.path().join("estimate.json.aside");
+    std::fs::rename(&stored, &aside).unwrap();
     let v1 = dir.path().join("v1");
     ok(&[
         "validate",
@@ -100,8 +103,22 @@ fn identify_writes_an_estimate_that_validates_simulates_and_predicts_without_the
         "--out",
         p(&v1),
     ]);
-    // The estimation data are deleted: the stored estimate still validates, to the same numbers.
+    std::fs::rename(&aside, &stored).unwrap();
+    // The estimation data are deleted: the stored estimate still validates, to the same
+    // numbers, given as the file or as the directory that holds it.
     std::fs::remove_file(&est).unwrap();
+    let v3 = dir.path().join("v3");
+    ok(&[
+        "validate",
+        "--model",
+        p(&model),
+        "--estimate",
+        p(&out),
+        "--data",
+        p(&val),
+        "--out",
+        p(&v3),
+    ]);
     let v2 = dir.path().join("v2");
     let o = ok(&[
         "validate",
@@ -129,8 +146,10 @@ fn identify_writes_an_estimate_that_validates_simulates_and_predicts_without_the
     }
     let sim_rebuilt = column(&v1.join("simulation.csv"), "y_sim");
     let sim_stored = column(&v2.join("simulation.csv"), "y_sim");
-    for (x, y) in sim_rebuilt.iter().zip(&sim_stored) {
+    let sim_dir = column(&v3.join("simulation.csv"), "y_sim");
+    for ((x, y), z) in sim_rebuilt.iter().zip(&sim_stored).zip(&sim_dir) {
         assert!((x - y).abs() <= 1e-12 * (1.0 + x.abs()));
+        assert!((y - z).abs() <= 1e-12 * (1.0 + y.abs()));
     }
 
     // simulate --estimate on the validation input gives the same simulation.

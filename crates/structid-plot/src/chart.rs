@@ -360,9 +360,10 @@ fn draw_legend(
     let top = (MARGIN + TITLE_SIZE + 20) as i32;
     let step = (TICK_SIZE + 8) as i32;
     let font = (FONT, TICK_SIZE).into_font().color(&BLACK);
+    let per_line = label_chars(strip.dim_in_pixel().0);
+    let mut y = top;
     for (i, s) in chart.series.iter().enumerate() {
         let colour = series_colour(i);
-        let y = top + i as i32 * step;
         let x = 6;
         match s.style {
             SeriesStyle::Line => strip.draw(&PathElement::new(
@@ -376,15 +377,57 @@ fn draw_legend(
             )),
         }
         .map_err(backend_err)?;
-        strip
-            .draw(&Text::new(
-                s.label.clone(),
-                (x + 26, y - (TICK_SIZE as i32) / 2),
-                font.clone(),
-            ))
-            .map_err(backend_err)?;
+        // A label longer than the strip is wrapped onto lines of its own, indented under
+        // its first, so that it never runs off the canvas.
+        for line in wrap(&s.label, per_line) {
+            strip
+                .draw(&Text::new(
+                    line,
+                    (x + 26, y - (TICK_SIZE as i32) / 2),
+                    font.clone(),
+                ))
+                .map_err(backend_err)?;
+            y += step;
+        }
     }
     Ok(())
+}
+
+/// How many characters of a label fit on one line of a legend strip `width` pixels wide (the
+/// glyph takes 32 pixels; a character about 0.6 em), at least 8.
+fn label_chars(width: u32) -> usize {
+    ((width.saturating_sub(32) * 10 / (6 * TICK_SIZE)) as usize).max(8)
+}
+
+/// `label` broken at spaces into lines of at most `width` characters; a word longer than a
+/// line is cut.
+fn wrap(label: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in label.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        while word.len() > width {
+            if !line.is_empty() {
+                lines.push(std::mem::take(&mut line));
+            }
+            lines.push(word.drain(..width).collect());
+        }
+        let word: String = word.into_iter().collect();
+        let needed = line.chars().count() + usize::from(!line.is_empty()) + word.chars().count();
+        if !line.is_empty() && needed > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !word.is_empty() {
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(&word);
+        }
+    }
+    if !line.is_empty() || lines.is_empty() {
+        lines.push(line);
+    }
+    lines
 }
 
 /// Renders a chart to an in-memory SVG string of size `chart.size`.
@@ -555,6 +598,27 @@ mod tests {
 
     /// Data filling every corner, including the upper right where legends used to sit: the
     /// legend is drawn right of all of it.
+    #[test]
+    fn long_legend_labels_are_wrapped_within_the_strip() {
+        let label = "asymmetric saturation (named, in augmented model) with a longer tail";
+        for width in [8usize, 12, 20, 40] {
+            let lines = wrap(label, width);
+            assert!(
+                lines.iter().all(|l| l.chars().count() <= width),
+                "{lines:?}"
+            );
+            // Every character is kept, in order (a word longer than a line is cut).
+            let kept: String = lines.concat().chars().filter(|c| *c != ' ').collect();
+            assert_eq!(kept, label.replace(' ', ""));
+        }
+        assert_eq!(wrap("a", 8), vec!["a"]);
+        assert_eq!(wrap("", 8), vec![""]);
+        assert_eq!(wrap("abcdefghij", 4), vec!["abcd", "efgh", "ij"]);
+        // The strip of a 900-pixel chart is a third of it; its lines fit in it.
+        let chars = label_chars(300);
+        assert!((chars * 6 * TICK_SIZE as usize) / 10 + 32 <= 300);
+    }
+
     #[test]
     fn the_legend_never_covers_data() {
         let x: Vec<f64> = (0..200).map(|i| i as f64 / 199.0).collect();

@@ -1613,7 +1613,9 @@ fn choices(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Vec<Choice> {
     let first_static = STATIC_CHOICES[(seed % STATIC_CHOICES.len() as u64) as usize];
     match kind {
         PhysicsKind::Static => vec![first_static],
-        PhysicsKind::Dynamic => vec![DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize]],
+        PhysicsKind::Dynamic => {
+            vec![DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize]]
+        }
         PhysicsKind::TimeVarying => vec![Choice::Drift],
         PhysicsKind::None => vec![],
         PhysicsKind::TwoEffects => {
@@ -1760,7 +1762,13 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
         let mut smallest = contribution;
         if effects.len() > 1 {
             for one in &effects {
-                let alone = simulate(&s.plant, std::slice::from_ref(one), s.drive(&est_shape), &e, s.ts);
+                let alone = simulate(
+                    &s.plant,
+                    std::slice::from_ref(one),
+                    s.drive(&est_shape),
+                    &e,
+                    s.ts,
+                );
                 smallest = smallest.min(gap(&alone)?);
             }
         }

@@ -166,7 +166,7 @@ pub use stationarity::{SEGMENTS, Stationarity};
 use std::time::Instant;
 
 use structid_core::validation::Scoring;
-use structid_core::{Data, Error, Result};
+use structid_core::{Data, Error, InitialState, Result};
 
 use crate::effects::Naming;
 use crate::gap::{Gap, gap};
@@ -523,24 +523,26 @@ fn discover_once(
     };
     // A plant with integrators gets a disturbance where its input acts, when the data say so
     // (see `noise`); its hypotheses inherit it.
-    let with_noise;
-    let input_noise = match scoring {
+    // A known map of a signal that the disturbance drives (a friction map of ẏ found in an
+    // earlier step) leaves z without a causal filter from y once the disturbance is a second
+    // noise channel; its one-step predictor does not exist, and the output noise alone is
+    // the noise model there, as it is for a disturbance path that cannot be whitened.
+    let with_noise = match scoring {
         Scoring::Windowed(_) if nominal.lft().t_ye().order() == 0 => {
-            noise::input_noise_ratio(nominal, est)?
+            match noise::input_noise_ratio(nominal, est)? {
+                Some(ratio) => Some((ratio, nominal.clone().with_input_noise(ratio)?))
+                    .filter(|(_, n)| n.lft().measurability().is_ok()),
+                None => None,
+            }
         }
         _ => None,
     };
+    let input_noise = with_noise.as_ref().map(|(ratio, _)| *ratio);
     let given = nominal;
     // A nominal G whose numerator cancels its integrator is usually the direct fit of a
     // closed-loop record: every verdict built on it says so.
     let cancelled = cancelled_integrator(given);
-    let nominal = match input_noise {
-        Some(ratio) => {
-            with_noise = nominal.clone().with_input_noise(ratio)?;
-            &with_noise
-        }
-        None => nominal,
-    };
+    let nominal = with_noise.as_ref().map_or(nominal, |(_, n)| n);
     let ts = nominal.lft().sample_time().unwrap_or(1.0);
     let nominal_model = nominal.model()?;
     // The nominal model's known maps (none for a linear nominal model) are in every
@@ -555,6 +557,18 @@ fn discover_once(
     val_candidates.extend(nominal.state_signals(val)?);
     let mut gap_settings = settings.gap.clone();
     gap_settings.scoring = scoring;
+    // A known map of a signal that an unknown initial state reaches differently from y (a
+    // sensor map adopted in an earlier step reads G·u) leaves no one-step predictor with an
+    // estimated x₀: that nominal model is scored from rest, as a sensor map's hypothesis is.
+    if gap_settings.initial_state == InitialState::Estimate
+        && !nominal.known_maps().is_empty()
+        && matches!(
+            structid_core::Problem::from_model_with_initial_state(&nominal_model, est),
+            Err(Error::NotMeasurable { .. })
+        )
+    {
+        gap_settings.initial_state = InitialState::Zero;
+    }
     gap_settings.max_lag = gap_settings
         .max_lag
         .min(crate::records::shortest(est) / 4)
