@@ -16,6 +16,7 @@
 //! | key parameters within 20 % | named static with key parameters | 85 % |
 //! | reported as dynamic | backlash, Bouc–Wen | 85 % |
 //! | no false alarm | LTI + noise | 14 of 15 |
+//! | no false alarm | LTI, an unmodelled resonance, outliers in the noise (5 each) | 14 of 15 |
 //! | flagged as time-varying | a drifting gain | 80 % |
 //! | both found with `--effects 2` | two static effects at two sites | 80 % |
 //! | median validation shrink | static | 90 % of the true model's (median ratio) |
@@ -52,6 +53,8 @@ const HELD_OUT_DYNAMIC: std::ops::Range<u64> = 1000..1015;
 const HELD_OUT_LTI: std::ops::Range<u64> = 1000..1015;
 const HELD_OUT_TIME_VARYING: std::ops::Range<u64> = 1000..1010;
 const HELD_OUT_TWO_EFFECTS: std::ops::Range<u64> = 1000..1010;
+/// Per kind of effect-free case (LTI, an unmodelled resonance, outliers): 15 cases in all.
+const HELD_OUT_EFFECT_FREE: std::ops::Range<u64> = 1000..1005;
 
 fn run(case: &PhysicsCase) -> Discovery {
     let nominal = Nominal::from_polynomial(&case.nominal).unwrap();
@@ -894,4 +897,45 @@ fn a_known_friction_map_behind_an_integrator_is_searched_around() {
     );
     let second = second.unwrap_or_else(|e| panic!("the second step failed: {e}"));
     assert!(second.input_noise.is_none(), "{:?}", second.input_noise);
+}
+
+/// How many effect-free cases of `kinds` over `seeds` raise an alarm: a block claimed as a
+/// missing effect.
+fn false_alarms(kinds: &[PhysicsKind], seeds: std::ops::Range<u64>) -> (usize, usize) {
+    let (mut alarms, mut cases) = (0, 0);
+    for &kind in kinds {
+        for seed in seeds.clone() {
+            let case = generate(kind, seed);
+            let d = run(&case);
+            let alarm = d.verdict_kind == Verdict::MissingEffect;
+            eprintln!("{kind:?} {} | alarm {alarm}", line(&case, &d));
+            alarms += usize::from(alarm);
+            cases += 1;
+        }
+    }
+    eprintln!("effect-free: {alarms} false alarms in {cases}");
+    (alarms, cases)
+}
+
+const EFFECT_FREE: [PhysicsKind; 3] = [
+    PhysicsKind::None,
+    PhysicsKind::Resonance,
+    PhysicsKind::Outliers,
+];
+
+/// The issue's goal: at most one false alarm in 15 effect-free cases, an unmodelled resonance
+/// and outliers in the noise among them (run with `--ignored`).
+#[test]
+#[ignore]
+fn effect_free_goal_of_the_issue() {
+    let (alarms, cases) = false_alarms(&EFFECT_FREE, HELD_OUT_EFFECT_FREE);
+    assert!(alarms <= 1, "{alarms} false alarms in {cases}");
+}
+
+/// The effect-free cases the rules may be tuned on (run with `--ignored`).
+#[test]
+#[ignore]
+fn effect_free_cases_of_the_tuning_seeds() {
+    let (alarms, cases) = false_alarms(&EFFECT_FREE, 0..5);
+    assert!(alarms <= 1, "{alarms} false alarms in {cases}");
 }

@@ -556,6 +556,13 @@ pub enum PhysicsKind {
     TimeVarying,
     /// Two static effects at two different sites, each visible on its own.
     TwoEffects,
+    /// No nonlinearity: a lightly damped mode at the output of an open-loop stable plant that
+    /// the nominal model does not have, its gap at least 8× the noise (`true_nominal` is the
+    /// plant without the mode).
+    Resonance,
+    /// No nonlinearity: LTI plus noise in which about one sample in 200 carries an outlier of
+    /// 10–20 noise standard deviations.
+    Outliers,
 }
 
 /// A drawn case.
@@ -971,6 +978,46 @@ pub fn point_to_point(
     }
     r.truncate(len);
     r
+}
+
+/// `plant` followed at its output by the lightly damped mode `ω²/(s² + 2ζω s + ω²)` (unit
+/// static gain).
+fn with_output_mode(plant: &Plant, w: f64, zeta: f64) -> Plant {
+    let n = plant.a.nrows();
+    let mut a = DMatrix::<f64>::zeros(n + 2, n + 2);
+    a.view_mut((0, 0), (n, n)).copy_from(&plant.a);
+    a[(n, n + 1)] = 1.0;
+    a[(n + 1, n)] = -w * w;
+    a[(n + 1, n + 1)] = -2.0 * zeta * w;
+    for j in 0..n {
+        a[(n + 1, j)] = w * w * plant.c[j];
+    }
+    let mut b = DVector::<f64>::zeros(n + 2);
+    b.rows_mut(0, n).copy_from(&plant.b);
+    let mut c = DVector::<f64>::zeros(n + 2);
+    c[n] = 1.0;
+    Plant {
+        a,
+        b,
+        c,
+        velocity: None,
+        ..plant.clone()
+    }
+}
+
+/// `e` with an outlier of 10–20 × `std` (either sign) on about one sample in 200, for
+/// [`PhysicsKind::Outliers`] (other kinds: `e` unchanged, no random draw).
+fn with_outliers(rng: &mut StdRng, kind: PhysicsKind, mut e: Vec<f64>, std: f64) -> Vec<f64> {
+    if kind != PhysicsKind::Outliers {
+        return e;
+    }
+    for v in &mut e {
+        if rng.random::<f64>() < 0.005 {
+            let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
+            *v += sign * uniform(rng, 10.0, 20.0) * std;
+        }
+    }
+    e
 }
 
 /// White (φ = None) or AR(1) noise of std `std`.
@@ -1617,7 +1664,7 @@ fn choices(kind: PhysicsKind, seed: u64, rng: &mut StdRng) -> Vec<Choice> {
             vec![DYNAMIC_CHOICES[(seed % DYNAMIC_CHOICES.len() as u64) as usize]]
         }
         PhysicsKind::TimeVarying => vec![Choice::Drift],
-        PhysicsKind::None => vec![],
+        PhysicsKind::None | PhysicsKind::Resonance | PhysicsKind::Outliers => vec![],
         PhysicsKind::TwoEffects => {
             let others: Vec<Choice> = STATIC_CHOICES
                 .into_iter()
@@ -1648,6 +1695,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     let sites: Vec<Site> = choices.iter().map(|c| site_of(*c)).collect();
     // plant and loop for the site
     let (integrating, closed) = match site {
+        _ if kind == PhysicsKind::Resonance => (false, false),
         Some(Site::RateFeedback) => pick(
             rng,
             &[(true, true), (true, true), (true, false), (false, false)],
@@ -1685,6 +1733,21 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
         return None;
     }
     let g = s.plant.discretise(s.ts);
+    // The plant the records come from; the nominal models know only `s.plant`.
+    let plant = match kind {
+        PhysicsKind::Resonance => {
+            let fastest = s
+                .plant
+                .a
+                .complex_eigenvalues()
+                .iter()
+                .map(|l| l.norm())
+                .fold(0.0, f64::max);
+            let w = fastest * uniform(rng, 0.5, 1.5);
+            with_output_mode(&s.plant, w, uniform(rng, 0.03, 0.1))
+        }
+        _ => s.plant.clone(),
+    };
     let zeros = vec![0.0; len];
     let scaled = |v: &[f64], a: f64| v.iter().map(|x| x * a).collect::<Vec<f64>>();
     let amp = s.scale * uniform(rng, 0.5, 1.0);
@@ -1711,7 +1774,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
             ((e, site_of(*c)), x)
         })
         .unzip();
-    let clean = simulate(&s.plant, &effects, s.drive(&est_shape), &zeros, s.ts);
+    let clean = simulate(&plant, &effects, s.drive(&est_shape), &zeros, s.ts);
     if clean.y_clean.iter().any(|v| !v.is_finite()) || peak(&clean.y_clean) > 20.0 * ranges.y_peak {
         return None;
     }
@@ -1757,13 +1820,14 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     let mut est = None;
     for _ in 0..3 {
         let e = noise(rng, len, noise_std, noise_ar);
-        let rec = simulate(&s.plant, &effects, s.drive(&est_shape), &e, s.ts);
+        let e = with_outliers(rng, kind, e, noise_std);
+        let rec = simulate(&plant, &effects, s.drive(&est_shape), &e, s.ts);
         let contribution = gap(&rec)?;
         let mut smallest = contribution;
         if effects.len() > 1 {
             for one in &effects {
                 let alone = simulate(
-                    &s.plant,
+                    &plant,
                     std::slice::from_ref(one),
                     s.drive(&est_shape),
                     &e,
@@ -1772,7 +1836,8 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
                 smallest = smallest.min(gap(&alone)?);
             }
         }
-        if effects.is_empty() || smallest >= 8.0 * noise_std {
+        let unmodelled = !effects.is_empty() || kind == PhysicsKind::Resonance;
+        if !unmodelled || smallest >= 8.0 * noise_std {
             est = Some((rec, contribution));
             break;
         }
@@ -1789,7 +1854,8 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     };
     let val_shape = scaled(&s.val, validation_scale * if closed { 1.0 } else { amp });
     let ev = noise(rng, len, noise_std, noise_ar);
-    let val = simulate(&s.plant, &effects, s.drive(&val_shape), &ev, s.ts);
+    let ev = with_outliers(rng, kind, ev, noise_std);
+    let val = simulate(&plant, &effects, s.drive(&val_shape), &ev, s.ts);
     if val.y.iter().any(|v| !v.is_finite()) || peak(&val.y_clean) > 40.0 * ranges.y_peak {
         return None;
     }
@@ -1813,7 +1879,7 @@ fn attempt(kind: PhysicsKind, seed: u64, rng: &mut StdRng, len: usize) -> Option
     Some(PhysicsCase {
         seed,
         kind,
-        plant: s.plant,
+        plant,
         effect,
         expected: expected.pop(),
         second,
@@ -2120,6 +2186,54 @@ mod tests {
         // the truth as a map: friction opposes the motion, offset in force units
         assert_eq!(ax.truth.eval(1.0), Some(ax.offset + ax.coulomb));
         assert_eq!(ax.truth.eval(-1.0), Some(ax.offset - ax.coulomb));
+    }
+
+    /// y − G·u of a record, G the case's `true_nominal` simulated from rest.
+    fn output_minus_nominal(case: &PhysicsCase) -> Vec<f64> {
+        let y = case.estimation.y().channel(0);
+        let gu = sim_g(&case.true_nominal, &case.estimation.u().channel(0));
+        y.iter().zip(&gu).map(|(a, b)| a - b).collect()
+    }
+
+    #[test]
+    fn an_unmodelled_resonance_adds_a_mode_and_a_gap_of_eight_noise_levels() {
+        for seed in 0..4 {
+            let c = generate(PhysicsKind::Resonance, seed);
+            assert!(c.effect.is_none() && c.second.is_none());
+            assert_eq!(c.plant.a.nrows(), c.true_nominal.den.len() - 1 + 2);
+            assert_eq!(c.control, Loop::Open);
+            // The mode's own contribution to the output, against the noise.
+            assert!(
+                c.effect_rms >= 8.0 * c.noise_std * 0.999,
+                "seed {seed}: {} vs {}",
+                c.effect_rms,
+                c.noise_std
+            );
+            // What the nominal model misses is well above the noise.
+            let r = rms(&output_minus_nominal(&c));
+            assert!(r > 5.0 * c.noise_std, "seed {seed}: {r}");
+        }
+    }
+
+    #[test]
+    fn outliers_are_rare_and_large() {
+        // White noise around a stable plant: y − G·u is the noise itself.
+        let mut checked = 0;
+        for seed in 0..12 {
+            let c = generate(PhysicsKind::Outliers, seed);
+            if c.plant.integrators > 0 || c.noise_ar.is_some() {
+                continue;
+            }
+            let e = output_minus_nominal(&c);
+            let large = e.iter().filter(|v| v.abs() > 8.0 * c.noise_std).count();
+            assert!(
+                (1..=60).contains(&large),
+                "seed {seed}: {large} outliers in {}",
+                e.len()
+            );
+            checked += 1;
+        }
+        assert!(checked >= 2, "{checked} cases checked");
     }
 
     #[test]
