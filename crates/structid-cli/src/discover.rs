@@ -495,7 +495,7 @@ fn map_svg(nominal: &Nominal, h: &HypothesisResult, f: &Finding) -> Result<Strin
         format!(
             "Map N {}: {}",
             nominal.key(f.location),
-            f.classification.describe()
+            f.classification.describe_at(f.location)
         ),
         z_label(f.location),
         "w = N(z)",

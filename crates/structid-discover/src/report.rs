@@ -740,7 +740,7 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
     let _ = writeln!(
         s,
         "**{}** ({kind}) {}.\n",
-        f.classification.describe(),
+        f.classification.describe_at(f.location),
         r.nominal.describe(f.location)
     );
     if let Some(h) = &f.input_hysteresis {
@@ -1053,7 +1053,7 @@ pub fn json(
                 "location": r.nominal.key(f.location),
                 "description": r.nominal.describe(f.location),
                 "equivalent_locations": f.equivalent_locations.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>(),
-                "classification": { "kind": kind, "description": f.classification.describe() },
+                "classification": { "kind": kind, "description": f.classification.describe_at(f.location) },
                 "named_effect": named,
                 "estimator": f.estimator,
                 "nonparametric_validation_rms": f.nonparametric_rms,
@@ -1249,7 +1249,7 @@ fn step_effect(r: &Nominal, d: &Discovery) -> String {
     match &d.finding {
         Some(f) => format!(
             "{} {}",
-            f.classification.describe(),
+            f.classification.describe_at(f.location),
             location_text(r, f.location)
         ),
         None => d.verdict_kind.describe().to_string(),
@@ -1330,7 +1330,7 @@ pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
                 "verdict_kind": d.verdict_kind,
                 "verdict": d.verdict,
                 "location": f.map(|f| step.nominal.key(f.location)),
-                "effect": f.map(|f| f.classification.describe()),
+                "effect": f.map(|f| f.classification.describe_at(f.location)),
                 "expression": f.and_then(|f| match &f.augmented.map {
                     AugmentedMap::Expression(x) => Some(x.clone()),
                     AugmentedMap::Table { .. } => None,

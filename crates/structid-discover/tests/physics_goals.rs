@@ -854,7 +854,10 @@ fn two_effects_tally(seeds: std::ops::Range<u64>) -> usize {
 }
 
 /// The issue's goal: with two static effects at two sites, `--effects 2` finds both in at
-/// least 80 % of the cases (run with `--ignored`).
+/// least 80 % of the cases (run with `--ignored`; not met, measured 1 of 10, as on the cases
+/// the iteration may be tuned on: two static effects at two sites often leave a direction
+/// effect that the first step reports as dynamic, and a first map fitted while the second
+/// effect is unmodelled carries its bias into the second step, which keeps it fixed).
 #[test]
 #[ignore]
 fn two_effects_goal_of_the_issue() {
@@ -924,15 +927,18 @@ const EFFECT_FREE: [PhysicsKind; 3] = [
 ];
 
 /// The issue's goal: at most one false alarm in 15 effect-free cases, an unmodelled resonance
-/// and outliers in the noise among them (run with `--ignored`).
+/// and outliers in the noise among them. Measured 1 in 15 (an unmodelled resonance reported
+/// as dynamic); on the cases the rules may be tuned on, 3 in 15, all of them resonances
+/// reported as dynamic: a lightly damped mode leaves a residual that depends on the direction
+/// of motion, as a hysteresis does.
 #[test]
-#[ignore]
 fn effect_free_goal_of_the_issue() {
     let (alarms, cases) = false_alarms(&EFFECT_FREE, HELD_OUT_EFFECT_FREE);
     assert!(alarms <= 1, "{alarms} false alarms in {cases}");
 }
 
-/// The effect-free cases the rules may be tuned on (run with `--ignored`).
+/// The effect-free cases the rules may be tuned on (run with `--ignored`; not met, see
+/// [`effect_free_goal_of_the_issue`]).
 #[test]
 #[ignore]
 fn effect_free_cases_of_the_tuning_seeds() {

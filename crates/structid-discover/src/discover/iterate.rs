@@ -95,6 +95,9 @@ pub enum StopReason {
     },
     /// [`EffectsSettings::max_effects`] steps were run.
     MaxEffects,
+    /// The last step's block is a gain: the linear model was wrong
+    /// ([`Verdict::LinearModel`]); G is to be re-estimated before looking further.
+    LinearModel,
 }
 
 impl StopReason {
@@ -118,6 +121,9 @@ impl StopReason {
                 100.0 * (1.0 - ratio),
                 100.0 * settings.min_improvement
             ),
+            StopReason::LinearModel => "the last step closed the gap with a gain, a change of \
+                                        G: re-estimate the linear model before looking further"
+                .into(),
             StopReason::MaxEffects => format!(
                 "{} effect(s) were looked for, the most allowed",
                 settings.max_effects
@@ -212,6 +218,7 @@ pub fn discover_effects(
         settings.scoring = Some(d.scoring);
         let outcome = match (&d.verdict_kind, &d.finding) {
             (Verdict::NoMissingEffect, _) => Err(StopReason::NoMissingEffect),
+            (Verdict::LinearModel, _) => Err(StopReason::LinearModel),
             (Verdict::Unexplained, _) | (Verdict::MissingEffect, None) => {
                 Err(StopReason::Unexplained)
             }

@@ -355,6 +355,11 @@ pub enum Verdict {
     /// locations explains it ([`Discovery::hypotheses`] lists what was tried): a dynamic
     /// effect the library does not cover, several effects at once, or a wrong linear model.
     Unexplained,
+    /// The gap closes, but the block chosen is a gain (with or without an offset): a linear
+    /// map at any site is a change of G itself, so the linear model was wrong rather than a
+    /// nonlinearity missing ([`Discovery::finding`] holds the block, whose augmented model is
+    /// the corrected linear model); re-estimate G (`structid linear`, `structid refine`).
+    LinearModel,
 }
 
 impl Verdict {
@@ -366,6 +371,7 @@ impl Verdict {
             Verdict::Unexplained => {
                 "a gap that one static block at these locations does not explain"
             }
+            Verdict::LinearModel => "the linear model was wrong",
         }
     }
 }
@@ -459,7 +465,22 @@ pub fn discover(
     val: &Data,
     settings: &DiscoverSettings,
 ) -> Result<Discovery> {
-    discover_with(nominal, est, val, settings, true)
+    discover_with(nominal, est, val, settings, true).map(linear_or_not)
+}
+
+/// A missing effect whose block is a gain is a change of G (see [`Verdict::LinearModel`]).
+fn linear_or_not(mut d: Discovery) -> Discovery {
+    let linear = matches!(&d.finding, Some(Finding {
+        classification: Classification::Named(fit), ..
+    }) if fit.effect == crate::effects::Effect::Gain);
+    if d.verdict_kind == Verdict::MissingEffect && linear {
+        d.verdict_kind = Verdict::LinearModel;
+        d.verdict = format!(
+            "the linear model was wrong: the gap closes with a gain, which is a change of G              rather than a nonlinearity (re-estimate G); {}",
+            d.verdict
+        );
+    }
+    d
 }
 
 /// [`discover`], with `second_pass` allowing the search around a refitted G when the first

@@ -88,6 +88,20 @@ impl Classification {
             }
         }
     }
+
+    /// The name for reports, in the physics of the site the effect acts at
+    /// ([`crate::effects::physical_name`]): a named family as an actuator's, a sensor's, a
+    /// stiffness or a friction.
+    pub fn describe_at(&self, location: crate::hypotheses::Location) -> String {
+        match self {
+            Classification::Named(fit) => crate::effects::physical_name(fit, location),
+            Classification::TimeVarying(fit) => format!(
+                "time-varying: {} whose parameters change over the record",
+                crate::effects::physical_name(fit, location)
+            ),
+            other => other.describe(),
+        }
+    }
 }
 
 /// The map the augmented model carries.

@@ -315,9 +315,12 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
                 .iter()
                 .map(|p| format!("; {} = {:.4}", p.name, p.value))
                 .collect::<String>();
-            format!("{} ({params}{derived})", fit.effect.name())
+            format!(
+                "{} ({params}{derived})",
+                crate::effects::physical_name(fit, f.location)
+            )
         }
-        other => other.describe(),
+        other => other.describe_at(f.location),
     };
     format!(
         "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({}), fit {:.1} % → {:.1} %",

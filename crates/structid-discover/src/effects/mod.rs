@@ -69,10 +69,12 @@
 mod family;
 mod fit;
 pub mod identifiability;
+mod physics;
 mod result;
 
 pub use family::{Effect, POWER_LAW_MAX_EXPONENT};
 pub use fit::{fit_effect, fit_effect_with};
+pub use physics::physical_name;
 pub use result::{EffectError, EffectFit, Parameter, Refit};
 
 /// Settings of [`name_effect`].

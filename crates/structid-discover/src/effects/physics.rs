@@ -1,0 +1,140 @@
+//! Names in the site's physics: what a family is where it acts.
+//!
+//! A family says what shape a map has; its site says what it is. A map of ẏ subtracted in
+//! rate feedback, y = G·(u − N(ẏ)), is a friction force; a map of y in feedback is a
+//! restoring force, a stiffness; at the input it is the actuator, at the output the sensor.
+//! [`physical_name`] words a fitted family that way. A saturation of ẏ in rate feedback is the
+//! usual regularised Coulomb model: its level is the Coulomb level and its knee the smoothing
+//! velocity below which the friction is taken as proportional to ẏ.
+
+use crate::hypotheses::Location;
+
+use super::{Effect, EffectFit};
+
+/// The fitted family `fit` named as what it is at `location` (the family's own name at a
+/// declared location).
+///
+/// ```
+/// use structid_discover::effects::{Effect, fit_effect, physical_name};
+/// use structid_discover::hypotheses::Location;
+/// let z: Vec<f64> = (0..200).map(|k| -1.0 + 0.01 * k as f64).collect();
+/// let w: Vec<f64> = z.iter().map(|v: &f64| (20.0 * v).clamp(-2.0, 2.0)).collect();
+/// let fit = fit_effect(Effect::Saturation, &z, &w).unwrap();
+/// assert_eq!(physical_name(&fit, Location::Input), "actuator saturation");
+/// let friction = physical_name(&fit, Location::RateFeedback);
+/// assert!(friction.starts_with("Coulomb friction 2.0000 smoothed below |ẏ| = 0.1000"), "{friction}");
+/// ```
+pub fn physical_name(fit: &EffectFit, location: Location) -> String {
+    let family = fit.effect.name();
+    match location {
+        Location::RateFeedback => friction(fit),
+        Location::OutputFeedback => stiffness(fit),
+        Location::Input => format!("actuator {family}"),
+        Location::Output => format!("sensor {family}"),
+        _ => family,
+    }
+}
+
+/// A parameter's value by name.
+fn value(fit: &EffectFit, name: &str) -> Option<f64> {
+    fit.parameters
+        .iter()
+        .find(|p| p.name == name)
+        .map(|p| p.value)
+}
+
+/// A map of ẏ subtracted from the force.
+fn friction(fit: &EffectFit) -> String {
+    let family = fit.effect.name();
+    let gain = value(fit, "gain").filter(|g| *g != 0.0);
+    match fit.effect {
+        Effect::Coulomb
+        | Effect::CoulombViscous
+        | Effect::Stribeck
+        | Effect::AsymmetricCoulombViscous
+        | Effect::AsymmetricStribeck => family,
+        Effect::Saturation | Effect::SmoothSaturation => match (gain, value(fit, "level")) {
+            (Some(k), Some(level)) => format!(
+                "Coulomb friction {level:.4} smoothed below |ẏ| = {:.4} ({family} of ẏ)",
+                (level / k).abs()
+            ),
+            _ => format!("friction: {family} of ẏ"),
+        },
+        Effect::AsymmetricSaturation => match (gain, value(fit, "lower"), value(fit, "upper")) {
+            (Some(k), Some(lower), Some(upper)) => format!(
+                "asymmetric Coulomb friction {upper:.4} / {:.4} smoothed below |ẏ| = {:.4} \
+                     ({family} of ẏ)",
+                -lower,
+                (upper.abs().max(lower.abs()) / k).abs()
+            ),
+            _ => format!("friction: {family} of ẏ"),
+        },
+        Effect::Gain => format!("viscous friction ({family} of ẏ)"),
+        _ => format!("friction: {family} of ẏ"),
+    }
+}
+
+/// A map of y subtracted from the force.
+fn stiffness(fit: &EffectFit) -> String {
+    let family = fit.effect.name();
+    match fit.effect {
+        Effect::OddPolynomial { degree: 3 } | Effect::GapSpring => family,
+        Effect::PowerLaw { .. } => format!("hardening spring ({family})"),
+        Effect::Gain => format!("linear stiffness ({family} of y)"),
+        Effect::Saturation | Effect::SmoothSaturation | Effect::AsymmetricSaturation => {
+            format!("softening spring ({family} of y)")
+        }
+        Effect::DeadZone => format!("contact spring across a gap ({family} of y)"),
+        _ => format!("stiffness: {family} of y"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::fit_effect;
+
+    fn fitted(effect: Effect, f: impl Fn(f64) -> f64) -> EffectFit {
+        let z: Vec<f64> = (0..400).map(|k| -2.0 + 0.01 * k as f64).collect();
+        let w: Vec<f64> = z.iter().map(|v| f(*v)).collect();
+        fit_effect(effect, &z, &w).unwrap()
+    }
+
+    #[test]
+    fn every_site_names_its_physics() {
+        let gain = fitted(Effect::Gain, |z| 3.0 * z);
+        assert_eq!(physical_name(&gain, Location::Input), "actuator gain error");
+        assert_eq!(physical_name(&gain, Location::Output), "sensor gain error");
+        assert!(physical_name(&gain, Location::OutputFeedback).starts_with("linear stiffness"));
+        assert!(physical_name(&gain, Location::RateFeedback).starts_with("viscous friction"));
+        let coulomb = fitted(Effect::CoulombViscous, |z| 0.5 * z.signum() + 0.2 * z);
+        assert_eq!(
+            physical_name(&coulomb, Location::RateFeedback),
+            "Coulomb + viscous friction"
+        );
+        let cubic = fitted(Effect::OddPolynomial { degree: 3 }, |z| z + 0.5 * z.powi(3));
+        assert_eq!(
+            physical_name(&cubic, Location::OutputFeedback),
+            Effect::OddPolynomial { degree: 3 }.name()
+        );
+    }
+
+    /// The regularised Coulomb reading of a saturation of ẏ: its level, and its knee
+    /// level/gain as the smoothing velocity.
+    #[test]
+    fn a_saturation_of_the_rate_is_a_smoothed_coulomb_friction() {
+        let sat = fitted(Effect::AsymmetricSaturation, |z| (8.0 * z).clamp(-1.5, 2.0));
+        let name = physical_name(&sat, Location::RateFeedback);
+        assert!(
+            name.starts_with(
+                "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed below |ẏ| = 0.2500"
+            ),
+            "{name}"
+        );
+        let sat = fitted(Effect::Saturation, |z| (4.0 * z).clamp(-1.0, 1.0));
+        assert!(
+            physical_name(&sat, Location::RateFeedback)
+                .starts_with("Coulomb friction 1.0000 smoothed below |ẏ| = 0.2500"),
+        );
+    }
+}
