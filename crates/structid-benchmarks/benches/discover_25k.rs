@@ -11,6 +11,9 @@
 //! case 0 drawn alike (a backlash at the actuator behind a nominal estimated from the record),
 //! the path that also fits a hysteresis at the input with G.
 //!
+//! The same static case drawn at 5000 samples per record is timed too (the speed goal of
+//! discovery: at most 10 s in the median).
+//!
 //! Run: `cargo bench -j 1 -p structid-benchmarks --bench discover_25k`.
 
 use std::hint::black_box;
@@ -23,11 +26,16 @@ use structid_testcases::physics::{PhysicsKind, generate_with_length};
 
 /// Samples per record.
 const SAMPLES: usize = 25_000;
+/// Samples per record of the case the speed goal on 5000 samples is timed on.
+const SHORT: usize = 5_000;
 
 fn bench(c: &mut Criterion) {
     let case = generate_with_length(PhysicsKind::Static, 0, SAMPLES);
     let nominal = Nominal::from_polynomial(&case.nominal).expect("the nominal model is valid");
     let settings = DiscoverSettings::default();
+    let short = generate_with_length(PhysicsKind::Static, 0, SHORT);
+    let short_nominal =
+        Nominal::from_polynomial(&short.nominal).expect("the nominal model is valid");
     let mut group = c.benchmark_group("discover");
     // One run takes seconds: 10 samples of one iteration each (flat sampling).
     group
@@ -35,6 +43,18 @@ fn bench(c: &mut Criterion) {
         .sample_size(10)
         .measurement_time(Duration::from_secs(60))
         .warm_up_time(Duration::from_secs(1));
+    group.bench_function("physics_static_0_5k_samples", |b| {
+        b.iter(|| {
+            let d = discover(
+                &short_nominal,
+                &short.estimation,
+                &short.validation,
+                &settings,
+            )
+            .expect("discovery runs");
+            black_box((d.verdict_kind, d.hypotheses.len()))
+        })
+    });
     group.bench_function("physics_static_0_25k_samples", |b| {
         b.iter(|| {
             let d = discover(&nominal, &case.estimation, &case.validation, &settings)

@@ -229,6 +229,9 @@ fn relative_paths_at_identify_time_still_validate_from_elsewhere() {
     let report = read_json(&work.join("est/report.json"));
     assert_eq!(report["data_file"], "d.csv");
     assert_eq!(report["reproduction"]["sigma"], 0.4);
+    // As an older `identify` wrote it (no estimate.json), so that validate rebuilds the
+    // estimate from the recorded paths.
+    std::fs::remove_file(work.join("est/estimate.json")).unwrap();
     // From another directory, with the paths of this one.
     let o = ok_in(
         Some(dir.path()),
