@@ -221,8 +221,9 @@ class Finding:
     location: str
     description: str
     effect: str
-    """The named family (e.g. ``cubic stiffness``), ``unnamed static effect``, ``dynamic: …``
-    or ``time-varying: …``."""
+    """The named family in the physics of its site (e.g. ``actuator saturation``, ``sensor
+    quantisation``, ``softening spring (saturation of y)``, ``Coulomb + viscous friction``),
+    ``unnamed static effect``, ``dynamic: …`` or ``time-varying: …``."""
     estimator: str
     nonparametric_rms: float
     validation_rms: float
