@@ -3,7 +3,7 @@
 //! ```text
 //! structid identify --model M.toml --data D.csv --out DIR [--beta B] [--sigma S] [--memory-limit-mib N]
 //! structid simulate --model M.toml --input U.csv --out D.csv [--noise-std S] [--seed N]
-//! structid validate --model M.toml --estimate DIR --data V.csv --out DIR2 [--initial-state zero|estimate] [--max-lag 25]
+//! structid validate [--model M.toml] [--estimate FILE.json|DIR] --data V.csv --out DIR2 [--initial-state zero|estimate] [--max-lag 25]
 //! structid demo spray [--out DIR] [--samples L] [--seed N]
 //! structid demo multi-input [--out DIR] [--samples L] [--seed N] [--noise-std S]
 //! structid data silverbox|tanks --file PATH --split NAME|all --out OUT
@@ -104,9 +104,11 @@ enum Command {
     /// Validate an estimate (or the true maps) on a record: simulation, one-step prediction
     /// and residual tests.
     ///
-    /// With --estimate DIR, rebuilds the estimate in DIR (the --out directory of `structid
-    /// identify`) by re-running the identification recorded in DIR/report.json and checking it
-    /// against DIR/estimate.csv; without it, uses the `truth` map of every block of --model.
+    /// With --estimate FILE.json (or a directory holding estimate.json), validates the stored
+    /// estimate; with the directory of an older `structid identify` without estimate.json,
+    /// rebuilds the estimate by re-running the identification recorded in DIR/report.json and
+    /// checks it against DIR/estimate.csv; without --estimate, uses the `truth` map of every
+    /// block of --model.
     /// Then simulates the model with these maps in the loop on the validation data and
     /// computes the one-step-ahead prediction errors and their whiteness and input
     /// cross-correlation tests (99 % bands). Writes DIR2/validation.json, DIR2/simulation.csv,
@@ -146,7 +148,7 @@ enum Command {
     /// rate, which is then written back as `[linear]`. Poles of G at z = 1 (integrators) stay there. β (and σ) are
     /// chosen on the first pass; the alternation stops when the validation simulation error
     /// stops improving. Writes DIR/model.toml (the refined linear part; `structid validate
-    /// --model DIR/model.toml --estimate DIR` reproduces the estimate), DIR/refine.csv and
+    /// --estimate DIR` validates the stored estimate DIR/estimate.json), DIR/refine.csv and
     /// DIR/refine.svg (costs and errors per iteration) and the files of `structid identify`.
     Refine(refine::RefineArgs),
     /// Identify a Wiener–Hammerstein model y = G₂·N(G₁·u) + e with both LTI blocks unknown.
@@ -411,9 +413,10 @@ struct SimulateArgs {
 /// Arguments of `structid validate`.
 #[derive(Clone, Debug, Args)]
 struct ValidateArgs {
-    /// The model file (TOML) of the estimate (same blocks as in DIR/report.json); without
-    /// --estimate, the model whose true maps are validated. Not needed with --estimate
-    /// FILE.json.
+    /// The model file (TOML) of an estimate rebuilt from an older directory (same blocks as in
+    /// DIR/report.json); without --estimate, the model whose true maps are validated. Not
+    /// needed, and not read, with a stored estimate (FILE.json, or a directory holding
+    /// estimate.json), which carries its model.
     #[arg(long, short = 'm', value_name = "MODEL.toml")]
     model: Option<PathBuf>,
     /// The estimate: a stored estimate file (DIR/estimate.json, written by `identify`,

@@ -310,7 +310,10 @@ impl Finding {
             ("location".to_string(), nominal.key(self.location)),
             (
                 "effect".to_string(),
-                format!("{} ({kind})", self.classification.describe()),
+                format!(
+                    "{} ({kind})",
+                    self.classification.describe_at(self.location)
+                ),
             ),
             (
                 "initial_state".to_string(),

@@ -596,8 +596,8 @@ mod tests {
             .fold(f64::NEG_INFINITY, f64::max)
     }
 
-    /// Data filling every corner, including the upper right where legends used to sit: the
-    /// legend is drawn right of all of it.
+    /// A label longer than the strip is wrapped, every character kept, no line wider than the
+    /// strip.
     #[test]
     fn long_legend_labels_are_wrapped_within_the_strip() {
         let label = "asymmetric saturation (named, in augmented model) with a longer tail";
@@ -619,6 +619,8 @@ mod tests {
         assert!((chars * 6 * TICK_SIZE as usize) / 10 + 32 <= 300);
     }
 
+    /// Data filling every corner, including the upper right where legends used to sit: the
+    /// legend is drawn right of all of it.
     #[test]
     fn the_legend_never_covers_data() {
         let x: Vec<f64> = (0..200).map(|i| i as f64 / 199.0).collect();

@@ -583,7 +583,8 @@ pub struct PhysicsCase {
     pub second: Option<((PhysicalEffect, Site), Expected)>,
     /// Open or closed loop.
     pub control: Loop,
-    /// The exact discretisation of the true linear part.
+    /// The exact discretisation of the true linear part (for [`PhysicsKind::Resonance`], of
+    /// the plant without its unmodelled mode).
     pub true_nominal: PolynomialModel,
     /// The nominal to give the workflow.
     pub nominal: PolynomialModel,
@@ -595,7 +596,8 @@ pub struct PhysicsCase {
     pub noise_ar: Option<f64>,
     /// Validation amplitude over estimation amplitude (up to 1.2).
     pub validation_scale: f64,
-    /// RMS of `y_noise-free − G_true·u` on the estimation record (0 for LTI up to RK4 error).
+    /// RMS of `y_noise-free − G_true·u` on the estimation record (0 for LTI up to RK4 error;
+    /// the unmodelled mode's part for [`PhysicsKind::Resonance`]).
     pub effect_rms: f64,
     /// Estimation record (`u` = force command, `y` = measured position).
     pub estimation: Data,

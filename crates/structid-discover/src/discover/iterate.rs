@@ -193,8 +193,8 @@ impl Effects {
 /// augmented model (every map found so far fixed inside it, [`super::Augmented::as_nominal`])
 /// as the next nominal model, and repeats.
 ///
-/// It stops when a step's verdict is "no missing effect" or "unexplained", when a step finds
-/// a dynamic effect, when a step's augmented model cuts the validation RMS of the model it
+/// It stops when a step's verdict is "no missing effect", "unexplained" or "the linear model
+/// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented model cuts the validation RMS of the model it
 /// started from by less than [`EffectsSettings::min_improvement`] (10 % by default; that step
 /// is reported but not adopted), or after [`EffectsSettings::max_effects`] steps. Every step
 /// after the first is scored as the first was (the scoring the first step resolved), so that

@@ -24,8 +24,10 @@
 //!    simulation misses by many times σ̂: when that gap exceeds [`PAST_DISTURBANCE_GAP`]·σ̂ on
 //!    both records the hypotheses are identified anyway, and a block confirms a missing effect
 //!    only by shrinking the validation gap [`PAST_DISTURBANCE_SHRINK`] times (otherwise the
-//!    verdict is "no missing effect", the gap being what the disturbance leaves). There are three verdicts ([`Verdict`]): no missing effect, missing effect, and
-//!    a gap larger than the noise that no candidate block closes.
+//!    verdict is "no missing effect", the gap being what the disturbance leaves). There are
+//!    four verdicts ([`Verdict`]): no missing effect, missing effect, the linear model was
+//!    wrong (the block that closes the gap is a gain), and a gap larger than the noise that no
+//!    candidate block closes.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
 //!    output G·u and the named states where the residual energy concentrates, e.g. `|u| > 0.8`).
@@ -340,7 +342,7 @@ pub const FINER_SIGMA: f64 = 4.0;
 /// below this share of the default's.
 pub const FINER_GAIN: f64 = 0.9;
 
-/// What a discovery concludes: one of three verdicts.
+/// What a discovery concludes: one of four verdicts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Verdict {
@@ -475,9 +477,14 @@ fn linear_or_not(mut d: Discovery) -> Discovery {
     }) if fit.effect == crate::effects::Effect::Gain);
     if d.verdict_kind == Verdict::MissingEffect && linear {
         d.verdict_kind = Verdict::LinearModel;
+        let found = d
+            .verdict
+            .strip_prefix("missing effect: ")
+            .unwrap_or(&d.verdict)
+            .to_string();
         d.verdict = format!(
-            "the linear model was wrong: the gap closes with a gain, which is a change of G              rather than a nonlinearity (re-estimate G); {}",
-            d.verdict
+            "the linear model was wrong (the block that closes the gap is a gain, a change of G \
+             rather than a nonlinearity: re-estimate G): {found}"
         );
     }
     d

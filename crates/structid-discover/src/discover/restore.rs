@@ -217,7 +217,7 @@ pub(super) fn better(
         super::rms_text(second.validation_gap.rms),
         first.finding.as_ref().map_or_else(
             || first.verdict_kind.describe().to_string(),
-            |f| { f.classification.describe() }
+            |f| f.classification.describe_at(f.location)
         ),
         super::rms_text(first_rms)
     ));

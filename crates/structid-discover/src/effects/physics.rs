@@ -25,13 +25,23 @@ use super::{Effect, EffectFit};
 /// assert!(friction.starts_with("Coulomb friction 2.0000 smoothed below |ẏ| = 0.1000"), "{friction}");
 /// ```
 pub fn physical_name(fit: &EffectFit, location: Location) -> String {
-    let family = fit.effect.name();
     match location {
         Location::RateFeedback => friction(fit),
         Location::OutputFeedback => stiffness(fit),
-        Location::Input => format!("actuator {family}"),
-        Location::Output => format!("sensor {family}"),
-        _ => family,
+        Location::Input => format!("actuator {}", shape(fit.effect)),
+        Location::Output => format!("sensor {}", shape(fit.effect)),
+        _ => fit.effect.name(),
+    }
+}
+
+/// A family's name as a shape, for an actuator's or a sensor's map: the families named after
+/// a force (a relay is Coulomb friction in rate feedback, a cubic a stiffness in position
+/// feedback) are named by their shape there.
+fn shape(effect: Effect) -> String {
+    match effect {
+        Effect::Coulomb => "relay (on–off)".into(),
+        Effect::OddPolynomial { degree } => format!("odd polynomial (degree {degree})"),
+        other => other.name(),
     }
 }
 
@@ -43,10 +53,14 @@ fn value(fit: &EffectFit, name: &str) -> Option<f64> {
         .map(|p| p.value)
 }
 
-/// A map of ẏ subtracted from the force.
+/// A map of ẏ subtracted from the force: a friction when its slope opposes the motion.
 fn friction(fit: &EffectFit) -> String {
     let family = fit.effect.name();
-    let gain = value(fit, "gain").filter(|g| *g != 0.0);
+    let gain = value(fit, "gain");
+    if gain.is_some_and(|k| k < 0.0) {
+        return format!("force aiding the motion, negative damping ({family} of ẏ)");
+    }
+    let gain = gain.filter(|k| *k > 0.0);
     match fit.effect {
         Effect::Coulomb
         | Effect::CoulombViscous
@@ -56,16 +70,18 @@ fn friction(fit: &EffectFit) -> String {
         Effect::Saturation | Effect::SmoothSaturation => match (gain, value(fit, "level")) {
             (Some(k), Some(level)) => format!(
                 "Coulomb friction {level:.4} smoothed below |ẏ| = {:.4} ({family} of ẏ)",
-                (level / k).abs()
+                level / k
             ),
             _ => format!("friction: {family} of ẏ"),
         },
         Effect::AsymmetricSaturation => match (gain, value(fit, "lower"), value(fit, "upper")) {
+            // Each direction has its own level and so its own knee.
             (Some(k), Some(lower), Some(upper)) => format!(
-                "asymmetric Coulomb friction {upper:.4} / {:.4} smoothed below |ẏ| = {:.4} \
-                     ({family} of ẏ)",
+                "asymmetric Coulomb friction {upper:.4} / {:.4} smoothed below ẏ = {:.4} / {:.4} \
+                 ({family} of ẏ)",
                 -lower,
-                (upper.abs().max(lower.abs()) / k).abs()
+                upper / k,
+                lower / k
             ),
             _ => format!("friction: {family} of ẏ"),
         },
@@ -74,9 +90,12 @@ fn friction(fit: &EffectFit) -> String {
     }
 }
 
-/// A map of y subtracted from the force.
+/// A map of y subtracted from the force: a restoring force when its slope is positive.
 fn stiffness(fit: &EffectFit) -> String {
     let family = fit.effect.name();
+    if value(fit, "gain").is_some_and(|k| k < 0.0) {
+        return format!("negative stiffness ({family} of y)");
+    }
     match fit.effect {
         Effect::OddPolynomial { degree: 3 } | Effect::GapSpring => family,
         Effect::PowerLaw { .. } => format!("hardening spring ({family})"),
@@ -84,7 +103,6 @@ fn stiffness(fit: &EffectFit) -> String {
         Effect::Saturation | Effect::SmoothSaturation | Effect::AsymmetricSaturation => {
             format!("softening spring ({family} of y)")
         }
-        Effect::DeadZone => format!("contact spring across a gap ({family} of y)"),
         _ => format!("stiffness: {family} of y"),
     }
 }
@@ -98,6 +116,22 @@ mod tests {
         let z: Vec<f64> = (0..400).map(|k| -2.0 + 0.01 * k as f64).collect();
         let w: Vec<f64> = z.iter().map(|v| f(*v)).collect();
         fit_effect(effect, &z, &w).unwrap()
+    }
+
+    #[test]
+    fn a_force_that_aids_the_motion_is_not_called_friction_or_stiffness() {
+        let gain = fitted(Effect::Gain, |z| -3.0 * z);
+        assert!(physical_name(&gain, Location::RateFeedback).starts_with("force aiding"));
+        assert!(physical_name(&gain, Location::OutputFeedback).starts_with("negative stiffness"));
+        let relay = fitted(Effect::Coulomb, |z| 0.4 * z.signum());
+        assert_eq!(
+            physical_name(&relay, Location::Input),
+            "actuator relay (on–off)"
+        );
+        assert_eq!(
+            physical_name(&relay, Location::RateFeedback),
+            Effect::Coulomb.name()
+        );
     }
 
     #[test]
@@ -127,7 +161,7 @@ mod tests {
         let name = physical_name(&sat, Location::RateFeedback);
         assert!(
             name.starts_with(
-                "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed below |ẏ| = 0.2500"
+                "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed below ẏ = 0.2500 / -0.1875"
             ),
             "{name}"
         );
