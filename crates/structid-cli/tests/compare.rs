@@ -243,7 +243,18 @@ fn compare_writes_every_file_with_one_row_per_case() {
         assert!(s.starts_with("<svg") && s.contains("truth"), "{f}");
     }
     let overlay = std::fs::read_to_string(out.join("overlay_sim.svg")).unwrap();
-    assert!(overlay.contains("gauss (auto ml: β = ") && overlay.contains("tv (β = 0.001)"));
+    // The legend's labels, each line of a label wrapped to its strip joined back by a space.
+    let texts: Vec<&str> = overlay
+        .split("<text")
+        .skip(1)
+        .filter_map(|t| t.split('>').nth(1)?.split('<').next())
+        .map(str::trim)
+        .collect();
+    let joined = texts.join(" ");
+    assert!(
+        joined.contains("gauss (auto ml: β = ") && joined.contains("tv (β = 0.001)"),
+        "{texts:?}"
+    );
 }
 
 #[test]

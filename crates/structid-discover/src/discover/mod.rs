@@ -357,7 +357,7 @@ pub enum Verdict {
     /// locations explains it ([`Discovery::hypotheses`] lists what was tried): a dynamic
     /// effect the library does not cover, several effects at once, or a wrong linear model.
     Unexplained,
-    /// The gap closes, but the block chosen is a gain (with or without an offset): a linear
+    /// A block is found, but it is a gain (with or without an offset): a linear
     /// map at any site is a change of G itself, so the linear model was wrong rather than a
     /// nonlinearity missing ([`Discovery::finding`] holds the block, whose augmented model is
     /// the corrected linear model); re-estimate G (`structid linear`, `structid refine`).
@@ -483,8 +483,8 @@ fn linear_or_not(mut d: Discovery) -> Discovery {
             .unwrap_or(&d.verdict)
             .to_string();
         d.verdict = format!(
-            "the linear model was wrong (the block that closes the gap is a gain, a change of G \
-             rather than a nonlinearity: re-estimate G): {found}"
+            "the linear model was wrong (the block found is a gain, a change of G rather than a \
+             nonlinearity: re-estimate G): {found}"
         );
     }
     d

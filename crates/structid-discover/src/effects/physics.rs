@@ -53,13 +53,28 @@ fn value(fit: &EffectFit, name: &str) -> Option<f64> {
         .map(|p| p.value)
 }
 
-/// A map of ẏ subtracted from the force: a friction when its slope opposes the motion.
+/// Whether any of the parameters `names` that the fit carries is negative: a slope, a level
+/// or a stiffness whose force then aids the motion instead of opposing it.
+fn any_negative(fit: &EffectFit, names: &[&str]) -> bool {
+    names.iter().any(|n| value(fit, n).is_some_and(|v| v < 0.0))
+}
+
+/// A map of ẏ subtracted from the force: a friction when it opposes the motion.
 fn friction(fit: &EffectFit) -> String {
     let family = fit.effect.name();
-    let gain = value(fit, "gain");
-    if gain.is_some_and(|k| k < 0.0) {
+    let opposing = [
+        "gain",
+        "coulomb",
+        "coulomb_pos",
+        "coulomb_neg",
+        "static",
+        "static_pos",
+        "static_neg",
+    ];
+    if any_negative(fit, &opposing) {
         return format!("force aiding the motion, negative damping ({family} of ẏ)");
     }
+    let gain = value(fit, "gain");
     let gain = gain.filter(|k| *k > 0.0);
     match fit.effect {
         Effect::Coulomb
@@ -77,11 +92,11 @@ fn friction(fit: &EffectFit) -> String {
         Effect::AsymmetricSaturation => match (gain, value(fit, "lower"), value(fit, "upper")) {
             // Each direction has its own level and so its own knee.
             (Some(k), Some(lower), Some(upper)) => format!(
-                "asymmetric Coulomb friction {upper:.4} / {:.4} smoothed below ẏ = {:.4} / {:.4} \
+                "asymmetric Coulomb friction {upper:.4} / {:.4} smoothed for {:.4} < ẏ < {:.4} \
                  ({family} of ẏ)",
                 -lower,
-                upper / k,
-                lower / k
+                lower / k,
+                upper / k
             ),
             _ => format!("friction: {family} of ẏ"),
         },
@@ -93,12 +108,11 @@ fn friction(fit: &EffectFit) -> String {
 /// A map of y subtracted from the force: a restoring force when its slope is positive.
 fn stiffness(fit: &EffectFit) -> String {
     let family = fit.effect.name();
-    if value(fit, "gain").is_some_and(|k| k < 0.0) {
+    if any_negative(fit, &["gain", "stiffness"]) {
         return format!("negative stiffness ({family} of y)");
     }
     match fit.effect {
-        Effect::OddPolynomial { degree: 3 } | Effect::GapSpring => family,
-        Effect::PowerLaw { .. } => format!("hardening spring ({family})"),
+        Effect::OddPolynomial { degree: 3 } | Effect::GapSpring | Effect::PowerLaw { .. } => family,
         Effect::Gain => format!("linear stiffness ({family} of y)"),
         Effect::Saturation | Effect::SmoothSaturation | Effect::AsymmetricSaturation => {
             format!("softening spring ({family} of y)")
@@ -123,6 +137,8 @@ mod tests {
         let gain = fitted(Effect::Gain, |z| -3.0 * z);
         assert!(physical_name(&gain, Location::RateFeedback).starts_with("force aiding"));
         assert!(physical_name(&gain, Location::OutputFeedback).starts_with("negative stiffness"));
+        let aiding = fitted(Effect::Coulomb, |z| -0.4 * z.signum());
+        assert!(physical_name(&aiding, Location::RateFeedback).starts_with("force aiding"));
         let relay = fitted(Effect::Coulomb, |z| 0.4 * z.signum());
         assert_eq!(
             physical_name(&relay, Location::Input),
@@ -161,7 +177,7 @@ mod tests {
         let name = physical_name(&sat, Location::RateFeedback);
         assert!(
             name.starts_with(
-                "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed below ẏ = 0.2500 / -0.1875"
+                "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed for -0.1875 < ẏ < 0.2500"
             ),
             "{name}"
         );
