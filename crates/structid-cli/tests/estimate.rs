@@ -89,36 +89,29 @@ fn identify_writes_an_estimate_that_validates_simulates_and_predicts_without_the
 
     // The validation that re-runs the identification, while the data still exist, from the
     // directory as an older `identify` wrote it (without estimate.json).
+    let validate_dir = |to: &Path| {
+        ok(&[
+            "validate",
+            "--model",
+            p(&model),
+            "--estimate",
+            p(&out),
+            "--data",
+            p(&val),
+            "--out",
+            p(to),
+        ])
+    };
     let aside = dir.path().join("estimate.json.aside");
     std::fs::rename(&stored, &aside).unwrap();
     let v1 = dir.path().join("v1");
-    ok(&[
-        "validate",
-        "--model",
-        p(&model),
-        "--estimate",
-        p(&out),
-        "--data",
-        p(&val),
-        "--out",
-        p(&v1),
-    ]);
+    validate_dir(&v1);
     std::fs::rename(&aside, &stored).unwrap();
     // The estimation data are deleted: the stored estimate still validates, to the same
     // numbers, given as the file or as the directory that holds it.
     std::fs::remove_file(&est).unwrap();
     let v3 = dir.path().join("v3");
-    ok(&[
-        "validate",
-        "--model",
-        p(&model),
-        "--estimate",
-        p(&out),
-        "--data",
-        p(&val),
-        "--out",
-        p(&v3),
-    ]);
+    validate_dir(&v3);
     let v2 = dir.path().join("v2");
     let o = ok(&[
         "validate",
