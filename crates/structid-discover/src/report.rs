@@ -711,6 +711,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     s
 }
 
+/// Sections 5 and 6 of the report: what the finding is, and the augmented model's gap.
 fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding) {
     if let Some(n) = &f.nominal_refinement {
         let _ = writeln!(
@@ -790,6 +791,34 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
     if let Some(st) = &f.stationarity {
         let _ = writeln!(s, "Stationarity: {}.\n", st.describe());
     }
+    families_md(s, f);
+    let _ = writeln!(
+        s,
+        "Direction test (residual deconvolved to the block's output, split by the direction of \
+         z within z-bins): the direction explains {:.1} % of its energy, t = {:.2}, {} samples; \
+         threshold {:.0} % → {}.\n",
+        100.0 * f.direction.explained,
+        f.direction.t_statistic,
+        f.direction.samples,
+        100.0 * r.settings.hysteresis_threshold(),
+        if f.direction.dynamic {
+            "dynamic (hysteresis or backlash suspected)"
+        } else {
+            "static"
+        }
+    );
+    if !f.remarks.is_empty() {
+        let _ = writeln!(s, "Remarks:\n");
+        for m in &f.remarks {
+            let _ = writeln!(s, "- {m}");
+        }
+        s.push('\n');
+    }
+    gap_after_md(s, d, r, f);
+}
+
+/// The families fitted to the finding's points, best BIC first.
+fn families_md(s: &mut String, f: &Finding) {
     let _ = writeln!(
         s,
         "Families fitted to the points (z_k, ŵ_k), best BIC first (validation RMS for those \
@@ -818,28 +847,10 @@ fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding)
         );
     }
     s.push('\n');
-    let _ = writeln!(
-        s,
-        "Direction test (residual deconvolved to the block's output, split by the direction of \
-         z within z-bins): the direction explains {:.1} % of its energy, t = {:.2}, {} samples; \
-         threshold {:.0} % → {}.\n",
-        100.0 * f.direction.explained,
-        f.direction.t_statistic,
-        f.direction.samples,
-        100.0 * r.settings.hysteresis_threshold(),
-        if f.direction.dynamic {
-            "dynamic (hysteresis or backlash suspected)"
-        } else {
-            "static"
-        }
-    );
-    if !f.remarks.is_empty() {
-        let _ = writeln!(s, "Remarks:\n");
-        for m in &f.remarks {
-            let _ = writeln!(s, "- {m}");
-        }
-        s.push('\n');
-    }
+}
+
+/// Section 6 of the report: the augmented model's gap and the shrink.
+fn gap_after_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding) {
     let _ = writeln!(s, "## 6. The gap after: augmented model\n");
     let _ = writeln!(
         s,

@@ -142,10 +142,12 @@
 //! ```
 
 mod candidates;
+mod context;
 mod direction;
 mod fit;
 mod input_hysteresis;
 mod iterate;
+mod locate;
 mod model;
 mod naming;
 mod noise;
@@ -155,6 +157,7 @@ mod restore;
 mod settings;
 mod stationarity;
 mod total_variation;
+mod verdict;
 
 pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersion_spec};
 pub use input_hysteresis::{InputHysteresis, PLAY_WEIGHT_TOLERANCE, play_into, stop_into};
@@ -168,16 +171,15 @@ pub use stationarity::{SEGMENTS, Stationarity};
 use std::time::Instant;
 
 use structid_core::validation::Scoring;
-use structid_core::{Data, Error, InitialState, Result};
+use structid_core::{Data, Error, Result};
 
 use crate::effects::Naming;
-use crate::gap::{Gap, gap};
-use crate::hypotheses::{Hypothesis, Location, Nominal};
+use crate::gap::Gap;
+use crate::hypotheses::{Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
-use direction::direction_test;
-use fit::{Fitted, by_validation, check_records, resolve_scoring};
-use naming::{name_and_add, verdict_text};
+use context::Context;
+use fit::Fitted;
 
 /// The validation RMS must shrink by at least this factor for a detected gap to count as a
 /// missing effect (see [`discover`]).
@@ -529,8 +531,10 @@ fn discover_with(
     }
 }
 
-/// One search around `nominal` (see [`discover_with`]); with `uncertain_g` every location is
-/// refined jointly with G, as behind a G whose zero cancels its integrator.
+/// One search around `nominal` (see [`discover_with`]), in stages: the gap
+/// ([`Context::new`]), the candidates ([`candidates`]), the location ([`locate`]), G settled
+/// with the finding ([`settle_g`]) and the verdict ([`verdict`]). With `uncertain_g` every
+/// location is refined jointly with G, as behind a G whose zero cancels its integrator.
 fn discover_once(
     nominal: &Nominal,
     est: &Data,
@@ -539,793 +543,120 @@ fn discover_once(
     second_pass: bool,
     uncertain_g: bool,
 ) -> Result<Discovery> {
-    let t0 = Instant::now();
-    check_records(est, val)?;
-    // Known maps given as functions: the families they are exactly, for the joint refit.
-    let recovered = naming::recover_families(nominal, est, settings)?;
-    let nominal = recovered.as_ref().unwrap_or(nominal);
-    let scoring = resolve_scoring(nominal, est, settings)?;
-    let settings = &DiscoverSettings {
-        scoring: Some(scoring),
-        ..settings.clone()
-    };
-    // A plant with integrators gets a disturbance where its input acts, when the data say so
-    // (see `noise`); its hypotheses inherit it.
-    // A known map of a signal that the disturbance drives (a friction map of ẏ found in an
-    // earlier step) leaves z without a causal filter from y once the disturbance is a second
-    // noise channel; its one-step predictor does not exist, and the output noise alone is
-    // the noise model there, as it is for a disturbance path that cannot be whitened.
-    let with_noise = match scoring {
-        Scoring::Windowed(_) if nominal.lft().t_ye().order() == 0 => {
-            match noise::input_noise_ratio(nominal, est)? {
-                Some(ratio) => Some((ratio, nominal.clone().with_input_noise(ratio)?))
-                    .filter(|(_, n)| n.lft().measurability().is_ok()),
-                None => None,
-            }
-        }
-        _ => None,
-    };
-    let input_noise = with_noise.as_ref().map(|(ratio, _)| *ratio);
-    let given = nominal;
-    // A nominal G whose numerator cancels its integrator is usually the direct fit of a
-    // closed-loop record: every verdict built on it says so.
-    let cancelled = cancelled_integrator(given);
-    let nominal = with_noise.as_ref().map_or(nominal, |(_, n)| n);
-    let ts = nominal.lft().sample_time().unwrap_or(1.0);
-    let nominal_model = nominal.model()?;
-    // The nominal model's known maps (none for a linear nominal model) are in every
-    // simulation of it.
-    let nominal_maps = nominal.maps();
-    let linear_output = |d: &Data| -> Result<Vec<f64>> {
-        crate::records::stacked(d, |r| nominal.simulate_output(r.u()))
-    };
-    let mut est_candidates = candidate_signals(est, &linear_output(est)?, ts);
-    est_candidates.extend(nominal.state_signals(est)?);
-    let mut val_candidates = candidate_signals(val, &linear_output(val)?, ts);
-    val_candidates.extend(nominal.state_signals(val)?);
-    let mut gap_settings = settings.gap.clone();
-    gap_settings.scoring = scoring;
-    // A known map of a signal that an unknown initial state reaches differently from y (a
-    // sensor map adopted in an earlier step reads G·u) leaves no one-step predictor with an
-    // estimated x₀: that nominal model is scored from rest, as a sensor map's hypothesis is.
-    if gap_settings.initial_state == InitialState::Estimate
-        && !nominal.known_maps().is_empty()
-        && matches!(
-            structid_core::Problem::from_model_with_initial_state(&nominal_model, est),
-            Err(Error::NotMeasurable { .. })
-        )
+    let (cx, mut noise) = Context::new(nominal, est, val, settings)?;
+    if !cx.missing_effect && !cx.past_disturbance {
+        let text = verdict::no_missing_effect(&cx);
+        return Ok(cx.discovery(Verdict::NoMissingEffect, noise, Vec::new(), None, text));
+    }
+    let (mut fitted, failed) = cx.search(uncertain_g).candidates();
+    tighten_by_fits(&mut noise, &fitted, &cx);
+    let mut hypotheses: Vec<HypothesisResult> = fitted.iter().map(|f| f.result.clone()).collect();
+    hypotheses.extend(failed);
+    if fitted
+        .first()
+        .is_none_or(|f| !f.result.validation_rms.is_finite())
     {
-        gap_settings.initial_state = InitialState::Zero;
+        let text = verdict::nothing_identified(&cx, &hypotheses);
+        return Ok(cx.discovery(Verdict::Unexplained, noise, hypotheses, None, text));
     }
-    gap_settings.max_lag = gap_settings
-        .max_lag
-        .min(crate::records::shortest(est) / 4)
-        .max(1);
-    let estimation_gap = gap(
-        &nominal_model,
-        &nominal_maps,
-        est,
-        &est_candidates,
-        &gap_settings,
-    )?;
-    check_nominal(&estimation_gap, est, scoring)?;
-    let validation_gap = gap(
-        &nominal_model,
-        &nominal_maps,
-        val,
-        &val_candidates,
-        &gap_settings,
-    )?;
-    let mut noise = NoiseLevel {
-        std: f64::INFINITY,
-        colour: 0.0,
-        source: String::new(),
-    };
-    noise.tighten(estimation_gap.noise, || {
-        "the nominal model's residual on the estimation record".into()
-    });
-    noise.tighten(validation_gap.noise, || {
-        "the nominal model's residual on the validation record".into()
-    });
-    let missing_effect = estimation_gap.missing_effect || validation_gap.missing_effect;
-    // The input disturbance is sized on the nominal model's residual, which holds the missing
-    // effect: a large ratio lets the one-step predictor follow the output, so that its
-    // innovations pass every test while the simulation misses by many times the noise (an
-    // integrating axis with friction under a PD controller: ε within 1.5·σ̂, the windowed
-    // simulation 10× σ̂). The hypotheses decide then, and a block must shrink the validation
-    // gap by [`PAST_DISTURBANCE_SHRINK`] to be a missing effect rather than what the
-    // disturbance leaves.
-    let past_disturbance = !missing_effect
-        && input_noise.is_some()
-        && [&estimation_gap, &validation_gap]
-            .iter()
-            .all(|g| g.rms > PAST_DISTURBANCE_GAP * noise.std);
-    if !missing_effect && !past_disturbance {
-        let verdict = format!(
-            "no missing effect detected: on the estimation record {}; on the validation record {}",
-            estimation_gap.verdict, validation_gap.verdict
-        );
-        return Ok(Discovery {
-            estimation_gap,
-            validation_gap,
-            missing_effect,
-            verdict_kind: Verdict::NoMissingEffect,
-            scoring,
-            input_noise,
-            noise,
-            hypotheses: Vec::new(),
-            finding: None,
-            verdict,
-            seconds: t0.elapsed().as_secs_f64(),
-        });
-    }
+    let mut directions = locate::directions(&fitted, &cx.settings);
+    let chosen = locate::choose(&fitted, &mut directions, &cx.settings);
+    let finding = locate::first_finding(&cx, &mut fitted, &directions, chosen)?;
+    let finding = locate::named_alternative(&cx, finding, &mut fitted);
+    let finding = locate::hysteresis_at_input(&cx, finding, &mut fitted, &noise);
+    let finding = settle_g(&cx, finding, second_pass)?;
+    Ok(verdict::confirm(cx, finding, hypotheses, noise))
+}
 
-    let search = candidates::Search {
-        given,
-        nominal,
-        est,
-        val,
-        settings,
-        input_noise,
-        uncertain_g,
-        cancelled: cancelled.is_some(),
-        gap_rms: validation_gap.rms,
-    };
-    let (mut fitted, failed) = search.candidates();
-    // Each smooth hypothesis's simulation residual on the estimation record bounds the noise
-    // level too. Not a total-variation estimate's, nor one whose β sits on its search bound:
-    // with a knot at nearly every sample, a map of z can memorise the noise of y even when z
-    // is simulated.
-    for f in &fitted {
-        if f.estimator != "quadratic" || f.result.beta_at_bound.is_some() {
-            continue;
-        }
+/// Each smooth hypothesis's simulation residual on the estimation record bounds the noise
+/// level too, and so does what it leaves unexplained there (its noise estimate ê). Not a
+/// total-variation estimate's, nor one whose β sits on its search bound: with a knot at
+/// nearly every sample, a map of z can memorise the noise of y even when z is simulated.
+/// With an input disturbance in the noise path, ê is split between it and the output noise,
+/// and is not the output noise alone.
+fn tighten_by_fits(noise: &mut NoiseLevel, fitted: &[Fitted], cx: &Context<'_>) {
+    let smooth = |f: &&Fitted| f.estimator == "quadratic" && f.result.beta_at_bound.is_none();
+    for f in fitted.iter().filter(smooth) {
         if let Some(fit) = f.residual_noise {
             noise.tighten(fit, || {
                 format!(
                     "the simulation of the {} estimate {} on the estimation record",
                     f.estimator,
-                    nominal.describe(f.result.location)
+                    cx.nominal.describe(f.result.location)
                 )
             });
         }
     }
-    // So does what it leaves unexplained there (its noise estimate ê), with the same
-    // exclusions. With an input disturbance in the noise path, ê is split between it and the
-    // output noise, and is not the output noise alone.
-    if input_noise.is_none() {
-        for f in &fitted {
-            if f.estimator == "quadratic"
-                && f.result.beta_at_bound.is_none()
-                && f.e_hat.channels() > 0
-                && !f.e_hat.is_empty()
-            {
-                noise.tighten(
-                    crate::gap::noise_level_coloured(&f.e_hat.channel(0)),
-                    || {
-                        format!(
-                            "what the {} estimate {} leaves on the estimation record",
-                            f.estimator,
-                            nominal.describe(f.result.location)
-                        )
-                    },
-                );
-            }
-        }
+    if cx.input_noise.is_some() {
+        return;
     }
-    // Direction dependence of every fit that explains the data about as well as the best: a
-    // hysteresis may be best approximated statically at a location other than its own.
-    let best_rms = fitted
-        .first()
-        .map(|f| f.result.validation_rms)
-        .unwrap_or(f64::INFINITY);
-    let mut directions: Vec<Option<DirectionTest>> = Vec::with_capacity(fitted.len());
-    for f in &fitted {
-        directions.push(if f.result.validation_rms <= DIRECTION_WITHIN * best_rms {
-            f.direction
-                .clone()
-                .or_else(|| direction_test(f, settings).ok())
-        } else {
-            None
-        });
-    }
-    let dynamic = directions
-        .iter()
-        .enumerate()
-        .filter_map(|(i, d)| d.as_ref().filter(|d| d.dynamic).map(|d| (i, d.explained)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(i, _)| i);
-    let mut chosen = dynamic.unwrap_or(0);
-    // A map of the rate depends on the direction of motion, so a static map of ẏ imitates a
-    // hysteresis anywhere in the loop and often validates best. When it does not explain most
-    // of the gap, a strong direction effect at the input or the sensor, whose z is u or G·u
-    // and so free of the output's noise, is the better explanation: a backlash in a sensor's
-    // drive is not friction. Friction itself, seen from the sensor, leaves a weak one (on the
-    // physics generator at most a fifth of the residual energy, against 0.3–0.6 for a
-    // backlash), and a rate fit that leaves a quarter of what that fit leaves stands.
-    if dynamic.is_none()
-        && fitted
-            .first()
-            .is_some_and(|f| f.result.location == Location::RateFeedback)
-    {
-        let rate_rms = fitted[0].result.validation_rms;
-        for (i, f) in fitted.iter().enumerate() {
-            if matches!(f.result.location, Location::Input | Location::Output)
-                && directions[i].is_none()
-                && f.result.validation_rms.is_finite()
-            {
-                directions[i] = direction_test(f, settings).ok();
-            }
-        }
-        if let Some((i, _)) = directions
-            .iter()
-            .enumerate()
-            .filter(|(i, d)| {
-                matches!(
-                    fitted[*i].result.location,
-                    Location::Input | Location::Output
-                ) && d
-                    .as_ref()
-                    .is_some_and(|d| d.dynamic && d.explained >= SENSOR_HYSTERESIS_SHARE)
-            })
-            .map(|(i, d)| (i, d.as_ref().map_or(0.0, |d| d.explained)))
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            && rate_rms > STATIC_OVER_DYNAMIC * fitted[i].result.validation_rms
-        {
-            chosen = i;
-        }
-    }
-    let mut hypotheses: Vec<HypothesisResult> = fitted.iter().map(|f| f.result.clone()).collect();
-    hypotheses.extend(failed);
-    if !best_rms.is_finite() {
-        let verdict = format!(
-            "{}: the nominal model's gap is not noise ({}), but no hypothesis could be \
-             identified and simulated: {}{}",
-            Verdict::Unexplained.describe(),
-            validation_gap.verdict,
-            hypotheses
-                .iter()
-                .filter_map(|h| h
-                    .failure
-                    .as_ref()
-                    .map(|f| format!("{}: {f}", nominal.key(h.location))))
-                .collect::<Vec<_>>()
-                .join("; "),
-            cancelled
-                .as_deref()
-                .map(|c| format!(". {c}"))
-                .unwrap_or_default()
-        );
-        return Ok(Discovery {
-            estimation_gap,
-            validation_gap,
-            missing_effect: true,
-            verdict_kind: Verdict::Unexplained,
-            scoring,
-            input_noise,
-            noise,
-            hypotheses,
-            finding: None,
-            verdict,
-            seconds: t0.elapsed().as_secs_f64(),
-        });
-    }
-    let tv_rms = |fitted: &[Fitted], i: usize| {
-        let loc = fitted[i].result.location;
-        fitted
-            .iter()
-            .find(|f| f.result.location == loc && f.estimator == "total variation")
-            .map(|f| f.result.validation_rms)
-    };
-    let direction_of = |i: usize| directions[i].clone().unwrap_or_else(DirectionTest::none);
-    let add = |best: Fitted, direction: DirectionTest, tv: Option<f64>| {
-        let joint = best.linear.clone();
-        let mut finding = name_and_add(
-            best,
-            direction,
-            tv,
-            est,
-            val,
-            &est_candidates,
-            &val_candidates,
-            &gap_settings,
-            &validation_gap,
-            settings,
-        )?;
-        if let (Some(j), Some(g)) = (joint, given.polynomial()) {
-            // In the structure's form, as the refinement after naming records it.
-            let form = |g: &structid_linear::PolynomialModel| {
-                structid_core::refine::LinearStructure::new("N", finding.location)
-                    .and_then(|s| s.initial_from_bla(g))
-                    .unwrap_or_else(|_| g.clone())
-            };
-            finding.nominal_refinement = Some(NominalRefinement {
-                before: form(g),
-                after: form(&j.g),
-                validation_rms_before: j.nominal_validation_rms,
-                validation_rms_after: finding.hypothesis.validation_rms,
-                adopted: true,
-            });
-        }
-        Ok::<Finding, Error>(finding)
-    };
-    // A direction-dependent force seen from the position (a dynamic fit in feedback from y)
-    // is static seen from the rate: a map of ẏ is the simplest map of y that depends on the
-    // direction of motion (friction). When the best rate fit (wherever it ranks: a better fit
-    // elsewhere, e.g. at the input, does not make the direction effect seen from the position
-    // any less a friction) is named and its augmented model validates clearly better than
-    // the dynamic fit's static approximation, or better and closes the gap
-    // ([`rate_explains`]), it is the explanation. Hysteresis elsewhere
-    // (backlash at the input, a sensor) keeps its verdict: no static map of a measured signal
-    // explains it.
-    let rate = fitted.iter().position(|f| {
-        f.result.location == Location::RateFeedback && f.result.validation_rms.is_finite()
-    });
-    let position_vs_rate = fitted[chosen].result.location == Location::OutputFeedback
-        && directions[chosen].as_ref().is_some_and(|d| d.dynamic)
-        && rate.is_some_and(|r| r != chosen);
-    let mut finding = if let (true, Some(rate)) = (position_vs_rate, rate) {
-        let (tv_dynamic, tv_static) = (tv_rms(&fitted, chosen), tv_rms(&fitted, rate));
-        let (dir_dynamic, dir_static) = (direction_of(chosen), direction_of(rate));
-        // Remove the later index first, so the earlier one stays where it is.
-        let (dynamic_fit, static_fit) = if chosen > rate {
-            let d = fitted.remove(chosen);
-            (d, fitted.remove(rate))
-        } else {
-            let s = fitted.remove(rate);
-            (fitted.remove(chosen), s)
-        };
-        let dynamic_finding = add(dynamic_fit, dir_dynamic, tv_dynamic)?;
-        match add(static_fit, dir_static, tv_static) {
-            Ok(f)
-                if matches!(f.classification, Classification::Named(_))
-                    && rate_explains(
-                        f.augmented.validation_gap.rms,
-                        f.shrink,
-                        dynamic_finding.augmented.validation_gap.rms,
-                    ) =>
-            {
-                f
-            }
-            _ => dynamic_finding,
-        }
-    } else {
-        let tv = tv_rms(&fitted, chosen);
-        add(fitted.swap_remove(chosen), direction_of(chosen), tv)?
-    };
-    // The best nonparametric fit names nothing (dynamic, or no family validates), or its
-    // augmented model does not confirm it (it closes less than 5 % of the gap): a named
-    // family elsewhere may still explain the data better than that fit's table. A
-    // nonparametric estimate in a feedback loop (a spring seen from the noisy measured
-    // position under a controller) can validate worse than the parametric map refined by
-    // output error from it; a static map there that validates better is the explanation.
-    if !matches!(finding.classification, Classification::Named(_))
-        || finding.shrink < MIN_CONFIRMING_SHRINK
-    {
-        by_validation(&mut fitted);
-        let mut tried = vec![finding.location];
-        let mut best_alternative: Option<Finding> = None;
-        let mut attempts = 0;
-        let mut i = 0;
-        while i < fitted.len() && attempts < ALTERNATIVE_LOCATIONS {
-            let location = fitted[i].result.location;
-            // A map of the rate depends on the direction of motion and so imitates
-            // hysteresis; a dynamic finding yields to it only through the position-vs-rate
-            // rule above.
-            let rate_for_dynamic = location == Location::RateFeedback
-                && finding.classification == Classification::Dynamic;
-            if tried.contains(&location)
-                || rate_for_dynamic
-                || !fitted[i].result.validation_rms.is_finite()
-            {
-                i += 1;
-                continue;
-            }
-            tried.push(location);
-            attempts += 1;
-            let tv = tv_rms(&fitted, i);
-            let alternative = fitted.remove(i);
-            let direction = direction_test(&alternative, settings)
-                .ok()
-                .unwrap_or_else(DirectionTest::none);
-            if let Ok(alt) = add(alternative, direction, tv)
-                && matches!(alt.classification, Classification::Named(_))
-                && alt.augmented.validation_gap.rms
-                    < best_alternative.as_ref().map_or(
-                        ALTERNATIVE_FACTOR * finding.augmented.validation_gap.rms,
-                        |b: &Finding| b.augmented.validation_gap.rms,
+    for f in fitted.iter().filter(smooth) {
+        if f.e_hat.channels() > 0 && !f.e_hat.is_empty() {
+            noise.tighten(
+                crate::gap::noise_level_coloured(&f.e_hat.channel(0)),
+                || {
+                    format!(
+                        "what the {} estimate {} leaves on the estimation record",
+                        f.estimator,
+                        cx.nominal.describe(f.result.location)
                     )
-            {
-                best_alternative = Some(alt);
-            }
-        }
-        if let Some(mut alt) = best_alternative {
-            alt.remarks.push(format!(
-                "the best nonparametric fit was at {} ({}, validation RMS {}); this named map \
-                 validates better ({})",
-                nominal.key(finding.location),
-                finding.classification.describe(),
-                rms_text(finding.augmented.validation_gap.rms),
-                rms_text(alt.augmented.validation_gap.rms)
-            ));
-            finding = alt;
+                },
+            );
         }
     }
-    // A static block that leaves a gap larger than the noise may be the static shadow of a
-    // hysteresis at the input (a play, or an elasto-plastic stop), whose phase lag an
-    // estimated G has partly absorbed (so that the direction test stays quiet): the
-    // hysteresis is fitted with G, and when it explains the record clearly better than the
-    // static block and than a better G alone, the effect is dynamic. A dynamic finding at the
-    // input gets the operator's parameters the same way.
-    if (finding.classification != Classification::Dynamic || finding.location == Location::Input)
-        && finding.augmented.validation_gap.rms > settings.gap.noise_ratio * noise.std
-        && let Some(g) = given.polynomial()
-        && let Some(h) = input_hysteresis::input_hysteresis(g, est, val, settings)
-        && h.validation_rms <= HYSTERESIS_OVER_STATIC * finding.augmented.validation_gap.rms
-        && h.validation_rms <= HYSTERESIS_OVER_STATIC * h.without_hysteresis_rms
-    {
-        let static_rms = finding.augmented.validation_gap.rms;
-        let static_what = match finding.classification {
-            // A dynamic finding's augmented model holds the static approximation at its site.
-            Classification::Dynamic => format!(
-                "the static approximation {}",
-                nominal.describe(finding.location)
-            ),
-            _ => format!(
-                "{} {}",
-                finding.classification.describe(),
-                nominal.describe(finding.location)
-            ),
-        };
-        if finding.location != Location::Input
-            && let Some(i) = fitted
-                .iter()
-                .position(|f| f.result.location == Location::Input)
-        {
-            let tv = tv_rms(&fitted, i);
-            let input = fitted.remove(i);
-            let mut direction = direction_test(&input, settings)
-                .ok()
-                .unwrap_or_else(DirectionTest::none);
-            direction.dynamic = true;
-            if let Ok(f) = add(input, direction, tv) {
-                finding = f;
-            }
-        }
-        if finding.location == Location::Input {
-            finding.classification = Classification::Dynamic;
-            finding.direction.dynamic = true;
-            // What the augmented model carries is the static approximation, not a name.
-            finding.augmented.fit = None;
-            finding.remarks.push(format!(
-                "{}, with G re-estimated behind it, validates at RMS {}, against {} for the \
-                 best static block ({static_what}) and {} for G re-estimated alone: the \
-                 missing effect has memory",
-                h.describe(),
-                rms_text(h.validation_rms),
-                rms_text(static_rms),
-                rms_text(h.without_hysteresis_rms)
-            ));
-            finding.input_hysteresis = Some(h);
-        }
-    }
+}
+
+/// G settled with the finding. G is re-estimated with the named map held fixed (a failed
+/// refit leaves the joint refinement of the hypotheses standing, and says so). The input
+/// disturbance was the identification's noise model; the model handed on keeps the nominal
+/// model's own noise path, so that files written from it read back with the same measurable z
+/// (the simulations, and so every RMS, do not depend on it). A gain error with G refitted
+/// says the linear model was wrong, not what was missing: the search runs once more around
+/// the refitted G (the first pass's locations were ranked around the wrong one, where a map
+/// of the rate may not even simulate), and an effect it names that validates better is the
+/// finding, its shrink against the nominal as given. So does a G refitted from a closed-loop
+/// fit (its zero cancelled the integrator): the locations were refitted around it one by one,
+/// each G absorbing what its map missed, and one G for all of them ranks them fairly.
+fn settle_g(cx: &Context<'_>, mut finding: Finding, second_pass: bool) -> Result<Finding> {
+    let settings = &cx.settings;
     if settings.refine_nominal
-        && let Some(g) = given.polynomial()
+        && let Some(g) = cx.given.polynomial()
     {
-        // The joint refinement of the hypotheses already stands; a failed refit of the named
-        // map's G leaves it (and says so) rather than the whole discovery.
         let joint = finding.nominal_refinement.clone();
-        if let Err(e) = refine::refine_nominal(
-            g,
-            &mut finding,
-            est,
-            val,
-            &est_candidates,
-            &val_candidates,
-            &gap_settings,
-            &validation_gap,
-            settings,
-        ) {
+        if let Err(e) = refine::refine_nominal(g, &mut finding, cx) {
             finding.nominal_refinement = joint;
             finding.remarks.push(format!(
                 "G could not be re-estimated with the named map: {e}"
             ));
         }
     }
-    // The input disturbance was the identification's noise model; the model handed on keeps
-    // the nominal model's own noise path, so that files written from it read back with the
-    // same measurable z (the simulations, and so every RMS above, do not depend on it).
-    if input_noise.is_some() {
+    if cx.input_noise.is_some() {
         let dispersion = std::sync::Arc::clone(&finding.augmented.model.blocks()[0].dispersion);
         let base = match &finding.nominal_refinement {
             Some(r) if r.adopted => Nominal::from_polynomial(&refine::u_to_y(&r.after))?,
-            _ => given.clone(),
+            _ => cx.given.clone(),
         };
         finding.augmented.model = base.hypothesis(finding.location, dispersion)?.model;
     }
-    // A gain error with G refitted says the linear model was wrong, not what was missing: the
-    // search runs once more around the refitted G (the first pass's locations were ranked
-    // around the wrong one, where a map of the rate may not even simulate), and an effect it
-    // names that validates better is the finding, its shrink against the nominal as given.
-    // So does a G refitted from a closed-loop fit (its zero cancelled the integrator): the
-    // locations were refitted around it one by one, each G absorbing what its map missed, and
-    // one G for all of them ranks them fairly.
     let gain = matches!(&finding.classification,
         Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
     if second_pass
         && settings.refine_nominal
-        && (gain || cancelled.is_some())
+        && (gain || cx.cancelled.is_some())
         && let Some(r) = finding.nominal_refinement.clone().filter(|r| r.adopted)
-        && let Some(second) = around_refitted(&r, est, val, settings, &finding)
+        && let Some(second) = around_refitted(&r, cx.est, cx.val, settings, &finding)
     {
-        finding = second_finding(second, &r, given, &finding, &validation_gap, val, settings)?;
+        finding = second_finding(
+            second,
+            &r,
+            &cx.given,
+            &finding,
+            &cx.validation_gap,
+            cx.val,
+            settings,
+        )?;
     }
-    // Confirmation: a failed test that no static block at any candidate location can act on
-    // is not reported as a missing effect. The portmanteau family errs 0.1 % of the time on
-    // stationary inputs, more on strongly non-stationary ones such as chirps, whose squares a
-    // low-order prewhitening cannot whiten.
-    for (g, record) in [
-        (&finding.augmented.estimation_gap, "estimation"),
-        (&finding.augmented.validation_gap, "validation"),
-    ] {
-        noise.tighten(g.noise, || {
-            format!(
-                "the augmented model ({} {}) on the {record} record",
-                finding.classification.describe(),
-                nominal.describe(finding.location)
-            )
-        });
-    }
-    // The simulation RMS against the output noise level: both of the output, whatever noise
-    // path the model has.
-    let above_noise = |g: &Gap| g.rms > settings.gap.noise_ratio * noise.std;
-    let real = above_noise(&estimation_gap) || above_noise(&validation_gap);
-    // A hysteresis is found by its direction effect, not by what a static approximation of it
-    // gains: at a sensor a static map closes almost none of a backlash's gap. At the input and
-    // the sensor, whose z (u, or G·u) carries no output noise, a real gap with a direction
-    // effect is a missing (dynamic) effect whatever the shrink. In feedback z is the noisy
-    // measured output, and a biased G in a loop leaves direction effects of its own, so
-    // there the shrink must confirm it as it confirms a static map, unless the direction
-    // explains a large share of the residual ([`FEEDBACK_HYSTERESIS_SHARE`]).
-    let dynamic_found = real
-        && finding.classification == Classification::Dynamic
-        && (matches!(finding.location, Location::Input | Location::Output)
-            || finding.direction.explained >= FEEDBACK_HYSTERESIS_SHARE);
-    let confirming = if past_disturbance {
-        PAST_DISTURBANCE_SHRINK
-    } else {
-        MIN_CONFIRMING_SHRINK
-    };
-    if finding.shrink < confirming
-        && !dynamic_found
-        && !(real && drifting_linear_part(&mut finding, nominal, est, settings))
-    {
-        // The gap is noise-sized and only a test failed: a false alarm of the test family
-        // (they err 0.1 % of the time on stationary inputs, more on chirps). Otherwise the gap
-        // is real and unexplained, and the verdict says so.
-        let tried = hypotheses
-            .iter()
-            .map(|h| {
-                format!(
-                    "{} ({}): {}",
-                    nominal.key(h.location),
-                    if h.dispersion.starts_with("tv") {
-                        "total variation"
-                    } else {
-                        "quadratic"
-                    },
-                    h.failure.clone().unwrap_or_else(|| format!(
-                        "validation RMS {}",
-                        rms_text(h.validation_rms)
-                    ))
-                )
-            })
-            .collect::<Vec<_>>()
-            .join("; ");
-        let (kind, verdict) = if past_disturbance {
-            (
-                Verdict::NoMissingEffect,
-                format!(
-                    "no missing effect detected: with the input disturbance fitted to the \
-                     nominal model's residual (ratio {:.3e}) its innovations pass every test \
-                     (estimation record: {}; validation record: {}); the simulation gap ({}, \
-                     {:.1}× the noise level σ̂ = {}) is what that disturbance leaves, and the \
-                     best candidate block ({} {}) reduces the validation RMS by less than \
-                     {:.0} % ({} → {}). Tried: {tried}",
-                    input_noise.unwrap_or(f64::NAN),
-                    estimation_gap.verdict,
-                    validation_gap.verdict,
-                    rms_text(validation_gap.rms),
-                    validation_gap.rms / noise.std,
-                    rms_text(noise.std),
-                    finding.classification.describe(),
-                    nominal.describe(finding.location),
-                    100.0 * (1.0 - 1.0 / PAST_DISTURBANCE_SHRINK),
-                    rms_text(validation_gap.rms),
-                    rms_text(finding.augmented.validation_gap.rms)
-                ),
-            )
-        } else if real {
-            (
-                Verdict::Unexplained,
-                format!(
-                    "{}: the nominal model's gap is larger than the noise (validation record: \
-                     {}), but the best candidate block ({} {}) reduces the validation RMS by \
-                     less than {:.0} % ({} → {}). Tried: {tried}{}",
-                    Verdict::Unexplained.describe(),
-                    validation_gap.verdict,
-                    finding.classification.describe(),
-                    nominal.describe(finding.location),
-                    100.0 * (1.0 - 1.0 / MIN_CONFIRMING_SHRINK),
-                    rms_text(validation_gap.rms),
-                    rms_text(finding.augmented.validation_gap.rms),
-                    cancelled
-                        .as_deref()
-                        .map(|c| format!(". {c}"))
-                        .unwrap_or_default()
-                ),
-            )
-        } else {
-            (
-                Verdict::NoMissingEffect,
-                format!(
-                    "no missing effect detected: the nominal model's gap is within the noise \
-                     level but failed a test (estimation record: {}; validation record: {}), \
-                     and the best candidate block reduces the validation RMS by less than \
-                     {:.0} % ({} {}, RMS {} → {})",
-                    estimation_gap.verdict,
-                    validation_gap.verdict,
-                    100.0 * (1.0 - 1.0 / MIN_CONFIRMING_SHRINK),
-                    finding.classification.describe(),
-                    nominal.describe(finding.location),
-                    rms_text(validation_gap.rms),
-                    rms_text(finding.augmented.validation_gap.rms)
-                ),
-            )
-        };
-        return Ok(Discovery {
-            estimation_gap,
-            validation_gap,
-            missing_effect: kind != Verdict::NoMissingEffect,
-            verdict_kind: kind,
-            scoring,
-            input_noise,
-            noise,
-            hypotheses,
-            finding: None,
-            verdict,
-            seconds: t0.elapsed().as_secs_f64(),
-        });
-    }
-    if let Some(c) = cancelled {
-        finding.remarks.push(c);
-    }
-    check_stationarity(&mut finding, nominal, est, settings);
-    let mut verdict = verdict_text(nominal, &validation_gap, &finding);
-    if let Some(h) = &finding.input_hysteresis {
-        verdict.push_str(&format!(
-            "; {}, with G re-estimated, validates at RMS {} ({})",
-            h.describe(),
-            rms_text(h.validation_rms),
-            crate::gap::shrink_text(validation_gap.rms / h.validation_rms, 1)
-        ));
-    }
-    // A block that closes a sliver of a large gap is a missing effect, but not the whole
-    // story: the verdict must not read as if the model were now complete.
-    let left = finding.augmented.validation_gap.rms / noise.std;
-    if finding.shrink < PARTIAL_SHRINK && left > settings.gap.noise_ratio {
-        let partial = format!(
-            "the block explains only part of the gap: the augmented model still misses the \
-             validation record by {left:.1}× the noise level σ̂ = {}; another effect, or a \
-             dynamic one, remains",
-            rms_text(noise.std)
-        );
-        verdict.push_str(&format!(". Only part of the gap: {partial}"));
-        finding.remarks.push(partial);
-        if finding.classification == Classification::Dynamic {
-            finding.remarks.push(UNLOCATED_DIRECTION_EFFECT.to_string());
-        }
-    }
-    Ok(Discovery {
-        estimation_gap,
-        validation_gap,
-        missing_effect,
-        verdict_kind: Verdict::MissingEffect,
-        scoring,
-        input_noise,
-        noise,
-        hypotheses,
-        finding: Some(finding),
-        verdict,
-        seconds: t0.elapsed().as_secs_f64(),
-    })
-}
-
-/// Re-estimates a named finding's family on consecutive segments of the estimation record
-/// ([`stationarity`](mod@stationarity)); a map that changes over the record makes the finding
-/// [`Classification::TimeVarying`].
-fn check_stationarity(
-    finding: &mut Finding,
-    nominal: &Nominal,
-    est: &Data,
-    settings: &DiscoverSettings,
-) {
-    let Classification::Named(fit) = &finding.classification else {
-        return;
-    };
-    let h = augmented_hypothesis(finding, nominal);
-    let Some(check) = stationarity::stationarity(fit, &h, est, settings) else {
-        return;
-    };
-    if check.time_varying {
-        finding.remarks.push(format!(
-            "the map is not stationary: {}; a static name would describe neither half",
-            check.describe()
-        ));
-        finding.classification = Classification::TimeVarying(fit.clone());
-    }
-    finding.stationarity = Some(check);
-}
-
-/// Whether a gap that no static block closes is a linear part that changes over the record:
-/// a gain at the finding's location (w = a·z, from the block's neutral value) re-estimated on
-/// consecutive segments
-/// of the estimation record ([`stationarity`](mod@stationarity)). A gain that drifts is
-/// absorbed on average by an estimated G, which leaves a residual that no static map
-/// explains; the segments' gains follow the drift. When they do, the finding becomes [`Classification::TimeVarying`].
-fn drifting_linear_part(
-    finding: &mut Finding,
-    nominal: &Nominal,
-    est: &Data,
-    settings: &DiscoverSettings,
-) -> bool {
-    // The block's neutral value: w = z where it passes a signal on (input, output), w = 0
-    // where it feeds back.
-    let neutral = match finding.location {
-        Location::OutputFeedback | Location::RateFeedback => 0.0,
-        _ => 1.0,
-    };
-    let Ok(mut gain) = crate::effects::fit_effect_with(
-        crate::effects::Effect::Gain,
-        false,
-        &[-1.0, 1.0],
-        &[-1.0, 1.0],
-    ) else {
-        return false;
-    };
-    gain.parameters[0].value = neutral;
-    let h = augmented_hypothesis(finding, nominal);
-    match stationarity::stationarity(&gain, &h, est, settings) {
-        Some(check) if check.time_varying => {
-            finding.remarks.push(format!(
-                "no static block closes the gap, and a gain at this location drifts over the \
-                 estimation record: {}",
-                check.describe()
-            ));
-            let whole = h
-                .data(est)
-                .map(|data| polish::polish(&gain, &h, &data, settings))
-                .unwrap_or(gain);
-            finding.classification = Classification::TimeVarying(whole);
-            finding.stationarity = Some(check);
-            true
-        }
-        _ => false,
-    }
-}
-
-/// The hypothesis of a finding's augmented model (its LFT, location and known maps).
-fn augmented_hypothesis(finding: &Finding, nominal: &Nominal) -> Hypothesis {
-    Hypothesis {
-        location: finding.location,
-        model: finding.augmented.model.clone(),
-        sample_time: nominal
-            .model()
-            .ok()
-            .and_then(|m| m.lft().sample_time())
-            .unwrap_or(1.0),
-        known: finding.augmented.known.clone(),
-    }
+    Ok(finding)
 }
 
 /// The remark on a dynamic finding whose static approximation closes little of the gap: the

@@ -8,6 +8,7 @@ use crate::gap::{Gap, GapSettings, gap};
 use crate::hypotheses::{Hypothesis, Location, Nominal};
 use crate::hysteresis::DirectionTest;
 
+use super::context::Context;
 use super::fit::{Fitted, simulation_errors};
 use super::fit::{even_indices, minmax, scoring_settings};
 use super::polish::{polish, polish_jointly};
@@ -427,19 +428,18 @@ fn refit_with_known(
 /// The most breakpoints a written table gets, whatever the kernel's width.
 const MAX_TABLE_POINTS: usize = 20_001;
 
-#[allow(clippy::too_many_arguments)]
+/// Names the estimate `best` from the candidate table at its location (the nonparametric map
+/// and the families refined there, chosen by [`select`]) and examines the augmented model on
+/// both records against the search's nominal gap.
 pub(super) fn name_and_add(
     best: Fitted,
     direction: DirectionTest,
     total_variation_rms: Option<f64>,
-    est: &Data,
-    val: &Data,
-    est_candidates: &[(String, Vec<f64>)],
-    val_candidates: &[(String, Vec<f64>)],
-    gap_settings: &GapSettings,
-    before: &Gap,
-    settings: &DiscoverSettings,
+    cx: &Context<'_>,
 ) -> Result<Finding> {
+    let (est, val, settings) = (cx.est, cx.val, &cx.settings);
+    let (est_candidates, val_candidates) = (&cx.est_candidates, &cx.val_candidates);
+    let (gap_settings, before) = (&cx.gap_settings, &cx.validation_gap);
     let location = best.result.location;
     let h = best.hypothesis.clone();
     let val_h = h.data(val)?;
@@ -535,31 +535,7 @@ pub(super) fn name_and_add(
             direction.t_statistic
         )),
     }
-    let augmented_map = match &classification {
-        Classification::Named(fit) => AugmentedMap::Expression(fit.expression.clone()),
-        _ => {
-            // The table extrapolates as the hypothesis was scored: held at the edges of the
-            // estimation range, or following the map as estimated over a range as wide again
-            // on each side (beyond which any table holds its last value).
-            let (lo, hi) = minmax(&best.z);
-            let pad = if best.hold_edges { 0.0 } else { hi - lo };
-            // Four breakpoints per kernel width at least: a map with detail finer than the
-            // range (a cogging force) is otherwise cut to a coarser one than was estimated.
-            let per_sigma = best
-                .result
-                .sigma
-                .filter(|s| *s > 0.0)
-                .map_or(0.0, |s| 4.0 * (hi - lo + 2.0 * pad) / s);
-            let n = settings
-                .table_points
-                .max((per_sigma.ceil() as usize + 1).min(MAX_TABLE_POINTS));
-            let z: Vec<f64> = (0..n)
-                .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
-                .collect();
-            let w = z.iter().map(|z| best.map.eval(&[*z])).collect();
-            AugmentedMap::Table { z, w }
-        }
-    };
+    let augmented_map = written_map(&best, &classification, settings);
     let interp = augmented_map.interpolant()?;
     let gap_settings = &GapSettings {
         initial_state: scoring_settings(location, settings).initial_state(),
@@ -609,6 +585,39 @@ pub(super) fn name_and_add(
         selection,
         stationarity: None,
     })
+}
+
+/// The map the augmented model carries: a named family's expression, else the estimate as a
+/// table, which extrapolates as the hypothesis was scored: held at the edges of the estimation
+/// range, or following the map as estimated over a range as wide again on each side (beyond
+/// which any table holds its last value).
+fn written_map(
+    best: &Fitted,
+    classification: &Classification,
+    settings: &DiscoverSettings,
+) -> AugmentedMap {
+    match classification {
+        Classification::Named(fit) => AugmentedMap::Expression(fit.expression.clone()),
+        _ => {
+            let (lo, hi) = minmax(&best.z);
+            let pad = if best.hold_edges { 0.0 } else { hi - lo };
+            // Four breakpoints per kernel width at least: a map with detail finer than the
+            // range (a cogging force) is otherwise cut to a coarser one than was estimated.
+            let per_sigma = best
+                .result
+                .sigma
+                .filter(|s| *s > 0.0)
+                .map_or(0.0, |s| 4.0 * (hi - lo + 2.0 * pad) / s);
+            let n = settings
+                .table_points
+                .max((per_sigma.ceil() as usize + 1).min(MAX_TABLE_POINTS));
+            let z: Vec<f64> = (0..n)
+                .map(|i| lo - pad + (hi - lo + 2.0 * pad) * i as f64 / (n - 1) as f64)
+                .collect();
+            let w = z.iter().map(|z| best.map.eval(&[*z])).collect();
+            AugmentedMap::Table { z, w }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -6,10 +6,11 @@ use structid_core::refine::{LinearStructure, RefineSettings, refine_linear};
 use structid_core::{Data, IdentifySettings, InitialState, Result, Structure};
 use structid_linear::PolynomialModel;
 
-use crate::gap::{Gap, GapSettings, gap};
+use crate::gap::{Gap, gap};
 
 use crate::hypotheses::{Location, Nominal};
 
+use super::context::Context;
 use super::fit::{Fitted, JointLinear, identify_hypothesis, initial_state, simulation_rms};
 use super::{DiscoverSettings, Finding, NominalRefinement};
 
@@ -19,18 +20,14 @@ use super::{DiscoverSettings, Finding, NominalRefinement};
 /// the new G when its validation RMS (scored as every simulation of the workflow) falls; the
 /// finding's gaps and shrink are then those of the new model. Records G as given and as kept,
 /// with the validation RMS of the finding's map around each.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn refine_nominal(
     g: &PolynomialModel,
     finding: &mut Finding,
-    est: &Data,
-    val: &Data,
-    est_candidates: &[(String, Vec<f64>)],
-    val_candidates: &[(String, Vec<f64>)],
-    gap_settings: &GapSettings,
-    before: &Gap,
-    settings: &DiscoverSettings,
+    cx: &Context<'_>,
 ) -> Result<()> {
+    let (est, val, settings) = (cx.est, cx.val, &cx.settings);
+    let (est_candidates, val_candidates) = (&cx.est_candidates, &cx.val_candidates);
+    let (gap_settings, before) = (&cx.gap_settings, &cx.validation_gap);
     let location = finding.location;
     let structure = LinearStructure::new("N", location)?;
     let given = structure.initial_from_bla(g)?;

@@ -22,11 +22,11 @@ use structid_core::ExprMap;
 use structid_core::validation::comparison::{default_bandwidth, long_run_variance};
 
 use crate::effects::EffectFit;
-use crate::hypotheses::Hypothesis;
+use crate::hypotheses::{Hypothesis, Location, Nominal};
 
-use super::DiscoverSettings;
 use super::fit::simulation_errors;
 use super::polish::polish;
+use super::{Classification, DiscoverSettings, Finding};
 
 /// How many consecutive segments of the estimation record the map is re-estimated on: four
 /// leave the scatter about a straight trend two degrees of freedom.
@@ -187,6 +187,93 @@ fn segment_fit(
         1.0
     };
     Some((refined, inflation))
+}
+
+/// Re-estimates a named finding's family on consecutive segments of the estimation record
+/// ([`stationarity`]); a map that changes over the record makes the finding
+/// [`Classification::TimeVarying`].
+pub(super) fn check_stationarity(
+    finding: &mut Finding,
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) {
+    let Classification::Named(fit) = &finding.classification else {
+        return;
+    };
+    let h = augmented_hypothesis(finding, nominal);
+    let Some(check) = stationarity(fit, &h, est, settings) else {
+        return;
+    };
+    if check.time_varying {
+        finding.remarks.push(format!(
+            "the map is not stationary: {}; a static name would describe neither half",
+            check.describe()
+        ));
+        finding.classification = Classification::TimeVarying(fit.clone());
+    }
+    finding.stationarity = Some(check);
+}
+
+/// Whether a gap that no static block closes is a linear part that changes over the record:
+/// a gain at the finding's location (w = a·z, from the block's neutral value) re-estimated on
+/// consecutive segments
+/// of the estimation record ([`stationarity`]). A gain that drifts is
+/// absorbed on average by an estimated G, which leaves a residual that no static map
+/// explains; the segments' gains follow the drift. When they do, the finding becomes [`Classification::TimeVarying`].
+pub(super) fn drifting_linear_part(
+    finding: &mut Finding,
+    nominal: &Nominal,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> bool {
+    // The block's neutral value: w = z where it passes a signal on (input, output), w = 0
+    // where it feeds back.
+    let neutral = match finding.location {
+        Location::OutputFeedback | Location::RateFeedback => 0.0,
+        _ => 1.0,
+    };
+    let Ok(mut gain) = crate::effects::fit_effect_with(
+        crate::effects::Effect::Gain,
+        false,
+        &[-1.0, 1.0],
+        &[-1.0, 1.0],
+    ) else {
+        return false;
+    };
+    gain.parameters[0].value = neutral;
+    let h = augmented_hypothesis(finding, nominal);
+    match stationarity(&gain, &h, est, settings) {
+        Some(check) if check.time_varying => {
+            finding.remarks.push(format!(
+                "no static block closes the gap, and a gain at this location drifts over the \
+                 estimation record: {}",
+                check.describe()
+            ));
+            let whole = h
+                .data(est)
+                .map(|data| polish(&gain, &h, &data, settings))
+                .unwrap_or(gain);
+            finding.classification = Classification::TimeVarying(whole);
+            finding.stationarity = Some(check);
+            true
+        }
+        _ => false,
+    }
+}
+
+/// The hypothesis of a finding's augmented model (its LFT, location and known maps).
+fn augmented_hypothesis(finding: &Finding, nominal: &Nominal) -> Hypothesis {
+    Hypothesis {
+        location: finding.location,
+        model: finding.augmented.model.clone(),
+        sample_time: nominal
+            .model()
+            .ok()
+            .and_then(|m| m.lft().sample_time())
+            .unwrap_or(1.0),
+        known: finding.augmented.known.clone(),
+    }
 }
 
 #[cfg(test)]

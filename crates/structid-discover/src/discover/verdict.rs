@@ -1,0 +1,238 @@
+//! The verdict stage of [`discover`](super::discover): whether the finding confirms a missing
+//! effect, and the paragraph that says what was found, or why nothing was.
+
+use crate::gap::Gap;
+
+use super::context::Context;
+use super::naming::verdict_text;
+use super::stationarity::{check_stationarity, drifting_linear_part};
+use super::{
+    Classification, Discovery, FEEDBACK_HYSTERESIS_SHARE, Finding, HypothesisResult,
+    MIN_CONFIRMING_SHRINK, NoiseLevel, PARTIAL_SHRINK, PAST_DISTURBANCE_SHRINK,
+    UNLOCATED_DIRECTION_EFFECT, Verdict, rms_text,
+};
+
+/// The verdict when the nominal model's gap passes every test (see
+/// [`Context::past_disturbance`] for the one exception that reaches the hypotheses).
+pub(super) fn no_missing_effect(cx: &Context<'_>) -> String {
+    format!(
+        "no missing effect detected: on the estimation record {}; on the validation record {}",
+        cx.estimation_gap.verdict, cx.validation_gap.verdict
+    )
+}
+
+/// The verdict when no hypothesis could be identified and simulated.
+pub(super) fn nothing_identified(cx: &Context<'_>, hypotheses: &[HypothesisResult]) -> String {
+    format!(
+        "{}: the nominal model's gap is not noise ({}), but no hypothesis could be identified \
+         and simulated: {}{}",
+        Verdict::Unexplained.describe(),
+        cx.validation_gap.verdict,
+        hypotheses
+            .iter()
+            .filter_map(|h| h
+                .failure
+                .as_ref()
+                .map(|f| format!("{}: {f}", cx.nominal.key(h.location))))
+            .collect::<Vec<_>>()
+            .join("; "),
+        cancelled_text(cx)
+    )
+}
+
+fn cancelled_text(cx: &Context<'_>) -> String {
+    cx.cancelled
+        .as_deref()
+        .map(|c| format!(". {c}"))
+        .unwrap_or_default()
+}
+
+/// Confirmation and the verdict. A failed test that no static block at any candidate location
+/// can act on is not reported as a missing effect: the portmanteau family errs 0.1 % of the
+/// time on stationary inputs, more on strongly non-stationary ones such as chirps, whose
+/// squares a low-order prewhitening cannot whiten. A block must shrink the validation gap by
+/// [`MIN_CONFIRMING_SHRINK`] ([`PAST_DISTURBANCE_SHRINK`] past a fitted input disturbance),
+/// unless it is a direction effect on a real gap, or a gain that drifts.
+pub(super) fn confirm(
+    cx: Context<'_>,
+    mut finding: Finding,
+    hypotheses: Vec<HypothesisResult>,
+    mut noise: NoiseLevel,
+) -> Discovery {
+    for (g, record) in [
+        (&finding.augmented.estimation_gap, "estimation"),
+        (&finding.augmented.validation_gap, "validation"),
+    ] {
+        noise.tighten(g.noise, || {
+            format!(
+                "the augmented model ({} {}) on the {record} record",
+                finding.classification.describe(),
+                cx.nominal.describe(finding.location)
+            )
+        });
+    }
+    let settings = &cx.settings;
+    // The simulation RMS against the output noise level: both of the output, whatever noise
+    // path the model has.
+    let above_noise = |g: &Gap| g.rms > settings.gap.noise_ratio * noise.std;
+    let real = above_noise(&cx.estimation_gap) || above_noise(&cx.validation_gap);
+    // A hysteresis is found by its direction effect, not by what a static approximation of
+    // it gains: at a sensor a static map closes almost none of a backlash's gap. At the input
+    // and the sensor, whose z (u, or G·u) carries no output noise, a real gap with a
+    // direction effect is a missing (dynamic) effect whatever the shrink. In feedback z is
+    // the noisy measured output, and a biased G in a loop leaves direction effects of its
+    // own, so there the shrink must confirm it as it confirms a static map, unless the
+    // direction explains a large share of the residual ([`FEEDBACK_HYSTERESIS_SHARE`]).
+    let dynamic_found = real
+        && finding.classification == Classification::Dynamic
+        && (matches!(
+            finding.location,
+            crate::hypotheses::Location::Input | crate::hypotheses::Location::Output
+        ) || finding.direction.explained >= FEEDBACK_HYSTERESIS_SHARE);
+    let confirming = if cx.past_disturbance {
+        PAST_DISTURBANCE_SHRINK
+    } else {
+        MIN_CONFIRMING_SHRINK
+    };
+    if finding.shrink < confirming
+        && !dynamic_found
+        && !(real && drifting_linear_part(&mut finding, &cx.nominal, cx.est, settings))
+    {
+        let (kind, verdict) = unconfirmed(&cx, &finding, &hypotheses, &noise, real);
+        return cx.discovery(kind, noise, hypotheses, None, verdict);
+    }
+    if let Some(c) = cx.cancelled.clone() {
+        finding.remarks.push(c);
+    }
+    check_stationarity(&mut finding, &cx.nominal, cx.est, settings);
+    let verdict = confirmed(&cx, &mut finding, &noise);
+    cx.discovery(
+        Verdict::MissingEffect,
+        noise,
+        hypotheses,
+        Some(finding),
+        verdict,
+    )
+}
+
+/// The verdict on a confirmed finding. A block that closes a sliver of a large gap is a
+/// missing effect, but not the whole story: the verdict must not read as if the model were
+/// now complete ([`PARTIAL_SHRINK`]).
+fn confirmed(cx: &Context<'_>, finding: &mut Finding, noise: &NoiseLevel) -> String {
+    let mut verdict = verdict_text(&cx.nominal, &cx.validation_gap, finding);
+    if let Some(h) = &finding.input_hysteresis {
+        verdict.push_str(&format!(
+            "; {}, with G re-estimated, validates at RMS {} ({})",
+            h.describe(),
+            rms_text(h.validation_rms),
+            crate::gap::shrink_text(cx.validation_gap.rms / h.validation_rms, 1)
+        ));
+    }
+    let left = finding.augmented.validation_gap.rms / noise.std;
+    if finding.shrink < PARTIAL_SHRINK && left > cx.settings.gap.noise_ratio {
+        let partial = format!(
+            "the block explains only part of the gap: the augmented model still misses the \
+             validation record by {left:.1}× the noise level σ̂ = {}; another effect, or a \
+             dynamic one, remains",
+            rms_text(noise.std)
+        );
+        verdict.push_str(&format!(". Only part of the gap: {partial}"));
+        finding.remarks.push(partial);
+        if finding.classification == Classification::Dynamic {
+            finding.remarks.push(UNLOCATED_DIRECTION_EFFECT.to_string());
+        }
+    }
+    verdict
+}
+
+/// The verdict when no block confirms the gap: the gap is what a fitted input disturbance
+/// leaves, or it is larger than the noise (`real`) and unexplained, or it is noise-sized and
+/// only a test failed (a false alarm of the test family).
+fn unconfirmed(
+    cx: &Context<'_>,
+    finding: &Finding,
+    hypotheses: &[HypothesisResult],
+    noise: &NoiseLevel,
+    real: bool,
+) -> (Verdict, String) {
+    let (est_gap, val_gap) = (&cx.estimation_gap, &cx.validation_gap);
+    let best = format!(
+        "{} {}",
+        finding.classification.describe(),
+        cx.nominal.describe(finding.location)
+    );
+    let (before, after) = (
+        rms_text(val_gap.rms),
+        rms_text(finding.augmented.validation_gap.rms),
+    );
+    let percent = |shrink: f64| 100.0 * (1.0 - 1.0 / shrink);
+    if cx.past_disturbance {
+        return (
+            Verdict::NoMissingEffect,
+            format!(
+                "no missing effect detected: with the input disturbance fitted to the nominal \
+                 model's residual (ratio {:.3e}) its innovations pass every test (estimation \
+                 record: {}; validation record: {}); the simulation gap ({before}, {:.1}× the \
+                 noise level σ̂ = {}) is what that disturbance leaves, and the best candidate \
+                 block ({best}) reduces the validation RMS by less than {:.0} % ({before} → \
+                 {after}). Tried: {}",
+                cx.input_noise.unwrap_or(f64::NAN),
+                est_gap.verdict,
+                val_gap.verdict,
+                val_gap.rms / noise.std,
+                rms_text(noise.std),
+                percent(PAST_DISTURBANCE_SHRINK),
+                tried(cx, hypotheses)
+            ),
+        );
+    }
+    if real {
+        return (
+            Verdict::Unexplained,
+            format!(
+                "{}: the nominal model's gap is larger than the noise (validation record: {}), \
+                 but the best candidate block ({best}) reduces the validation RMS by less than \
+                 {:.0} % ({before} → {after}). Tried: {}{}",
+                Verdict::Unexplained.describe(),
+                val_gap.verdict,
+                percent(MIN_CONFIRMING_SHRINK),
+                tried(cx, hypotheses),
+                cancelled_text(cx)
+            ),
+        );
+    }
+    (
+        Verdict::NoMissingEffect,
+        format!(
+            "no missing effect detected: the nominal model's gap is within the noise level but \
+             failed a test (estimation record: {}; validation record: {}), and the best \
+             candidate block reduces the validation RMS by less than {:.0} % ({best}, RMS \
+             {before} → {after})",
+            est_gap.verdict,
+            val_gap.verdict,
+            percent(MIN_CONFIRMING_SHRINK),
+        ),
+    )
+}
+
+/// Every hypothesis tried, with its estimator and validation RMS or failure.
+fn tried(cx: &Context<'_>, hypotheses: &[HypothesisResult]) -> String {
+    hypotheses
+        .iter()
+        .map(|h| {
+            format!(
+                "{} ({}): {}",
+                cx.nominal.key(h.location),
+                if h.dispersion.starts_with("tv") {
+                    "total variation"
+                } else {
+                    "quadratic"
+                },
+                h.failure
+                    .clone()
+                    .unwrap_or_else(|| format!("validation RMS {}", rms_text(h.validation_rms)))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
