@@ -66,7 +66,21 @@ fn discovery_dict<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     out.set_item("verdict", &d.verdict)?;
+    out.set_item("verdict_kind", d.verdict_kind.key())?;
     out.set_item("missing_effect", d.missing_effect)?;
+    let rival = match &d.linear_rival {
+        None => None,
+        Some(r) => {
+            let x = PyDict::new(py);
+            x.set_item("num", r.g.num.clone())?;
+            x.set_item("den", r.g.den.clone())?;
+            x.set_item("validation_rms", r.validation_rms)?;
+            x.set_item("p_worse", r.comparison.as_ref().map(|c| c.p_worse))?;
+            x.set_item("explains", r.explains)?;
+            Some(x)
+        }
+    };
+    out.set_item("linear_rival", rival)?;
     out.set_item("nominal_validation_rms", d.validation_gap.rms)?;
     out.set_item("nominal_estimation_rms", d.estimation_gap.rms)?;
     let per_record =

@@ -259,12 +259,20 @@ class Discovery:
     """The result of :func:`discover`."""
 
     verdict: str
+    verdict_kind: str
+    """``no-missing-effect``, ``missing-effect``, ``unexplained`` or ``linear-model`` (the
+    linear model was wrong), as report.json spells it."""
     missing_effect: bool
     nominal_validation_rms: float
     nominal_estimation_rms: float
     hypotheses: List[Dict[str, Any]]
     """Per candidate location: dispersion, β, σ, estimation and validation RMS, failure."""
     finding: Optional[Finding]
+    linear_rival: Optional[Dict[str, Any]]
+    """G alone re-estimated with one more mode, the linear model a finding must beat (None
+    when it was not fitted): ``num``, ``den``, ``validation_rms``, ``p_worse`` (the paired
+    test's p-value that the finding is worse than it; None without a finding) and
+    ``explains`` (it closes the gap: the verdict is ``linear-model``)."""
     seconds: float
     extra: Dict[str, Any]
 
@@ -275,8 +283,8 @@ def _discovery(out: Dict[str, Any]) -> Discovery:
         est = Estimate(finding.pop("estimate"))
         aug = finding.pop("augmented")
         finding = Finding(estimate=est, augmented=None if aug is None else Model(aug), **finding)
-    keys = ("verdict", "missing_effect", "nominal_validation_rms", "nominal_estimation_rms",
-            "hypotheses", "seconds")
+    keys = ("verdict", "verdict_kind", "missing_effect", "nominal_validation_rms",
+            "nominal_estimation_rms", "hypotheses", "linear_rival", "seconds")
     core = {k: out.pop(k) for k in keys}
     return Discovery(finding=finding, extra=out, **core)
 

@@ -148,6 +148,15 @@ def test_discover_matches_the_tool(cli, duffing):
     found = structid.discover(nominal, u, y, uv, yv)
     assert found.finding is not None
     assert found.finding.location == "output-feedback"
+    assert found.verdict_kind == report["verdict_kind"] == "missing-effect"
+    # The linear rival is the tool's, and a finding that stands beats it or leaves it short.
+    rival, tool_rival = found.linear_rival, report["linear_rival"]
+    if rival is None:
+        assert tool_rival is None
+    else:
+        np.testing.assert_allclose(rival["validation_rms"], tool_rival["validation_rms"],
+                                   rtol=1e-6)
+        assert rival["explains"] is False and tool_rival["explains"] is False
     tool = {h["location"]: h["validation_rms"] for h in report["hypotheses"]}
     mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
     assert tool.keys() == mine.keys()

@@ -607,6 +607,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
         d.seconds
     );
 
+    linear_rival_md(&mut s, d);
     let _ = writeln!(s, "## 1. The gap: nominal model against the records\n");
     gap_table(&mut s, &d.estimation_gap, &d.validation_gap);
 
@@ -709,6 +710,34 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
         let _ = writeln!(s, "```");
     }
     s
+}
+
+/// G alone with one more mode, the linear model a finding must beat, when it was fitted.
+fn linear_rival_md(s: &mut String, d: &Discovery) {
+    let Some(r) = &d.linear_rival else {
+        return;
+    };
+    let test = match &r.comparison {
+        Some(c) => format!(
+            "the finding against it, paired over {} blocks of the validation record: mean \
+             ln(MSE ratio) {:+.3}, p = {:.3}",
+            c.blocks, c.mean_log_ratio, c.p_worse
+        ),
+        None => "no finding to test against it".to_string(),
+    };
+    let _ = writeln!(
+        s,
+        "**G alone with one more mode** (the linear model a finding must beat): F = {:?}, \
+         B = {:?}; validation RMS {}; {test} → {}.\n",
+        r.g.den,
+        r.g.num,
+        e(r.validation_rms),
+        if r.explains {
+            "it closes the gap: the linear model was wrong"
+        } else {
+            "it does not explain the gap"
+        }
+    );
 }
 
 /// Sections 5 and 6 of the report: what the finding is, and the augmented model's gap.
@@ -1139,6 +1168,7 @@ pub fn json(
         "scoring": d.scoring.describe(),
         "input_noise_ratio": d.input_noise,
         "noise": json_value(&d.noise)?,
+        "linear_rival": json_value(&d.linear_rival)?,
         "seconds": d.seconds,
         "gap_before": {
             "estimation": gap_json(&d.estimation_gap, &r.estimation.time)?,

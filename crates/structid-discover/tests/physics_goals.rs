@@ -142,8 +142,20 @@ fn line(case: &PhysicsCase, d: &Discovery) -> String {
             format!("{what} at {} (shrink {:.1}×)", f.location.name(), f.shrink)
         })
         .unwrap_or_else(|| "nothing".into());
+    // The rival G against the gap level 1.5·σ̂, and the paired test's p.
+    let rival = d
+        .linear_rival
+        .as_ref()
+        .map(|r| {
+            format!(
+                " [G+mode RMS {:.2}·σ̂, p {:.3}]",
+                r.validation_rms / d.noise.std,
+                r.comparison.as_ref().map_or(f64::NAN, |c| c.p_worse)
+            )
+        })
+        .unwrap_or_default();
     format!(
-        "seed {:2} [{:?} {:?} delay {} {:?} {} noise{}]: {truth} → {:?}: {found}, {:.1} s",
+        "seed {:2} [{:?} {:?} delay {} {:?} {} noise{}]: {truth} → {:?}: {found}{rival}, {:.1} s",
         case.seed,
         case.plant.kind,
         case.control,

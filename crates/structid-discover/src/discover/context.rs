@@ -217,6 +217,7 @@ impl<'a> Context<'a> {
             noise,
             hypotheses,
             finding,
+            linear_rival: None,
             verdict,
             seconds: self.started.elapsed().as_secs_f64(),
         }

@@ -248,7 +248,7 @@ fn trial(g: &PolynomialModel, est: &Data, c: f64, settings: &DiscoverSettings) -
             let fitted = output_error_records(&pairs, s, &oe)
                 .map(|f| f.model)
                 .unwrap_or_else(|_| s.clone());
-            let rms = simulate(&fitted, &data, settings)?.rms;
+            let rms = simulate_linear(&fitted, &data, settings)?.rms;
             Some(Trial {
                 c,
                 weight,
@@ -261,7 +261,11 @@ fn trial(g: &PolynomialModel, est: &Data, c: f64, settings: &DiscoverSettings) -
 
 /// G from the input on `data` (u already through the operator), scored as every simulation
 /// of the workflow; `None` when it fails or diverges.
-fn simulate(g: &PolynomialModel, data: &Data, settings: &DiscoverSettings) -> Option<Simulated> {
+pub(super) fn simulate_linear(
+    g: &PolynomialModel,
+    data: &Data,
+    settings: &DiscoverSettings,
+) -> Option<Simulated> {
     let h = Nominal::from_polynomial(g)
         .ok()?
         .hypothesis(
@@ -334,7 +338,7 @@ pub(super) fn input_hysteresis(
         let records = stopped(val, t.c);
         with_input(&records, t.weight)
             .ok()
-            .and_then(|d| simulate(&t.g, &d, settings))
+            .and_then(|d| simulate_linear(&t.g, &d, settings))
             .map_or(f64::INFINITY, |s| s.rms)
     };
     Some(InputHysteresis {

@@ -5,7 +5,7 @@
 //! one output, possibly with declared locations and named states), an estimation record and a
 //! validation record, and answers four questions:
 //!
-//! 1. **Is something missing?** The [`gap`] of the nominal model on both records: simulation
+//! 1. **Is something missing?** The [`gap`](crate::gap::gap) of the nominal model on both records: simulation
 //!    RMS and fit, a model-free noise level σ̂, and portmanteau tests of its innovations ε
 //!    (whiteness; ε against u, against u², and ε² against u², together at the 0.1 % level).
 //!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
@@ -115,6 +115,14 @@
 //!    table) is examined like the nominal one on both records: the gap before and after, and
 //!    the shrink of the validation RMS. A gap whose tests failed but which no candidate block
 //!    shrinks by [`MIN_CONFIRMING_SHRINK`] is not reported as a missing effect.
+//! 7. **Is it a nonlinearity at all?** G alone re-estimated with one more mode
+//!    ([`LinearRival`]) is the linear model a finding must beat: when it validates within
+//!    `noise_ratio`·σ̂ and the finding (or, with no block confirmed, nothing) is not better
+//!    than it by the paired block test at α, the verdict is [`Verdict::LinearModel`].
+//!
+//! The search runs in stages, one module each: the gap ([`context`](self) builds what every
+//! later stage reads), the candidates, the location of the finding, G settled with it, and
+//! the verdict.
 //!
 //! **Several effects.** The nominal model may already carry maps ([`Nominal::from_model`],
 //! e.g. the augmented model of an earlier run): they are simulated in every step, and kept
@@ -147,6 +155,7 @@ mod direction;
 mod fit;
 mod input_hysteresis;
 mod iterate;
+mod linear_rival;
 mod locate;
 mod model;
 mod naming;
@@ -162,6 +171,7 @@ mod verdict;
 pub use fit::{TREND_SCALE, candidate_signals, initial_state, quadratic_dispersion_spec};
 pub use input_hysteresis::{InputHysteresis, PLAY_WEIGHT_TOLERANCE, play_into, stop_into};
 pub use iterate::{Effects, EffectsSettings, Step, StopReason, discover_effects};
+pub use linear_rival::LinearRival;
 pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCurve};
 pub use naming::parsimonious;
 pub use noise::SMALLER_RATIO;
@@ -359,14 +369,30 @@ pub enum Verdict {
     /// locations explains it ([`Discovery::hypotheses`] lists what was tried): a dynamic
     /// effect the library does not cover, several effects at once, or a wrong linear model.
     Unexplained,
-    /// A block is found, but it is a gain (with or without an offset): a linear
-    /// map at any site is a change of G itself, so the linear model was wrong rather than a
-    /// nonlinearity missing ([`Discovery::finding`] holds the block, whose augmented model is
-    /// the corrected linear model); re-estimate G (`structid linear`, `structid refine`).
+    /// The linear model was wrong, not a nonlinearity missing: either the block found is a
+    /// gain (with or without an offset), a linear map at any site being a change of G itself
+    /// ([`Discovery::finding`] holds the block, whose augmented model is the corrected linear
+    /// model), or G alone re-estimated with one more mode closes the gap and no block beats
+    /// it ([`Discovery::linear_rival`] holds that G; no finding). Re-estimate G.
     LinearModel,
 }
 
 impl Verdict {
+    /// The verdict's key, as report.json spells it.
+    ///
+    /// ```
+    /// use structid_discover::discover::Verdict;
+    /// assert_eq!(Verdict::LinearModel.key(), "linear-model");
+    /// ```
+    pub fn key(&self) -> &'static str {
+        match self {
+            Verdict::NoMissingEffect => "no-missing-effect",
+            Verdict::MissingEffect => "missing-effect",
+            Verdict::Unexplained => "unexplained",
+            Verdict::LinearModel => "linear-model",
+        }
+    }
+
     /// The verdict in words, as the reports open with it.
     pub fn describe(&self) -> &'static str {
         match self {
@@ -439,6 +465,10 @@ pub struct Discovery {
     pub hypotheses: Vec<HypothesisResult>,
     /// The effect found (when something is missing and a hypothesis could be identified).
     pub finding: Option<Finding>,
+    /// G alone re-estimated with one more mode, when the gap was larger than the noise or a
+    /// finding was confirmed around a polynomial G ([`LinearRival`]): the linear model a
+    /// finding must beat.
+    pub linear_rival: Option<LinearRival>,
     /// The verdict in one paragraph.
     pub verdict: String,
     /// Wall-clock seconds.
@@ -774,7 +804,7 @@ fn against_given(
 ///
 /// A missing effect legitimately makes the nominal model look bad, so the margin is wide. On
 /// the generators' cases (30 static, 20 effect-free and 10 hysteresis cases of
-/// [`crate::synthetic`]; 40 static, 15 dynamic and 15 effect-free cases of [`crate::physics`];
+/// the synthetic generator; 40 static, 15 dynamic and 15 effect-free cases of the physics one;
 /// the positioning axis) the ratio reaches 37 (a stuck actuator: y is G's response to a
 /// constant, the nominal's to u) and 26 (a hysteretic spring in a stiff closed loop, scored in
 /// windows); a stuck sensor reaches 151 but is exempt: a record whose y stays within three
@@ -862,6 +892,18 @@ mod tests {
     use structid_core::{Dispersion, Model, PolynomialDispersion, Signal};
     use structid_linear::PolynomialModel;
     use structid_lti::LinearSystem as _;
+
+    #[test]
+    fn a_verdict_key_is_its_serialised_name() {
+        for v in [
+            Verdict::NoMissingEffect,
+            Verdict::MissingEffect,
+            Verdict::Unexplained,
+            Verdict::LinearModel,
+        ] {
+            assert_eq!(serde_json::to_value(v).unwrap(), v.key());
+        }
+    }
 
     fn nominal() -> PolynomialModel {
         PolynomialModel {

@@ -263,7 +263,7 @@ pub(super) fn drifting_linear_part(
 }
 
 /// The hypothesis of a finding's augmented model (its LFT, location and known maps).
-fn augmented_hypothesis(finding: &Finding, nominal: &Nominal) -> Hypothesis {
+pub(super) fn augmented_hypothesis(finding: &Finding, nominal: &Nominal) -> Hypothesis {
     Hypothesis {
         location: finding.location,
         model: finding.augmented.model.clone(),

@@ -4,8 +4,10 @@
 use crate::gap::Gap;
 
 use super::context::Context;
+use super::fit::simulation_errors;
+use super::linear_rival::{self, LinearRival};
 use super::naming::verdict_text;
-use super::stationarity::{check_stationarity, drifting_linear_part};
+use super::stationarity::{augmented_hypothesis, check_stationarity, drifting_linear_part};
 use super::{
     Classification, Discovery, FEEDBACK_HYSTERESIS_SHARE, Finding, HypothesisResult,
     MIN_CONFIRMING_SHRINK, NoiseLevel, PARTIAL_SHRINK, PAST_DISTURBANCE_SHRINK,
@@ -94,25 +96,102 @@ pub(super) fn confirm(
     } else {
         MIN_CONFIRMING_SHRINK
     };
+    let gap_level = settings.gap.noise_ratio * noise.std;
     if finding.shrink < confirming
         && !dynamic_found
         && !(real && drifting_linear_part(&mut finding, &cx.nominal, cx.est, settings))
     {
         let (kind, verdict) = unconfirmed(&cx, &finding, &hypotheses, &noise, real);
-        return cx.discovery(kind, noise, hypotheses, None, verdict);
+        let rival = (kind == Verdict::Unexplained)
+            .then(|| rival(&cx, None, gap_level))
+            .flatten();
+        return match rival {
+            Some(r) if r.explains => linear_model(cx, r, None, hypotheses, noise),
+            _ => cx.discovery(kind, noise, hypotheses, None, verdict),
+        };
+    }
+    let rival = rival(&cx, Some(&finding), gap_level);
+    if let Some(r) = rival.clone().filter(|r| r.explains) {
+        return linear_model(cx, r, Some(&finding), hypotheses, noise);
     }
     if let Some(c) = cx.cancelled.clone() {
         finding.remarks.push(c);
     }
     check_stationarity(&mut finding, &cx.nominal, cx.est, settings);
     let verdict = confirmed(&cx, &mut finding, &noise);
-    cx.discovery(
+    let mut d = cx.discovery(
         Verdict::MissingEffect,
         noise,
         hypotheses,
         Some(finding),
         verdict,
-    )
+    );
+    d.linear_rival = rival;
+    d
+}
+
+/// G alone re-estimated with one more mode, judged against the finding (see
+/// [`linear_rival`](super::linear_rival)); `None` for a nominal model without a polynomial G,
+/// or when the refit fails.
+fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<LinearRival> {
+    let g = cx.given.polynomial()?;
+    let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings)?;
+    let errors = finding.and_then(|f| {
+        let h = augmented_hypothesis(f, &cx.nominal);
+        let map = f.augmented.map.interpolant().ok()?;
+        let errors = simulation_errors(&h, map.as_ref(), &h.data(cx.val).ok()?, &cx.settings);
+        (!errors.is_empty()).then_some(errors)
+    });
+    Some(linear_rival::judge(
+        fitted,
+        errors.as_deref(),
+        gap_level,
+        cx.settings.significance,
+    ))
+}
+
+/// The verdict "the linear model was wrong" from the rival G that closes the gap.
+fn linear_model(
+    cx: Context<'_>,
+    rival: LinearRival,
+    finding: Option<&Finding>,
+    hypotheses: Vec<HypothesisResult>,
+    noise: NoiseLevel,
+) -> Discovery {
+    let block = match (finding, &rival.comparison) {
+        (Some(f), Some(c)) => format!(
+            ", and the best block ({} {}, validation RMS {}) is not better than it (paired test \
+             over {} blocks of the validation record: p = {:.3} at α = {})",
+            f.classification.describe(),
+            cx.nominal.describe(f.location),
+            rms_text(f.augmented.validation_gap.rms),
+            c.blocks,
+            c.p_worse,
+            cx.settings.significance
+        ),
+        (Some(f), None) => format!(
+            ", as well as the best block ({} {}, validation RMS {})",
+            f.classification.describe(),
+            cx.nominal.describe(f.location),
+            rms_text(f.augmented.validation_gap.rms)
+        ),
+        (None, _) => String::new(),
+    };
+    let verdict = format!(
+        "{} (G lacks a mode, not a nonlinearity): G re-estimated alone with {} poles instead \
+         of {} validates at RMS {}, within the noise level ({} × σ̂ = {}; the nominal model: \
+         {}){block}. Re-estimate G with a higher order, then look for a missing effect again",
+        Verdict::LinearModel.describe(),
+        rival.g.den.len() - 1,
+        cx.given.polynomial().map_or(0, |g| g.den.len() - 1),
+        rms_text(rival.validation_rms),
+        cx.settings.gap.noise_ratio,
+        rms_text(noise.std),
+        rms_text(cx.validation_gap.rms),
+    );
+    let mut d = cx.discovery(Verdict::LinearModel, noise, hypotheses, None, verdict);
+    d.linear_rival = Some(rival);
+    d
 }
 
 /// The verdict on a confirmed finding. A block that closes a sliver of a large gap is a
