@@ -111,6 +111,9 @@ pub struct Gap {
     pub simulated: Vec<f64>,
     /// RMS of the simulation residual y − ŷ.
     pub rms: f64,
+    /// The samples `rms` is taken over, as ranges into `residual` (all of them in a free run;
+    /// the scored part of each window when scored in windows).
+    pub scored: Vec<Range<usize>>,
     /// RMS of the one-step prediction errors ε (equal to `rms` for an output-error model).
     pub prediction_rms: f64,
     /// The fit in percent.
@@ -142,6 +145,61 @@ pub struct Gap {
     /// Each record's simulation RMS and fit (one entry for a record of its own; see
     /// [`Data::from_records`]), in the order of the records.
     pub records: Vec<RecordGap>,
+}
+
+/// A residual sample whose departure from the mean of its two neighbours exceeds this many
+/// noise levels σ̂ is an isolated spike ([`Gap::bulk_rms`]). For white noise that second
+/// difference has standard deviation 1.22·σ̂, so an excursion beyond 6·σ̂ is a 4.9-sigma
+/// event, about one sample in a million; a model error seen through a dynamic G moves the
+/// residual smoothly from sample to sample and leaves none.
+pub const SPIKE: f64 = 6.0;
+
+impl Gap {
+    /// The RMS of the residual at its scored samples without its isolated spikes (samples
+    /// beyond [`SPIKE`]·`noise_std` from the mean of their neighbours, and further than either
+    /// neighbour is from its own: outliers of the measurement, not a missing dynamic effect),
+    /// and how many were left out.
+    ///
+    /// ```
+    /// use structid_discover::gap::Gap;
+    /// let mut r: Vec<f64> = (0..200).map(|k| 0.01 * (0.3 * k as f64).sin()).collect();
+    /// r[50] += 1.0;
+    /// let (bulk, spikes) = Gap::bulk_rms_of(&r, &[0..200], 0.01);
+    /// assert_eq!(spikes, 1);
+    /// assert!(bulk < 0.01);
+    /// ```
+    pub fn bulk_rms(&self, noise_std: f64) -> (f64, usize) {
+        Self::bulk_rms_of(&self.residual, &self.scored, noise_std)
+    }
+
+    /// [`Gap::bulk_rms`] of a residual `residual` scored over `scored`.
+    pub fn bulk_rms_of(residual: &[f64], scored: &[Range<usize>], noise_std: f64) -> (f64, usize) {
+        let departure = |k: usize| {
+            if k > 0 && k + 1 < residual.len() {
+                (residual[k] - 0.5 * (residual[k - 1] + residual[k + 1])).abs()
+            } else {
+                0.0
+            }
+        };
+        // An outlier's neighbours depart from their own neighbours by half of it: the spike
+        // is the sample that departs most.
+        let spike = |k: usize| {
+            let d = departure(k);
+            d > SPIKE * noise_std
+                && d > departure(k.saturating_sub(1))
+                && d >= departure(k + 1)
+        };
+        let (mut sum, mut n, mut spikes) = (0.0, 0usize, 0usize);
+        for k in scored.iter().flat_map(|r| r.clone()) {
+            if spike(k) {
+                spikes += 1;
+            } else {
+                sum += residual[k] * residual[k];
+                n += 1;
+            }
+        }
+        ((sum / n.max(1) as f64).sqrt(), spikes)
+    }
 }
 
 /// One record's part of a [`Gap`] over several records.
@@ -649,6 +707,7 @@ fn pool(
         residual,
         simulated,
         rms,
+        scored,
         prediction_rms,
         fit_percent,
         noise_std,
@@ -788,6 +847,7 @@ fn gap_record(
         residual,
         simulated,
         rms,
+        scored: v.scored.clone(),
         prediction_rms,
         fit_percent: v.fit_percent[0],
         noise_std,
@@ -907,6 +967,33 @@ mod tests {
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
     use structid_core::{Lft, LftMatrices, Signal};
+
+    #[test]
+    fn a_smooth_model_error_has_no_spikes_and_outliers_are_the_spikes() {
+        // A model error seen through G: large, but smooth from sample to sample.
+        let smooth: Vec<f64> = (0..2000).map(|k| 20.0 * (0.05 * k as f64).sin()).collect();
+        let all = [0..2000];
+        let (bulk, spikes) = Gap::bulk_rms_of(&smooth, &all, 1.0);
+        assert_eq!(spikes, 0);
+        assert!((bulk - structid_core::metrics::rms(&smooth)).abs() < 1e-12);
+        // Outliers of ten noise levels on a small residual are exactly the spikes, and the
+        // bulk RMS is that of the rest.
+        let mut r: Vec<f64> = (0..2000).map(|k| 0.5 * (0.9 * k as f64).cos()).collect();
+        let clean = structid_core::metrics::rms(&r);
+        for k in (100..2000).step_by(300) {
+            r[k] += if k % 600 == 100 { 10.0 } else { -10.0 };
+        }
+        let (bulk, spikes) = Gap::bulk_rms_of(&r, &all, 1.0);
+        assert_eq!(spikes, 7);
+        assert!(
+            (bulk - clean).abs() < 0.01 * clean,
+            "{bulk} against {clean}"
+        );
+        assert!(structid_core::metrics::rms(&r) > 1.5 * clean);
+        // Only the scored samples count.
+        let (_, scored_spikes) = Gap::bulk_rms_of(&r, &[0..1000], 1.0);
+        assert_eq!(scored_spikes, 3);
+    }
 
     /// A slow multisine of amplitude 1, quantised to `step` (none for 0), plus white noise.
     fn sensed(step: f64, noise: f64, seed: u64) -> Vec<f64> {

@@ -1,7 +1,7 @@
 //! The verdict stage of [`discover`](super::discover): whether the finding confirms a missing
 //! effect, and the paragraph that says what was found, or why nothing was.
 
-use crate::gap::Gap;
+use crate::gap::{Gap, SPIKE};
 
 use super::context::Context;
 use super::fit::simulation_errors;
@@ -75,8 +75,9 @@ pub(super) fn confirm(
     }
     let settings = &cx.settings;
     // The simulation RMS against the output noise level: both of the output, whatever noise
-    // path the model has.
-    let above_noise = |g: &Gap| g.rms > settings.gap.noise_ratio * noise.std;
+    // path the model has. Isolated spikes (outliers of the measurement) are left out: a gap
+    // they alone carry is not a missing effect.
+    let above_noise = |g: &Gap| g.bulk_rms(noise.std).0 > settings.gap.noise_ratio * noise.std;
     let real = above_noise(&cx.estimation_gap) || above_noise(&cx.validation_gap);
     // A hysteresis is found by its direction effect, not by what a static approximation of
     // it gains: at a sensor a static map closes almost none of a backlash's gap. At the input
@@ -280,11 +281,20 @@ fn unconfirmed(
             ),
         );
     }
+    let spikes = est_gap.bulk_rms(noise.std).1 + val_gap.bulk_rms(noise.std).1;
+    let outliers = if spikes > 0 {
+        format!(
+            " (without {spikes} isolated samples beyond {SPIKE}·σ̂ from their neighbours: \
+             outliers of the measurement, which no missing effect explains)"
+        )
+    } else {
+        String::new()
+    };
     (
         Verdict::NoMissingEffect,
         format!(
-            "no missing effect detected: the nominal model's gap is within the noise level but \
-             failed a test (estimation record: {}; validation record: {}), and the best \
+            "no missing effect detected: the nominal model's gap is within the noise level{outliers} \
+             but failed a test (estimation record: {}; validation record: {}), and the best \
              candidate block reduces the validation RMS by less than {:.0} % ({best}, RMS \
              {before} → {after})",
             est_gap.verdict,
