@@ -270,9 +270,10 @@ class Discovery:
     finding: Optional[Finding]
     linear_rival: Optional[Dict[str, Any]]
     """G alone re-estimated with one more mode, the linear model a finding must beat (None
-    when it was not fitted): ``num``, ``den``, ``validation_rms``, ``p_worse`` (the paired
-    test's p-value that the finding is worse than it; None without a finding) and
-    ``explains`` (it closes the gap: the verdict is ``linear-model``)."""
+    when it was not fitted): ``num``, ``den``, ``validation_rms``, ``p_worse`` (from the
+    paired test of the finding against it: the finding is better at α when ``1 − p_worse``
+    < α; None when there was no finding or it could not be tested) and ``explains`` (it
+    closes the gap: the verdict is ``linear-model``)."""
     seconds: float
     extra: Dict[str, Any]
 

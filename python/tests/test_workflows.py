@@ -149,14 +149,15 @@ def test_discover_matches_the_tool(cli, duffing):
     assert found.finding is not None
     assert found.finding.location == "output-feedback"
     assert found.verdict_kind == report["verdict_kind"] == "missing-effect"
-    # The linear rival is the tool's, and a finding that stands beats it or leaves it short.
+    # The linear rival is the tool's: G with one more mode, two more poles than the nominal.
     rival, tool_rival = found.linear_rival, report["linear_rival"]
-    if rival is None:
-        assert tool_rival is None
-    else:
-        np.testing.assert_allclose(rival["validation_rms"], tool_rival["validation_rms"],
+    assert rival is not None and tool_rival is not None
+    np.testing.assert_allclose(rival["validation_rms"], tool_rival["validation_rms"], rtol=1e-6)
+    np.testing.assert_allclose(rival["den"], tool_rival["g"]["den"], rtol=1e-9)
+    assert len(rival["den"]) == 5
+    if rival["p_worse"] is not None:
+        np.testing.assert_allclose(rival["p_worse"], tool_rival["comparison"]["p_worse"],
                                    rtol=1e-6)
-        assert rival["explains"] is False and tool_rival["explains"] is False
     tool = {h["location"]: h["validation_rms"] for h in report["hypotheses"]}
     mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
     assert tool.keys() == mine.keys()

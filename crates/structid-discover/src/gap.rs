@@ -111,8 +111,8 @@ pub struct Gap {
     pub simulated: Vec<f64>,
     /// RMS of the simulation residual y − ŷ.
     pub rms: f64,
-    /// The samples `rms` is taken over, as ranges into `residual` (all of them in a free run;
-    /// the scored part of each window when scored in windows).
+    /// The samples `rms` is taken over, as ranges into `residual` (those after the settling
+    /// samples in a free run; the scored part of each window when scored in windows).
     pub scored: Vec<Range<usize>>,
     /// RMS of the one-step prediction errors ε (equal to `rms` for an output-error model).
     pub prediction_rms: f64,
@@ -150,8 +150,10 @@ pub struct Gap {
 /// A residual sample whose departure from the mean of its two neighbours exceeds this many
 /// noise levels σ̂ is an isolated spike ([`Gap::bulk_rms`]). For white noise that second
 /// difference has standard deviation 1.22·σ̂, so an excursion beyond 6·σ̂ is a 4.9-sigma
-/// event, about one sample in a million; a model error seen through a dynamic G moves the
-/// residual smoothly from sample to sample and leaves none.
+/// event, about one sample in a million. A model error seen through a dynamic G moves the
+/// residual smoothly from sample to sample and leaves none; one that acts after G (a coarse
+/// sensor quantiser) can jump, and is only left out where it jumps alone, a single sample
+/// against both neighbours.
 pub const SPIKE: f64 = 6.0;
 
 impl Gap {
@@ -174,8 +176,9 @@ impl Gap {
 
     /// [`Gap::bulk_rms`] of a residual `residual` scored over `scored`.
     pub fn bulk_rms_of(residual: &[f64], scored: &[Range<usize>], noise_std: f64) -> (f64, usize) {
-        let departure = |k: usize| {
-            if k > 0 && k + 1 < residual.len() {
+        // Neighbours within the same scored range only: records and windows restart there.
+        let departure = |range: &Range<usize>, k: usize| {
+            if k > range.start && k + 1 < range.end.min(residual.len()) {
                 (residual[k] - 0.5 * (residual[k - 1] + residual[k + 1])).abs()
             } else {
                 0.0
@@ -183,15 +186,15 @@ impl Gap {
         };
         // An outlier's neighbours depart from their own neighbours by half of it: the spike
         // is the sample that departs most.
-        let spike = |k: usize| {
-            let d = departure(k);
+        let spike = |range: &Range<usize>, k: usize| {
+            let d = departure(range, k);
             d > SPIKE * noise_std
-                && d > departure(k.saturating_sub(1))
-                && d >= departure(k + 1)
+                && d > departure(range, k.saturating_sub(1))
+                && d >= departure(range, k + 1)
         };
         let (mut sum, mut n, mut spikes) = (0.0, 0usize, 0usize);
-        for k in scored.iter().flat_map(|r| r.clone()) {
-            if spike(k) {
+        for (range, k) in scored.iter().flat_map(|r| r.clone().map(move |k| (r, k))) {
+            if spike(range, k) {
                 spikes += 1;
             } else {
                 sum += residual[k] * residual[k];

@@ -677,7 +677,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
 
     if let Some(f) = &d.finding {
         finding_md(&mut s, d, r, f);
-    } else if d.missing_effect {
+    } else if !d.hypotheses.is_empty() && d.hypotheses.iter().all(|h| h.failure.is_some()) {
         let _ = writeln!(
             s,
             "No hypothesis could be identified and simulated, so no augmented model was written.\n"
@@ -720,10 +720,12 @@ fn linear_rival_md(s: &mut String, d: &Discovery) {
     let test = match &r.comparison {
         Some(c) => format!(
             "the finding against it, paired over {} blocks of the validation record: mean \
-             ln(MSE ratio) {:+.3}, p = {:.3}",
-            c.blocks, c.mean_log_ratio, c.p_worse
+             ln(MSE ratio) {:+.3}, p = {:.3} that the finding is better",
+            c.blocks,
+            c.mean_log_ratio,
+            1.0 - c.p_worse
         ),
-        None => "no finding to test against it".to_string(),
+        None => "no paired test (no finding, or one that cannot be tested against it)".to_string(),
     };
     let _ = writeln!(
         s,

@@ -142,15 +142,16 @@ fn line(case: &PhysicsCase, d: &Discovery) -> String {
             format!("{what} at {} (shrink {:.1}×)", f.location.name(), f.shrink)
         })
         .unwrap_or_else(|| "nothing".into());
-    // The rival G against the gap level 1.5·σ̂, and the paired test's p.
+    // The rival G against σ̂ (it closes the gap within 1.5·σ̂), and the paired test's p that
+    // the finding is better than it.
     let rival = d
         .linear_rival
         .as_ref()
         .map(|r| {
             format!(
-                " [G+mode RMS {:.2}·σ̂, p {:.3}]",
+                " [G+mode RMS {:.2}·σ̂, p better {:.3}]",
                 r.validation_rms / d.noise.std,
-                r.comparison.as_ref().map_or(f64::NAN, |c| c.p_worse)
+                r.comparison.as_ref().map_or(f64::NAN, |c| 1.0 - c.p_worse)
             )
         })
         .unwrap_or_default();

@@ -266,6 +266,17 @@ pub(super) fn simulate_linear(
     data: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Simulated> {
+    simulate_linear_as(g, data, settings, Location::Input)
+}
+
+/// [`simulate_linear`], with its initial state handled as a hypothesis at `location` handles
+/// it (from rest at the sensor and the rate), so that it competes with one on equal terms.
+pub(super) fn simulate_linear_as(
+    g: &PolynomialModel,
+    data: &Data,
+    settings: &DiscoverSettings,
+    location: Location,
+) -> Option<Simulated> {
     let h = Nominal::from_polynomial(g)
         .ok()?
         .hypothesis(
@@ -279,7 +290,7 @@ pub(super) fn simulate_linear(
         &h.model,
         &h.maps(&identity),
         &h.data(data).ok()?,
-        &scoring_settings(Location::Input, settings),
+        &scoring_settings(location, settings),
     )
     .ok()
     .filter(|v| v.rms.is_finite() && v.rms < limit)

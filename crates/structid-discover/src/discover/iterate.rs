@@ -95,8 +95,9 @@ pub enum StopReason {
     },
     /// [`EffectsSettings::max_effects`] steps were run.
     MaxEffects,
-    /// The last step's block is a gain: the linear model was wrong
-    /// ([`Verdict::LinearModel`]); G is to be re-estimated before looking further.
+    /// The linear model was wrong ([`Verdict::LinearModel`]: the last step's block is a gain,
+    /// or G with one more mode closes the gap); G is to be re-estimated before looking
+    /// further.
     LinearModel,
 }
 
@@ -121,8 +122,9 @@ impl StopReason {
                 100.0 * (1.0 - ratio),
                 100.0 * settings.min_improvement
             ),
-            StopReason::LinearModel => "the last step closed the gap with a gain, a change of \
-                                        G: re-estimate the linear model before looking further"
+            StopReason::LinearModel => "the linear model was wrong (the last step's block is a \
+                                        gain, or G with one more mode closes the gap): \
+                                        re-estimate it before looking further"
                 .into(),
             StopReason::MaxEffects => format!(
                 "{} effect(s) were looked for, the most allowed",

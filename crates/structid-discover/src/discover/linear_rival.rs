@@ -25,7 +25,9 @@ use structid_linear::{OeSettings, Orders, PolynomialModel, oe_records, output_er
 use crate::table::{BlockComparison, compare_blocks};
 
 use super::DiscoverSettings;
-use super::input_hysteresis::simulate_linear;
+use crate::hypotheses::Location;
+
+use super::input_hysteresis::{simulate_linear, simulate_linear_as};
 
 /// G re-estimated alone with one more mode, two more poles and zeros than the given G, by
 /// output error on the estimation record: the linear model a finding must beat. It explains
@@ -38,7 +40,8 @@ pub struct LinearRival {
     /// Its simulation RMS on the validation record, scored as every model of the workflow.
     pub validation_rms: f64,
     /// The paired test of the finding's validation errors against this G's (a: the finding,
-    /// b: this G), when there was a finding and the test could be made.
+    /// b: this G), when there was a finding and the test could be made; the finding is better
+    /// at α when `1 − p_worse` < α.
     pub comparison: Option<BlockComparison>,
     /// Whether this G closes the gap and the finding is not better than it at α: the linear
     /// model was wrong.
@@ -48,18 +51,24 @@ pub struct LinearRival {
 /// The extra poles (and zeros) of the rival: one mode.
 const EXTRA_ORDER: usize = 2;
 
-/// The rival G for the given polynomial `g`, fitted on `est` and scored on `val`; `None`
-/// when the fit fails or its simulation diverges.
+/// The rival G for the given polynomial `g`, fitted on `est` and scored on `val` as a
+/// hypothesis at `location` is (its initial state from rest at the sensor and the rate);
+/// `None` when the fit fails or its simulation diverges.
 pub(super) fn fit(
     g: &PolynomialModel,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
+    location: Location,
 ) -> Option<(PolynomialModel, Vec<f64>, f64)> {
     let b = g.num.first()?;
     let nk = b.iter().take_while(|v| **v == 0.0).count();
     let nb = b.len().saturating_sub(nk).max(1);
-    let orders = Orders::siso(g.den.len() - 1 + EXTRA_ORDER, nb + EXTRA_ORDER, nk);
+    let orders = Orders::siso(
+        g.den.len().saturating_sub(1) + EXTRA_ORDER,
+        nb + EXTRA_ORDER,
+        nk,
+    );
     let mut builder = OeSettings::builder().max_iterations(50);
     if let Some(ts) = g.sample_time {
         builder = builder.sample_time(ts);
@@ -83,7 +92,7 @@ pub(super) fn fit(
         .filter(|(rms, _)| rms.is_finite())
         .min_by(|a, b| a.0.total_cmp(&b.0))?
         .1;
-    let simulated = simulate_linear(&rival, val, settings)?;
+    let simulated = simulate_linear_as(&rival, val, settings, location)?;
     let errors = simulated.scored_residual();
     Some((rival, errors, simulated.rms))
 }
@@ -117,7 +126,8 @@ fn with_mode(g: &PolynomialModel, f: f64) -> Option<PolynomialModel> {
 }
 
 /// The rival's verdict on a finding whose augmented model leaves the validation errors
-/// `finding_errors` (`None`: no finding), with `gap_level` the RMS below which a model closes
+/// `finding_errors` (`None`: no finding; empty: a finding that cannot be tested against it,
+/// which the rival does not overrule), with `gap_level` the RMS below which a model closes
 /// the gap.
 pub(super) fn judge(
     (g, errors, validation_rms): (PolynomialModel, Vec<f64>, f64),
@@ -126,7 +136,13 @@ pub(super) fn judge(
     alpha: f64,
 ) -> LinearRival {
     let comparison = finding_errors.and_then(|f| compare_blocks(f, &errors));
-    let finding_better = comparison.as_ref().is_some_and(|c| c.better_at(alpha));
+    // A finding that could not be tested against the rival (its simulation failed, or too
+    // few blocks) is not overruled by it.
+    let finding_better = match (finding_errors, &comparison) {
+        (None, _) => false,
+        (Some(_), Some(c)) => c.better_at(alpha),
+        (Some(_), None) => true,
+    };
     LinearRival {
         g,
         validation_rms,
@@ -180,7 +196,7 @@ mod tests {
         let (est, val) = (record(&truth, 1), record(&truth, 2));
         let settings = DiscoverSettings::default();
         let nominal_rms = simulate_linear(&nominal(), &val, &settings).unwrap().rms;
-        let (g, errors, rms) = fit(&nominal(), &est, &val, &settings).unwrap();
+        let (g, errors, rms) = fit(&nominal(), &est, &val, &settings, Location::Input).unwrap();
         assert_eq!(g.den.len(), nominal().den.len() + EXTRA_ORDER);
         // Within the noise that was added, where the nominal model misses by many times it.
         assert!(rms < 1.2 * NOISE, "rival RMS {rms}");

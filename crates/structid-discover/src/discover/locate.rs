@@ -141,7 +141,8 @@ pub(super) fn first_finding(
     let position_vs_rate = fitted[chosen].result.location == Location::OutputFeedback
         && directions[chosen].as_ref().is_some_and(|d| d.dynamic);
     let Some(rate) = rate.filter(|&r| position_vs_rate && r != chosen) else {
-        return add_at(cx, fitted, chosen, direction_of(chosen));
+        let tv = total_variation_rms(fitted, chosen);
+        return cx.add(fitted.swap_remove(chosen), direction_of(chosen), tv);
     };
     let (tv_dynamic, tv_static) = (
         total_variation_rms(fitted, chosen),
@@ -185,7 +186,7 @@ pub(super) fn named_alternative(
     fitted: &mut Vec<Fitted>,
 ) -> Finding {
     if matches!(finding.classification, Classification::Named(_))
-        && finding.shrink >= super::MIN_CONFIRMING_SHRINK
+        && !(finding.shrink < super::MIN_CONFIRMING_SHRINK)
     {
         return finding;
     }

@@ -26,8 +26,8 @@
 //!    only by shrinking the validation gap [`PAST_DISTURBANCE_SHRINK`] times (otherwise the
 //!    verdict is "no missing effect", the gap being what the disturbance leaves). There are
 //!    four verdicts ([`Verdict`]): no missing effect, missing effect, the linear model was
-//!    wrong (the block that closes the gap is a gain), and a gap larger than the noise that no
-//!    candidate block closes.
+//!    wrong (the block that closes the gap is a gain, or G with one more mode closes it), and
+//!    a gap larger than the noise that no candidate block closes.
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
 //!    output G·u and the named states where the residual energy concentrates, e.g. `|u| > 0.8`).
@@ -120,9 +120,8 @@
 //!    `noise_ratio`·σ̂ and the finding (or, with no block confirmed, nothing) is not better
 //!    than it by the paired block test at α, the verdict is [`Verdict::LinearModel`].
 //!
-//! The search runs in stages, one module each: the gap ([`context`](self) builds what every
-//! later stage reads), the candidates, the location of the finding, G settled with it, and
-//! the verdict.
+//! The search runs in stages: the gap (which builds what every later stage reads), the
+//! candidates, the location of the finding, G settled with it, and the verdict.
 //!
 //! **Several effects.** The nominal model may already carry maps ([`Nominal::from_model`],
 //! e.g. the augmented model of an earlier run): they are simulated in every step, and kept
@@ -465,9 +464,9 @@ pub struct Discovery {
     pub hypotheses: Vec<HypothesisResult>,
     /// The effect found (when something is missing and a hypothesis could be identified).
     pub finding: Option<Finding>,
-    /// G alone re-estimated with one more mode, when the gap was larger than the noise or a
-    /// finding was confirmed around a polynomial G ([`LinearRival`]): the linear model a
-    /// finding must beat.
+    /// G alone re-estimated with one more mode ([`LinearRival`]), the linear model a finding
+    /// must beat: fitted around a polynomial G when a finding was confirmed, or when the
+    /// hypotheses left a gap larger than the noise unexplained.
     pub linear_rival: Option<LinearRival>,
     /// The verdict in one paragraph.
     pub verdict: String,

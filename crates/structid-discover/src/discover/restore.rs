@@ -189,8 +189,10 @@ pub(super) fn better(
     val: &Data,
     settings: &DiscoverSettings,
 ) -> Result<Discovery> {
-    let first_rms = match (&first.finding, first.verdict_kind) {
-        (Some(f), Verdict::MissingEffect) => f.augmented.validation_gap.rms,
+    let first_rms = match (&first.finding, first.verdict_kind, &first.linear_rival) {
+        (Some(f), Verdict::MissingEffect, _) => f.augmented.validation_gap.rms,
+        // G with one more mode closed the gap: that is what a second search must beat.
+        (None, Verdict::LinearModel, Some(r)) => r.validation_rms,
         _ => first.validation_gap.rms,
     };
     let Some(f) = second

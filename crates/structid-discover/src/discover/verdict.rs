@@ -107,13 +107,17 @@ pub(super) fn confirm(
             .then(|| rival(&cx, None, gap_level))
             .flatten();
         return match rival {
-            Some(r) if r.explains => linear_model(cx, r, None, hypotheses, noise),
-            _ => cx.discovery(kind, noise, hypotheses, None, verdict),
+            Some(r) if r.explains => linear_model(cx, r, None, hypotheses, noise, gap_level),
+            rival => {
+                let mut d = cx.discovery(kind, noise, hypotheses, None, verdict);
+                d.linear_rival = rival;
+                d
+            }
         };
     }
     let rival = rival(&cx, Some(&finding), gap_level);
     if let Some(r) = rival.clone().filter(|r| r.explains) {
-        return linear_model(cx, r, Some(&finding), hypotheses, noise);
+        return linear_model(cx, r, Some(&finding), hypotheses, noise, gap_level);
     }
     if let Some(c) = cx.cancelled.clone() {
         finding.remarks.push(c);
@@ -132,16 +136,26 @@ pub(super) fn confirm(
 }
 
 /// G alone re-estimated with one more mode, judged against the finding (see
-/// [`linear_rival`](super::linear_rival)); `None` for a nominal model without a polynomial G,
-/// or when the refit fails.
+/// [`linear_rival`](super::linear_rival)), its initial state handled as the finding's is;
+/// `None` for a nominal model without a polynomial G, or when the refit fails. A finding
+/// with a hysteresis at the input is that operator with its own G, which the augmented model's
+/// errors do not describe: it is not tested against the rival, and so not overruled.
 fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<LinearRival> {
     let g = cx.given.polynomial()?;
-    let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings)?;
-    let errors = finding.and_then(|f| {
+    let location = finding.map_or(crate::hypotheses::Location::Input, |f| f.location);
+    let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings, location)?;
+    let errors = finding.map(|f| {
+        if f.input_hysteresis.is_some() {
+            return Vec::new();
+        }
         let h = augmented_hypothesis(f, &cx.nominal);
-        let map = f.augmented.map.interpolant().ok()?;
-        let errors = simulation_errors(&h, map.as_ref(), &h.data(cx.val).ok()?, &cx.settings);
-        (!errors.is_empty()).then_some(errors)
+        let Ok(map) = f.augmented.map.interpolant() else {
+            return Vec::new();
+        };
+        h.data(cx.val).map_or_else(
+            |_| Vec::new(),
+            |data| simulation_errors(&h, map.as_ref(), &data, &cx.settings),
+        )
     });
     Some(linear_rival::judge(
         fitted,
@@ -158,35 +172,36 @@ fn linear_model(
     finding: Option<&Finding>,
     hypotheses: Vec<HypothesisResult>,
     noise: NoiseLevel,
+    gap_level: f64,
 ) -> Discovery {
+    // The rival overrules a finding only through the paired test (see `linear_rival::judge`).
     let block = match (finding, &rival.comparison) {
         (Some(f), Some(c)) => format!(
             ", and the best block ({} {}, validation RMS {}) is not better than it (paired test \
-             over {} blocks of the validation record: p = {:.3} at α = {})",
+             over {} blocks of the validation record: p = {:.3} that the block is better, at \
+             α = {})",
             f.classification.describe(),
             cx.nominal.describe(f.location),
             rms_text(f.augmented.validation_gap.rms),
             c.blocks,
-            c.p_worse,
+            1.0 - c.p_worse,
             cx.settings.significance
         ),
-        (Some(f), None) => format!(
-            ", as well as the best block ({} {}, validation RMS {})",
-            f.classification.describe(),
-            cx.nominal.describe(f.location),
-            rms_text(f.augmented.validation_gap.rms)
-        ),
-        (None, _) => String::new(),
+        _ => String::new(),
     };
     let verdict = format!(
         "{} (G lacks a mode, not a nonlinearity): G re-estimated alone with {} poles instead \
-         of {} validates at RMS {}, within the noise level ({} × σ̂ = {}; the nominal model: \
-         {}){block}. Re-estimate G with a higher order, then look for a missing effect again",
+         of {} validates at RMS {}, within the noise level ({}·σ̂ = {}, σ̂ = {}; the nominal \
+         model: {}){block}. Re-estimate G with a higher order, then look for a missing effect \
+         again",
         Verdict::LinearModel.describe(),
-        rival.g.den.len() - 1,
-        cx.given.polynomial().map_or(0, |g| g.den.len() - 1),
+        rival.g.den.len().saturating_sub(1),
+        cx.given
+            .polynomial()
+            .map_or(0, |g| g.den.len().saturating_sub(1)),
         rms_text(rival.validation_rms),
         cx.settings.gap.noise_ratio,
+        rms_text(gap_level),
         rms_text(noise.std),
         rms_text(cx.validation_gap.rms),
     );
