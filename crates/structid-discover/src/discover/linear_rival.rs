@@ -1,9 +1,8 @@
 //! G alone, re-estimated with one more mode: the linear model every finding must beat.
 //!
 //! A nominal G that lacks a mode (an unmodelled resonance) leaves a gap larger than the noise,
-//! and a block at some site imitates part of it: the residual of a lightly damped mode
-//! depends on the direction of motion, as a hysteresis' does. So before a gap is called a
-//! missing effect (or an unexplained one), G alone is re-estimated from the estimation record
+//! and a static block at some site imitates part of it. So before a gap is called a missing
+//! static effect (or an unexplained one), G alone is re-estimated from the estimation record
 //! by output error with two more poles and two more zeros than the given G (its poles all
 //! free: a near-integrator is a pole like any other here) and simulated on the validation
 //! record as every model is. Output error is not convex, so it starts from an ARX model of the
@@ -17,6 +16,10 @@
 //! better than it by the paired test of the validation errors over blocks at α
 //! ([`crate::table::compare_blocks`]). A nonlinearity leaves a gap that no linear model of any
 //! order closes, and a finding better than the rival at α stands whatever the rival leaves.
+//! A dynamic finding is not tested against it: its augmented model holds only the static
+//! approximation of a direction effect, whose errors do not describe it (a lightly damped mode
+//! can leave a residual that depends on the direction of motion, and such a case stays
+//! reported as dynamic).
 
 use structid_core::Data;
 use structid_linear::integrators::convolve;
