@@ -975,7 +975,7 @@ mod tests {
     fn a_smooth_model_error_has_no_spikes_and_outliers_are_the_spikes() {
         // A model error seen through G: large, but smooth from sample to sample.
         let smooth: Vec<f64> = (0..2000).map(|k| 20.0 * (0.05 * k as f64).sin()).collect();
-        let all = [0..2000];
+        let all: Vec<Range<usize>> = std::iter::once(0..2000).collect();
         let (bulk, spikes) = Gap::bulk_rms_of(&smooth, &all, 1.0);
         assert_eq!(spikes, 0);
         assert!((bulk - structid_core::metrics::rms(&smooth)).abs() < 1e-12);
@@ -994,7 +994,7 @@ mod tests {
         );
         assert!(structid_core::metrics::rms(&r) > 1.5 * clean);
         // Only the scored samples count.
-        let (_, scored_spikes) = Gap::bulk_rms_of(&r, &[0..1000], 1.0);
+        let (_, scored_spikes) = Gap::bulk_rms_of(&r, std::slice::from_ref(&(0..1000)), 1.0);
         assert_eq!(scored_spikes, 3);
     }
 

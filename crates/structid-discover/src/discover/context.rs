@@ -8,13 +8,11 @@ use structid_core::{Data, Error, InitialState, Result};
 
 use crate::gap::{Gap, GapSettings, gap};
 use crate::hypotheses::Nominal;
-use crate::hysteresis::DirectionTest;
 
-use super::fit::{Fitted, candidate_signals, check_records, resolve_scoring};
-use super::naming::name_and_add;
+use super::fit::{candidate_signals, check_records, resolve_scoring};
 use super::{
-    DiscoverSettings, Discovery, Finding, HypothesisResult, NoiseLevel, NominalRefinement,
-    PAST_DISTURBANCE_GAP, Verdict, cancelled_integrator, candidates, check_nominal, naming, noise,
+    DiscoverSettings, Discovery, Finding, HypothesisResult, NoiseLevel, PAST_DISTURBANCE_GAP,
+    Verdict, cancelled_integrator, candidates, check_nominal, naming, noise,
 };
 
 /// One search's nominal model, records and settings, and what the gap stage found.
@@ -168,34 +166,6 @@ impl<'a> Context<'a> {
             cancelled: self.cancelled.is_some(),
             gap_rms: self.validation_gap.rms,
         }
-    }
-
-    /// Names the estimate `best` and adds it to the nominal model (see
-    /// [`name_and_add`]); a hypothesis refined jointly with G records G before and after.
-    pub fn add(
-        &self,
-        best: Fitted,
-        direction: DirectionTest,
-        total_variation_rms: Option<f64>,
-    ) -> Result<Finding> {
-        let joint = best.linear.clone();
-        let mut finding = name_and_add(best, direction, total_variation_rms, self)?;
-        if let (Some(j), Some(g)) = (joint, self.given.polynomial()) {
-            // In the structure's form, as the refinement after naming records it.
-            let form = |g: &structid_linear::PolynomialModel| {
-                structid_core::refine::LinearStructure::new("N", finding.location)
-                    .and_then(|s| s.initial_from_bla(g))
-                    .unwrap_or_else(|_| g.clone())
-            };
-            finding.nominal_refinement = Some(NominalRefinement {
-                before: form(g),
-                after: form(&j.g),
-                validation_rms_before: j.nominal_validation_rms,
-                validation_rms_after: finding.hypothesis.validation_rms,
-                adopted: true,
-            });
-        }
-        Ok(finding)
     }
 
     /// The discovery this search ends with.

@@ -9,10 +9,11 @@ use crate::hysteresis::DirectionTest;
 use super::context::Context;
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation};
+use super::naming::name_and_add;
 use super::{
     ALTERNATIVE_FACTOR, ALTERNATIVE_LOCATIONS, Classification, DIRECTION_WITHIN, DiscoverSettings,
-    Finding, HYSTERESIS_OVER_STATIC, NoiseLevel, Result, SENSOR_HYSTERESIS_SHARE,
-    STATIC_OVER_DYNAMIC, input_hysteresis, rate_explains, rms_text,
+    Finding, HYSTERESIS_OVER_STATIC, NoiseLevel, NominalRefinement, Result,
+    SENSOR_HYSTERESIS_SHARE, STATIC_OVER_DYNAMIC, input_hysteresis, rate_explains, rms_text,
 };
 
 /// The direction test of every fit that explains the data about as well as the best
@@ -109,6 +110,34 @@ fn total_variation_rms(fitted: &[Fitted], i: usize) -> Option<f64> {
         .map(|f| f.result.validation_rms)
 }
 
+/// Names the estimate `best` and adds it to the nominal model (see
+/// [`name_and_add`]); a hypothesis refined jointly with G records G before and after.
+fn add(
+    cx: &Context<'_>,
+    best: Fitted,
+    direction: DirectionTest,
+    total_variation_rms: Option<f64>,
+) -> Result<Finding> {
+    let joint = best.linear.clone();
+    let mut finding = name_and_add(best, direction, total_variation_rms, cx)?;
+    if let (Some(j), Some(g)) = (joint, cx.given.polynomial()) {
+        // In the structure's form, as the refinement after naming records it.
+        let form = |g: &structid_linear::PolynomialModel| {
+            structid_core::refine::LinearStructure::new("N", finding.location)
+                .and_then(|s| s.initial_from_bla(g))
+                .unwrap_or_else(|_| g.clone())
+        };
+        finding.nominal_refinement = Some(NominalRefinement {
+            before: form(g),
+            after: form(&j.g),
+            validation_rms_before: j.nominal_validation_rms,
+            validation_rms_after: finding.hypothesis.validation_rms,
+            adopted: true,
+        });
+    }
+    Ok(finding)
+}
+
 /// Removes `fitted[i]` and names and adds it, with the direction test `direction`.
 fn add_at(
     cx: &Context<'_>,
@@ -117,7 +146,7 @@ fn add_at(
     direction: DirectionTest,
 ) -> Result<Finding> {
     let tv = total_variation_rms(fitted, i);
-    cx.add(fitted.remove(i), direction, tv)
+    add(cx, fitted.remove(i), direction, tv)
 }
 
 /// The finding from the chosen fit. A direction-dependent force seen from the position (a
@@ -142,7 +171,7 @@ pub(super) fn first_finding(
         && directions[chosen].as_ref().is_some_and(|d| d.dynamic);
     let Some(rate) = rate.filter(|&r| position_vs_rate && r != chosen) else {
         let tv = total_variation_rms(fitted, chosen);
-        return cx.add(fitted.swap_remove(chosen), direction_of(chosen), tv);
+        return add(cx, fitted.swap_remove(chosen), direction_of(chosen), tv);
     };
     let (tv_dynamic, tv_static) = (
         total_variation_rms(fitted, chosen),
@@ -157,8 +186,8 @@ pub(super) fn first_finding(
         let s = fitted.remove(rate);
         (fitted.remove(chosen), s)
     };
-    let dynamic_finding = cx.add(dynamic_fit, dir_dynamic, tv_dynamic)?;
-    Ok(match cx.add(static_fit, dir_static, tv_static) {
+    let dynamic_finding = add(cx, dynamic_fit, dir_dynamic, tv_dynamic)?;
+    Ok(match add(cx, static_fit, dir_static, tv_static) {
         Ok(f)
             if matches!(f.classification, Classification::Named(_))
                 && rate_explains(
@@ -186,7 +215,8 @@ pub(super) fn named_alternative(
     fitted: &mut Vec<Fitted>,
 ) -> Finding {
     if matches!(finding.classification, Classification::Named(_))
-        && !(finding.shrink < super::MIN_CONFIRMING_SHRINK)
+        // A NaN shrink is not "less than the confirming shrink", as the verdict reads it.
+        && (finding.shrink >= super::MIN_CONFIRMING_SHRINK || finding.shrink.is_nan())
     {
         return finding;
     }
