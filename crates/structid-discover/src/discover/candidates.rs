@@ -37,7 +37,23 @@ pub(super) struct Search<'a> {
     pub gap_rms: f64,
 }
 
-impl Search<'_> {
+impl<'a> Search<'a> {
+    /// The candidates stage's view of the search `cx`; with `uncertain_g` every location is
+    /// refined jointly with G.
+    pub fn of(cx: &'a super::context::Context<'a>, uncertain_g: bool) -> Self {
+        Search {
+            given: &cx.given,
+            nominal: &cx.nominal,
+            est: cx.est,
+            val: cx.val,
+            settings: &cx.settings,
+            input_noise: cx.input_noise,
+            uncertain_g,
+            cancelled: cx.cancelled.is_some(),
+            gap_rms: cx.validation_gap.rms,
+        }
+    }
+
     /// Every location's estimates, best validation RMS first, and the failures.
     pub fn candidates(&self) -> (Vec<Fitted>, Vec<HypothesisResult>) {
         let locations = self

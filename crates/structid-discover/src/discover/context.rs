@@ -9,10 +9,10 @@ use structid_core::{Data, Error, InitialState, Result};
 use crate::gap::{Gap, GapSettings, gap};
 use crate::hypotheses::Nominal;
 
-use super::fit::{candidate_signals, check_records, resolve_scoring};
+use super::fit::{candidate_signals, resolve_scoring};
 use super::{
     DiscoverSettings, Discovery, Finding, HypothesisResult, NoiseLevel, PAST_DISTURBANCE_GAP,
-    Verdict, cancelled_integrator, candidates, check_nominal, naming, noise,
+    Verdict, cancelled_integrator, check_nominal, noise,
 };
 
 /// One search's nominal model, records and settings, and what the gap stage found.
@@ -46,17 +46,16 @@ pub(super) struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    /// The gap stage, and the noise level the nominal model's residuals give.
+    /// The gap stage around `given` (the nominal model with its known maps recovered as
+    /// families), on records already checked, and the noise level the nominal model's
+    /// residuals give; `started` is when the search began.
     pub fn new(
-        nominal: &Nominal,
+        given: Nominal,
         est: &'a Data,
         val: &'a Data,
         settings: &DiscoverSettings,
+        started: Instant,
     ) -> Result<(Self, NoiseLevel)> {
-        let started = Instant::now();
-        check_records(est, val)?;
-        // Known maps given as functions: the families they are exactly, for the joint refit.
-        let given = naming::recover_families(nominal, est, settings)?.unwrap_or(nominal.clone());
         let scoring = resolve_scoring(&given, est, settings)?;
         let settings = DiscoverSettings {
             scoring: Some(scoring),
@@ -151,21 +150,6 @@ impl<'a> Context<'a> {
             started,
         };
         Ok((context, noise))
-    }
-
-    /// The candidates stage's view of this search.
-    pub fn search(&self, uncertain_g: bool) -> candidates::Search<'_> {
-        candidates::Search {
-            given: &self.given,
-            nominal: &self.nominal,
-            est: self.est,
-            val: self.val,
-            settings: &self.settings,
-            input_noise: self.input_noise,
-            uncertain_g,
-            cancelled: self.cancelled.is_some(),
-            gap_rms: self.validation_gap.rms,
-        }
     }
 
     /// The discovery this search ends with.

@@ -572,12 +572,16 @@ fn discover_once(
     second_pass: bool,
     uncertain_g: bool,
 ) -> Result<Discovery> {
-    let (cx, mut noise) = Context::new(nominal, est, val, settings)?;
+    let started = Instant::now();
+    fit::check_records(est, val)?;
+    // Known maps given as functions: the families they are exactly, for the joint refit.
+    let given = naming::recover_families(nominal, est, settings)?.unwrap_or(nominal.clone());
+    let (cx, mut noise) = Context::new(given, est, val, settings, started)?;
     if !cx.missing_effect && !cx.past_disturbance {
         let text = verdict::no_missing_effect(&cx);
         return Ok(cx.discovery(Verdict::NoMissingEffect, noise, Vec::new(), None, text));
     }
-    let (mut fitted, failed) = cx.search(uncertain_g).candidates();
+    let (mut fitted, failed) = candidates::Search::of(&cx, uncertain_g).candidates();
     tighten_by_fits(&mut noise, &fitted, &cx);
     let mut hypotheses: Vec<HypothesisResult> = fitted.iter().map(|f| f.result.clone()).collect();
     hypotheses.extend(failed);
