@@ -465,8 +465,8 @@ pub struct Discovery {
     /// The effect found (when something is missing and a hypothesis could be identified).
     pub finding: Option<Finding>,
     /// G alone re-estimated with one more mode ([`LinearRival`]), the linear model a finding
-    /// must beat: fitted around a polynomial G when a finding was confirmed, or when the
-    /// hypotheses left a gap larger than the noise unexplained.
+    /// must beat: fitted around a polynomial G when a static finding other than a gain was
+    /// confirmed, or when the hypotheses left a gap larger than the noise unexplained.
     pub linear_rival: Option<LinearRival>,
     /// The verdict in one paragraph.
     pub verdict: String,

@@ -137,23 +137,25 @@ pub(super) fn confirm(
 
 /// G alone re-estimated with one more mode, judged against the finding (see
 /// [`linear_rival`](super::linear_rival)), its initial state handled as the finding's is;
-/// `None` for a nominal model without a polynomial G, or when the refit fails.
-///
-/// Two findings are not tested against the rival, and so not overruled by it: a dynamic one
-/// (a hysteresis at the input, or a direction effect), whose augmented model holds only a
-/// static approximation whose errors do not describe it; and a gain, itself the linear
-/// model's correction (its verdict already says the linear model was wrong).
+/// `None` for a nominal model without a polynomial G, when the refit fails, or for a finding
+/// the rival could not overrule, where it is not fitted at all: a dynamic one (a hysteresis
+/// at the input, or a direction effect), whose augmented model holds only a static
+/// approximation whose errors do not describe it; and a gain, itself the linear model's
+/// correction (its verdict already says the linear model was wrong).
 fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<LinearRival> {
     use crate::hypotheses::Location;
+    let exempt = |f: &Finding| {
+        let gain = matches!(&f.classification,
+            Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
+        f.input_hysteresis.is_some() || gain || f.classification == Classification::Dynamic
+    };
+    if finding.is_some_and(exempt) {
+        return None;
+    }
     let g = cx.given.polynomial()?;
     let location = finding.map_or(Location::Input, |f| f.location);
     let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings, location)?;
     let errors = finding.map(|f| {
-        let gain = matches!(&f.classification,
-            Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
-        if f.input_hysteresis.is_some() || gain || f.classification == Classification::Dynamic {
-            return Vec::new();
-        }
         let h = augmented_hypothesis(f, &cx.nominal);
         let Ok(map) = f.augmented.map.interpolant() else {
             return Vec::new();
