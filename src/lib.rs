@@ -10,7 +10,8 @@
 //! * the core (re-exported at the top level) — the LFT model, measurability, dispersions and
 //!   kernels, [`identify()`], simulation with maps in the loop;
 //! * [`io`] — model files (TOML), data files (CSV), reports and atomic output;
-//! * [`plot`] — SVG figures;
+//! * `plot` — SVG figures (the default feature `plot`; leave it out with
+//!   `default-features = false` to build without plotters);
 //! * [`linear`] — estimating the linear part: ARX, output error, order selection, periodic BLA;
 //! * [`discover`] — the discovery workflow: what a nominal model is missing, where, and which effect;
 //! * [`nalgebra`] and [`faer`] — the versions the public types use, so that a program needs only
@@ -65,6 +66,8 @@ pub use structid_io as io;
 pub use structid_joint as joint;
 pub use structid_linear as linear;
 pub use structid_lti as lti;
+/// SVG figures: charts, grids of charts and heat maps (feature `plot`, on by default).
+#[cfg(feature = "plot")]
 pub use structid_plot as plot;
 /// The workflows under the command-line tool and Python, as typed requests and results.
 pub use structid_workflow as workflow;
