@@ -287,7 +287,8 @@ pub fn discover_columns<'py>(
 
 /// The discovery workflow on the Silverbox benchmark file `SNLS80mV.csv`: the BLA of
 /// `order` on the first part of the estimation split, discovery with the rest as validation,
-/// and the test splits simulated with the BLA and the augmented model.
+/// and the test splits simulated with the BLA and the augmented model
+/// ([`structid_workflow::discover_from_linear_start`]).
 #[pyfunction]
 #[pyo3(signature = (path, order=2, validation_fraction=0.2))]
 pub fn silverbox_discovery<'py>(
@@ -296,26 +297,22 @@ pub fn silverbox_discovery<'py>(
     order: usize,
     validation_fraction: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, parts, run};
-    if !(validation_fraction > 0.0 && validation_fraction < 1.0) {
-        return Err(invalid(format!(
-            "validation_fraction {validation_fraction} must lie strictly between 0 and 1"
-        )));
-    }
-    let settings = SilverboxDiscoverySettings {
-        order,
-        validation_fraction,
-        ..SilverboxDiscoverySettings::default()
-    };
-    let (r, fit) = py.detach(move || {
-        let sb = structid_io::Silverbox::load(&path).map_err(error)?;
-        let r = run(&sb, &settings).map_err(error)?;
-        let (fit, _) = parts(&sb, settings.validation_fraction).map_err(error)?;
-        Ok::<_, PyErr>((Arc::new(r), fit))
+    use structid_io::{Silverbox, SilverboxSplit};
+    use structid_workflow::{LinearStartRequest, discover_from_linear_start};
+    let r = py.detach(move || {
+        let sb = Silverbox::load(&path).map_err(error)?;
+        let est = sb.split(SilverboxSplit::Estimation).data().map_err(error)?;
+        let tests = SilverboxSplit::TESTS.map(|s| sb.split(s));
+        let request = LinearStartRequest {
+            order,
+            validation_fraction,
+            sample_time: sb.sample_time,
+            ..LinearStartRequest::default()
+        };
+        discover_from_linear_start(&est, &tests, &request).map_err(error)
     })?;
-    let nominal = Nominal::from_polynomial(&r.bla).map_err(error)?;
-    let settings = SilverboxDiscoverySettings::default().discover;
-    let out = discovery_dict(py, &r.discovery, &nominal, None, &settings, &fit)?;
+    let settings = LinearStartRequest::default().discover;
+    let out = discovery_dict(py, &r.discovery, &r.nominal, None, &settings, &r.fit)?;
     out.set_item("bla_num", r.bla.num.clone())?;
     out.set_item("bla_den", r.bla.den.clone())?;
     let tests = r
@@ -323,7 +320,7 @@ pub fn silverbox_discovery<'py>(
         .iter()
         .map(|t| {
             let x = PyDict::new(py);
-            x.set_item("split", &t.split)?;
+            x.set_item("split", &t.record)?;
             x.set_item("bla_rms", t.bla_rms)?;
             x.set_item("augmented_rms", t.augmented_rms)?;
             x.set_item("measured", convert::vector(py, t.measured.clone()))?;

@@ -4,13 +4,13 @@
 use std::sync::Arc;
 
 use structid_core::hyperparameters::{Criterion, SelectionSettings};
-use structid_core::refine::{RefineSettings, output_error_with_state};
+use structid_core::refine::RefineSettings;
 use structid_core::{
     Data, Dispersion, Error, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
     PolynomialDispersion, Result, SumDispersion,
 };
 use structid_io::IoError;
-use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx};
+use structid_linear::{OeSettings, PolynomialModel};
 
 pub(crate) fn io(e: IoError) -> Error {
     Error::InvalidStructure(e.to_string())
@@ -93,21 +93,5 @@ pub(crate) fn refine_settings(
 
 /// The BLA of order n (na = nb = n, nk = 1): ARX, then output error with a free initial state.
 pub(crate) fn bla(data: &Data, order: usize, sample_time: f64) -> Result<PolynomialModel> {
-    let arx_settings = ArxSettings::builder()
-        .sample_time(sample_time)
-        .build()
-        .map_err(linear)?;
-    let start = arx(
-        data.u(),
-        data.y(),
-        &Orders::siso(order, order, 1),
-        &arx_settings,
-    )
-    .map_err(linear)?
-    .model;
-    let oe = OeSettings::builder()
-        .sample_time(sample_time)
-        .build()
-        .map_err(linear)?;
-    Ok(output_error_with_state(data.u(), data.y(), &start, &oe, true)?.model)
+    structid_core::refine::best_linear_approximation(data, order, sample_time)
 }

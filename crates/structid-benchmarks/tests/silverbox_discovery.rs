@@ -42,7 +42,7 @@ fn discover_names_a_cubic_stiffness_in_feedback_from_y_and_shrinks_the_arrow_err
     let arrow = r
         .tests
         .iter()
-        .find(|t| t.split == "test-arrow-full")
+        .find(|t| t.record == "silverbox-test-arrow-full")
         .unwrap();
     eprintln!(
         "arrow: BLA {:.3} mV, augmented {:.3} mV; discover {:.1} s",

@@ -127,6 +127,41 @@ pub fn output_error_with_state(
     oe_fit(&[(inputs, y)], g, settings, free_initial_state, 0)
 }
 
+/// The best linear approximation of order n from `data` (one input, one output): na = nb = n
+/// with one sample of delay, fitted by ARX and then by output error with a free initial state
+/// ([`output_error_with_state`]), so that the criterion is the simulation error.
+///
+/// ```
+/// use structid_core::{Data, refine::best_linear_approximation};
+/// use structid_linear::PolynomialModel;
+/// use structid_lti::Signal;
+/// let g = PolynomialModel { num: vec![vec![0.0, 0.5, 0.2]], den: vec![1.0, -1.2, 0.5], sample_time: None };
+/// let u = Signal::from_fn(400, 1, |k, _| ((k * k) as f64 * 0.37).sin());
+/// let y = Signal::new(1, g.simulate(&u)?)?;
+/// let bla = best_linear_approximation(&Data::new(u, y)?, 2, 1.0)?;
+/// assert!((bla.den[1] + 1.2).abs() < 1e-6 && (bla.num[0][1] - 0.5).abs() < 1e-6);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn best_linear_approximation(
+    data: &Data,
+    order: usize,
+    sample_time: f64,
+) -> Result<PolynomialModel> {
+    let arx_settings = structid_linear::ArxSettings::builder()
+        .sample_time(sample_time)
+        .build()
+        .map_err(linear_error)?;
+    let orders = structid_linear::Orders::siso(order, order, 1);
+    let start = structid_linear::arx(data.u(), data.y(), &orders, &arx_settings)
+        .map_err(linear_error)?
+        .model;
+    let oe = OeSettings::builder()
+        .sample_time(sample_time)
+        .build()
+        .map_err(linear_error)?;
+    Ok(output_error_with_state(data.u(), data.y(), &start, &oe, true)?.model)
+}
+
 /// [`output_error_with_state`] with `integrators` poles of `g` held at z = 1.
 ///
 /// G = B/(F′·(1 − q⁻¹)ⁿ) applied to v is B/F′ applied to ṽ = v/(1 − q⁻¹)ⁿ (v summed n times

@@ -163,6 +163,13 @@ impl SilverboxSplit {
         Self::TestMultisine,
     ];
 
+    /// The three test splits (every split but the estimation one).
+    pub const TESTS: [Self; 3] = [
+        Self::TestArrowFull,
+        Self::TestArrowNoExtrapolation,
+        Self::TestMultisine,
+    ];
+
     /// The text name: `estimation`, `test-arrow-full`, `test-arrow-no-extrapolation` or
     /// `test-multisine`.
     pub fn name(self) -> &'static str {

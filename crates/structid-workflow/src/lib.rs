@@ -9,11 +9,13 @@
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`] | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
+//! | [`linear_start`] | discovery from a record alone: the best linear approximation as the nominal model, [`structid_discover`]'s search for what it is missing, and test records scored with both (the Silverbox discovery in Python) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
 pub mod error;
 pub mod free;
 pub mod joint;
+pub mod linear_start;
 pub mod simulation_score;
 pub mod wiener_hammerstein;
 
@@ -22,6 +24,10 @@ pub use free::parse_free;
 pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
+};
+pub use linear_start::{
+    LinearStartDiscovery, LinearStartRequest, TestScore, discover_from_linear_start,
+    split_for_validation,
 };
 pub use simulation_score::{SimulationScore, score_simulation, why_simulation_only};
 pub use wiener_hammerstein::{
