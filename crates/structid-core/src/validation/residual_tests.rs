@@ -76,7 +76,9 @@ impl CorrelationTest {
     /// Whether the portmanteau statistic stays below its 1 % critical value: the residual shows
     /// no correlation over the tested lags taken together.
     pub fn passes(&self) -> bool {
-        !(self.statistic > self.critical)
+        // Not "statistic ≤ critical": a statistic that could not be computed (NaN) is no
+        // evidence of correlation.
+        self.statistic.partial_cmp(&self.critical) != Some(std::cmp::Ordering::Greater)
     }
 }
 
