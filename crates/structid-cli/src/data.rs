@@ -37,11 +37,11 @@ pub fn read_table(path: &Path) -> Result<DataTable, IoError> {
 pub fn read_record(
     mf: &ModelFile,
     path: &Path,
-) -> Result<structid_discover::report::Record, IoError> {
+) -> Result<structid_workflow::discover_report::Record, IoError> {
     let table = read_table(path)?;
     let data = mf.select_data(&table)?;
-    let time = structid_discover::report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
-    Ok(structid_discover::report::Record {
+    let time = structid_workflow::discover_report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
+    Ok(structid_workflow::discover_report::Record {
         path: path.to_path_buf(),
         paths: vec![path.to_path_buf()],
         table,

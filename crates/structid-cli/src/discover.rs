@@ -17,7 +17,7 @@ use structid_discover::discover::{
 use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Location, Nominal};
 use structid_discover::localise::binned_residual;
-use structid_discover::report::{self, Record, ReportContext, TimeAxis};
+use structid_workflow::discover_report::{self as report, Record, ReportContext, TimeAxis};
 use structid_io::{ModelFile, OutputGuard, estimate_json};
 use structid_plot::{Chart, Series, decimate_min_max, render_chart_svg, render_grid_svg};
 

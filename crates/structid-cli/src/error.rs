@@ -15,6 +15,9 @@ pub struct CliError {
     code: u8,
     context: Option<String>,
     error: Box<dyn std::error::Error + Send + Sync + 'static>,
+    /// The command that does what the failed one could not (the library's errors name no
+    /// commands; the tool words them here).
+    hint: Option<&'static str>,
 }
 
 #[derive(Debug)]
@@ -34,6 +37,7 @@ impl CliError {
         Self {
             code: EXIT_INPUT,
             context: None,
+            hint: None,
             error: Box::new(Message(message.into())),
         }
     }
@@ -43,6 +47,7 @@ impl CliError {
         Self {
             code: EXIT_RUNTIME,
             context: None,
+            hint: None,
             error: Box::new(Message(message.into())),
         }
     }
@@ -68,7 +73,11 @@ impl fmt::Display for CliError {
         if let Some(c) = &self.context {
             write!(f, "{c}: ")?;
         }
-        write!(f, "{}", ErrorChain(self.error.as_ref()))
+        write!(f, "{}", ErrorChain(self.error.as_ref()))?;
+        match self.hint {
+            Some(h) => write!(f, "\nhint: {h}"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -81,6 +90,10 @@ impl From<IoError> for CliError {
                 EXIT_RUNTIME
             },
             context: None,
+            hint: match &e {
+                IoError::Core(c) => hint(c),
+                _ => None,
+            },
             error: Box::new(e),
         }
     }
@@ -96,15 +109,32 @@ impl From<structid_workflow::WorkflowError> for CliError {
             other => Self {
                 code: EXIT_RUNTIME,
                 context: None,
+                hint: None,
                 error: Box::new(other),
             },
         }
     }
 }
 
+/// The command to try after a library error, when there is one.
+fn hint(e: &structid_core::Error) -> Option<&'static str> {
+    use structid_core::Error as E;
+    match e {
+        E::PoorNominal { .. } => Some(
+            "estimate a nominal model from the data with `structid linear` (`--integrators N` \
+             for a plant that integrates)",
+        ),
+        E::NotMeasurable { .. } => Some(
+            "`structid refine --joint` fits maps in series and latent blocks by simulation error",
+        ),
+        _ => None,
+    }
+}
+
 impl From<structid_core::Error> for CliError {
     fn from(e: structid_core::Error) -> Self {
         Self {
+            hint: hint(&e),
             code: if structid_io::core_is_input_error(&e) {
                 EXIT_INPUT
             } else {
@@ -123,6 +153,7 @@ impl From<structid_linear::LinearError> for CliError {
         Self {
             code: EXIT_INPUT,
             context: Some("linear estimation".into()),
+            hint: None,
             error: Box::new(e),
         }
     }
@@ -133,6 +164,7 @@ impl From<structid_plot::PlotError> for CliError {
         Self {
             code: EXIT_RUNTIME,
             context: Some("cannot draw a figure".into()),
+            hint: None,
             error: Box::new(e),
         }
     }

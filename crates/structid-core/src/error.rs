@@ -227,8 +227,8 @@ pub enum Error {
     /// is infinite for a simulation that diverged.
     #[error(
         "the nominal model is not usable on the {record} record: {}; check its units, its \
-         sign, its input delay and any offset in the data, or estimate one (`structid linear`, \
-         with `--integrators` for a plant that integrates)",
+         sign, its input delay and any offset in the data, or estimate a linear model from the \
+         data (output error, with integrators held for a plant that integrates)",
         poor_nominal_text(*.model_rms, *.constant_rms, .scoring)
     )]
     PoorNominal {

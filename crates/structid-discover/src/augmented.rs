@@ -354,7 +354,7 @@ pub fn header(
         .first()
         .map_or(BLOCK, |b| b.name.as_str());
     format!(
-        "# Written by `structid discover`: the nominal model `{}` with the block `{block}` {}.\n\
+        "# Written by discovery: the nominal model `{}` with the block `{block}` {}.\n\
          # Missing effect: {what}; validation RMS {:.6e} (nominal {:.6e}).\n\
          # `{block}`'s truth is the map found; its dispersion is the one discovery identified it with.\n\
          # See {} for the report and how to reproduce it.\n",

@@ -33,7 +33,6 @@
 //!   direction test;
 //! * [`augmented`]: the augmented model of a finding as a model file and as a stored
 //!   estimate;
-//! * [`report`]: the reports of a discovery (Markdown, JSON and the printed summary);
 //! * [`records`]: several records (experiments): each step runs record by record and pools;
 //!
 //! ```
@@ -56,7 +55,7 @@ pub mod hysteresis;
 pub mod known;
 pub mod localise;
 pub mod records;
-pub mod report;
+
 pub mod staticness;
 pub mod table;
 

@@ -174,7 +174,7 @@ impl ReportRecord {
                 |p| format!("`{}`", p.display()),
             );
             IoError::InvalidArgument(format!(
-                "{name} is not a report.json written by `structid identify`: {e}"
+                "{name} is not the report.json of an identification: {e}"
             ))
         })
     }

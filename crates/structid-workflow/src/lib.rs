@@ -10,8 +10,10 @@
 //! | [`wiener_hammerstein`] | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
 //! | [`linear_start`] | discovery from a record alone: the best linear approximation as the nominal model, [`structid_discover`]'s search for what it is missing, and test records scored with both (the Silverbox discovery in Python) |
+//! | [`discover_report`] | the reports of a discovery: report.md, report.json and the summary `structid discover` prints (the presentation of [`structid_discover`]'s results, which carry data only) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
+pub mod discover_report;
 pub mod error;
 pub mod free;
 pub mod joint;

@@ -144,8 +144,8 @@ impl Lft {
         Err(Error::NotMeasurable {
             explanation: format!(
                 "{}. Identification by the dispersion criterion needs every block's input computable \
-                 from u and y; the joint fit by simulation error takes maps in series and latent blocks \
-                 (`structid refine --joint`, Python's `structid.refine_joint`)",
+                 from u and y; the joint fit by simulation error (`structid_joint`) takes maps in \
+                 series and latent blocks",
                 why.join("; ")
             ),
         })

@@ -123,9 +123,8 @@ pub(super) fn resolve_scoring(
         return Err(Error::InvalidStructure(format!(
             "the nominal model is unstable (spectral radius {radius:.6} > 1): its simulation \
              diverges even over a short window, so its gap to the data means nothing. If the \
-             plant integrates (a position from a force), fix the integrators at 1 \
-             (`structid linear --integrators 1`); otherwise re-estimate it (e.g. `structid \
-             linear --method oe`)"
+             plant integrates (a position from a force), estimate it with its integrators held \
+             at z = 1; otherwise re-estimate it by output error"
         )));
     }
     if let Some(s) = settings.scoring {

@@ -1071,8 +1071,8 @@ mod tests {
         for part in [
             "worse",
             "constant",
-            "structid linear",
-            "--integrators",
+            "linear model",
+            "integrators",
             "units",
         ] {
             assert!(text.contains(part), "{part}: {text}");

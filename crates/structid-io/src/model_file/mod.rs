@@ -396,7 +396,7 @@ impl ModelFile {
                     return Err(err_at(
                         src.line(d.span().start),
                         format!(
-                            "[discover] describes a nominal model for `structid discover`, but the \
+                            "[discover] describes a nominal model for discovery, but the \
                              file has {} (the first at line {first}); remove [discover] or the blocks",
                             plural(blocks.len(), "[[nonlinearity]] block")
                         ),
@@ -412,7 +412,7 @@ impl ModelFile {
         let nominal = blocks.is_empty() && linear.is_none();
         if !nominal && let Some(c) = owner.iter().position(Option::is_none) {
             let unused = if linear.is_none() {
-                "; unused w columns (injection points declared for `structid discover`, see \
+                "; unused w columns (injection points declared for discovery, see \
                  [discover]) are only allowed in a nominal model without [[nonlinearity]] blocks"
             } else {
                 ""
