@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use structid::hyperparameters::{SelectionSettings, select};
+use structid::selection::{SelectionSettings, select};
 use structid::{
     FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, SolverChoice, identify,
     paper, scenarios,

@@ -21,9 +21,9 @@ use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use nalgebra::DMatrix;
-use structid::hyperparameters::{Criterion as Cv, SelectionSettings, select};
 use structid::paper::{Experiment, gaussian_noise};
 use structid::scenarios::{Excitation, hammerstein_map, mixed_hammerstein};
+use structid::selection::{Criterion as Cv, SelectionSettings, select};
 use structid::{
     Dispersion, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, Lft,
     LftMatrices, Model, NonlinearBlock, SolverChoice, TotalVariation, identify,

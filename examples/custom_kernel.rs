@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use structid::metrics::rms_difference;
+use structid::validation::metrics::rms_difference;
 use structid::{IdentifySettings, Kernel, KernelDispersion, identify, scenarios};
 
 /// k(a, b) = (1 + √3·d/ℓ)·exp(−√3·d/ℓ), d = ‖a − b‖.

@@ -8,7 +8,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid::metrics::rms_difference;
+use structid::validation::metrics::rms_difference;
 use structid::{
     FourierDispersion, FourierWeights, IdentifySettings, SolverChoice, identify, scenarios,
 };

@@ -9,9 +9,9 @@
 
 use std::sync::Arc;
 
-use structid::metrics::rms_difference;
 use structid::paper::{multi_input, multi_input_map};
 use structid::plot::{HeatMap, render_heatmaps_svg};
+use structid::validation::metrics::rms_difference;
 use structid::{IdentifySettings, KernelDispersion, identify};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -33,7 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "multi-input example, L = {len}: RMS map error at the data {:.4} (map RMS {:.4}), J = {:.4}, {:.2} s",
         rms_difference(&block.w_hat, &truth),
-        structid::metrics::rms(&truth),
+        structid::validation::metrics::rms(&truth),
         id.cost.total,
         id.diagnostics.timings.total
     );

@@ -9,9 +9,9 @@
 
 use std::sync::Arc;
 
-use structid::metrics::centred_rms_difference;
 use structid::paper::{spray, spray_f, spray_g};
 use structid::plot::{Chart, Series, render_grid_svg};
+use structid::validation::metrics::centred_rms_difference;
 use structid::{IdentifySettings, KernelDispersion, identify};
 
 fn centred(v: &[f64]) -> Vec<f64> {

@@ -9,8 +9,8 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid::metrics::rms_difference;
 use structid::scenarios::{Excitation, hammerstein_map};
+use structid::validation::metrics::rms_difference;
 use structid::{IdentifySettings, SolverChoice, TotalVariation, identify};
 
 fn main() {
@@ -57,7 +57,7 @@ fn main() {
         .unwrap();
         let t = Instant::now();
         if args.iter().any(|a| a == "cv") {
-            use structid::hyperparameters::{Criterion, SelectionSettings, select};
+            use structid::selection::{Criterion, SelectionSettings, select};
             let how = SelectionSettings::builder()
                 .criterion(Criterion::CrossValidation { folds: 5 })
                 .build()

@@ -22,7 +22,10 @@ fn tree(extra: &[&str]) -> String {
 #[test]
 fn plotting_is_optional() {
     let full = tree(&[]);
-    assert!(full.contains("plotters"), "the default build has the figures");
+    assert!(
+        full.contains("plotters"),
+        "the default build has the figures"
+    );
     let lean = tree(&["--no-default-features"]);
     assert!(!lean.contains("plotters"), "{lean}");
     assert!(!lean.contains("structid-plot"), "{lean}");

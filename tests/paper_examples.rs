@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
-use structid::metrics::{centred_rms_difference, rms, rms_difference};
 use structid::paper::{multi_input, multi_input_map, spray, spray_f, spray_g};
+use structid::validation::metrics::{centred_rms_difference, rms, rms_difference};
 use structid::{IdentifySettings, KernelDispersion, identify};
 
 /// Centred RMS errors of f̂ and ĝ at the data points (f and g share an unidentifiable constant).

@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use structid::metrics::rms_difference;
+use structid::validation::metrics::rms_difference;
 use structid::{
     FourierDispersion, FourierWeights, IdentifySettings, SolverChoice, identify, scenarios,
 };

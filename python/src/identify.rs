@@ -6,7 +6,7 @@ use std::sync::Arc;
 use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::selection::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
 use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal, identify};

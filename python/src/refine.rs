@@ -5,7 +5,7 @@ use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::estimate::{Estimate, Provenance, SignalNames};
-use structid_core::hyperparameters::{Criterion, SelectionSettings};
+use structid_core::selection::{Criterion, SelectionSettings};
 use structid_core::refine::{RefineSettings, refine};
 use structid_core::{Data, IdentifySettings};
 use structid_io::{ModelFile, RefinementReport, Report};

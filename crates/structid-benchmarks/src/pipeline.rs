@@ -3,8 +3,8 @@
 
 use std::sync::Arc;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::RefineSettings;
+use structid_core::selection::{Criterion, SelectionSettings};
 use structid_core::{
     Data, Dispersion, Error, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
     PolynomialDispersion, Result, SumDispersion,

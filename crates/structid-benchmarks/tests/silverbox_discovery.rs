@@ -11,7 +11,7 @@ use structid::io::Silverbox;
 use structid_benchmarks::silverbox_discovery::{SilverboxDiscoverySettings, run};
 use structid_discover::Effect;
 use structid_discover::discover::Classification;
-use structid_discover::hypotheses::Location;
+use structid_discover::hypotheses::Site;
 
 #[test]
 fn discover_names_a_cubic_stiffness_in_feedback_from_y_and_shrinks_the_arrow_error_fivefold() {
@@ -23,7 +23,7 @@ fn discover_names_a_cubic_stiffness_in_feedback_from_y_and_shrinks_the_arrow_err
     eprintln!("{}", r.discovery.verdict);
     assert!(r.discovery.missing_effect, "the BLA's gap must be detected");
     let f = r.discovery.finding.as_ref().expect("an effect is found");
-    assert_eq!(f.location, Location::OutputFeedback);
+    assert_eq!(f.location, Site::OutputFeedback);
     match &f.classification {
         Classification::Named(fit) if fit.effect == Effect::OddPolynomial { degree: 3 } => {
             // A hardening spring: the cubic coefficient is positive and its interval excludes 0.

@@ -40,7 +40,8 @@ pub fn read_record(
 ) -> Result<structid_workflow::discover_report::Record, IoError> {
     let table = read_table(path)?;
     let data = mf.select_data(&table)?;
-    let time = structid_workflow::discover_report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
+    let time =
+        structid_workflow::discover_report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
     Ok(structid_workflow::discover_report::Record {
         path: path.to_path_buf(),
         paths: vec![path.to_path_buf()],

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde_json::json;
-use structid_core::metrics::{centred_rms_difference, rms_difference};
+use structid_core::validation::metrics::{centred_rms_difference, rms_difference};
 use structid_core::{IdentifySettings, Interpolant, identify, paper};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, SignalNames, TruthSpec};
 use structid_plot::{Chart, HeatMap, Series, render_grid_svg, render_heatmaps_svg};

@@ -15,11 +15,11 @@ use structid_discover::discover::{
     candidate_signals, discover, discover_effects,
 };
 use structid_discover::gap::Gap;
-use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::hypotheses::{Nominal, Site};
 use structid_discover::localise::binned_residual;
-use structid_workflow::discover_report::{self as report, Record, ReportContext, TimeAxis};
 use structid_io::{ModelFile, OutputGuard, estimate_json};
 use structid_plot::{Chart, Series, decimate_min_max, render_chart_svg, render_grid_svg};
+use structid_workflow::discover_report::{self as report, Record, ReportContext, TimeAxis};
 
 use crate::error::CliError;
 
@@ -94,13 +94,6 @@ pub struct DiscoverArgs {
     /// or windows `LENGTH:INIT` (each simulated from a state fitted to its first half, scored after its first INIT samples).
     #[arg(long, value_name = "auto|free|LENGTH:INIT", default_value = "auto")]
     scoring: String,
-    /// Re-estimate G jointly with the best hypothesis' map and with the named map (output
-    /// error, alternating with the nonparametric map) and keep the new G when the validation
-    /// RMS falls. This is the default: a nominal model estimated from data (`structid linear`)
-    /// is biased by the very effect that is missing, and the map alone cannot absorb that. The
-    /// report shows G before and after. Kept for scripts written when it was not the default.
-    #[arg(long, conflicts_with = "keep_nominal")]
-    refine_nominal: bool,
     /// Keep G exactly as given: no joint re-estimation with the map (for a nominal model known
     /// to be exact, e.g. from first principles with measured parameters).
     #[arg(long)]
@@ -253,11 +246,11 @@ fn known_maps_nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> 
 fn parse_locations(
     given: Option<&[String]>,
     nominal: &Nominal,
-) -> Result<Option<Vec<Location>>, CliError> {
+) -> Result<Option<Vec<Site>>, CliError> {
     let Some(given) = given else {
         return Ok(None);
     };
-    let mut out: Vec<Location> = Vec::new();
+    let mut out: Vec<Site> = Vec::new();
     for raw in given {
         let s = raw.trim();
         let found = nominal
@@ -269,7 +262,7 @@ fn parse_locations(
                     .declared()
                     .iter()
                     .find(|d| d.name == s)
-                    .map(|d| Location::Declared { z: d.z, w: d.w })
+                    .map(|d| Site::Declared { z: d.z, w: d.w })
             });
         let Some(location) = found else {
             let mut known: Vec<String> = nominal
@@ -296,10 +289,7 @@ fn parse_locations(
     Ok(Some(out))
 }
 
-fn settings(
-    a: &DiscoverArgs,
-    locations: Option<Vec<Location>>,
-) -> Result<DiscoverSettings, CliError> {
+fn settings(a: &DiscoverArgs, locations: Option<Vec<Site>>) -> Result<DiscoverSettings, CliError> {
     if !(a.sigma_fraction.is_finite() && a.sigma_fraction > 0.0) {
         return Err(CliError::input(format!(
             "invalid value {} for --sigma-fraction: it must be a finite fraction of the range of z \
@@ -328,7 +318,7 @@ fn settings(
         .tune_sigma(a.tune_sigma)
         .significance(a.significance)
         .hysteresis_threshold(a.hysteresis_threshold)
-        .refine_nominal(a.refine_nominal || !a.keep_nominal);
+        .refine_nominal(!a.keep_nominal);
     if let Some(l) = locations {
         b = b.locations(l);
     }
@@ -452,13 +442,13 @@ fn regions_svg(residual: &[f64], candidates: &[(String, Vec<f64>)]) -> Result<St
     )?)
 }
 
-fn z_label(location: Location) -> &'static str {
+fn z_label(location: Site) -> &'static str {
     match location {
-        Location::Input => "z = u",
-        Location::Output => "z = G·u",
-        Location::OutputFeedback => "z = y",
-        Location::RateFeedback => "z = ẏ",
-        Location::Declared { .. } => "z",
+        Site::Input => "z = u",
+        Site::Output => "z = G·u",
+        Site::OutputFeedback => "z = y",
+        Site::RateFeedback => "z = ẏ",
+        Site::Declared { .. } => "z",
     }
 }
 
@@ -906,7 +896,7 @@ mod tests {
         ];
         assert_eq!(
             parse_locations(Some(&given), &nominal).unwrap(),
-            Some(vec![Location::Input, Location::OutputFeedback])
+            Some(vec![Site::Input, Site::OutputFeedback])
         );
         let e = parse_locations(Some(&["friction".to_string()]), &nominal)
             .unwrap_err()

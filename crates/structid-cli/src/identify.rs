@@ -7,7 +7,7 @@ use std::time::Instant;
 use structid_core::estimate::{Estimate, SignalNames};
 use structid_io::estimate_json;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::selection::{Criterion, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
 use structid_core::{

@@ -503,7 +503,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         sim_all.extend(model.simulate(u)?);
         y_all.extend(y.channel(0));
     }
-    let fit = structid_core::metrics::fit_percent(&y_all, &sim_all);
+    let fit = structid_core::validation::metrics::fit_percent(&y_all, &sim_all);
     println!(
         "linear block: na = {}, nb = {:?}, nk = {:?}{}",
         orders.na,

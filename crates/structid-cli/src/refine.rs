@@ -7,8 +7,8 @@ use std::time::Instant;
 use structid_core::estimate::{Estimate, Provenance};
 
 use clap::Args;
-use structid_core::hyperparameters::{Criterion, SelectionSettings};
 use structid_core::refine::{LinearStructure, RefineSettings, refine};
+use structid_core::selection::{Criterion, SelectionSettings};
 use structid_core::{Data, IdentifySettings, InitialState};
 use structid_io::{LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction};
 use structid_linear::OeSettings;

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use clap::Parser;
 use serde_json::{Value, json};
-use structid_core::metrics::PooledFit;
+use structid_core::validation::metrics::PooledFit;
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
 use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};

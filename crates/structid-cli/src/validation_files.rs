@@ -2,8 +2,8 @@
 //! stored estimate: simulation.csv's columns, the simulation and residual figures, the per-output
 //! part of validation.json and the summary's wording.
 
-use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::ValidationReport;
+use structid_core::validation::residual_tests::CorrelationTest;
 use structid_plot::{
     Chart, CorrelationChart, Series, decimate_min_max, render_correlation_svg, render_grid_svg,
 };

@@ -86,9 +86,6 @@
 //! | [`paper`], [`scenarios`] | the paper's examples and test scenarios |
 //! | [`progress`] | observers of long work (selection trials, refinement alternations) |
 //!
-//! The flat module paths of earlier versions (`structid_core::kernel`, `::lft`, `::hyperparameters`,
-//! …) remain as aliases of their new homes.
-//!
 //! ## Example
 //! ```
 //! use std::sync::Arc;
@@ -116,45 +113,37 @@ pub mod solver;
 pub mod stored;
 pub mod validation;
 
-// The module paths of the earlier flat layout (`structid_core::kernel::…`), kept as aliases.
-pub use dispersion::{fourier, kernel, low_rank, neighbours, polynomial, sum, total_variation};
-pub use identify::{posterior, problem};
-pub use model::{interpolant, lft, maps, measurability, simulate, structure};
-pub use selection as hyperparameters;
-pub use solver::prox;
-pub use validation::{metrics, residual_tests};
-
+pub use dispersion::fourier::{
+    Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights,
+};
+pub use dispersion::kernel::{GaussianKernel, Kernel, KernelExpansion};
+pub use dispersion::low_rank::{LowRankGaussian, NystromFeatures};
+pub use dispersion::polynomial::{PolynomialDispersion, PolynomialFeatures};
+pub use dispersion::sum::{StackedFeatures, SumDispersion};
+pub use dispersion::total_variation::{
+    GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty,
+};
 pub use dispersion::{Dispersion, FeatureMap, KernelDispersion, Penalty, QuadraticPenalty};
 pub use error::{Error, Result};
 pub use estimate::{Estimate, Prediction, PredictionSettings};
-pub use fourier::{
-    Combination, FeatureExpansion, FourierDispersion, FourierKernel, FourierWeights,
-};
+pub use identify::posterior::Posterior;
+pub use identify::problem::{Problem, ProblemBlock};
 pub use identify::{
     BlockEstimate, CostTerms, Diagnostics, Identification, IdentifySettings,
     IdentifySettingsBuilder, InitialState, SolverChoice, Timings, identify, identify_problem,
 };
-pub use interpolant::Interpolant;
-pub use kernel::{GaussianKernel, Kernel, KernelExpansion};
-pub use lft::{Lft, LftDims, LftMatrices};
-pub use low_rank::{LowRankGaussian, NystromFeatures};
-pub use maps::{ExprMap, LookupTable};
-pub use measurability::ZSource;
 pub use model::access::BlockAccess;
+pub use model::interpolant::Interpolant;
+pub use model::lft::{Lft, LftDims, LftMatrices};
+pub use model::maps::{ExprMap, LookupTable};
+pub use model::measurability::ZSource;
 pub use model::order::BlockPlace;
 pub use model::parametric::ParametricMap;
+pub use model::simulate::{MapBinding, Simulation};
+pub use model::structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use model::{Data, Model, NonlinearBlock};
-pub use polynomial::{PolynomialDispersion, PolynomialFeatures};
-pub use posterior::Posterior;
-pub use problem::{Problem, ProblemBlock};
-pub use simulate::{MapBinding, Simulation};
 pub use solver::choice::{SolveStatus, SolverKind, SolverReason};
 pub use structid_lti::Signal;
-pub use structure::{LinearPart, PlacedBlock, Site, Structure};
-pub use sum::{StackedFeatures, SumDispersion};
-pub use total_variation::{GraphInterpolation, NodeInterpolation, TotalVariation, TvPenalty};
-#[allow(deprecated)]
-pub use validation::ValidationInitialState;
 pub use validation::{ValidationReport, ValidationSettings, validate};
 
 // Dynamic scalar blocks (operators with memory).

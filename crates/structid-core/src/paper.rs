@@ -12,7 +12,7 @@ use structid_lti::Signal;
 
 use crate::dispersion::{Dispersion, KernelDispersion};
 use crate::error::Result;
-use crate::lft::{Lft, LftMatrices};
+use crate::model::lft::{Lft, LftMatrices};
 use crate::model::{Data, Model, NonlinearBlock};
 
 /// f(z) = −|z|, the first map of the spray-deposition example.

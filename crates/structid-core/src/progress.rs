@@ -74,7 +74,7 @@ impl PartialEq for Progress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hyperparameters::{SelectionSettings, select};
+    use crate::selection::{SelectionSettings, select};
     use crate::{IdentifySettings, KernelDispersion, paper};
     use std::sync::Mutex;
 

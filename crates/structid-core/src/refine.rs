@@ -8,7 +8,7 @@
 //!
 //! 1. **Maps, G fixed.** Build the structured model from G ([`LinearStructure::model`]) and
 //!    identify the maps with [`identify()`]; β (and σ) are chosen on the first pass by
-//!    [`crate::hyperparameters::select`] and then kept.
+//!    [`crate::selection::select`] and then kept.
 //! 2. **G, maps fixed.** With the map outputs fixed at their sample values ŵ, the inputs of G
 //!    are known signals (for output feedback, u and ŵ = N̂(y) with y measured), so this step is
 //!    an output-error estimate of G ([`structid_linear::output_error()`], Levenberg–Marquardt
@@ -87,15 +87,15 @@ use structid_lti::Signal;
 
 use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
-use crate::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use crate::identify::{Identification, IdentifySettings, InitialState, identify};
 use crate::initial_state::estimate_initial_state;
-use crate::interpolant::Interpolant;
-use crate::lft::Lft;
+use crate::model::interpolant::Interpolant;
+use crate::model::lft::Lft;
+use crate::model::simulate::MapBinding;
+use crate::model::structure::{self, Site};
 use crate::model::{Data, Model, NonlinearBlock};
 use crate::progress::Progress;
-use crate::simulate::MapBinding;
-use crate::structure::{self, Site};
+use crate::selection::{Criterion, Selection, SelectionSettings, select};
 use crate::validation::simulate_records_from_rest;
 
 mod integrators;
@@ -107,7 +107,7 @@ fn linear_error(e: structid_linear::LinearError) -> Error {
 }
 
 /// The LFT of a linear model without maps (white output noise); see [`structure::realise`].
-pub use crate::structure::realise as lti_lft;
+pub use crate::model::structure::realise as lti_lft;
 
 /// Output-error estimate of `g` from `inputs` to `y`, optionally with a free initial state.
 ///
@@ -488,7 +488,7 @@ impl LinearStructure {
     /// previous-output state).
     ///
     /// ```
-    /// use structid_core::{Site, refine::LinearStructure, structure::realise};
+    /// use structid_core::{Site, refine::LinearStructure, model::structure::realise};
     /// use structid_linear::PolynomialModel;
     /// let g = PolynomialModel { num: vec![vec![0.0, 0.5]], den: vec![1.0, -0.8], sample_time: Some(0.1) };
     /// let lft = Site::RateFeedback.insert(&realise(&g).unwrap()).unwrap();

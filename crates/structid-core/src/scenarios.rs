@@ -7,9 +7,9 @@ use structid_lti::Signal;
 
 use crate::dispersion::Dispersion;
 use crate::error::Result;
-use crate::lft::{Lft, LftMatrices};
+use crate::model::lft::{Lft, LftMatrices};
+use crate::model::structure::Structure;
 use crate::paper::{Experiment, gaussian_noise};
-use crate::structure::Structure;
 
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
 /// (spectral radius 0.9, reproducible from `seed`), N = tanh, u uniform on [−2, 2] and white
@@ -192,7 +192,7 @@ pub fn mixed_hammerstein_with_radius(
             "relay",
             vec![1],
             1,
-            Arc::new(crate::total_variation::TotalVariation::new()),
+            Arc::new(crate::dispersion::total_variation::TotalVariation::new()),
         ),
     ];
     let model = crate::model::Model::new(lft, blocks)?;

@@ -4,9 +4,9 @@
 
 use std::sync::Arc;
 
-use structid_core::hyperparameters::{Criterion, Selection, SelectionSettings, select};
 use structid_core::paper::{Experiment, gaussian_noise};
 use structid_core::scenarios::{Excitation, hammerstein_map};
+use structid_core::selection::{Criterion, Selection, SelectionSettings, select};
 use structid_core::{
     Dispersion, FeatureMap, FourierDispersion, FourierWeights, Identification, IdentifySettings,
     KernelDispersion, Problem, SolverChoice, TotalVariation, identify_problem,
@@ -442,7 +442,7 @@ fn held_out_rows_give_the_same_fit_in_the_feature_and_exact_solvers() {
 
 #[test]
 fn a_beta_on_a_search_bound_is_flagged() {
-    use structid_core::hyperparameters::Bound;
+    use structid_core::selection::Bound;
     let (beta0, sigma, s2) = (1e-4, 0.1, 0.01);
     let ml_widened = |lo: f64, hi: f64, widen: f64| {
         SelectionSettings::builder()

@@ -783,8 +783,8 @@ fn initial_state_is_recovered_and_improves_the_map() {
         .sum::<f64>()
         .sqrt();
     assert!(err_x0 < 0.05 * 3.9, "x₀ = {x0:?}, true {x0_true:?}");
-    let ea = structid_core::metrics::rms_difference(&a.blocks[0].w_hat, &truth);
-    let eb = structid_core::metrics::rms_difference(&b.blocks[0].w_hat, &truth);
+    let ea = structid_core::validation::metrics::rms_difference(&a.blocks[0].w_hat, &truth);
+    let eb = structid_core::validation::metrics::rms_difference(&b.blocks[0].w_hat, &truth);
     assert!(
         ea < 0.5 * eb,
         "map error with x₀ estimated {ea}, assuming rest {eb}"

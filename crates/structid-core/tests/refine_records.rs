@@ -8,11 +8,11 @@ use std::sync::Arc;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
 use structid_core::refine::{
     LinearStructure, RefineSettings, Refinement, output_error_records_with_state, refine,
     refine_linear,
 };
+use structid_core::selection::{Criterion, SelectionSettings, select};
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState,
     Interpolant, MapBinding, Model, PolynomialDispersion, Signal, SolverChoice, SumDispersion,

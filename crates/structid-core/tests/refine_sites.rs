@@ -10,10 +10,10 @@ use nalgebra::Complex;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
+use structid_core::model::structure::realise;
 use structid_core::refine::{
     LinearRefineStatus, LinearStructure, RefineSettings, Refinement, refine, refine_linear,
 };
-use structid_core::structure::realise;
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, InitialState, Lft,
     MapBinding, PolynomialDispersion, Signal, Site, SolverChoice, SumDispersion,

@@ -7,10 +7,10 @@
 
 use std::sync::Arc;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
-use structid_core::metrics::rms_difference;
 use structid_core::paper::Experiment;
 use structid_core::scenarios::hammerstein;
+use structid_core::selection::{Criterion, SelectionSettings, select};
+use structid_core::validation::metrics::rms_difference;
 use structid_core::{
     Data, Dispersion, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion,
     Signal, SolverChoice, identify,

@@ -670,7 +670,8 @@ fn feasibility_holds_with_the_problem_operators() {
         let r = lft.residual(exp.data.u(), exp.data.y()).unwrap();
         let res: Vec<f64> = (0..80).map(|k| fit[k] + fe[k] - r.get(k, 0)).collect();
         assert!(
-            structid_core::metrics::rms(&res) < 1e-6 * structid_core::metrics::rms(r.as_slice())
+            structid_core::validation::metrics::rms(&res)
+                < 1e-6 * structid_core::validation::metrics::rms(r.as_slice())
         );
     }
 }
@@ -737,7 +738,7 @@ fn admm_converges_on_the_spray_example_where_two_blocks_share_z() {
         let scale = a
             .blocks
             .iter()
-            .map(|b| structid_core::metrics::rms(&centred(&b.w_hat)))
+            .map(|b| structid_core::validation::metrics::rms(&centred(&b.w_hat)))
             .fold(0.0, f64::max);
         for (x, y) in a.blocks.iter().zip(&c.blocks) {
             let (cx, cy) = (centred(&x.w_hat), centred(&y.w_hat));
@@ -1021,7 +1022,7 @@ fn admm_with_held_out_samples_agrees_with_clarabel() {
 /// pick β within half a decade.
 #[test]
 fn cross_validation_through_admm_and_clarabel_is_alike() {
-    use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+    use structid_core::selection::{Criterion, SelectionSettings, select};
     let exp = experiment(300, 5, Excitation::White);
     let how = SelectionSettings::builder()
         .criterion(Criterion::CrossValidation { folds: 5 })

@@ -16,8 +16,8 @@ use rand_distr::{Distribution, Normal};
 use structid_core::{Data, Signal};
 use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::effects::Effect;
-use structid_discover::hypotheses::Location;
 use structid_discover::hypotheses::Nominal;
+use structid_discover::hypotheses::Site;
 use structid_linear::PolynomialModel;
 use structid_testcases::synthetic::{Case, CaseKind, Hidden, InputKind, generate};
 
@@ -50,7 +50,7 @@ fn integrator(seed: u64) -> Case {
     let hidden = Hidden::Static {
         effect: Effect::CoulombViscous,
         theta: vec![0.3, 0.05],
-        location: Location::RateFeedback,
+        location: Site::RateFeedback,
     };
     let y0 = hidden.simulate(&g, &ue, None).unwrap();
     let sd = (y0.iter().map(|v| v * v).sum::<f64>() / len as f64).sqrt();

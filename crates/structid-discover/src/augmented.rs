@@ -20,7 +20,7 @@ use structid_io::{
 use crate::discover::{
     AugmentedMap, Classification, Discovery, Finding, initial_state, quadratic_dispersion_spec,
 };
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Nominal, Site};
 
 /// The name of the block added to the nominal model.
 pub const BLOCK: &str = "N";
@@ -96,7 +96,7 @@ pub fn initial_state_name(s: InitialState) -> &'static str {
 /// without a truth.
 pub fn model_file(
     nominal_file: &ModelFile,
-    location: Location,
+    location: Site,
     lft: &Lft,
     map: &AugmentedMap,
     dispersion: DispersionSpec,
@@ -107,7 +107,7 @@ pub fn model_file(
     let with_maps = !nominal_file.blocks.is_empty();
     let linear = match (&nominal_file.linear, location) {
         _ if with_maps => None,
-        (_, Location::Declared { .. }) | (None, _) => None,
+        (_, Site::Declared { .. }) | (None, _) => None,
         (Some(spec), site) => Some(LinearSpec::from_linear(&spec.model, Some(site))),
     };
     let (lft, form) = match &linear {
@@ -229,7 +229,7 @@ impl Finding {
             Some(r) if r.adopted => {
                 let mut f = nominal_file.clone();
                 match (&mut f.linear, self.location) {
-                    (Some(spec), Location::Input | Location::Output | Location::RateFeedback) => {
+                    (Some(spec), Site::Input | Site::Output | Site::RateFeedback) => {
                         spec.model = r.after.clone();
                     }
                     _ => f.linear = None,
@@ -432,7 +432,7 @@ mod tests {
         let lft = nominal_mf.lft.clone();
         let (mf, form) = model_file(
             &nominal_mf,
-            Location::OutputFeedback,
+            Site::OutputFeedback,
             &lft,
             &AugmentedMap::Expression("0.2*z0^3".into()),
             quadratic_dispersion_spec(Some(0.3), 3),
@@ -475,22 +475,22 @@ mod tests {
         let truth = |z: f64| 0.3 * z + 0.05 * z * z * z;
         for (location, map) in [
             (
-                Location::Input,
+                Site::Input,
                 AugmentedMap::Expression("min(max(1.5*z0, -0.8), 0.8)".into()),
             ),
             (
-                Location::Output,
+                Site::Output,
                 AugmentedMap::Expression("z0 + 0.2*z0^3".into()),
             ),
             (
-                Location::OutputFeedback,
+                Site::OutputFeedback,
                 AugmentedMap::Table {
                     z: (0..41).map(|i| -4.0 + 0.2 * i as f64).collect(),
                     w: (0..41).map(|i| truth(-4.0 + 0.2 * i as f64)).collect(),
                 },
             ),
             (
-                Location::RateFeedback,
+                Site::RateFeedback,
                 AugmentedMap::Expression("0.01*z0".into()),
             ),
         ] {
@@ -530,7 +530,7 @@ mod tests {
                 TABLE_FILE,
             )
             .unwrap();
-            let expect_linear = !matches!(location, Location::Declared { .. });
+            let expect_linear = !matches!(location, Site::Declared { .. });
             assert_eq!(form.starts_with("[linear]"), expect_linear, "{form}");
             let sub = dir.path().join(nominal.key(location));
             std::fs::create_dir_all(&sub).unwrap();
@@ -549,7 +549,7 @@ mod tests {
             // hypothesis takes it as 0 (a record rarely starts at y = 0); with x₀ estimated
             // that one sample moves the least-squares x̂₀ by O(1/L). Every other location
             // reproduces to rounding.
-            let tolerance = if location == Location::RateFeedback {
+            let tolerance = if location == Site::RateFeedback {
                 1e-3
             } else {
                 1e-9

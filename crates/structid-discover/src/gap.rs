@@ -39,8 +39,8 @@
 
 use std::ops::Range;
 
-use structid_core::residual_tests::{autocorrelation, cross_correlation};
 use structid_core::validation::distributions::chi_square_quantile;
+use structid_core::validation::residual_tests::{autocorrelation, cross_correlation};
 use structid_core::validation::{Scoring, ValidationSettings, validate};
 use structid_core::{Data, InitialState, Interpolant, Model, Result};
 
@@ -659,7 +659,7 @@ fn pool(
         .zip(bounds)
         .flat_map(|(p, &b)| p.scored.iter().map(move |r| r.start + b..r.end + b))
         .collect();
-    let mut pooled = structid_core::metrics::PooledFit::default();
+    let mut pooled = structid_core::validation::metrics::PooledFit::default();
     pooled.add_ranges(&y, &simulated, &scored);
     let (rms, fit_percent) = (pooled.rms(), pooled.fit_percent());
     let floor = quantisation_floor(&y);
@@ -679,7 +679,7 @@ fn pool(
     let mut noise = noise_level_coloured_records(&scored_parts);
     noise.std = noise.std.max(floor);
     let all: Vec<f64> = innovations.concat();
-    let prediction_rms = structid_core::metrics::rms(&all);
+    let prediction_rms = structid_core::validation::metrics::rms(&all);
     // Each statistic summed over the records, with its degrees of freedom.
     let mut tests: Vec<Portmanteau> = parts[0].gap.tests.clone();
     for p in &parts[1..] {
@@ -843,7 +843,7 @@ fn gap_record(
         .collect();
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let rms = v.rms[0];
-    let prediction_rms = structid_core::metrics::rms(&innovations);
+    let prediction_rms = structid_core::validation::metrics::rms(&innovations);
     let verdict = conclude(tests, prediction_rms, noise_std, &[&y], settings);
     let scored_samples = v.scored.iter().map(|r| r.len()).sum();
     let gap = Gap {
@@ -978,11 +978,11 @@ mod tests {
         let all: Vec<Range<usize>> = std::iter::once(0..2000).collect();
         let (bulk, spikes) = Gap::bulk_rms_of(&smooth, &all, 1.0);
         assert_eq!(spikes, 0);
-        assert!((bulk - structid_core::metrics::rms(&smooth)).abs() < 1e-12);
+        assert!((bulk - structid_core::validation::metrics::rms(&smooth)).abs() < 1e-12);
         // Outliers of ten noise levels on a small residual are exactly the spikes, and the
         // bulk RMS is that of the rest.
         let mut r: Vec<f64> = (0..2000).map(|k| 0.5 * (0.9 * k as f64).cos()).collect();
-        let clean = structid_core::metrics::rms(&r);
+        let clean = structid_core::validation::metrics::rms(&r);
         for k in (100..2000).step_by(300) {
             r[k] += if k % 600 == 100 { 10.0 } else { -10.0 };
         }
@@ -992,7 +992,7 @@ mod tests {
             (bulk - clean).abs() < 0.01 * clean,
             "{bulk} against {clean}"
         );
-        assert!(structid_core::metrics::rms(&r) > 1.5 * clean);
+        assert!(structid_core::validation::metrics::rms(&r) > 1.5 * clean);
         // Only the scored samples count.
         let (_, scored_spikes) = Gap::bulk_rms_of(&r, std::slice::from_ref(&(0..1000)), 1.0);
         assert_eq!(scored_spikes, 3);
@@ -1136,7 +1136,7 @@ mod tests {
             .enumerate()
             .map(|(k, v)| v + 0.4 * (0.01 * k as f64).sin())
             .collect();
-        assert!(structid_core::metrics::rms(&r) > 2.5 * 0.1);
+        assert!(structid_core::validation::metrics::rms(&r) > 2.5 * 0.1);
         let fit = noise_level_coloured(&r);
         assert!((fit.std - 0.1).abs() < 0.01, "{fit:?}");
         assert!(fit.drift > 0.0, "{fit:?}");

@@ -2,16 +2,16 @@
 //!
 //! A [`Nominal`] model is an LFT without maps, y = G·u + H·e (one input, one output, any noise
 //! path H), possibly with *declared* injection points and signals: w columns and z rows of its
-//! LFT that the model file names, unused until a block is put there. Each [`Location`] inserts
+//! LFT that the model file names, unused until a block is put there. Each [`Site`] inserts
 //! one unknown static block N (the LFTs are built by [`Site::insert`]):
 //!
 //! | location | model | z (measurable because) |
 //! |---|---|---|
-//! | [`Location::Input`] | y = G·N(u) + H·e | z = u |
-//! | [`Location::Output`] | y = N(G·u) + H·e (a sensor map) | z = G·u depends on u only |
-//! | [`Location::OutputFeedback`] | y = G·(u − N(y)) + H·e | z = y is measured |
-//! | [`Location::RateFeedback`] | y = G·(u − N(ẏ)) + H·e, ẏ_k = (y_k − y_(k−1))/T_s | z = Ψ(q)·y with the LTI Ψ = (1 − q⁻¹)/T_s |
-//! | [`Location::Declared`] | the nominal LFT's declared w column and z row | checked by measurability |
+//! | [`Site::Input`] | y = G·N(u) + H·e | z = u |
+//! | [`Site::Output`] | y = N(G·u) + H·e (a sensor map) | z = G·u depends on u only |
+//! | [`Site::OutputFeedback`] | y = G·(u − N(y)) + H·e | z = y is measured |
+//! | [`Site::RateFeedback`] | y = G·(u − N(ẏ)) + H·e, ẏ_k = (y_k − y_(k−1))/T_s | z = Ψ(q)·y with the LTI Ψ = (1 − q⁻¹)/T_s |
+//! | [`Site::Declared`] | the nominal LFT's declared w column and z row | checked by measurability |
 //!
 //! For the rate, z is a *dynamic* function of the measured output (the paper's Definition 1
 //! with an LTI Ψ_M): the LFT carries Ψ's state (the previous output), and
@@ -30,17 +30,17 @@
 
 use std::sync::Arc;
 
-use structid_core::structure::{realise, without_blocks};
+use structid_core::model::structure::{realise, without_blocks};
 use structid_core::{
     Data, Dispersion, Error, Interpolant, Lft, MapBinding, Model, NonlinearBlock,
-    PolynomialDispersion, Result, Signal, Simulation, Site, Structure,
+    PolynomialDispersion, Result, Signal, Simulation, Structure,
 };
 use structid_linear::PolynomialModel;
 use structid_lti::LinearSystem as _;
 
-/// Where the unknown block is inserted: structid-core's [`Site`], under the name this crate
-/// has always used.
-pub use structid_core::Site as Location;
+/// Where the unknown block is inserted: structid-core's [`Site`](structid_core::Site),
+/// re-exported beside the hypotheses built on it.
+pub use structid_core::Site;
 
 /// A location the nominal model declares: the block reads z row `z` and writes w column `w`
 /// of the nominal LFT.
@@ -140,16 +140,16 @@ impl Nominal {
     /// ```
     /// use std::sync::Arc;
     /// use structid_core::{Interpolant, PolynomialDispersion};
-    /// use structid_discover::hypotheses::{Location, Nominal, hypothesis};
+    /// use structid_discover::hypotheses::{Site, Nominal, hypothesis};
     /// use structid_linear::PolynomialModel;
     /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
     /// // The augmented model of a first discovery: a saturation at the input.
-    /// let first = hypothesis(&g, Location::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
+    /// let first = hypothesis(&g, Site::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
     /// let sat: Arc<dyn Interpolant> = Arc::new(|z: &[f64]| z[0].clamp(-1.0, 1.0));
     /// let nominal = Nominal::from_model(&first.model, vec![sat]).unwrap();
     /// assert_eq!(nominal.known_maps().len(), 1);
     /// // A cubic spring in feedback from y, with the saturation kept in the loop.
-    /// let h = nominal.hypothesis(Location::OutputFeedback, Arc::new(PolynomialDispersion::new(3).unwrap())).unwrap();
+    /// let h = nominal.hypothesis(Site::OutputFeedback, Arc::new(PolynomialDispersion::new(3).unwrap())).unwrap();
     /// assert_eq!(h.model.blocks().len(), 2);
     /// ```
     ///
@@ -264,11 +264,11 @@ impl Nominal {
     /// The nominal model y = G·u + e of a polynomial G (white output noise).
     ///
     /// ```
-    /// use structid_discover::hypotheses::{Location, Nominal};
+    /// use structid_discover::hypotheses::{Site, Nominal};
     /// use structid_linear::PolynomialModel;
     /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
     /// let nominal = Nominal::from_polynomial(&g).unwrap();
-    /// assert_eq!(nominal.locations(), Location::ALL.to_vec());
+    /// assert_eq!(nominal.locations(), Site::ALL.to_vec());
     /// ```
     pub fn from_polynomial(g: &PolynomialModel) -> Result<Self> {
         let mut n = Self::new(realise(g)?)?;
@@ -404,30 +404,30 @@ impl Nominal {
     }
 
     /// Every candidate location: the four built-in ones, then the declared ones.
-    pub fn locations(&self) -> Vec<Location> {
-        Location::ALL
+    pub fn locations(&self) -> Vec<Site> {
+        Site::ALL
             .into_iter()
             .chain(
                 self.declared
                     .iter()
-                    .map(|d| Location::Declared { z: d.z, w: d.w }),
+                    .map(|d| Site::Declared { z: d.z, w: d.w }),
             )
             .collect()
     }
 
-    /// The index of the declared location a [`Location::Declared`] reads and writes.
-    fn declared_index(&self, location: Location) -> Option<usize> {
+    /// The index of the declared location a [`Site::Declared`] reads and writes.
+    fn declared_index(&self, location: Site) -> Option<usize> {
         match location {
-            Location::Declared { z, w } => self.declared.iter().position(|d| d.z == z && d.w == w),
+            Site::Declared { z, w } => self.declared.iter().position(|d| d.z == z && d.w == w),
             _ => None,
         }
     }
 
     /// A short identifier of `location`: its [`Site::name`] for the built-in ones, `declared-i`
     /// for the i-th declared one (the names of `--locations` and the reports).
-    pub fn key(&self, location: Location) -> String {
+    pub fn key(&self, location: Site) -> String {
         match location {
-            Location::Declared { z, w } => match self.declared_index(location) {
+            Site::Declared { z, w } => match self.declared_index(location) {
                 Some(i) => format!("declared-{i}"),
                 None => format!("declared-z{z}-w{w}"),
             },
@@ -436,9 +436,9 @@ impl Nominal {
     }
 
     /// A description of `location` for reports.
-    pub fn describe(&self, location: Location) -> String {
+    pub fn describe(&self, location: Site) -> String {
         match location {
-            Location::Declared { z, w } => match self.declared_index(location) {
+            Site::Declared { z, w } => match self.declared_index(location) {
                 Some(i) => format!(
                     "at the declared location `{}` (z row {z}, w column {w})",
                     self.declared[i].name
@@ -518,10 +518,10 @@ impl Nominal {
     /// ```
     pub fn hypothesis(
         &self,
-        location: Location,
+        location: Site,
         dispersion: Arc<dyn Dispersion>,
     ) -> Result<Hypothesis> {
-        if let Location::Declared { z, w } = location
+        if let Site::Declared { z, w } = location
             && self.declared_index(location).is_none()
         {
             return Err(Error::InvalidStructure(format!(
@@ -539,7 +539,7 @@ impl Nominal {
             });
         }
         let lft = match location {
-            Location::Declared { z, w } => {
+            Site::Declared { z, w } => {
                 let zs: Vec<usize> = std::iter::once(z)
                     .chain(self.known.iter().map(|k| k.z))
                     .collect();
@@ -573,7 +573,7 @@ impl Nominal {
 #[derive(Clone, Debug)]
 pub struct Hypothesis {
     /// Where the block is.
-    pub location: Location,
+    pub location: Site,
     /// The LFT and its blocks: the unknown one first (z row 0, w column 0), then the nominal
     /// model's known maps.
     pub model: Model,
@@ -656,7 +656,7 @@ impl Hypothesis {
         }
         let u = Signal::from_fn(len, columns.len(), |t, c| columns[c][t]);
         let mut id_data = Data::new(u, data.y().clone())?;
-        if self.location == Location::RateFeedback {
+        if self.location == Site::RateFeedback {
             id_data = id_data.with_z(Signal::from_fn(len, 1, |t, _| z.get(t, 0)))?;
         }
         let block = NonlinearBlock::new(
@@ -674,10 +674,10 @@ impl Hypothesis {
     /// ```
     /// use std::sync::Arc;
     /// use structid_core::{PolynomialDispersion, Signal};
-    /// use structid_discover::hypotheses::{Location, hypothesis};
+    /// use structid_discover::hypotheses::{Site, hypothesis};
     /// use structid_linear::PolynomialModel;
     /// let g = PolynomialModel { den: vec![1.0, -0.5], num: vec![vec![0.0, 1.0]], sample_time: None };
-    /// let h = hypothesis(&g, Location::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
+    /// let h = hypothesis(&g, Site::Input, Arc::new(PolynomialDispersion::new(1).unwrap())).unwrap();
     /// let square = |z: &[f64]| z[0] * z[0];
     /// let sim = h.simulate(&square, &Signal::from_fn(3, 1, |_, _| 2.0), None).unwrap();
     /// assert_eq!(sim.y.channel(0), vec![0.0, 4.0, 6.0]); // y_k = 0.5·y_(k−1) + u²_(k−1)
@@ -714,7 +714,7 @@ impl Hypothesis {
             return crate::records::restack(data, |r| self.data(r));
         }
         match self.location {
-            Location::RateFeedback => {
+            Site::RateFeedback => {
                 let y = data.y();
                 let ts = self.sample_time;
                 // The first sample has no predecessor in the record: its rate is taken as 0
@@ -749,17 +749,17 @@ impl Hypothesis {
 /// ```
 /// use std::sync::Arc;
 /// use structid_core::KernelDispersion;
-/// use structid_discover::hypotheses::{Location, hypothesis};
+/// use structid_discover::hypotheses::{Site, hypothesis};
 /// use structid_linear::PolynomialModel;
 /// let g = PolynomialModel { den: vec![1.0, -0.8], num: vec![vec![0.0, 0.5]], sample_time: Some(0.1) };
-/// for loc in Location::ALL {
+/// for loc in Site::ALL {
 ///     let h = hypothesis(&g, loc, Arc::new(KernelDispersion::gaussian(0.3).unwrap())).unwrap();
 ///     assert_eq!(h.model.blocks().len(), 1);
 /// }
 /// ```
 pub fn hypothesis(
     g: &PolynomialModel,
-    location: Location,
+    location: Site,
     dispersion: Arc<dyn Dispersion>,
 ) -> Result<Hypothesis> {
     Nominal::from_polynomial(g)?.hypothesis(location, dispersion)
@@ -784,7 +784,7 @@ mod tests {
     /// Simulates the hypothesis with `truth` in the loop and identifies its map again: the
     /// estimate must match the truth, which checks the LFT against its own simulation and
     /// the measured z of the rate.
-    fn round_trip(location: Location, truth: fn(f64) -> f64, amplitude: f64) -> f64 {
+    fn round_trip(location: Site, truth: fn(f64) -> f64, amplitude: f64) -> f64 {
         let h = hypothesis(
             &nominal(),
             location,
@@ -852,10 +852,10 @@ mod tests {
         // Rate feedback: ẏ = Δy/T_s is ten times y, so a gentler friction keeps the loop stable.
         let friction: fn(f64) -> f64 = |z| 0.02 * z + 0.002 * z.powi(3);
         for (loc, truth, amp) in [
-            (Location::Input, cubic, 1.0),
-            (Location::Output, cubic, 1.0),
-            (Location::OutputFeedback, cubic, 0.5),
-            (Location::RateFeedback, friction, 0.3),
+            (Site::Input, cubic, 1.0),
+            (Site::Output, cubic, 1.0),
+            (Site::OutputFeedback, cubic, 0.5),
+            (Site::RateFeedback, friction, 0.3),
         ] {
             let err = round_trip(loc, truth, amp);
             assert!(err < 0.02, "{loc:?}: relative map error {err}");
@@ -870,18 +870,18 @@ mod tests {
             sample_time: None,
         };
         let d: Arc<dyn Dispersion> = Arc::new(PolynomialDispersion::new(3).unwrap());
-        for loc in [Location::OutputFeedback, Location::RateFeedback] {
+        for loc in [Site::OutputFeedback, Site::RateFeedback] {
             let e = hypothesis(&direct, loc, Arc::clone(&d))
                 .unwrap_err()
                 .to_string();
             assert!(e.contains("delay"), "{e}");
         }
-        assert!(hypothesis(&direct, Location::Input, Arc::clone(&d)).is_ok());
+        assert!(hypothesis(&direct, Site::Input, Arc::clone(&d)).is_ok());
         let two = PolynomialModel {
             den: vec![1.0, -0.5],
             num: vec![vec![0.0, 1.0], vec![0.0, 2.0]],
             sample_time: None,
         };
-        assert!(hypothesis(&two, Location::Input, d).is_err());
+        assert!(hypothesis(&two, Site::Input, d).is_err());
     }
 }

@@ -319,7 +319,7 @@ pub(crate) fn with_known_inputs(lft: &Lft) -> Result<Lft> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use structid_core::structure::realise;
+    use structid_core::model::structure::realise;
     use structid_linear::PolynomialModel;
 
     fn g() -> Lft {
@@ -355,7 +355,7 @@ mod tests {
     /// sensor after both.
     #[test]
     fn wrapped_sites_simulate_as_the_plant() {
-        use crate::hypotheses::{Location, Nominal, hypothesis};
+        use crate::hypotheses::{Nominal, Site, hypothesis};
         use std::sync::Arc;
         use structid_core::{Interpolant, PolynomialDispersion, Signal};
         let g = PolynomialModel {
@@ -371,35 +371,35 @@ mod tests {
             .map(|k| 1.2 * (0.07 * k as f64).sin() + 0.5 * (0.31 * k as f64).cos())
             .collect();
         let us = Signal::from_fn(u.len(), 1, |k, _| u[k]);
-        let known = |location: Location, map: fn(f64) -> f64| {
+        let known = |location: Site, map: fn(f64) -> f64| {
             let first = hypothesis(&g, location, d()).unwrap();
             let m: Arc<dyn Interpolant> = Arc::new(move |z: &[f64]| map(z[0]));
             Nominal::from_model(&first.model, vec![m]).unwrap()
         };
         let ts = 0.05;
-        type Case = (Nominal, Location, fn(f64) -> f64, Vec<f64>);
+        type Case = (Nominal, Site, fn(f64) -> f64, Vec<f64>);
         let cases: Vec<Case> = vec![
             (
-                known(Location::Input, sat),
-                Location::OutputFeedback,
+                known(Site::Input, sat),
+                Site::OutputFeedback,
                 cubic,
                 plant(&u, |u, y, _| sat(u) - cubic(y), |x| x),
             ),
             (
-                known(Location::Input, sat),
-                Location::RateFeedback,
+                known(Site::Input, sat),
+                Site::RateFeedback,
                 friction,
                 plant(&u, |u, y, y1| sat(u) - friction((y - y1) / ts), |x| x),
             ),
             (
-                known(Location::OutputFeedback, cubic),
-                Location::Input,
+                known(Site::OutputFeedback, cubic),
+                Site::Input,
                 sat,
                 plant(&u, |u, y, _| sat(u) - cubic(y), |x| x),
             ),
             (
-                known(Location::Input, sat),
-                Location::Output,
+                known(Site::Input, sat),
+                Site::Output,
                 cubic,
                 plant(&u, |u, _, _| sat(u), cubic),
             ),

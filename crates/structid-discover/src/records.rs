@@ -11,7 +11,7 @@
 
 use std::ops::Range;
 
-use structid_core::metrics::PooledFit;
+use structid_core::validation::metrics::PooledFit;
 use structid_core::validation::{ValidationSettings, validate};
 use structid_core::{Data, Error, Interpolant, Model, Result};
 

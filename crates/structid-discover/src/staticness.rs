@@ -35,7 +35,7 @@
 use std::sync::Arc;
 
 use nalgebra::DMatrix;
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::selection::{Criterion, SelectionSettings, select};
 use structid_core::{
     Data, Dispersion, IdentifySettings, Lft, LftMatrices, LowRankGaussian, Model, NonlinearBlock,
     Signal,

@@ -51,7 +51,7 @@
 use structid_core::validation::comparison::mean_statistic;
 use structid_core::validation::distributions::upper_normal_tail;
 
-use crate::hypotheses::Location;
+use crate::hypotheses::Site;
 
 /// The significance level of the selection rule when none is given: a row is dismissed as
 /// worse than the best only when the paired test says so with at most a 5 % chance of error.
@@ -93,7 +93,7 @@ pub struct Candidate {
     /// What the row is, e.g. `saturation` or `nonparametric (quadratic)`.
     pub label: String,
     /// Where its block sits, if it has one.
-    pub location: Option<Location>,
+    pub location: Option<Site>,
     /// Its form.
     pub form: Form,
     /// Its number of parameters (for a nonparametric map, the points it was estimated on are

@@ -15,7 +15,7 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use structid_core::{Data, Signal};
 use structid_discover::discover::{AugmentedMap, DiscoverSettings, Verdict, discover};
-use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::hypotheses::{Nominal, Site};
 use structid_linear::{OeSettings, Orders, oe};
 
 const PERIOD: f64 = 0.25;
@@ -78,8 +78,8 @@ fn a_cogging_force_is_placed_in_feedback_from_y_and_its_period_kept() {
     assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
     let f = d.finding.as_ref().unwrap();
     assert!(
-        f.location == Location::OutputFeedback
-            || f.equivalent_locations.contains(&Location::OutputFeedback),
+        f.location == Site::OutputFeedback
+            || f.equivalent_locations.contains(&Site::OutputFeedback),
         "found at {}",
         f.location.name()
     );

@@ -704,7 +704,7 @@ fn a_rate_map_that_barely_beats_the_position_does_not_hide_a_hysteresis() {
     let rate = d
         .hypotheses
         .iter()
-        .filter(|h| h.location == structid_discover::hypotheses::Location::RateFeedback)
+        .filter(|h| h.location == structid_discover::hypotheses::Site::RateFeedback)
         .map(|h| h.validation_rms)
         .fold(f64::INFINITY, f64::min);
     assert!(rate.is_finite());
@@ -755,8 +755,8 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
     assert!(
         matches!(
             f.location,
-            structid_discover::hypotheses::Location::OutputFeedback
-                | structid_discover::hypotheses::Location::RateFeedback
+            structid_discover::hypotheses::Site::OutputFeedback
+                | structid_discover::hypotheses::Site::RateFeedback
         ),
         "{}",
         d.verdict
@@ -780,13 +780,13 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
 /// found as an elasto-plastic stop (λ > 0) yielding within 20 % of that level.
 #[test]
 fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_parameters() {
-    use structid_discover::hypotheses::Location;
+    use structid_discover::hypotheses::Site;
     use structid_testcases::physics::PhysicalEffect;
     for seed in [0, 9] {
         let (case, d) = dynamic_finding(seed);
         assert_ne!(case.nominal_source, NominalSource::Exact);
         let f = d.finding.as_ref().unwrap();
-        assert_eq!(f.location, Location::Input, "{}", d.verdict);
+        assert_eq!(f.location, Site::Input, "{}", d.verdict);
         let h = f.input_hysteresis.as_ref().expect("the input hysteresis");
         // It explains more than half of what the static approximation leaves.
         assert!(
@@ -904,7 +904,7 @@ fn a_known_friction_map_behind_an_integrator_is_searched_around() {
     let f = first.finding.as_ref().expect("a first finding");
     assert_eq!(
         f.location,
-        structid_discover::hypotheses::Location::RateFeedback,
+        structid_discover::hypotheses::Site::RateFeedback,
         "{}",
         first.verdict
     );

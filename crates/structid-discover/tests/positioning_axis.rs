@@ -10,7 +10,7 @@
 use structid_core::validation::Scoring;
 use structid_discover::discover::{Classification, DiscoverSettings, Verdict, discover};
 use structid_discover::effects::Effect;
-use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::hypotheses::{Nominal, Site};
 use structid_testcases::physics::positioning_axis;
 
 #[test]
@@ -27,7 +27,7 @@ fn coulomb_friction_of_a_closed_loop_axis_is_named_in_rate_feedback() {
     assert!(matches!(d.scoring, Scoring::Windowed(_)), "{:?}", d.scoring);
     assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
     let f = d.finding.as_ref().unwrap();
-    assert_eq!(f.location, Location::RateFeedback, "{}", d.verdict);
+    assert_eq!(f.location, Site::RateFeedback, "{}", d.verdict);
     let Classification::Named(fit) = &f.classification else {
         panic!("not named: {}", d.verdict)
     };
@@ -73,7 +73,7 @@ fn coulomb_friction_is_named_from_an_estimated_nominal_too() {
     .unwrap();
     assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
     let f = d.finding.as_ref().unwrap();
-    assert_eq!(f.location, Location::RateFeedback, "{}", d.verdict);
+    assert_eq!(f.location, Site::RateFeedback, "{}", d.verdict);
     let Classification::Named(fit) = &f.classification else {
         panic!("not named: {}", d.verdict)
     };

@@ -13,7 +13,7 @@ use structid_core::validation::{ValidationSettings, validate};
 use structid_core::{Data, InitialState, Signal};
 use structid_discover::discover::{Classification, DiscoverSettings, Discovery, discover};
 use structid_discover::effects::Effect;
-use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::hypotheses::{Nominal, Site};
 use structid_linear::PolynomialModel;
 
 const NOISE: f64 = 0.005;
@@ -91,7 +91,7 @@ fn pooled_nominal_rms(data: &Data) -> f64 {
 
 fn named_saturation(d: &Discovery) -> (f64, f64) {
     let f = d.finding.as_ref().expect("a finding");
-    assert_eq!(f.location, Location::Input, "{}", d.verdict);
+    assert_eq!(f.location, Site::Input, "{}", d.verdict);
     let Classification::Named(fit) = &f.classification else {
         panic!("not named: {}", d.verdict)
     };

@@ -19,7 +19,7 @@ use structid_discover::discover::{
 };
 use structid_discover::effects::{Effect, EffectFit};
 use structid_discover::gap::GapSettings;
-use structid_discover::hypotheses::{Location, Nominal, hypothesis};
+use structid_discover::hypotheses::{Nominal, Site, hypothesis};
 use structid_linear::PolynomialModel;
 
 const NOISE: f64 = 0.005;
@@ -93,12 +93,12 @@ fn two_effects(seed: u64) -> Data {
 
 /// Which of the two effects a named family at a location is: the saturation at the input, the
 /// cubic spring in feedback from y, or something else.
-fn which(location: Location, fit: Option<&EffectFit>) -> &'static str {
+fn which(location: Site, fit: Option<&EffectFit>) -> &'static str {
     match (location, fit.map(|f| f.effect)) {
-        (Location::Input, Some(Effect::Saturation)) => "saturation",
+        (Site::Input, Some(Effect::Saturation)) => "saturation",
         // A cubic is a power law of exponent 3: the near family is accepted.
         (
-            Location::OutputFeedback,
+            Site::OutputFeedback,
             Some(Effect::OddPolynomial { degree: 3 } | Effect::PowerLaw { .. }),
         ) => "spring",
         _ => "other",
@@ -225,7 +225,7 @@ fn a_known_map_in_the_nominal_model_is_simulated() {
     let record = data(&u, &y);
     let first = hypothesis(
         &g(),
-        Location::Input,
+        Site::Input,
         Arc::new(PolynomialDispersion::new(1).unwrap()),
     )
     .unwrap();
@@ -256,7 +256,7 @@ fn a_known_map_in_the_nominal_model_is_simulated() {
                 initial_state: structid_core::InitialState::Zero,
                 ..GapSettings::default()
             })
-            .locations(vec![Location::Input])
+            .locations(vec![Site::Input])
             .build()
             .unwrap(),
     )

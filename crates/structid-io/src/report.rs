@@ -3,7 +3,7 @@
 //! [`Report::new`] collects the settings, the cost terms of eq. (4), the solver diagnostics and,
 //! per block, the dispersion value and (when the model file gives a `truth`) the RMS error of
 //! the estimate at the data points, plain and centred (see
-//! [`structid_core::metrics::centred_rms_difference`]; maps that share an output are identifiable
+//! [`structid_core::validation::metrics::centred_rms_difference`]; maps that share an output are identifiable
 //! only up to a constant). The caller adds the names of the files it wrote and a
 //! [`Reproduction`] record, and serialises with [`Report::to_json_string`].
 //!
@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-use structid_core::metrics::{centred_rms_difference, rms_difference};
+use structid_core::validation::metrics::{centred_rms_difference, rms_difference};
 use structid_core::{CostTerms, Diagnostics, Identification, IdentifySettings};
 
 use crate::error::IoError;
@@ -207,14 +207,14 @@ pub struct SelectionReport {
     /// ŝ² at the choice (likelihood-based criteria).
     pub noise_variance: Option<f64>,
     /// Every trial (β, σ, value) in the order evaluated.
-    pub curve: Vec<structid_core::hyperparameters::Trial>,
+    pub curve: Vec<structid_core::selection::Trial>,
     /// Seconds for the selection and the final fit.
     pub seconds: f64,
 }
 
 impl SelectionReport {
     /// The report of a selection.
-    pub fn new(sel: &structid_core::hyperparameters::Selection) -> Self {
+    pub fn new(sel: &structid_core::selection::Selection) -> Self {
         Self {
             criterion: sel.criterion.name().into(),
             criterion_description: sel.criterion.describe(),

@@ -3,8 +3,8 @@
 //! writes it; a library user gets the same document from a [`ValidationReport`].
 
 use serde_json::{Value, json};
-use structid_core::residual_tests::CorrelationTest;
 use structid_core::validation::ValidationReport;
+use structid_core::validation::residual_tests::CorrelationTest;
 
 use crate::error::IoError;
 

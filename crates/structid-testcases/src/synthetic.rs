@@ -5,7 +5,7 @@
 //! workflow is given, the truth it must find ([`Hidden`]), and an estimation and a validation
 //! record. Three kinds of case ([`CaseKind`]):
 //!
-//! * **static**: one named effect of [`Effect`] at one [`Location`] of G, simulated with
+//! * **static**: one named effect of [`Effect`] at one [`Site`] of G, simulated with
 //!   *exactly* the augmented model [`hypothesis`] builds for that location, with the
 //!   true map `effect.eval(θ, ·)` in the block (so the workflow's hypotheses contain the
 //!   truth). The (effect, location) pairs are the physically sensible ones of
@@ -39,7 +39,7 @@
 //!   (nothing moves between steps, and the direction of motion that tells hysteresis from a
 //!   static map is only seen at the edges).
 //! * **Parameters** relative to the range of the block's input z in the nominal simulation
-//!   (u, G·u, y or ẏ, see [`Location`]): a saturation level at 30–70 % of max |z|, a dead
+//!   (u, G·u, y or ẏ, see [`Site`]): a saturation level at 30–70 % of max |z|, a dead
 //!   zone half-width at 10–30 %, 6–20 quantisation levels over the range, a cubic term that
 //!   changes the map by 15–60 % at the edge of the range, friction levels of 10–35 % of the
 //!   input's RMS, and so on. The slope of saturations, dead zones and input or output
@@ -91,7 +91,7 @@ use structid_core::{Data, Error, PolynomialDispersion, Result, Signal};
 use structid_linear::PolynomialModel;
 
 use structid_discover::effects::Effect;
-use structid_discover::hypotheses::{Location, hypothesis};
+use structid_discover::hypotheses::{Site, hypothesis};
 
 /// The kind of input signal of a case; its parameters are drawn per case.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -134,7 +134,7 @@ pub enum Hidden {
         /// Its parameters, in the order of [`Effect::parameter_names`].
         theta: Vec<f64>,
         /// Where the block sits.
-        location: Location,
+        location: Site,
     },
     /// A backlash (mechanical play) at the input: v = backlash(u), y = G·v + e, with
     ///
@@ -234,31 +234,28 @@ pub enum CaseKind {
 /// of a schedule in which the first 13 (main) pairs appear twice and the last 4 (gain error
 /// and stuck block) once: seeds 0…16 cover every pair once, and any 30 consecutive seeds
 /// cover every pair.
-pub const STATIC_PAIRS: [(Effect, Location); 17] = [
-    (Effect::Saturation, Location::Input),
-    (Effect::AsymmetricSaturation, Location::Input),
-    (Effect::DeadZone, Location::Input),
-    (Effect::Quantisation, Location::Input),
-    (Effect::OddPolynomial { degree: 3 }, Location::Input),
-    (Effect::Saturation, Location::Output),
-    (Effect::Quantisation, Location::Output),
-    (Effect::EvenPolynomial { degree: 2 }, Location::Output),
-    (Effect::OddPolynomial { degree: 3 }, Location::Output),
-    (
-        Effect::OddPolynomial { degree: 3 },
-        Location::OutputFeedback,
-    ),
-    (Effect::Saturation, Location::OutputFeedback),
-    (Effect::CoulombViscous, Location::RateFeedback),
-    (Effect::Stribeck, Location::RateFeedback),
-    (Effect::Gain, Location::Input),
-    (Effect::Gain, Location::Output),
-    (Effect::Offset, Location::Input),
-    (Effect::Offset, Location::Output),
+pub const STATIC_PAIRS: [(Effect, Site); 17] = [
+    (Effect::Saturation, Site::Input),
+    (Effect::AsymmetricSaturation, Site::Input),
+    (Effect::DeadZone, Site::Input),
+    (Effect::Quantisation, Site::Input),
+    (Effect::OddPolynomial { degree: 3 }, Site::Input),
+    (Effect::Saturation, Site::Output),
+    (Effect::Quantisation, Site::Output),
+    (Effect::EvenPolynomial { degree: 2 }, Site::Output),
+    (Effect::OddPolynomial { degree: 3 }, Site::Output),
+    (Effect::OddPolynomial { degree: 3 }, Site::OutputFeedback),
+    (Effect::Saturation, Site::OutputFeedback),
+    (Effect::CoulombViscous, Site::RateFeedback),
+    (Effect::Stribeck, Site::RateFeedback),
+    (Effect::Gain, Site::Input),
+    (Effect::Gain, Site::Output),
+    (Effect::Offset, Site::Input),
+    (Effect::Offset, Site::Output),
 ];
 
 /// The pair a static case of `seed` uses (see [`STATIC_PAIRS`]).
-fn static_pair(seed: u64) -> (Effect, Location) {
+fn static_pair(seed: u64) -> (Effect, Site) {
     let slot = (seed % 30) as usize;
     let main = 13;
     if slot < STATIC_PAIRS.len() {
@@ -298,17 +295,17 @@ impl Case {
     /// linear, so a static gain commutes with it, and a constant in front of G is a constant
     /// behind it once G's transient has died out); otherwise just the location itself. Empty
     /// for [`Hidden::None`] and the hysteresis cases (no static block explains them).
-    pub fn equivalent_locations(&self) -> Vec<Location> {
+    pub fn equivalent_locations(&self) -> Vec<Site> {
         match &self.hidden {
             Hidden::Static {
                 effect: Effect::Gain | Effect::Offset,
-                location: location @ (Location::Input | Location::Output),
+                location: location @ (Site::Input | Site::Output),
                 ..
             } => {
-                let other = if *location == Location::Input {
-                    Location::Output
+                let other = if *location == Site::Input {
+                    Site::Output
                 } else {
-                    Location::Input
+                    Site::Input
                 };
                 vec![*location, other]
             }
@@ -349,8 +346,8 @@ impl Case {
         if *effect == Effect::Offset {
             let g0 = dc_gain(&self.nominal);
             let other = match location {
-                Location::Input => theta[0] * g0,
-                Location::Output => theta[0] / g0,
+                Site::Input => theta[0] * g0,
+                Site::Output => theta[0] / g0,
                 _ => return false,
             };
             return close(&[other]);
@@ -444,7 +441,7 @@ fn trace(g: &PolynomialModel, hidden: &Hidden, u: &[f64], e: Option<&[f64]>) -> 
 /// The augmented model of [`hypothesis`] at `location` simulated with `map` in its block.
 fn static_trace(
     g: &PolynomialModel,
-    location: Location,
+    location: Site,
     map: &(dyn Fn(f64) -> f64 + Sync),
     u: &[f64],
     e: Option<&[f64]>,
@@ -461,10 +458,10 @@ fn static_trace(
 }
 
 /// The map that makes the augmented model at `location` the nominal G.
-fn nominal_map(location: Location) -> fn(f64) -> f64 {
+fn nominal_map(location: Site) -> fn(f64) -> f64 {
     match location {
-        Location::Input | Location::Output => |z| z,
-        Location::OutputFeedback | Location::RateFeedback | Location::Declared { .. } => |_| 0.0,
+        Site::Input | Site::Output => |z| z,
+        Site::OutputFeedback | Site::RateFeedback | Site::Declared { .. } => |_| 0.0,
     }
 }
 
@@ -852,7 +849,7 @@ struct Nominal<'a> {
 
 impl Nominal<'_> {
     /// max |y| with the linear feedback N(z) = k·z at `location`.
-    fn linear_feedback_peak(&self, location: Location, k: f64) -> Option<f64> {
+    fn linear_feedback_peak(&self, location: Site, k: f64) -> Option<f64> {
         let t = static_trace(self.g, location, &|z| k * z, self.u, None).ok()?;
         let m = max_abs(&t.z);
         m.is_finite().then_some(m)
@@ -863,14 +860,14 @@ impl Nominal<'_> {
 fn draw_theta(
     rng: &mut StdRng,
     effect: Effect,
-    location: Location,
+    location: Site,
     nom: &Nominal<'_>,
 ) -> Option<Vec<f64>> {
     let g = nom.g;
     let g0 = dc_gain(g);
     let zmax = max_abs(&nom.z);
     let (zlo, zhi) = range(&nom.z);
-    let feedback = matches!(location, Location::OutputFeedback | Location::RateFeedback);
+    let feedback = matches!(location, Site::OutputFeedback | Site::RateFeedback);
     let theta = match (effect, feedback) {
         (Effect::Saturation, false) => vec![1.0, uniform(rng, 0.3, 0.7) * zmax],
         (Effect::Saturation, true) => {
@@ -946,13 +943,7 @@ fn draw_theta(
 
 /// Whether the effect is clearly active on the block input `z` of the simulation with it,
 /// and (feedback) every local slope over the range leaves the linearised loop stable.
-fn active(
-    effect: Effect,
-    theta: &[f64],
-    location: Location,
-    g: &PolynomialModel,
-    z: &[f64],
-) -> bool {
+fn active(effect: Effect, theta: &[f64], location: Site, g: &PolynomialModel, z: &[f64]) -> bool {
     let (zlo, zhi) = range(z);
     let zmax = max_abs(z);
     let ok = match effect {
@@ -975,14 +966,14 @@ fn active(
         _ => true,
     };
     let stable = match location {
-        Location::OutputFeedback => {
+        Site::OutputFeedback => {
             let slope_hi = match effect {
                 Effect::OddPolynomial { .. } => theta[0] + 3.0 * theta[1] * zmax * zmax,
                 _ => theta[0],
             };
             loop_stable(g, 0.0, slope_hi, false)
         }
-        Location::RateFeedback => loop_stable(g, 0.0, theta[theta.len() - 1], true),
+        Site::RateFeedback => loop_stable(g, 0.0, theta[theta.len() - 1], true),
         _ => true,
     };
     ok && stable
@@ -1005,7 +996,7 @@ fn draw_hysteresis(rng: &mut StdRng, bouc_wen: bool, nom: &Nominal<'_>) -> Optio
     if !loop_stable(g, alpha * k, k * (alpha + (1.0 - alpha) * unload), false) {
         return None;
     }
-    let peak = nom.linear_feedback_peak(Location::OutputFeedback, k)?;
+    let peak = nom.linear_feedback_peak(Site::OutputFeedback, k)?;
     let h_max = uniform(rng, 0.15, 0.4) * peak;
     let beta = h_max.powf(-n) / (1.0 + rho);
     Some(Hidden::BoucWen {
@@ -1035,8 +1026,8 @@ fn attempt(kind: CaseKind, seed: u64, rng: &mut StdRng) -> Option<Case> {
     let bw = bandwidth(&g);
     let len = rng.random_range(2000..=4000);
     let pair = static_pair(seed);
-    let continuous_motion = kind == CaseKind::Hysteresis
-        || (kind == CaseKind::Static && pair.1 == Location::RateFeedback);
+    let continuous_motion =
+        kind == CaseKind::Hysteresis || (kind == CaseKind::Static && pair.1 == Site::RateFeedback);
     let kinds: &[InputKind] = if continuous_motion {
         &[
             InputKind::FilteredNoise,
@@ -1177,7 +1168,7 @@ fn attempt(kind: CaseKind, seed: u64, rng: &mut StdRng) -> Option<Case> {
 mod tests {
     use super::*;
 
-    fn static_parts(case: &Case) -> (Effect, Vec<f64>, Location) {
+    fn static_parts(case: &Case) -> (Effect, Vec<f64>, Site) {
         match &case.hidden {
             Hidden::Static {
                 effect,
@@ -1328,7 +1319,7 @@ mod tests {
             assert_eq!(eq[0], location);
             if matches!(effect, Effect::Gain | Effect::Offset) {
                 assert_eq!(eq.len(), 2, "{effect:?}");
-                assert!(eq.contains(&Location::Input) && eq.contains(&Location::Output));
+                assert!(eq.contains(&Site::Input) && eq.contains(&Site::Output));
                 seen += 1;
             } else {
                 assert_eq!(eq, vec![location], "{effect:?}");
@@ -1368,7 +1359,7 @@ mod tests {
                     if effect == Effect::Offset {
                         // Unless it happens to be the other location's constant.
                         let other = theta[0]
-                            * if location == Location::Input {
+                            * if location == Site::Input {
                                 g0
                             } else {
                                 1.0 / g0
@@ -1386,7 +1377,7 @@ mod tests {
             assert!(!c.parameters_within(&theta[..theta.len() - 1], 0.2));
             if effect == Effect::Offset {
                 // The constant of the other location is accepted too.
-                let other = if location == Location::Input {
+                let other = if location == Site::Input {
                     theta[0] * g0
                 } else {
                     theta[0] / g0
@@ -1437,7 +1428,7 @@ mod tests {
                     .map(|k| (noisy.get(k, 0) - d.y().get(k, 0)).abs())
                     .fold(0.0, f64::max);
                 assert!(worst < 1e-9, "{effect:?} at {location:?}: {worst}");
-                if matches!(location, Location::Input | Location::Output) {
+                if matches!(location, Site::Input | Site::Output) {
                     let clean = sim(None);
                     let worst = (0..d.len())
                         .map(|k| (clean.get(k, 0) + e[k] - d.y().get(k, 0)).abs())

@@ -167,7 +167,11 @@ fn score_tests(bla: &Model, augmented: &Augmented, tests: &[Record]) -> Result<V
         .iter()
         .map(|rec| {
             let u = rec.data()?.u().clone();
-            let simulated = augmented.model.simulate(&maps, &u, None, None)?.y.channel(0);
+            let simulated = augmented
+                .model
+                .simulate(&maps, &u, None, None)?
+                .y
+                .channel(0);
             let bla_simulated = bla.lft().simulate(&[], &u, None, None)?.y.channel(0);
             Ok(TestScore {
                 record: rec.name.clone(),

@@ -21,9 +21,17 @@ fn plant() -> PolynomialModel {
 }
 
 /// u uniform in ±amplitude, y = G·N(u) + noise.
-fn record(n: usize, amplitude: f64, noise: f64, map: fn(f64) -> f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+fn record(
+    n: usize,
+    amplitude: f64,
+    noise: f64,
+    map: fn(f64) -> f64,
+    seed: u64,
+) -> (Vec<f64>, Vec<f64>) {
     let mut rng = StdRng::seed_from_u64(seed);
-    let u: Vec<f64> = (0..n).map(|_| amplitude * (2.0 * rng.random::<f64>() - 1.0)).collect();
+    let u: Vec<f64> = (0..n)
+        .map(|_| amplitude * (2.0 * rng.random::<f64>() - 1.0))
+        .collect();
     let v = Signal::new(1, u.iter().map(|&x| map(x)).collect()).unwrap();
     let y = plant()
         .simulate(&v)
@@ -35,7 +43,11 @@ fn record(n: usize, amplitude: f64, noise: f64, map: fn(f64) -> f64, seed: u64) 
 }
 
 fn data((u, y): &(Vec<f64>, Vec<f64>)) -> Data {
-    Data::new(Signal::new(1, u.clone()).unwrap(), Signal::new(1, y.clone()).unwrap()).unwrap()
+    Data::new(
+        Signal::new(1, u.clone()).unwrap(),
+        Signal::new(1, y.clone()).unwrap(),
+    )
+    .unwrap()
 }
 
 fn test_record((u, y): (Vec<f64>, Vec<f64>)) -> Record {
@@ -53,11 +65,17 @@ fn test_record((u, y): (Vec<f64>, Vec<f64>)) -> Record {
 fn a_linear_plant_is_its_own_bla_and_misses_nothing() {
     let est = record(1500, 1.0, 0.01, |u| u, 1);
     let tests = [test_record(record(500, 1.0, 0.0, |u| u, 2))];
-    let r = discover_from_linear_start(&data(&est), &tests, &LinearStartRequest::default()).unwrap();
+    let r =
+        discover_from_linear_start(&data(&est), &tests, &LinearStartRequest::default()).unwrap();
     for (a, b) in r.bla.den.iter().zip(&plant().den) {
         assert!((a - b).abs() < 0.02, "{:?}", r.bla.den);
     }
-    assert_eq!(r.discovery.verdict_kind, Verdict::NoMissingEffect, "{}", r.discovery.verdict);
+    assert_eq!(
+        r.discovery.verdict_kind,
+        Verdict::NoMissingEffect,
+        "{}",
+        r.discovery.verdict
+    );
     assert!(r.tests.is_empty());
     assert_eq!(r.fit.len() + r.validation.len(), 1500);
 }
@@ -67,8 +85,14 @@ fn an_input_saturation_is_found_and_shrinks_the_test_error() {
     let sat = |u: f64| u.clamp(-0.6, 0.6);
     let est = record(2000, 1.5, 0.005, sat, 3);
     let tests = [test_record(record(600, 1.5, 0.0, sat, 4))];
-    let r = discover_from_linear_start(&data(&est), &tests, &LinearStartRequest::default()).unwrap();
-    assert_eq!(r.discovery.verdict_kind, Verdict::MissingEffect, "{}", r.discovery.verdict);
+    let r =
+        discover_from_linear_start(&data(&est), &tests, &LinearStartRequest::default()).unwrap();
+    assert_eq!(
+        r.discovery.verdict_kind,
+        Verdict::MissingEffect,
+        "{}",
+        r.discovery.verdict
+    );
     let t = &r.tests[0];
     assert_eq!(t.record, "test");
     assert!(
@@ -79,7 +103,11 @@ fn an_input_saturation_is_found_and_shrinks_the_test_error() {
     );
     // The scores are the RMS over the samples after `settle`, recomputed here.
     let rms = |s: &[f64]| {
-        let e: f64 = s[20..].iter().zip(&t.measured[20..]).map(|(a, b)| (a - b).powi(2)).sum();
+        let e: f64 = s[20..]
+            .iter()
+            .zip(&t.measured[20..])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum();
         (e / (s.len() - 20) as f64).sqrt()
     };
     assert!((rms(&t.simulated) - t.augmented_rms).abs() < 1e-12);
@@ -93,6 +121,12 @@ fn the_validation_part_is_the_tail_of_the_record() {
     assert_eq!((fit.len(), val.len()), (75, 25));
     assert_eq!(val.y().get(0, 0), est.y().get(75, 0));
     for bad in [0.0, 1.0, -0.1, f64::NAN, 0.001] {
-        assert!(matches!(split_for_validation(&est, bad), Err(WorkflowError::Request(_))), "{bad}");
+        assert!(
+            matches!(
+                split_for_validation(&est, bad),
+                Err(WorkflowError::Request(_))
+            ),
+            "{bad}"
+        );
     }
 }

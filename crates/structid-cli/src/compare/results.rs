@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use structid_io::{OutputGuard, format_number};
 
 use crate::error::CliError;
-use structid_core::hyperparameters::Trial;
+use structid_core::selection::Trial;
 
 /// Identifies case files of this version.
 pub const CASE_FORMAT: &str = "structid-compare-case/1";

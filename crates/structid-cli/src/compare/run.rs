@@ -7,7 +7,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use rayon::prelude::*;
-use structid_core::metrics::{centred_rms_difference, rms_difference};
+use structid_core::validation::metrics::{centred_rms_difference, rms_difference};
 use structid_core::{Identification, IdentifySettings, Signal, identify};
 use structid_io::sweep_file::{BetaChoice, SelectionMethod, SweepDispersion};
 use structid_io::{DispersionSpec, OutputGuard};
@@ -67,16 +67,16 @@ fn fingerprint(exp: &Experiment, disp: &SweepDispersion, case: &Case) -> String 
     format!("{:016x}", h.finish())
 }
 
-fn criterion(m: SelectionMethod) -> structid_core::hyperparameters::Criterion {
+fn criterion(m: SelectionMethod) -> structid_core::selection::Criterion {
     match m {
         SelectionMethod::MarginalLikelihood => {
-            structid_core::hyperparameters::Criterion::MarginalLikelihood
+            structid_core::selection::Criterion::MarginalLikelihood
         }
-        SelectionMethod::Gcv => structid_core::hyperparameters::Criterion::Gcv,
+        SelectionMethod::Gcv => structid_core::selection::Criterion::Gcv,
         SelectionMethod::CrossValidation { folds } => {
-            structid_core::hyperparameters::Criterion::CrossValidation { folds }
+            structid_core::selection::Criterion::CrossValidation { folds }
         }
-        SelectionMethod::Validation => structid_core::hyperparameters::Criterion::Validation,
+        SelectionMethod::Validation => structid_core::selection::Criterion::Validation,
     }
 }
 
@@ -178,11 +178,11 @@ fn execute(ctx: &Context<'_>, case: &Case, rec: &mut CaseRecord) -> Result<(), C
     let (id, model): (Identification, _) = match case.beta {
         BetaChoice::Fixed(_) => (identify(&model, &data, &settings)?, model),
         BetaChoice::Auto => {
-            let sel_settings = structid_core::hyperparameters::SelectionSettings::builder()
+            let sel_settings = structid_core::selection::SelectionSettings::builder()
                 .criterion(criterion(disp.selection))
                 .tune_sigma(disp.tune_sigma)
                 .build()?;
-            let sel = structid_core::hyperparameters::select(
+            let sel = structid_core::selection::select(
                 &model,
                 &data,
                 validation.as_ref(),

@@ -24,10 +24,10 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use structid_lti::Signal;
 
+use crate::dispersion::kernel::Kernel;
 use crate::dispersion::{Dispersion, FeatureMap, Penalty, QuadraticPenalty};
 use crate::error::{Error, Result, positive_finite};
-use crate::interpolant::Interpolant;
-use crate::kernel::Kernel;
+use crate::model::interpolant::Interpolant;
 
 /// Margin on each side of the data inside the periodic unit interval.
 pub const DOMAIN_MARGIN: f64 = 0.25;

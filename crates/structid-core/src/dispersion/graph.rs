@@ -6,7 +6,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
+use crate::model::interpolant::Interpolant;
 
 /// Turns node values into an interpolant (the map between and beyond the nodes).
 pub trait NodeInterpolation: Send + Sync {
@@ -22,7 +22,7 @@ pub trait NodeInterpolation: Send + Sync {
 ///
 /// Solvers treat the node values as the unknowns, so samples that share a node share a value
 /// exactly. When the edges are exactly (0,1), (1,2), …, (G−2, G−1) the graph is a chain and
-/// solvers use the O(G) one-dimensional proximal operator ([`crate::prox::tv1d`]).
+/// solvers use the O(G) one-dimensional proximal operator ([`crate::solver::prox::tv1d`]).
 ///
 /// ```
 /// use std::sync::Arc;

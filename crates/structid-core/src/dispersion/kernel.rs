@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use structid_lti::Signal;
 
 use crate::error::{Result, positive_finite};
-use crate::interpolant::Interpolant;
+use crate::model::interpolant::Interpolant;
 
 /// A symmetric positive-definite kernel k: ℝᵖ × ℝᵖ → ℝ.
 ///

@@ -15,10 +15,10 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use structid_lti::Signal;
 
+use crate::dispersion::fourier::FeaturePenalty;
+use crate::dispersion::kernel::{GaussianKernel, Kernel};
 use crate::dispersion::{Dispersion, FeatureMap, Penalty};
 use crate::error::{Error, Result, positive_finite};
-use crate::fourier::FeaturePenalty;
-use crate::kernel::{GaussianKernel, Kernel};
 
 /// A Gaussian dispersion approximated by k ≪ L Nyström features (any number of inputs).
 ///

@@ -20,9 +20,9 @@ use std::sync::Arc;
 use structid_lti::Signal;
 
 use crate::dispersion::graph::TvPenalty;
+use crate::dispersion::kernel::{GaussianKernel, Kernel, KernelExpansion};
 use crate::error::Result;
-use crate::interpolant::Interpolant;
-use crate::kernel::{GaussianKernel, Kernel, KernelExpansion};
+use crate::model::interpolant::Interpolant;
 
 /// A dispersion function D(z, w) for one nonlinear block.
 pub trait Dispersion: Send + Sync + fmt::Debug {
@@ -38,7 +38,7 @@ pub trait Dispersion: Send + Sync + fmt::Debug {
     fn penalty(&self, z: &Signal) -> Result<Penalty>;
 
     /// The width σ of a dispersion that has one (a length scale in units of z), for
-    /// automatic selection ([`crate::hyperparameters`]); `None` (the default) when it has none.
+    /// automatic selection ([`crate::selection`]); `None` (the default) when it has none.
     fn width(&self) -> Option<f64> {
         None
     }
@@ -57,7 +57,7 @@ pub enum Penalty {
     /// only through its columns and never invert it.
     Quadratic(Box<dyn QuadraticPenalty>),
     /// D(w) = Σ_(a,b)∈E c_ab·|v_a − v_b|, a graph total variation on node values (a conic,
-    /// non-smooth penalty): see [`crate::total_variation`].
+    /// non-smooth penalty): see [`crate::dispersion::total_variation`].
     TotalVariation(TvPenalty),
 }
 
@@ -130,7 +130,7 @@ pub trait QuadraticPenalty: Send + Sync {
     /// unspecified, when the penalty cannot evaluate its kernel away from the samples (the
     /// default) or when `points` has the wrong number of channels or `out` the wrong shape.
     ///
-    /// The posterior band of the exact solver ([`crate::posterior`]) needs it; every penalty of
+    /// The posterior band of the exact solver ([`crate::identify::posterior`]) needs it; every penalty of
     /// this crate's quadratic dispersions implements it.
     ///
     /// ```
@@ -426,7 +426,7 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
         {
             return false;
         }
-        crate::kernel::par_rows(out, &|i, mut row| {
+        crate::dispersion::kernel::par_rows(out, &|i, mut row| {
             let zi = self.z.sample(i);
             for j in 0..row.ncols() {
                 row[j] = self.kernel.eval(zi, points.sample(j));

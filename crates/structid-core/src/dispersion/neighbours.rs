@@ -36,7 +36,7 @@ enum Node {
 ///
 /// # Example
 /// ```
-/// use structid_core::neighbours::KdTree;
+/// use structid_core::dispersion::neighbours::KdTree;
 ///
 /// // Four points in 2-D, point-major.
 /// let points = [0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 5.0, 5.0];
@@ -72,7 +72,7 @@ impl KdTree {
     ///
     /// # Example
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     ///
     /// let tree = KdTree::new(&[1.0, 2.0, 3.0], 1);
     /// assert_eq!((tree.len(), tree.dim()), (3, 1));
@@ -136,7 +136,7 @@ impl KdTree {
     /// The number of points N.
     ///
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     /// assert_eq!(KdTree::new(&[0.0; 6], 2).len(), 3);
     /// ```
     pub fn len(&self) -> usize {
@@ -146,7 +146,7 @@ impl KdTree {
     /// Whether the tree holds no points.
     ///
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     /// assert!(KdTree::new(&[], 3).is_empty());
     /// ```
     pub fn is_empty(&self) -> bool {
@@ -156,7 +156,7 @@ impl KdTree {
     /// The dimension of the points.
     ///
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     /// assert_eq!(KdTree::new(&[0.0; 6], 3).dim(), 3);
     /// ```
     pub fn dim(&self) -> usize {
@@ -169,7 +169,7 @@ impl KdTree {
     /// If `i >= self.len()`, like slice indexing.
     ///
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     /// let tree = KdTree::new(&[0.0, 1.0, 2.0, 3.0], 2);
     /// assert_eq!(tree.point(1), &[2.0, 3.0]);
     /// ```
@@ -196,7 +196,7 @@ impl KdTree {
     /// implementation).
     ///
     /// ```
-    /// use structid_core::neighbours::KdTree;
+    /// use structid_core::dispersion::neighbours::KdTree;
     ///
     /// let points = [0.0, 1.0, 3.0, 7.0]; // 1-D
     /// let tree = KdTree::new(&points, 1);
@@ -471,7 +471,7 @@ fn squared_distance(a: &[f64], b: &[f64]) -> f64 {
 /// dimensions.
 ///
 /// ```
-/// use structid_core::neighbours::knn_graph;
+/// use structid_core::dispersion::neighbours::knn_graph;
 ///
 /// // Points 0..=3 on a line at 0, 1, 3, 10. Their nearest neighbours are points 1, 0, 1
 /// // and 2; symmetrised and deduplicated:
@@ -545,7 +545,7 @@ pub enum Weighting {
 ///
 /// # Example
 /// ```
-/// use structid_core::neighbours::{KdTree, ScatteredInterpolant, Weighting};
+/// use structid_core::dispersion::neighbours::{KdTree, ScatteredInterpolant, Weighting};
 ///
 /// let nodes = KdTree::new(&[0.0, 0.0, 1.0, 0.0, 0.0, 1.0], 2);
 /// let f = ScatteredInterpolant::new(
@@ -571,7 +571,7 @@ impl ScatteredInterpolant {
     /// and for [`Weighting::InverseDistance`] `power` is finite and ≥ 0.
     ///
     /// ```
-    /// use structid_core::neighbours::{KdTree, ScatteredInterpolant, Weighting};
+    /// use structid_core::dispersion::neighbours::{KdTree, ScatteredInterpolant, Weighting};
     ///
     /// let f = ScatteredInterpolant::new(KdTree::new(&[0.0, 1.0], 1), vec![5.0, 7.0], Weighting::Nearest);
     /// assert_eq!(f.eval(&[0.8]), 7.0);
@@ -626,7 +626,7 @@ impl ScatteredInterpolant {
     /// Returns NaN if the interpolant has no nodes (a precondition violation).
     ///
     /// ```
-    /// use structid_core::neighbours::{KdTree, ScatteredInterpolant, Weighting};
+    /// use structid_core::dispersion::neighbours::{KdTree, ScatteredInterpolant, Weighting};
     ///
     /// let w = Weighting::InverseDistance { neighbours: 2, power: 1.0 };
     /// let f = ScatteredInterpolant::new(KdTree::new(&[0.0, 4.0], 1), vec![0.0, 8.0], w);
@@ -688,7 +688,7 @@ impl ScatteredInterpolant {
 /// constant (the end value) outside `[x_0, x_last]`.
 ///
 /// ```
-/// use structid_core::neighbours::PiecewiseLinear;
+/// use structid_core::dispersion::neighbours::PiecewiseLinear;
 ///
 /// let f = PiecewiseLinear::new(vec![0.0, 1.0, 3.0], vec![0.0, 2.0, 0.0]);
 /// assert_eq!(f.eval(0.5), 1.0);
@@ -708,7 +708,7 @@ impl PiecewiseLinear {
     /// strictly increasing.
     ///
     /// ```
-    /// use structid_core::neighbours::PiecewiseLinear;
+    /// use structid_core::dispersion::neighbours::PiecewiseLinear;
     /// let f = PiecewiseLinear::new(vec![1.0], vec![4.0]); // a single knot: a constant
     /// assert_eq!(f.eval(-1.0), 4.0);
     /// ```
@@ -739,7 +739,7 @@ impl PiecewiseLinear {
     /// precondition violation).
     ///
     /// ```
-    /// use structid_core::neighbours::PiecewiseLinear;
+    /// use structid_core::dispersion::neighbours::PiecewiseLinear;
     /// let f = PiecewiseLinear::new(vec![0.0, 2.0], vec![1.0, 5.0]);
     /// assert_eq!(f.eval(0.5), 2.0);
     /// assert_eq!(f.eval(9.0), 5.0);
@@ -772,7 +772,7 @@ impl PiecewiseLinear {
     /// The knots, strictly increasing.
     ///
     /// ```
-    /// use structid_core::neighbours::PiecewiseLinear;
+    /// use structid_core::dispersion::neighbours::PiecewiseLinear;
     /// let f = PiecewiseLinear::new(vec![0.0, 1.0], vec![3.0, 4.0]);
     /// assert_eq!(f.knots(), &[0.0, 1.0]);
     /// ```
@@ -783,7 +783,7 @@ impl PiecewiseLinear {
     /// The values at the knots.
     ///
     /// ```
-    /// use structid_core::neighbours::PiecewiseLinear;
+    /// use structid_core::dispersion::neighbours::PiecewiseLinear;
     /// let f = PiecewiseLinear::new(vec![0.0, 1.0], vec![3.0, 4.0]);
     /// assert_eq!(f.values(), &[3.0, 4.0]);
     /// ```

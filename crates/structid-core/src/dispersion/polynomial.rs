@@ -22,10 +22,10 @@ use std::sync::Arc;
 
 use structid_lti::Signal;
 
+use crate::dispersion::fourier::FeaturePenalty;
+use crate::dispersion::kernel::Kernel;
 use crate::dispersion::{Dispersion, FeatureMap, Penalty};
 use crate::error::{Error, Result, positive_finite};
-use crate::fourier::FeaturePenalty;
-use crate::kernel::Kernel;
 
 /// Largest number of monomials a polynomial dispersion may create.
 pub const MAX_MONOMIALS: usize = 4096;

@@ -19,11 +19,11 @@ use std::sync::Arc;
 use faer::Mat;
 use structid_lti::Signal;
 
+use crate::dispersion::fourier::FeaturePenalty;
+use crate::dispersion::kernel::Kernel;
 use crate::dispersion::{Dispersion, FeatureMap, Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::fourier::FeaturePenalty;
-use crate::interpolant::Interpolant;
-use crate::kernel::Kernel;
+use crate::model::interpolant::Interpolant;
 
 /// The dispersion of the kernel K₁ + K₂ + … of quadratic dispersions.
 ///

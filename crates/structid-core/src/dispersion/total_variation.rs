@@ -54,10 +54,12 @@ use std::sync::Arc;
 use structid_lti::Signal;
 
 pub use super::graph::{NodeInterpolation, TvPenalty};
+use crate::dispersion::neighbours::{
+    KdTree, PiecewiseLinear, ScatteredInterpolant, Weighting, knn_graph,
+};
 use crate::dispersion::{Dispersion, Penalty};
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
-use crate::neighbours::{KdTree, PiecewiseLinear, ScatteredInterpolant, Weighting, knn_graph};
+use crate::model::interpolant::Interpolant;
 
 /// How a multi-input total-variation estimate is evaluated between the nodes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

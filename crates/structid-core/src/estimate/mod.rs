@@ -42,7 +42,7 @@
 //! let back: Estimate = serde_json::from_str(&text).unwrap();
 //! let a = estimate.simulate(&u, None).unwrap().y;
 //! assert_eq!(a, back.simulate(&u, None).unwrap().y);
-//! assert!(structid_core::metrics::rms_difference(&a.channel(0), &y.channel(0)) < 0.01);
+//! assert!(structid_core::validation::metrics::rms_difference(&a.channel(0), &y.channel(0)) < 0.01);
 //! //! ```
 
 pub mod predict;
@@ -57,10 +57,10 @@ use structid_lti::Signal;
 use crate::dispersion::{Dispersion, Penalty};
 use crate::error::{Error, Result};
 use crate::identify::{CostTerms, Identification, IdentifySettings, identify};
-use crate::interpolant::Interpolant;
-use crate::lft::{Lft, LftMatrices};
+use crate::model::interpolant::Interpolant;
+use crate::model::lft::{Lft, LftMatrices};
+use crate::model::simulate::Simulation;
 use crate::model::{Data, Model, NonlinearBlock};
-use crate::simulate::Simulation;
 use crate::validation::{ValidationReport, ValidationSettings, validate};
 
 pub use crate::stored::{

@@ -21,9 +21,9 @@ use structid_lti::Signal;
 
 use crate::error::{Error, Result};
 use crate::initial_state::InitialState;
-use crate::interpolant::Interpolant;
-use crate::metrics::{fit_percent, rms_difference};
+use crate::model::interpolant::Interpolant;
 use crate::model::{Data, Model};
+use crate::validation::metrics::{fit_percent, rms_difference};
 use crate::validation::{check_record, measured_residual};
 
 /// Settings of [`predict`]; build them with [`PredictionSettings::builder`].

@@ -6,17 +6,17 @@ use std::sync::Arc;
 use structid_lti::Signal;
 
 use crate::dispersion::FeatureMap;
+use crate::dispersion::fourier::{FeatureExpansion, FourierKernel};
+use crate::dispersion::kernel::{GaussianKernel, Kernel, KernelExpansion};
+use crate::dispersion::low_rank::NystromFeatures;
+use crate::dispersion::neighbours::{KdTree, PiecewiseLinear, ScatteredInterpolant, Weighting};
+use crate::dispersion::polynomial::PolynomialFeatures;
+use crate::dispersion::sum::{StackedFeatures, SumInterpolant};
+use crate::dispersion::total_variation::{PiecewiseLinearMap, ScaledScattered};
 use crate::error::{Error, Result};
-use crate::fourier::{FeatureExpansion, FourierKernel};
-use crate::interpolant::Interpolant;
-use crate::kernel::{GaussianKernel, Kernel, KernelExpansion};
-use crate::low_rank::NystromFeatures;
-use crate::maps::{ExprMap, LookupTable};
-use crate::neighbours::{KdTree, PiecewiseLinear, ScatteredInterpolant, Weighting};
-use crate::polynomial::PolynomialFeatures;
+use crate::model::interpolant::Interpolant;
+use crate::model::maps::{ExprMap, LookupTable};
 use crate::stored::{StoredKernel, StoredMap};
-use crate::sum::{StackedFeatures, SumInterpolant};
-use crate::total_variation::{PiecewiseLinearMap, ScaledScattered};
 
 impl StoredKernel {
     /// The feature map this describes.

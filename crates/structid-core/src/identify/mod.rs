@@ -12,8 +12,8 @@ pub use settings::{IdentifySettings, IdentifySettingsBuilder, SolverChoice};
 use std::time::Instant;
 
 use crate::error::{Error, Result, positive_finite};
+use crate::identify::problem::Problem;
 use crate::model::{Data, Model};
-use crate::problem::Problem;
 use crate::solver;
 use crate::solver::choice::{SolverKind, SolverReason, choose_with};
 

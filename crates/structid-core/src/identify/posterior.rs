@@ -42,7 +42,7 @@
 //!
 //! **Meaning.** N̂_i(z) ± 1.96·std is a 95 % credible band: it covers the true map at 95 % of
 //! the points *if* the map is a draw from the prior above with the β used (so β should fit
-//! the data, e.g. from [`crate::hyperparameters`]). For a fixed map that is much smoother or
+//! the data, e.g. from [`crate::selection`]). For a fixed map that is much smoother or
 //! rougher than the prior says, the coverage can differ. With several blocks feeding one
 //! output, constants (and anything else the data cannot attribute) are shared between the
 //! blocks, and each block's band includes that ambiguity.
@@ -422,9 +422,9 @@ impl Features {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dispersion::fourier::{FourierDispersion, FourierWeights};
+    use crate::dispersion::low_rank::LowRankGaussian;
     use crate::dispersion::{Dispersion, KernelDispersion, Penalty};
-    use crate::fourier::{FourierDispersion, FourierWeights};
-    use crate::low_rank::LowRankGaussian;
 
     fn quadratic(d: &dyn Dispersion, z: &Signal) -> Box<dyn QuadraticPenalty> {
         match d.penalty(z).unwrap() {

@@ -12,7 +12,7 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
-use crate::measurability::ZSource;
+use crate::model::measurability::ZSource;
 use crate::model::{Data, Model};
 
 /// One nonlinear block as the solver sees it.
@@ -318,7 +318,7 @@ impl Problem {
     /// Leaves out of the fit the output rows marked in `held_out` (length L·n_y, sample-major:
     /// row `k·n_y + i` is output `i` at sample `k`): their equations y_k = … are dropped, so
     /// the estimate does not see them, while ŵ and ê are still defined at every sample. This
-    /// is what cross-validation needs ([`crate::hyperparameters`]). The exact and conic
+    /// is what cross-validation needs ([`crate::selection`]). The exact and conic
     /// solvers support it, the feature solver for a static noise path and whole samples, ADMM
     /// for whole samples (missing outputs of its smoother).
     ///

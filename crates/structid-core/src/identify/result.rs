@@ -5,8 +5,8 @@ use structid_lti::Signal;
 
 use crate::error::Result;
 use crate::identify::posterior::Posterior;
-use crate::interpolant::Interpolant;
-use crate::measurability::ZSource;
+use crate::model::interpolant::Interpolant;
+use crate::model::measurability::ZSource;
 use crate::solver::status::{SolveStatus, SolverKind, SolverReason};
 
 /// The cost terms of eq. (4) at the optimum.
@@ -209,7 +209,7 @@ impl Identification {
     /// The pointwise posterior standard deviation of block `block`'s map (index into
     /// [`Identification::blocks`]) at every sample of `points` (one point per sample, as many
     /// channels as the block has inputs): N̂ ± 1.96·std is the 95 % band. See
-    /// [`crate::posterior`] for the formula, the noise level ŝ² it uses and the cost.
+    /// [`crate::identify::posterior`] for the formula, the noise level ŝ² it uses and the cost.
     ///
     /// `Ok(None)` when no posterior was kept: [`IdentifySettingsBuilder::posterior`](crate::IdentifySettingsBuilder::posterior) off, an
     /// iterative solver (total variation, Clarabel, ADMM), or a user-defined penalty that
@@ -236,11 +236,10 @@ impl Identification {
     /// assert!(off.posterior_std(1, &z).unwrap().is_none());
     /// ```
     pub fn posterior_std(&self, block: usize, points: &Signal) -> Result<Option<Vec<f64>>> {
-        let est = self
-            .blocks
-            .get(block)
-            .ok_or_else(|| crate::posterior::block_out_of_range(block, self.blocks.len()))?;
-        crate::posterior::check_points(points, est.z.channels())?;
+        let est = self.blocks.get(block).ok_or_else(|| {
+            crate::identify::posterior::block_out_of_range(block, self.blocks.len())
+        })?;
+        crate::identify::posterior::check_points(points, est.z.channels())?;
         match &self.posterior {
             Some(p) => p.std(block, points),
             None => Ok(None),

@@ -236,7 +236,7 @@ impl IdentifySettingsBuilder {
     /// Keep the posterior of the maps (default `false`): the exact and feature solvers then
     /// store their Cholesky factor and the noise level in [`Identification::posterior`](crate::Identification::posterior), and
     /// [`Identification::posterior_std`](crate::Identification::posterior_std) gives pointwise standard deviations (uncertainty
-    /// bands; see [`crate::posterior`]). The exact solver's factor is n×n f64 (n = L·n_y),
+    /// bands; see [`crate::identify::posterior`]). The exact solver's factor is n×n f64 (n = L·n_y),
     /// kept as long as the identification; its memory estimate includes it.
     ///
     /// ```

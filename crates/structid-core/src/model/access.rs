@@ -8,7 +8,7 @@
 use nalgebra::DMatrix;
 
 use crate::error::{Error, Result};
-use crate::lft::{Lft, LftMatrices};
+use crate::model::lft::{Lft, LftMatrices};
 use crate::model::order::BlockPlace;
 
 /// How the paper's identification reaches one block's input.

@@ -3,7 +3,7 @@
 use exmex::{Express, FlatEx};
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
+use crate::model::interpolant::Interpolant;
 
 /// A static map given as an expression in `z0, z1, …` (or `z` for a single input), e.g.
 /// `tanh(z0)`, `0.5*(sin((3*z)^2) + (2*z)^2 - 2)`, `min(max(z0, -1), 1)`.

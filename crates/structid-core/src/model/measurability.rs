@@ -30,7 +30,7 @@ use nalgebra::DMatrix;
 use structid_lti::{LinearSystem, Signal, StateSpace};
 
 use crate::error::{Error, Result};
-use crate::lft::Lft;
+use crate::model::lft::Lft;
 
 /// How z is obtained from the data.
 #[derive(Clone, Debug, PartialEq)]
@@ -373,15 +373,15 @@ fn observed_rows(c: &DMatrix<f64>, a: &DMatrix<f64>) -> Vec<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lft::LftMatrices;
+    use crate::identify::problem::Problem;
+    use crate::model::lft::LftMatrices;
+    use crate::model::structure::{Site, polynomial_lft};
     use crate::model::{Data, Model, NonlinearBlock};
-    use crate::problem::Problem;
-    use crate::structure::{Site, polynomial_lft};
 
     fn rate_feedback_lft(g: &structid_linear::PolynomialModel) -> Result<Lft> {
         polynomial_lft(g, Some(Site::RateFeedback), false)
     }
-    use crate::simulate::MapBinding;
+    use crate::model::simulate::MapBinding;
     use nalgebra::dmatrix;
     use proptest::prelude::*;
     use std::sync::Arc;

@@ -19,7 +19,7 @@ use structid_lti::Signal;
 
 use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
-use crate::lft::Lft;
+use crate::model::lft::Lft;
 
 /// One unknown static map N^\[i\]: it reads the z channels `inputs` and produces w channel `output`.
 #[derive(Clone)]

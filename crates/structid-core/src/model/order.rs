@@ -16,7 +16,7 @@
 //! reported z but no map's input.
 
 use crate::error::{Error, Result};
-use crate::lft::Lft;
+use crate::model::lft::Lft;
 
 /// Where one block sits: the z channels it reads and the w channel it writes, with its name
 /// for messages.
@@ -147,7 +147,7 @@ impl Lft {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lft::LftMatrices;
+    use crate::model::lft::LftMatrices;
     use nalgebra::DMatrix;
 
     /// A static LFT with `nw` maps, each reading its own z channel, and the given D_zw.

@@ -17,8 +17,8 @@ use std::str::FromStr;
 use exmex::{BinOp, Express, FlatEx, MakeOperators, Operator};
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
-use crate::maps::{function_names, unknown_function};
+use crate::model::interpolant::Interpolant;
+use crate::model::maps::{function_names, unknown_function};
 
 /// A dual number v + d·ε: a value and its derivative along one direction.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

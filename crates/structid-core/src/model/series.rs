@@ -17,9 +17,9 @@
 use structid_lti::Signal;
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
 use crate::model::Model;
 use crate::model::access::BlockAccess;
+use crate::model::interpolant::Interpolant;
 
 impl Model {
     /// z computed from the record (u, y) with the maps `maps` (one per block, in block order)

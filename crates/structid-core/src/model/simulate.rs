@@ -3,9 +3,9 @@
 use structid_lti::Signal;
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
-use crate::lft::Lft;
 use crate::model::Model;
+use crate::model::interpolant::Interpolant;
+use crate::model::lft::Lft;
 use crate::model::order::BlockPlace;
 
 /// One static map placed in the loop: `w[output] = map(z[inputs])`.

@@ -36,7 +36,7 @@ use structid_linear::PolynomialModel;
 
 use crate::dispersion::Dispersion;
 use crate::error::{Error, Result};
-use crate::lft::{Lft, LftMatrices};
+use crate::model::lft::{Lft, LftMatrices};
 use crate::model::{Model, NonlinearBlock};
 
 /// Where an unknown static block sits in a structure.
@@ -144,7 +144,7 @@ impl Site {
 /// nominal model of a polynomial G. The sample time of `g` is kept.
 ///
 /// ```
-/// use structid_core::structure::realise;
+/// use structid_core::model::structure::realise;
 /// use structid_linear::PolynomialModel;
 /// let g = PolynomialModel { num: vec![vec![0.0, 1.0]], den: vec![1.0, -0.5], sample_time: Some(0.1) };
 /// let lft = realise(&g).unwrap();

@@ -12,8 +12,8 @@ use structid_linear::PolynomialModel;
 
 use super::LinearStructure;
 use crate::error::{Error, Result};
-use crate::lft::Lft;
-use crate::structure::Site;
+use crate::model::lft::Lft;
+use crate::model::structure::Site;
 
 /// The Markov parameters D, C·B, C·A·B, … (`count` of them) of (A, B, C, D).
 fn markov(
@@ -238,7 +238,7 @@ pub(super) fn from_lft(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::structure::realise;
+    use crate::model::structure::realise;
 
     fn g() -> PolynomialModel {
         PolynomialModel {
@@ -277,7 +277,8 @@ mod tests {
             num: vec![vec![0.0, 0.3, 0.1], vec![0.0, -0.2, 0.05]],
             ..g()
         };
-        let lft = crate::structure::polynomial_lft(&two, Some(Site::OutputFeedback), true).unwrap();
+        let lft = crate::model::structure::polynomial_lft(&two, Some(Site::OutputFeedback), true)
+            .unwrap();
         let (s, found) = from_lft("N".into(), &lft, 0, 0).unwrap();
         assert!(s.separate_numerator());
         assert!((found.num[1][1] + 0.2).abs() < 1e-10, "{found:?}");

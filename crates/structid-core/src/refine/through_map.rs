@@ -22,8 +22,8 @@ use structid_lti::Signal;
 
 use super::{integrators, linear_error};
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
 use crate::model::Data;
+use crate::model::interpolant::Interpolant;
 
 struct Problem<'a> {
     u: Signal,

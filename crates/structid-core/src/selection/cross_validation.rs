@@ -1,8 +1,8 @@
 //! Blocked K-fold cross-validation by refitting.
 
 use crate::error::{Error, Result};
+use crate::identify::problem::Problem;
 use crate::identify::{Identification, IdentifySettings, SolverChoice, identify_problem};
-use crate::problem::Problem;
 use crate::solver::choice::SolverKind;
 
 use super::score::BetaScore;

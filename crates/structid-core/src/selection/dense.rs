@@ -10,7 +10,7 @@ use structid_lti::{LinearSystem, StateSpace};
 
 use crate::dispersion::QuadraticPenalty;
 use crate::error::{Error, Result};
-use crate::problem::Problem;
+use crate::identify::problem::Problem;
 use crate::solver::exact::{add_noise_term, assemble};
 
 use super::score::{BetaScore, factored_value, free_state_unsupported};

@@ -4,7 +4,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::dispersion::Penalty;
 use crate::error::Result;
-use crate::problem::Problem;
+use crate::identify::problem::Problem;
 use crate::solver::features::{FeatureGram, gram};
 
 use super::score::{BetaScore, factored_value, free_state_unsupported};

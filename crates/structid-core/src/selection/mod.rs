@@ -61,7 +61,7 @@
 //!
 //! ```
 //! use std::sync::Arc;
-//! use structid_core::hyperparameters::{select, Criterion, SelectionSettings};
+//! use structid_core::selection::{select, Criterion, SelectionSettings};
 //! use structid_core::{paper, IdentifySettings, KernelDispersion};
 //! let exp = paper::spray(300, 1.0, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 3).unwrap();
 //! let how = SelectionSettings::builder().criterion(Criterion::MarginalLikelihood).build().unwrap();
@@ -85,7 +85,7 @@ pub use settings::{Criterion, SelectionSettings, SelectionSettingsBuilder};
 
 // the unit tests reach the dense score and the β-score trait through `super::*`
 #[cfg(test)]
-use crate::problem::Problem;
+use crate::identify::problem::Problem;
 #[cfg(test)]
 use dense::DenseScore;
 #[cfg(test)]

@@ -13,7 +13,7 @@ use super::settings::Criterion;
 /// dispersion's null space (a constant, or the trend). Either is a failed selection.
 ///
 /// ```
-/// use structid_core::hyperparameters::Bound;
+/// use structid_core::selection::Bound;
 /// assert_eq!(Bound::Lower.to_string(), "lower");
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]

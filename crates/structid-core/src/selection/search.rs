@@ -5,9 +5,9 @@ use std::time::Instant;
 
 use crate::dispersion::{Dispersion, Penalty};
 use crate::error::{Error, Result, positive_finite};
+use crate::identify::problem::Problem;
 use crate::identify::{IdentifySettings, InitialState, SolverChoice, identify_problem};
 use crate::model::{Data, Model};
-use crate::problem::Problem;
 use crate::solver::choice::{SolverReason, feature_path};
 
 use super::cross_validation::FoldScore;
@@ -438,7 +438,7 @@ fn minimise_log10(
 ///
 /// ```
 /// use std::sync::Arc;
-/// use structid_core::hyperparameters::{select_beta, Criterion};
+/// use structid_core::selection::{select_beta, Criterion};
 /// use structid_core::{paper, KernelDispersion, Problem};
 /// let exp = paper::spray(300, 1.0, Arc::new(KernelDispersion::gaussian(0.1).unwrap()), 3).unwrap();
 /// let problem = Problem::from_model(&exp.model, &exp.data).unwrap();

@@ -23,7 +23,7 @@ impl Criterion {
     /// A short name: `ml`, `gcv`, `cv` or `validation`.
     ///
     /// ```
-    /// use structid_core::hyperparameters::Criterion;
+    /// use structid_core::selection::Criterion;
     /// assert_eq!(Criterion::CrossValidation { folds: 5 }.name(), "cv");
     /// ```
     pub fn name(&self) -> &'static str {
@@ -51,7 +51,7 @@ impl Criterion {
 /// How hyperparameters are selected; build with [`SelectionSettings::builder`].
 ///
 /// ```
-/// use structid_core::hyperparameters::{Criterion, SelectionSettings};
+/// use structid_core::selection::{Criterion, SelectionSettings};
 /// let s = SelectionSettings::builder().criterion(Criterion::Gcv).tune_sigma(true).build().unwrap();
 /// assert!(s.tune_sigma() && s.tune_beta());
 /// assert!(SelectionSettings::builder().criterion(Criterion::CrossValidation { folds: 1 }).build().is_err());
@@ -129,7 +129,7 @@ impl SelectionSettings {
     /// after the search has looked past it.
     ///
     /// ```
-    /// use structid_core::hyperparameters::SelectionSettings;
+    /// use structid_core::selection::SelectionSettings;
     /// assert_eq!(SelectionSettings::default().widen_decades(), 6.0);
     /// assert!(SelectionSettings::builder().widen_decades(-1.0).build().is_err());
     /// ```
@@ -156,7 +156,7 @@ impl SelectionSettings {
     /// The same settings with another observer.
     ///
     /// ```
-    /// use structid_core::hyperparameters::SelectionSettings;
+    /// use structid_core::selection::SelectionSettings;
     /// use structid_core::progress::Progress;
     /// let s = SelectionSettings::default().with_progress(Progress::new(|_, _| {}));
     /// assert!(s.progress().is_active());

@@ -7,8 +7,8 @@ use nalgebra::{DMatrix, DVector};
 use structid_lti::{LinearSystem, Signal, StateSpace};
 
 use crate::dispersion::KernelDispersion;
-use crate::kernel::{GaussianKernel, Kernel};
-use crate::problem::ProblemBlock;
+use crate::dispersion::kernel::{GaussianKernel, Kernel};
+use crate::identify::problem::ProblemBlock;
 
 /// A SISO problem with r = T_yw·w + e, w drawn from N(0, s²K/(Lβ)) and e from N(0, s²).
 fn gp_problem(len: usize, beta: f64, sigma: f64, seed: u64) -> (Problem, DMatrix<f64>) {

@@ -1,10 +1,10 @@
 //! Validation simulation error by refitting.
 
 use crate::error::{Error, Result};
+use crate::identify::problem::Problem;
 use crate::identify::{Identification, IdentifySettings, identify_problem};
+use crate::model::simulate::MapBinding;
 use crate::model::{Data, Model};
-use crate::problem::Problem;
-use crate::simulate::MapBinding;
 
 use super::score::BetaScore;
 

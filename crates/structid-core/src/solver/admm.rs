@@ -31,8 +31,8 @@
 //!   L = 2000 there, against 60 with the offsets.
 //! * The second step is the exact proximal operator of the total variation. Samples that share
 //!   a node enter through their mean with weight = their count. On a chain (scalar z) it is the
-//!   O(G) dynamic programme [`crate::prox::tv1d`]; on a k-NN graph (p > 1) a warm-started dual
-//!   FISTA ([`crate::prox::GraphTv`]) run to a duality gap below a tenth of the outer tolerance.
+//!   O(G) dynamic programme [`crate::solver::prox::tv1d`]; on a k-NN graph (p > 1) a warm-started dual
+//!   FISTA ([`crate::solver::prox::GraphTv`]) run to a duality gap below a tenth of the outer tolerance.
 //!
 //! Held-out samples (a cross-validation fold: every output channel of the sample left out)
 //! are missing outputs of the smoother ([`DisturbanceSmoother::with_missing`]), so the same
@@ -91,17 +91,17 @@ use rayon::prelude::*;
 
 use structid_lti::{DisturbanceSmoother, Signal, SmootherInitial, StateSpace};
 
+use crate::dispersion::total_variation::TvPenalty;
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
+use crate::identify::problem::Problem;
 use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
-use crate::problem::Problem;
-use crate::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
+use crate::solver::prox::{GraphTv, Tv1dWorkspace};
 use crate::solver::quadratic_factor::QuadraticFactor;
 use crate::solver::realisation::{Realisation, joint_realisation, unreachable_samples_of_records};
 use crate::solver::{BlockPart, finish_tv, tv_parts};
-use crate::total_variation::TvPenalty;
 
 /// The solver's name in reports.
 pub const NAME: &str = crate::solver::settings::ADMM_NAME;

@@ -2,7 +2,7 @@
 //!
 //! The rule ([`choose_solver`]) is the one place that decides, for [`SolverChoice::Auto`],
 //! between the four solvers; [`crate::identify_problem`] runs its choice and
-//! [`crate::hyperparameters::select`] uses `feature_path` to decide whether β is selected in
+//! [`crate::selection::select`] uses `feature_path` to decide whether β is selected in
 //! feature space. In order:
 //!
 //! 1. quadratic and total-variation blocks together: some samples held out in part (some of
@@ -22,8 +22,8 @@
 
 use crate::dispersion::Penalty;
 use crate::error::Result;
+use crate::identify::problem::Problem;
 use crate::identify::settings::{IdentifySettings, SolverChoice};
-use crate::problem::Problem;
 
 pub(crate) use crate::solver::status::unconverged_warning;
 pub use crate::solver::status::{SolveStatus, SolverKind, SolverReason};

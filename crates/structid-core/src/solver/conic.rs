@@ -32,15 +32,15 @@ use std::time::Instant;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
+use crate::dispersion::total_variation::TvPenalty;
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
+use crate::identify::problem::Problem;
 use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
-use crate::problem::Problem;
 use crate::solver::choice::{SolveStatus, SolverKind, unconverged_warning};
 use crate::solver::realisation::{joint_realisation, unreachable_samples_of_records};
 use crate::solver::{BlockPart, finish_tv, penalties, tv_part};
-use crate::total_variation::TvPenalty;
 
 pub use crate::solver::settings::{ConicSettings, ConicSettingsBuilder};
 

@@ -32,10 +32,10 @@ use structid_lti::{LinearSystem, Signal};
 
 use crate::dispersion::QuadraticPenalty;
 use crate::error::{Error, Result};
+use crate::identify::posterior::{DenseBlock as DensePosteriorBlock, Posterior};
+use crate::identify::problem::Problem;
 use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
-use crate::posterior::{DenseBlock as DensePosteriorBlock, Posterior};
-use crate::problem::Problem;
 use crate::solver::square_buffer::SquareBuffer;
 use crate::solver::{BlockPart, assemble_blocks, cost_terms};
 
@@ -74,7 +74,7 @@ pub fn peak_memory_bytes(
 /// already counted in [`peak_memory_bytes`], but it then stays allocated inside
 /// [`crate::Posterior`] for as long as the [`Identification`] lives (8·n² bytes, n = L·n_y);
 /// this adds the basis of the initial-state directions (n·n_x) and the workspace of one batch
-/// of [`crate::posterior::BATCH`] points (BATCH·(L + 2n)).
+/// of [`crate::identify::posterior::BATCH`] points (BATCH·(L + 2n)).
 pub fn posterior_memory_bytes(
     settings: &IdentifySettings,
     len: usize,
@@ -85,7 +85,7 @@ pub fn posterior_memory_bytes(
         return 0;
     }
     let n = (len * outputs) as u64;
-    let batch = crate::posterior::BATCH.min(len.max(1)) as u64;
+    let batch = crate::identify::posterior::BATCH.min(len.max(1)) as u64;
     8 * (n * free_cols as u64 + batch * (len as u64 + 2 * n) + n)
 }
 

@@ -37,13 +37,13 @@ use faer::{Mat, MatMut};
 use rayon::prelude::*;
 use structid_lti::{ColumnStream, KalmanWhitener, LinearSystem, Signal, WhiteningOptions};
 
+use crate::dispersion::fourier::FeatureExpansion;
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::fourier::FeatureExpansion;
+use crate::identify::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
+use crate::identify::problem::Problem;
 use crate::identify::result::{Diagnostics, Identification, Timings};
 use crate::identify::settings::IdentifySettings;
-use crate::posterior::{FeatureBlock as FeaturePosteriorBlock, Posterior};
-use crate::problem::Problem;
 use crate::solver::{BlockPart, cost_terms};
 
 /// Samples per chunk of the time pass (rounded to the streams' block length): the chunk of
@@ -779,7 +779,7 @@ fn apply_long(sys: &dyn LinearSystem, u: &[f64], y: &mut [f64]) {
 }
 
 /// The posterior of the maps from the m-space factor the solve computed: s² from
-/// min L·J = weighted SSE + L·β·|b|² (see [`crate::posterior`]).
+/// min L·J = weighted SSE + L·β·|b|² (see [`crate::identify::posterior`]).
 fn feature_posterior(
     chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
     maps: &[(Arc<dyn FeatureMap>, Signal)],

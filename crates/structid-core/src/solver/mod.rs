@@ -19,12 +19,12 @@ pub use choice::choose_solver;
 
 use structid_lti::Signal;
 
+use crate::dispersion::total_variation::TvPenalty;
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
+use crate::identify::problem::{Problem, ProblemBlock};
 use crate::identify::result::{BlockEstimate, CostTerms, Timings};
-use crate::interpolant::Interpolant;
-use crate::problem::{Problem, ProblemBlock};
-use crate::total_variation::TvPenalty;
+use crate::model::interpolant::Interpolant;
 
 /// One block's solution before assembly: ŵ at the samples, D_i and the interpolant.
 pub(crate) struct BlockPart {

@@ -49,7 +49,7 @@
 ///
 /// # Example
 /// ```
-/// use structid_core::prox::tv1d;
+/// use structid_core::solver::prox::tv1d;
 /// let y = [0.0, 1.0, 5.0];
 /// let mut x = [0.0; 3];
 /// tv1d(&y, &[1.0, 1.0, 1.0], &[0.25, 10.0], &mut x);
@@ -66,7 +66,7 @@ pub fn tv1d(y: &[f64], w: &[f64], lambda: &[f64], out: &mut [f64]) {
 ///
 /// # Example
 /// ```
-/// use structid_core::prox::Tv1dWorkspace;
+/// use structid_core::solver::prox::Tv1dWorkspace;
 /// let mut ws = Tv1dWorkspace::new();
 /// let mut x = vec![0.0; 4];
 /// for lam in [0.0, 0.5, 100.0] {
@@ -87,7 +87,7 @@ impl Tv1dWorkspace {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::Tv1dWorkspace;
+    /// use structid_core::solver::prox::Tv1dWorkspace;
     /// let mut ws = Tv1dWorkspace::new();
     /// let mut x = [0.0; 2];
     /// ws.solve(&[0.0, 1.0], &[1.0, 3.0], &[0.3], &mut x);
@@ -105,7 +105,7 @@ impl Tv1dWorkspace {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::Tv1dWorkspace;
+    /// use structid_core::solver::prox::Tv1dWorkspace;
     /// let mut ws = Tv1dWorkspace::new();
     /// let mut x = [0.0; 3];
     /// ws.solve(&[3.0, -1.0, 2.0], &[1.0, 1.0, 1.0], &[0.0, 0.0], &mut x);
@@ -436,7 +436,7 @@ pub struct GraphTvReport {
 ///
 /// # Example
 /// ```
-/// use structid_core::prox::GraphTv;
+/// use structid_core::solver::prox::GraphTv;
 /// // A triangle with one cheap edge.
 /// let mut tv = GraphTv::new(3, vec![(0, 1, 1.0), (1, 2, 1.0), (0, 2, 0.1)]);
 /// let mut x = [0.0; 3];
@@ -498,7 +498,7 @@ impl GraphTv {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::GraphTv;
+    /// use structid_core::solver::prox::GraphTv;
     /// // A 2×2 grid.
     /// let tv = GraphTv::new(4, vec![(0, 1, 1.0), (2, 3, 1.0), (0, 2, 1.0), (1, 3, 1.0)]);
     /// # let _ = tv;
@@ -541,7 +541,7 @@ impl GraphTv {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::GraphTv;
+    /// use structid_core::solver::prox::GraphTv;
     /// assert_eq!(GraphTv::new(5, vec![(0, 4, 1.0)]).nodes(), 5);
     /// ```
     pub fn nodes(&self) -> usize {
@@ -561,7 +561,7 @@ impl GraphTv {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::GraphTv;
+    /// use structid_core::solver::prox::GraphTv;
     /// let mut tv = GraphTv::new(2, vec![(0, 1, 1.0)]);
     /// let mut x = [0.0; 2];
     /// let first = tv.solve(&[0.0, 1.0], &[1.0, 1.0], 0.2, 1e-12, 1000, &mut x);
@@ -665,7 +665,7 @@ impl GraphTv {
     ///
     /// # Example
     /// ```
-    /// use structid_core::prox::GraphTv;
+    /// use structid_core::solver::prox::GraphTv;
     /// let mut tv = GraphTv::new(2, vec![(0, 1, 1.0)]);
     /// let mut x = [0.0; 2];
     /// tv.solve(&[0.0, 1.0], &[1.0, 1.0], 0.2, 1e-12, 1000, &mut x);

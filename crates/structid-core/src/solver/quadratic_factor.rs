@@ -19,9 +19,9 @@ use std::sync::Arc;
 
 use structid_lti::Signal;
 
+use crate::dispersion::fourier::FeatureExpansion;
 use crate::dispersion::{FeatureMap, QuadraticPenalty};
 use crate::error::{Error, Result};
-use crate::fourier::FeatureExpansion;
 use crate::solver::BlockPart;
 
 /// The pivoted Cholesky factorisation stops when the largest residual diagonal entry is at most
@@ -204,7 +204,7 @@ impl QuadraticFactor {
         let mut w_hat = self.values(eta);
         w_hat.resize(len, 0.0);
         let dispersion_value = eta.iter().map(|v| v * v).sum();
-        let map: Box<dyn crate::interpolant::Interpolant> = match &self.kind {
+        let map: Box<dyn crate::model::interpolant::Interpolant> = match &self.kind {
             Kind::Features { map, sqrt_weights } => Box::new(FeatureExpansion::new(
                 Arc::clone(map),
                 eta.iter().zip(sqrt_weights).map(|(e, s)| e * s).collect(),

@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use structid_lti::StateSpace;
 
 use crate::error::{Error, Result};
-use crate::problem::Problem;
+use crate::identify::problem::Problem;
 
 /// x_{k+1} = A·x_k + B·[e_k; w_k], r_k = C·x_k + D·[e_k; w_k] (+ the free response of x₀).
 pub(crate) struct Realisation {

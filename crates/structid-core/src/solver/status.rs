@@ -170,7 +170,7 @@ pub enum SolverReason {
         /// The exact solver's estimated peak memory in bytes.
         needed_bytes: u64,
     },
-    /// β (and σ) were selected in feature space ([`crate::hyperparameters::select`]), so the
+    /// β (and σ) were selected in feature space ([`crate::selection::select`]), so the
     /// final fit uses the feature solver too.
     FeatureSpaceSelection,
 }

@@ -43,7 +43,7 @@ pub fn fit_percent(measured: &[f64], simulated: &[f64]) -> f64 {
 /// average of the records' fits: a record with little spread does not swing it.
 ///
 /// ```
-/// use structid_core::metrics::{PooledFit, fit_percent, rms_difference};
+/// use structid_core::validation::metrics::{PooledFit, fit_percent, rms_difference};
 /// let (y1, s1) = ([1.0, 2.0, 4.0], [1.5, 2.0, 3.0]);
 /// let (y2, s2) = ([0.0, -1.0], [0.5, -1.0]);
 /// let mut pooled = PooledFit::default();

@@ -8,7 +8,7 @@
 //!    maps in the loop ([`Model::simulate`], e = 0): z is computed from the *simulated* signals,
 //!    so errors of the maps propagate through the dynamics. Per output: RMS(y − y_sim) and the
 //!    fit 100·(1 − ‖y − y_sim‖/‖y − mean y‖) of MATLAB's `compare`
-//!    ([`crate::metrics::fit_percent`]). When the data carry measured z columns, the
+//!    ([`crate::validation::metrics::fit_percent`]). When the data carry measured z columns, the
 //!    simulation still computes z from the LFT's z-equations (C_z, D_zu), which must then
 //!    describe how z arises; the measured z serve the prediction only.
 //! 2. **One-step prediction.** What does the model leave unexplained? z is measurable (computed
@@ -33,7 +33,7 @@
 //!    output injection z = L_zu·u + Ψ·(y − L_yu·u), z_k itself contains y_k; the predictor then
 //!    uses the present value of the outputs that z reads, as the model structure implies.)
 //!    If the maps and the noise model are right, ε is white and uncorrelated with past inputs;
-//!    the residual tests of [`crate::residual_tests`] check both with 99 % bands.
+//!    the residual tests of [`crate::validation::residual_tests`] check both with 99 % bands.
 //!
 //! **Initial state.** [`InitialState::Zero`] assumes the record starts at rest.
 //! [`InitialState::Estimate`] estimates x₀ by generalised least squares from the
@@ -104,17 +104,12 @@ use structid_lti::Signal;
 use structid_lti::kalman::{KalmanWhitener, WhiteningOptions};
 
 use crate::error::{Error, Result};
+use crate::identify::problem::Problem;
 use crate::initial_state::{InitialState, estimate_initial_state};
-use crate::interpolant::Interpolant;
-use crate::metrics::rms;
+use crate::model::interpolant::Interpolant;
 use crate::model::{Data, Model};
-use crate::problem::Problem;
-use crate::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
-
-/// How [`validate`] treated the initial state of the linear block: now the one
-/// [`InitialState`] of identification, validation and prediction.
-#[deprecated(note = "use structid_core::InitialState (the same enum)")]
-pub type ValidationInitialState = InitialState;
+use crate::validation::metrics::rms;
+use crate::validation::residual_tests::{CorrelationTest, autocorrelation, cross_correlation};
 
 /// Settings of [`validate`]; build them with [`ValidationSettings::builder`].
 ///

@@ -117,7 +117,7 @@ fn covariance(a: &[f64], b: &[f64], tau: isize) -> f64 {
 /// The autocorrelation test of `residual` at lags −max_lag…max_lag.
 ///
 /// ```
-/// use structid_core::residual_tests::autocorrelation;
+/// use structid_core::validation::residual_tests::autocorrelation;
 /// let e: Vec<f64> = (0..400).map(|k| if k % 2 == 0 { 1.0 } else { -1.0 }).collect();
 /// let t = autocorrelation(&e, 3);
 /// assert!((t.values[4] + 1.0).abs() < 0.01); // lag 1 of an alternating sign: about −1

@@ -106,7 +106,7 @@ fn with_white_noise_the_prediction_error_is_the_noise_and_mostly_white() {
         let d = max_abs_diff(r.prediction_error.as_slice(), exp.noise.as_slice());
         assert!(d < 1e-12, "seed {seed}: {d}");
         // The simulation error is the noise too (z = u is unaffected by e).
-        assert!((r.rms[0] - crate::metrics::rms(exp.noise.as_slice())).abs() < 1e-12);
+        assert!((r.rms[0] - crate::validation::metrics::rms(exp.noise.as_slice())).abs() < 1e-12);
         assert_eq!(r.whiteness[0].lags, (0..=25).collect::<Vec<isize>>());
         assert_eq!(r.input_correlation[0][0].lags.len(), 51);
         white += usize::from(r.whiteness_passes());

@@ -42,9 +42,9 @@ use nalgebra::{DMatrix, DVector};
 use structid_lti::Signal;
 
 use crate::error::{Error, Result};
-use crate::interpolant::Interpolant;
-use crate::metrics::fit_percent;
+use crate::model::interpolant::Interpolant;
 use crate::model::{Data, Model};
+use crate::validation::metrics::fit_percent;
 
 /// Windows of a windowed simulation: `length` samples each, the state fitted on the first
 /// half of them (at least `init`) and all but the first `init` scored. Build with [`Windows::new`] or [`Windows::for_record`].
@@ -576,7 +576,7 @@ mod tests {
         let data = Data::new(u, y).unwrap().with_z(z).unwrap();
         let s = Scoring::Windowed(Windows::new(300, 20).unwrap());
         let win = simulate_scored(&model, &[&friction], &data, s, None, 0).unwrap();
-        let scale = crate::metrics::rms(&data.y().channel(0));
+        let scale = crate::validation::metrics::rms(&data.y().channel(0));
         assert!(
             win.rms(data.y(), 0) < 1e-8 * scale,
             "{}",

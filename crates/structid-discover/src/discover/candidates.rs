@@ -7,7 +7,7 @@ use std::time::Instant;
 use structid_core::{Data, Result};
 
 use crate::effects::name_effect;
-use crate::hypotheses::{Hypothesis, Location, Nominal};
+use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation, identify_hypothesis};
@@ -85,7 +85,7 @@ impl<'a> Search<'a> {
     /// The disturbance path is a noise model like any other: where it cannot be used (its
     /// whitening filter is unstable when an estimated G has a zero outside the unit circle),
     /// the location is identified with the nominal model's own noise path.
-    fn identify_at(&self, location: Location, settings: &DiscoverSettings) -> Result<Fitted> {
+    fn identify_at(&self, location: Site, settings: &DiscoverSettings) -> Result<Fitted> {
         let (est, val) = (self.est, self.val);
         match identify_hypothesis(self.nominal, location, est, val, settings) {
             Err(_) if self.input_noise.is_some() => {
@@ -116,7 +116,7 @@ impl<'a> Search<'a> {
     /// with σ a [`FINER_SIGMA`]-th as wide, and the finer fit replaces the default one only
     /// when it validates clearly better there (a narrower kernel that merely matches the
     /// default one has only more room to fit the noise).
-    fn finer(&self, locations: &[Location], fitted: &mut Vec<Fitted>) {
+    fn finer(&self, locations: &[Site], fitted: &mut Vec<Fitted>) {
         let finer = DiscoverSettings {
             sigma_fraction: self.settings.sigma_fraction / FINER_SIGMA,
             ..self.settings.clone()
@@ -156,7 +156,7 @@ impl<'a> Search<'a> {
             || !self.given.known_maps().is_empty()
             || !fitted
                 .first()
-                .is_some_and(|f| uncertain || f.result.location != Location::RateFeedback)
+                .is_some_and(|f| uncertain || f.result.location != Site::RateFeedback)
         {
             return;
         }

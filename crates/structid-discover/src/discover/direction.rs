@@ -3,7 +3,7 @@
 use structid_core::{Data, Interpolant, Result, Signal};
 use structid_lti::LinearSystem;
 
-use crate::hypotheses::{Hypothesis, Location};
+use crate::hypotheses::{Hypothesis, Site};
 use crate::hysteresis::{DirectionTest, direction_dependence_records};
 
 use super::DiscoverSettings;
@@ -41,7 +41,7 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
     // artefact).
     let feedback = matches!(
         f.result.location,
-        Location::OutputFeedback | Location::Declared { .. }
+        Site::OutputFeedback | Site::Declared { .. }
     );
     Ok(direction_beyond_sampling(
         &z,

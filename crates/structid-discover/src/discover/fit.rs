@@ -4,7 +4,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::hyperparameters::{Criterion, SelectionSettings, select};
+use structid_core::selection::{Criterion, SelectionSettings, select};
 use structid_core::validation::{Scoring, ValidationSettings, Windows};
 use structid_core::{
     Data, Dispersion, Error, IdentifySettings, InitialState, Interpolant, PolynomialDispersion,
@@ -12,7 +12,7 @@ use structid_core::{
 };
 use structid_io::{DispersionSpec, IoError};
 
-use crate::hypotheses::{Hypothesis, Location, Nominal};
+use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::{DiscoverSettings, HypothesisResult, MapCurve};
 
@@ -146,10 +146,7 @@ pub(super) fn resolve_scoring(
 const MARGINAL: f64 = 1e-3;
 
 /// The validation settings every simulation of hypothesis at `location` is scored with.
-pub(super) fn scoring_settings(
-    location: Location,
-    settings: &DiscoverSettings,
-) -> ValidationSettings {
+pub(super) fn scoring_settings(location: Site, settings: &DiscoverSettings) -> ValidationSettings {
     // Windows fit their own states; the record's x₀ is the free run's start and the one-step
     // predictor's.
     ValidationSettings::builder()
@@ -244,14 +241,14 @@ pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
 /// ```
 /// use structid_core::InitialState;
 /// use structid_discover::discover::initial_state;
-/// use structid_discover::hypotheses::Location;
-/// assert_eq!(initial_state(Location::Input).1, InitialState::Estimate);
-/// assert_eq!(initial_state(Location::Output).1, InitialState::Zero);
-/// assert_eq!(initial_state(Location::RateFeedback).1, InitialState::Estimate);
+/// use structid_discover::hypotheses::Site;
+/// assert_eq!(initial_state(Site::Input).1, InitialState::Estimate);
+/// assert_eq!(initial_state(Site::Output).1, InitialState::Zero);
+/// assert_eq!(initial_state(Site::RateFeedback).1, InitialState::Estimate);
 /// ```
-pub fn initial_state(location: Location) -> (InitialState, InitialState) {
+pub fn initial_state(location: Site) -> (InitialState, InitialState) {
     match location {
-        Location::Output => (InitialState::Zero, InitialState::Zero),
+        Site::Output => (InitialState::Zero, InitialState::Zero),
         _ => (InitialState::Estimate, InitialState::Estimate),
     }
 }
@@ -291,7 +288,8 @@ fn simulated(
     let settings = scoring_settings(h.location, settings);
     // A simulation that runs a million times beyond the output's size has diverged, even if
     // its numbers are still finite.
-    let limit = 1e6 * structid_core::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
+    let limit =
+        1e6 * structid_core::validation::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
     crate::records::simulate(&h.model, &h.maps(map), data, &settings)
         .ok()
         .filter(|v| v.rms.is_finite() && v.rms < limit)
@@ -368,12 +366,12 @@ pub(super) struct JointLinear {
 /// grid, and the naming points.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn finish_fit(
-    location: Location,
+    location: Site,
     estimator: &'static str,
     h: Hypothesis,
     id: structid_core::Identification,
     beta: f64,
-    beta_at_bound: Option<structid_core::hyperparameters::Bound>,
+    beta_at_bound: Option<structid_core::selection::Bound>,
     sigma: Option<f64>,
     est_h: &Data,
     val_h: &Data,
@@ -460,7 +458,7 @@ pub(super) fn finish_fit(
 /// The quadratic estimate at `location`: Fourier kernel plus trend, β by marginal likelihood.
 pub(super) fn identify_hypothesis(
     nominal: &Nominal,
-    location: Location,
+    location: Site,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,

@@ -24,7 +24,7 @@ use structid_core::model::hysteresis::apply_from_rest_into;
 use structid_core::{Data, Play, PolynomialDispersion, Result, Signal, Stop};
 use structid_linear::{OeSettings, PolynomialModel, output_error_records};
 
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Nominal, Site};
 use crate::records::{self, Simulated};
 
 use super::DiscoverSettings;
@@ -266,7 +266,7 @@ pub(super) fn simulate_linear(
     data: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Simulated> {
-    simulate_linear_as(g, data, settings, Location::Input)
+    simulate_linear_as(g, data, settings, Site::Input)
 }
 
 /// [`simulate_linear`], with its initial state handled as a hypothesis at `location` handles
@@ -275,17 +275,15 @@ pub(super) fn simulate_linear_as(
     g: &PolynomialModel,
     data: &Data,
     settings: &DiscoverSettings,
-    location: Location,
+    location: Site,
 ) -> Option<Simulated> {
     let h = Nominal::from_polynomial(g)
         .ok()?
-        .hypothesis(
-            Location::Input,
-            Arc::new(PolynomialDispersion::new(1).ok()?),
-        )
+        .hypothesis(Site::Input, Arc::new(PolynomialDispersion::new(1).ok()?))
         .ok()?;
     let identity = structid_core::ExprMap::parse("z0", 1).ok()?;
-    let limit = 1e6 * structid_core::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
+    let limit =
+        1e6 * structid_core::validation::metrics::rms(&data.y().channel(0)).max(f64::MIN_POSITIVE);
     records::simulate(
         &h.model,
         &h.maps(&identity),

@@ -28,7 +28,7 @@ use structid_linear::{OeSettings, Orders, PolynomialModel, oe_records, output_er
 use crate::table::{BlockComparison, compare_blocks};
 
 use super::DiscoverSettings;
-use crate::hypotheses::Location;
+use crate::hypotheses::Site;
 
 use super::input_hysteresis::{simulate_linear, simulate_linear_as};
 
@@ -62,7 +62,7 @@ pub(super) fn fit(
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
-    location: Location,
+    location: Site,
 ) -> Option<(PolynomialModel, Vec<f64>, f64)> {
     let b = g.num.first()?;
     let nk = b.iter().take_while(|v| **v == 0.0).count();
@@ -199,7 +199,7 @@ mod tests {
         let (est, val) = (record(&truth, 1), record(&truth, 2));
         let settings = DiscoverSettings::default();
         let nominal_rms = simulate_linear(&nominal(), &val, &settings).unwrap().rms;
-        let (g, errors, rms) = fit(&nominal(), &est, &val, &settings, Location::Input).unwrap();
+        let (g, errors, rms) = fit(&nominal(), &est, &val, &settings, Site::Input).unwrap();
         assert_eq!(g.den.len(), nominal().den.len() + EXTRA_ORDER);
         // Within the noise that was added, where the nominal model misses by many times it.
         assert!(rms < 1.2 * NOISE, "rival RMS {rms}");

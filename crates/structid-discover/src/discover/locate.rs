@@ -3,7 +3,7 @@
 //! leaves; a named map elsewhere when it names nothing, and a hysteresis at the input when no
 //! static block closes the gap.
 
-use crate::hypotheses::Location;
+use crate::hypotheses::Site;
 use crate::hysteresis::DirectionTest;
 
 use super::context::Context;
@@ -65,16 +65,11 @@ pub(super) fn choose(
     }
     if fitted
         .first()
-        .is_none_or(|f| f.result.location != Location::RateFeedback)
+        .is_none_or(|f| f.result.location != Site::RateFeedback)
     {
         return 0;
     }
-    let at_the_ends = |i: usize| {
-        matches!(
-            fitted[i].result.location,
-            Location::Input | Location::Output
-        )
-    };
+    let at_the_ends = |i: usize| matches!(fitted[i].result.location, Site::Input | Site::Output);
     for (i, f) in fitted.iter().enumerate() {
         if at_the_ends(i) && directions[i].is_none() && f.result.validation_rms.is_finite() {
             directions[i] = direction_test(f, settings).ok();
@@ -165,9 +160,9 @@ pub(super) fn first_finding(
 ) -> Result<Finding> {
     let direction_of = |i: usize| directions[i].clone().unwrap_or_else(DirectionTest::none);
     let rate = fitted.iter().position(|f| {
-        f.result.location == Location::RateFeedback && f.result.validation_rms.is_finite()
+        f.result.location == Site::RateFeedback && f.result.validation_rms.is_finite()
     });
-    let position_vs_rate = fitted[chosen].result.location == Location::OutputFeedback
+    let position_vs_rate = fitted[chosen].result.location == Site::OutputFeedback
         && directions[chosen].as_ref().is_some_and(|d| d.dynamic);
     let Some(rate) = rate.filter(|&r| position_vs_rate && r != chosen) else {
         let tv = total_variation_rms(fitted, chosen);
@@ -230,7 +225,7 @@ pub(super) fn named_alternative(
         // A map of the rate depends on the direction of motion and so imitates hysteresis;
         // a dynamic finding yields to it only through the position-vs-rate rule.
         let rate_for_dynamic =
-            location == Location::RateFeedback && finding.classification == Classification::Dynamic;
+            location == Site::RateFeedback && finding.classification == Classification::Dynamic;
         if tried.contains(&location)
             || rate_for_dynamic
             || !fitted[i].result.validation_rms.is_finite()
@@ -283,7 +278,7 @@ pub(super) fn hysteresis_at_input(
     let settings = &cx.settings;
     let static_rms = finding.augmented.validation_gap.rms;
     let Some(h) = (finding.classification != Classification::Dynamic
-        || finding.location == Location::Input)
+        || finding.location == Site::Input)
         .then_some(())
         .filter(|_| static_rms > settings.gap.noise_ratio * noise.std)
         .and_then(|_| cx.given.polynomial())
@@ -307,10 +302,8 @@ pub(super) fn hysteresis_at_input(
             cx.nominal.describe(finding.location)
         ),
     };
-    if finding.location != Location::Input
-        && let Some(i) = fitted
-            .iter()
-            .position(|f| f.result.location == Location::Input)
+    if finding.location != Site::Input
+        && let Some(i) = fitted.iter().position(|f| f.result.location == Site::Input)
     {
         let mut direction = direction_test(&fitted[i], settings)
             .ok()
@@ -320,7 +313,7 @@ pub(super) fn hysteresis_at_input(
             finding = f;
         }
     }
-    if finding.location == Location::Input {
+    if finding.location == Site::Input {
         finding.classification = Classification::Dynamic;
         finding.direction.dynamic = true;
         // What the augmented model carries is the static approximation, not a name.

@@ -31,7 +31,7 @@
 //! 2. **Where do model and data disagree?** In time (windows where the residual leaves its
 //!    noise band) and in operating space (regions of u, y, their rates, the simulated linear
 //!    output G·u and the named states where the residual energy concentrates, e.g. `|u| > 0.8`).
-//! 3. **Where in the structure does it act?** Each [`Location`] inserts one unknown static
+//! 3. **Where in the structure does it act?** Each [`Site`] inserts one unknown static
 //!    block ([`crate::hypotheses`], [`structid_core::Site::insert`]). Its map is identified by
 //!    structid's `identify` with a quadratic dispersion (a Gaussian-like Fourier kernel of width
 //!    σ = 0.1 × the range of z plus a cubic polynomial trend: finitely many features, so
@@ -184,7 +184,7 @@ use structid_core::{Data, Error, Result};
 
 use crate::effects::Naming;
 use crate::gap::Gap;
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Nominal, Site};
 use crate::hysteresis::DirectionTest;
 
 use context::Context;
@@ -212,12 +212,12 @@ pub const PARTIAL_SHRINK: f64 = 2.0;
 #[derive(Clone, Debug)]
 pub struct Finding {
     /// The best location (lowest validation RMS).
-    pub location: Location,
+    pub location: Site,
     /// The estimate that was named (one of [`Discovery::hypotheses`]).
     pub hypothesis: HypothesisResult,
     /// Locations that explain the data equally well by construction (e.g. a gain at the
     /// input or at the output of a linear G), including `location`.
-    pub equivalent_locations: Vec<Location>,
+    pub equivalent_locations: Vec<Site>,
     /// Which estimate was named: `quadratic` or `total variation`.
     pub estimator: String,
     /// Validation RMS with the nonparametric map that was named.
@@ -826,10 +826,11 @@ pub const WORSE_THAN_CONSTANT: f64 = 100.0;
 fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
     let y = est.y().channel(0);
     let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
-    let constant = structid_core::metrics::rms(&y.iter().map(|v| v - mean).collect::<Vec<_>>());
+    let constant =
+        structid_core::validation::metrics::rms(&y.iter().map(|v| v - mean).collect::<Vec<_>>());
     // A simulation a million times the output's size has diverged, finite or not.
     let diverged = !gap.rms.is_finite()
-        || gap.rms > 1e6 * structid_core::metrics::rms(&y).max(f64::MIN_POSITIVE);
+        || gap.rms > 1e6 * structid_core::validation::metrics::rms(&y).max(f64::MIN_POSITIVE);
     let stuck = constant
         <= 3.0 * crate::gap::noise_level_records(&crate::records::parts(&y, est.record_bounds()));
     if diverged || (!stuck && gap.rms > WORSE_THAN_CONSTANT * constant) {
@@ -859,7 +860,7 @@ pub fn rms_text(v: f64) -> String {
 
 /// A hypothesis that could not be identified; `dispersion` names the estimator that was tried
 /// (`tv` for total variation, empty for the smooth estimate) so that reports label it.
-fn failure(location: Location, dispersion: &str, t: Instant, e: &Error) -> HypothesisResult {
+fn failure(location: Site, dispersion: &str, t: Instant, e: &Error) -> HypothesisResult {
     HypothesisResult {
         location,
         dispersion: dispersion.into(),
@@ -917,7 +918,7 @@ mod tests {
     }
 
     /// Data of the nominal G with `truth` at `location` (or none), filtered-noise input.
-    fn record(location: Option<Location>, truth: fn(f64) -> f64, seed: u64, n: usize) -> Data {
+    fn record(location: Option<Site>, truth: fn(f64) -> f64, seed: u64, n: usize) -> Data {
         let g = nominal();
         let mut rng = StdRng::seed_from_u64(seed);
         let norm = Normal::new(0.0, 1.0).unwrap();
@@ -946,8 +947,8 @@ mod tests {
     #[test]
     fn a_hidden_input_saturation_is_named_located_and_closes_the_gap() {
         let sat: fn(f64) -> f64 = |z| (1.5 * z).clamp(-0.8, 0.8);
-        let est = record(Some(Location::Input), sat, 1, 3000);
-        let val = record(Some(Location::Input), sat, 2, 3000);
+        let est = record(Some(Site::Input), sat, 1, 3000);
+        let val = record(Some(Site::Input), sat, 2, 3000);
         let nominal = Nominal::from_polynomial(&nominal()).unwrap();
         let d = discover(&nominal, &est, &val, &DiscoverSettings::default()).unwrap();
         assert!(d.missing_effect);
@@ -959,7 +960,7 @@ mod tests {
                 .all(|p| p[0].validation_rms <= p[1].validation_rms)
         );
         let f = d.finding.unwrap();
-        assert_eq!(f.location, Location::Input);
+        assert_eq!(f.location, Site::Input);
         let Classification::Named(fit) = &f.classification else {
             panic!("not named: {:?}", f.classification)
         };
@@ -1068,13 +1069,7 @@ mod tests {
         assert!((ratio - 999.0).abs() < 10.0, "{ratio}");
         assert!(ratio > WORSE_THAN_CONSTANT);
         let text = e.to_string();
-        for part in [
-            "worse",
-            "constant",
-            "linear model",
-            "integrators",
-            "units",
-        ] {
+        for part in ["worse", "constant", "linear model", "integrators", "units"] {
             assert!(text.contains(part), "{part}: {text}");
         }
         for k in [1.0, 10.0, -1.0] {
@@ -1104,9 +1099,7 @@ mod tests {
         let nominal = Nominal::from_polynomial(&nominal()).unwrap();
         let disp: Arc<dyn Dispersion> = Arc::new(PolynomialDispersion::new(1).unwrap());
         let r: Vec<f64> = (0..400).map(|k| (0.05 * k as f64).sin()).collect();
-        let sensor = nominal
-            .hypothesis(Location::Output, Arc::clone(&disp))
-            .unwrap();
+        let sensor = nominal.hypothesis(Site::Output, Arc::clone(&disp)).unwrap();
         let d = deconvolve(&sensor, &r).unwrap();
         let worst = r
             .iter()
@@ -1115,7 +1108,7 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(worst < 1e-6, "{worst}");
         // Input location: L_yw = G. A slow sine passes G, so T·δ̂ ≈ r.
-        let input = nominal.hypothesis(Location::Input, disp).unwrap();
+        let input = nominal.hypothesis(Site::Input, disp).unwrap();
         let slow: Vec<f64> = (0..2000).map(|k| (0.01 * k as f64).sin()).collect();
         let delta = deconvolve(&input, &slow).unwrap();
         let s = Signal::from_fn(delta.len(), 1, |k, _| delta[k]);

@@ -2,13 +2,13 @@
 //! results, the classification and the augmented model.
 
 use std::sync::Arc;
-use structid_core::hyperparameters::Bound;
+use structid_core::selection::Bound;
 
 use structid_core::{ExprMap, Interpolant, LookupTable, Model, Result};
 
 use crate::effects::EffectFit;
 use crate::gap::Gap;
-use crate::hypotheses::{KnownMap, Location, Nominal};
+use crate::hypotheses::{KnownMap, Nominal, Site};
 
 /// A map estimate drawn for reports: values (and, when available, the ±2σ posterior band) on
 /// a grid over the range of z seen in the estimation record.
@@ -26,7 +26,7 @@ pub struct MapCurve {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct HypothesisResult {
     /// Where the block was put.
-    pub location: Location,
+    pub location: Site,
     /// The dispersion used, e.g. `sum(fourier(sigma=0.1), polynomial(3))`.
     pub dispersion: String,
     /// β chosen.
@@ -92,7 +92,7 @@ impl Classification {
     /// The name for reports, in the physics of the site the effect acts at
     /// ([`crate::effects::physical_name`]): a named family as an actuator's, a sensor's, a
     /// stiffness or a friction.
-    pub fn describe_at(&self, location: crate::hypotheses::Location) -> String {
+    pub fn describe_at(&self, location: crate::hypotheses::Site) -> String {
         match self {
             Classification::Named(fit) => crate::effects::physical_name(fit, location),
             Classification::TimeVarying(fit) => format!(
@@ -132,7 +132,7 @@ impl AugmentedMap {
 #[derive(Clone, Debug)]
 pub struct Augmented {
     /// Where the block sits.
-    pub location: Location,
+    pub location: Site,
     /// The augmented LFT with its blocks: the new one first, then the nominal model's known
     /// maps.
     pub model: Model,

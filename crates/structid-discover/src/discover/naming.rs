@@ -5,7 +5,7 @@ use structid_core::{Data, Error, ExprMap, Result};
 
 use crate::effects::{Effect, EffectFit, Naming, NamingSettings, fit_effect_with, name_effect};
 use crate::gap::{Gap, GapSettings, gap};
-use crate::hypotheses::{Hypothesis, Location, Nominal};
+use crate::hypotheses::{Hypothesis, Nominal, Site};
 use crate::hysteresis::DirectionTest;
 
 use super::context::Context;
@@ -17,13 +17,13 @@ use crate::table::{Candidate, Form, select};
 
 /// Remarks and equivalent locations for a named effect.
 pub(super) fn structural_remarks(
-    location: Location,
+    location: Site,
     class: &Classification,
-) -> (Vec<Location>, Vec<String>) {
+) -> (Vec<Site>, Vec<String>) {
     let mut remarks = Vec::new();
     let mut equivalent = vec![location];
     if let Classification::Named(fit) = class {
-        let io = matches!(location, Location::Input | Location::Output);
+        let io = matches!(location, Site::Input | Site::Output);
         match fit.effect {
             Effect::Gain => {
                 remarks.push(
@@ -37,10 +37,10 @@ pub(super) fn structural_remarks(
                          linear G"
                             .into(),
                     );
-                    equivalent = vec![Location::Input, Location::Output];
+                    equivalent = vec![Site::Input, Site::Output];
                 }
             }
-            Effect::SmoothSaturation if location == Location::RateFeedback => {
+            Effect::SmoothSaturation if location == Site::RateFeedback => {
                 let v = fit.values();
                 remarks.push(format!(
                     "a tanh saturation of the velocity is Coulomb friction regularised over a \
@@ -57,11 +57,11 @@ pub(super) fn structural_remarks(
                      G's static gain"
                         .into(),
                 );
-                equivalent = vec![Location::Input, Location::Output];
+                equivalent = vec![Site::Input, Site::Output];
             }
             _ => {}
         }
-        if matches!(location, Location::OutputFeedback | Location::RateFeedback)
+        if matches!(location, Site::OutputFeedback | Site::RateFeedback)
             && fit
                 .parameter("a1")
                 .or_else(|| fit.parameter("viscous"))
@@ -108,10 +108,7 @@ pub(super) fn naming_settings(settings: &DiscoverSettings) -> NamingSettings {
 /// [`naming_settings`] with the library cut to the families offered at `location`
 /// ([`Effect::applies_at`]: a dead zone at the input or output, a gap spring in feedback from
 /// the output, friction in feedback from the rate).
-pub(super) fn naming_settings_at(
-    settings: &DiscoverSettings,
-    location: Location,
-) -> NamingSettings {
+pub(super) fn naming_settings_at(settings: &DiscoverSettings, location: Site) -> NamingSettings {
     NamingSettings {
         library: Effect::library_at(&settings.library, location),
         ..naming_settings(settings)
@@ -134,8 +131,8 @@ const FLAG_REMARKS: usize = 6;
 /// the estimate sees a Coulomb jump blurred by the measured rate's noise (the rate is a
 /// difference of noisy positions) and by the half sample the rate lags, so its steep but
 /// finite slope is the blur, not a physical velocity scale.
-fn relay_start(fit: &EffectFit, location: Location) -> Option<(f64, f64)> {
-    if location != Location::RateFeedback && !fit.flags.iter().any(|f| f.contains("relay")) {
+fn relay_start(fit: &EffectFit, location: Site) -> Option<(f64, f64)> {
+    if location != Site::RateFeedback && !fit.flags.iter().any(|f| f.contains("relay")) {
         return None;
     }
     let v = fit.values();
@@ -220,7 +217,7 @@ fn relay_family(
     targets: &[usize],
     zs: &[f64],
     ws: &[f64],
-    location: Location,
+    location: Site,
 ) -> Option<usize> {
     let (level, offset) = targets
         .iter()

@@ -10,7 +10,7 @@ use structid_linear::levenberg_marquardt::{
 };
 
 use crate::effects::{Effect, EffectFit, Refit};
-use crate::hypotheses::{Hypothesis, Location};
+use crate::hypotheses::{Hypothesis, Site};
 use structid_core::Interpolant;
 use structid_linear::PolynomialModel;
 
@@ -239,7 +239,7 @@ impl LeastSquaresProblem for JointProblem<'_> {
 pub(super) fn polish_linear(
     g: &PolynomialModel,
     map: &dyn Interpolant,
-    location: Location,
+    location: Site,
     est: &Data,
     settings: &DiscoverSettings,
 ) -> Option<PolynomialModel> {
@@ -331,7 +331,7 @@ struct LinearProblem<'a> {
     parts: &'a LinearParts,
     dispersion: Arc<dyn structid_core::Dispersion>,
     map: &'a dyn Interpolant,
-    location: Location,
+    location: Site,
     data: &'a Data,
     settings: &'a DiscoverSettings,
 }
@@ -359,7 +359,7 @@ const JACOBIAN_STEP: f64 = 1e-6;
 mod tests {
     use super::*;
     use crate::effects::fit_effect_with;
-    use crate::hypotheses::{Location, hypothesis};
+    use crate::hypotheses::{Site, hypothesis};
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
@@ -379,7 +379,7 @@ mod tests {
         };
         let h = hypothesis(
             &g,
-            Location::Output,
+            Site::Output,
             Arc::new(PolynomialDispersion::new(1).unwrap()),
         )
         .unwrap();
@@ -437,7 +437,7 @@ mod tests {
         };
         let h = hypothesis(
             &truth,
-            Location::RateFeedback,
+            Site::RateFeedback,
             Arc::new(PolynomialDispersion::new(1).unwrap()),
         )
         .unwrap();
@@ -470,7 +470,7 @@ mod tests {
             den: vec![1.0, -(1.0 + q), q],
             sample_time: Some(ts),
         };
-        let g = polish_linear(&start, &friction, Location::RateFeedback, &est, &settings)
+        let g = polish_linear(&start, &friction, Site::RateFeedback, &est, &settings)
             .expect("the refit lowers the cost");
         assert_eq!(structid_linear::integrators::count_integrators(&g.den), 1);
         for w in [2e-3, 2e-2] {

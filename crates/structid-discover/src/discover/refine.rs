@@ -8,7 +8,7 @@ use structid_linear::PolynomialModel;
 
 use crate::gap::{Gap, gap};
 
-use crate::hypotheses::{Location, Nominal};
+use crate::hypotheses::{Nominal, Site};
 
 use super::context::Context;
 use super::fit::{Fitted, JointLinear, identify_hypothesis, initial_state, simulation_rms};
@@ -204,7 +204,7 @@ pub(super) fn refine_jointly(
         let g_now = f_now.linear.as_ref().map_or(g, |j| &j.g);
         let step = || -> Result<Fitted> {
             let next = match location {
-                Location::OutputFeedback | Location::RateFeedback => {
+                Site::OutputFeedback | Site::RateFeedback => {
                     let in_loop = |g: &PolynomialModel| {
                         super::polish::polish_linear(g, f_now.map.as_ref(), location, est, settings)
                     };
@@ -277,7 +277,7 @@ pub(super) fn refine_jointly(
 fn identify_around(
     g: &PolynomialModel,
     input_noise: Option<f64>,
-    location: crate::hypotheses::Location,
+    location: crate::hypotheses::Site,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,

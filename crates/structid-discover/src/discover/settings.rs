@@ -6,12 +6,12 @@ use structid_core::{Error, Result};
 
 use crate::effects::Effect;
 use crate::gap::GapSettings;
-use crate::hypotheses::Location;
+use crate::hypotheses::Site;
 
 /// Settings of [`discover`](super::discover); build them with [`DiscoverSettings::builder`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiscoverSettings {
-    pub(super) locations: Option<Vec<Location>>,
+    pub(super) locations: Option<Vec<Site>>,
     pub(super) library: Vec<Effect>,
     pub(super) gap: GapSettings,
     pub(super) sigma_fraction: f64,
@@ -80,9 +80,9 @@ impl DiscoverSettings {
     ///
     /// ```
     /// use structid_discover::discover::DiscoverSettings;
-    /// use structid_discover::hypotheses::Location;
+    /// use structid_discover::hypotheses::Site;
     /// let s = DiscoverSettings::builder()
-    ///     .locations(vec![Location::Input, Location::OutputFeedback])
+    ///     .locations(vec![Site::Input, Site::OutputFeedback])
     ///     .total_variation(false)
     ///     .build()
     ///     .unwrap();
@@ -96,7 +96,7 @@ impl DiscoverSettings {
     }
 
     /// The candidate locations (`None`: every location of the nominal model).
-    pub fn locations(&self) -> Option<&[Location]> {
+    pub fn locations(&self) -> Option<&[Site]> {
         self.locations.as_deref()
     }
 
@@ -185,7 +185,7 @@ pub struct DiscoverSettingsBuilder {
 impl DiscoverSettingsBuilder {
     /// The candidate locations (default: the four built-in ones and those the nominal model
     /// declares).
-    pub fn locations(mut self, locations: Vec<Location>) -> Self {
+    pub fn locations(mut self, locations: Vec<Site>) -> Self {
         self.inner.locations = Some(locations);
         self
     }

@@ -22,7 +22,7 @@ use structid_core::ExprMap;
 use structid_core::validation::comparison::{default_bandwidth, long_run_variance};
 
 use crate::effects::EffectFit;
-use crate::hypotheses::{Hypothesis, Location, Nominal};
+use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::fit::simulation_errors;
 use super::polish::polish;
@@ -230,7 +230,7 @@ pub(super) fn drifting_linear_part(
     // The block's neutral value: w = z where it passes a signal on (input, output), w = 0
     // where it feeds back.
     let neutral = match finding.location {
-        Location::OutputFeedback | Location::RateFeedback => 0.0,
+        Site::OutputFeedback | Site::RateFeedback => 0.0,
         _ => 1.0,
     };
     let Ok(mut gain) = crate::effects::fit_effect_with(

@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::hyperparameters::{Bound, Criterion, Selection, SelectionSettings, select};
+use structid_core::selection::{Bound, Criterion, Selection, SelectionSettings, select};
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::{Data, Error, IdentifySettings, Result, TotalVariation};
 
@@ -124,7 +124,7 @@ mod tests {
         };
         let h = crate::hypotheses::hypothesis(
             &g,
-            crate::hypotheses::Location::Input,
+            crate::hypotheses::Site::Input,
             Arc::new(TotalVariation::new()),
         )
         .unwrap();

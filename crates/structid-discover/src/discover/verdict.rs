@@ -90,7 +90,7 @@ pub(super) fn confirm(
         && finding.classification == Classification::Dynamic
         && (matches!(
             finding.location,
-            crate::hypotheses::Location::Input | crate::hypotheses::Location::Output
+            crate::hypotheses::Site::Input | crate::hypotheses::Site::Output
         ) || finding.direction.explained >= FEEDBACK_HYSTERESIS_SHARE);
     let confirming = if cx.past_disturbance {
         PAST_DISTURBANCE_SHRINK
@@ -143,7 +143,7 @@ pub(super) fn confirm(
 /// approximation whose errors do not describe it; and a gain, itself the linear model's
 /// correction (its verdict already says the linear model was wrong).
 fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<LinearRival> {
-    use crate::hypotheses::Location;
+    use crate::hypotheses::Site;
     let exempt = |f: &Finding| {
         let gain = matches!(&f.classification,
             Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
@@ -153,7 +153,7 @@ fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<
         return None;
     }
     let g = cx.given.polynomial()?;
-    let location = finding.map_or(Location::Input, |f| f.location);
+    let location = finding.map_or(Site::Input, |f| f.location);
     let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings, location)?;
     let errors = finding.map(|f| {
         let h = augmented_hypothesis(f, &cx.nominal);

@@ -7,7 +7,7 @@
 //! usual regularised Coulomb model: its level is the Coulomb level and its knee the smoothing
 //! velocity below which the friction is taken as proportional to ẏ.
 
-use crate::hypotheses::Location;
+use crate::hypotheses::Site;
 
 use super::{Effect, EffectFit};
 
@@ -16,20 +16,20 @@ use super::{Effect, EffectFit};
 ///
 /// ```
 /// use structid_discover::effects::{Effect, fit_effect, physical_name};
-/// use structid_discover::hypotheses::Location;
+/// use structid_discover::hypotheses::Site;
 /// let z: Vec<f64> = (0..200).map(|k| -1.0 + 0.01 * k as f64).collect();
 /// let w: Vec<f64> = z.iter().map(|v: &f64| (20.0 * v).clamp(-2.0, 2.0)).collect();
 /// let fit = fit_effect(Effect::Saturation, &z, &w).unwrap();
-/// assert_eq!(physical_name(&fit, Location::Input), "actuator saturation");
-/// let friction = physical_name(&fit, Location::RateFeedback);
+/// assert_eq!(physical_name(&fit, Site::Input), "actuator saturation");
+/// let friction = physical_name(&fit, Site::RateFeedback);
 /// assert!(friction.starts_with("Coulomb friction 2.0000 smoothed below |ẏ| = 0.1000"), "{friction}");
 /// ```
-pub fn physical_name(fit: &EffectFit, location: Location) -> String {
+pub fn physical_name(fit: &EffectFit, location: Site) -> String {
     match location {
-        Location::RateFeedback => friction(fit),
-        Location::OutputFeedback => stiffness(fit),
-        Location::Input => format!("actuator {}", shape(fit.effect)),
-        Location::Output => format!("sensor {}", shape(fit.effect)),
+        Site::RateFeedback => friction(fit),
+        Site::OutputFeedback => stiffness(fit),
+        Site::Input => format!("actuator {}", shape(fit.effect)),
+        Site::Output => format!("sensor {}", shape(fit.effect)),
         _ => fit.effect.name(),
     }
 }
@@ -135,17 +135,17 @@ mod tests {
     #[test]
     fn a_force_that_aids_the_motion_is_not_called_friction_or_stiffness() {
         let gain = fitted(Effect::Gain, |z| -3.0 * z);
-        assert!(physical_name(&gain, Location::RateFeedback).starts_with("force aiding"));
-        assert!(physical_name(&gain, Location::OutputFeedback).starts_with("negative stiffness"));
+        assert!(physical_name(&gain, Site::RateFeedback).starts_with("force aiding"));
+        assert!(physical_name(&gain, Site::OutputFeedback).starts_with("negative stiffness"));
         let aiding = fitted(Effect::Coulomb, |z| -0.4 * z.signum());
-        assert!(physical_name(&aiding, Location::RateFeedback).starts_with("force aiding"));
+        assert!(physical_name(&aiding, Site::RateFeedback).starts_with("force aiding"));
         let relay = fitted(Effect::Coulomb, |z| 0.4 * z.signum());
         assert_eq!(
-            physical_name(&relay, Location::Input),
+            physical_name(&relay, Site::Input),
             "actuator relay (on–off)"
         );
         assert_eq!(
-            physical_name(&relay, Location::RateFeedback),
+            physical_name(&relay, Site::RateFeedback),
             Effect::Coulomb.name()
         );
     }
@@ -153,18 +153,18 @@ mod tests {
     #[test]
     fn every_site_names_its_physics() {
         let gain = fitted(Effect::Gain, |z| 3.0 * z);
-        assert_eq!(physical_name(&gain, Location::Input), "actuator gain error");
-        assert_eq!(physical_name(&gain, Location::Output), "sensor gain error");
-        assert!(physical_name(&gain, Location::OutputFeedback).starts_with("linear stiffness"));
-        assert!(physical_name(&gain, Location::RateFeedback).starts_with("viscous friction"));
+        assert_eq!(physical_name(&gain, Site::Input), "actuator gain error");
+        assert_eq!(physical_name(&gain, Site::Output), "sensor gain error");
+        assert!(physical_name(&gain, Site::OutputFeedback).starts_with("linear stiffness"));
+        assert!(physical_name(&gain, Site::RateFeedback).starts_with("viscous friction"));
         let coulomb = fitted(Effect::CoulombViscous, |z| 0.5 * z.signum() + 0.2 * z);
         assert_eq!(
-            physical_name(&coulomb, Location::RateFeedback),
+            physical_name(&coulomb, Site::RateFeedback),
             "Coulomb + viscous friction"
         );
         let cubic = fitted(Effect::OddPolynomial { degree: 3 }, |z| z + 0.5 * z.powi(3));
         assert_eq!(
-            physical_name(&cubic, Location::OutputFeedback),
+            physical_name(&cubic, Site::OutputFeedback),
             Effect::OddPolynomial { degree: 3 }.name()
         );
     }
@@ -174,7 +174,7 @@ mod tests {
     #[test]
     fn a_saturation_of_the_rate_is_a_smoothed_coulomb_friction() {
         let sat = fitted(Effect::AsymmetricSaturation, |z| (8.0 * z).clamp(-1.5, 2.0));
-        let name = physical_name(&sat, Location::RateFeedback);
+        let name = physical_name(&sat, Site::RateFeedback);
         assert!(
             name.starts_with(
                 "asymmetric Coulomb friction 2.0000 / 1.5000 smoothed for -0.1875 < ẏ < 0.2500"
@@ -183,7 +183,7 @@ mod tests {
         );
         let sat = fitted(Effect::Saturation, |z| (4.0 * z).clamp(-1.0, 1.0));
         assert!(
-            physical_name(&sat, Location::RateFeedback)
+            physical_name(&sat, Site::RateFeedback)
                 .starts_with("Coulomb friction 1.0000 smoothed below |ẏ| = 0.2500"),
         );
     }

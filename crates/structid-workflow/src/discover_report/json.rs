@@ -53,7 +53,10 @@ pub(super) fn parameter_json(p: &structid_discover::effects::Parameter) -> Value
     })
 }
 
-pub(super) fn fit_json(fit: &EffectFit, validation_rms: Option<f64>) -> Result<Value, serde_json::Error> {
+pub(super) fn fit_json(
+    fit: &EffectFit,
+    validation_rms: Option<f64>,
+) -> Result<Value, serde_json::Error> {
     Ok(json!({
         "name": fit.effect.name(),
         "family": json_value(&fit.effect)?,
@@ -314,4 +317,3 @@ pub(super) fn absolute(p: &Path) -> PathBuf {
         .or_else(|_| std::path::absolute(p))
         .unwrap_or_else(|_| p.to_path_buf())
 }
-

@@ -31,7 +31,7 @@ pub(super) fn cell(s: &str) -> String {
 }
 
 /// A location as reports name it: its key and what it means.
-pub fn location_text(nominal: &Nominal, l: Location) -> String {
+pub fn location_text(nominal: &Nominal, l: Site) -> String {
     format!("`{}` ({})", nominal.key(l), nominal.describe(l))
 }
 
@@ -319,7 +319,11 @@ pub(super) fn scoring_argument(scoring: Scoring) -> String {
     }
 }
 
-pub(super) fn validate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: Scoring) -> String {
+pub(super) fn validate_command(
+    r: &ReportContext<'_>,
+    w: &AugmentedFile,
+    scoring: Scoring,
+) -> String {
     format!(
         "structid validate --model {} --data {} --out {} --initial-state {}{}",
         r.out.join("augmented.toml").display(),
@@ -330,7 +334,11 @@ pub(super) fn validate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring
     )
 }
 
-pub(super) fn validate_estimate_command(r: &ReportContext<'_>, w: &AugmentedFile, scoring: Scoring) -> String {
+pub(super) fn validate_estimate_command(
+    r: &ReportContext<'_>,
+    w: &AugmentedFile,
+    scoring: Scoring,
+) -> String {
     format!(
         "structid validate --estimate {} --data {} --out {} --initial-state {}{}",
         r.out.join(ESTIMATE_FILE).display(),

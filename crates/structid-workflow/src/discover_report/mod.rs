@@ -17,7 +17,7 @@ use structid_discover::discover::{
 };
 use structid_discover::effects::EffectFit;
 use structid_discover::gap::Gap;
-use structid_discover::hypotheses::{Location, Nominal};
+use structid_discover::hypotheses::{Nominal, Site};
 
 /// Rows of the window table in report.md per record.
 const MAX_WINDOW_ROWS: usize = 20;

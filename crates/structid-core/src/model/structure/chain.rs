@@ -20,7 +20,7 @@ use nalgebra::DMatrix;
 
 use super::{Site, no_direct_feedthrough, single_input, with_time};
 use crate::error::{Error, Result};
-use crate::lft::{Lft, LftMatrices};
+use crate::model::lft::{Lft, LftMatrices};
 
 /// `top` stacked on `bottom`.
 fn stack(top: &DMatrix<f64>, bottom: &DMatrix<f64>) -> DMatrix<f64> {
