@@ -34,7 +34,7 @@
 //!   total variation of the piecewise-linear interpolant) for scalar z, and the graph total
 //!   variation over a k-nearest-neighbour graph for several inputs. It keeps jumps and corners
 //!   (relays, Coulomb friction, quantisers) that kernel norms round off; see
-//!   [`total_variation`].
+//!   [`total_variation`](dispersion::total_variation).
 //!
 //! A dispersion turns into a [`Penalty`] once the sample points are known; solvers only see
 //! penalties, so user-defined dispersions run through the same [`identify()`].

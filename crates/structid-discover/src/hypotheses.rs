@@ -38,7 +38,7 @@ use structid_core::{
 use structid_linear::PolynomialModel;
 use structid_lti::LinearSystem as _;
 
-/// Where the unknown block is inserted: structid-core's [`Site`](structid_core::Site),
+/// Where the unknown block is inserted: structid-core's [`Site`],
 /// re-exported beside the hypotheses built on it.
 pub use structid_core::Site;
 

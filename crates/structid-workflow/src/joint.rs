@@ -16,7 +16,7 @@
 //! `truth` when the file gives one (a previous estimate written as a table, a guess), from zero
 //! otherwise. Its centres are spread over the range its input covers when the starting model
 //! is simulated on the estimation data, so a block of an unmeasured signal gets centres where
-//! that signal goes. [`structid_joint::fit`] then fits everything at once.
+//! that signal goes. [`structid_joint::fit()`] then fits everything at once.
 //!
 //! β is given, or chosen from a grid by the simulation RMS on a validation record, simulated
 //! from rest. The fitted model is written back as a model file: the LFT with its fitted

@@ -7,7 +7,7 @@
 //! | module | workflow |
 //! |---|---|
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
-//! | [`wiener_hammerstein`] | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
+//! | [`wiener_hammerstein`](mod@wiener_hammerstein) | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
 //! | [`linear_start`] | discovery from a record alone: the best linear approximation as the nominal model, [`structid_discover`]'s search for what it is missing, and test records scored with both (the Silverbox discovery in Python) |
 //! | [`discover_report`] | the reports of a discovery: report.md, report.json and the summary `structid discover` prints (the presentation of [`structid_discover`]'s results, which carry data only) |
