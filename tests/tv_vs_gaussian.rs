@@ -5,7 +5,7 @@
 //! Setup: SISO Hammerstein y = G(q)·N(u) + e, G a random stable 2nd-order IIR block, u white
 //! on (−2, 2), noise std 0.1, L = 400, two seeds. The error is the RMS of N̂ − N on 201 points
 //! spanning the 5–95 % quantiles of u (no extrapolation). The table printed by
-//! `cargo test --release --test tv_vs_gaussian -- --nocapture` is the one in the README.
+//! `cargo test --release --test tv_vs_gaussian -- --nocapture` is the one in docs/benchmarks.md.
 
 use std::sync::Arc;
 

@@ -103,7 +103,7 @@ def silverbox(path: str, out: str) -> None:
     for h in d.hypotheses:
         print(f"  {h['location']:<16} validation RMS {h['validation_rms']:.4e}")
     for test in d.extra["tests"]:
-        print(f"  {test['split']:<28} BLA RMS {1e3 * test['bla_rms']:.3f} mV → augmented "
+        print(f"  {test['split']:<40} BLA RMS {1e3 * test['bla_rms']:.3f} mV → augmented "
               f"{1e3 * test['augmented_rms']:.3f} mV")
     if plt is not None and d.finding is not None:
         fig, axes = plt.subplots(1, 2, figsize=(10, 4))

@@ -2,7 +2,6 @@
 //! `structid discover`), and the workflow on the Silverbox benchmark.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
@@ -299,15 +298,19 @@ pub fn silverbox_discovery<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     use structid_io::{Silverbox, SilverboxSplit};
     use structid_workflow::{LinearStartRequest, discover_from_linear_start};
+    let request = LinearStartRequest {
+        order,
+        validation_fraction,
+        ..LinearStartRequest::default()
+    };
+    request.check().map_err(error)?;
     let r = py.detach(move || {
         let sb = Silverbox::load(&path).map_err(error)?;
         let est = sb.split(SilverboxSplit::Estimation).data().map_err(error)?;
         let tests = SilverboxSplit::TESTS.map(|s| sb.split(s));
         let request = LinearStartRequest {
-            order,
-            validation_fraction,
             sample_time: sb.sample_time,
-            ..LinearStartRequest::default()
+            ..request
         };
         discover_from_linear_start(&est, &tests, &request).map_err(error)
     })?;

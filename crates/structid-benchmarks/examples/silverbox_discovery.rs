@@ -43,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     for t in &r.tests {
         println!(
-            "{:<32} BLA {:.3} mV  augmented {:.3} mV  ({:.1}×)",
+            "{:<40} BLA {:.3} mV  augmented {:.3} mV  ({:.1}×)",
             t.record,
             1e3 * t.bla_rms,
             1e3 * t.augmented_rms,

@@ -1,12 +1,12 @@
 //! The discovery workflow on the Silverbox benchmark: start from the project's own best linear
-//! approximation and let [`discover`] find what is missing.
+//! approximation and let [`discover`](structid_discover::discover::discover) find what is missing.
 //!
 //! 1. The estimation split is divided into a fitting part (the first 80 %) and a validation
 //!    part (the rest); the test splits are not looked at until the end.
 //! 2. The nominal model is the BLA of order n (default 2: the physics' mass–spring–damper) on
 //!    the fitting part, by ARX then output error with a free initial state
 //!    ([`structid_core::refine::best_linear_approximation`]); its model is y = G·u + e.
-//! 3. [`discover`] runs over every default location with its default settings: the gap of the
+//! 3. [`discover`](structid_discover::discover::discover) runs over every default location with its default settings: the gap of the
 //!    BLA, the four hypotheses (input, output sensor, feedback from y, feedback from ẏ)
 //!    identified on the fitting part and ranked on the validation part, the named family and
 //!    the augmented model.

@@ -62,6 +62,12 @@ impl CliError {
         self
     }
 
+    /// The same error with `hint` as the command to try instead.
+    pub fn hint(mut self, hint: &'static str) -> Self {
+        self.hint = Some(hint);
+        self
+    }
+
     /// The process exit code.
     pub fn code(&self) -> u8 {
         self.code
@@ -116,7 +122,11 @@ impl From<structid_workflow::WorkflowError> for CliError {
     }
 }
 
-/// The command to try after a library error, when there is one.
+/// What `structid refine --joint` does that identification by the dispersion cannot.
+pub const JOINT_FIT_HINT: &str =
+    "`structid refine --joint` fits maps in series and latent blocks by simulation error";
+
+/// The command to try after a library error, when the error alone says which one.
 fn hint(e: &structid_core::Error) -> Option<&'static str> {
     use structid_core::Error as E;
     match e {
@@ -124,9 +134,7 @@ fn hint(e: &structid_core::Error) -> Option<&'static str> {
             "estimate a nominal model from the data with `structid linear` (`--integrators N` \
              for a plant that integrates)",
         ),
-        E::NotMeasurable { .. } => Some(
-            "`structid refine --joint` fits maps in series and latent blocks by simulation error",
-        ),
+        E::SeriesMaps { .. } => Some(JOINT_FIT_HINT),
         _ => None,
     }
 }

@@ -448,6 +448,7 @@ fn a_nominal_worse_than_a_constant_is_an_input_error() {
         "worse than a constant",
         "RMS",
         "units",
+        "\nhint: ",
         "structid linear",
         "--integrators",
     ] {

@@ -92,18 +92,45 @@ pub struct LinearStartDiscovery {
 ///
 /// Fails when f is not strictly between 0 and 1 or either part would be empty.
 pub fn split_for_validation(estimation: &Data, fraction: f64) -> Result<(Data, Data)> {
+    check_fraction(fraction)?;
+    // A cut through several records would join them into one.
+    estimation.require_single_record("the split into fitting and validation parts")?;
     let n = estimation.len();
     let cut = ((1.0 - fraction) * n as f64).round() as usize;
-    if !(fraction > 0.0 && fraction < 1.0) || cut == 0 || cut >= n {
+    if cut == 0 || cut >= n {
         return Err(WorkflowError::Request(format!(
             "a validation fraction of {fraction} of {n} samples leaves no fitting or no \
-             validation part; it must lie strictly between 0 and 1"
+             validation part: each needs at least one sample"
         )));
     }
     let part = |r: std::ops::Range<usize>| {
         Data::new(estimation.u().slice(r.clone()), estimation.y().slice(r))
     };
     Ok((part(0..cut)?, part(cut..n)?))
+}
+
+fn check_fraction(fraction: f64) -> Result<()> {
+    if fraction > 0.0 && fraction < 1.0 {
+        Ok(())
+    } else {
+        Err(WorkflowError::Request(format!(
+            "validation fraction {fraction}: it must lie strictly between 0 and 1"
+        )))
+    }
+}
+
+impl LinearStartRequest {
+    /// Checks what can be checked before any data are read: the validation fraction lies
+    /// strictly between 0 and 1 and the order is at least 1.
+    pub fn check(&self) -> Result<()> {
+        check_fraction(self.validation_fraction)?;
+        if self.order == 0 {
+            return Err(WorkflowError::Request(
+                "the order of the BLA must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Runs the workflow of the [module documentation](self) on `estimation` (one input, one
@@ -134,6 +161,7 @@ pub fn discover_from_linear_start(
             estimation.y().channels()
         )));
     }
+    request.check()?;
     let (fit, validation) = split_for_validation(estimation, request.validation_fraction)?;
     let t0 = Instant::now();
     let bla = best_linear_approximation(&fit, request.order, request.sample_time)?;

@@ -129,4 +129,10 @@ fn the_validation_part_is_the_tail_of_the_record() {
             "{bad}"
         );
     }
+    // A cut through several records would join them: refused.
+    let two = Data::from_records(vec![est.clone(), est.clone()]).unwrap();
+    assert!(matches!(
+        split_for_validation(&two, 0.25),
+        Err(WorkflowError::Core(_))
+    ));
 }

@@ -41,6 +41,7 @@ pub fn best_linear_approximation(
     order: usize,
     sample_time: f64,
 ) -> Result<PolynomialModel> {
+    data.require_single_record("the best linear approximation")?;
     let arx_settings = structid_linear::ArxSettings::builder()
         .sample_time(sample_time)
         .build()

@@ -1,5 +1,6 @@
-//! The reports of a discovery, the presentation layer of `structid_discover`: `report.md` ([`markdown`]), `report.json` ([`json()`]) and the
-//! summary a run prints ([`summary`]), with the records they describe ([`Record`]).
+//! The reports of a discovery, the presentation layer of `structid_discover`: `report.md`
+//! ([`markdown()`]), `report.json` ([`json()`]) and the summary a run prints ([`summary`]),
+//! with the records they describe ([`Record`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
