@@ -139,7 +139,7 @@ impl LinearStartRequest {
 /// ```no_run
 /// use structid_io::{Silverbox, SilverboxSplit};
 /// use structid_workflow::{LinearStartRequest, discover_from_linear_start};
-/// let sb = Silverbox::load("SNLS80mV.csv")?;
+/// let sb = Silverbox::load(std::path::Path::new("SNLS80mV.csv"))?;
 /// let est = sb.split(SilverboxSplit::Estimation).data()?;
 /// let tests = [sb.split(SilverboxSplit::TestMultisine)];
 /// let request = LinearStartRequest { sample_time: sb.sample_time, ..Default::default() };
