@@ -464,3 +464,74 @@ impl<'a> Stepper<'a> {
         })
     }
 }
+
+/// Simulation of the joint model: the stepper run from a stacked initial state.
+impl JointModel {
+    /// The stacked initial state ξ₀ = [x₀; each block's rest state at the first sample's
+    /// input]: x₀ given (zero by default), block states at rest. Blocks read z at rest from
+    /// x₀ and u₀ in evaluation order.
+    pub fn rest_state(&self, u0: &[f64], x0: Option<&[f64]>) -> Result<Vec<f64>> {
+        let n = self.lft().dims().states;
+        let x0 = match x0 {
+            Some(x) if x.len() != n => {
+                return Err(JointError::InvalidModel(format!(
+                    "the initial state has {} entries, the LFT has {n} states",
+                    x.len()
+                )));
+            }
+            Some(x) => x.to_vec(),
+            None => vec![0.0; n],
+        };
+        Stepper::new(self).rest_state(u0, &x0)
+    }
+
+    /// Simulates the model from u alone, with the stacked initial state `xi0` (default: the
+    /// zero state, blocks at rest). `Simulation::final_state` is the stacked state.
+    pub fn simulate(&self, u: &Signal, xi0: Option<&[f64]>) -> Result<Simulation> {
+        self.simulate_noisy(u, None, xi0)
+    }
+
+    /// [`JointModel::simulate`] with the noise `e` (L × n_e) entering through B_e, D_ye and D_ze.
+    pub fn simulate_noisy(
+        &self,
+        u: &Signal,
+        e: Option<&Signal>,
+        xi0: Option<&[f64]>,
+    ) -> Result<Simulation> {
+        let d = self.lft().dims();
+        if let Some(e) = e
+            && (e.len() != u.len() || e.channels() != d.e)
+        {
+            return Err(JointError::InvalidModel(format!(
+                "the noise has {} samples × {} channels; the input {} samples and the LFT {} noise channels",
+                e.len(),
+                e.channels(),
+                u.len(),
+                d.e
+            )));
+        }
+        let d = self.lft().dims();
+        if u.channels() != d.u {
+            return Err(JointError::InvalidModel(format!(
+                "u has {} channel(s), the LFT {}",
+                u.channels(),
+                d.u
+            )));
+        }
+        if u.is_empty() {
+            return Err(JointError::InvalidModel("u has no samples".into()));
+        }
+        let xi0 = match xi0 {
+            Some(x) if x.len() != self.stacked_state_len() => {
+                return Err(JointError::InvalidModel(format!(
+                    "the stacked initial state has {} entries, the model {}",
+                    x.len(),
+                    self.stacked_state_len()
+                )));
+            }
+            Some(x) => x.to_vec(),
+            None => self.rest_state(u.sample(0), None)?,
+        };
+        Stepper::new(self).simulate(u, e, &xi0)
+    }
+}
