@@ -447,7 +447,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
                     fit.iterations
                 )
             };
-            warning = fit.warning.as_ref().map(ToString::to_string);
+            warning = fit.warning.clone();
             (fit.model, fit.cost, note, fit.parameter_covariance)
         }
     };
@@ -533,6 +533,11 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         .filter(|&r| r < structid_linear::integrators::CANCELLATION);
     if let Some(w) = warning {
         println!("warning: {w}");
+        if a.integrators == 0
+            && !matches!(w, structid_linear::OeWarning::IntegratorCancelled { .. })
+        {
+            println!("hint: `--integrators 1` holds an integrator at z = 1");
+        }
     } else if let Some(ratio) = cancelled {
         let w = structid_linear::OeWarning::IntegratorCancelled {
             ratio,

@@ -564,7 +564,7 @@ fn chirp(design: &Design, sweep: Sweep) -> Result<Vec<f64>, InputError> {
             if lo <= 0.0 {
                 return Err(invalid(
                     "band",
-                    "a logarithmic chirp needs a lower edge above 0 Hz (e.g. --band 0.01,1)",
+                    "a logarithmic chirp needs a lower edge above 0 Hz (e.g. a band of 0.01 to 1 Hz)",
                 ));
             }
             let r = (hi / lo).ln();

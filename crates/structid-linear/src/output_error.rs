@@ -347,7 +347,7 @@ pub enum OeWarning {
 impl std::fmt::Display for OeWarning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let hint = "if the plant integrates (a position driven by a force, a level driven by a \
-                    flow), fix the integrator (OeSettings::integrators, `--integrators 1`)";
+                    flow), hold its integrator at z = 1 (`OeSettings::integrators`)";
         match self {
             OeWarning::OutputNearZero { ratio, fit_percent } => write!(
                 f,

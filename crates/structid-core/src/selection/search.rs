@@ -315,7 +315,7 @@ fn bound_warning(side: Bound, beta: f64, criterion: Criterion) -> String {
         Bound::Lower => format!(
             "the {criterion} search put β on its lower bound ({beta:.3e}, after widening once): \
              the data want less regularisation than that, and the map may interpolate the \
-             noise; try `--selection cv`, or a smaller σ"
+             noise; try cross-validation (`Criterion::CrossValidation`), or a smaller σ"
         ),
         Bound::Upper => format!(
             "the {criterion} search put β on its upper bound ({beta:.3e}, after widening once): \
