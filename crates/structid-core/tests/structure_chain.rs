@@ -66,7 +66,7 @@ fn access(model: &Model) -> Vec<BlockAccess> {
 #[test]
 fn an_input_map_around_output_feedback_feeds_g_beside_the_feedback() {
     // y = G·(N₁(u) − N₂(y)) + e.
-    let m = Structure::output_feedback(&g(), d())
+    let m = Structure::output_feedback(g(), d())
         .then(Site::Input, d())
         .model()
         .unwrap();
@@ -89,7 +89,7 @@ fn an_input_map_around_output_feedback_feeds_g_beside_the_feedback() {
 #[test]
 fn feedback_around_an_input_map_makes_the_input_map_read_u_minus_the_feedback() {
     // y = G·N₁(u − N₂(y)) + e: the input map reads the feedback's output in the same sample.
-    let m = Structure::hammerstein(&g(), d())
+    let m = Structure::hammerstein(g(), d())
         .then(Site::OutputFeedback, d())
         .model()
         .unwrap();
@@ -117,7 +117,7 @@ fn feedback_around_an_input_map_makes_the_input_map_read_u_minus_the_feedback() 
 #[test]
 fn stiffness_and_friction_in_feedback_together() {
     // y = G·(u − N₁(y) − N₂(ẏ)) + e, ẏ_k = (y_k − y_(k−1))/T_s with T_s = 0.5.
-    let m = Structure::output_feedback(&g(), d())
+    let m = Structure::output_feedback(g(), d())
         .then(Site::RateFeedback, d())
         .model()
         .unwrap();
@@ -141,7 +141,7 @@ fn stiffness_and_friction_in_feedback_together() {
 fn a_sensor_behind_a_feedback_loop_makes_the_loop_latent() {
     // g = G·(u − N₁(g)), y = N₂(g) + e: the feedback reads the plant's output, which only the
     // sensor's map of it reveals.
-    let m = Structure::output_feedback(&g(), d())
+    let m = Structure::output_feedback(g(), d())
         .then(Site::Output, d())
         .model()
         .unwrap();
@@ -182,14 +182,14 @@ fn chains_that_cannot_be_built_say_why() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("algebraic loop"), "{e}");
-    let e = Structure::output_feedback(&g(), d())
+    let e = Structure::output_feedback(g(), d())
         .then(Site::Declared { z: 0, w: 0 }, d())
         .lft()
         .unwrap_err()
         .to_string();
     assert!(e.contains("declared"), "{e}");
     // Names: the last placed block is renamed; a one-block structure keeps its old API.
-    let s = Structure::output_feedback(&g(), d())
+    let s = Structure::output_feedback(g(), d())
         .named("spring")
         .then(Site::RateFeedback, d())
         .named("friction");
