@@ -135,6 +135,17 @@ pub(super) fn oe_fit_stacked(
     oe_fit(&pairs, g, settings, free_initial_state, integrators)
 }
 
+/// The number of states of a realisation of `g`: its longest numerator's or its denominator's
+/// degree, whichever is larger (the length of an initial state's free response).
+pub(super) fn state_order(g: &PolynomialModel) -> usize {
+    g.num
+        .iter()
+        .map(|b| b.len().saturating_sub(1))
+        .chain([g.den.len().saturating_sub(1)])
+        .max()
+        .unwrap_or(0)
+}
+
 pub(super) fn oe_fit(
     records: &[(&Signal, &Signal)],
     g: &PolynomialModel,
@@ -158,13 +169,7 @@ pub(super) fn oe_fit(
     let Some(first) = records.first() else {
         return Err(Error::InvalidStructure("no data record was given".into()));
     };
-    let order = g
-        .num
-        .iter()
-        .map(|b| b.len().saturating_sub(1))
-        .chain([g.den.len().saturating_sub(1)])
-        .max()
-        .unwrap_or(0);
+    let order = state_order(g);
     let m = first.0.channels();
     let count = records.len();
     let mut start = g.clone();

@@ -153,13 +153,7 @@ pub(super) fn fit(
              path would stay at zero; start it from small nonzero coefficients after the delay"
         )));
     }
-    let order = g
-        .num
-        .iter()
-        .map(|b| b.len().saturating_sub(1))
-        .chain([g.den.len().saturating_sub(1)])
-        .max()
-        .unwrap_or(0);
+    let order = super::state_order(g);
     let a0 = g.den[0];
     let mut start = PolynomialModel {
         num: g
