@@ -8,7 +8,7 @@ use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::estimate::PredictionSettings;
-use structid_core::validation::ValidationSettings;
+use structid_core::validation::{ValidationReport, ValidationSettings};
 use structid_core::{Data, Estimate, Identification};
 use structid_io::{OutputGuard, estimate_json, read_estimate};
 
@@ -240,27 +240,55 @@ impl Fitted {
                 data.len()
             )));
         }
-        let settings = ValidationSettings::builder()
-            .initial_state(convert::initial_state(initial_state)?)
-            .max_lag(max_lag)
-            .settle(settle)
-            .build()
-            .map_err(error)?;
+        let settings = validation_settings(initial_state, max_lag, settle)?;
         let estimate = self.estimate.clone();
         let r = py
             .detach(move || estimate.validate(&data, &settings))
             .map_err(error)?;
+        report_dict(py, &r)
+    }
+
+    /// Each record of several (lists `us`, `ys`) validated on its own, and the simulation
+    /// errors pooled over every record's scored samples (as `structid validate --data a
+    /// --data b`).
+    #[pyo3(signature = (us, ys, initial_state="zero", max_lag=25, settle=0))]
+    fn validate_records<'py>(
+        &self,
+        py: Python<'py>,
+        us: Vec<PyReadonlyArray2<'py, f64>>,
+        ys: Vec<PyReadonlyArray2<'py, f64>>,
+        initial_state: &str,
+        max_lag: usize,
+        settle: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if us.len() != ys.len() || us.is_empty() {
+            return Err(invalid(format!(
+                "give one y per u and at least one record ({} u, {} y)",
+                us.len(),
+                ys.len()
+            )));
+        }
+        let records = us
+            .iter()
+            .zip(&ys)
+            .map(|(u, y)| self.record(u, y))
+            .collect::<PyResult<Vec<Data>>>()?;
+        let data = Data::from_records(records).map_err(error)?;
+        let settings = validation_settings(initial_state, max_lag, settle)?;
+        let estimate = self.estimate.clone();
+        let r = py
+            .detach(move || estimate.validate_records(&data, &settings))
+            .map_err(error)?;
         let d = PyDict::new(py);
-        d.set_item("simulated", convert::array(py, &r.simulated))?;
-        d.set_item("rms", r.rms.clone())?;
-        d.set_item("fit_percent", r.fit_percent.clone())?;
-        d.set_item("prediction_error", convert::array(py, &r.prediction_error))?;
-        d.set_item("prediction_rms", r.prediction_rms.clone())?;
-        d.set_item("whiteness_passes", r.whiteness_passes())?;
-        d.set_item("input_correlation_passes", r.input_correlation_passes())?;
-        d.set_item("whiteness", convert::json(&r.whiteness)?)?;
-        d.set_item("input_correlation", convert::json(&r.input_correlation)?)?;
-        d.set_item("initial_state", r.initial_state.clone())?;
+        let reports = r
+            .records
+            .iter()
+            .map(|one| report_dict(py, one))
+            .collect::<PyResult<Vec<_>>>()?;
+        d.set_item("records", reports)?;
+        d.set_item("rms", r.rms())?;
+        d.set_item("fit_percent", r.fit_percent())?;
+        d.set_item("samples", r.samples())?;
         Ok(d)
     }
 
@@ -268,6 +296,36 @@ impl Fitted {
         let names: Vec<_> = self.estimate.blocks().iter().map(|b| &b.name).collect();
         format!("Estimate(blocks={names:?})")
     }
+}
+
+/// The settings of `validate` from Python's arguments.
+fn validation_settings(
+    initial_state: &str,
+    max_lag: usize,
+    settle: usize,
+) -> PyResult<ValidationSettings> {
+    ValidationSettings::builder()
+        .initial_state(convert::initial_state(initial_state)?)
+        .max_lag(max_lag)
+        .settle(settle)
+        .build()
+        .map_err(error)
+}
+
+/// A validation report as the keyword arguments of Python's `Validation`.
+fn report_dict<'py>(py: Python<'py>, r: &ValidationReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("simulated", convert::array(py, &r.simulated))?;
+    d.set_item("rms", r.rms.clone())?;
+    d.set_item("fit_percent", r.fit_percent.clone())?;
+    d.set_item("prediction_error", convert::array(py, &r.prediction_error))?;
+    d.set_item("prediction_rms", r.prediction_rms.clone())?;
+    d.set_item("whiteness_passes", r.whiteness_passes())?;
+    d.set_item("input_correlation_passes", r.input_correlation_passes())?;
+    d.set_item("whiteness", convert::json(&r.whiteness)?)?;
+    d.set_item("input_correlation", convert::json(&r.input_correlation)?)?;
+    d.set_item("initial_state", r.initial_state.clone())?;
+    Ok(d)
 }
 
 /// Writes a result directory as `structid identify` does: estimate.json, estimate.csv (ŵ by

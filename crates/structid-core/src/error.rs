@@ -47,6 +47,15 @@ pub enum Error {
         order: usize,
     },
 
+    /// An error in one record of several.
+    #[error("record {record}: {source}")]
+    InRecord {
+        /// One-based record number, as a user counts the `--data` files.
+        record: usize,
+        /// What went wrong in it.
+        source: Box<Error>,
+    },
+
     /// A data sample is NaN or infinite.
     #[error("non-finite value {value} in {signal} at sample {sample}, channel {channel}")]
     NonFiniteData {

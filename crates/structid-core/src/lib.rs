@@ -144,7 +144,9 @@ pub use model::structure::{LinearPart, PlacedBlock, Site, Structure};
 pub use model::{Data, Model, NonlinearBlock};
 pub use solver::choice::{SolveStatus, SolverKind, SolverReason};
 pub use structid_lti::Signal;
-pub use validation::{ValidationReport, ValidationSettings, validate};
+pub use validation::{
+    RecordsValidation, ValidationReport, ValidationSettings, validate, validate_records,
+};
 
 // Dynamic scalar blocks (operators with memory).
 pub use model::hysteresis::{

@@ -10,6 +10,7 @@
 
 use structid_discover::discover::{Classification, DiscoverSettings, Discovery, discover};
 use structid_discover::hypotheses::Nominal;
+use structid_testcases::parallel;
 use structid_testcases::synthetic::{Case, CaseKind, Hidden, generate};
 
 fn run(case: &Case) -> Discovery {
@@ -38,8 +39,13 @@ fn static_effects_are_named_located_and_close_the_gap() {
     let cases = 30;
     let (mut correct, mut params_ok) = (0, 0);
     let mut shrinks = Vec::new();
-    for seed in 0..cases {
+    let seeds: Vec<u64> = (0..cases).collect();
+    let runs = parallel::map(&seeds, |&seed| {
         let case = generate(CaseKind::Static, seed);
+        let d = run(&case);
+        (case, d)
+    });
+    for (seed, (case, d)) in seeds.iter().zip(runs) {
         let Hidden::Static {
             effect,
             theta,
@@ -48,7 +54,6 @@ fn static_effects_are_named_located_and_close_the_gap() {
         else {
             unreachable!()
         };
-        let d = run(&case);
         let (named, located, within, shrink) = match &d.finding {
             Some(f) => {
                 let named = matches!(&f.classification, Classification::Named(fit) if fit.effect == *effect);
@@ -110,9 +115,13 @@ fn static_effects_are_named_located_and_close_the_gap() {
 fn lti_data_gives_no_missing_effect() {
     let cases = 20;
     let mut quiet = 0;
-    for seed in 0..cases {
+    let seeds: Vec<u64> = (0..cases).collect();
+    let runs = parallel::map(&seeds, |&seed| {
         let case = generate(CaseKind::None, seed);
         let d = run(&case);
+        (case, d)
+    });
+    for (seed, (case, d)) in seeds.iter().zip(runs) {
         if !d.missing_effect {
             quiet += 1;
         } else {
@@ -130,9 +139,13 @@ fn lti_data_gives_no_missing_effect() {
 fn hysteresis_is_reported_as_dynamic() {
     let cases = 10;
     let mut dynamic = 0;
-    for seed in 0..cases {
+    let seeds: Vec<u64> = (0..cases).collect();
+    let runs = parallel::map(&seeds, |&seed| {
         let case = generate(CaseKind::Hysteresis, seed);
         let d = run(&case);
+        (case, d)
+    });
+    for (seed, (case, d)) in seeds.iter().zip(runs) {
         let f = d.finding.as_ref();
         let is_dynamic = f.is_some_and(|f| f.classification == Classification::Dynamic);
         eprintln!(

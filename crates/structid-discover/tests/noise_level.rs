@@ -15,34 +15,36 @@ use structid_discover::discover::{DiscoverSettings, discover};
 use structid_discover::gap::noise_level;
 use structid_discover::hypotheses::Nominal;
 use structid_linear::PolynomialModel;
-use structid_testcases::{physics, synthetic};
+use structid_testcases::{parallel, physics, synthetic};
 
-/// (σ̂/σ of the workflow, σ̂/σ of the first difference of the nominal model's residual).
-fn ratios(
-    name: &str,
+/// One generated case: its name, true noise std, AR coefficient of coloured noise, nominal
+/// model and records.
+struct Case {
+    name: String,
     truth: f64,
     colour: Option<f64>,
-    nominal: &PolynomialModel,
-    est: &Data,
-    val: &Data,
-) -> (f64, f64) {
-    let n = Nominal::from_polynomial(nominal).unwrap();
-    let d = discover(&n, est, val, &DiscoverSettings::default()).unwrap();
-    let ratio = d.noise.std / truth;
-    let difference = noise_level(&d.estimation_gap.residual) / truth;
-    eprintln!(
-        "{name:<16} φ {:<5} │ σ̂/σ {ratio:5.2} {} φ̂ {:.2} │ Δ-nominal {difference:6.2} │ {:<16} │ {}",
-        colour.map_or("white".to_string(), |p| format!("{p:.2}")),
-        if (ratio - 1.0).abs() <= 0.3 {
-            " "
-        } else {
-            "✗"
-        },
+    nominal: PolynomialModel,
+    est: Data,
+    val: Data,
+}
+
+/// (σ̂/σ of the workflow, σ̂/σ of the first difference of the nominal model's residual) and
+/// the case's printed line.
+fn ratios(c: &Case) -> ((f64, f64), String) {
+    let n = Nominal::from_polynomial(&c.nominal).unwrap();
+    let d = discover(&n, &c.est, &c.val, &DiscoverSettings::default()).unwrap();
+    let ratio = d.noise.std / c.truth;
+    let difference = noise_level(&d.estimation_gap.residual) / c.truth;
+    let line = format!(
+        "{:<16} φ {:<5} │ σ̂/σ {ratio:5.2} {} φ̂ {:.2} │ Δ-nominal {difference:6.2} │ {:<16} │ {}",
+        c.name,
+        c.colour.map_or("white".to_string(), |p| format!("{p:.2}")),
+        if close(ratio) { " " } else { "✗" },
         d.noise.colour,
         format!("{:?}", d.verdict_kind),
         d.noise.source
     );
-    (ratio, difference)
+    ((ratio, difference), line)
 }
 
 /// Whether a ratio σ̂/σ is within 30 % of 1.
@@ -50,56 +52,44 @@ fn close(r: f64) -> bool {
     (r - 1.0).abs() <= 0.3
 }
 
+/// The 60 cases, in a fixed order.
+fn cases() -> Vec<Case> {
+    let mut out = Vec::new();
+    let synthetic_case = |kind, tag: &str, seed| {
+        let c = synthetic::generate(kind, seed);
+        Case {
+            name: format!("synthetic {tag} {seed}"),
+            truth: c.noise_std,
+            colour: None,
+            nominal: c.nominal,
+            est: c.estimation,
+            val: c.validation,
+        }
+    };
+    let physics_case = |kind, tag: &str, seed| {
+        let c = physics::generate(kind, seed);
+        Case {
+            name: format!("physics {tag} {seed}"),
+            truth: c.noise_std,
+            colour: c.noise_ar,
+            nominal: c.nominal,
+            est: c.estimation,
+            val: c.validation,
+        }
+    };
+    out.extend((0..20).map(|s| synthetic_case(synthetic::CaseKind::Static, "S", s)));
+    out.extend((0..10).map(|s| synthetic_case(synthetic::CaseKind::None, "N", s)));
+    out.extend((0..20).map(|s| physics_case(physics::PhysicsKind::Static, "S", s)));
+    out.extend((0..10).map(|s| physics_case(physics::PhysicsKind::None, "N", s)));
+    out
+}
+
 #[test]
 fn the_noise_level_is_within_30_percent_of_the_truth() {
     let mut all = Vec::new();
-    for seed in 0..20 {
-        let c = synthetic::generate(synthetic::CaseKind::Static, seed);
-        let name = format!("synthetic S {seed}");
-        all.push(ratios(
-            &name,
-            c.noise_std,
-            None,
-            &c.nominal,
-            &c.estimation,
-            &c.validation,
-        ));
-    }
-    for seed in 0..10 {
-        let c = synthetic::generate(synthetic::CaseKind::None, seed);
-        let name = format!("synthetic N {seed}");
-        all.push(ratios(
-            &name,
-            c.noise_std,
-            None,
-            &c.nominal,
-            &c.estimation,
-            &c.validation,
-        ));
-    }
-    for seed in 0..20 {
-        let c = physics::generate(physics::PhysicsKind::Static, seed);
-        let name = format!("physics S {seed}");
-        all.push(ratios(
-            &name,
-            c.noise_std,
-            c.noise_ar,
-            &c.nominal,
-            &c.estimation,
-            &c.validation,
-        ));
-    }
-    for seed in 0..10 {
-        let c = physics::generate(physics::PhysicsKind::None, seed);
-        let name = format!("physics N {seed}");
-        all.push(ratios(
-            &name,
-            c.noise_std,
-            c.noise_ar,
-            &c.nominal,
-            &c.estimation,
-            &c.validation,
-        ));
+    for (r, line) in parallel::map(&cases(), ratios) {
+        eprintln!("{line}");
+        all.push(r);
     }
     let within = all.iter().filter(|(r, _)| close(*r)).count();
     let difference = all.iter().filter(|(_, r)| close(*r)).count();

@@ -46,6 +46,7 @@ use structid_discover::discover::{
     rate_explains,
 };
 use structid_discover::hypotheses::Nominal;
+use structid_testcases::parallel;
 use structid_testcases::physics::{
     Expected, NominalSource, PhysicsCase, PhysicsKind, generate, generate_with_length,
 };
@@ -70,6 +71,16 @@ fn run(case: &PhysicsCase) -> Discovery {
         &DiscoverSettings::default(),
     )
     .unwrap_or_else(|e| panic!("seed {}: discover failed: {e}", case.seed))
+}
+
+/// The cases `seeds` of `kind` with their discoveries, run on every core.
+fn run_all(kind: PhysicsKind, seeds: std::ops::Range<u64>) -> Vec<(PhysicsCase, Discovery)> {
+    let seeds: Vec<u64> = seeds.collect();
+    parallel::map(&seeds, |&seed| {
+        let case = generate(kind, seed);
+        let d = run(&case);
+        (case, d)
+    })
 }
 
 /// Dynamic case `seed` through the workflow; its finding must be dynamic.
@@ -200,10 +211,8 @@ fn static_tally(seeds: std::ops::Range<u64>) -> Tally {
         shrinks: Vec::new(),
         relative: Vec::new(),
     };
-    for seed in seeds {
-        let case = generate(PhysicsKind::Static, seed);
+    for (case, d) in run_all(PhysicsKind::Static, seeds) {
         let expected: &Expected = case.expected.as_ref().unwrap();
-        let d = run(&case);
         t.cases += 1;
         t.estimated += usize::from(case.nominal_source != NominalSource::Exact);
         let (mut located, mut named, mut within) = (false, false, None);
@@ -330,10 +339,8 @@ fn static_effects_of_the_tuning_seeds() {
 fn dynamic_tally(seeds: std::ops::Range<u64>) -> usize {
     let mut dynamic = 0;
     let cases = seeds.end - seeds.start;
-    for seed in seeds {
-        let case = generate(PhysicsKind::Dynamic, seed);
+    for (case, d) in run_all(PhysicsKind::Dynamic, seeds) {
         assert!(case.expected.as_ref().unwrap().is_dynamic());
-        let d = run(&case);
         let is_dynamic = d
             .finding
             .as_ref()
@@ -369,9 +376,7 @@ fn dynamic_goal_of_the_issue() {
 fn time_varying_tally(seeds: std::ops::Range<u64>) -> usize {
     let mut flagged = 0;
     let cases = seeds.end - seeds.start;
-    for seed in seeds {
-        let case = generate(PhysicsKind::TimeVarying, seed);
-        let d = run(&case);
+    for (case, d) in run_all(PhysicsKind::TimeVarying, seeds) {
         let time_varying = d
             .finding
             .as_ref()
@@ -408,9 +413,7 @@ fn drifting_gains_of_the_tuning_seeds() {
 fn lti_physical_plants_raise_no_false_alarm() {
     let cases = HELD_OUT_LTI.end - HELD_OUT_LTI.start;
     let mut alarms = 0;
-    for seed in HELD_OUT_LTI {
-        let case = generate(PhysicsKind::None, seed);
-        let d = run(&case);
+    for (case, d) in run_all(PhysicsKind::None, HELD_OUT_LTI) {
         let alarm = d.verdict_kind != Verdict::NoMissingEffect;
         eprintln!("{} | alarm {alarm}", line(&case, &d));
         alarms += usize::from(alarm);

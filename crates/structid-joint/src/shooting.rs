@@ -23,6 +23,7 @@
 use nalgebra::{DMatrix, DVector};
 use structid_core::Data;
 use structid_linear::levenberg_marquardt::LeastSquaresProblem;
+use structid_linear::normal_equations::NormalEquations;
 
 use crate::model::JointModel;
 use crate::step::Stepper;
@@ -149,8 +150,7 @@ impl LeastSquaresProblem for Shooting<'_> {
         let (ny, nxi, pg) = (stepper.outputs(), model.stacked_state_len(), self.globals);
         let p = pg + nxi;
         let total = self.len();
-        let mut jtj = DMatrix::zeros(total, total);
-        let mut jtr = DVector::zeros(total);
+        let mut normal = NormalEquations::new(total);
         let y = self.data.y();
         let mut ends: Vec<(Vec<f64>, Vec<f64>)> = Vec::with_capacity(self.segments.len());
         let mut idx = vec![0usize; p];
@@ -166,6 +166,9 @@ impl LeastSquaresProblem for Shooting<'_> {
                 *slot = if c < pg { c } else { local + c - pg };
             }
             let live = if s.state_at.is_some() { p } else { pg };
+            // The segment's rows reach only its `live` columns: accumulate them there and
+            // scatter once.
+            let mut segment = NormalEquations::new(live);
             stepper.run_tangent(
                 self.data.u(),
                 s.start..s.end,
@@ -176,11 +179,11 @@ impl LeastSquaresProblem for Shooting<'_> {
                     for o in 0..ny {
                         let res = y.sample(k)[o] - yk[o];
                         // J row = −∂ŷ; the sign cancels in JᵀJ and flips Jᵀr.
-                        let g = &dy[o * p..o * p + live];
-                        accumulate(&mut jtj, &mut jtr, &idx[..live], g, -res);
+                        segment.add_row(&dy[o * p..o * p + live], -res);
                     }
                 },
             )?;
+            normal.add_scattered(segment, &idx[..live]);
             ends.push((xi, t));
         }
         for (i, s) in self.segments.iter().enumerate() {
@@ -209,7 +212,7 @@ impl LeastSquaresProblem for Shooting<'_> {
                     vals.push(self.weight);
                 }
                 let res = self.weight * (nstate[c] - end[c]);
-                accumulate(&mut jtj, &mut jtr, &cols, &vals, res);
+                normal.add_sparse_row(&cols, &vals, res);
             }
         }
         for (at, r) in &self.regularisers {
@@ -218,36 +221,10 @@ impl LeastSquaresProblem for Shooting<'_> {
             let cols: Vec<usize> = (*at..*at + r.ncols()).collect();
             for i in 0..r.nrows() {
                 let row: Vec<f64> = r.row(i).iter().copied().collect();
-                accumulate(&mut jtj, &mut jtr, &cols, &row, res[i]);
+                normal.add_sparse_row(&cols, &row, res[i]);
             }
         }
-        symmetrise(&mut jtj);
-        Some((jtj, jtr))
-    }
-}
-
-/// Adds one residual's row `g` (on columns `cols`, increasing) to the upper triangle of JᵀJ
-/// and g·res to Jᵀr; [`symmetrise`] fills the lower triangle once at the end.
-fn accumulate(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, cols: &[usize], g: &[f64], res: f64) {
-    debug_assert!(cols.windows(2).all(|w| w[0] < w[1]));
-    for (a, &ca) in cols.iter().enumerate() {
-        let ga = g[a];
-        if ga == 0.0 {
-            continue;
-        }
-        jtr[ca] += ga * res;
-        for (b, &cb) in cols.iter().enumerate().skip(a) {
-            jtj[(ca, cb)] += ga * g[b];
-        }
-    }
-}
-
-/// Copies the upper triangle of `m` into its lower triangle.
-fn symmetrise(m: &mut DMatrix<f64>) {
-    for j in 0..m.ncols() {
-        for i in j + 1..m.nrows() {
-            m[(i, j)] = m[(j, i)];
-        }
+        Some(normal.finish())
     }
 }
 

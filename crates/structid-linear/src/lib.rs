@@ -96,6 +96,7 @@ pub mod bla;
 pub mod error;
 pub mod integrators;
 pub mod levenberg_marquardt;
+pub mod normal_equations;
 pub mod orders;
 pub mod output_error;
 pub mod polynomial;
@@ -111,6 +112,7 @@ pub use levenberg_marquardt::{
     LeastSquaresProblem, LevenbergMarquardt, LmConvergence, LmFit, LmSettings, LmSettingsBuilder,
     LmStatus, covariance_from_normal,
 };
+pub use normal_equations::NormalEquations;
 pub use orders::Orders;
 pub use output_error::{
     OeFit, OeSettings, OeSettingsBuilder, OeWarning, oe, oe_records, output_error,

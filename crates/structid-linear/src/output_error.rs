@@ -7,6 +7,7 @@ use crate::arx::{ArxSettings, check_integrators, fit_arx_records, prepare_data, 
 use crate::error::{LinearError, check_sample_time};
 use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
 use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
+use crate::normal_equations::NormalEquations;
 use crate::orders::Orders;
 use crate::polynomial::{PolynomialModel, root_radius, schur_stable};
 
@@ -800,7 +801,7 @@ impl LeastSquaresProblem for Problem<'_> {
         };
         let (h, g) = self.psi_normal_equations(theta, yhat);
         // Jᵀε with J = −Ψ
-        Some((h, DVector::from_iterator(g.len(), g.iter().map(|v| -v))))
+        Some((h, -g))
     }
 }
 
@@ -891,11 +892,10 @@ impl Problem<'_> {
 
     /// `(ΨᵀΨ, Ψᵀε)` over the scored samples, accumulated row by row from the sensitivities
     /// (`O(L·d²)`, Ψ never stored).
-    fn psi_normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, Vec<f64>) {
+    fn psi_normal_equations(&self, theta: &[f64], yhat: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
         let (filtered, cols) = self.sensitivities(theta, yhat);
         let d = theta.len();
-        let mut h = DMatrix::zeros(d, d);
-        let mut g = vec![0.0; d];
+        let mut normal = NormalEquations::new(d);
         let mut psi = vec![0.0; d];
         for (k, start) in self.scored() {
             for (p, &(f, lag, sign)) in cols.iter().enumerate() {
@@ -905,20 +905,9 @@ impl Problem<'_> {
                     0.0
                 };
             }
-            let e = self.y[k] - yhat[k];
-            for p in 0..d {
-                g[p] += psi[p] * e;
-                for q in p..d {
-                    h[(p, q)] += psi[p] * psi[q];
-                }
-            }
+            normal.add_row(&psi, self.y[k] - yhat[k]);
         }
-        for p in 0..d {
-            for q in 0..p {
-                h[(p, q)] = h[(q, p)];
-            }
-        }
-        (h, g)
+        normal.finish()
     }
 }
 

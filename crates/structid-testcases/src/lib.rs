@@ -8,7 +8,9 @@
 //!   the very LFT the workflow hypothesises;
 //! * [`physics`]: plants from continuous-time physics (integrators in closed loop, two-mass
 //!   plants, delays, coloured noise, estimated nominals) integrated by RK4 and sampled, and the
-//!   closed-loop positioning axis.
+//!   closed-loop positioning axis;
+//! * [`parallel`]: independent cases on every core.
 
+pub mod parallel;
 pub mod physics;
 pub mod synthetic;

@@ -52,7 +52,7 @@ class Validation:
 class RecordsValidation:
     """Validation on several records (``structid validate --data a.csv --data b.csv``): each
     record validated on its own, from its own initial state, and the free-run simulation error
-    pooled over the records after the settling samples of each."""
+    pooled over the samples each record's validation scored (after its settling samples)."""
 
     records: List[Validation]
     """Per record, its :class:`Validation`."""
@@ -63,19 +63,6 @@ class RecordsValidation:
     constant output)."""
     samples: int
     """Scored samples of all records."""
-
-    @staticmethod
-    def pool(records: List[Validation], ys: List[np.ndarray], settle: int) -> "RecordsValidation":
-        """Pools the simulation errors of ``records`` (measured outputs ``ys``)."""
-        y = np.vstack([a[settle:] for a in ys])
-        sim = np.vstack([r.simulated[settle:] for r in records])
-        sse = ((y - sim) ** 2).sum(axis=0)
-        n = max(len(y), 1)
-        spread = np.maximum((y * y).sum(axis=0) - y.sum(axis=0) ** 2 / n, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fit = np.where(spread > 0, 100.0 * (1.0 - np.sqrt(sse / spread)), np.nan)
-        return RecordsValidation(records=records, rms=[float(v) for v in np.sqrt(sse / n)],
-                                 fit_percent=[float(v) for v in fit], samples=len(y))
 
 
 class Estimate:
@@ -159,14 +146,13 @@ class Estimate:
         records (``structid validate --data a.csv --data b.csv``)."""
         records = records_of(u, y)
         if records is not None:
-            return RecordsValidation.pool(
-                [self.validate(a, b, initial_state, max_lag, settle) for a, b in records],
-                [as_signal(b, "y") for _, b in records], int(settle))
-        d = self._native.validate(as_signal(u, "u"), as_signal(y, "y"), initial_state,
-                                  int(max_lag), int(settle))
-        d["whiteness"] = json.loads(d["whiteness"])
-        d["input_correlation"] = json.loads(d["input_correlation"])
-        return Validation(**d)
+            d = self._native.validate_records([as_signal(a, "u") for a, _ in records],
+                                              [as_signal(b, "y") for _, b in records],
+                                              initial_state, int(max_lag), int(settle))
+            d["records"] = [_validation(r) for r in d["records"]]
+            return RecordsValidation(**d)
+        return _validation(self._native.validate(as_signal(u, "u"), as_signal(y, "y"),
+                                                 initial_state, int(max_lag), int(settle)))
 
     def __getstate__(self) -> str:
         return self.to_json()
@@ -176,3 +162,10 @@ class Estimate:
 
     def __repr__(self) -> str:
         return repr(self._native)
+
+
+def _validation(d: Dict[str, Any]) -> Validation:
+    """A :class:`Validation` from the native report (its tests as JSON text)."""
+    d["whiteness"] = json.loads(d["whiteness"])
+    d["input_correlation"] = json.loads(d["input_correlation"])
+    return Validation(**d)

@@ -9,7 +9,11 @@ pub fn benchmark_args(rel: &str, out: &str) -> (PathBuf, PathBuf) {
     let path = args.first().map(PathBuf::from).unwrap_or_else(|| {
         let base = std::env::var("STRUCTID_DATA")
             .map(PathBuf::from)
-            .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+            .unwrap_or_else(|_| {
+                // The crate sits at `crates/structid-benchmarks` of the workspace, and the
+                // data beside the workspace root.
+                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
+            });
         base.join(rel)
     });
     let out = args

@@ -14,6 +14,7 @@
 //! | [`Estimate::simulate`] | y from u alone with the maps in the loop (e = 0) |
 //! | [`Estimate::predict`] | ŷ_(t∣t−k), the k-step-ahead prediction from u and past y ([`predict`](mod@predict)) |
 //! | [`Estimate::validate`] | simulation and one-step errors with their residual tests ([`crate::validate`]) |
+//! | [`Estimate::validate_records`] | the same on each of several records, with the simulation errors pooled ([`crate::validate_records`]) |
 //!
 //! In the style of linfa's `Fit`/`Predict`, fitting is [`Model::fit`], which returns the
 //! `Estimate`:
@@ -61,7 +62,9 @@ use crate::model::interpolant::Interpolant;
 use crate::model::lft::{Lft, LftMatrices};
 use crate::model::simulate::Simulation;
 use crate::model::{Data, Model, NonlinearBlock};
-use crate::validation::{ValidationReport, ValidationSettings, validate};
+use crate::validation::{
+    RecordsValidation, ValidationReport, ValidationSettings, validate, validate_records,
+};
 
 pub use crate::stored::{
     FourierStored, NystromStored, PolynomialStored, StoredKernel, StoredMap, StoredPoints,
@@ -544,6 +547,19 @@ impl Estimate {
     /// As [`crate::validate`].
     pub fn validate(&self, data: &Data, settings: &ValidationSettings) -> Result<ValidationReport> {
         validate(&self.model, &self.maps(), data, settings)
+    }
+
+    /// Validates the estimate on every record of `data`, each on its own, and pools the
+    /// simulation errors ([`crate::validate_records`]).
+    ///
+    /// # Errors
+    /// As [`crate::validate_records`].
+    pub fn validate_records(
+        &self,
+        data: &Data,
+        settings: &ValidationSettings,
+    ) -> Result<RecordsValidation> {
+        validate_records(&self.model, &self.maps(), data, settings)
     }
 
     /// The k-step-ahead prediction on a record ([`predict`](mod@predict)).

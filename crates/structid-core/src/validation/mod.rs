@@ -49,9 +49,11 @@
 pub mod comparison;
 pub mod distributions;
 pub mod metrics;
+pub mod records;
 pub mod residual_tests;
 pub mod windows;
 
+pub use records::{RecordsValidation, validate_records};
 pub use windows::{ScoredSimulation, Scoring, Windows, simulate_scored};
 
 /// The free-run simulation error of `lft` with `bindings` in the loop on every record of

@@ -414,3 +414,49 @@ proptest! {
         prop_assert!(r.rms[0] < 1e-8);
     }
 }
+
+/// Several records with windowed scoring: the pooled RMS and fit are those of the samples each
+/// record's own validation scored, concatenated; a record that fails is named.
+#[test]
+fn records_pool_exactly_the_samples_each_record_scored() {
+    let model = feedback_model();
+    let noisy = |len: usize, seed: u64| {
+        let u = gaussian_noise(len, 1, 1.0, seed);
+        let e = gaussian_noise(len, 1, 0.05, seed + 100);
+        Experiment::simulate(feedback_model(), &[&tanh_map], u, e)
+            .unwrap()
+            .data
+    };
+    let records = [noisy(400, 1), noisy(260, 2)];
+    let data = Data::from_records(records.to_vec()).unwrap();
+    let wrong = |z: &[f64]| 0.8 * z[0].tanh();
+    let s = ValidationSettings::builder()
+        .initial_state(InitialState::Estimate)
+        .settle(10)
+        .scoring(Scoring::Windowed(Windows::new(100, 30).unwrap()))
+        .build()
+        .unwrap();
+    let pooled = validate_records(&model, &[&wrong], &data, &s).unwrap();
+    let (mut y, mut sim) = (Vec::new(), Vec::new());
+    for (record, report) in records.iter().zip(&pooled.records) {
+        assert_eq!(report, &validate(&model, &[&wrong], record, &s).unwrap());
+        for r in &report.scored {
+            y.extend_from_slice(&record.y().channel(0)[r.clone()]);
+            sim.extend_from_slice(&report.simulated.channel(0)[r.clone()]);
+        }
+    }
+    assert!(y.len() < 400 + 260 - 2 * 10, "windows leave samples out");
+    assert_eq!(pooled.samples(), y.len());
+    let rms_all = metrics::rms_difference(&y, &sim);
+    assert!((pooled.rms()[0] - rms_all).abs() <= 1e-14 * rms_all);
+    assert!((pooled.fit_percent()[0] - metrics::fit_percent(&y, &sim)).abs() <= 1e-10);
+
+    let short = Data::from_records(vec![records[0].clone(), noisy(20, 3)]).unwrap();
+    let long_lag = ValidationSettings::builder().max_lag(25).build().unwrap();
+    match validate_records(&model, &[&wrong], &short, &long_lag) {
+        Err(Error::InRecord { record: 2, source }) => {
+            assert!(matches!(*source, Error::InvalidParameter { .. }), "{source}")
+        }
+        other => panic!("expected an error in record 2, got {other:?}"),
+    }
+}
