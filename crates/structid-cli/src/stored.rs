@@ -14,6 +14,7 @@ use structid_io::{OutputGuard, read_estimate};
 
 use crate::error::CliError;
 use crate::identify::absolute;
+use crate::validate::RecordScore;
 use crate::validation_files::{
     fmt_pct, outputs_json, pass, residuals_svg, simulation_names, simulation_svg,
 };
@@ -84,7 +85,7 @@ fn write_json(guard: &OutputGuard, path: &Path, doc: &serde_json::Value) -> Resu
 }
 
 /// `structid validate --estimate FILE.json`.
-pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
+pub fn validate(a: &ValidateArgs, path: &Path) -> Result<RecordScore, CliError> {
     let t0 = Instant::now();
     if a.max_lag == 0 {
         return Err(CliError::input(
@@ -189,7 +190,12 @@ pub fn validate(a: &ValidateArgs, path: &Path) -> Result<(), CliError> {
     for p in &written {
         println!("  {}", p.display());
     }
-    Ok(())
+    Ok(RecordScore {
+        y: data.y().clone(),
+        simulated: report.simulated,
+        scored: report.scored,
+        doc,
+    })
 }
 
 /// `structid simulate --estimate FILE.json`.

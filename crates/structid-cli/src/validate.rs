@@ -7,8 +7,9 @@ use std::time::Instant;
 use clap::Parser;
 use serde_json::{Value, json};
 use structid_core::validation::metrics::PooledFit;
+use structid_core::validation::records::pool_record;
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
-use structid_core::{Identification, InitialState, Interpolant, identify};
+use structid_core::{Identification, InitialState, Interpolant, Signal, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
@@ -286,6 +287,23 @@ pub fn run(mut a: ValidateArgs) -> Result<(), CliError> {
     if a.data.len() > 1 {
         return run_records(a);
     }
+    validate_record(a).map(|_| ())
+}
+
+/// What one record's validation scored, for pooling over records, with its validation.json.
+pub struct RecordScore {
+    /// The measured outputs.
+    pub y: Signal,
+    /// The simulated outputs.
+    pub simulated: Signal,
+    /// The samples the simulation error is over.
+    pub scored: Vec<std::ops::Range<usize>>,
+    /// The record's validation.json document.
+    pub doc: Value,
+}
+
+/// `structid validate` on one record (the files of `a.out`).
+fn validate_record(a: ValidateArgs) -> Result<RecordScore, CliError> {
     if let Some(p) = &a.estimate
         && p.is_file()
     {
@@ -539,7 +557,12 @@ pub fn run(mut a: ValidateArgs) -> Result<(), CliError> {
             t0.elapsed().as_secs_f64()
         )
     );
-    Ok(())
+    Ok(RecordScore {
+        y: vdata.y().clone(),
+        simulated: report.simulated,
+        scored: report.scored,
+        doc,
+    })
 }
 
 /// `structid validate` of a model without a one-step predictor (`why`): the simulation from rest
@@ -549,7 +572,7 @@ fn simulation_only(
     vmf: &ModelFile,
     model_path: &Path,
     why: &str,
-) -> Result<(), CliError> {
+) -> Result<RecordScore, CliError> {
     if matches!(a.initial_state, InitialStateArg::Estimate) {
         return Err(CliError::input(format!(
             "`{}` has no one-step predictor ({why}): it is validated by its simulation from \
@@ -624,7 +647,13 @@ fn simulation_only(
         "wrote {}/validation.json and simulation.csv",
         a.out.display()
     );
-    Ok(())
+    let scored = vec![a.settle.min(vdata.len())..vdata.len()];
+    Ok(RecordScore {
+        y: vdata.y().clone(),
+        simulated: score.simulated,
+        scored,
+        doc,
+    })
 }
 
 /// `structid validate` with several --data files: each record is validated on its own, from
@@ -642,8 +671,10 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
         dirs.iter().chain(["validation.json".to_string()].iter()),
     )?;
     let mut records = Vec::with_capacity(a.data.len());
-    // Per output, the fit pooled over every record's scored samples.
-    let mut pooled: Vec<(String, PooledFit)> = Vec::new();
+    // Per output, the fit pooled over the samples each record's own validation scored (after
+    // its settling samples, or its windows), so that it agrees with the records' own figures.
+    let mut pooled: Vec<PooledFit> = Vec::new();
+    let mut names: Vec<String> = Vec::new();
     for (i, (file, dir)) in a.data.iter().zip(&dirs).enumerate() {
         let one = ValidateArgs {
             data: vec![file.clone()],
@@ -651,46 +682,17 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
             ..a.clone()
         };
         println!("record {} (`{}`):", i + 1, file.display());
-        run(one).map_err(|e| e.context(format!("record {} (`{}`)", i + 1, file.display())))?;
-        let doc: Value = serde_json::from_str(
-            &std::fs::read_to_string(a.out.join(dir).join("validation.json")).map_err(|e| {
-                CliError::runtime(format!("cannot read back record {}: {e}", i + 1))
-            })?,
-        )
-        .map_err(|e| CliError::runtime(format!("cannot read back record {}: {e}", i + 1)))?;
-        // The samples the record's own validation scored (after its settling samples, or
-        // its windows), so that the pooled figure agrees with the records' own.
-        let scored: Vec<std::ops::Range<usize>> = doc["scored"]
-            .as_array()
-            .map(|ranges| {
-                ranges
-                    .iter()
-                    .filter_map(|r| Some(r[0].as_u64()? as usize..r[1].as_u64()? as usize))
-                    .collect()
-            })
-            .unwrap_or_default();
-        let table = DataTable::read(&a.out.join(dir).join("simulation.csv"))?;
-        let names: Vec<String> = table
-            .names
-            .iter()
-            .filter_map(|n| n.strip_suffix("_sim").map(str::to_string))
-            .collect();
-        if pooled.is_empty() {
-            pooled = names
-                .iter()
-                .map(|n| (n.clone(), PooledFit::default()))
+        let r = validate_record(one)
+            .map_err(|e| e.context(format!("record {} (`{}`)", i + 1, file.display())))?;
+        pool_record(&mut pooled, &r.y, &r.simulated, &r.scored);
+        let doc = r.doc;
+        if names.is_empty() {
+            names = doc["outputs"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|o| o["name"].as_str().unwrap_or_default().to_string())
                 .collect();
-        }
-        for (name, fit) in pooled.iter_mut() {
-            let missing = || {
-                CliError::runtime(format!(
-                    "simulation.csv of record {} has no `{name}`",
-                    i + 1
-                ))
-            };
-            let y = table.column(name).ok_or_else(missing)?;
-            let sim = table.column(&format!("{name}_sim")).ok_or_else(missing)?;
-            fit.add_ranges(y, sim, &scored);
         }
         records.push(json!({
             "record": i + 1,
@@ -706,7 +708,7 @@ fn run_records(a: ValidateArgs) -> Result<(), CliError> {
     }
     let mut overall = Vec::new();
     let mut s = String::new();
-    for (name, pool) in &pooled {
+    for (name, pool) in names.iter().zip(&pooled) {
         let (rms, fit, count) = (pool.rms(), pool.fit_percent(), pool.samples());
         overall.push(json!({
             "name": name,

@@ -11,8 +11,7 @@
 
 use std::ops::Range;
 
-use structid_core::validation::metrics::PooledFit;
-use structid_core::validation::{ValidationSettings, validate};
+use structid_core::validation::{ValidationSettings, validate_records};
 use structid_core::{Data, Error, Interpolant, Model, Result};
 
 /// `data`'s records, each passed through `f`, stacked again into one [`Data`] with the same
@@ -123,25 +122,23 @@ pub fn simulate(
         fit_percent: f64::NAN,
         records: Vec::new(),
     };
-    for (r, record) in data.records().iter().enumerate() {
-        let v = validate(model, maps, record, settings).map_err(|e| in_record(e, r, data))?;
-        let start = bounds[r];
+    let all = validate_records(model, maps, data, settings).map_err(|e| match e {
+        Error::InRecord { record, source } => in_record(*source, record - 1, data),
+        other => other,
+    })?;
+    for (v, start) in all.records.iter().zip(bounds) {
         let count = v.scored.iter().map(|s| s.len()).sum::<usize>();
         out.scored
             .extend(v.scored.iter().map(|s| s.start + start..s.end + start));
         out.records.push((v.rms[0], count));
         out.simulated.extend(v.simulated.channel(0));
-        if data.record_count() == 1 {
-            out.rms = v.rms[0];
-            out.fit_percent = v.fit_percent[0];
-        }
     }
-    if data.record_count() > 1 {
-        let mut pooled = PooledFit::default();
-        pooled.add_ranges(&out.measured, &out.simulated, &out.scored);
-        out.rms = pooled.rms();
-        out.fit_percent = pooled.fit_percent();
-    }
+    // One record keeps its validation's own figures; several are pooled over their scored
+    // samples.
+    (out.rms, out.fit_percent) = match all.records.as_slice() {
+        [one] => (one.rms[0], one.fit_percent[0]),
+        _ => (all.pooled[0].rms(), all.pooled[0].fit_percent()),
+    };
     Ok(out)
 }
 

@@ -7,6 +7,8 @@
 //! validated by what it can do: simulate the record from u alone, from rest, and score the
 //! simulation error after `settle` samples.
 
+use structid_core::validation::metrics::PooledFit;
+use structid_core::validation::records::pool_record;
 use structid_core::{BlockAccess, Data, Signal};
 use structid_io::ModelFile;
 
@@ -86,28 +88,14 @@ pub fn score_simulation(mf: &ModelFile, data: &Data, settle: usize) -> Result<Si
     }
     let ny = data.y().channels();
     let mut simulated = Vec::with_capacity(data.len() * ny);
-    let (mut y, mut s) = (vec![Vec::new(); ny], vec![Vec::new(); ny]);
+    let mut pooled = Vec::new();
     for rec in &records {
         let sim = simulate_model_file(mf, rec.u(), None)?;
+        pool_record(&mut pooled, rec.y(), &sim.y, &[settle..rec.len()]);
         simulated.extend_from_slice(sim.y.as_slice());
-        for c in 0..ny {
-            y[c].extend_from_slice(&rec.y().channel(c)[settle..]);
-            s[c].extend_from_slice(&sim.y.channel(c)[settle..]);
-        }
     }
-    let (mut rms, mut fit) = (Vec::with_capacity(ny), Vec::with_capacity(ny));
-    for (y, s) in y.iter().zip(&s) {
-        let n = y.len() as f64;
-        let mean = y.iter().sum::<f64>() / n;
-        let err: f64 = y.iter().zip(s).map(|(a, b)| (a - b).powi(2)).sum();
-        let spread: f64 = y.iter().map(|a| (a - mean).powi(2)).sum();
-        rms.push((err / n).sqrt());
-        fit.push(if spread > 0.0 {
-            100.0 * (1.0 - (err / spread).sqrt())
-        } else {
-            f64::NAN
-        });
-    }
+    let rms = pooled.iter().map(PooledFit::rms).collect();
+    let fit = pooled.iter().map(PooledFit::fit_percent).collect();
     Ok(SimulationScore {
         simulated: Signal::new(ny, simulated).map_err(structid_core::Error::from)?,
         rms,

@@ -5,6 +5,8 @@
 //! The pooled figures are those of all scored samples taken together
 //! ([`PooledFit`]), so a short record weighs as much per sample as a long one.
 
+use structid_lti::Signal;
+
 use crate::error::{Error, Result};
 use crate::model::interpolant::Interpolant;
 use crate::model::{Data, Model};
@@ -95,14 +97,38 @@ pub fn validate_records(
             },
             false => e,
         })?;
-        for (c, pooled) in out.pooled.iter_mut().enumerate() {
-            pooled.add_ranges(
-                &record.y().channel(c),
-                &report.simulated.channel(c),
-                &report.scored,
-            );
-        }
+        pool_record(&mut out.pooled, record.y(), &report.simulated, &report.scored);
         out.records.push(report);
     }
     Ok(out)
+}
+
+/// Adds one record's measured `y` and `simulated` outputs at the samples `scored` to `pooled`
+/// (one [`PooledFit`] per output; an empty `pooled` is sized to the outputs first). This is
+/// the one pooling rule of validation over records, for a caller that scored its records
+/// itself.
+///
+/// ```
+/// use structid_core::validation::metrics::rms_difference;
+/// use structid_core::validation::records::pool_record;
+/// use structid_lti::Signal;
+/// let y = Signal::new(1, vec![1.0, 2.0, 3.0, 4.0]).unwrap();
+/// let s = Signal::new(1, vec![0.0, 2.5, 3.0, 3.0]).unwrap();
+/// let mut pooled = Vec::new();
+/// pool_record(&mut pooled, &y, &s, &[1..2, 3..4]);
+/// assert_eq!(pooled[0].samples(), 2);
+/// assert_eq!(pooled[0].rms(), rms_difference(&[2.0, 4.0], &[2.5, 3.0]));
+/// ```
+pub fn pool_record(
+    pooled: &mut Vec<PooledFit>,
+    y: &Signal,
+    simulated: &Signal,
+    scored: &[std::ops::Range<usize>],
+) {
+    if pooled.is_empty() {
+        pooled.resize(y.channels(), PooledFit::default());
+    }
+    for (c, fit) in pooled.iter_mut().enumerate() {
+        fit.add_ranges(&y.channel(c), &simulated.channel(c), scored);
+    }
 }
