@@ -111,6 +111,7 @@ impl From<structid_workflow::WorkflowError> for CliError {
         match e {
             W::Io(e) => e.into(),
             W::Core(e) => e.into(),
+            W::Discover(e) => e.into(),
             W::Request(m) => Self::input(m),
             other => Self {
                 code: EXIT_RUNTIME,
@@ -130,10 +131,6 @@ pub const JOINT_FIT_HINT: &str =
 fn hint(e: &structid_core::Error) -> Option<&'static str> {
     use structid_core::Error as E;
     match e {
-        E::PoorNominal { .. } => Some(
-            "estimate a nominal model from the data with `structid linear` (`--integrators N` \
-             for a plant that integrates)",
-        ),
         E::SeriesMaps { .. } => Some(JOINT_FIT_HINT),
         _ => None,
     }
@@ -150,6 +147,32 @@ impl From<structid_core::Error> for CliError {
             },
             context: None,
             error: Box::new(e),
+        }
+    }
+}
+
+impl From<structid_discover::DiscoverError> for CliError {
+    /// A nominal model that cannot be a starting point is an input error, with the command
+    /// that estimates one.
+    fn from(e: structid_discover::DiscoverError) -> Self {
+        use structid_discover::DiscoverError as D;
+        match e {
+            D::Core(e) => e.into(),
+            e @ D::PoorNominal { .. } => Self {
+                code: EXIT_INPUT,
+                context: None,
+                hint: Some(
+                    "estimate a nominal model from the data with `structid linear` \
+                     (`--integrators N` for a plant that integrates)",
+                ),
+                error: Box::new(e),
+            },
+            other => Self {
+                code: EXIT_RUNTIME,
+                context: None,
+                hint: None,
+                error: Box::new(other),
+            },
         }
     }
 }

@@ -231,26 +231,6 @@ pub enum Error {
         detail: String,
     },
 
-    /// A nominal model that cannot be a starting point: its simulation on the record is worse
-    /// than the best constant (the mean of y) by a clear margin, or it diverges. `model_rms`
-    /// is infinite for a simulation that diverged.
-    #[error(
-        "the nominal model is not usable on the {record} record: {}; check its units, its \
-         sign, its input delay and any offset in the data, or estimate a linear model from the \
-         data (output error, with integrators held for a plant that integrates)",
-        poor_nominal_text(*.model_rms, *.constant_rms, .scoring)
-    )]
-    PoorNominal {
-        /// Which record (`estimation`).
-        record: String,
-        /// The simulation RMS of the nominal model (infinite when it diverged).
-        model_rms: f64,
-        /// The RMS of y about its mean: what a constant achieves.
-        constant_rms: f64,
-        /// How the simulation was scored (`one free run` or `windows`).
-        scoring: &'static str,
-    },
-
     /// An expression for a static map could not be parsed or uses unknown variables.
     #[error("invalid map expression `{expression}`: {reason}")]
     Expression {
@@ -259,18 +239,6 @@ pub enum Error {
         /// What is wrong with it.
         reason: String,
     },
-}
-
-fn poor_nominal_text(model: f64, constant: f64, scoring: &str) -> String {
-    if model.is_finite() {
-        format!(
-            "its simulation ({scoring}) has RMS {model:.4e}, {:.1}× the RMS {constant:.4e} of \
-             y about its mean: it is worse than a constant (the mean of y)",
-            model / constant.max(f64::MIN_POSITIVE)
-        )
-    } else {
-        format!("its simulation ({scoring}) diverged (y about its mean has RMS {constant:.4e})")
-    }
 }
 
 /// Result alias used across `structid-core`.

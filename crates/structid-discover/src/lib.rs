@@ -49,6 +49,7 @@
 pub mod augmented;
 pub mod discover;
 pub mod effects;
+pub mod error;
 pub mod gap;
 pub mod hypotheses;
 pub mod hysteresis;
@@ -63,6 +64,7 @@ pub use discover::{
     Classification, DiscoverSettings, Discovery, Effects, EffectsSettings, discover,
     discover_effects,
 };
+pub use error::DiscoverError;
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
 };

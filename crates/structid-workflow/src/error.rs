@@ -11,6 +11,9 @@ pub enum WorkflowError {
     /// The model layer.
     #[error(transparent)]
     Core(#[from] structid_core::Error),
+    /// Discovery.
+    #[error(transparent)]
+    Discover(#[from] structid_discover::DiscoverError),
     /// The joint fit.
     #[error(transparent)]
     Joint(#[from] structid_joint::JointError),

@@ -55,7 +55,7 @@ impl<'a> Context<'a> {
         val: &'a Data,
         settings: &DiscoverSettings,
         started: Instant,
-    ) -> Result<(Self, NoiseLevel)> {
+    ) -> crate::error::Result<(Self, NoiseLevel)> {
         let scoring = resolve_scoring(&given, est, settings)?;
         let settings = DiscoverSettings {
             scoring: Some(scoring),

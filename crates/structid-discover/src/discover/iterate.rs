@@ -210,7 +210,7 @@ pub fn discover_effects(
     val: &Data,
     settings: &DiscoverSettings,
     effects: &EffectsSettings,
-) -> Result<Effects> {
+) -> crate::error::Result<Effects> {
     let t0 = Instant::now();
     let mut steps: Vec<Step> = Vec::new();
     let mut current = nominal.clone();

@@ -11,7 +11,7 @@
 //!    When every test passes and RMS(ε) ≤ 1.5·σ̂ on both records, the verdict is "no missing
 //!    effect detected" with the statistics behind it, and the workflow stops there.
 //!    A nominal model whose simulation diverges, or is worse than the mean of y by more than
-//!    [`WORSE_THAN_CONSTANT`], is refused ([`Error::PoorNominal`]).
+//!    [`WORSE_THAN_CONSTANT`], is refused ([`DiscoverError::PoorNominal`]).
 //!    A nominal model with a pole on the unit circle (an integrator) is scored in windows
 //!    ([`structid_core::validation::windows`]) in this step and in every later one, and gets a
 //!    disturbance where its input acts, sized by maximum likelihood
@@ -183,6 +183,7 @@ use structid_core::validation::Scoring;
 use structid_core::{Data, Error, Result};
 
 use crate::effects::Naming;
+use crate::error::DiscoverError;
 use crate::gap::Gap;
 use crate::hypotheses::{Nominal, Site};
 use crate::hysteresis::DirectionTest;
@@ -490,14 +491,14 @@ pub struct Discovery {
 /// Errors: several inputs or outputs, a record shorter than 100 samples (named), a constant input, an
 /// unstable nominal model (its simulation would diverge), a nominal model whose simulation
 /// diverges or is worse than a constant by more than [`WORSE_THAN_CONSTANT`]
-/// ([`Error::PoorNominal`]); a hypothesis that fails is recorded
+/// ([`DiscoverError::PoorNominal`]); a hypothesis that fails is recorded
 /// in [`HypothesisResult::failure`] and ranked last instead.
 pub fn discover(
     nominal: &Nominal,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
-) -> Result<Discovery> {
+) -> crate::error::Result<Discovery> {
     discover_with(nominal, est, val, settings, true).map(linear_or_not)
 }
 
@@ -530,7 +531,7 @@ fn discover_with(
     val: &Data,
     settings: &DiscoverSettings,
     second_pass: bool,
-) -> Result<Discovery> {
+) -> crate::error::Result<Discovery> {
     let first = discover_once(nominal, est, val, settings, second_pass, false)?;
     if !second_pass || !settings.refine_nominal || !nominal.known_maps().is_empty() {
         return Ok(first);
@@ -545,6 +546,7 @@ fn discover_with(
         return Ok(first);
     };
     let second = Nominal::from_polynomial(&start)
+        .map_err(DiscoverError::from)
         .and_then(|n| discover_once(&n, est, val, settings, true, true));
     match second {
         Ok(second) => {
@@ -571,7 +573,7 @@ fn discover_once(
     settings: &DiscoverSettings,
     second_pass: bool,
     uncertain_g: bool,
-) -> Result<Discovery> {
+) -> crate::error::Result<Discovery> {
     let started = Instant::now();
     fit::check_records(est, val)?;
     // Known maps given as functions: the families they are exactly, for the joint refit.
@@ -803,7 +805,7 @@ fn against_given(
 }
 
 /// A nominal model whose simulation RMS on the estimation record exceeds this multiple of the
-/// best constant's (the RMS of y about its mean) is refused ([`Error::PoorNominal`]).
+/// best constant's (the RMS of y about its mean) is refused ([`DiscoverError::PoorNominal`]).
 ///
 /// A missing effect legitimately makes the nominal model look bad, so the margin is wide. On
 /// the generators' cases (30 static, 20 effect-free and 10 hysteresis cases of
@@ -823,7 +825,7 @@ pub const WORSE_THAN_CONSTANT: f64 = 100.0;
 /// 3·MAD(Δy)/(0.6745·√2)) is exempt from the ratio: a constant explains it, any model that
 /// moves is worse, and that is the missing effect (a stuck sensor or actuator), not a bad
 /// nominal model.
-fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
+fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> crate::error::Result<()> {
     let y = est.y().channel(0);
     let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
     let constant =
@@ -834,7 +836,7 @@ fn check_nominal(gap: &Gap, est: &Data, scoring: Scoring) -> Result<()> {
     let stuck = constant
         <= 3.0 * crate::gap::noise_level_records(&crate::records::parts(&y, est.record_bounds()));
     if diverged || (!stuck && gap.rms > WORSE_THAN_CONSTANT * constant) {
-        return Err(Error::PoorNominal {
+        return Err(DiscoverError::PoorNominal {
             record: "estimation".into(),
             model_rms: if diverged { f64::INFINITY } else { gap.rms },
             constant_rms: constant,
@@ -1055,7 +1057,7 @@ mod tests {
             Nominal::from_polynomial(&g).unwrap()
         };
         let e = discover(&scaled(1000.0), &est, &est, &DiscoverSettings::default()).unwrap_err();
-        let Error::PoorNominal {
+        let DiscoverError::PoorNominal {
             model_rms,
             constant_rms,
             ..
@@ -1086,7 +1088,7 @@ mod tests {
         .unwrap();
         let d = discover(&scaled(1.0), &stuck, &stuck, &DiscoverSettings::default());
         assert!(
-            !matches!(d, Err(Error::PoorNominal { .. })),
+            !matches!(d, Err(DiscoverError::PoorNominal { .. })),
             "{:?}",
             d.err()
         );
