@@ -18,9 +18,29 @@ pyo3::create_exception!(
 );
 
 /// The library error as a Python `StructidError`, its causes on further lines (as the
-/// command-line tool prints them).
+/// command-line tool prints them), and the function to try instead when the error says which.
 pub fn error(e: impl std::error::Error + 'static) -> PyErr {
-    StructidError::new_err(ErrorChain(&e).to_string())
+    let mut message = ErrorChain(&e).to_string();
+    if let Some(hint) = structid_workflow::remedy(&e).and_then(hint) {
+        message.push_str("\nhint: ");
+        message.push_str(hint);
+    }
+    StructidError::new_err(message)
+}
+
+/// How the Python package words a library's remedy.
+fn hint(r: structid_workflow::Remedy) -> Option<&'static str> {
+    use structid_workflow::Remedy;
+    match r {
+        Remedy::JointFit => Some(
+            "`structid.refine_joint` fits maps in series and latent blocks by simulation error",
+        ),
+        Remedy::LinearNominal => Some(
+            "estimate a nominal model from the data with `structid.linear` (`integrators=N` \
+             for a plant that integrates)",
+        ),
+        _ => None,
+    }
 }
 
 /// A `StructidError` with a message of the bindings themselves.

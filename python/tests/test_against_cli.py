@@ -184,3 +184,18 @@ def test_two_records_match_the_tool_and_not_their_concatenation(cli, files):
     assert np.max(np.abs(glued.w_hat[:, 0] - fit.w_hat[:, 0])) > 1e-6
     with pytest.raises(structid.StructidError, match="several records"):
         structid.identify(model, [a["u"], b["u"]], [a["y"]], beta=0.001)
+
+
+def test_simulate_matches_the_tool(cli, files):
+    """`structid simulate` of a stored estimate and of a model's truths, against Python's."""
+    out, fit = run_both(cli, files, ["--beta", "0.001"], beta=0.001)
+    val = read_csv(files["val"])
+    sim = files["dir"] / "sim.csv"
+    cli("simulate", "--estimate", out / "estimate.json", "--input", files["val"], "--out", sim)
+    close(read_csv(sim)["y"], fit.simulate(val["u"])["y"][:, 0], rtol=1e-12)
+    truth = structid.Model.from_file(files["model"]).with_truth("N", "tanh(2*z0)")
+    path = files["dir"] / "truth.toml"
+    truth.save(path)
+    sim_truth = files["dir"] / "sim-truth.csv"
+    cli("simulate", "--model", path, "--input", files["val"], "--out", sim_truth)
+    close(read_csv(sim_truth)["y"], truth.simulate(val["u"])["y"][:, 0], rtol=1e-12)

@@ -197,6 +197,9 @@ def test_a_chain_of_sites_builds_series_and_latent_blocks_as_written_out_in_nump
     # Hammerstein–Wiener: the sensor reads G's output, which u reveals once the actuator is known.
     hw = structid.Model.structure(["input", "output"], [0.0, 1.0], [1.0, -0.6])
     assert [b["name"] for b in hw.blocks] == ["N1", "N2"]
+    # Identification by the dispersion cannot reach maps in series; the error says what can.
+    with pytest.raises(structid.StructidError, match=r"hint: `structid\.refine_joint`"):
+        structid.identify(hw, u, y, beta=0.01)
     with pytest.raises(ValueError, match="names and dispersions"):
         structid.Model.structure(["input", "output"], [0.0, 1.0], [1.0, -0.6], name="N")
     with pytest.raises(ValueError, match="lti"):

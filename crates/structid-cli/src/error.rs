@@ -3,6 +3,7 @@
 use std::fmt;
 
 use structid_io::{ErrorChain, IoError};
+use structid_workflow::Remedy;
 
 /// Exit code for invalid usage or input.
 pub const EXIT_INPUT: u8 = 2;
@@ -59,12 +60,6 @@ impl CliError {
             Some(old) => format!("{c}: {old}"),
             None => c,
         });
-        self
-    }
-
-    /// The same error with `hint` as the command to try instead.
-    pub fn hint(mut self, hint: &'static str) -> Self {
-        self.hint = Some(hint);
         self
     }
 
@@ -127,13 +122,21 @@ impl From<structid_workflow::WorkflowError> for CliError {
 pub const JOINT_FIT_HINT: &str =
     "`structid refine --joint` fits maps in series and latent blocks by simulation error";
 
-/// The command to try after a library error, when the error alone says which one.
-fn hint(e: &structid_core::Error) -> Option<&'static str> {
-    use structid_core::Error as E;
-    match e {
-        E::SeriesMaps { .. } => Some(JOINT_FIT_HINT),
+/// How the tool words a library's remedy.
+fn hint_text(r: Remedy) -> Option<&'static str> {
+    match r {
+        Remedy::JointFit => Some(JOINT_FIT_HINT),
+        Remedy::LinearNominal => Some(
+            "estimate a nominal model from the data with `structid linear` (`--integrators N` \
+             for a plant that integrates)",
+        ),
         _ => None,
     }
+}
+
+/// The command to try after a library error, when the error alone says which one.
+fn hint(e: &(dyn std::error::Error + 'static)) -> Option<&'static str> {
+    structid_workflow::remedy(e).and_then(hint_text)
 }
 
 impl From<structid_core::Error> for CliError {
@@ -158,20 +161,15 @@ impl From<structid_discover::DiscoverError> for CliError {
         use structid_discover::DiscoverError as D;
         match e {
             D::Core(e) => e.into(),
-            e @ D::PoorNominal { .. } => Self {
-                code: EXIT_INPUT,
+            e => Self {
+                code: if matches!(e, D::PoorNominal { .. }) {
+                    EXIT_INPUT
+                } else {
+                    EXIT_RUNTIME
+                },
                 context: None,
-                hint: Some(
-                    "estimate a nominal model from the data with `structid linear` \
-                     (`--integrators N` for a plant that integrates)",
-                ),
+                hint: hint(&e),
                 error: Box::new(e),
-            },
-            other => Self {
-                code: EXIT_RUNTIME,
-                context: None,
-                hint: None,
-                error: Box::new(other),
             },
         }
     }

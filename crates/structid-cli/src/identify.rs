@@ -360,19 +360,10 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let cannot = |e: structid_core::Error| {
         CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
     };
+    // A block whose z the data do not give (latent, or behind another map) is the joint
+    // fit's: the error's hint says so.
     mf.check_z_computable().map_err(|e| {
-        // A block whose z the data do not give (latent, or behind another map) is the joint
-        // fit's.
-        let joint = matches!(
-            &e,
-            structid_io::IoError::Core(structid_core::Error::NotMeasurable { .. })
-        );
-        let e = CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()));
-        if joint {
-            e.hint(crate::error::JOINT_FIT_HINT)
-        } else {
-            e
-        }
+        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
     })?;
     mf.lft.check_residual_stable().map_err(cannot)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);

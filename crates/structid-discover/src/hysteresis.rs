@@ -18,7 +18,12 @@
 //! together with the standardised difference of the rising and falling means. The effect is
 //! reported as dynamic ("hysteresis or backlash suspected") when direction explains more than
 //! `threshold` (0.1 is a good default) of the residual energy and the difference is significant
-//! (|t| > 5).
+//! (|t| > [`DIRECTION_T`]).
+
+/// The bar on |t| of the rising-minus-falling difference: well above the normal quantiles,
+/// because a residual is correlated in time and its samples are not independent, which the
+/// pooled t statistic assumes.
+pub const DIRECTION_T: f64 = 5.0;
 
 /// The outcome of [`direction_dependence`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -175,7 +180,7 @@ pub fn direction_dependence_records(
         explained,
         t_statistic: t,
         samples: m,
-        dynamic: explained > threshold && t.abs() > 5.0,
+        dynamic: explained > threshold && t.abs() > DIRECTION_T,
         direction_energy: between,
         sampling_energy: 0.0,
     }

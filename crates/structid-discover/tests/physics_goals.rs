@@ -929,9 +929,7 @@ fn a_known_friction_map_behind_an_integrator_is_searched_around() {
 fn false_alarms(kinds: &[PhysicsKind], seeds: std::ops::Range<u64>) -> (usize, usize) {
     let (mut alarms, mut cases) = (0, 0);
     for &kind in kinds {
-        for seed in seeds.clone() {
-            let case = generate(kind, seed);
-            let d = run(&case);
+        for (case, d) in run_all(kind, seeds.clone()) {
             let alarm = d.verdict_kind == Verdict::MissingEffect;
             eprintln!("{kind:?} {} | alarm {alarm}", line(&case, &d));
             alarms += usize::from(alarm);

@@ -18,6 +18,7 @@ pub mod error;
 pub mod free;
 pub mod joint;
 pub mod linear_start;
+pub mod remedy;
 pub mod simulation_score;
 pub mod wiener_hammerstein;
 
@@ -31,6 +32,7 @@ pub use linear_start::{
     LinearStartDiscovery, LinearStartRequest, TestScore, discover_from_linear_start,
     split_for_validation,
 };
+pub use remedy::{Remedy, remedy};
 pub use simulation_score::{SimulationScore, score_simulation, why_simulation_only};
 pub use wiener_hammerstein::{
     BlockStructure, WienerHammersteinOutcome, WienerHammersteinRequest, wiener_hammerstein,

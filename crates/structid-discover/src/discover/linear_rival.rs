@@ -16,10 +16,13 @@
 //! better than it by the paired test of the validation errors over blocks at α
 //! ([`crate::table::compare_blocks`]). A nonlinearity leaves a gap that no linear model of any
 //! order closes, and a finding better than the rival at α stands whatever the rival leaves.
-//! A dynamic finding is not tested against it: its augmented model holds only the static
-//! approximation of a direction effect, whose errors do not describe it (a lightly damped mode
-//! can leave a residual that depends on the direction of motion, and such a case stays
-//! reported as dynamic).
+//! A dynamic finding's augmented model holds only the static approximation of a direction
+//! effect, whose errors do not describe it, so it is judged by what the rival leaves instead:
+//! a lightly damped mode that G lacks can leave a residual that depends on the direction of
+//! motion, but once the rival holds that mode its own residual, deconvolved to the finding's
+//! block as the direction test's is, no longer does; a hysteresis leaves a direction effect
+//! that no linear model removes ([`leaves_direction_effect`]). The rival explains a dynamic
+//! finding when it closes the gap and leaves no direction effect there.
 
 use structid_core::Data;
 use structid_linear::integrators::convolve;
@@ -28,7 +31,11 @@ use structid_linear::{OeSettings, Orders, PolynomialModel, oe_records, output_er
 use crate::table::{BlockComparison, compare_blocks};
 
 use super::DiscoverSettings;
-use crate::hypotheses::Site;
+use crate::hypotheses::{Hypothesis, Site};
+use structid_core::Interpolant;
+
+use super::direction::{deconvolve, direction_beyond_sampling};
+use super::fit::z_of;
 
 use super::input_hysteresis::{simulate_linear, simulate_linear_as};
 
@@ -46,9 +53,14 @@ pub struct LinearRival {
     /// b: this G), when there was a finding and the test could be made; the finding is better
     /// at α when `1 − p_worse` < α.
     pub comparison: Option<BlockComparison>,
-    /// Whether this G closes the gap and the finding is not better than it at α: the linear
-    /// model was wrong.
+    /// Whether this G closes the gap and the finding is not better than it at α (for a
+    /// dynamic finding: and this G's own residual leaves no direction effect at the
+    /// finding's block): the linear model was wrong.
     pub explains: bool,
+    /// For a dynamic finding: whether this G's own residual, deconvolved to the finding's
+    /// block, still depends on the direction of the block's input
+    /// ([`leaves_direction_effect`]); `None` when not assessed.
+    pub leaves_direction_effect: Option<bool>,
 }
 
 /// The extra poles (and zeros) of the rival: one mode.
@@ -151,7 +163,57 @@ pub(super) fn judge(
         validation_rms,
         comparison,
         explains: validation_rms <= gap_level && !finding_better,
+        leaves_direction_effect: None,
     }
+}
+
+/// Whether the rival G's own simulation residual on the estimation record, deconvolved to the
+/// output of the block of `h` (as the finding's direction test deconvolves its residual),
+/// still depends on the direction of the block's input z, by the direction test's bar on its
+/// t statistic ([`crate::hysteresis::DIRECTION_T`]) whatever share of the residual it
+/// explains: a hysteresis leaves a direction effect that no linear model removes, while a
+/// missing mode that imitated one leaves none once the rival holds that mode. `map` is the finding's static map, for the sampling
+/// artefact of a map in feedback ([`direction_beyond_sampling`]). `None` when a record cannot
+/// be simulated or deconvolved.
+pub(super) fn leaves_direction_effect(
+    rival: &PolynomialModel,
+    h: &Hypothesis,
+    map: Option<&dyn Interpolant>,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Option<bool> {
+    let (mut z, mut kept, mut bounds) = (Vec::new(), Vec::new(), vec![0]);
+    for record in est.records() {
+        let simulated = rival.simulate(record.u()).ok()?;
+        let r: Vec<f64> = record
+            .y()
+            .channel(0)
+            .iter()
+            .zip(&simulated)
+            .map(|(y, s)| y - s)
+            .collect();
+        let delta = deconvolve(h, &r).ok()?;
+        let zr = z_of(h, &h.data(&record).ok()?).ok()?;
+        // The start of each record carries the rival's transient from rest, as the direction
+        // test's own residual does: left out alike.
+        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+        z.extend_from_slice(&zr[skip..]);
+        kept.extend_from_slice(&delta[skip..]);
+        bounds.push(z.len());
+    }
+    let feedback = matches!(h.location, Site::OutputFeedback | Site::Declared { .. });
+    // The direction test's own bar on the t statistic, with no bar on the share of energy
+    // the direction explains: the rival's residual is mostly noise once it closes the gap, so
+    // a hysteresis left in it is a small share of a significant effect.
+    let any_share = 0.0;
+    let test = direction_beyond_sampling(
+        &z,
+        &kept,
+        &bounds,
+        map.filter(|_| feedback),
+        any_share,
+    );
+    Some(test.dynamic)
 }
 
 #[cfg(test)]
@@ -214,6 +276,48 @@ mod tests {
         assert!(!judge(fitted.clone(), Some(&better), level, 0.05).explains);
         // A rival that leaves more than the gap level explains nothing, whatever the finding.
         assert!(!judge(fitted, Some(&worse), 0.5 * rms, 0.05).explains);
+    }
+
+    /// A play (backlash) of half-width `half` on u.
+    fn play(u: &[f64], half: f64) -> Vec<f64> {
+        let mut w = vec![0.0; u.len()];
+        for k in 0..u.len() {
+            let prev: f64 = if k > 0 { w[k - 1] } else { 0.0 };
+            w[k] = prev.clamp(u[k] - half, u[k] + half);
+        }
+        w
+    }
+
+    /// The rival G (the truth's linear part) leaves no direction effect at the input of a
+    /// plant that only lacks a mode, and keeps the one a backlash at the input leaves: no
+    /// linear model removes it.
+    #[test]
+    fn a_missing_mode_leaves_no_direction_effect_in_the_rival_and_a_backlash_does() {
+        use crate::hypotheses::hypothesis;
+        let settings = DiscoverSettings::default();
+        let dispersion = std::sync::Arc::new(structid_core::PolynomialDispersion::new(1).unwrap());
+        let h = hypothesis(&nominal(), Site::Input, dispersion).unwrap();
+        let truth = with_true_mode(0.08);
+        let mode = record(&truth, 3);
+        assert_eq!(
+            leaves_direction_effect(&truth, &h, None, &mode, &settings),
+            Some(false)
+        );
+        // The backlash record: y = G·play(u) + noise, with G itself as the rival.
+        let base = record(&nominal(), 4);
+        let u = base.u().channel(0);
+        let w = Signal::new(1, play(&u, 0.5)).unwrap();
+        let clean = nominal().simulate(&w).unwrap();
+        let noisy: Vec<f64> = clean
+            .iter()
+            .zip(base.y().channel(0).iter().zip(nominal().simulate(base.u()).unwrap()))
+            .map(|(c, (y, g))| c + (y - g))
+            .collect();
+        let backlash = Data::new(base.u().clone(), Signal::new(1, noisy).unwrap()).unwrap();
+        assert_eq!(
+            leaves_direction_effect(&nominal(), &h, None, &backlash, &settings),
+            Some(true)
+        );
     }
 
     #[test]

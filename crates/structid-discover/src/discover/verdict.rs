@@ -138,16 +138,16 @@ pub(super) fn confirm(
 /// G alone re-estimated with one more mode, judged against the finding (see
 /// [`linear_rival`](super::linear_rival)), its initial state handled as the finding's is;
 /// `None` for a nominal model without a polynomial G, when the refit fails, or for a finding
-/// the rival could not overrule, where it is not fitted at all: a dynamic one (a hysteresis
-/// at the input, or a direction effect), whose augmented model holds only a static
-/// approximation whose errors do not describe it; and a gain, itself the linear model's
-/// correction (its verdict already says the linear model was wrong).
+/// the rival cannot overrule, where it is not fitted at all: a hysteresis at the input (a
+/// fitted operator, not a static approximation) and a gain, itself the linear model's
+/// correction (its verdict already says the linear model was wrong). A dynamic finding (a
+/// direction effect) is judged by the direction effect the rival's own residual leaves.
 fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<LinearRival> {
     use crate::hypotheses::Site;
     let exempt = |f: &Finding| {
         let gain = matches!(&f.classification,
             Classification::Named(fit) if fit.effect == crate::effects::Effect::Gain);
-        f.input_hysteresis.is_some() || gain || f.classification == Classification::Dynamic
+        f.input_hysteresis.is_some() || gain
     };
     if finding.is_some_and(exempt) {
         return None;
@@ -155,6 +155,18 @@ fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<
     let g = cx.given.polynomial()?;
     let location = finding.map_or(Site::Input, |f| f.location);
     let fitted = linear_rival::fit(g, cx.est, cx.val, &cx.settings, location)?;
+    if let Some(f) = finding.filter(|f| f.classification == Classification::Dynamic) {
+        let h = augmented_hypothesis(f, &cx.nominal);
+        let map = f.augmented.map.interpolant().ok();
+        let left =
+            linear_rival::leaves_direction_effect(&fitted.0, &h, map.as_deref(), cx.est, &cx.settings);
+        // No finding's errors to compare with: the rival explains when it closes the gap,
+        // provided it leaves no direction effect (an empty comparison is never overruled).
+        let errors: Option<&[f64]> = (left != Some(false)).then_some(&[]);
+        let mut r = linear_rival::judge(fitted, errors, gap_level, cx.settings.significance);
+        r.leaves_direction_effect = left;
+        return Some(r);
+    }
     let errors = finding.map(|f| {
         let h = augmented_hypothesis(f, &cx.nominal);
         let Ok(map) = f.augmented.map.interpolant() else {
@@ -194,6 +206,12 @@ fn linear_model(
             c.blocks,
             1.0 - c.p_worse,
             cx.settings.significance
+        ),
+        (Some(f), None) if rival.leaves_direction_effect == Some(false) => format!(
+            ", and its own residual leaves no direction effect at {}, where the best block \
+             (validation RMS {}) was called dynamic for one",
+            cx.nominal.describe(f.location),
+            rms_text(f.augmented.validation_gap.rms),
         ),
         _ => String::new(),
     };

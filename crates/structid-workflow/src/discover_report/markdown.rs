@@ -527,7 +527,18 @@ pub(super) fn linear_rival_md(s: &mut String, d: &Discovery) {
             c.mean_log_ratio,
             1.0 - c.p_worse
         ),
-        None => "no paired test (no finding, or one that cannot be tested against it)".to_string(),
+        None => match r.leaves_direction_effect {
+            Some(true) => format!(
+                "its own residual keeps the dynamic finding's direction effect (|t| > {} at \
+                 the finding's block)",
+                structid_discover::hysteresis::DIRECTION_T
+            ),
+            Some(false) => "its own residual leaves no direction effect at the dynamic \
+                            finding's block"
+                .to_string(),
+            None => "no paired test (no finding, or one that cannot be tested against it)"
+                .to_string(),
+        },
     };
     let _ = writeln!(
         s,
