@@ -14,7 +14,7 @@ use structid_io::{OutputGuard, read_estimate};
 
 use crate::error::CliError;
 use crate::identify::absolute;
-use crate::validate::RecordScore;
+use crate::validation_files::RecordScore;
 use crate::validation_files::{
     fmt_pct, outputs_json, pass, residuals_svg, simulation_names, simulation_svg,
 };

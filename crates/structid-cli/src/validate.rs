@@ -9,14 +9,14 @@ use serde_json::{Value, json};
 use structid_core::validation::metrics::PooledFit;
 use structid_core::validation::records::pool_record;
 use structid_core::validation::{ValidationReport, ValidationSettings, validate};
-use structid_core::{Identification, InitialState, Interpolant, Signal, identify};
+use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
 use crate::identify::{absolute, estimate_columns, load, model_and_data, protect_inputs};
 use crate::validation_files::{
-    OUTPUTS, check_lengths, fmt_pct, outputs_json, pass, residuals_svg, simulation_names,
-    simulation_svg,
+    OUTPUTS, RecordScore, check_lengths, fmt_pct, outputs_json, pass, residuals_svg,
+    simulation_names, simulation_svg,
 };
 use crate::{Cli, Command, IdentifyArgs, InitialStateArg, ValidateArgs};
 
@@ -288,18 +288,6 @@ pub fn run(mut a: ValidateArgs) -> Result<(), CliError> {
         return run_records(a);
     }
     validate_record(a).map(|_| ())
-}
-
-/// What one record's validation scored, for pooling over records, with its validation.json.
-pub struct RecordScore {
-    /// The measured outputs.
-    pub y: Signal,
-    /// The simulated outputs.
-    pub simulated: Signal,
-    /// The samples the simulation error is over.
-    pub scored: Vec<std::ops::Range<usize>>,
-    /// The record's validation.json document.
-    pub doc: Value,
 }
 
 /// `structid validate` on one record (the files of `a.out`).
@@ -647,7 +635,7 @@ fn simulation_only(
         "wrote {}/validation.json and simulation.csv",
         a.out.display()
     );
-    let scored = vec![a.settle.min(vdata.len())..vdata.len()];
+    let scored = std::iter::once(a.settle.min(vdata.len())..vdata.len()).collect();
     Ok(RecordScore {
         y: vdata.y().clone(),
         simulated: score.simulated,

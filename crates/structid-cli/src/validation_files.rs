@@ -1,6 +1,6 @@
 //! The files and lines of a validation, shared by `validate` with a model file and with a
 //! stored estimate: simulation.csv's columns, the simulation and residual figures, the per-output
-//! part of validation.json and the summary's wording.
+//! part of validation.json, the summary's wording, and what a record scored for pooling over records.
 
 use structid_core::validation::ValidationReport;
 use structid_core::validation::residual_tests::CorrelationTest;
@@ -8,7 +8,8 @@ use structid_plot::{
     Chart, CorrelationChart, Series, decimate_min_max, render_correlation_svg, render_grid_svg,
 };
 
-use structid_core::Data;
+use serde_json::Value;
+use structid_core::{Data, Signal};
 
 use crate::ValidateArgs;
 use crate::error::CliError;
@@ -197,6 +198,18 @@ pub(crate) fn scored_json(report: &ValidationReport) -> serde_json::Value {
             .map(|r| [r.start, r.end])
             .collect::<Vec<_>>()
     )
+}
+
+/// What one record's validation scored, for pooling over records, with its validation.json.
+pub struct RecordScore {
+    /// The measured outputs.
+    pub y: Signal,
+    /// The simulated outputs.
+    pub simulated: Signal,
+    /// The samples the simulation error is over.
+    pub scored: Vec<std::ops::Range<usize>>,
+    /// The record's validation.json document.
+    pub doc: Value,
 }
 
 #[cfg(test)]

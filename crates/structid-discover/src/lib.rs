@@ -64,7 +64,7 @@ pub use discover::{
     Classification, DiscoverSettings, Discovery, Effects, EffectsSettings, discover,
     discover_effects,
 };
-pub use error::DiscoverError;
 pub use effects::{
     Effect, EffectError, EffectFit, Naming, NamingSettings, Parameter, fit_effect, name_effect,
 };
+pub use error::DiscoverError;

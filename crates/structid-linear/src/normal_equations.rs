@@ -62,7 +62,11 @@ impl NormalEquations {
     /// # Panics
     /// When `j.len() != self.dim()` (a programming error of the caller).
     pub fn add_row(&mut self, j: &[f64], r: f64) {
-        assert_eq!(j.len(), self.dim(), "a row of J has one entry per parameter");
+        assert_eq!(
+            j.len(),
+            self.dim(),
+            "a row of J has one entry per parameter"
+        );
         let c = self.pending;
         for (i, &v) in j.iter().enumerate() {
             self.rows[(i, c)] = v;
@@ -91,7 +95,11 @@ impl NormalEquations {
     /// # Panics
     /// When `cols.len() != other.dim()` or a column is out of range.
     pub fn add_scattered(&mut self, other: NormalEquations, cols: &[usize]) {
-        assert_eq!(cols.len(), other.dim(), "one column per parameter of `other`");
+        assert_eq!(
+            cols.len(),
+            other.dim(),
+            "one column per parameter of `other`"
+        );
         let (jtj, jtr) = other.into_parts();
         for (a, &ca) in cols.iter().enumerate() {
             self.jtr[(ca, 0)] += jtr[(a, 0)];

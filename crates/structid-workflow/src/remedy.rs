@@ -100,7 +100,10 @@ mod tests {
             remedy(&WorkflowError::Discover(poor())),
             Some(Remedy::LinearNominal)
         );
-        assert_eq!(remedy(&WorkflowError::Core(series())), Some(Remedy::JointFit));
+        assert_eq!(
+            remedy(&WorkflowError::Core(series())),
+            Some(Remedy::JointFit)
+        );
         assert_eq!(
             remedy(&WorkflowError::Io(structid_io::IoError::Core(series()))),
             Some(Remedy::JointFit)

@@ -91,7 +91,8 @@ pub fn score_simulation(mf: &ModelFile, data: &Data, settle: usize) -> Result<Si
     let mut pooled = Vec::new();
     for rec in &records {
         let sim = simulate_model_file(mf, rec.u(), None)?;
-        pool_record(&mut pooled, rec.y(), &sim.y, &[settle..rec.len()]);
+        let scored = settle..rec.len();
+        pool_record(&mut pooled, rec.y(), &sim.y, std::slice::from_ref(&scored));
         simulated.extend_from_slice(sim.y.as_slice());
     }
     let rms = pooled.iter().map(PooledFit::rms).collect();

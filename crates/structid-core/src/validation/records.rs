@@ -97,7 +97,12 @@ pub fn validate_records(
             },
             false => e,
         })?;
-        pool_record(&mut out.pooled, record.y(), &report.simulated, &report.scored);
+        pool_record(
+            &mut out.pooled,
+            record.y(),
+            &report.simulated,
+            &report.scored,
+        );
         out.records.push(report);
     }
     Ok(out)

@@ -455,7 +455,10 @@ fn records_pool_exactly_the_samples_each_record_scored() {
     let long_lag = ValidationSettings::builder().max_lag(25).build().unwrap();
     match validate_records(&model, &[&wrong], &short, &long_lag) {
         Err(Error::InRecord { record: 2, source }) => {
-            assert!(matches!(*source, Error::InvalidParameter { .. }), "{source}")
+            assert!(
+                matches!(*source, Error::InvalidParameter { .. }),
+                "{source}"
+            )
         }
         other => panic!("expected an error in record 2, got {other:?}"),
     }

@@ -206,13 +206,7 @@ pub(super) fn leaves_direction_effect(
     // the direction explains: the rival's residual is mostly noise once it closes the gap, so
     // a hysteresis left in it is a small share of a significant effect.
     let any_share = 0.0;
-    let test = direction_beyond_sampling(
-        &z,
-        &kept,
-        &bounds,
-        map.filter(|_| feedback),
-        any_share,
-    );
+    let test = direction_beyond_sampling(&z, &kept, &bounds, map.filter(|_| feedback), any_share);
     Some(test.dynamic)
 }
 
@@ -310,7 +304,12 @@ mod tests {
         let clean = nominal().simulate(&w).unwrap();
         let noisy: Vec<f64> = clean
             .iter()
-            .zip(base.y().channel(0).iter().zip(nominal().simulate(base.u()).unwrap()))
+            .zip(
+                base.y()
+                    .channel(0)
+                    .iter()
+                    .zip(nominal().simulate(base.u()).unwrap()),
+            )
             .map(|(c, (y, g))| c + (y - g))
             .collect();
         let backlash = Data::new(base.u().clone(), Signal::new(1, noisy).unwrap()).unwrap();

@@ -158,8 +158,13 @@ fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<
     if let Some(f) = finding.filter(|f| f.classification == Classification::Dynamic) {
         let h = augmented_hypothesis(f, &cx.nominal);
         let map = f.augmented.map.interpolant().ok();
-        let left =
-            linear_rival::leaves_direction_effect(&fitted.0, &h, map.as_deref(), cx.est, &cx.settings);
+        let left = linear_rival::leaves_direction_effect(
+            &fitted.0,
+            &h,
+            map.as_deref(),
+            cx.est,
+            &cx.settings,
+        );
         // No finding's errors to compare with: the rival explains when it closes the gap,
         // provided it leaves no direction effect (an empty comparison is never overruled).
         let errors: Option<&[f64]> = (left != Some(false)).then_some(&[]);

@@ -536,8 +536,9 @@ pub(super) fn linear_rival_md(s: &mut String, d: &Discovery) {
             Some(false) => "its own residual leaves no direction effect at the dynamic \
                             finding's block"
                 .to_string(),
-            None => "no paired test (no finding, or one that cannot be tested against it)"
-                .to_string(),
+            None => {
+                "no paired test (no finding, or one that cannot be tested against it)".to_string()
+            }
         },
     };
     let _ = writeln!(
