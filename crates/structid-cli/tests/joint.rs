@@ -198,6 +198,23 @@ fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
         .sqrt();
     assert!((rms - direct).abs() <= 1e-9 * direct, "{rms} vs {direct}");
     assert!(rms < 1.5 * 0.005, "{rms}");
+    // Over several records the simulation errors are pooled: the record twice pools to its
+    // own RMS over twice its samples.
+    ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--data",
+        p(&d.join("val.csv")),
+        "--data",
+        p(&d.join("val.csv")),
+        "--out",
+        p(&d.join("v2")),
+    ]);
+    let overall = &json(&d.join("v2").join("validation.json"))["overall"]["outputs"][0];
+    let pooled = overall["rms"].as_f64().unwrap();
+    assert!((pooled - direct).abs() <= 1e-9 * direct, "{pooled} vs {direct}");
+    assert_eq!(overall["samples"].as_u64().unwrap() as usize, 2 * y.len());
 }
 
 #[test]

@@ -129,6 +129,17 @@ pub enum Error {
         detail: String,
     },
 
+    /// Blocks whose input identification by the dispersion criterion cannot compute from u
+    /// and y even with the other maps known: latent blocks, and blocks in series behind
+    /// another map's output. The joint fit by simulation error takes them.
+    #[error("z is not measurable: {explanation}")]
+    OutOfReach {
+        /// The blocks out of reach, by name.
+        blocks: Vec<String>,
+        /// Each block and why, and what takes them.
+        explanation: String,
+    },
+
     /// z cannot be computed from u and y (paper, Definition 1).
     #[error("z is not measurable: {explanation}")]
     NotMeasurable {

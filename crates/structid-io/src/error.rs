@@ -241,10 +241,11 @@ impl IoError {
 /// Whether a `structid-core` error is caused by the user's input (see [`IoError::is_input_error`]).
 pub fn core_is_input_error(e: &structid_core::Error) -> bool {
     use structid_core::Error as E;
-    !matches!(
-        e,
-        E::TooLarge { .. } | E::Numerical(_) | E::Clarabel(_) | E::NotConverged { .. }
-    )
+    match e {
+        E::InRecord { source, .. } => core_is_input_error(source),
+        E::TooLarge { .. } | E::Numerical(_) | E::Clarabel(_) | E::NotConverged { .. } => false,
+        _ => true,
+    }
 }
 
 fn source_name(path: Option<&Path>) -> String {

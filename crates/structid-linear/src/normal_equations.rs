@@ -45,7 +45,9 @@ impl NormalEquations {
         Self {
             jtj: Mat::zeros(p, p),
             jtr: Mat::zeros(p, 1),
-            rows: Mat::zeros(p, BLOCK),
+            // Allocated by the first dense row: a system that takes only sparse rows and
+            // scattered sub-systems (a multiple-shooting fit's global one) never needs it.
+            rows: Mat::zeros(0, 0),
             residuals: Mat::zeros(BLOCK, 1),
             pending: 0,
         }
@@ -67,6 +69,9 @@ impl NormalEquations {
             self.dim(),
             "a row of J has one entry per parameter"
         );
+        if self.rows.ncols() == 0 {
+            self.rows = Mat::zeros(self.dim(), BLOCK);
+        }
         let c = self.pending;
         for (i, &v) in j.iter().enumerate() {
             self.rows[(i, c)] = v;
@@ -184,9 +189,13 @@ mod tests {
             for k in 0..rows {
                 r[k] = val(k * 31 + 7);
                 if k % 5 == 0 {
-                    let col = k % p;
-                    j[(k, col)] = val(k);
-                    ne.add_sparse_row(&[col], &[val(k)], r[k]);
+                    // Two columns (one when p = 1), off the diagonal of JᵀJ.
+                    let cols: Vec<usize> = if p > 1 { vec![k % p, (k + 1) % p] } else { vec![0] };
+                    let vals: Vec<f64> = cols.iter().map(|&c| val(k + 3 * c)).collect();
+                    for (&c, &v) in cols.iter().zip(&vals) {
+                        j[(k, c)] = v;
+                    }
+                    ne.add_sparse_row(&cols, &vals, r[k]);
                 } else {
                     for i in 0..p {
                         j[(k, i)] = val(k * p + i);
@@ -195,15 +204,24 @@ mod tests {
                     ne.add_row(&row, r[k]);
                 }
             }
-            // A one-parameter system scattered onto the last column.
-            let mut sub = NormalEquations::new(1);
-            sub.add_row(&[2.0], 3.0);
-            ne.add_scattered(sub, &[p - 1]);
+            // A sub-system with its own dense rows, scattered onto the last and first columns
+            // (in that order): J gains rows that are zero elsewhere.
+            let cols: Vec<usize> = if p > 1 { vec![p - 1, 0] } else { vec![0] };
+            let mut sub = NormalEquations::new(cols.len());
+            let mut extra = DMatrix::zeros(3, p);
+            let mut extra_r = DVector::zeros(3);
+            for e in 0..3 {
+                let row: Vec<f64> = (0..cols.len()).map(|i| val(1000 + 7 * e + i)).collect();
+                for (&c, &v) in cols.iter().zip(&row) {
+                    extra[(e, c)] = v;
+                }
+                extra_r[e] = val(2000 + e);
+                sub.add_row(&row, extra_r[e]);
+            }
+            ne.add_scattered(sub, &cols);
             let (jtj, jtr) = ne.finish();
-            let mut want = j.transpose() * &j;
-            let mut want_r = j.transpose() * &r;
-            want[(p - 1, p - 1)] += 4.0;
-            want_r[p - 1] += 6.0;
+            let want = j.transpose() * &j + extra.transpose() * &extra;
+            let want_r = j.transpose() * &r + extra.transpose() * &extra_r;
             let scale = 1.0 + want.amax();
             prop_assert!((jtj - want).amax() <= 1e-12 * scale * rows.max(1) as f64);
             prop_assert!((jtr - want_r).amax() <= 1e-12 * scale * rows.max(1) as f64);

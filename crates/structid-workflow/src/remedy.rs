@@ -24,8 +24,14 @@ pub enum Remedy {
 ///
 /// ```
 /// use structid_workflow::remedy::{Remedy, remedy};
-/// let e = structid_core::Error::NotMeasurable { explanation: "block `N` is latent".into() };
+/// let e = structid_core::Error::OutOfReach {
+///     blocks: vec!["N".into()],
+///     explanation: "block `N` is latent".into(),
+/// };
 /// assert_eq!(remedy(&e), Some(Remedy::JointFit));
+/// // A z that is not measurable for another reason has its own advice in its message.
+/// let other = structid_core::Error::NotMeasurable { explanation: "use a zero initial state".into() };
+/// assert_eq!(remedy(&other), None);
 /// let other = structid_core::Error::Numerical("a NaN".into());
 /// assert_eq!(remedy(&other), None);
 /// ```
@@ -70,7 +76,8 @@ fn of_discover(e: &DiscoverError) -> Option<Remedy> {
 
 fn of_core(e: &CoreError) -> Option<Remedy> {
     match e {
-        CoreError::NotMeasurable { .. } | CoreError::SeriesMaps { .. } => Some(Remedy::JointFit),
+        CoreError::OutOfReach { .. } | CoreError::SeriesMaps { .. } => Some(Remedy::JointFit),
+        CoreError::InRecord { source, .. } => of_core(source),
         _ => None,
     }
 }
@@ -92,7 +99,8 @@ mod tests {
     /// and not invented for errors that have none.
     #[test]
     fn remedies_are_found_through_transparent_wrappers() {
-        let series = || CoreError::NotMeasurable {
+        let series = || CoreError::OutOfReach {
+            blocks: vec!["N2".into()],
             explanation: "z of `N2` needs the output of `N1`".into(),
         };
         assert_eq!(remedy(&poor()), Some(Remedy::LinearNominal));
@@ -113,5 +121,10 @@ mod tests {
             None
         );
         assert_eq!(remedy(&WorkflowError::Request("bad".into())), None);
+        let in_record = CoreError::InRecord {
+            record: 2,
+            source: Box::new(series()),
+        };
+        assert_eq!(remedy(&in_record), Some(Remedy::JointFit));
     }
 }

@@ -111,7 +111,7 @@ impl Lft {
     }
 
     /// `Ok` when every block's input is computable from u and y; otherwise
-    /// [`Error::NotMeasurable`] naming each block that is not, and why, and pointing to the
+    /// [`Error::OutOfReach`] naming each block that is not, and why, and pointing to the
     /// joint fit, which takes them.
     ///
     /// # Errors
@@ -141,7 +141,14 @@ impl Lft {
         if why.is_empty() {
             return Ok(());
         }
-        Err(Error::NotMeasurable {
+        let blocks = places
+            .iter()
+            .zip(&access)
+            .filter(|(_, a)| **a != BlockAccess::Computable)
+            .map(|(p, _)| p.name.to_string())
+            .collect();
+        Err(Error::OutOfReach {
+            blocks,
             explanation: format!(
                 "{}. Identification by the dispersion criterion needs every block's input computable \
                  from u and y; the joint fit by simulation error (`structid_joint`) takes maps in \

@@ -30,26 +30,33 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         let e = f.e_hat.slice(w[0]..w[1]);
         let r = t_ye.simulate(&e)?.channel(0);
         let delta = deconvolve(&f.hypothesis, &r)?;
-        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+        let skip = transient(delta.len(), settings);
         z.extend_from_slice(&f.z[w[0] + skip..w[1]]);
         kept.extend_from_slice(&delta[skip..]);
         bounds.push(z.len());
     }
-    // Actuator and sensor maps act on held or sampled signals and have no sampling artefact;
-    // nor does a map of the measured rate, whose backward difference already sits half a
-    // sample back (and whose steep static fits, relays, would call any direction effect an
-    // artefact).
-    let feedback = matches!(
-        f.result.location,
-        Site::OutputFeedback | Site::Declared { .. }
-    );
     Ok(direction_beyond_sampling(
         &z,
         &kept,
         &bounds,
-        feedback.then_some(f.map.as_ref()),
+        acts_in_continuous_time(f.result.location).then_some(f.map.as_ref()),
         settings.hysteresis_threshold,
     ))
+}
+
+/// The leading samples of a record's deconvolved residual left out of a direction test: the
+/// transient of a start that the record does not reveal.
+pub(super) fn transient(len: usize, settings: &DiscoverSettings) -> usize {
+    settings.settle.min(len / 10).max(len / 50)
+}
+
+/// Whether a map at `site` acts in continuous time on a fed-back signal, and so has a
+/// sampling artefact ([`direction_beyond_sampling`]). Actuator and sensor maps act on held or
+/// sampled signals and have none; nor does a map of the measured rate, whose backward
+/// difference already sits half a sample back (and whose steep static fits, relays, would
+/// call any direction effect an artefact).
+pub(super) fn acts_in_continuous_time(site: Site) -> bool {
+    matches!(site, Site::OutputFeedback | Site::Declared { .. })
 }
 
 /// A direction effect of at most this many times the energy of the half-sample artefact is

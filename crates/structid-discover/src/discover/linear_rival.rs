@@ -34,7 +34,7 @@ use super::DiscoverSettings;
 use crate::hypotheses::{Hypothesis, Site};
 use structid_core::Interpolant;
 
-use super::direction::{deconvolve, direction_beyond_sampling};
+use super::direction::{acts_in_continuous_time, deconvolve, direction_beyond_sampling, transient};
 use super::fit::z_of;
 
 use super::input_hysteresis::{simulate_linear, simulate_linear_as};
@@ -194,19 +194,24 @@ pub(super) fn leaves_direction_effect(
             .collect();
         let delta = deconvolve(h, &r).ok()?;
         let zr = z_of(h, &h.data(&record).ok()?).ok()?;
-        // The start of each record carries the rival's transient from rest, as the direction
-        // test's own residual does: left out alike.
-        let skip = settings.settle.min(delta.len() / 10).max(delta.len() / 50);
+        // The start of each record carries the rival's transient from rest: left out as the
+        // direction test leaves out its own residual's start.
+        let skip = transient(delta.len(), settings);
         z.extend_from_slice(&zr[skip..]);
         kept.extend_from_slice(&delta[skip..]);
         bounds.push(z.len());
     }
-    let feedback = matches!(h.location, Site::OutputFeedback | Site::Declared { .. });
     // The direction test's own bar on the t statistic, with no bar on the share of energy
     // the direction explains: the rival's residual is mostly noise once it closes the gap, so
     // a hysteresis left in it is a small share of a significant effect.
     let any_share = 0.0;
-    let test = direction_beyond_sampling(&z, &kept, &bounds, map.filter(|_| feedback), any_share);
+    let test = direction_beyond_sampling(
+        &z,
+        &kept,
+        &bounds,
+        map.filter(|_| acts_in_continuous_time(h.location)),
+        any_share,
+    );
     Some(test.dynamic)
 }
 

@@ -118,7 +118,9 @@
 //! 7. **Is it a nonlinearity at all?** G alone re-estimated with one more mode
 //!    ([`LinearRival`]) is the linear model a finding must beat: when it validates within
 //!    `noise_ratio`·σ̂ and the finding (or, with no block confirmed, nothing) is not better
-//!    than it by the paired block test at α, the verdict is [`Verdict::LinearModel`].
+//!    than it by the paired block test at α, the verdict is [`Verdict::LinearModel`]. A
+//!    dynamic finding is judged instead by the direction effect the rival's own residual
+//!    leaves at its block ([`LinearRival::leaves_direction_effect`]).
 //!
 //! The search runs in stages: the gap (which builds what every later stage reads), the
 //! candidates, the location of the finding, G settled with it, and the verdict.
@@ -466,8 +468,9 @@ pub struct Discovery {
     /// The effect found (when something is missing and a hypothesis could be identified).
     pub finding: Option<Finding>,
     /// G alone re-estimated with one more mode ([`LinearRival`]), the linear model a finding
-    /// must beat: fitted around a polynomial G when a static finding other than a gain was
-    /// confirmed, or when the hypotheses left a gap larger than the noise unexplained.
+    /// must beat: fitted around a polynomial G when a finding other than a gain or a
+    /// hysteresis at the input was confirmed (static or dynamic), or when the hypotheses left
+    /// a gap larger than the noise unexplained.
     pub linear_rival: Option<LinearRival>,
     /// The verdict in one paragraph.
     pub verdict: String,

@@ -199,7 +199,8 @@ fn linear_model(
     noise: NoiseLevel,
     gap_level: f64,
 ) -> Discovery {
-    // The rival overrules a finding only through the paired test (see `linear_rival::judge`).
+    // The rival overrules a static finding through the paired test, a dynamic one through
+    // the direction effect it leaves (see `linear_rival`).
     let block = match (finding, &rival.comparison) {
         (Some(f), Some(c)) => format!(
             ", and the best block ({} {}, validation RMS {}) is not better than it (paired test \
