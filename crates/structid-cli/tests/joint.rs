@@ -213,7 +213,10 @@ fn a_play_and_a_map_in_series_are_simulated_and_refined_jointly() {
     ]);
     let overall = &json(&d.join("v2").join("validation.json"))["overall"]["outputs"][0];
     let pooled = overall["rms"].as_f64().unwrap();
-    assert!((pooled - direct).abs() <= 1e-9 * direct, "{pooled} vs {direct}");
+    assert!(
+        (pooled - direct).abs() <= 1e-9 * direct,
+        "{pooled} vs {direct}"
+    );
     assert_eq!(overall["samples"].as_u64().unwrap() as usize, 2 * y.len());
 }
 

@@ -167,6 +167,24 @@ pub(super) fn judge(
     }
 }
 
+/// The rival's verdict on a dynamic finding, whose augmented model holds only a static
+/// approximation and so has no errors to compare: it explains the gap when it closes it and
+/// its own residual leaves no direction effect at the finding's block (`leaves`, from
+/// [`leaves_direction_effect`]; `None`, not assessed, never overrules).
+pub(super) fn judge_dynamic(
+    (g, _, validation_rms): (PolynomialModel, Vec<f64>, f64),
+    leaves: Option<bool>,
+    gap_level: f64,
+) -> LinearRival {
+    LinearRival {
+        g,
+        validation_rms,
+        comparison: None,
+        explains: validation_rms <= gap_level && leaves == Some(false),
+        leaves_direction_effect: leaves,
+    }
+}
+
 /// Whether the rival G's own simulation residual on the estimation record, deconvolved to the
 /// output of the block of `h` (as the finding's direction test deconvolves its residual),
 /// still depends on the direction of the block's input z, by the direction test's bar on its

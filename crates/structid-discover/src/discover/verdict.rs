@@ -165,12 +165,7 @@ fn rival(cx: &Context<'_>, finding: Option<&Finding>, gap_level: f64) -> Option<
             cx.est,
             &cx.settings,
         );
-        // No finding's errors to compare with: the rival explains when it closes the gap,
-        // provided it leaves no direction effect (an empty comparison is never overruled).
-        let errors: Option<&[f64]> = (left != Some(false)).then_some(&[]);
-        let mut r = linear_rival::judge(fitted, errors, gap_level, cx.settings.significance);
-        r.leaves_direction_effect = left;
-        return Some(r);
+        return Some(linear_rival::judge_dynamic(fitted, left, gap_level));
     }
     let errors = finding.map(|f| {
         let h = augmented_hypothesis(f, &cx.nominal);
