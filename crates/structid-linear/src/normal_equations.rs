@@ -15,6 +15,10 @@ use nalgebra::{DMatrix, DVector};
 /// Rows of `J` gathered before they are added as one matrix product.
 pub const BLOCK: usize = 256;
 
+/// The number of parameters from which a block's product runs on every thread: a
+/// `p × BLOCK` by `BLOCK × p` product of about 2·10⁶ multiply-adds and up, worth splitting.
+pub const PARALLEL_DIM: usize = 64;
+
 /// `JᵀJ` and `Jᵀr` for rows of `J` added one at a time.
 ///
 /// ```
@@ -144,12 +148,23 @@ impl NormalEquations {
         (self.jtj, self.jtr)
     }
 
+    /// Threads for a block's product: all of them once the product is large enough to share
+    /// ([`PARALLEL_DIM`]), one below that, where splitting costs more than it saves.
+    fn parallelism(&self) -> Par {
+        if self.dim() >= PARALLEL_DIM {
+            Par::rayon(0)
+        } else {
+            Par::Seq
+        }
+    }
+
     /// Adds the pending rows: `JᵀJ += B·Bᵀ` (its lower triangle), `Jᵀr += B·r_B`.
     fn flush(&mut self) {
         let n = self.pending;
         if n == 0 {
             return;
         }
+        let par = self.parallelism();
         let b = self.rows.as_ref().subcols(0, n);
         let r = self.residuals.as_ref().subrows(0, n);
         triangular::matmul(
@@ -161,7 +176,7 @@ impl NormalEquations {
             b.transpose(),
             BlockStructure::Rectangular,
             1.0,
-            Par::Seq,
+            par,
         );
         faer::linalg::matmul::matmul(self.jtr.as_mut(), Accum::Add, b, r, 1.0, Par::Seq);
         self.pending = 0;
@@ -172,6 +187,24 @@ impl NormalEquations {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// A system large enough for the block products to run on every thread
+    /// ([`PARALLEL_DIM`]) against the dense products of the stored J.
+    #[test]
+    fn a_large_system_equals_the_dense_products() {
+        let (p, rows) = (PARALLEL_DIM + 6, 3 * BLOCK + 17);
+        let j = DMatrix::from_fn(rows, p, |k, i| ((k * 31 + i * 17) % 23) as f64 / 11.0 - 1.0);
+        let r = DVector::from_fn(rows, |k, _| ((k * 7) % 13) as f64 / 6.0 - 1.0);
+        let mut ne = NormalEquations::new(p);
+        for k in 0..rows {
+            let row: Vec<f64> = j.row(k).iter().copied().collect();
+            ne.add_row(&row, r[k]);
+        }
+        let (jtj, jtr) = ne.finish();
+        let (want, want_r) = (j.transpose() * &j, j.transpose() * &r);
+        assert!((jtj - &want).amax() <= 1e-12 * want.amax());
+        assert!((jtr - &want_r).amax() <= 1e-12 * want.amax());
+    }
 
     proptest! {
         /// Against the dense products of the stored J, across block boundaries, with sparse
