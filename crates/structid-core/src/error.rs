@@ -120,6 +120,17 @@ pub enum Error {
         detail: String,
     },
 
+    /// A stored estimate names a user-defined kernel or feature map that the reader was not
+    /// given (only the name of user code is stored).
+    #[error(
+        "the estimate uses the user-defined kernel `{name}`, whose code is not stored with it; \
+         supply that kernel under this name when reading the estimate"
+    )]
+    UserKernelMissing {
+        /// The kernel's name as stored.
+        name: String,
+    },
+
     /// A penalty's internal description (nodes, samples, edges) is inconsistent.
     #[error("invalid model structure: {penalty} penalty: {detail}")]
     InconsistentPenalty {

@@ -17,7 +17,9 @@
 //!
 //! A user-defined kernel or interpolant has no stored form unless it implements
 //! [`crate::Kernel::stored_kernel`] / [`crate::Interpolant::stored`]; writing such an estimate is an error that
-//! names the block.
+//! names the block. A user kernel or feature map may be stored by name
+//! ([`StoredKernel::User`]) and supplied again when the estimate is read
+//! ([`crate::dispersion::user`]).
 
 use serde::{Deserialize, Serialize};
 use structid_lti::Signal;
@@ -90,6 +92,13 @@ pub enum StoredKernel {
         parts: Vec<StoredKernel>,
         /// The part whose weights follow a width change.
         width_part: Option<usize>,
+    },
+    /// A user-defined kernel or feature map ([`crate::dispersion::user`]): its name only, since
+    /// its code cannot be stored. Reading the estimate back takes it from a
+    /// [`crate::dispersion::user::UserKernels`] registry.
+    User {
+        /// The name it is registered under.
+        name: String,
     },
 }
 

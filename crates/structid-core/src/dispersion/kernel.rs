@@ -86,6 +86,32 @@ pub trait Kernel: Send + Sync + fmt::Debug {
             }
         });
     }
+
+    /// Writes the cross-Gram matrix k(a_i, b_j) of the points of `rows` and `cols` into `out`
+    /// (`rows.len()` × `cols.len()`, any layout): what posterior bands at new points need.
+    /// The default evaluates [`Kernel::eval`] entry by entry, in parallel over rows; a kernel
+    /// with one batched evaluation (a kernel written in another language) overrides it.
+    fn fill_cross(&self, rows: &Signal, cols: &Signal, out: MatMut<'_, f64>) {
+        par_rows(out, &|i, mut row| {
+            let a = rows.sample(i);
+            for j in 0..row.ncols() {
+                row[j] = self.eval(a, cols.sample(j));
+            }
+        });
+    }
+
+    /// N̂(z) = Σ_k α_k k(z, z_k) at one point `z` for the centres z_k and coefficients α: how
+    /// a [`KernelExpansion`] evaluates, in simulation once per sample. The default sums
+    /// [`Kernel::eval`] over the centres with α_k ≠ 0, in order; a kernel with one batched
+    /// evaluation overrides it.
+    fn eval_expansion(&self, z: &[f64], centres: &Signal, alpha: &[f64]) -> f64 {
+        alpha
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| **a != 0.0)
+            .map(|(k, a)| a * self.eval(z, centres.sample(k)))
+            .sum()
+    }
 }
 
 /// Copies the upper triangle of the square matrix `m` into its lower triangle, one block of
@@ -389,12 +415,7 @@ impl<K: Kernel> KernelExpansion<K> {
 
 impl<K: Kernel> Interpolant for KernelExpansion<K> {
     fn eval(&self, z: &[f64]) -> f64 {
-        self.alpha
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| **a != 0.0)
-            .map(|(k, a)| a * self.kernel.eval(z, self.centres.sample(k)))
-            .sum()
+        self.kernel.eval_expansion(z, &self.centres, &self.alpha)
     }
 
     fn eval_many(&self, z: &Signal) -> Vec<f64> {

@@ -12,6 +12,7 @@ pub mod neighbours;
 pub mod polynomial;
 pub mod sum;
 pub mod total_variation;
+pub mod user;
 
 use std::fmt;
 use std::ops::Range;
@@ -47,6 +48,13 @@ pub trait Dispersion: Send + Sync + fmt::Debug {
     fn with_width(&self, width: f64) -> Option<Result<Arc<dyn Dispersion>>> {
         let _ = width;
         None
+    }
+
+    /// The user-defined kernels and feature maps the dispersion is built on (those whose
+    /// stored form is [`crate::stored::StoredKernel::User`]), so that an estimate made with it
+    /// keeps them ([`user`]); empty (the default) for the built-in dispersions.
+    fn user_kernels(&self) -> user::UserKernels {
+        user::UserKernels::new()
     }
 }
 
@@ -351,6 +359,10 @@ impl<K: Kernel + 'static> Dispersion for KernelDispersion<K> {
             z: z.clone(),
         })))
     }
+
+    fn user_kernels(&self) -> user::UserKernels {
+        user::user_kernel_of(&self.kernel)
+    }
 }
 
 struct KernelGram<K: Kernel> {
@@ -426,12 +438,7 @@ impl<K: Kernel + 'static> QuadraticPenalty for KernelGram<K> {
         {
             return false;
         }
-        crate::dispersion::kernel::par_rows(out, &|i, mut row| {
-            let zi = self.z.sample(i);
-            for j in 0..row.ncols() {
-                row[j] = self.kernel.eval(zi, points.sample(j));
-            }
-        });
+        self.kernel.fill_cross(&self.z, points, out);
         true
     }
 

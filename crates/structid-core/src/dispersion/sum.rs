@@ -105,6 +105,12 @@ impl Dispersion for SumDispersion {
         }))
     }
 
+    fn user_kernels(&self) -> crate::dispersion::user::UserKernels {
+        self.parts
+            .iter()
+            .fold(Default::default(), |acc, p| acc.merged(p.user_kernels()))
+    }
+
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
         let mut parts = Vec::with_capacity(self.parts.len());
         for (i, d) in self.parts.iter().enumerate() {

@@ -55,6 +55,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use structid_lti::Signal;
 
+use crate::dispersion::user::UserKernels;
 use crate::dispersion::{Dispersion, Penalty};
 use crate::error::{Error, Result};
 use crate::identify::{CostTerms, Identification, IdentifySettings, identify};
@@ -325,6 +326,20 @@ impl TryFrom<EstimateData> for Estimate {
     type Error = Error;
 
     fn try_from(data: EstimateData) -> Result<Self> {
+        Self::from_data_with_kernels(data, &UserKernels::new())
+    }
+}
+
+impl Estimate {
+    /// The estimate of its stored form, with the user-defined kernels and feature maps it is
+    /// built on ([`crate::stored::StoredKernel::User`]) taken from `kernels`: the way to read
+    /// back an estimate made with a kernel of your own ([`crate::dispersion::user`]).
+    /// `Estimate::try_from(data)` is this with an empty registry.
+    ///
+    /// # Errors
+    /// As `try_from`, and [`Error::UserKernelMissing`] for a user kernel that `kernels` does
+    /// not hold.
+    pub fn from_data_with_kernels(data: EstimateData, kernels: &UserKernels) -> Result<Self> {
         if data.format_version > FORMAT_VERSION {
             return Err(Error::InvalidStructure(format!(
                 "the estimate was written in format {} by a newer structid; this one reads format {FORMAT_VERSION} and older",
@@ -349,20 +364,17 @@ impl TryFrom<EstimateData> for Estimate {
             .blocks
             .iter()
             .map(|b| {
-                b.map.interpolant().map(Arc::from).map_err(|e| {
-                    Error::InvalidStructure(format!("the map of block `{}`: {e}", b.name))
-                })
+                b.map
+                    .interpolant_with(kernels)
+                    .map(Arc::from)
+                    .map_err(|e| match e {
+                        Error::UserKernelMissing { .. } => e,
+                        e => Error::InvalidStructure(format!("the map of block `{}`: {e}", b.name)),
+                    })
             })
             .collect::<Result<Vec<_>>>()?;
         if let Some(names) = &data.signals {
-            let d = model.lft().dims();
-            if names.u.len() != d.u || names.y.len() != d.y {
-                return Err(Error::DimensionMismatch {
-                    what: "stored signal names (inputs, outputs)".into(),
-                    expected: format!("({}, {})", d.u, d.y),
-                    found: format!("({}, {})", names.u.len(), names.y.len()),
-                });
-            }
+            check_signal_names(&model, names)?;
         }
         if let Some(x0) = &data.initial_state
             && x0.len() != model.lft().dims().states
@@ -375,6 +387,19 @@ impl TryFrom<EstimateData> for Estimate {
         }
         Ok(Self { data, model, maps })
     }
+}
+
+/// Whether `names` has one name per input and per output of `model`.
+fn check_signal_names(model: &Model, names: &SignalNames) -> Result<()> {
+    let d = model.lft().dims();
+    if names.u.len() != d.u || names.y.len() != d.y {
+        return Err(Error::DimensionMismatch {
+            what: "stored signal names (inputs, outputs)".into(),
+            expected: format!("({}, {})", d.u, d.y),
+            found: format!("({}, {})", names.u.len(), names.y.len()),
+        });
+    }
+    Ok(())
 }
 
 /// The dispersion of a block whose map is already fitted: it describes the original one and
@@ -438,14 +463,22 @@ impl Estimate {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
-        Self::try_from(EstimateData {
-            format_version: FORMAT_VERSION,
-            lft: StoredLft::from_lft(model.lft()),
-            blocks: stored,
-            initial_state,
-            provenance,
-            signals: None,
-        })
+        // A map on a user kernel is stored by the kernel's name; the model's dispersions hold
+        // the kernels themselves.
+        let kernels = blocks.iter().fold(UserKernels::new(), |acc, b| {
+            acc.merged(b.dispersion.user_kernels())
+        });
+        Self::from_data_with_kernels(
+            EstimateData {
+                format_version: FORMAT_VERSION,
+                lft: StoredLft::from_lft(model.lft()),
+                blocks: stored,
+                initial_state,
+                provenance,
+                signals: None,
+            },
+            &kernels,
+        )
     }
 
     /// The estimate of an identification of `model` on `data` with `settings`.
@@ -526,10 +559,10 @@ impl Estimate {
     ///
     /// # Errors
     /// [`Error::DimensionMismatch`] when the numbers of names do not match the LFT.
-    pub fn with_signal_names(self, names: SignalNames) -> Result<Self> {
-        let mut data = self.data;
-        data.signals = Some(names);
-        Self::try_from(data)
+    pub fn with_signal_names(mut self, names: SignalNames) -> Result<Self> {
+        check_signal_names(&self.model, &names)?;
+        self.data.signals = Some(names);
+        Ok(self)
     }
 
     /// Simulates y from u with the maps in the loop and e = 0, from `x0` (zero when `None`).

@@ -13,6 +13,7 @@ use crate::dispersion::neighbours::{KdTree, PiecewiseLinear, ScatteredInterpolan
 use crate::dispersion::polynomial::PolynomialFeatures;
 use crate::dispersion::sum::{StackedFeatures, SumInterpolant};
 use crate::dispersion::total_variation::{PiecewiseLinearMap, ScaledScattered};
+use crate::dispersion::user::{DynKernel, UserKernel, UserKernels};
 use crate::error::{Error, Result};
 use crate::model::interpolant::Interpolant;
 use crate::model::maps::{ExprMap, LookupTable};
@@ -25,6 +26,16 @@ impl StoredKernel {
     /// [`Error::InvalidStructure`] when the stored numbers are inconsistent, or for a kernel
     /// without finite features (Gaussian).
     pub fn feature_map(&self) -> Result<Arc<dyn FeatureMap>> {
+        self.feature_map_with(&UserKernels::new())
+    }
+
+    /// The feature map this describes, with a user-defined one ([`StoredKernel::User`]) taken
+    /// from `user`.
+    ///
+    /// # Errors
+    /// As [`StoredKernel::feature_map`], and [`Error::UserKernelMissing`] for a user feature
+    /// map that `user` does not hold.
+    pub fn feature_map_with(&self, user: &UserKernels) -> Result<Arc<dyn FeatureMap>> {
         Ok(match self {
             StoredKernel::Gaussian { .. } => {
                 return Err(Error::InvalidStructure(
@@ -35,7 +46,13 @@ impl StoredKernel {
             StoredKernel::Fourier(k) => Arc::new(FourierKernel::from_stored(k)?),
             StoredKernel::Polynomial(k) => Arc::new(PolynomialFeatures::from_stored(k)?),
             StoredKernel::Nystrom(n) => Arc::new(NystromFeatures::from_stored(n)?),
-            StoredKernel::Stacked { parts, width_part } => Arc::new(stacked(parts, *width_part)?),
+            StoredKernel::Stacked { parts, width_part } => {
+                Arc::new(stacked(parts, *width_part, user)?)
+            }
+            StoredKernel::User { name } => match user.get(name)? {
+                UserKernel::Features(f) => Arc::clone(f),
+                UserKernel::Kernel(_) => return Err(user_mismatch(name, "a kernel", "features")),
+            },
         })
     }
 
@@ -44,6 +61,7 @@ impl StoredKernel {
         &self,
         centres: Signal,
         alpha: Vec<f64>,
+        user: &UserKernels,
     ) -> Result<Box<dyn Interpolant>> {
         fn boxed<K: Kernel + 'static>(k: K, c: Signal, a: Vec<f64>) -> Box<dyn Interpolant> {
             Box::new(KernelExpansion::new(Arc::new(k), c, a))
@@ -56,8 +74,14 @@ impl StoredKernel {
             }
             StoredKernel::Nystrom(n) => boxed(NystromFeatures::from_stored(n)?, centres, alpha),
             StoredKernel::Stacked { parts, width_part } => {
-                boxed(stacked(parts, *width_part)?, centres, alpha)
+                boxed(stacked(parts, *width_part, user)?, centres, alpha)
             }
+            StoredKernel::User { name } => match user.get(name)? {
+                UserKernel::Kernel(k) => boxed(DynKernel(Arc::clone(k)), centres, alpha),
+                UserKernel::Features(_) => {
+                    return Err(user_mismatch(name, "a feature map", "a kernel"));
+                }
+            },
         })
     }
 
@@ -69,12 +93,26 @@ impl StoredKernel {
             StoredKernel::Polynomial(k) => Some(k.affine.len()),
             StoredKernel::Nystrom(n) => Some(n.centres.channels),
             StoredKernel::Stacked { parts, .. } => parts.iter().find_map(StoredKernel::inputs),
+            StoredKernel::User { .. } => None,
         }
     }
 }
 
+/// The error for a registry entry of the wrong kind: `name` is `registered` but the stored
+/// estimate needs `needed`.
+fn user_mismatch(name: &str, registered: &str, needed: &str) -> Error {
+    Error::InconsistentStored {
+        item: format!("user kernel `{name}`"),
+        detail: format!("it is registered as {registered}, but the estimate needs {needed}"),
+    }
+}
+
 /// Stacked features rebuilt from their stored parts.
-fn stacked(parts: &[StoredKernel], width_part: Option<usize>) -> Result<StackedFeatures> {
+fn stacked(
+    parts: &[StoredKernel],
+    width_part: Option<usize>,
+    user: &UserKernels,
+) -> Result<StackedFeatures> {
     if parts.is_empty() || width_part.is_some_and(|w| w >= parts.len()) {
         return Err(Error::InvalidStructure(format!(
             "stored stacked features: {} part(s) and width part {width_part:?}",
@@ -83,7 +121,7 @@ fn stacked(parts: &[StoredKernel], width_part: Option<usize>) -> Result<StackedF
     }
     let maps = parts
         .iter()
-        .map(StoredKernel::feature_map)
+        .map(|p| p.feature_map_with(user))
         .collect::<Result<Vec<_>>>()?;
     Ok(StackedFeatures::new(maps, width_part))
 }
@@ -105,6 +143,16 @@ impl StoredMap {
     /// assert!(bad.interpolant().is_err());
     /// ```
     pub fn interpolant(&self) -> Result<Box<dyn Interpolant>> {
+        self.interpolant_with(&UserKernels::new())
+    }
+
+    /// [`StoredMap::interpolant`], with the user-defined kernels and feature maps the map is
+    /// built on ([`StoredKernel::User`]) taken from `user`.
+    ///
+    /// # Errors
+    /// As [`StoredMap::interpolant`], and [`Error::UserKernelMissing`] for a user kernel that
+    /// `user` does not hold.
+    pub fn interpolant_with(&self, user: &UserKernels) -> Result<Box<dyn Interpolant>> {
         let bad = |detail: String| Error::InconsistentStored {
             item: "map".into(),
             detail,
@@ -130,13 +178,13 @@ impl StoredMap {
                         centres.channels
                     )));
                 }
-                kernel.expansion(centres.to_signal()?, alpha.clone())?
+                kernel.expansion(centres.to_signal()?, alpha.clone(), user)?
             }
             StoredMap::FeatureExpansion {
                 features,
                 coefficients,
             } => {
-                let map = features.feature_map()?;
+                let map = features.feature_map_with(user)?;
                 if map.dim() != coefficients.len() {
                     return Err(bad(format!(
                         "{} features but {} coefficients",
@@ -152,7 +200,7 @@ impl StoredMap {
                 }
                 let parts = parts
                     .iter()
-                    .map(StoredMap::interpolant)
+                    .map(|p| p.interpolant_with(user))
                     .collect::<Result<Vec<_>>>()?;
                 Box::new(SumInterpolant(parts))
             }

@@ -1,0 +1,308 @@
+//! Kernels and feature maps defined outside this crate (in user code, or in another language
+//! through the Python bindings), and how estimates on them are stored and read back.
+//!
+//! A user kernel k(z₁, z₂) enters identification through [`crate::KernelDispersion`], a user
+//! feature map ψ with weights λ (K = ΨΛΨᵀ) through [`FeatureDispersion`]; both then pose the
+//! paper's problem min (1/L)·Σ|e_k|² + β·wᵀK⁻¹w like the built-in Gaussian or Fourier
+//! dispersions, with every solver and criterion.
+//!
+//! Their code cannot be written to a file. Their stored form is a name,
+//! [`StoredKernel::User`], next to the numbers of the estimate (the centres and α of
+//! N̂(z) = Σ_k α_k k(z, z_k), or the coefficients c of N̂(z) = ψ(z)ᵀc). An estimate made in
+//! memory keeps its kernels (they are gathered from the model's dispersions by
+//! [`crate::Dispersion::user_kernels`]); an estimate read back from its stored form takes them
+//! again, by name, from a [`UserKernels`] registry
+//! ([`crate::Estimate::from_data_with_kernels`]).
+
+use std::fmt;
+use std::ops::Range;
+use std::sync::Arc;
+
+use faer::MatMut;
+use structid_lti::Signal;
+
+use crate::dispersion::fourier::FeaturePenalty;
+use crate::dispersion::kernel::Kernel;
+use crate::dispersion::{Dispersion, FeatureMap, Penalty};
+use crate::error::{Error, Result};
+use crate::stored::StoredKernel;
+
+/// A user-defined kernel or feature map, as a registry holds it.
+#[derive(Clone)]
+pub enum UserKernel {
+    /// A kernel k(z₁, z₂): estimates on it are kernel expansions.
+    Kernel(Arc<dyn Kernel>),
+    /// A feature map ψ with weights λ: estimates on it are feature expansions.
+    Features(Arc<dyn FeatureMap>),
+}
+
+impl fmt::Debug for UserKernel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            UserKernel::Kernel(k) => write!(f, "Kernel({})", k.describe()),
+            UserKernel::Features(m) => write!(f, "Features(dim = {})", m.dim()),
+        }
+    }
+}
+
+/// User-defined kernels and feature maps by name: what reading an estimate on them back needs
+/// (their stored form is the name only).
+///
+/// ```
+/// use std::sync::Arc;
+/// use structid_core::GaussianKernel;
+/// use structid_core::dispersion::user::UserKernels;
+/// let kernels = UserKernels::new().with_kernel("wide", Arc::new(GaussianKernel::new(2.0).unwrap()));
+/// assert!(kernels.get("wide").is_ok());
+/// assert!(kernels.get("narrow").unwrap_err().to_string().contains("`narrow`"));
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct UserKernels {
+    entries: Vec<(String, UserKernel)>,
+}
+
+impl UserKernels {
+    /// An empty registry.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The registry with the kernel `kernel` under `name` (replacing one of that name).
+    pub fn with_kernel(self, name: impl Into<String>, kernel: Arc<dyn Kernel>) -> Self {
+        self.with(name.into(), UserKernel::Kernel(kernel))
+    }
+
+    /// The registry with the feature map `features` under `name` (replacing one of that name).
+    pub fn with_features(self, name: impl Into<String>, features: Arc<dyn FeatureMap>) -> Self {
+        self.with(name.into(), UserKernel::Features(features))
+    }
+
+    fn with(mut self, name: String, entry: UserKernel) -> Self {
+        self.entries.retain(|(n, _)| *n != name);
+        self.entries.push((name, entry));
+        self
+    }
+
+    /// Both registries; on a name in both, `other`'s entry.
+    pub fn merged(self, other: UserKernels) -> Self {
+        other
+            .entries
+            .into_iter()
+            .fold(self, |acc, (name, entry)| acc.with(name, entry))
+    }
+
+    /// The entry named `name`.
+    ///
+    /// # Errors
+    /// [`Error::UserKernelMissing`] when the registry has no such entry.
+    pub fn get(&self, name: &str) -> Result<&UserKernel> {
+        self.entries
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, e)| e)
+            .ok_or_else(|| Error::UserKernelMissing { name: name.into() })
+    }
+
+    /// The names in the registry.
+    pub fn names(&self) -> Vec<&str> {
+        self.entries.iter().map(|(n, _)| n.as_str()).collect()
+    }
+
+    /// Whether the registry is empty.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+}
+
+/// The registry entry of a kernel whose stored form is [`StoredKernel::User`], if it is one.
+pub(crate) fn user_kernel_of<K: Kernel + 'static>(kernel: &Arc<K>) -> UserKernels {
+    match kernel.stored_kernel() {
+        Some(StoredKernel::User { name }) => {
+            UserKernels::new().with_kernel(name, Arc::clone(kernel) as Arc<dyn Kernel>)
+        }
+        _ => UserKernels::new(),
+    }
+}
+
+/// A kernel behind a trait object, as a sized [`Kernel`] (a rebuilt kernel expansion holds
+/// it). Every method forwards, so batched overrides of the user's kernel keep working.
+#[derive(Debug)]
+pub(crate) struct DynKernel(pub(crate) Arc<dyn Kernel>);
+
+impl Kernel for DynKernel {
+    fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
+        self.0.eval(a, b)
+    }
+    fn describe(&self) -> String {
+        self.0.describe()
+    }
+    fn parameters(&self) -> Vec<(String, f64)> {
+        self.0.parameters()
+    }
+    fn width(&self) -> Option<f64> {
+        self.0.width()
+    }
+    fn stored_kernel(&self) -> Option<StoredKernel> {
+        self.0.stored_kernel()
+    }
+    fn fill_gram(&self, z: &Signal, out: MatMut<'_, f64>) {
+        self.0.fill_gram(z, out)
+    }
+    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: MatMut<'_, f64>) {
+        self.0.fill_gram_columns(z, cols, out)
+    }
+    fn fill_cross(&self, rows: &Signal, cols: &Signal, out: MatMut<'_, f64>) {
+        self.0.fill_cross(rows, cols, out)
+    }
+    fn eval_expansion(&self, z: &[f64], centres: &Signal, alpha: &[f64]) -> f64 {
+        self.0.eval_expansion(z, centres, alpha)
+    }
+}
+
+/// Any [`FeatureMap`] ψ with weights λ as a quadratic dispersion: D(z, w) = wᵀK⁻¹w with
+/// K = ΨΛΨᵀ, solved in feature space (cost linear in L) by the feature solver.
+///
+/// ```
+/// use structid_core::dispersion::user::FeatureDispersion;
+/// use structid_core::{Dispersion, FeatureMap, Penalty, Signal};
+///
+/// /// ψ(z) = [1, z, z²] with weights 1, 1, 0.5.
+/// struct Quadratic;
+/// impl FeatureMap for Quadratic {
+///     fn dim(&self) -> usize { 3 }
+///     fn weights(&self) -> &[f64] { &[1.0, 1.0, 0.5] }
+///     fn eval_into(&self, z: &[f64], out: &mut [f64]) {
+///         out.copy_from_slice(&[1.0, z[0], z[0] * z[0]]);
+///     }
+/// }
+///
+/// let d = FeatureDispersion::new("quadratic", Quadratic);
+/// let z = Signal::from_fn(10, 1, |k, _| k as f64 / 9.0);
+/// let Penalty::Quadratic(p) = d.penalty(&z).unwrap() else { unreachable!() };
+/// assert!(p.features().is_some());
+/// ```
+pub struct FeatureDispersion<F: FeatureMap> {
+    map: Arc<Features<F>>,
+}
+
+impl<F: FeatureMap> fmt::Debug for FeatureDispersion<F> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "FeatureDispersion({})", self.map.name)
+    }
+}
+
+impl<F: FeatureMap + 'static> FeatureDispersion<F> {
+    /// The dispersion of the feature map `map`, described as `name` in reports.
+    pub fn new(name: impl Into<String>, map: F) -> Self {
+        Self {
+            map: Arc::new(Features {
+                map,
+                name: name.into(),
+            }),
+        }
+    }
+
+    /// The feature map.
+    pub fn features(&self) -> &F {
+        &self.map.map
+    }
+}
+
+impl<F: FeatureMap + 'static> Dispersion for FeatureDispersion<F> {
+    fn describe(&self) -> String {
+        self.map.name.clone()
+    }
+
+    fn penalty(&self, z: &Signal) -> Result<Penalty> {
+        Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
+            map: Arc::clone(&self.map),
+            z: z.clone(),
+        })))
+    }
+
+    fn user_kernels(&self) -> UserKernels {
+        match self.map.map.stored_features() {
+            Some(StoredKernel::User { name }) => {
+                UserKernels::new().with_features(name, Arc::clone(&self.map) as Arc<dyn FeatureMap>)
+            }
+            _ => UserKernels::new(),
+        }
+    }
+}
+
+/// A feature map with its name, also a [`Kernel`] K(a, b) = ψ(a)ᵀΛψ(b) (what the feature
+/// penalty needs). Every feature method forwards, so batched overrides keep working.
+struct Features<F: FeatureMap> {
+    map: F,
+    name: String,
+}
+
+impl<F: FeatureMap> fmt::Debug for Features<F> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Features({})", self.name)
+    }
+}
+
+impl<F: FeatureMap> Kernel for Features<F> {
+    fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
+        crate::dispersion::feature_kernel(&self.map, a, b)
+    }
+    fn describe(&self) -> String {
+        self.name.clone()
+    }
+    fn stored_kernel(&self) -> Option<StoredKernel> {
+        self.map.stored_features()
+    }
+}
+
+impl<F: FeatureMap> FeatureMap for Features<F> {
+    fn dim(&self) -> usize {
+        self.map.dim()
+    }
+    fn weights(&self) -> &[f64] {
+        self.map.weights()
+    }
+    fn eval_into(&self, z: &[f64], out: &mut [f64]) {
+        self.map.eval_into(z, out)
+    }
+    fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
+        self.map.eval_rows(z, t0, scale, rows)
+    }
+    fn eval_cols(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: Range<usize>,
+        scale: &[f64],
+        rows: &mut [f64],
+    ) {
+        self.map.eval_cols(z, t0, cols, scale, rows)
+    }
+    fn prepared_len(&self) -> usize {
+        self.map.prepared_len()
+    }
+    fn prepare_rows(&self, z: &Signal, t0: usize, out: &mut [f64]) {
+        self.map.prepare_rows(z, t0, out)
+    }
+    fn eval_cols_prepared(
+        &self,
+        z: &Signal,
+        t0: usize,
+        cols: Range<usize>,
+        scale: &[f64],
+        prepared: &[f64],
+        rows: &mut [f64],
+    ) {
+        self.map
+            .eval_cols_prepared(z, t0, cols, scale, prepared, rows)
+    }
+    fn combine_rows(&self, z: &Signal, t0: usize, coef: &[f64], out: &mut [f64]) {
+        self.map.combine_rows(z, t0, coef, out)
+    }
+    fn weights_at_width(&self, width: f64) -> Option<Vec<f64>> {
+        self.map.weights_at_width(width)
+    }
+    fn stored_features(&self) -> Option<StoredKernel> {
+        self.map.stored_features()
+    }
+}
