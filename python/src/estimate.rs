@@ -7,12 +7,13 @@ use std::sync::Arc;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use structid_core::estimate::PredictionSettings;
+use structid_core::estimate::{EstimateData, PredictionSettings};
 use structid_core::validation::{ValidationReport, ValidationSettings};
 use structid_core::{Data, Estimate, Identification};
 use structid_io::{OutputGuard, estimate_json, read_estimate};
 
 use crate::convert::{self, error, invalid};
+use crate::user_kernel::{UserDispersion, detach};
 
 /// A fitted model: the linear block with every estimated map, as `estimate.json` stores it.
 /// It simulates, predicts and validates on its own; a fresh fit also keeps the posterior for
@@ -21,6 +22,8 @@ use crate::convert::{self, error, invalid};
 pub struct Fitted {
     estimate: Estimate,
     identification: Option<Arc<Identification>>,
+    /// The Python kernels and feature maps it is built on (pickled with it).
+    kernels: Vec<Py<PyAny>>,
 }
 
 impl Fitted {
@@ -29,7 +32,33 @@ impl Fitted {
         Self {
             estimate,
             identification,
+            kernels: Vec::new(),
         }
+    }
+
+    /// The same, built on the Python kernels and feature maps `kernels`.
+    pub fn with_kernels(mut self, kernels: Vec<Py<PyAny>>) -> Self {
+        self.kernels = kernels;
+        self
+    }
+
+    /// An estimate from its stored form with the user kernels `kernels` (`Kernel` and
+    /// `FeatureMap` objects).
+    fn with_registry(data: EstimateData, kernels: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
+        let user = kernels
+            .iter()
+            .map(|k| {
+                UserDispersion::extract(k).ok_or_else(|| {
+                    invalid("kernels must be structid.Kernel or structid.FeatureMap objects")
+                })
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let estimate = Estimate::from_data_with_kernels(data, &UserDispersion::registry(&user))
+            .map_err(error)?;
+        Ok(
+            Self::new(estimate, None)
+                .with_kernels(kernels.into_iter().map(Bound::unbind).collect()),
+        )
     }
 
     fn block_index(&self, block: &str) -> PyResult<usize> {
@@ -63,20 +92,32 @@ impl Fitted {
     }
 }
 
+/// What pickling stores: the constructor and its arguments (the JSON document and the kernels).
+type Reduced = (Py<PyAny>, (String, Vec<Py<PyAny>>));
+
 #[pymethods]
 impl Fitted {
-    /// The estimate from its JSON document (`to_json`, or a tool's estimate.json text).
+    /// The estimate from its JSON document (`to_json`, or a tool's estimate.json text), with
+    /// the `Kernel` and `FeatureMap` objects it was made with, by their names.
     #[staticmethod]
-    fn from_json(text: &str) -> PyResult<Self> {
-        let estimate: Estimate = serde_json::from_str(text)
+    #[pyo3(signature = (text, kernels=Vec::new()))]
+    fn from_json(text: &str, kernels: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
+        let data: EstimateData = serde_json::from_str(text)
             .map_err(|e| invalid(format!("not an estimate document: {e}")))?;
-        Ok(Self::new(estimate, None))
+        Self::with_registry(data, kernels)
     }
 
-    /// Reads an estimate file (estimate.json of `structid identify`, `refine`, `discover`).
+    /// Reads an estimate file (estimate.json of `structid identify`, `refine`, `discover`),
+    /// with the `Kernel` and `FeatureMap` objects it was made with.
     #[staticmethod]
-    fn from_file(path: PathBuf) -> PyResult<Self> {
-        Ok(Self::new(read_estimate(&path).map_err(error)?, None))
+    #[pyo3(signature = (path, kernels=Vec::new()))]
+    fn from_file(path: PathBuf, kernels: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
+        if kernels.is_empty() {
+            return Ok(Self::new(read_estimate(&path).map_err(error)?, None));
+        }
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| invalid(format!("cannot read {}: {e}", path.display())))?;
+        Self::from_json(&text, kernels)
     }
 
     /// The JSON document (what estimate.json holds); numbers read back bit for bit.
@@ -85,9 +126,10 @@ impl Fitted {
             .map_err(|e| invalid(e.to_string()))
     }
 
-    fn __reduce__(&self, py: Python<'_>) -> PyResult<(Py<PyAny>, (String,))> {
+    fn __reduce__(&self, py: Python<'_>) -> PyResult<Reduced> {
         let from = py.get_type::<Self>().getattr("from_json")?.unbind();
-        Ok((from, (self.to_json()?,)))
+        let kernels = self.kernels.iter().map(|k| k.clone_ref(py)).collect();
+        Ok((from, (self.to_json()?, kernels)))
     }
 
     /// The blocks: name, z inputs, w output and dispersion.
@@ -143,8 +185,9 @@ impl Fitted {
                 points.channels()
             )));
         }
-        let map = self.estimate.maps()[i];
-        Ok(convert::vector(py, map.eval_many(&points)))
+        let estimate = self.estimate.clone();
+        let values = detach(py, move || Ok(estimate.maps()[i].eval_many(&points)))?;
+        Ok(convert::vector(py, values))
     }
 
     /// The posterior standard deviation of N̂ of `block` at `points` (the 95 % band is
@@ -161,9 +204,7 @@ impl Fitted {
             return Ok(None);
         };
         let id = Arc::clone(id);
-        let std = py
-            .detach(move || id.posterior_std(i, &points))
-            .map_err(error)?;
+        let std = detach(py, move || id.posterior_std(i, &points).map_err(error))?;
         Ok(std.map(|s| convert::vector(py, s)))
     }
 
@@ -177,9 +218,9 @@ impl Fitted {
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = convert::signal(&u, "u")?;
         let estimate = self.estimate.clone();
-        let sim = py
-            .detach(move || estimate.simulate(&u, x0.as_deref()))
-            .map_err(error)?;
+        let sim = detach(py, move || {
+            estimate.simulate(&u, x0.as_deref()).map_err(error)
+        })?;
         let d = PyDict::new(py);
         d.set_item("y", convert::array(py, &sim.y))?;
         d.set_item("z", convert::array(py, &sim.z))?;
@@ -206,9 +247,9 @@ impl Fitted {
             .build()
             .map_err(error)?;
         let estimate = self.estimate.clone();
-        let p = py
-            .detach(move || estimate.predict(&data, &settings))
-            .map_err(error)?;
+        let p = detach(py, move || {
+            estimate.predict(&data, &settings).map_err(error)
+        })?;
         let d = PyDict::new(py);
         d.set_item("horizon", p.horizon)?;
         d.set_item("predicted", convert::array(py, &p.predicted))?;
@@ -242,9 +283,9 @@ impl Fitted {
         }
         let settings = validation_settings(initial_state, max_lag, settle)?;
         let estimate = self.estimate.clone();
-        let r = py
-            .detach(move || estimate.validate(&data, &settings))
-            .map_err(error)?;
+        let r = detach(py, move || {
+            estimate.validate(&data, &settings).map_err(error)
+        })?;
         report_dict(py, &r)
     }
 
@@ -276,9 +317,9 @@ impl Fitted {
         let data = Data::from_records(records).map_err(error)?;
         let settings = validation_settings(initial_state, max_lag, settle)?;
         let estimate = self.estimate.clone();
-        let r = py
-            .detach(move || estimate.validate_records(&data, &settings))
-            .map_err(error)?;
+        let r = detach(py, move || {
+            estimate.validate_records(&data, &settings).map_err(error)
+        })?;
         let d = PyDict::new(py);
         let reports = r
             .records

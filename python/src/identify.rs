@@ -15,6 +15,7 @@ use structid_io::{Report, SelectionReport};
 use crate::convert::{self, error, invalid};
 use crate::estimate::Fitted;
 use crate::model::Model;
+use crate::user_kernel::{UserDispersion, detach};
 
 /// Points of the grid a one-input map is evaluated on (as in the tool's map_<block>.csv).
 const GRID_1D: usize = 201;
@@ -22,7 +23,7 @@ const GRID_1D: usize = 201;
 const GRID_2D: usize = 41;
 
 /// What `identify` is asked to do, beyond the model and the record.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct Request {
     /// β, or `None` to select it.
     pub beta: Option<f64>,
@@ -47,6 +48,9 @@ pub struct Request {
     pub max_iterations: Option<usize>,
     /// Memory budget in MiB.
     pub memory_limit_mib: Option<u64>,
+    /// Python kernels and feature maps replacing the dispersion of one block (by name) or
+    /// of every block (`None`).
+    pub user: Vec<(Option<String>, UserDispersion)>,
 }
 
 /// The settings of a request, checked as the command-line tool checks its arguments.
@@ -170,18 +174,32 @@ pub(crate) struct Outcome {
     pub sigma: Option<f64>,
     /// σ chosen per block by selection.
     pub widths: Vec<Option<f64>>,
+    /// Every block's map on its grid, with the posterior standard deviation when kept.
+    pub maps: Vec<MapOnGrid>,
+}
+
+/// A block's map on the grid it is shown on.
+pub(crate) struct MapOnGrid {
+    grid: Signal,
+    value: Vec<f64>,
+    std: Option<Vec<f64>>,
 }
 
 impl Outcome {
     /// The dictionary `structid._identify._fit` reads.
-    pub(crate) fn into_dict(mut self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    pub(crate) fn into_dict(
+        mut self,
+        py: Python<'_>,
+        kernels: Vec<Py<PyAny>>,
+    ) -> PyResult<Bound<'_, PyDict>> {
         let d = PyDict::new(py);
         // ŵ and ê move into numpy (bands need only the blocks and the posterior).
         let w_hat = std::mem::replace(&mut self.id.w_hat, Signal::zeros(0, 0));
         let e_hat = std::mem::replace(&mut self.id.e_hat, Signal::zeros(0, 0));
         d.set_item("w_hat", convert::into_array(py, w_hat))?;
         d.set_item("e_hat", convert::into_array(py, e_hat))?;
-        d.set_item("maps", maps(py, &self.id)?)?;
+        let maps = std::mem::take(&mut self.maps);
+        d.set_item("maps", maps_dict(py, &self.id, maps)?)?;
         d.set_item("report", self.report)?;
         d.set_item("beta", self.beta)?;
         d.set_item("sigma", self.sigma)?;
@@ -192,7 +210,7 @@ impl Outcome {
         )?;
         d.set_item(
             "estimate",
-            Fitted::new(self.estimate, Some(Arc::new(self.id))),
+            Fitted::new(self.estimate, Some(Arc::new(self.id))).with_kernels(kernels),
         )?;
         Ok(d)
     }
@@ -245,7 +263,7 @@ fn run_records(
     if let Some(s) = r.sigma {
         mf.check_sigma(s, &data, "sigma").map_err(error)?;
     }
-    let core = convert::core_model(mf, r.sigma, &data)?;
+    let core = with_user_dispersions(convert::core_model(mf, r.sigma, &data)?, &r.user, r.sigma)?;
     let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
         let criterion = criterion(r, !model.has_total_variation())?;
         let validation = validation.map(|v| convert::record(mf, v)).transpose()?;
@@ -285,7 +303,9 @@ fn run_records(
             y: mf.signals.y.clone(),
         })
         .map_err(error)?;
+    let maps = map_values(&id)?;
     Ok(Outcome {
+        maps,
         report: report.to_json_string().map_err(error)?,
         beta: settings.beta(),
         sigma,
@@ -295,27 +315,68 @@ fn run_records(
     })
 }
 
-/// The map of every block: its inputs z at the samples (ŵ is a column of the whole ŵ), the grid, N̂ on it and the posterior
-/// standard deviation there when kept.
-fn maps<'py>(py: Python<'py>, id: &Identification) -> PyResult<Vec<Bound<'py, PyDict>>> {
+/// Every block's map on its grid (evaluated without the GIL: a Python kernel may be called
+/// from the library's threads).
+pub(crate) fn map_values(id: &Identification) -> PyResult<Vec<MapOnGrid>> {
+    (0..id.blocks.len())
+        .map(|i| {
+            let grid = grid(&id.blocks[i].z);
+            Ok(MapOnGrid {
+                value: id.blocks[i].map.eval_many(&grid),
+                std: id.posterior_std(i, &grid).map_err(error)?,
+                grid,
+            })
+        })
+        .collect()
+}
+
+/// The map of every block: its inputs z at the samples (ŵ is a column of the whole ŵ), the
+/// grid, N̂ on it and the posterior standard deviation there when kept.
+fn maps_dict<'py>(
+    py: Python<'py>,
+    id: &Identification,
+    maps: Vec<MapOnGrid>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
     id.blocks
         .iter()
-        .enumerate()
-        .map(|(i, b)| {
-            let points = grid(&b.z);
+        .zip(maps)
+        .map(|(b, m)| {
             let d = PyDict::new(py);
             d.set_item("name", &b.name)?;
             d.set_item("dispersion", &b.dispersion)?;
             d.set_item("z", convert::array(py, &b.z))?;
             d.set_item("output", b.output)?;
-            d.set_item("grid", convert::array(py, &points))?;
-            d.set_item("value", convert::vector(py, b.map.eval_many(&points)))?;
-            let std = id.posterior_std(i, &points).map_err(error)?;
-            d.set_item("std", std.map(|s| convert::vector(py, s)))?;
+            d.set_item("grid", convert::array(py, &m.grid))?;
+            d.set_item("value", convert::vector(py, m.value))?;
+            d.set_item("std", m.std.map(|s| convert::vector(py, s)))?;
             d.set_item("dispersion_value", b.dispersion_value)?;
             Ok(d)
         })
         .collect()
+}
+
+/// The core model with the Python kernels and feature maps in place of the model file's
+/// dispersions: one block's by name, or every block's.
+fn with_user_dispersions(
+    core: structid_core::Model,
+    user: &[(Option<String>, UserDispersion)],
+    sigma: Option<f64>,
+) -> PyResult<structid_core::Model> {
+    if let Some(name) = user
+        .iter()
+        .filter_map(|(b, _)| b.as_deref())
+        .find(|name| core.blocks().iter().all(|b| b.name != *name))
+    {
+        return Err(invalid(format!(
+            "the model has no block `{name}` for a kernel"
+        )));
+    }
+    Ok(core.with_dispersions(|b| {
+        user.iter()
+            .rev()
+            .find(|(name, _)| name.as_deref().is_none_or(|n| n == b.name))
+            .map_or_else(|| Arc::clone(&b.dispersion), |(_, u)| u.dispersion(sigma))
+    }))
 }
 
 /// A record as named numpy columns.
@@ -323,7 +384,7 @@ pub(crate) type Columns<'py> = Vec<(String, PyReadonlyArray1<'py, f64>)>;
 
 /// Identifies the model's maps from named columns (see `structid.identify`).
 #[pyfunction]
-#[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None, more_records=None))]
+#[pyo3(signature = (model, columns, beta=None, sigma=None, sigma_auto=false, selection=None, folds=5, validation=None, solver="auto", initial_state="zero", bands=true, tolerance=None, max_iterations=None, memory_limit_mib=None, more_records=None, kernels=Vec::new()))]
 pub fn identify_columns<'py>(
     py: Python<'py>,
     model: &Model,
@@ -341,8 +402,18 @@ pub fn identify_columns<'py>(
     max_iterations: Option<usize>,
     memory_limit_mib: Option<u64>,
     more_records: Option<Vec<Columns<'py>>>,
+    kernels: Vec<(Option<String>, Bound<'py, PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let user = kernels
+        .iter()
+        .map(|(block, obj)| {
+            UserDispersion::extract(obj)
+                .map(|u| (block.clone(), u))
+                .ok_or_else(|| invalid("a kernel must be a structid.Kernel or structid.FeatureMap"))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
     let request = Request {
+        user,
         beta,
         sigma,
         sigma_auto,
@@ -360,8 +431,11 @@ pub fn identify_columns<'py>(
     records.extend(more_records.iter().flatten().map(|r| named_columns(r)));
     let validation = validation.as_ref().map(|v| named_columns(v));
     let model = model.clone();
-    py.detach(move || run_records(&model, records, validation, &request))?
-        .into_dict(py)
+    let kernels = kernels.into_iter().map(|(_, k)| k.unbind()).collect();
+    detach(py, move || {
+        run_records(&model, records, validation, &request)
+    })?
+    .into_dict(py, kernels)
 }
 
 /// Columns by name, copied out of numpy before the GIL is released.

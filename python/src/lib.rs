@@ -1,7 +1,7 @@
 //! `structid._structid`: the native module of the Python package `structid`.
 //!
 //! A thin layer over the library: one module per concept ([`model`], [`identify`],
-//! [`estimate`], [`linear`], [`refine`], [`discover`], [`staticness`], [`design`], [`paper`]), every conversion between Python and Rust in [`convert`]. Long calls release
+//! [`estimate`], [`linear`], [`refine`], [`discover`], [`staticness`], [`design`], [`paper`], [`user_kernel`]), every conversion between Python and Rust in [`convert`]. Long calls release
 //! the GIL (`Python::detach`). The Python package (`structid/__init__.py`) turns the
 //! dictionaries returned here into dataclasses.
 
@@ -16,6 +16,7 @@ mod model;
 mod paper;
 mod refine;
 mod staticness;
+mod user_kernel;
 
 use pyo3::prelude::*;
 
@@ -25,6 +26,8 @@ fn _structid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("StructidError", m.py().get_type::<convert::StructidError>())?;
     m.add_class::<model::Model>()?;
     m.add_class::<estimate::Fitted>()?;
+    m.add_class::<user_kernel::PyKernel>()?;
+    m.add_class::<user_kernel::PyFeatures>()?;
     m.add_function(wrap_pyfunction!(identify::identify_columns, m)?)?;
     m.add_function(wrap_pyfunction!(refine::refine_columns, m)?)?;
     m.add_function(wrap_pyfunction!(joint::refine_joint_columns, m)?)?;

@@ -12,7 +12,7 @@ use structid_io::{ModelFile, RefinementReport, Report};
 use structid_linear::OeSettings;
 
 use crate::convert::{self, error, invalid};
-use crate::identify::{Outcome, named_columns};
+use crate::identify::{Outcome, map_values, named_columns};
 use crate::model::Model;
 
 /// What `refine` is asked to do.
@@ -219,6 +219,7 @@ fn run(
         .map_err(error)?;
     Ok((
         Outcome {
+            maps: map_values(&id)?,
             report: report.to_json_string().map_err(error)?,
             beta: result.beta,
             sigma: width,
@@ -270,7 +271,7 @@ pub fn refine_columns<'py>(
         .map(|v| v.iter().map(|r| named_columns(r)).collect());
     let model = model.clone();
     let (outcome, refined) = py.detach(move || run(&model, named, validation, &request))?;
-    let d = outcome.into_dict(py)?;
+    let d = outcome.into_dict(py, Vec::new())?;
     d.set_item("model", Model { file: refined })?;
     Ok(d)
 }

@@ -196,6 +196,23 @@ fn identify_writes_an_estimate_that_validates_simulates_and_predicts_without_the
     for (x, y) in far.iter().zip(&sim_stored) {
         assert!((x - y).abs() <= 1e-9 * (1.0 + x.abs()));
     }
+
+    // An estimate on a user-defined kernel stores the kernel's name only; the tool, which
+    // cannot run user code, says which kernel it lacks.
+    let mut doc = read_json(&stored);
+    doc["blocks"][0]["map"]["kernel"] = serde_json::json!({"kind": "user", "name": "matern"});
+    let user = dir.path().join("user.json");
+    std::fs::write(&user, serde_json::to_string(&doc).unwrap()).unwrap();
+    let msg = input_error(&[
+        "predict",
+        "--estimate",
+        p(&user),
+        "--data",
+        p(&val),
+        "--out",
+        p(&dir.path().join("pu")),
+    ]);
+    assert!(msg.contains("user-defined kernel `matern`"), "{msg}");
 }
 
 #[test]

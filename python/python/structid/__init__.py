@@ -24,7 +24,7 @@ the ``structid`` command-line tool, and long calls release the GIL.
 
 from __future__ import annotations
 
-from ._structid import StructidError, __version__
+from ._structid import FeatureMap, Kernel, StructidError, __version__
 from ._model import Model, gaussian, gaussian_lowrank, fourier, polynomial, total_variation
 from ._identify import Fit, MapEstimate, identify, load
 from ._estimate import Estimate, Prediction, RecordsValidation, Validation
@@ -73,5 +73,7 @@ __all__ = [
     "fourier",
     "polynomial",
     "total_variation",
+    "Kernel",
+    "FeatureMap",
     "__version__",
 ]

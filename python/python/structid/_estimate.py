@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -68,7 +68,8 @@ class RecordsValidation:
 class Estimate:
     """A fitted model (what ``estimate.json`` stores): the linear block with every estimated
     map. It simulates, predicts and validates without the estimation data; pickling keeps its
-    JSON document (numbers bit for bit). A fresh fit also computes bands at any point."""
+    JSON document (numbers bit for bit) and the user kernels it is built on. A fresh fit also
+    computes bands at any point."""
 
     __slots__ = ("_native",)
 
@@ -76,14 +77,17 @@ class Estimate:
         self._native = native
 
     @classmethod
-    def from_file(cls, path: Union[str, os.PathLike]) -> "Estimate":
-        """Reads an estimate.json (of ``structid identify``, ``refine``, ``discover``)."""
-        return cls(_structid.Estimate.from_file(os.fspath(path)))
+    def from_file(cls, path: Union[str, os.PathLike],
+                  kernels: Sequence[Any] = ()) -> "Estimate":
+        """Reads an estimate.json (of ``structid identify``, ``refine``, ``discover``).
+        An estimate made with your own :class:`Kernel` or :class:`FeatureMap` stores only
+        its name: pass the same objects in ``kernels``."""
+        return cls(_structid.Estimate.from_file(os.fspath(path), list(kernels)))
 
     @classmethod
-    def from_json(cls, text: str) -> "Estimate":
-        """The estimate from its JSON document."""
-        return cls(_structid.Estimate.from_json(text))
+    def from_json(cls, text: str, kernels: Sequence[Any] = ()) -> "Estimate":
+        """The estimate from its JSON document (with ``kernels`` as for :meth:`from_file`)."""
+        return cls(_structid.Estimate.from_json(text, list(kernels)))
 
     def to_json(self) -> str:
         """The JSON document (estimate.json)."""
@@ -154,11 +158,13 @@ class Estimate:
         return _validation(self._native.validate(as_signal(u, "u"), as_signal(y, "y"),
                                                  initial_state, int(max_lag), int(settle)))
 
-    def __getstate__(self) -> str:
-        return self.to_json()
+    def __getstate__(self) -> "_structid.Estimate":
+        # The native estimate pickles as its JSON document and the user kernels it uses.
+        return self._native
 
-    def __setstate__(self, text: str) -> None:
-        self._native = _structid.Estimate.from_json(text)
+    def __setstate__(self, state: Any) -> None:
+        self._native = (_structid.Estimate.from_json(state, [])
+                        if isinstance(state, str) else state)
 
     def __repr__(self) -> str:
         return repr(self._native)

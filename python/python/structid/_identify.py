@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -133,7 +133,9 @@ def _columns(model: Model, u: object, y: object, z: object, what: str) -> List[T
 
 def identify(model: Model, u: object, y: object, z: object = None, *,
              beta: Union[float, str] = 0.01, sigma: Union[None, float, str] = None,
-             dispersion: Union[None, Dispersion, str] = None, selection: Optional[str] = None,
+             dispersion: Union[None, Dispersion, str, "_structid.Kernel", "_structid.FeatureMap",
+                               Dict[str, Any]] = None,
+             selection: Optional[str] = None,
              folds: int = 5, validation: Optional[Tuple[object, ...]] = None,
              solver: str = "auto", initial_state: str = "zero", bands: bool = True,
              tolerance: Optional[float] = None, max_iterations: Optional[int] = None,
@@ -144,13 +146,15 @@ def identify(model: Model, u: object, y: object, z: object = None, *,
     channel), or lists of such arrays for several records (experiments), each with its own
     initial state and length: ``identify(model, [u1, u2], [y1, y2])``. ``beta`` is β or ``"auto"``; ``sigma`` is a kernel width for every block,
     ``"auto"`` or None (the model's). ``dispersion`` replaces every block's dispersion (e.g.
-    ``"fourier"``, ``structid.total_variation()``). ``selection`` is ``"ml"``, ``"gcv"``,
+    ``"fourier"``, ``structid.total_variation()``), or is your own :class:`Kernel` or
+    :class:`FeatureMap` (for every block, or ``{block name: kernel}`` for some). ``selection`` is ``"ml"``, ``"gcv"``,
     ``"cv"`` (``folds``) or ``"validation"`` (with ``validation=(u_val, y_val)``); by default
     marginal likelihood for quadratic dispersions, cross-validation for total variation.
     ``solver`` is ``auto``, ``exact``, ``features``, ``clarabel`` or ``admm``. Raises
     :class:`StructidError` with the library's message on bad input or failure.
     """
-    if dispersion is not None:
+    kernels = _user_kernels(dispersion)
+    if dispersion is not None and not kernels:
         model = model.with_dispersion(_dispersion(dispersion))
     beta_value = None if isinstance(beta, str) and beta == "auto" else beta
     if isinstance(beta, str) and beta != "auto":
@@ -177,8 +181,19 @@ def identify(model: Model, u: object, y: object, z: object = None, *,
         model._native, cols, None if beta_value is None else float(beta_value),
         None if sigma is None or sigma_auto else float(sigma), sigma_auto, selection, int(folds),
         val, solver, initial_state, bool(bands), tolerance, max_iterations, memory_limit_mib,
-        more)
+        more, kernels)
     return _fit(model, out)
+
+
+def _user_kernels(dispersion: object) -> List[Tuple[Optional[str], Any]]:
+    """(block or None for every block, kernel) for user kernels and feature maps; empty for a
+    built-in dispersion."""
+    user = (_structid.Kernel, _structid.FeatureMap)
+    if isinstance(dispersion, user):
+        return [(None, dispersion)]
+    if isinstance(dispersion, dict) and "kind" not in dispersion:
+        return [(str(block), k) for block, k in dispersion.items()]
+    return []
 
 
 def _is_records(x: object) -> bool:
@@ -200,13 +215,15 @@ def _fit(model: Model, out: Dict[str, Any]) -> Fit:
                widths=list(out.get("widths") or []), noise_variance=out.get("noise_variance"))
 
 
-def load(directory: Union[str, os.PathLike]) -> Fit:
+def load(directory: Union[str, os.PathLike], kernels: Sequence[Any] = ()) -> Fit:
     """Reads a result directory written by :meth:`Fit.save` or by ``structid identify --out``:
     the estimate, ŵ and ê (estimate.csv), report.json and the model (model.toml, else the
     report's model file). Maps are evaluated on the grid of the report's z ranges; the
-    samples' z and the bands are not kept in the files (``z`` is empty, ``std`` is None)."""
+    samples' z and the bands are not kept in the files (``z`` is empty, ``std`` is None).
+    A fit made with your own :class:`Kernel` or :class:`FeatureMap` stores its name only:
+    pass the same objects in ``kernels``."""
     d = os.fspath(directory)
-    estimate = Estimate.from_file(os.path.join(d, "estimate.json"))
+    estimate = Estimate.from_file(os.path.join(d, "estimate.json"), kernels)
     with open(os.path.join(d, "report.json"), encoding="utf-8") as f:
         report = json.load(f)
     model_path = os.path.join(d, "model.toml")
