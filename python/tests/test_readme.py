@@ -23,3 +23,7 @@ def test_readme_example_runs(tmp_path, monkeypatch):
     assert np.max(np.abs(fit.evaluate("N", z) - np.tanh(2 * z))) < 0.1
     np.testing.assert_array_equal(again.evaluate("N", z), fit.evaluate("N", z))
     assert os.path.isfile(tmp_path / "fit-dir" / "report.json")
+    # The example's own kernel finds the same map.
+    mine = scope["mine"]
+    assert mine.maps["N"].dispersion == "laplace"
+    assert np.max(np.abs(mine.evaluate("N", z) - np.tanh(2 * z))) < 0.1
