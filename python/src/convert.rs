@@ -67,27 +67,6 @@ pub fn signal(a: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<Signal> {
     Signal::new(channels, data).map_err(error)
 }
 
-/// The library model of a model file with every block's kernel width: `sigma` when given,
-/// else the file's, else the default from the range of the block's z on `data` (as `structid
-/// identify` chooses it).
-pub fn core_model(
-    mf: &ModelFile,
-    sigma: Option<f64>,
-    data: &Data,
-) -> PyResult<structid_core::Model> {
-    let needs_z = sigma.is_none()
-        && mf.blocks.iter().any(|b| {
-            b.dispersion.sigma().is_none()
-                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
-        });
-    let z = if needs_z {
-        Some(mf.z_signal(data).map_err(error)?)
-    } else {
-        None
-    };
-    mf.to_model(sigma, z.as_ref()).map_err(error)
-}
-
 /// A signal as an L × n numpy array.
 pub fn array<'py>(py: Python<'py>, s: &Signal) -> Bound<'py, PyArray2<f64>> {
     Array2::from_shape_vec((s.len(), s.channels()), s.as_slice().to_vec())

@@ -6,11 +6,12 @@ use std::sync::Arc;
 use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use structid_core::selection::{Criterion, SelectionSettings, select};
+use structid_core::progress::Progress;
+use structid_core::selection::Criterion;
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
-use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal, identify};
-use structid_io::{Report, SelectionReport};
+use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal};
+use structid_workflow::{IdentifyRequest, identify_model_file};
 
 use crate::convert::{self, error, invalid};
 use crate::estimate::Fitted;
@@ -101,19 +102,19 @@ fn settings(r: &Request) -> PyResult<IdentifySettings> {
     b.build().map_err(error)
 }
 
-fn criterion(r: &Request, quadratic: bool) -> PyResult<Criterion> {
+/// The criterion asked for; `None`: the workflow's default.
+fn criterion(r: &Request) -> PyResult<Option<Criterion>> {
     Ok(match r.selection.as_deref() {
-        Some("ml") => Criterion::MarginalLikelihood,
-        Some("gcv") => Criterion::Gcv,
-        Some("cv") => Criterion::CrossValidation { folds: r.folds },
-        Some("validation") => Criterion::Validation,
+        Some("ml") => Some(Criterion::MarginalLikelihood),
+        Some("gcv") => Some(Criterion::Gcv),
+        Some("cv") => Some(Criterion::CrossValidation { folds: r.folds }),
+        Some("validation") => Some(Criterion::Validation),
         Some(other) => {
             return Err(invalid(format!(
                 "selection `{other}` is not one of ml, gcv, cv, validation"
             )));
         }
-        None if quadratic => Criterion::MarginalLikelihood,
-        None => Criterion::CrossValidation { folds: r.folds },
+        None => None,
     })
 }
 
@@ -226,16 +227,6 @@ fn run_records(
 ) -> PyResult<Outcome> {
     let settings = settings(r)?;
     let mf = &model.file;
-    if let Some(s) = r.sigma
-        && !(s.is_finite() && s > 0.0)
-    {
-        return Err(invalid(format!(
-            "invalid sigma {s}: it must be a finite number greater than zero"
-        )));
-    }
-    mf.check_z_computable().map_err(error)?;
-    mf.lft.check_residual_stable().map_err(error)?;
-    let auto_beta = r.beta.is_none();
     if r.selection.as_deref() == Some("cv") && r.folds < 2 {
         return Err(invalid("folds must be at least 2"));
     }
@@ -244,7 +235,7 @@ fn run_records(
             "selection=\"validation\" and validation data go together",
         ));
     }
-    if r.selection.is_some() && !(auto_beta || r.sigma_auto) {
+    if r.selection.is_some() && !(r.beta.is_none() || r.sigma_auto) {
         return Err(invalid(
             "a selection criterion needs beta=\"auto\" and/or sigma=\"auto\"",
         ));
@@ -258,60 +249,36 @@ fn run_records(
     } else {
         Data::from_records(data).map_err(error)?
     };
-    // The checks of `structid identify`: a map input that does not vary, an absurd σ.
-    mf.check_excitation(&data, "the data").map_err(error)?;
-    if let Some(s) = r.sigma {
-        mf.check_sigma(s, &data, "sigma").map_err(error)?;
-    }
-    let core = with_user_dispersions(convert::core_model(mf, r.sigma, &data)?, &r.user, r.sigma)?;
-    let (id, settings, fitted_model, selection) = if auto_beta || r.sigma_auto {
-        let criterion = criterion(r, !model.has_total_variation())?;
-        let validation = validation.map(|v| convert::record(mf, v)).transpose()?;
-        let how = SelectionSettings::builder()
-            .criterion(criterion)
-            .tune_beta(auto_beta)
-            .tune_sigma(r.sigma_auto)
-            .build()
-            .map_err(error)?;
-        let sel = select(&core, &data, validation.as_ref(), &settings, &how).map_err(error)?;
-        let chosen = settings.with_beta(sel.beta).map_err(error)?;
-        let report = SelectionReport::new(&sel);
-        let widths = sel.widths.clone();
-        (
-            sel.identification,
-            chosen,
-            sel.model,
-            Some((report, widths)),
-        )
-    } else {
-        let id = identify(&core, &data, &settings).map_err(error)?;
-        (id, settings, core, None)
-    };
-    id.check_converged().map_err(error)?;
-    let mut report = Report::new(mf, &id, &settings, r.sigma).map_err(error)?;
-    let (selection, widths) = match selection {
-        Some((s, w)) => (Some(s), w),
-        None => (None, Vec::new()),
-    };
-    let sigma = selection.as_ref().and_then(|s| s.sigma).or(r.sigma);
-    report.selection = selection;
-    let estimate =
-        Estimate::from_identification(&fitted_model, &id, &data, &settings).map_err(error)?;
-    let estimate = estimate
-        .with_signal_names(structid_core::estimate::SignalNames {
-            u: mf.signals.u.clone(),
-            y: mf.signals.y.clone(),
-        })
-        .map_err(error)?;
-    let maps = map_values(&id)?;
+    let validation = validation.map(|v| convert::record(mf, v)).transpose()?;
+    let out = identify_model_file(&IdentifyRequest {
+        model: mf,
+        data: &data,
+        data_label: "the data".into(),
+        validation: validation.as_ref(),
+        beta: r.beta,
+        sigma: r.sigma,
+        sigma_label: "sigma".into(),
+        sigma_auto: r.sigma_auto,
+        selection: criterion(r)?,
+        folds: r.folds,
+        settings,
+        dispersions: r
+            .user
+            .iter()
+            .map(|(block, u)| (block.clone(), u.dispersion()))
+            .collect(),
+        progress: Progress::none(),
+    })
+    .map_err(error)?;
+    out.identification.check_converged().map_err(error)?;
     Ok(Outcome {
-        maps,
-        report: report.to_json_string().map_err(error)?,
-        beta: settings.beta(),
-        sigma,
-        widths,
-        id,
-        estimate,
+        maps: map_values(&out.identification)?,
+        report: out.report.to_json_string().map_err(error)?,
+        beta: out.settings.beta(),
+        sigma: out.sigma,
+        widths: out.widths,
+        id: out.identification,
+        estimate: out.estimate,
     })
 }
 
@@ -353,30 +320,6 @@ fn maps_dict<'py>(
             Ok(d)
         })
         .collect()
-}
-
-/// The core model with the Python kernels and feature maps in place of the model file's
-/// dispersions: one block's by name, or every block's.
-fn with_user_dispersions(
-    core: structid_core::Model,
-    user: &[(Option<String>, UserDispersion)],
-    sigma: Option<f64>,
-) -> PyResult<structid_core::Model> {
-    if let Some(name) = user
-        .iter()
-        .filter_map(|(b, _)| b.as_deref())
-        .find(|name| core.blocks().iter().all(|b| b.name != *name))
-    {
-        return Err(invalid(format!(
-            "the model has no block `{name}` for a kernel"
-        )));
-    }
-    Ok(core.with_dispersions(|b| {
-        user.iter()
-            .rev()
-            .find(|(name, _)| name.as_deref().is_none_or(|n| n == b.name))
-            .map_or_else(|| Arc::clone(&b.dispersion), |(_, u)| u.dispersion(sigma))
-    }))
 }
 
 /// A record as named numpy columns.

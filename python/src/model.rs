@@ -30,20 +30,10 @@ impl Model {
         Ok(Self { file: back })
     }
 
-    /// The model's blocks that use a total-variation dispersion exist.
     /// A model from a model file that a workflow produced (already checked, its tables in
     /// memory).
     pub(crate) fn from_file_value(file: ModelFile) -> PyResult<Self> {
         Ok(Self { file })
-    }
-
-    pub(crate) fn has_total_variation(&self) -> bool {
-        self.file.blocks.iter().any(|b| {
-            matches!(
-                b.dispersion,
-                structid_io::DispersionSpec::TotalVariation { .. }
-            )
-        })
     }
 }
 

@@ -123,7 +123,7 @@ fn run(
     if let Some(s) = r.sigma {
         mf.check_sigma(s, &data, "sigma").map_err(error)?;
     }
-    let core = convert::core_model(mf, r.sigma, &data)?;
+    let core = structid_workflow::core_model(mf, r.sigma, &data).map_err(error)?;
     let identify_settings = IdentifySettings::builder()
         .beta(beta)
         .initial_state(convert::initial_state(&r.initial_state)?)

@@ -456,19 +456,10 @@ impl UserDispersion {
             .map(|f| Self::Features(f.get().clone()))
     }
 
-    /// The dispersion, with the width `sigma` when given and the kernel has one.
-    pub(crate) fn dispersion(&self, sigma: Option<f64>) -> Arc<dyn Dispersion> {
+    /// The dispersion.
+    pub(crate) fn dispersion(&self) -> Arc<dyn Dispersion> {
         match self {
-            Self::Kernel(k) => {
-                let k = match (sigma, k.width) {
-                    (Some(s), Some(_)) => PyKernel {
-                        width: Some(s),
-                        ..k.clone()
-                    },
-                    _ => k.clone(),
-                };
-                Arc::new(KernelDispersion::new(k))
-            }
+            Self::Kernel(k) => Arc::new(KernelDispersion::new(k.clone())),
             Self::Features(f) => Arc::new(FeatureDispersion::new(f.name.clone(), f.clone())),
         }
     }

@@ -6,6 +6,7 @@
 //!
 //! | module | workflow |
 //! |---|---|
+//! | [`identify`](mod@identify) | a model file's maps identified from records, with β and σ given or selected (`structid identify`) |
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`](mod@wiener_hammerstein) | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
@@ -16,6 +17,7 @@
 pub mod discover_report;
 pub mod error;
 pub mod free;
+pub mod identify;
 pub mod joint;
 pub mod linear_start;
 pub mod remedy;
@@ -24,6 +26,9 @@ pub mod wiener_hammerstein;
 
 pub use error::{Result, WorkflowError};
 pub use free::parse_free;
+pub use identify::{
+    IdentifyOutcome, IdentifyRequest, core_model, default_criterion, identify_model_file,
+};
 pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
