@@ -7,15 +7,12 @@ use std::time::Instant;
 use structid_core::estimate::{Estimate, SignalNames};
 use structid_io::estimate_json;
 
-use structid_core::selection::{Criterion, SelectionSettings, select};
+use structid_core::selection::Criterion;
 use structid_core::solver::admm::AdmmSettings;
 use structid_core::solver::conic::ConicSettings;
-use structid_core::{
-    Data, Identification, IdentifySettings, InitialState, Model, SolverChoice, identify,
-};
-use structid_io::{
-    DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, SelectionReport, TruthSpec,
-};
+use structid_core::{Data, Identification, IdentifySettings, InitialState, Model, SolverChoice};
+use structid_io::{DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, TruthSpec};
+use structid_workflow::{IdentifyRequest, identify_model_file};
 
 use crate::IdentifyArgs;
 use crate::error::{CliError, positive};
@@ -357,15 +354,6 @@ const LONG_SOLVE_SAMPLES: usize = 5000;
 pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let (settings, sigma, mf) = load(&a)?;
-    let cannot = |e: structid_core::Error| {
-        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
-    };
-    // A block whose z the data do not give (latent, or behind another map) is the joint
-    // fit's: the error's hint says so.
-    mf.check_z_computable().map_err(|e| {
-        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
-    })?;
-    mf.lft.check_residual_stable().map_err(cannot)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
     let auto_beta = a.beta == crate::AutoOr::Auto;
     if a.folds < 2 && a.selection == Some(crate::SelectionArg::Cv) {
@@ -399,63 +387,61 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         )
         .collect();
     guard.check_out_dir(&a.out, &planned)?;
-    let (data, model) = model_and_data(&mf, &a.data, sigma)?;
-    check_excitation(&mf, &data, &files_label(&a.data))?;
-    if let Some(s) = sigma {
-        check_sigma(s, &mf, &data)?;
-    }
-    let (id, settings, selection) = if auto_beta || auto_sigma {
-        let quadratic = !mf
-            .blocks
-            .iter()
-            .any(|b| matches!(b.dispersion, DispersionSpec::TotalVariation { .. }));
-        let criterion = match a.selection {
-            Some(crate::SelectionArg::Ml) => Criterion::MarginalLikelihood,
-            Some(crate::SelectionArg::Gcv) => Criterion::Gcv,
-            Some(crate::SelectionArg::Cv) => Criterion::CrossValidation { folds: a.folds },
-            Some(crate::SelectionArg::Validation) => Criterion::Validation,
-            None if quadratic => Criterion::MarginalLikelihood,
-            None => Criterion::CrossValidation { folds: a.folds },
-        };
-        let validation = match &a.validation_data {
-            Some(v) => Some(mf.select_data(&crate::data::read_table(v)?)?),
-            None => None,
-        };
+    let data = read_records(&mf, &a.data)?;
+    let validation = match &a.validation_data {
+        Some(v) => Some(mf.select_data(&crate::data::read_table(v)?)?),
+        None => None,
+    };
+    let criterion = a.selection.map(|s| match s {
+        crate::SelectionArg::Ml => Criterion::MarginalLikelihood,
+        crate::SelectionArg::Gcv => Criterion::Gcv,
+        crate::SelectionArg::Cv => Criterion::CrossValidation { folds: a.folds },
+        crate::SelectionArg::Validation => Criterion::Validation,
+    });
+    // A selection counts its trials; one solve reports nothing on its way, and above this
+    // size takes long enough that a terminal should show it is running.
+    let pb = if auto_beta || auto_sigma {
         let pb = crate::progress::bar(None, "β trials");
-        pb.set_message(format!("selecting by {}", criterion.describe()));
-        let how = SelectionSettings::builder()
-            .criterion(criterion)
-            .tune_beta(auto_beta)
-            .tune_sigma(auto_sigma)
-            .progress(crate::progress::observer(&pb))
-            .build()?;
-        let sel = select(&model, &data, validation.as_ref(), &settings, &how);
-        pb.finish_and_clear();
-        let sel = sel?;
-        let chosen = settings.with_beta(sel.beta)?;
-        let report = SelectionReport::new(&sel);
-        let widths: Vec<(String, f64)> = if auto_sigma {
-            sel.model
-                .blocks()
-                .iter()
-                .zip(&sel.widths)
-                .filter_map(|(b, w)| w.map(|w| (b.name.clone(), w)))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        (sel.identification, chosen, Some((report, widths)))
+        let shown = criterion
+            .clone()
+            .unwrap_or_else(|| structid_workflow::default_criterion(&mf, a.folds));
+        pb.set_message(format!("selecting by {}", shown.describe()));
+        pb
+    } else if data.len() > LONG_SOLVE_SAMPLES {
+        crate::progress::spinner(format!("identifying from {} samples", data.len()))
     } else {
-        // One solve reports nothing on its way; above this size it takes long enough that a
-        // terminal should show it is running.
-        let pb = if data.len() > LONG_SOLVE_SAMPLES {
-            crate::progress::spinner(format!("identifying from {} samples", data.len()))
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
-        let id = identify(&model, &data, &settings);
-        pb.finish_and_clear();
-        (id?, settings, None)
+        indicatif::ProgressBar::hidden()
+    };
+    let outcome = identify_model_file(&IdentifyRequest {
+        model: &mf,
+        data: &data,
+        data_label: files_label(&a.data),
+        validation: validation.as_ref(),
+        beta: (!auto_beta).then(|| settings.beta()),
+        sigma,
+        sigma_label: "--sigma".into(),
+        sigma_auto: auto_sigma,
+        selection: criterion,
+        folds: a.folds,
+        settings,
+        dispersions: Vec::new(),
+        progress: crate::progress::observer(&pb),
+    });
+    pb.finish_and_clear();
+    let outcome = outcome.map_err(|e| {
+        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
+    })?;
+    let id = &outcome.identification;
+    let block_sigmas: Vec<(String, f64)> = if auto_sigma {
+        outcome
+            .model
+            .blocks()
+            .iter()
+            .zip(&outcome.widths)
+            .filter_map(|(b, w)| w.map(|w| (b.name.clone(), w)))
+            .collect()
+    } else {
+        Vec::new()
     };
     // An iterate that stopped at a limit is written all the same, its status and the
     // solver's warning in report.json, and then reported as a runtime failure: the run is
@@ -463,23 +449,17 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let unconverged = id.check_converged().err();
 
     guard.begin_set(&a.out, Some(&planned))?;
-    let mut report = Report::new(&mf, &id, &settings, sigma)?;
+    let mut report = outcome.report.clone();
     report.data_file = Some(files_label(&a.data));
-    let (selection, block_sigmas) = match selection {
-        Some((r, w)) => (Some(r), w),
-        None => (None, Vec::new()),
-    };
-    let mut rec = reproduction(&a, &id, settings.beta(), sigma);
+    let mut rec = reproduction(&a, id, outcome.settings.beta(), sigma);
     rec.block_sigmas = block_sigmas;
     report.reproduction = Some(rec);
-    report.selection = selection;
-    let stored = Estimate::from_identification(&model, &id, &data, &settings)?;
     let written = write_estimate(
         &a.out,
         &mut guard,
         &mf,
-        &id,
-        &stored,
+        id,
+        &outcome.estimate,
         &mut report,
         a.no_bands,
     )?;
@@ -487,7 +467,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
 
     print!(
         "{}",
-        summary(&report, &id, &written, t0.elapsed().as_secs_f64())
+        summary(&report, id, &written, t0.elapsed().as_secs_f64())
     );
     match unconverged {
         Some(e) => Err(CliError::runtime(format!(
