@@ -286,16 +286,6 @@ pub(crate) fn model_and_data(
     Ok((data, model))
 }
 
-/// Refuses a record on which a block's input z does not vary ([`ModelFile::check_excitation`]).
-pub(crate) fn check_excitation(mf: &ModelFile, data: &Data, source: &str) -> Result<(), CliError> {
-    Ok(mf.check_excitation(data, source)?)
-}
-
-/// Refuses a `--sigma` that is absurd for the record ([`ModelFile::check_sigma`]).
-pub(crate) fn check_sigma(sigma: f64, mf: &ModelFile, data: &Data) -> Result<(), CliError> {
-    Ok(mf.check_sigma(sigma, data, "--sigma")?)
-}
-
 /// An absolute, canonical form of an existing path (absolute but not canonical when it cannot
 /// be resolved), for reports that must not depend on the working directory.
 pub(crate) fn absolute(p: &Path) -> PathBuf {
@@ -402,9 +392,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     // size takes long enough that a terminal should show it is running.
     let pb = if auto_beta || auto_sigma {
         let pb = crate::progress::bar(None, "β trials");
-        let shown = criterion
-            .clone()
-            .unwrap_or_else(|| structid_workflow::default_criterion(&mf, a.folds));
+        let shown = criterion.unwrap_or_else(|| structid_workflow::default_criterion(&mf, a.folds));
         pb.set_message(format!("selecting by {}", shown.describe()));
         pb
     } else if data.len() > LONG_SOLVE_SAMPLES {

@@ -4,18 +4,16 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
-use structid_core::estimate::{Estimate, Provenance};
 
 use clap::Args;
-use structid_core::refine::{LinearStructure, RefineSettings, refine};
-use structid_core::selection::{Criterion, SelectionSettings};
+use structid_core::selection::Criterion;
 use structid_core::{Data, IdentifySettings, InitialState};
-use structid_io::{LinearSpec, ModelFile, OutputGuard, RefinementReport, Report, Reproduction};
-use structid_linear::OeSettings;
+use structid_io::{ModelFile, OutputGuard, Reproduction};
 use structid_plot::{Chart, Series, render_chart_svg};
+use structid_workflow::{RefineRequest, refine_model_file};
 
 use crate::error::CliError;
-use crate::identify::{absolute, model_and_data, write_estimate};
+use crate::identify::{absolute, write_estimate};
 use crate::{AutoOr, InitialStateArg};
 
 /// Arguments of `structid refine`.
@@ -117,60 +115,6 @@ fn split(data: &Data, at: usize) -> Result<(Data, Data), CliError> {
     Ok((part(0..at)?, part(at..data.len())?))
 }
 
-/// An `[lft]` model file as the `[linear]` one it is: the structure and G that its one map's
-/// declared location puts the map around ([`LinearStructure::from_lft`]), the block reading
-/// z 0 and writing w 0. Returns the file, its `[linear]` section and a sentence saying what
-/// was recognised.
-fn as_linear(
-    mf: ModelFile,
-    path: &std::path::Path,
-) -> Result<(ModelFile, LinearSpec, Option<String>), CliError> {
-    let [block] = mf.blocks.as_slice() else {
-        return Err(CliError::input(format!(
-            "`{}` has {} maps; refinement of an [lft] model needs exactly one",
-            path.display(),
-            mf.blocks.len()
-        )));
-    };
-    let [z] = block.inputs.as_slice() else {
-        return Err(CliError::input(format!(
-            "the map `{}` of `{}` reads {} z channels; refinement re-estimates G around a map \
-             of one input",
-            block.name,
-            path.display(),
-            block.inputs.len()
-        )));
-    };
-    let (structure, g) = LinearStructure::from_lft(&block.name, &mf.lft, *z, block.output)
-        .map_err(|e| {
-            CliError::input(format!(
-                "`{}` cannot be refined: {}",
-                path.display(),
-                e.to_string()
-                    .trim_start_matches("invalid model structure: ")
-            ))
-        })?;
-    let spec = LinearSpec {
-        structure: Some(structure.site()),
-        model: g,
-        separate_numerator: structure.separate_numerator(),
-    };
-    let mut out = mf.clone();
-    out.lft = spec.lft()?;
-    out.linear = Some(spec.clone());
-    out.signals.z = None;
-    out.blocks[0].inputs = vec![0];
-    out.blocks[0].output = 0;
-    out.discover = None;
-    let note = format!(
-        "the [lft] location of `{}` (z {z}, w {}) is {}; model.toml is written as [linear]",
-        block.name,
-        block.output,
-        structure.describe()
-    );
-    Ok((out, spec, Some(note)))
-}
-
 /// Runs `structid refine`.
 pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if a.joint {
@@ -179,41 +123,14 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let iterations = a.iterations.unwrap_or(10);
     let read = ModelFile::from_path(&a.model)?;
-    let (mf, spec, recognised) = match read.linear.clone() {
-        Some(spec) => (read, spec, None),
-        None => as_linear(read, &a.model)?,
+    let (mf, recognised) = match read.linear {
+        Some(_) => (read, None),
+        None => {
+            let (mf, _, note) =
+                structid_workflow::as_linear(&read, &a.model.display().to_string())?;
+            (mf, Some(note))
+        }
     };
-    if spec.structure.is_none() {
-        return Err(CliError::input(format!(
-            "`{}` has structure = \"lti\", a linear model without a map; refinement \
-             re-estimates G around a map (structure = \"output-feedback\", \"rate-feedback\", \
-             \"input\" or \"output\")",
-            a.model.display()
-        )));
-    }
-    if mf.blocks.len() != 1 {
-        return Err(CliError::input(format!(
-            "`{}` has {} maps; refinement needs a structure with exactly one",
-            a.model.display(),
-            mf.blocks.len()
-        )));
-    }
-    let block = mf.blocks[0].name.clone();
-    let structure = spec.structure(&block).ok_or_else(|| {
-        CliError::input(format!(
-            "structure = \"{}\" has no map to refine",
-            spec.structure_name()
-        ))
-    })?;
-    if iterations == 0 {
-        return Err(CliError::input("--iterations must be at least 1"));
-    }
-    if !(a.tolerance.is_finite() && a.tolerance >= 0.0) {
-        return Err(CliError::input(format!(
-            "invalid value {} for --tolerance: it must be a finite number ≥ 0",
-            a.tolerance
-        )));
-    }
     if let Some(f) = a.validation_fraction
         && !(f > 0.0 && f < 1.0)
     {
@@ -265,12 +182,8 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         Some(AutoOr::Value(s)) => Some(s),
         _ => None,
     };
-    let (all, model) = model_and_data(&mf, &a.data, sigma)?;
+    let all = crate::identify::read_records(&mf, &a.data)?;
     let data_label = crate::identify::files_label(&a.data);
-    crate::identify::check_excitation(&mf, &all, &data_label)?;
-    if let Some(s) = sigma {
-        crate::identify::check_sigma(s, &mf, &all)?;
-    }
     let (data, validation, validation_note, estimation_file): (Data, Option<Data>, _, _) = match (
         a.validation_data.is_empty(),
         a.validation_fraction,
@@ -316,97 +229,51 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         }
         (true, None) => (all, None, None, None),
     };
-    if let Some(v) = &validation
-        && a.validation_fraction.is_none()
-    {
-        // Every validation record is scored after its settling samples.
-        for (i, (r, path)) in v.records().iter().zip(&a.validation_data).enumerate() {
-            if a.settle >= r.len() {
-                return Err(CliError::input(format!(
-                    "--settle {} is not less than the {} samples of validation record {}{}",
-                    a.settle,
-                    r.len(),
-                    i + 1,
-                    if a.validation_data.len() > 1 {
-                        format!(" (`{}`)", path.display())
-                    } else {
-                        String::new()
-                    }
-                )));
-            }
-        }
-    }
-
-    // Settings.
-    let initial_state = match a.initial_state {
-        InitialStateArg::Zero => InitialState::Zero,
-        InitialStateArg::Estimate => InitialState::Estimate,
-    };
-    let auto_beta = a.beta == AutoOr::Auto;
-    let auto_sigma = a.sigma == Some(AutoOr::Auto);
-    let beta = match a.beta {
-        AutoOr::Value(b) => crate::error::beta("--beta", b)?,
-        AutoOr::Auto => 0.01,
-    };
-    let identify_settings = IdentifySettings::builder()
-        .beta(beta)
-        .initial_state(initial_state)
-        .posterior(!a.no_bands)
-        .build()?;
-    let pb = crate::progress::bar(Some(iterations as u64), "alternations");
-    let selection = if auto_beta || auto_sigma {
-        Some(
-            SelectionSettings::builder()
-                .criterion(match a.selection {
-                    RefineSelectionArg::Ml => Criterion::MarginalLikelihood,
-                    RefineSelectionArg::Gcv => Criterion::Gcv,
-                })
-                .tune_beta(auto_beta)
-                .tune_sigma(auto_sigma)
-                .progress(crate::progress::message_observer(&pb, "first pass"))
-                .build()?,
-        )
-    } else {
-        None
-    };
-    let mut oe = OeSettings::builder();
-    if let Some(ts) = spec.model.sample_time {
-        oe = oe.sample_time(ts);
-    }
     let settle = match a.validation_fraction {
         Some(_) => data.len() + a.settle,
         None => a.settle,
     };
-    let settings = RefineSettings::builder()
-        .max_iterations(iterations)
-        .tolerance(a.tolerance)
-        .identify(identify_settings.clone())
-        .selection(selection)
-        .oe(oe.build()?)
-        .settle(settle)
-        .progress(crate::progress::observer(&pb))
+    let identify_settings = IdentifySettings::builder()
+        .initial_state(match a.initial_state {
+            InitialStateArg::Zero => InitialState::Zero,
+            InitialStateArg::Estimate => InitialState::Estimate,
+        })
+        .posterior(!a.no_bands)
         .build()?;
-    let dispersion = model.blocks()[0].dispersion.clone();
-    let r = refine(
-        &structure,
-        &spec.model,
-        dispersion,
-        &data,
-        validation.as_ref(),
-        &settings,
-    );
+    let pb = crate::progress::bar(Some(iterations as u64), "alternations");
+    let outcome = refine_model_file(&RefineRequest {
+        model: &mf,
+        model_label: a.model.display().to_string(),
+        data: &data,
+        data_label: data_label.clone(),
+        validation: validation.as_ref(),
+        validation_labels: a
+            .validation_data
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect(),
+        validation_note,
+        beta: match a.beta {
+            AutoOr::Value(b) => Some(crate::error::beta("--beta", b)?),
+            AutoOr::Auto => None,
+        },
+        sigma,
+        sigma_label: "--sigma".into(),
+        sigma_auto: a.sigma == Some(AutoOr::Auto),
+        criterion: match a.selection {
+            RefineSelectionArg::Ml => Criterion::MarginalLikelihood,
+            RefineSelectionArg::Gcv => Criterion::Gcv,
+        },
+        iterations,
+        tolerance: a.tolerance,
+        settle,
+        identify: identify_settings,
+        progress: crate::progress::observer(&pb),
+        selection_progress: crate::progress::message_observer(&pb, "first pass"),
+    });
     pb.finish_and_clear();
-    let r = r?;
-
-    // The refined model file: the new linear part, the width actually used.
-    let mut refined = mf.clone();
-    let mut lin = spec.clone();
-    lin.model = r.linear.clone();
-    refined.lft = lin.lft()?;
-    refined.linear = Some(lin);
-    let width = r.model.blocks()[0].dispersion.width();
-    refined.blocks[0].dispersion = refined.blocks[0].dispersion.with_sigma(width);
-    refined.path = None;
+    let outcome = outcome?;
+    let (r, refined) = (&outcome.refinement, &outcome.refined);
 
     guard.begin_set(&a.out, Some(&planned))?;
     let model_path = a.out.join("model.toml");
@@ -430,8 +297,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         None => a.data[0].clone(),
     };
     let id = &r.identification;
-    let chosen = identify_settings.with_beta(r.beta)?;
-    let mut report = Report::new(&refined, id, &chosen, None)?;
+    let mut report = outcome.report.clone();
     report.model_file = Some(model_path.display().to_string());
     report.data_file = Some(if estimation_file.is_some() {
         data_file.display().to_string()
@@ -460,17 +326,6 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         tolerance: None,
         max_iterations: None,
         block_sigmas: Vec::new(),
-    });
-    report.selection = r.selection.as_ref().map(structid_io::SelectionReport::new);
-    report.refinement = Some(RefinementReport {
-        structure: structure.describe(),
-        validation: validation_note,
-        settle,
-        iterations: r.iterations.clone(),
-        best: r.best,
-        stop_reason: r.stop_reason.clone(),
-        beta: r.beta,
-        seconds: r.seconds,
     });
 
     // The iteration table and figure.
@@ -524,17 +379,12 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let svg = crate::figures::linear_svg(&r.linear, None, &refined.signals.u)?;
     guard.write(&linear_path, svg.as_bytes())?;
 
-    let mut stored = Estimate::from_identification(&r.model, id, &data, &identify_settings)?;
-    stored = stored.clone().with_provenance(Provenance {
-        workflow: "refine".into(),
-        ..stored.provenance().clone()
-    });
     let mut written = write_estimate(
         &a.out,
         &mut guard,
-        &refined,
+        refined,
         id,
-        &stored,
+        &outcome.estimate,
         &mut report,
         a.no_bands,
     )?;
@@ -546,7 +396,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     if let Some(note) = recognised {
         println!("{note}");
     }
-    print!("{}", summary(&r, &written, t0.elapsed().as_secs_f64()));
+    print!("{}", summary(r, &written, t0.elapsed().as_secs_f64()));
     Ok(())
 }
 

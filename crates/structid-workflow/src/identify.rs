@@ -175,7 +175,6 @@ pub fn identify_model_file(req: &IdentifyRequest<'_>) -> Result<IdentifyOutcome>
     let (id, settings, model, selection, widths) = if req.beta.is_none() || req.sigma_auto {
         let criterion = req
             .selection
-            .clone()
             .unwrap_or_else(|| default_criterion(mf, req.folds));
         let how = SelectionSettings::builder()
             .criterion(criterion)

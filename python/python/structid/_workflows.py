@@ -36,7 +36,9 @@ def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[obj
     """Refines an uncertain linear part (``structid refine``): alternates between identifying
     the map with G fixed and re-estimating G (output error) with the map fixed, and stops when
     the validation simulation error (``validation=(u_val, y_val)``, else the estimation one)
-    stops improving. ``model`` is a one-map structure (:meth:`Model.hammerstein`, …).
+    stops improving. ``model`` is a one-map structure (:meth:`Model.hammerstein`, …), or an
+    LFT whose one map sits where such a structure puts it (the refined model is then written
+    with a ``[linear]`` section).
 
     u and y may be lists of arrays for several records (``refine(model, [u1, u2], [y1, y2])``,
     ``structid refine --data a.csv --data b.csv``): both steps restart at every record, each
