@@ -8,10 +8,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::progress::Progress;
 use structid_core::selection::Criterion;
-use structid_core::solver::admm::AdmmSettings;
-use structid_core::solver::conic::ConicSettings;
 use structid_core::{Data, Estimate, Identification, IdentifySettings, Signal};
-use structid_workflow::{IdentifyRequest, identify_model_file};
+use structid_workflow::{IdentifyRequest, SolveOptions, identify_model_file};
 
 use crate::convert::{self, error, invalid};
 use crate::estimate::Fitted;
@@ -56,50 +54,17 @@ pub struct Request {
 
 /// The settings of a request, checked as the command-line tool checks its arguments.
 fn settings(r: &Request) -> PyResult<IdentifySettings> {
-    let beta = match r.beta {
-        Some(b) if !(b.is_finite() && b > 0.0) => {
-            return Err(invalid(format!(
-                "invalid beta {b}: it must be a finite number greater than zero"
-            )));
-        }
-        Some(b) => b,
-        None => IdentifySettings::default().beta(),
-    };
-    let mut b = IdentifySettings::builder()
-        .beta(beta)
-        .posterior(r.bands)
-        .initial_state(convert::initial_state(&r.initial_state)?)
-        .solver(convert::solver(&r.solver)?);
-    if r.tolerance.is_some() || r.max_iterations.is_some() {
-        let mut conic = ConicSettings::builder();
-        let mut admm = AdmmSettings::builder();
-        if let Some(t) = r.tolerance {
-            if !(t.is_finite() && t > 0.0) {
-                return Err(invalid(format!(
-                    "invalid tolerance {t}: it must be a finite number greater than zero"
-                )));
-            }
-            conic = conic.tolerance(t);
-            admm = admm.tolerance(t);
-        }
-        if let Some(n) = r.max_iterations {
-            if n == 0 {
-                return Err(invalid("max_iterations must be at least 1"));
-            }
-            conic = conic.max_iterations(u32::try_from(n).unwrap_or(u32::MAX));
-            admm = admm.max_iterations(n);
-        }
-        b = b
-            .conic(conic.build().map_err(error)?)
-            .admm(admm.build().map_err(error)?);
+    SolveOptions {
+        beta: r.beta,
+        bands: r.bands,
+        initial_state: convert::initial_state(&r.initial_state)?,
+        solver: convert::solver(&r.solver)?,
+        tolerance: r.tolerance,
+        max_iterations: r.max_iterations,
+        memory_limit_mib: r.memory_limit_mib,
     }
-    if let Some(mib) = r.memory_limit_mib {
-        if mib == 0 {
-            return Err(invalid("memory_limit_mib must be at least 1"));
-        }
-        b = b.memory_limit_bytes(mib << 20);
-    }
-    b.build().map_err(error)
+    .settings()
+    .map_err(error)
 }
 
 /// The criterion asked for; `None`: the workflow's default.

@@ -108,6 +108,14 @@ impl From<structid_workflow::WorkflowError> for CliError {
             W::Core(e) => e.into(),
             W::Discover(e) => e.into(),
             W::Request(m) => Self::input(m),
+            W::InvalidOption {
+                option,
+                value,
+                rule,
+            } => Self::input(format!(
+                "invalid value {value} for --{}: {rule}",
+                option.replace('_', "-")
+            )),
             other => Self {
                 code: EXIT_RUNTIME,
                 context: None,
@@ -210,24 +218,14 @@ pub fn positive(flag: &str, v: f64) -> Result<f64, CliError> {
     }
 }
 
-/// The largest β the commands accept: two decades above the top of the automatic search
-/// (10⁻¹⁰ … 10⁴). β weighs the dispersion against the mean noise energy per sample; far
-/// above that the dispersion outweighs any record's noise and the estimate is what the
-/// dispersion leaves free (a constant, or the trend), whatever the data say, and L·β
-/// overflows for absurd values such as 1e308.
-pub const MAX_BETA: f64 = 1e6;
-
-/// Checks a command-line β: finite, greater than zero, at most [`MAX_BETA`].
+/// Checks a command-line β (see [`structid_workflow::options::beta`]), naming it `flag`.
 pub fn beta(flag: &str, v: f64) -> Result<f64, CliError> {
-    let v = positive(flag, v)?;
-    if v > MAX_BETA {
-        return Err(CliError::input(format!(
-            "invalid value {v:e} for {flag}: above {MAX_BETA:e} the dispersion outweighs the noise \
-             energy of any record and the estimate ignores the data; give 0 < β ≤ {MAX_BETA:e} \
-             (typically 1e-4 … 1; `auto` searches 1e-10 … 1e4)"
-        )));
-    }
-    Ok(v)
+    structid_workflow::options::beta(v).map_err(|e| match e {
+        structid_workflow::WorkflowError::InvalidOption { value, rule, .. } => {
+            CliError::input(format!("invalid value {value} for {flag}: {rule}"))
+        }
+        e => e.into(),
+    })
 }
 
 /// Checks a noise standard deviation: finite, zero or greater, and with a finite variance

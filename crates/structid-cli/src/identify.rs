@@ -8,11 +8,9 @@ use structid_core::estimate::{Estimate, SignalNames};
 use structid_io::estimate_json;
 
 use structid_core::selection::Criterion;
-use structid_core::solver::admm::AdmmSettings;
-use structid_core::solver::conic::ConicSettings;
 use structid_core::{Data, Identification, IdentifySettings, InitialState, Model, SolverChoice};
 use structid_io::{DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, TruthSpec};
-use structid_workflow::{IdentifyRequest, identify_model_file};
+use structid_workflow::{IdentifyRequest, SolveOptions, identify_model_file};
 
 use crate::IdentifyArgs;
 use crate::error::{CliError, positive};
@@ -72,74 +70,29 @@ pub fn protect_inputs(
 
 /// Builds the settings from the command line.
 fn settings(a: &IdentifyArgs) -> Result<IdentifySettings, CliError> {
-    let beta = match a.beta {
-        crate::AutoOr::Value(b) => crate::error::beta("--beta", b)?,
-        crate::AutoOr::Auto => IdentifySettings::default().beta(),
-    };
-    let mut b = IdentifySettings::builder()
-        .beta(beta)
+    Ok(SolveOptions {
+        beta: match a.beta {
+            crate::AutoOr::Value(b) => Some(b),
+            crate::AutoOr::Auto => None,
+        },
         // Bands for quadratic dispersions (the exact and feature solvers keep their factor).
-        .posterior(!a.no_bands)
-        .initial_state(match a.initial_state {
+        bands: !a.no_bands,
+        initial_state: match a.initial_state {
             crate::InitialStateArg::Zero => InitialState::Zero,
             crate::InitialStateArg::Estimate => InitialState::Estimate,
-        })
-        .solver(match a.solver {
+        },
+        solver: match a.solver {
             crate::SolverArg::Auto => SolverChoice::Auto,
             crate::SolverArg::Exact => SolverChoice::Exact,
             crate::SolverArg::Features => SolverChoice::Features,
             crate::SolverArg::Clarabel => SolverChoice::Clarabel,
             crate::SolverArg::Admm => SolverChoice::Admm,
-        });
-    if a.tolerance.is_some() || a.max_iterations.is_some() {
-        let tol = a
-            .tolerance
-            .map(|t| positive("--tolerance", t))
-            .transpose()?;
-        if a.max_iterations == Some(0) {
-            return Err(CliError::input(
-                "invalid value 0 for --max-iterations: it must be at least 1",
-            ));
-        }
-        let mut conic = ConicSettings::builder();
-        let mut admm = AdmmSettings::builder();
-        if let Some(t) = tol {
-            conic = conic.tolerance(t);
-            admm = admm.tolerance(t);
-        }
-        if let Some(n) = a.max_iterations {
-            conic = conic.max_iterations(u32::try_from(n).unwrap_or(u32::MAX));
-            admm = admm.max_iterations(n);
-        }
-        b = b.conic(conic.build()?).admm(admm.build()?);
+        },
+        tolerance: a.tolerance,
+        max_iterations: a.max_iterations,
+        memory_limit_mib: a.memory_limit_mib,
     }
-    if let Some(mib) = a.memory_limit_mib {
-        if mib == 0 {
-            return Err(CliError::input(
-                "invalid value 0 for --memory-limit-mib: it must be at least 1",
-            ));
-        }
-        check_memory_limit(mib, structid_core::identify::settings::total_memory_bytes())?;
-        b = b.memory_limit_bytes(mib << 20);
-    }
-    Ok(b.build()?)
-}
-
-/// Refuses a `--memory-limit-mib` above the machine's memory `total` (bytes; unchecked
-/// where it is unknown): the solvers would plan for memory that does not exist and fail on
-/// an allocation instead of choosing a smaller method or refusing the problem.
-fn check_memory_limit(mib: u64, total: Option<u64>) -> Result<(), CliError> {
-    let bytes = mib.checked_mul(1 << 20);
-    match (bytes, total) {
-        (Some(b), Some(t)) if b > t => Err(CliError::input(format!(
-            "invalid value {mib} for --memory-limit-mib: the machine has {} MiB of memory; give at most that",
-            t >> 20
-        ))),
-        (None, _) => Err(CliError::input(format!(
-            "invalid value {mib} for --memory-limit-mib: more memory than any machine has"
-        ))),
-        _ => Ok(()),
-    }
+    .settings()?)
 }
 
 /// Applies `--dispersion` and `--neighbours` to every block.
@@ -713,19 +666,6 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn memory_limit_is_checked_against_the_machine() {
-        let gib = 1u64 << 30;
-        assert!(check_memory_limit(1024, Some(16 * gib)).is_ok());
-        assert!(check_memory_limit(16 * 1024, Some(16 * gib)).is_ok());
-        let e = check_memory_limit(100_000_000, Some(16 * gib)).unwrap_err();
-        assert_eq!(e.code(), crate::error::EXIT_INPUT);
-        assert!(e.to_string().contains("the machine has 16384 MiB"), "{e}");
-        // Unknown machine memory: any representable budget is taken as given.
-        assert!(check_memory_limit(100_000_000, None).is_ok());
-        assert!(check_memory_limit(u64::MAX, None).is_err());
-    }
 
     #[test]
     fn file_stems_are_safe_and_unique() {

@@ -20,6 +20,17 @@ pub enum WorkflowError {
     /// A request that cannot be carried out as given; the message says what to change.
     #[error("{0}")]
     Request(String),
+    /// An option out of its range: the front end names it its own way (`--max-iterations`,
+    /// `max_iterations`).
+    #[error("invalid value {value} for {option}: {rule}")]
+    InvalidOption {
+        /// The option, in snake case (`max_iterations`).
+        option: &'static str,
+        /// The value given.
+        value: String,
+        /// What it must be.
+        rule: String,
+    },
 }
 
 /// `Result` with [`WorkflowError`].

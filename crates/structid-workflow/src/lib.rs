@@ -8,6 +8,7 @@
 //! |---|---|
 //! | [`identify`](mod@identify) | a model file's maps identified from records, with β and σ given or selected (`structid identify`) |
 //! | [`refine`](mod@refine) | the linear part G of a one-map model refined by alternation with the map (`structid refine`) |
+//! | [`options`] | an identification's options (β, solver, tolerance, iterations, memory budget) checked the same way for every front end |
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`](mod@wiener_hammerstein) | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
@@ -21,6 +22,7 @@ pub mod free;
 pub mod identify;
 pub mod joint;
 pub mod linear_start;
+pub mod options;
 pub mod refine;
 pub mod remedy;
 pub mod simulation_score;
@@ -39,6 +41,7 @@ pub use linear_start::{
     LinearStartDiscovery, LinearStartRequest, TestScore, discover_from_linear_start,
     split_for_validation,
 };
+pub use options::SolveOptions;
 pub use refine::{RefineOutcome, RefineRequest, as_linear, refine_model_file};
 pub use remedy::{Remedy, remedy};
 pub use simulation_score::{SimulationScore, score_simulation, why_simulation_only};

@@ -168,14 +168,16 @@ fn checked_structure(
             req.tolerance
         )));
     }
-    for (name, v) in [(&req.sigma_label, req.sigma), (&"beta".into(), req.beta)] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            return Err(request(format!(
-                "invalid {name} {v}: it must be a finite number greater than zero"
-            )));
-        }
+    if let Some(s) = req.sigma
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(request(format!(
+            "invalid {} {s}: it must be a finite number greater than zero",
+            req.sigma_label
+        )));
+    }
+    if let Some(b) = req.beta {
+        crate::options::beta(b)?;
     }
     if let Some(v) = req.validation {
         for (i, r) in v.records().iter().enumerate() {
