@@ -8,50 +8,16 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::Data;
 use structid_core::estimate::SignalNames;
-use structid_discover::discover::{DiscoverSettings, Discovery, discover};
+use structid_discover::discover::{DiscoverSettings, Discovery};
 use structid_discover::hypotheses::Nominal;
 use structid_io::ModelFile;
+use structid_workflow::discover::check_settle;
+use structid_workflow::{DiscoverOptions, DiscoverRequest, discover_model_file, nominal_model};
 
-use crate::convert::{self, error, invalid};
+use crate::convert::{self, error};
 use crate::estimate::Fitted;
 use crate::identify::{Columns, named_columns};
 use crate::model::Model;
-
-/// The nominal model of a model file without maps: `[linear] structure = "lti"` or an `[lft]`,
-/// with the locations and states its `[discover]` section declares.
-fn nominal(mf: &ModelFile) -> PyResult<Nominal> {
-    if !mf.blocks.is_empty() {
-        return Err(invalid(
-            "discovery starts from a nominal model without maps ([linear] structure = \"lti\", \
-             e.g. Model.structure(\"lti\", ...), or an [lft] without [[nonlinearity]])",
-        ));
-    }
-    if mf.signals.u.len() != 1 || mf.signals.y.len() != 1 || mf.signals.z.is_some() {
-        return Err(invalid(
-            "discovery needs a nominal model with one input, one output and no measured z",
-        ));
-    }
-    let mut nominal = match &mf.linear {
-        Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model),
-        Some(spec) => {
-            return Err(invalid(format!(
-                "the model has [linear] structure = \"{}\"; discovery needs structure = \"lti\"",
-                spec.structure_name()
-            )));
-        }
-        None => Nominal::new(mf.lft.clone()),
-    }
-    .map_err(error)?;
-    if let Some(d) = &mf.discover {
-        for l in &d.locations {
-            nominal = nominal.with_location(&l.name, l.z, l.w).map_err(error)?;
-        }
-        for st in &d.states {
-            nominal = nominal.with_state(&st.name, st.state).map_err(error)?;
-        }
-    }
-    Ok(nominal)
-}
 
 /// A discovery as Python objects: the verdict, every hypothesis, and the finding with its
 /// augmented model and estimate.
@@ -211,8 +177,6 @@ fn discovery_dict<'py>(
     Ok(out)
 }
 
-/// The record of `first` and the records of `more` as one [`Data`] of several records; `what`
-/// names them in errors (`estimation`, `validation`).
 fn records<'py>(
     mf: &ModelFile,
     first: &[(String, PyReadonlyArray1<'py, f64>)],
@@ -225,26 +189,27 @@ fn records<'py>(
         all.push(convert::record(mf, named_columns(r))?);
     }
     let several = all.len() > 1;
-    for (i, r) in all.iter().enumerate() {
-        if settle >= r.len() {
+    let lengths: Vec<(usize, String)> = all
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
             let which = if several {
                 format!("{what} record {}", i + 1)
             } else {
                 format!("the {what} record")
             };
-            return Err(invalid(format!(
-                "settle {settle} must be less than the {} samples of {which}",
-                r.len()
-            )));
-        }
-    }
+            (r.len(), which)
+        })
+        .collect();
+    check_settle(settle, &lengths).map_err(error)?;
     Data::from_records(all).map_err(error)
 }
 
 /// Runs the discovery workflow from a nominal model on an estimation and a validation record,
-/// or on several of each (`more_records`, `more_validation`: the records after the first).
+/// or on several of each (`more_records`, `more_validation`: the records after the first);
+/// with `effects` > 1, up to that many effects one at a time.
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false, more_records=None, more_validation=None, significance=0.05))]
+#[pyo3(signature = (model, columns, validation, total_variation=true, settle=0, tune_sigma=false, more_records=None, more_validation=None, significance=0.05, effects=1, locations=None, scoring="auto", keep_nominal=false, sigma_fraction=None, trend=None, hysteresis_threshold=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn discover_columns<'py>(
     py: Python<'py>,
@@ -257,9 +222,31 @@ pub fn discover_columns<'py>(
     more_records: Option<Vec<Columns<'py>>>,
     more_validation: Option<Vec<Columns<'py>>>,
     significance: f64,
+    effects: usize,
+    locations: Option<Vec<String>>,
+    scoring: &str,
+    keep_nominal: bool,
+    sigma_fraction: Option<f64>,
+    trend: Option<usize>,
+    hysteresis_threshold: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
-    let nominal = nominal(&mf)?;
+    let nominal = nominal_model(&mf, "the model").map_err(error)?;
+    let defaults = DiscoverOptions::default();
+    let settings = DiscoverOptions {
+        total_variation,
+        settle,
+        scoring: scoring.into(),
+        keep_nominal,
+        sigma_fraction: sigma_fraction.unwrap_or(defaults.sigma_fraction),
+        trend: trend.unwrap_or(defaults.trend),
+        tune_sigma,
+        significance,
+        hysteresis_threshold: hysteresis_threshold.unwrap_or(defaults.hysteresis_threshold),
+        locations,
+    }
+    .settings(&nominal)
+    .map_err(error)?;
     let est = records(&mf, &columns, more_records.as_deref(), settle, "estimation")?;
     let val = records(
         &mf,
@@ -268,20 +255,56 @@ pub fn discover_columns<'py>(
         settle,
         "validation",
     )?;
-    let settings = DiscoverSettings::builder()
-        .total_variation(total_variation)
-        .settle(settle)
-        .tune_sigma(tune_sigma)
-        .significance(significance)
-        .build()
+    let (s, e) = (settings.clone(), est.clone());
+    let out = py
+        .detach(move || {
+            discover_model_file(&DiscoverRequest {
+                model: &mf,
+                nominal: &nominal,
+                estimation: &e,
+                validation: &val,
+                settings: &s,
+                effects,
+            })
+        })
         .map_err(error)?;
-    let n = nominal.clone();
-    let s = settings.clone();
-    let e = est.clone();
-    let d = py
-        .detach(move || discover(&n, &e, &val, &s))
-        .map_err(error)?;
-    discovery_dict(py, &d, &nominal, Some(&mf), &settings, &est)
+    let d = discovery_dict(
+        py,
+        &out.discovery,
+        &out.nominal,
+        Some(&out.model),
+        &settings,
+        &est,
+    )?;
+    let steps = match &out.effects {
+        None => None,
+        Some((all, _)) => Some(
+            all.steps
+                .iter()
+                .map(|step| {
+                    let x = PyDict::new(py);
+                    x.set_item("adopted", step.adopted)?;
+                    x.set_item("verdict", &step.discovery.verdict)?;
+                    x.set_item(
+                        "effect",
+                        step.discovery
+                            .finding
+                            .as_ref()
+                            .map(|f| f.classification.describe()),
+                    )?;
+                    Ok(x)
+                })
+                .collect::<PyResult<Vec<_>>>()?,
+        ),
+    };
+    d.set_item("steps", steps)?;
+    d.set_item(
+        "stop",
+        out.effects
+            .as_ref()
+            .map(|(all, _)| all.stop.describe(&all.settings)),
+    )?;
+    Ok(d)
 }
 
 /// The discovery workflow on the Silverbox benchmark file `SNLS80mV.csv`: the BLA of

@@ -214,6 +214,35 @@ def test_discover_matches_the_tool(cli, duffing):
         structid.discover(nominal, u, y, uv, yv, significance=0.7)
 
 
+def test_discover_around_a_model_with_maps_and_options_matches_the_tool(cli, duffing):
+    """The augmented model of a first discovery (its map known, kept fixed) is a nominal model
+    for the next, in the bindings as in the tool, with the tool's options."""
+    nominal, (u, y, uv, yv), d = duffing
+    first = d / "first"
+    cli("discover", "--model", d / "nominal.toml", "--data", d / "est.csv", "--validate",
+        d / "val.csv", "--out", first)
+    augmented = first / "augmented.toml"
+    args = ["--locations", "input,output", "--sigma-fraction", "0.2", "--trend", "2"]
+    cli("discover", "--model", augmented, "--data", d / "est.csv", "--validate",
+        d / "val.csv", "--out", d / "second", *args)
+    report = read_json(d / "second" / "report.json")
+    found = structid.discover(structid.Model.from_file(augmented), u, y, uv, yv,
+                              locations=["input", "output"], sigma_fraction=0.2, trend=2)
+    assert found.verdict_kind == report["verdict_kind"]
+    tool = {h["location"]: h["validation_rms"] for h in report["hypotheses"]}
+    mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
+    assert set(mine) == set(tool) and set(mine) <= {"input", "output"}
+    # The nominal model with its fixed map simulates the validation record as the tool's.
+    np.testing.assert_allclose(found.nominal_validation_rms,
+                               report["gap_before"]["validation"]["rms"], rtol=1e-9)
+    for k in tool:
+        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-6)
+    with pytest.raises(structid.StructidError, match="sigma_fraction"):
+        structid.discover(nominal, u, y, uv, yv, sigma_fraction=-1.0)
+    with pytest.raises(structid.StructidError, match="elsewhere"):
+        structid.discover(nominal, u, y, uv, yv, locations=["elsewhere"])
+
+
 def test_discover_on_several_records_matches_the_tool(cli, tmp_path):
     """Two estimation and two validation records, as lists of arrays and as repeated --data
     and --validation-data files: the same hypotheses, finding and per-record gaps."""

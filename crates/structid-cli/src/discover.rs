@@ -4,15 +4,14 @@
 //! `structid_discover`'s; this module parses the arguments, draws the figures and writes the
 //! files.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
 use structid_core::estimate::SignalNames;
 use structid_discover::augmented::{self, AugmentedFile, ESTIMATE_FILE, TABLE_FILE};
 use structid_discover::discover::{
-    Classification, DiscoverSettings, EffectsSettings, Finding, HypothesisResult,
-    candidate_signals, discover, discover_effects,
+    Classification, DiscoverSettings, Finding, HypothesisResult, candidate_signals,
 };
 use structid_discover::gap::Gap;
 use structid_discover::hypotheses::{Nominal, Site};
@@ -20,6 +19,9 @@ use structid_discover::localise::binned_residual;
 use structid_io::{ModelFile, OutputGuard, estimate_json};
 use structid_plot::{Chart, Series, decimate_min_max, render_chart_svg, render_grid_svg};
 use structid_workflow::discover_report::{self as report, Record, ReportContext, TimeAxis};
+use structid_workflow::{
+    DiscoverOptions, DiscoverOutcome, DiscoverRequest, discover_model_file, nominal_model,
+};
 
 use crate::error::CliError;
 
@@ -142,193 +144,20 @@ pub struct DiscoverArgs {
 // ---------------------------------------------------------------------------------------------
 // Inputs
 
-/// The nominal model of a model file, or a clear input error. A file with
-/// `[[nonlinearity]]` blocks (e.g. the `augmented.toml` of an earlier run) is a nominal model
-/// that carries maps: every block needs a `truth` (the known map, kept fixed) and one z input.
-fn nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
-    let how = "write one with `structid linear --data EST.csv --structure lti --out MODEL.toml`, \
-               or give the linear block as [lft] without [[nonlinearity]]";
-    for b in &mf.blocks {
-        if b.truth.is_none() {
-            return Err(CliError::input(format!(
-                "`{}`: block `{}` has no `truth`: a nominal model's maps must be known (give the \
-                 map as `truth = \"expression in z0\"` or a table, as `structid discover` writes \
-                 augmented.toml), or remove the block",
-                path.display(),
-                b.name
-            )));
-        }
-        if b.inputs.len() != 1 {
-            return Err(CliError::input(format!(
-                "`{}`: block `{}` reads {} z signals; a map of a nominal model reads one",
-                path.display(),
-                b.name,
-                b.inputs.len()
-            )));
-        }
+/// The options of `structid discover` as the workflow takes them.
+fn options(a: &DiscoverArgs) -> DiscoverOptions {
+    DiscoverOptions {
+        total_variation: !a.no_tv,
+        settle: a.settle,
+        scoring: a.scoring.clone(),
+        keep_nominal: a.keep_nominal,
+        sigma_fraction: a.sigma_fraction,
+        trend: a.trend,
+        tune_sigma: a.tune_sigma,
+        significance: a.significance,
+        hysteresis_threshold: a.hysteresis_threshold,
+        locations: a.locations.clone(),
     }
-    if mf.signals.u.len() != 1 || mf.signals.y.len() != 1 {
-        return Err(CliError::input(format!(
-            "`{}` has {} input(s) and {} output(s) in [signals]; discovery needs a nominal model \
-             with one input and one output",
-            path.display(),
-            mf.signals.u.len(),
-            mf.signals.y.len()
-        )));
-    }
-    if mf.signals.z.is_some() {
-        return Err(CliError::input(format!(
-            "`{}` lists measured z columns ([signals].z); discovery computes z for each \
-             candidate location itself: remove [signals].z",
-            path.display()
-        )));
-    }
-    let mut nominal = match &mf.linear {
-        _ if !mf.blocks.is_empty() => known_maps_nominal(mf, path)?,
-        Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model)?,
-        Some(spec) => {
-            return Err(CliError::input(format!(
-                "`{}` has [linear] structure = \"{}\"; discovery needs structure = \"lti\" ({how})",
-                path.display(),
-                spec.structure_name()
-            )));
-        }
-        None => Nominal::new(mf.lft.clone())?,
-    };
-    // The locations and states the model file declares ([discover]).
-    if let Some(d) = &mf.discover {
-        for l in &d.locations {
-            nominal = nominal.with_location(&l.name, l.z, l.w)?;
-        }
-        for st in &d.states {
-            nominal = nominal.with_state(&st.name, st.state)?;
-        }
-    }
-    Ok(nominal)
-}
-
-/// The nominal model of a file with `[[nonlinearity]]` blocks: its LFT with every block's
-/// truth as a fixed map.
-fn known_maps_nominal(mf: &ModelFile, path: &Path) -> Result<Nominal, CliError> {
-    let context = |e: String| {
-        CliError::input(format!(
-            "`{}` cannot be a nominal model with maps: {e}",
-            path.display()
-        ))
-    };
-    let maps = mf
-        .truth_maps()
-        .map_err(|e| context(e.to_string()))?
-        .ok_or_else(|| context("a block has no truth".into()))?;
-    // The dispersions are not used (the maps are fixed): placeholders keep the model valid.
-    let placeholder: std::sync::Arc<dyn structid_core::Dispersion> = std::sync::Arc::new(
-        structid_core::PolynomialDispersion::new(1).map_err(|e| context(e.to_string()))?,
-    );
-    let blocks = mf
-        .blocks
-        .iter()
-        .map(|b| {
-            structid_core::NonlinearBlock::new(
-                b.name.clone(),
-                b.inputs.clone(),
-                b.output,
-                std::sync::Arc::clone(&placeholder),
-            )
-        })
-        .collect();
-    let model =
-        structid_core::Model::new(mf.lft.clone(), blocks).map_err(|e| context(e.to_string()))?;
-    Nominal::from_model(&model, maps.into_iter().map(std::sync::Arc::from).collect())
-        .map_err(|e| context(e.to_string()))
-}
-
-/// `--locations`: keys of the built-in locations, `declared-i`, or names of declared ones.
-fn parse_locations(
-    given: Option<&[String]>,
-    nominal: &Nominal,
-) -> Result<Option<Vec<Site>>, CliError> {
-    let Some(given) = given else {
-        return Ok(None);
-    };
-    let mut out: Vec<Site> = Vec::new();
-    for raw in given {
-        let s = raw.trim();
-        let found = nominal
-            .locations()
-            .into_iter()
-            .find(|l| nominal.key(*l) == s)
-            .or_else(|| {
-                nominal
-                    .declared()
-                    .iter()
-                    .find(|d| d.name == s)
-                    .map(|d| Site::Declared { z: d.z, w: d.w })
-            });
-        let Some(location) = found else {
-            let mut known: Vec<String> = nominal
-                .locations()
-                .iter()
-                .map(|l| format!("`{}`", nominal.key(*l)))
-                .collect();
-            known.extend(nominal.declared().iter().map(|d| format!("`{}`", d.name)));
-            return Err(CliError::input(format!(
-                "invalid value `{s}` for --locations: the candidate locations of this nominal \
-                 model are {}",
-                known.join(", ")
-            )));
-        };
-        if !out.contains(&location) {
-            out.push(location);
-        }
-    }
-    if out.is_empty() {
-        return Err(CliError::input(
-            "--locations names no location; omit it to try every one",
-        ));
-    }
-    Ok(Some(out))
-}
-
-fn settings(a: &DiscoverArgs, locations: Option<Vec<Site>>) -> Result<DiscoverSettings, CliError> {
-    if !(a.sigma_fraction.is_finite() && a.sigma_fraction > 0.0) {
-        return Err(CliError::input(format!(
-            "invalid value {} for --sigma-fraction: it must be a finite fraction of the range of z \
-             greater than zero",
-            a.sigma_fraction
-        )));
-    }
-    if a.trend > 64 {
-        return Err(CliError::input(format!(
-            "invalid value {} for --trend: the polynomial degree must be at most 64",
-            a.trend
-        )));
-    }
-    if !(a.hysteresis_threshold > 0.0 && a.hysteresis_threshold < 1.0) {
-        return Err(CliError::input(format!(
-            "invalid value {} for --hysteresis-threshold: it is a share of the residual energy \
-             and must lie strictly between 0 and 1",
-            a.hysteresis_threshold
-        )));
-    }
-    let mut b = DiscoverSettings::builder()
-        .total_variation(!a.no_tv)
-        .settle(a.settle)
-        .sigma_fraction(a.sigma_fraction)
-        .trend_degree(a.trend)
-        .tune_sigma(a.tune_sigma)
-        .significance(a.significance)
-        .hysteresis_threshold(a.hysteresis_threshold)
-        .refine_nominal(!a.keep_nominal);
-    if let Some(l) = locations {
-        b = b.locations(l);
-    }
-    if a.scoring != "auto" {
-        b = b.scoring(
-            crate::parse_scoring(&a.scoring)
-                .map_err(|e| CliError::input(format!("invalid value for --scoring: {e}")))?,
-        );
-    }
-    Ok(b.build()?)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -609,9 +438,8 @@ fn write_augmented(
 pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let mf = ModelFile::from_path(&a.model)?;
-    let nominal = nominal(&mf, &a.model)?;
-    let locations = parse_locations(a.locations.as_deref(), &nominal)?;
-    let settings = settings(&a, locations)?;
+    let nominal = nominal_model(&mf, &a.model.display().to_string())?;
+    let settings = options(&a).settings(&nominal)?;
 
     // Never overwrite an input; refuse a bad output directory before the long part.
     let mut guard = OutputGuard::new();
@@ -622,64 +450,36 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     guard.check_out_dir(&a.out, OUTPUTS)?;
 
     let read = |paths: &[PathBuf], flag: &str| -> Result<Record, CliError> {
-        let mut records = Vec::with_capacity(paths.len());
-        for p in paths {
-            let r = crate::data::read_record(&mf, p)?;
-            if a.settle >= r.data.len() {
-                return Err(CliError::input(format!(
-                    "invalid value {} for --settle: it must be less than the {} samples of \
-                     {flag} `{}`",
-                    a.settle,
-                    r.data.len(),
-                    r.path.display()
-                )));
-            }
-            records.push(r);
-        }
+        let records = paths
+            .iter()
+            .map(|p| crate::data::read_record(&mf, p))
+            .collect::<Result<Vec<_>, _>>()?;
+        let lengths: Vec<(usize, String)> = records
+            .iter()
+            .map(|r| (r.data.len(), format!("{flag} `{}`", r.path.display())))
+            .collect();
+        structid_workflow::discover::check_settle(a.settle, &lengths)?;
         Record::join(records).map_err(|e| CliError::input(format!("{flag}: {e}")))
     };
     let est = read(&a.data, "--data")?;
     let val = read(&a.validate, "--validation-data")?;
-    if a.effects == 0 {
-        return Err(CliError::input(
-            "invalid value 0 for --effects: at least one effect must be looked for",
-        ));
-    }
-    // One effect: the discovery itself. Several: the iteration, reported through its last
-    // adopted step (whose nominal model carries the effects of the steps before it).
     let pb = crate::progress::bar(Some(0), "locations identified");
     let observed = settings.with_progress(crate::progress::observer(&pb));
-    let run = || -> Result<_, CliError> {
-        Ok(if a.effects == 1 {
-            (discover(&nominal, &est.data, &val.data, &observed)?, None)
-        } else {
-            let effects = discover_effects(
-                &nominal,
-                &est.data,
-                &val.data,
-                &observed,
-                &EffectsSettings::default().with_max_effects(a.effects)?,
-            )?;
-            let at = effects.steps.iter().rposition(|s| s.adopted).unwrap_or(0);
-            (effects.steps[at].discovery.clone(), Some((effects, at)))
-        })
-    };
-    let outcome = run();
+    let outcome = discover_model_file(&DiscoverRequest {
+        model: &mf,
+        nominal: &nominal,
+        estimation: &est.data,
+        validation: &val.data,
+        settings: &observed,
+        effects: a.effects,
+    });
     pb.finish_and_clear();
-    let (d, effects) = outcome?;
-    // The nominal model and file of the reported step: the given ones, or those of the
-    // augmented model of the step before it.
-    let mut step_file = mf.clone();
-    let mut step_nominal = nominal.clone();
-    if let Some((effects, at)) = &effects {
-        for step in &effects.steps[..*at] {
-            if let Some(f) = &step.discovery.finding {
-                step_file = f.augmented_file(&step_file, settings.trend_degree())?.model;
-            }
-        }
-        step_nominal = effects.steps[*at].nominal.clone();
-    }
-    let (mf, nominal) = (step_file, step_nominal);
+    let DiscoverOutcome {
+        discovery: d,
+        effects,
+        model: mf,
+        nominal,
+    } = outcome?;
     // Said after the run, so that an input error is the first line of stderr.
     let canonical = |p: &PathBuf| std::fs::canonicalize(p).ok();
     if a.validate
@@ -871,37 +671,4 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         )
     );
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use structid_linear::PolynomialModel;
-
-    fn g() -> PolynomialModel {
-        PolynomialModel {
-            den: vec![1.0, -1.5, 0.7],
-            num: vec![vec![0.0, 0.1, 0.1]],
-            sample_time: Some(0.05),
-        }
-    }
-
-    #[test]
-    fn locations_parse_by_key_and_reject_unknown_names() {
-        let nominal = Nominal::from_polynomial(&g()).unwrap();
-        let given = vec![
-            "input".to_string(),
-            " output-feedback".into(),
-            "input".into(),
-        ];
-        assert_eq!(
-            parse_locations(Some(&given), &nominal).unwrap(),
-            Some(vec![Site::Input, Site::OutputFeedback])
-        );
-        let e = parse_locations(Some(&["friction".to_string()]), &nominal)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("friction") && e.contains("rate-feedback"), "{e}");
-        assert_eq!(parse_locations(None, &nominal).unwrap(), None);
-    }
 }

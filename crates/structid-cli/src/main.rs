@@ -449,27 +449,8 @@ struct ValidateArgs {
     /// windows of LENGTH samples, each simulated from a state fitted to its first half
     /// and scored after its first INIT samples (for plants with integrators, whose free run drifts; `discover`
     /// reports the windows it used).
-    #[arg(long, value_name = "free|LENGTH:INIT", value_parser = parse_scoring, default_value = "free")]
+    #[arg(long, value_name = "free|LENGTH:INIT", value_parser = structid_workflow::discover::parse_scoring, default_value = "free")]
     scoring: structid_core::validation::Scoring,
-}
-
-/// Parses `--scoring`: `free` or `LENGTH:INIT`.
-pub(crate) fn parse_scoring(s: &str) -> Result<structid_core::validation::Scoring, String> {
-    use structid_core::validation::{Scoring, Windows};
-    if s == "free" {
-        return Ok(Scoring::Free);
-    }
-    let (length, init) = s
-        .split_once(':')
-        .ok_or_else(|| format!("`{s}` is neither `free` nor LENGTH:INIT (e.g. 500:25)"))?;
-    let parse = |v: &str, what: &str| {
-        v.trim()
-            .parse::<usize>()
-            .map_err(|_| format!("{what} `{v}` in `{s}` is not a whole number of samples"))
-    };
-    Windows::new(parse(length, "LENGTH")?, parse(init, "INIT")?)
-        .map(Scoring::Windowed)
-        .map_err(|e| e.to_string())
 }
 
 /// Arguments of `structid predict`.

@@ -9,6 +9,7 @@
 //! | [`identify`](mod@identify) | a model file's maps identified from records, with β and σ given or selected (`structid identify`) |
 //! | [`refine`](mod@refine) | the linear part G of a one-map model refined by alternation with the map (`structid refine`) |
 //! | [`options`] | an identification's options (β, solver, tolerance, iterations, memory budget) checked the same way for every front end |
+//! | [`discover`](mod@discover) | what a nominal model file is missing, for one effect or several in turn (`structid discover`), with its options checked once |
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`](mod@wiener_hammerstein) | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
@@ -16,6 +17,7 @@
 //! | [`discover_report`] | the reports of a discovery: report.md, report.json and the summary `structid discover` prints (the presentation of [`structid_discover`]'s results, which carry data only) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 
+pub mod discover;
 pub mod discover_report;
 pub mod error;
 pub mod free;
@@ -28,6 +30,9 @@ pub mod remedy;
 pub mod simulation_score;
 pub mod wiener_hammerstein;
 
+pub use discover::{
+    DiscoverOptions, DiscoverOutcome, DiscoverRequest, discover_model_file, nominal_model,
+};
 pub use error::{Result, WorkflowError};
 pub use free::parse_free;
 pub use identify::{

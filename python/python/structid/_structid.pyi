@@ -110,7 +110,11 @@ def discover_columns(model: Model, columns: Columns, validation: Columns,
                      total_variation: bool = True, settle: int = 0,
                      tune_sigma: bool = False, more_records: Optional[List[Columns]] = None,
                      more_validation: Optional[List[Columns]] = None,
-                     significance: float = 0.05) -> Dict[str, Any]: ...
+                     significance: float = 0.05, effects: int = 1,
+                     locations: Optional[List[str]] = None, scoring: str = "auto",
+                     keep_nominal: bool = False, sigma_fraction: Optional[float] = None,
+                     trend: Optional[int] = None,
+                     hysteresis_threshold: Optional[float] = None) -> Dict[str, Any]: ...
 def staticness_columns(z: Array1, w: Array1, sigma_fraction: Optional[float] = None,
                        sigma: Optional[float] = None, noise_std: Optional[float] = None,
                        ratio_limit: Optional[float] = None,

@@ -294,10 +294,16 @@ def _discovery(out: Dict[str, Any]) -> Discovery:
 
 def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object, *,
              total_variation: bool = True, settle: int = 0, tune_sigma: bool = False,
-             significance: float = 0.05) -> Discovery:
-    """Finds what a nominal linear model (``Model.structure("lti", ...)`` or an ``[lft]``
-    without maps) is missing (``structid discover``): tests its residual, inserts one unknown
-    map at each candidate location, ranks them on the validation record and names the map.
+             significance: float = 0.05, effects: int = 1,
+             locations: Optional[List[str]] = None, scoring: str = "auto",
+             keep_nominal: bool = False, sigma_fraction: Optional[float] = None,
+             trend: Optional[int] = None,
+             hysteresis_threshold: Optional[float] = None) -> Discovery:
+    """Finds what a nominal linear model (``Model.structure("lti", ...)``, an ``[lft]``
+    without maps, or a model whose every map has a known ``truth``, such as an earlier
+    discovery's augmented model) is missing (``structid discover``): tests its residual,
+    inserts one unknown map at each candidate location, ranks them on the validation record
+    and names the map.
 
     Each of u, y, u_val, y_val is an array, or a list of arrays for several records
     (experiments, each simulated from its own initial state):
@@ -307,12 +313,19 @@ def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object,
 
     ``significance`` is the level α of the candidate table's rule: the simplest row that a
     paired test of the validation errors over blocks does not call worse than the best at α
-    is chosen (``Finding.table``)."""
+    is chosen (``Finding.table``). The other keywords are the options of ``structid
+    discover``: ``effects`` (up to N effects, one at a time; the result is the last adopted
+    step's, ``extra["steps"]`` lists every step and ``extra["stop"]`` why it stopped),
+    ``locations`` (e.g. ``["input", "output-feedback"]``), ``scoring`` (``"auto"``,
+    ``"free"`` or ``"LENGTH:INIT"``), ``keep_nominal``, ``sigma_fraction``, ``trend`` and
+    ``hysteresis_threshold`` (None: the defaults)."""
     est, more = _record_columns(nominal, u, y, "")
     val, more_val = _record_columns(nominal, u_val, y_val, "validation ")
     return _discovery(_structid.discover_columns(
         nominal._native, est, val, bool(total_variation), int(settle), bool(tune_sigma),
-        more, more_val, float(significance)))
+        more, more_val, float(significance), int(effects),
+        None if locations is None else [str(l) for l in locations], str(scoring),
+        bool(keep_nominal), sigma_fraction, trend, hysteresis_threshold))
 
 
 def _record_columns(model: Model, u: object, y: object, what: str):
