@@ -115,22 +115,18 @@ fn split(data: &Data, at: usize) -> Result<(Data, Data), CliError> {
     Ok((part(0..at)?, part(at..data.len())?))
 }
 
-/// Runs `structid refine`.
-pub fn run(a: RefineArgs) -> Result<(), CliError> {
-    if a.joint {
-        return run_joint(a);
-    }
-    let t0 = Instant::now();
-    let iterations = a.iterations.unwrap_or(10);
-    let read = ModelFile::from_path(&a.model)?;
-    let (mf, recognised) = match read.linear {
-        Some(_) => (read, None),
-        None => {
-            let (mf, _, note) =
-                structid_workflow::as_linear(&read, &a.model.display().to_string())?;
-            (mf, Some(note))
-        }
-    };
+/// The estimation and validation records of a refinement, and what the report says of them.
+struct Split {
+    data: Data,
+    validation: Option<Data>,
+    validation_note: Option<String>,
+    /// Where the estimation part is written when it was cut from the data file.
+    estimation_file: Option<PathBuf>,
+}
+
+/// The records of `--data`, and the validation: `--validation-data` files, or the end of the
+/// one `--data` record (`--validation-fraction`), simulated from the start of the file.
+fn split_records(a: &RefineArgs, mf: &ModelFile, data_label: &str) -> Result<Split, CliError> {
     if let Some(f) = a.validation_fraction
         && !(f > 0.0 && f < 1.0)
     {
@@ -147,49 +143,13 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
             a.data.len()
         )));
     }
-    let mut guard = OutputGuard::new();
-    guard.protect(&a.model);
-    for d in a.data.iter().chain(&a.validation_data) {
-        guard.protect(d);
-    }
-    let planned: Vec<String> = [
-        "model.toml",
-        "refine.csv",
-        "refine.svg",
-        "linear.svg",
-        "estimation.csv",
-        "report.json",
-        "estimate.json",
-        "estimate.csv",
-    ]
-    .into_iter()
-    .map(String::from)
-    .chain(
-        crate::identify::file_stems(mf.blocks.iter().map(|b| b.name.as_str()))
-            .iter()
-            .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
-    )
-    .collect();
-    guard.check_out_dir(&a.out, &planned)?;
-
-    // Records.
-    let sigma = match a.sigma {
-        Some(AutoOr::Value(s)) if !(s.is_finite() && s > 0.0) => {
-            return Err(CliError::input(format!(
-                "invalid value {s} for --sigma: it must be a finite number greater than zero"
-            )));
-        }
-        Some(AutoOr::Value(s)) => Some(s),
-        _ => None,
-    };
-    let all = crate::identify::read_records(&mf, &a.data)?;
-    let data_label = crate::identify::files_label(&a.data);
-    let (data, validation, validation_note, estimation_file): (Data, Option<Data>, _, _) = match (
+    let all = crate::identify::read_records(mf, &a.data)?;
+    let (data, validation, validation_note, estimation_file) = match (
         a.validation_data.is_empty(),
         a.validation_fraction,
     ) {
         (false, _) => {
-            let vd = crate::identify::read_records(&mf, &a.validation_data).map_err(|e| {
+            let vd = crate::identify::read_records(mf, &a.validation_data).map_err(|e| {
                 e.context(format!(
                     "the --validation-data files ({})",
                     crate::identify::files_label(&a.validation_data)
@@ -229,6 +189,170 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
         }
         (true, None) => (all, None, None, None),
     };
+    Ok(Split {
+        data,
+        validation,
+        validation_note,
+        estimation_file,
+    })
+}
+
+/// refine.csv (one row per alternation) and refine.svg (the estimation and validation RMS
+/// against the iteration) in `out`; returns their paths.
+fn write_iterations(
+    out: &std::path::Path,
+    guard: &mut OutputGuard,
+    r: &structid_core::refine::Refinement,
+    with_validation: bool,
+) -> Result<(PathBuf, PathBuf), CliError> {
+    let csv_path = out.join("refine.csv");
+    let n = r.iterations.len();
+    let col = |f: &dyn Fn(&structid_core::refine::RefineIteration) -> f64| -> Vec<f64> {
+        r.iterations.iter().map(f).collect()
+    };
+    guard.write_csv(
+        &csv_path,
+        &[
+            "iteration",
+            "cost_after_maps",
+            "noise_after_maps",
+            "dispersion_term",
+            "cost_after_linear",
+            "estimation_rms",
+            "validation_rms",
+            "oe_iterations",
+            "seconds",
+        ],
+        &[
+            (0..n).map(|i| i as f64).collect(),
+            col(&|i| i.cost_after_maps),
+            col(&|i| i.noise_after_maps),
+            col(&|i| i.dispersion_term),
+            col(&|i| i.cost_after_linear.unwrap_or(f64::NAN)),
+            col(&|i| i.estimation_rms),
+            col(&|i| i.validation_rms.unwrap_or(f64::NAN)),
+            col(&|i| i.oe_iterations as f64),
+            col(&|i| i.seconds),
+        ],
+    )?;
+    let svg_path = out.join("refine.svg");
+    let x: Vec<f64> = (0..n).map(|i| i as f64).collect();
+    let est = col(&|i| i.estimation_rms);
+    let val = col(&|i| i.validation_rms.unwrap_or(f64::NAN));
+    let mut chart = Chart::new(
+        "Alternating refinement",
+        "iteration",
+        "RMS simulation error",
+    )
+    .with(Series::line("estimation record", &x, &est));
+    if with_validation {
+        chart = chart.with(Series::line("validation record", &x, &val));
+    }
+    guard.write(&svg_path, render_chart_svg(&chart)?.as_bytes())?;
+    Ok((csv_path, svg_path))
+}
+
+/// What `structid validate` needs to re-run the final identification of a refinement.
+fn reproduction(
+    a: &RefineArgs,
+    model_path: &std::path::Path,
+    data_file: &std::path::Path,
+    r: &structid_core::refine::Refinement,
+) -> Reproduction {
+    Reproduction {
+        model_file_absolute: absolute(model_path).display().to_string(),
+        data_file_absolute: absolute(data_file).display().to_string(),
+        data_files_absolute: if a.data.len() > 1 {
+            a.data
+                .iter()
+                .map(|p| absolute(p).display().to_string())
+                .collect()
+        } else {
+            Vec::new()
+        },
+        beta: r.beta,
+        sigma: None,
+        solver_requested: "auto".into(),
+        solver: r.identification.diagnostics.solver.name().to_string(),
+        initial_state: crate::identify::value_name(a.initial_state),
+        memory_limit_mib: None,
+        dispersion: None,
+        neighbours: None,
+        tolerance: None,
+        max_iterations: None,
+        block_sigmas: Vec::new(),
+    }
+}
+
+/// Writes the record `data` as CSV with the model file's column names.
+fn write_record(
+    guard: &mut OutputGuard,
+    path: &std::path::Path,
+    mf: &ModelFile,
+    data: &Data,
+) -> Result<(), CliError> {
+    let names: Vec<String> = mf.signals.u.iter().chain(&mf.signals.y).cloned().collect();
+    let mut columns: Vec<Vec<f64>> = (0..data.u().channels())
+        .map(|c| data.u().channel(c))
+        .collect();
+    columns.extend((0..data.y().channels()).map(|c| data.y().channel(c)));
+    guard.write_csv(path, &names, &columns)?;
+    Ok(())
+}
+
+/// Runs `structid refine`.
+pub fn run(a: RefineArgs) -> Result<(), CliError> {
+    if a.joint {
+        return run_joint(a);
+    }
+    let t0 = Instant::now();
+    let iterations = a.iterations.unwrap_or(10);
+    let read = ModelFile::from_path(&a.model)?;
+    let (mf, recognised) = match read.linear {
+        Some(_) => (read, None),
+        None => {
+            let (mf, _, note) =
+                structid_workflow::as_linear(&read, &a.model.display().to_string())?;
+            (mf, Some(note))
+        }
+    };
+    let mut guard = OutputGuard::new();
+    guard.protect(&a.model);
+    for d in a.data.iter().chain(&a.validation_data) {
+        guard.protect(d);
+    }
+    let planned: Vec<String> = [
+        "model.toml",
+        "refine.csv",
+        "refine.svg",
+        "linear.svg",
+        "estimation.csv",
+        "report.json",
+        "estimate.json",
+        "estimate.csv",
+    ]
+    .into_iter()
+    .map(String::from)
+    .chain(
+        crate::identify::file_stems(mf.blocks.iter().map(|b| b.name.as_str()))
+            .iter()
+            .flat_map(|s| [format!("map_{s}.csv"), format!("map_{s}.svg")]),
+    )
+    .collect();
+    guard.check_out_dir(&a.out, &planned)?;
+
+    // Records.
+    let sigma = match a.sigma {
+        Some(AutoOr::Value(s)) => Some(crate::error::positive("--sigma", s)?),
+        _ => None,
+    };
+    let data_label = crate::identify::files_label(&a.data);
+    let Split {
+        data,
+        validation,
+        validation_note,
+        estimation_file,
+    } = split_records(&a, &mf, &data_label)?;
     let settle = match a.validation_fraction {
         Some(_) => data.len() + a.settle,
         None => a.settle,
@@ -280,18 +404,7 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     guard.write(&model_path, refined.to_toml_string().as_bytes())?;
     let data_file = match &estimation_file {
         Some(path) => {
-            let names: Vec<String> = refined
-                .signals
-                .u
-                .iter()
-                .chain(&refined.signals.y)
-                .cloned()
-                .collect();
-            let mut columns: Vec<Vec<f64>> = (0..data.u().channels())
-                .map(|c| data.u().channel(c))
-                .collect();
-            columns.extend((0..data.y().channels()).map(|c| data.y().channel(c)));
-            guard.write_csv(path, &names, &columns)?;
+            write_record(&mut guard, path, refined, &data)?;
             path.clone()
         }
         None => a.data[0].clone(),
@@ -304,75 +417,10 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     } else {
         data_label.clone()
     });
-    report.reproduction = Some(Reproduction {
-        model_file_absolute: absolute(&model_path).display().to_string(),
-        data_file_absolute: absolute(&data_file).display().to_string(),
-        data_files_absolute: if a.data.len() > 1 {
-            a.data
-                .iter()
-                .map(|p| absolute(p).display().to_string())
-                .collect()
-        } else {
-            Vec::new()
-        },
-        beta: r.beta,
-        sigma: None,
-        solver_requested: "auto".into(),
-        solver: id.diagnostics.solver.name().to_string(),
-        initial_state: crate::identify::value_name(a.initial_state),
-        memory_limit_mib: None,
-        dispersion: None,
-        neighbours: None,
-        tolerance: None,
-        max_iterations: None,
-        block_sigmas: Vec::new(),
-    });
+    report.reproduction = Some(reproduction(&a, &model_path, &data_file, r));
 
     // The iteration table and figure.
-    let csv_path = a.out.join("refine.csv");
-    let n = r.iterations.len();
-    let col = |f: &dyn Fn(&structid_core::refine::RefineIteration) -> f64| -> Vec<f64> {
-        r.iterations.iter().map(f).collect()
-    };
-    guard.write_csv(
-        &csv_path,
-        &[
-            "iteration",
-            "cost_after_maps",
-            "noise_after_maps",
-            "dispersion_term",
-            "cost_after_linear",
-            "estimation_rms",
-            "validation_rms",
-            "oe_iterations",
-            "seconds",
-        ],
-        &[
-            (0..n).map(|i| i as f64).collect(),
-            col(&|i| i.cost_after_maps),
-            col(&|i| i.noise_after_maps),
-            col(&|i| i.dispersion_term),
-            col(&|i| i.cost_after_linear.unwrap_or(f64::NAN)),
-            col(&|i| i.estimation_rms),
-            col(&|i| i.validation_rms.unwrap_or(f64::NAN)),
-            col(&|i| i.oe_iterations as f64),
-            col(&|i| i.seconds),
-        ],
-    )?;
-    let svg_path = a.out.join("refine.svg");
-    let x: Vec<f64> = (0..n).map(|i| i as f64).collect();
-    let est = col(&|i| i.estimation_rms);
-    let val = col(&|i| i.validation_rms.unwrap_or(f64::NAN));
-    let mut chart = Chart::new(
-        "Alternating refinement",
-        "iteration",
-        "RMS simulation error",
-    )
-    .with(Series::line("estimation record", &x, &est));
-    if validation.is_some() {
-        chart = chart.with(Series::line("validation record", &x, &val));
-    }
-    guard.write(&svg_path, render_chart_svg(&chart)?.as_bytes())?;
+    let (csv_path, svg_path) = write_iterations(&a.out, &mut guard, r, validation.is_some())?;
     // The alternation keeps no parameter covariance of G (its fits run through the map): the
     // figure has no band.
     let linear_path = a.out.join("linear.svg");
