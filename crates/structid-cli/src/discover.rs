@@ -434,6 +434,129 @@ fn write_augmented(
     Ok(file)
 }
 
+/// The figures of a discovery in `out` (residual.svg, regions.svg, and with a finding map.svg
+/// and before_after.svg), each added to `written`; returns each file with its caption.
+#[allow(clippy::too_many_arguments)]
+fn write_figures(
+    out: &std::path::Path,
+    guard: &OutputGuard,
+    d: &structid_discover::discover::Discovery,
+    nominal: &Nominal,
+    settings: &DiscoverSettings,
+    est: &Record,
+    val: &Record,
+    written_files: &mut Vec<PathBuf>,
+) -> Result<Vec<(String, String)>, CliError> {
+    let mut figures: Vec<(String, String)> = Vec::new();
+    let band = settings.gap().band;
+    let svg = residual_svg(&d.estimation_gap, band, &est.time)?;
+    let path = out.join("residual.svg");
+    guard.write(&path, svg.as_bytes())?;
+    written_files.push(path);
+    figures.push((
+        "residual.svg".into(),
+        format!(
+            "the nominal model's residual on the estimation record with ±{band}·σ̂ and the \
+             windows above it shaded"
+        ),
+    ));
+    let linear =
+        structid_discover::records::stacked(&est.data, |r| nominal.simulate_output(r.u()))?;
+    let mut candidates = candidate_signals(
+        &est.data,
+        &linear,
+        nominal.lft().sample_time().unwrap_or(1.0),
+    );
+    candidates.extend(nominal.state_signals(&est.data)?);
+    let path = out.join("regions.svg");
+    guard.write(
+        &path,
+        regions_svg(&d.estimation_gap.residual, &candidates)?.as_bytes(),
+    )?;
+    written_files.push(path);
+    figures.push((
+        "regions.svg".into(),
+        format!(
+            "the residual binned by each candidate signal ({REGION_BINS} quantile bins: mean and \
+             RMS), estimation record"
+        ),
+    ));
+    if let Some(f) = &d.finding {
+        if let Some(h) = Some(&f.hypothesis).filter(|h| !h.curve.z.is_empty()) {
+            let path = out.join("map.svg");
+            guard.write(&path, map_svg(nominal, h, f)?.as_bytes())?;
+            written_files.push(path);
+            figures.push((
+                "map.svg".into(),
+                "the best hypothesis' nonparametric map with its ±2σ band and points, and the \
+                 map of the augmented model"
+                    .into(),
+            ));
+        }
+        let path = out.join("before_after.svg");
+        guard.write(
+            &path,
+            before_after_svg(
+                val,
+                &d.validation_gap,
+                &f.augmented.validation_gap,
+                f.shrink,
+            )?
+            .as_bytes(),
+        )?;
+        written_files.push(path);
+        figures.push((
+            "before_after.svg".into(),
+            "validation record: measured y, the nominal and the augmented simulation, and their \
+             residuals"
+                .into(),
+        ));
+    }
+
+    Ok(figures)
+}
+
+/// Removes the outputs of an earlier run in `out` that this one did not write (they would
+/// contradict the report); returns them.
+fn remove_stale(out: &std::path::Path, written: &[PathBuf]) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    for f in planned_outputs() {
+        let p = out.join(f);
+        if p.is_file() && !written.contains(&p) && std::fs::remove_file(&p).is_ok() {
+            removed.push(p);
+        }
+    }
+    removed
+}
+
+/// Every file this command may write, earlier runs' extra tables included.
+fn planned_outputs() -> Vec<String> {
+    OUTPUTS
+        .iter()
+        .map(|f| f.to_string())
+        .chain(
+            (2..=MAX_TABLE_BLOCKS)
+                .map(|i| augmented::table_file_name(&format!("{}{i}", augmented::BLOCK))),
+        )
+        .collect()
+}
+
+/// Warns when a validation file is also an estimation file: ranking and naming on a record the
+/// maps were estimated on favour whatever overfits.
+fn warn_if_validation_is_estimation(a: &DiscoverArgs) {
+    let canonical = |p: &PathBuf| std::fs::canonicalize(p).ok();
+    if a.validate
+        .iter()
+        .any(|v| a.data.iter().any(|d| canonical(d) == canonical(v)))
+    {
+        eprintln!(
+            "warning: a --validation-data file is a --data file: the hypotheses are ranked and \
+             the effect is named on a record they were estimated on, which favours whatever \
+             overfits; give a separate validation record"
+        );
+    }
+}
+
 /// Runs `structid discover`.
 pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
@@ -481,17 +604,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         nominal,
     } = outcome?;
     // Said after the run, so that an input error is the first line of stderr.
-    let canonical = |p: &PathBuf| std::fs::canonicalize(p).ok();
-    if a.validate
-        .iter()
-        .any(|v| a.data.iter().any(|d| canonical(d) == canonical(v)))
-    {
-        eprintln!(
-            "warning: a --validation-data file is a --data file: the hypotheses are ranked and \
-             the effect is named on a record they were estimated on, which favours whatever \
-             overfits; give a separate validation record"
-        );
-    }
+    warn_if_validation_is_estimation(&a);
     // The gap's lags, as discovery sets them.
     let max_lag = settings
         .gap()
@@ -499,16 +612,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         .min(structid_discover::records::shortest(&est.data) / 4)
         .max(1);
 
-    // Every file this command may write, earlier runs' extra tables included.
-    let planned: Vec<String> = OUTPUTS
-        .iter()
-        .map(|f| f.to_string())
-        .chain(
-            (2..=MAX_TABLE_BLOCKS)
-                .map(|i| augmented::table_file_name(&format!("{}{i}", augmented::BLOCK))),
-        )
-        .collect();
-    guard.begin_set(&a.out, Some(&planned))?;
+    guard.begin_set(&a.out, Some(&planned_outputs()))?;
     let command = command_line();
     let mut written_files: Vec<PathBuf> = Vec::new();
     let written = match &d.finding {
@@ -529,72 +633,16 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
         None => None,
     };
 
-    // Figures.
-    let mut figures: Vec<(String, String)> = Vec::new();
-    let band = settings.gap().band;
-    let svg = residual_svg(&d.estimation_gap, band, &est.time)?;
-    let path = a.out.join("residual.svg");
-    guard.write(&path, svg.as_bytes())?;
-    written_files.push(path);
-    figures.push((
-        "residual.svg".into(),
-        format!(
-            "the nominal model's residual on the estimation record with ±{band}·σ̂ and the \
-             windows above it shaded"
-        ),
-    ));
-    let linear =
-        structid_discover::records::stacked(&est.data, |r| nominal.simulate_output(r.u()))?;
-    let mut candidates = candidate_signals(
-        &est.data,
-        &linear,
-        nominal.lft().sample_time().unwrap_or(1.0),
-    );
-    candidates.extend(nominal.state_signals(&est.data)?);
-    let path = a.out.join("regions.svg");
-    guard.write(
-        &path,
-        regions_svg(&d.estimation_gap.residual, &candidates)?.as_bytes(),
+    let figures = write_figures(
+        &a.out,
+        &guard,
+        &d,
+        &nominal,
+        &settings,
+        &est,
+        &val,
+        &mut written_files,
     )?;
-    written_files.push(path);
-    figures.push((
-        "regions.svg".into(),
-        format!(
-            "the residual binned by each candidate signal ({REGION_BINS} quantile bins: mean and \
-             RMS), estimation record"
-        ),
-    ));
-    if let Some(f) = &d.finding {
-        if let Some(h) = Some(&f.hypothesis).filter(|h| !h.curve.z.is_empty()) {
-            let path = a.out.join("map.svg");
-            guard.write(&path, map_svg(&nominal, h, f)?.as_bytes())?;
-            written_files.push(path);
-            figures.push((
-                "map.svg".into(),
-                "the best hypothesis' nonparametric map with its ±2σ band and points, and the \
-                 map of the augmented model"
-                    .into(),
-            ));
-        }
-        let path = a.out.join("before_after.svg");
-        guard.write(
-            &path,
-            before_after_svg(
-                &val,
-                &d.validation_gap,
-                &f.augmented.validation_gap,
-                f.shrink,
-            )?
-            .as_bytes(),
-        )?;
-        written_files.push(path);
-        figures.push((
-            "before_after.svg".into(),
-            "validation record: measured y, the nominal and the augmented simulation, and their \
-             residuals"
-                .into(),
-        ));
-    }
 
     // Reports.
     let context = ReportContext {
@@ -641,20 +689,7 @@ pub fn run(a: DiscoverArgs) -> Result<(), CliError> {
     written_files.push(json_path);
 
     // Outputs of an earlier run that this one did not write would contradict the report.
-    let mut removed = Vec::new();
-    let tables: Vec<String> = (2..=MAX_TABLE_BLOCKS)
-        .map(|i| augmented::table_file_name(&format!("{}{i}", augmented::BLOCK)))
-        .collect();
-    for f in OUTPUTS
-        .iter()
-        .copied()
-        .chain(tables.iter().map(String::as_str))
-    {
-        let p = a.out.join(f);
-        if p.is_file() && !written_files.contains(&p) && std::fs::remove_file(&p).is_ok() {
-            removed.push(p);
-        }
-    }
+    let removed = remove_stale(&a.out, &written_files);
     guard.finish_set(&a.out, &structid_io::output::file_names(&written_files))?;
 
     if let Some((effects, _)) = &effects {
