@@ -45,14 +45,11 @@ impl Fitted {
     /// An estimate from its stored form with the user kernels `kernels` (`Kernel` and
     /// `FeatureMap` objects).
     fn with_registry(data: EstimateData, kernels: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
-        let user = kernels
-            .iter()
-            .map(|k| {
-                UserDispersion::extract(k).ok_or_else(|| {
-                    invalid("kernels must be structid.Kernel or structid.FeatureMap objects")
-                })
-            })
-            .collect::<PyResult<Vec<_>>>()?;
+        let tagged: Vec<((), Bound<'_, PyAny>)> = kernels.iter().map(|k| ((), k.clone())).collect();
+        let user: Vec<UserDispersion> = UserDispersion::extract_all(&tagged)?
+            .into_iter()
+            .map(|(_, u)| u)
+            .collect();
         let estimate = Estimate::from_data_with_kernels(data, &UserDispersion::registry(&user))
             .map_err(error)?;
         Ok(
@@ -186,7 +183,9 @@ impl Fitted {
             )));
         }
         let estimate = self.estimate.clone();
-        let values = detach(py, move || Ok(estimate.maps()[i].eval_many(&points)))?;
+        let values = detach(py, !self.kernels.is_empty(), move || {
+            Ok(estimate.maps()[i].eval_many(&points))
+        })?;
         Ok(convert::vector(py, values))
     }
 
@@ -204,7 +203,9 @@ impl Fitted {
             return Ok(None);
         };
         let id = Arc::clone(id);
-        let std = detach(py, move || id.posterior_std(i, &points).map_err(error))?;
+        let std = detach(py, !self.kernels.is_empty(), move || {
+            id.posterior_std(i, &points).map_err(error)
+        })?;
         Ok(std.map(|s| convert::vector(py, s)))
     }
 
@@ -218,7 +219,7 @@ impl Fitted {
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = convert::signal(&u, "u")?;
         let estimate = self.estimate.clone();
-        let sim = detach(py, move || {
+        let sim = detach(py, !self.kernels.is_empty(), move || {
             estimate.simulate(&u, x0.as_deref()).map_err(error)
         })?;
         let d = PyDict::new(py);
@@ -247,7 +248,7 @@ impl Fitted {
             .build()
             .map_err(error)?;
         let estimate = self.estimate.clone();
-        let p = detach(py, move || {
+        let p = detach(py, !self.kernels.is_empty(), move || {
             estimate.predict(&data, &settings).map_err(error)
         })?;
         let d = PyDict::new(py);
@@ -283,7 +284,7 @@ impl Fitted {
         }
         let settings = validation_settings(initial_state, max_lag, settle)?;
         let estimate = self.estimate.clone();
-        let r = detach(py, move || {
+        let r = detach(py, !self.kernels.is_empty(), move || {
             estimate.validate(&data, &settings).map_err(error)
         })?;
         report_dict(py, &r)
@@ -317,7 +318,7 @@ impl Fitted {
         let data = Data::from_records(records).map_err(error)?;
         let settings = validation_settings(initial_state, max_lag, settle)?;
         let estimate = self.estimate.clone();
-        let r = detach(py, move || {
+        let r = detach(py, !self.kernels.is_empty(), move || {
             estimate.validate_records(&data, &settings).map_err(error)
         })?;
         let d = PyDict::new(py);

@@ -312,14 +312,7 @@ pub fn identify_columns<'py>(
     more_records: Option<Vec<Columns<'py>>>,
     kernels: Vec<(Option<String>, Bound<'py, PyAny>)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let user = kernels
-        .iter()
-        .map(|(block, obj)| {
-            UserDispersion::extract(obj)
-                .map(|u| (block.clone(), u))
-                .ok_or_else(|| invalid("a kernel must be a structid.Kernel or structid.FeatureMap"))
-        })
-        .collect::<PyResult<Vec<_>>>()?;
+    let user = UserDispersion::extract_all(&kernels)?;
     let request = Request {
         user,
         beta,
@@ -339,8 +332,9 @@ pub fn identify_columns<'py>(
     records.extend(more_records.iter().flatten().map(|r| named_columns(r)));
     let validation = validation.as_ref().map(|v| named_columns(v));
     let model = model.clone();
+    let python_kernels = !kernels.is_empty();
     let kernels = kernels.into_iter().map(|(_, k)| k.unbind()).collect();
-    detach(py, move || {
+    detach(py, python_kernels, move || {
         run_records(&model, records, validation, &request)
     })?
     .into_dict(py, kernels)

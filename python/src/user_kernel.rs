@@ -22,8 +22,12 @@ use structid_core::{Dispersion, FeatureMap, Kernel, KernelDispersion, Signal};
 
 use crate::convert::invalid;
 
-/// The first exception a Python kernel raised since the last [`detach`] began.
+/// The first exception a Python kernel raised during the running call.
 static PENDING: Mutex<Option<PyErr>> = Mutex::new(None);
+
+/// Held by the native call that may call Python kernels, so that such calls from several
+/// Python threads run one at a time and each exception is raised by the call that caused it.
+static CALLS: Mutex<()> = Mutex::new(());
 
 fn keep(err: PyErr) {
     let mut pending = PENDING.lock().unwrap_or_else(|p| p.into_inner());
@@ -36,18 +40,33 @@ fn take_pending() -> Option<PyErr> {
     PENDING.lock().unwrap_or_else(|p| p.into_inner()).take()
 }
 
-/// Runs `f` without the GIL and raises the first exception a Python kernel raised during it
-/// (before the library's own error, which it caused).
+fn failed() -> bool {
+    PENDING.lock().unwrap_or_else(|p| p.into_inner()).is_some()
+}
+
+/// Runs `f` without the GIL. With `python_kernels` (the call may evaluate a Python kernel),
+/// it runs alone among such calls and raises the first exception a kernel raised during it,
+/// before the library's own error, which it caused.
+///
+/// The library's worker threads take the GIL to call a Python kernel, so no native call may
+/// hold the GIL while it uses them: every call that evaluates maps goes through here.
 pub(crate) fn detach<T: Send>(
     py: Python<'_>,
+    python_kernels: bool,
     f: impl FnOnce() -> PyResult<T> + Send,
 ) -> PyResult<T> {
-    take_pending();
-    let out = py.detach(f);
-    match take_pending() {
-        Some(e) => Err(e),
-        None => out,
+    if !python_kernels {
+        return py.detach(f);
     }
+    py.detach(|| {
+        let _alone = CALLS.lock().unwrap_or_else(|p| p.into_inner());
+        take_pending();
+        let out = f();
+        match take_pending() {
+            Some(e) => Err(e),
+            None => out,
+        }
+    })
 }
 
 /// Rows `rows` of a signal as an n × p numpy array.
@@ -71,6 +90,10 @@ fn call_matrix(
     shape: (usize, usize),
     args: impl for<'py> FnOnce(Python<'py>) -> Vec<Bound<'py, PyAny>>,
 ) -> Option<Array2<f64>> {
+    // After a first exception the call's result is discarded: spare the rest of the calls.
+    if failed() {
+        return None;
+    }
     Python::attach(|py| {
         let run = || -> PyResult<Array2<f64>> {
             let args = pyo3::types::PyTuple::new(py, args(py))?;
@@ -231,6 +254,7 @@ impl Kernel for PyKernel {
     fn stored_kernel(&self) -> Option<StoredKernel> {
         Some(StoredKernel::User {
             name: self.name.clone(),
+            width: self.width,
         })
     }
 
@@ -414,6 +438,7 @@ impl FeatureMap for PyFeatures {
     fn stored_features(&self) -> Option<StoredKernel> {
         Some(StoredKernel::User {
             name: self.name.clone(),
+            width: None,
         })
     }
 }
@@ -464,11 +489,49 @@ impl UserDispersion {
         }
     }
 
+    /// The name it is stored under.
+    fn name(&self) -> &str {
+        match self {
+            Self::Kernel(k) => &k.name,
+            Self::Features(f) => &f.name,
+        }
+    }
+
     /// The registry of these objects by name.
     pub(crate) fn registry(all: &[Self]) -> structid_core::dispersion::user::UserKernels {
         all.iter().fold(Default::default(), |acc, u| match u {
             Self::Kernel(k) => acc.with_kernel(k.name.clone(), Arc::new(k.clone())),
             Self::Features(f) => acc.with_features(f.name.clone(), Arc::new(f.clone())),
         })
+    }
+
+    /// The objects `objs` (with the blocks they are for), refusing two different callables
+    /// under one name: the name is all an estimate stores of them.
+    pub(crate) fn extract_all<'py, B: Clone>(
+        objs: &[(B, Bound<'py, PyAny>)],
+    ) -> PyResult<Vec<(B, Self)>> {
+        let mut seen: Vec<(String, Bound<'py, PyAny>)> = Vec::new();
+        let mut out = Vec::with_capacity(objs.len());
+        for (b, obj) in objs {
+            let u = Self::extract(obj).ok_or_else(|| {
+                invalid("a kernel must be a structid.Kernel or a structid.FeatureMap")
+            })?;
+            let func = match &u {
+                Self::Kernel(k) => k.func.bind(obj.py()).clone(),
+                Self::Features(f) => f.func.bind(obj.py()).clone(),
+            };
+            if let Some((_, other)) = seen.iter().find(|(n, _)| n == u.name())
+                && !other.is(&func)
+            {
+                return Err(invalid(format!(
+                    "two different kernels are named `{}`; give each its own name= (an \
+                     estimate stores kernels by name)",
+                    u.name()
+                )));
+            }
+            seen.push((u.name().to_string(), func));
+            out.push((b.clone(), u));
+        }
+        Ok(out)
     }
 }

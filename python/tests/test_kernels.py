@@ -142,3 +142,76 @@ def test_an_estimate_on_a_numpy_kernel_predicts_saves_loads_and_pickles(data, tm
 
     again = pickle.loads(pickle.dumps(fit.estimate))
     np.testing.assert_array_equal(again.evaluate("N", grid), fit.estimate.evaluate("N", grid))
+
+
+def test_a_selected_width_is_kept_through_pickle_and_load(data, tmp_path):
+    model, u, y = data
+    k = structid.Kernel(np_gaussian, name="np-gaussian", width=0.1)
+    fit = structid.identify(model, u, y, beta=1e-4, sigma=0.5, dispersion=k)
+    grid = np.linspace(-2, 2, 9)[:, None]
+    direct = fit.estimate.evaluate("N", grid)
+    again = pickle.loads(pickle.dumps(fit.estimate))
+    np.testing.assert_array_equal(again.evaluate("N", grid), direct)
+    fit.save(tmp_path)
+    back = structid.load(tmp_path, kernels=[k])
+    np.testing.assert_array_equal(back.estimate.evaluate("N", grid), direct)
+
+
+def test_two_blocks_with_kernels_of_their_own():
+    exp = structid.paper.spray(samples=300, seed=3)
+    f = structid.Kernel(lambda a, b: np_gaussian(a, b, 0.1), name="narrow")
+    g = structid.Kernel(lambda a, b: np_gaussian(a, b, 1.0), name="wide")
+    fit = structid.identify(exp.model, exp.u, exp.y, beta=1e-3, dispersion={"f": f, "g": g})
+    for block in ("f", "g"):
+        m = fit.maps[block]
+        close(fit.estimate.evaluate(block, m.grid), m.value, 1e-12)
+    # Two different callables under one name cannot be told apart in a stored estimate.
+    same = structid.Kernel(lambda a, b: np_gaussian(a, b, 1.0), name="narrow")
+    with pytest.raises(structid.StructidError, match="named `narrow`"):
+        structid.identify(exp.model, exp.u, exp.y, beta=1e-3, dispersion={"f": f, "g": same})
+
+
+def test_sigma_needs_a_width_to_set(data):
+    model, u, y = data
+    with pytest.raises(structid.StructidError, match="no width"):
+        structid.identify(model, u, y, beta=1e-3, sigma=0.5,
+                          dispersion=structid.FeatureMap(cubic, CUBIC_WEIGHTS))
+
+
+def test_exceptions_stay_with_the_thread_that_caused_them(data):
+    import threading
+    model, u, y = data
+    good = structid.identify(model, u, y, beta=1e-4,
+                             dispersion=structid.Kernel(np_gaussian, name="good")).estimate
+
+    state = {"broken": False}
+
+    def flaky(a, b):
+        if state["broken"]:
+            raise KeyError("flaky kernel")
+        return np_gaussian(a, b)
+
+    bad = structid.identify(model, u, y, beta=1e-4,
+                            dispersion=structid.Kernel(flaky, name="flaky")).estimate
+    state["broken"] = True
+    grid = np.linspace(-1, 1, 5)[:, None]
+    expected = good.evaluate("N", grid)
+    outcomes = {"good": [], "bad": []}
+
+    def run(name, est):
+        for _ in range(300):
+            try:
+                v = est.evaluate("N", grid)
+                outcomes[name].append("ok" if name == "bad" or np.array_equal(v, expected)
+                                      else "wrong")
+            except KeyError:
+                outcomes[name].append("raised")
+
+    threads = [threading.Thread(target=run, args=("good", good)),
+               threading.Thread(target=run, args=("bad", bad))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert outcomes["good"] == ["ok"] * 300
+    assert outcomes["bad"] == ["raised"] * 300

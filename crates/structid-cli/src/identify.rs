@@ -8,7 +8,7 @@ use structid_core::estimate::{Estimate, SignalNames};
 use structid_io::estimate_json;
 
 use structid_core::selection::Criterion;
-use structid_core::{Data, Identification, IdentifySettings, InitialState, Model, SolverChoice};
+use structid_core::{Data, Identification, IdentifySettings, InitialState, SolverChoice};
 use structid_io::{DispersionSpec, ModelFile, OutputGuard, Report, Reproduction, TruthSpec};
 use structid_workflow::{IdentifyRequest, SolveOptions, identify_model_file};
 
@@ -212,33 +212,6 @@ pub(crate) fn files_label(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
-/// z of the data (see [`ModelFile::z_signal`]), computed record by record.
-pub(crate) fn z_of(mf: &ModelFile, data: &Data) -> Result<structid_core::Signal, CliError> {
-    Ok(mf.z_of_records(data)?)
-}
-
-/// The records named by the model file's `[signals]` and the core model, with default kernel
-/// widths chosen from the records' z.
-pub(crate) fn model_and_data(
-    mf: &ModelFile,
-    data_paths: &[PathBuf],
-    sigma: Option<f64>,
-) -> Result<(Data, Model), CliError> {
-    let data = read_records(mf, data_paths)?;
-    let needs_z = sigma.is_none()
-        && mf.blocks.iter().any(|b| {
-            b.dispersion.sigma().is_none()
-                && !matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
-        });
-    let z = if needs_z {
-        Some(z_of(mf, &data)?)
-    } else {
-        None
-    };
-    let model = mf.to_model(sigma, z.as_ref())?;
-    Ok((data, model))
-}
-
 /// An absolute, canonical form of an existing path (absolute but not canonical when it cannot
 /// be resolved), for reports that must not depend on the working directory.
 pub(crate) fn absolute(p: &Path) -> PathBuf {
@@ -297,6 +270,11 @@ const LONG_SOLVE_SAMPLES: usize = 5000;
 pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let (settings, sigma, mf) = load(&a)?;
+    let cannot =
+        |e| CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()));
+    // A block whose z the data do not give (latent, or behind another map) is the joint fit's:
+    // the error's hint says so, before any data are read.
+    structid_workflow::identify::check_identifiable(&mf).map_err(cannot)?;
     let auto_sigma = a.sigma == Some(crate::AutoOr::Auto);
     let auto_beta = a.beta == crate::AutoOr::Auto;
     if a.folds < 2 && a.selection == Some(crate::SelectionArg::Cv) {
@@ -369,9 +347,7 @@ pub fn run(a: IdentifyArgs) -> Result<(), CliError> {
         progress: crate::progress::observer(&pb),
     });
     pb.finish_and_clear();
-    let outcome = outcome.map_err(|e| {
-        CliError::from(e).context(format!("cannot identify with `{}`", a.model.display()))
-    })?;
+    let outcome = outcome?;
     let id = &outcome.identification;
     let block_sigmas: Vec<(String, f64)> = if auto_sigma {
         outcome

@@ -308,14 +308,14 @@ pub fn run(a: RefineArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let iterations = a.iterations.unwrap_or(10);
     let read = ModelFile::from_path(&a.model)?;
-    let (mf, recognised) = match read.linear {
-        Some(_) => (read, None),
-        None => {
-            let (mf, _, note) =
-                structid_workflow::as_linear(&read, &a.model.display().to_string())?;
-            (mf, Some(note))
-        }
-    };
+    // The structure is checked before any data are read.
+    let (mf, _, _, recognised) =
+        structid_workflow::refine::refinable(&read, &a.model.display().to_string())?;
+    if iterations == 0 {
+        return Err(CliError::input(
+            "invalid value 0 for --iterations: it must be at least 1",
+        ));
+    }
     let mut guard = OutputGuard::new();
     guard.protect(&a.model);
     for d in a.data.iter().chain(&a.validation_data) {

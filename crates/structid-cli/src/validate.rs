@@ -13,7 +13,7 @@ use structid_core::{Identification, InitialState, Interpolant, identify};
 use structid_io::{DataTable, ModelFile, OutputGuard, ReportRecord, Reproduction};
 
 use crate::error::CliError;
-use crate::identify::{absolute, estimate_columns, load, model_and_data, protect_inputs};
+use crate::identify::{absolute, estimate_columns, load, protect_inputs};
 use crate::validation_files::{
     OUTPUTS, RecordScore, check_lengths, fmt_pct, outputs_json, pass, residuals_svg,
     simulation_names, simulation_svg,
@@ -261,8 +261,10 @@ fn rebuild(recorded: Recorded) -> Result<Rebuilt, CliError> {
         "re-running the identification recorded in `{}`",
         recorded.report_path.display()
     );
-    let (edata, emodel) = model_and_data(&recorded.model, &recorded.args.data, recorded.sigma)
+    let edata = crate::identify::read_records(&recorded.model, &recorded.args.data)
         .map_err(|e| e.context(context.clone()))?;
+    let emodel = structid_workflow::core_model(&recorded.model, recorded.sigma, &edata)
+        .map_err(|e| CliError::from(e).context(context.clone()))?;
     let id = identify(&emodel, &edata, &recorded.id_settings)
         .and_then(|id| id.converged())
         .map_err(|e| CliError::from(e).context(context))?;

@@ -124,7 +124,8 @@ pub enum Error {
     /// given (only the name of user code is stored).
     #[error(
         "the estimate uses the user-defined kernel `{name}`, whose code is not stored with it; \
-         supply that kernel under this name when reading the estimate"
+         it can be read only where that kernel is supplied under this name (the library's \
+         `Estimate::from_data_with_kernels`, Python's `kernels=`)"
     )]
     UserKernelMissing {
         /// The kernel's name as stored.

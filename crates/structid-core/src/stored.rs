@@ -99,6 +99,10 @@ pub enum StoredKernel {
     User {
         /// The name it is registered under.
         name: String,
+        /// The width it was used at, when it has one (a selected σ is not the registered
+        /// kernel's own).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        width: Option<f64>,
     },
 }
 

@@ -25,9 +25,16 @@ impl Kernel for MyGaussian {
     fn describe(&self) -> String {
         "my gaussian".into()
     }
+    fn width(&self) -> Option<f64> {
+        Some(self.0.sigma())
+    }
+    fn with_width(&self, width: f64) -> Option<structid_core::Result<Self>> {
+        Some(GaussianKernel::new(width).map(MyGaussian))
+    }
     fn stored_kernel(&self) -> Option<StoredKernel> {
         Some(StoredKernel::User {
             name: "my-gaussian".into(),
+            width: Some(self.0.sigma()),
         })
     }
 }
@@ -50,6 +57,7 @@ impl FeatureMap for Cubic {
     fn stored_features(&self) -> Option<StoredKernel> {
         Some(StoredKernel::User {
             name: "cubic".into(),
+            width: None,
         })
     }
 }
@@ -99,11 +107,16 @@ fn a_user_kernel_identifies_as_the_built_in_one_and_is_read_back_by_name() {
     let direct = b.blocks[0].map.eval_many(&grid);
     assert_eq!(est.maps()[0].eval_many(&grid), direct);
 
-    // Stored, it names the kernel; read back with it, it evaluates to the same numbers.
+    // Stored, it names the kernel and its width; read back with it, registered at another
+    // width, it evaluates to the same numbers.
     let data = stored(&est);
-    let kernels = UserKernels::new().with_kernel("my-gaussian", Arc::new(mine.kernel().clone()));
+    let other = MyGaussian(GaussianKernel::new(2.0).unwrap());
+    let kernels = UserKernels::new().with_kernel("my-gaussian", Arc::new(other));
     let back = Estimate::from_data_with_kernels(data.clone(), &kernels).unwrap();
     assert_eq!(back.maps()[0].eval_many(&grid), direct);
+    for k in 0..grid.len() {
+        assert_eq!(back.maps()[0].eval(grid.sample(k)), direct[k]);
+    }
 
     // Without it, the error names the kernel.
     match Estimate::try_from(data) {

@@ -74,10 +74,16 @@ pub struct IdentifyOutcome {
 /// The criterion used when none is asked for: the marginal likelihood when every dispersion is
 /// quadratic (a Gaussian-process evidence exists), else `folds`-fold cross-validation.
 pub fn default_criterion(model: &ModelFile, folds: usize) -> Criterion {
-    let quadratic = !model
-        .blocks
-        .iter()
-        .any(|b| matches!(b.dispersion, DispersionSpec::TotalVariation { .. }));
+    criterion_for(model, &[], folds)
+}
+
+/// [`default_criterion`] when `replaced` blocks (by name; `None`: every block) have a
+/// dispersion of their own in place of the model file's: a kernel or features, quadratic.
+fn criterion_for(model: &ModelFile, replaced: &[Option<&str>], folds: usize) -> Criterion {
+    let is_replaced = |name: &str| replaced.iter().any(|r| r.is_none_or(|r| r == name));
+    let quadratic = !model.blocks.iter().any(|b| {
+        !is_replaced(&b.name) && matches!(b.dispersion, DispersionSpec::TotalVariation { .. })
+    });
     if quadratic {
         Criterion::MarginalLikelihood
     } else {
@@ -129,19 +135,41 @@ fn with_dispersions(
         else {
             return Arc::clone(&b.dispersion);
         };
-        match sigma.and_then(|s| d.with_width(s)) {
+        let Some(s) = sigma else {
+            return Arc::clone(d);
+        };
+        match d.with_width(s) {
             Some(Ok(w)) => w,
             Some(Err(e)) => {
-                failed = Some(e);
+                failed = Some(WorkflowError::Core(e));
                 Arc::clone(d)
             }
-            None => Arc::clone(d),
+            None => {
+                failed = Some(WorkflowError::Request(format!(
+                    "block `{}`: its dispersion {} has no width for sigma to set",
+                    b.name,
+                    d.describe()
+                )));
+                Arc::clone(d)
+            }
         }
     });
     match failed {
-        Some(e) => Err(e.into()),
+        Some(e) => Err(e),
         None => Ok(model),
     }
+}
+
+/// The checks of a model file that need no data: every block's z computable from u and y
+/// (else the joint fit's), and a stable residual recursion. [`identify_model_file`] makes them
+/// first; a front end may make them before it reads any data.
+///
+/// # Errors
+/// The model file's refusal, which names the blocks out of reach.
+pub fn check_identifiable(mf: &ModelFile) -> Result<()> {
+    mf.check_z_computable()?;
+    mf.lft.check_residual_stable()?;
+    Ok(())
 }
 
 /// Runs the identify workflow (see the module documentation).
@@ -161,8 +189,7 @@ pub fn identify_model_file(req: &IdentifyRequest<'_>) -> Result<IdentifyOutcome>
             req.sigma_label
         )));
     }
-    mf.check_z_computable()?;
-    mf.lft.check_residual_stable()?;
+    check_identifiable(mf)?;
     mf.check_excitation(req.data, &req.data_label)?;
     if let Some(s) = req.sigma {
         mf.check_sigma(s, req.data, &req.sigma_label)?;
@@ -172,28 +199,30 @@ pub fn identify_model_file(req: &IdentifyRequest<'_>) -> Result<IdentifyOutcome>
         &req.dispersions,
         req.sigma,
     )?;
+    let base = match req.beta {
+        Some(b) => req.settings.with_beta(crate::options::beta(b)?)?,
+        None => req.settings.clone(),
+    };
     let (id, settings, model, selection, widths) = if req.beta.is_none() || req.sigma_auto {
+        let replaced: Vec<Option<&str>> =
+            req.dispersions.iter().map(|(b, _)| b.as_deref()).collect();
         let criterion = req
             .selection
-            .unwrap_or_else(|| default_criterion(mf, req.folds));
+            .unwrap_or_else(|| criterion_for(mf, &replaced, req.folds));
         let how = SelectionSettings::builder()
             .criterion(criterion)
             .tune_beta(req.beta.is_none())
             .tune_sigma(req.sigma_auto)
             .progress(req.progress.clone())
             .build()?;
-        let sel = select(&model, req.data, req.validation, &req.settings, &how)?;
-        let chosen = req.settings.with_beta(sel.beta)?;
+        let sel = select(&model, req.data, req.validation, &base, &how)?;
+        let chosen = base.with_beta(sel.beta)?;
         let report = SelectionReport::new(&sel);
         let widths = sel.widths.clone();
         (sel.identification, chosen, sel.model, Some(report), widths)
     } else {
-        let settings = match req.beta {
-            Some(b) => req.settings.with_beta(b)?,
-            None => req.settings.clone(),
-        };
-        let id = identify(&model, req.data, &settings)?;
-        (id, settings, model, None, Vec::new())
+        let id = identify(&model, req.data, &base)?;
+        (id, base, model, None, Vec::new())
     };
     let sigma = selection.as_ref().and_then(|s| s.sigma).or(req.sigma);
     let mut report = Report::new(mf, &id, &settings, req.sigma)?;

@@ -126,30 +126,35 @@ pub fn as_linear(mf: &ModelFile, label: &str) -> Result<(ModelFile, LinearSpec, 
     Ok((out, spec, note))
 }
 
-/// The checks of a request that need no data: the structure and the numbers.
-fn checked_structure(
-    req: &RefineRequest<'_>,
+/// The structure of a model file that refinement works on: the file (as `[linear]`), its
+/// `[linear]` section, the structure around its one map, and what was recognised when it was an
+/// `[lft]`. [`refine_model_file`] starts with it; a front end may call it before it reads any
+/// data. `label` names the file in messages.
+///
+/// # Errors
+/// [`WorkflowError::Request`] for a model without exactly one map at one of the structures.
+pub fn refinable(
+    model: &ModelFile,
+    label: &str,
 ) -> Result<(ModelFile, LinearSpec, LinearStructure, Option<String>)> {
     let request = |m: String| WorkflowError::Request(m);
-    let (mf, spec, recognised) = match req.model.linear.clone() {
-        Some(spec) => (req.model.clone(), spec, None),
+    let (mf, spec, recognised) = match model.linear.clone() {
+        Some(spec) => (model.clone(), spec, None),
         None => {
-            let (mf, spec, note) = as_linear(req.model, &req.model_label)?;
+            let (mf, spec, note) = as_linear(model, label)?;
             (mf, spec, Some(note))
         }
     };
     if spec.structure.is_none() {
         return Err(request(format!(
-            "`{}` has structure = \"lti\", a linear model without a map; refinement \
+            "`{label}` has structure = \"lti\", a linear model without a map; refinement \
              re-estimates G around a map (structure = \"output-feedback\", \"rate-feedback\", \
-             \"input\" or \"output\")",
-            req.model_label
+             \"input\" or \"output\")"
         )));
     }
     if mf.blocks.len() != 1 {
         return Err(request(format!(
-            "`{}` has {} maps; refinement needs a structure with exactly one",
-            req.model_label,
+            "`{label}` has {} maps; refinement needs a structure with exactly one",
             mf.blocks.len()
         )));
     }
@@ -159,14 +164,28 @@ fn checked_structure(
             spec.structure_name()
         ))
     })?;
+    Ok((mf, spec, structure, recognised))
+}
+
+/// The checks of a request's numbers.
+fn check_numbers(req: &RefineRequest<'_>) -> Result<()> {
+    let request = |m: String| WorkflowError::Request(m);
+    let invalid = |option: &'static str, value: String, rule: String| {
+        Err(WorkflowError::InvalidOption {
+            option,
+            value,
+            rule,
+        })
+    };
     if req.iterations == 0 {
-        return Err(request("iterations must be at least 1".into()));
+        return invalid("iterations", "0".into(), "it must be at least 1".into());
     }
     if !(req.tolerance.is_finite() && req.tolerance >= 0.0) {
-        return Err(request(format!(
-            "invalid tolerance {}: it must be a finite number ≥ 0",
-            req.tolerance
-        )));
+        return invalid(
+            "tolerance",
+            req.tolerance.to_string(),
+            "it must be a finite number ≥ 0".into(),
+        );
     }
     if let Some(s) = req.sigma
         && !(s.is_finite() && s > 0.0)
@@ -187,16 +206,19 @@ fn checked_structure(
                     .get(i)
                     .map(|l| format!(" (`{l}`)"))
                     .unwrap_or_default();
-                return Err(request(format!(
-                    "settle {} is not less than the {} samples of validation record {}{named}",
-                    req.settle,
-                    r.len(),
-                    i + 1
-                )));
+                return invalid(
+                    "settle",
+                    req.settle.to_string(),
+                    format!(
+                        "it is not less than the {} samples of validation record {}{named}",
+                        r.len(),
+                        i + 1
+                    ),
+                );
             }
         }
     }
-    Ok((mf, spec, structure, recognised))
+    Ok(())
 }
 
 /// The refined model file: the new G and the width actually used.
@@ -218,7 +240,8 @@ fn refined_file(mf: &ModelFile, spec: &LinearSpec, r: &Refinement) -> Result<Mod
 /// The checks of the request (see [`as_linear`] and the messages), a map input that does not
 /// vary, an absurd σ, and the errors of the refinement.
 pub fn refine_model_file(req: &RefineRequest<'_>) -> Result<RefineOutcome> {
-    let (mf, spec, structure, recognised) = checked_structure(req)?;
+    let (mf, spec, structure, recognised) = refinable(req.model, &req.model_label)?;
+    check_numbers(req)?;
     mf.check_excitation(req.data, &req.data_label)?;
     if let Some(s) = req.sigma {
         mf.check_sigma(s, req.data, &req.sigma_label)?;

@@ -844,6 +844,10 @@ impl FourierKernel {
     }
 }
 
+/// Samples whose features are evaluated in one call where a penalty needs them all (a map
+/// written in another language pays per call, not per sample).
+const FEATURE_BLOCK: usize = 1024;
+
 /// A quadratic penalty given by a feature map at fixed sample points: K = Ψ Λ Ψᵀ.
 pub(crate) struct FeaturePenalty<F: FeatureMap + Kernel> {
     pub(crate) map: Arc<F>,
@@ -861,13 +865,19 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {
         // N̂(z) = Σ_k α_k K(z, z_k) = ψ(z)ᵀ·(Λ Ψᵀ α): m coefficients instead of L centres.
+        // The features are evaluated a block of samples at a time (one call of a batched map).
         let m = self.map.dim();
+        let ones = vec![1.0; m];
         let mut coef = vec![0.0; m];
-        let mut psi = vec![0.0; m];
-        for (k, a) in alpha.iter().enumerate() {
-            if *a != 0.0 {
-                self.map.eval_into(self.z.sample(k), &mut psi);
-                coef.iter_mut().zip(&psi).for_each(|(c, v)| *c += a * v);
+        let mut psi = vec![0.0; FEATURE_BLOCK * m];
+        for t0 in (0..alpha.len()).step_by(FEATURE_BLOCK) {
+            let n = FEATURE_BLOCK.min(alpha.len() - t0);
+            let rows = &mut psi[..n * m];
+            self.map.eval_rows(&self.z, t0, &ones, rows);
+            for (a, row) in alpha[t0..t0 + n].iter().zip(rows.chunks_exact(m.max(1))) {
+                if *a != 0.0 {
+                    coef.iter_mut().zip(row).for_each(|(c, v)| *c += a * v);
+                }
             }
         }
         coef.iter_mut()
@@ -890,18 +900,15 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
         if points.channels() != self.z.channels() || out.nrows() != len || out.ncols() != g {
             return false;
         }
+        let ones = vec![1.0; m];
         let mut psi_z = vec![0.0; len * m];
         psi_z
-            .par_chunks_mut(m.max(1))
+            .par_chunks_mut((FEATURE_BLOCK * m).max(1))
             .enumerate()
-            .for_each(|(k, row)| self.map.eval_into(self.z.sample(k), row));
+            .for_each(|(b, rows)| self.map.eval_rows(&self.z, b * FEATURE_BLOCK, &ones, rows));
         let mut psi_p = vec![0.0; g * m];
-        for (j, row) in psi_p.chunks_mut(m.max(1)).enumerate() {
-            self.map.eval_into(points.sample(j), row);
-            row.iter_mut()
-                .zip(self.map.weights())
-                .for_each(|(v, l)| *v *= l);
-        }
+        self.map
+            .eval_rows(points, 0, self.map.weights(), &mut psi_p);
         faer::linalg::matmul::matmul(
             out,
             faer::Accum::Replace,
@@ -917,12 +924,13 @@ impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
         if points.channels() != self.z.channels() {
             return None;
         }
-        let mut psi = vec![0.0; self.map.dim()];
+        let m = self.map.dim();
+        let mut psi = vec![0.0; points.len() * m];
+        self.map.eval_rows(points, 0, &vec![1.0; m], &mut psi);
         Some(
-            (0..points.len())
-                .map(|j| {
-                    self.map.eval_into(points.sample(j), &mut psi);
-                    psi.iter()
+            psi.chunks_exact(m.max(1))
+                .map(|row| {
+                    row.iter()
                         .zip(self.map.weights())
                         .map(|(v, l)| v * v * l)
                         .sum()

@@ -6,7 +6,6 @@ use std::sync::Arc;
 
 use faer::MatMut;
 use faer::reborrow::{Reborrow, ReborrowMut};
-use rayon::prelude::*;
 use structid_lti::Signal;
 
 use crate::error::{Result, positive_finite};
@@ -418,11 +417,39 @@ impl<K: Kernel> Interpolant for KernelExpansion<K> {
         self.kernel.eval_expansion(z, &self.centres, &self.alpha)
     }
 
+    /// A block of points at a time through [`Kernel::fill_cross`] (one call of a batched
+    /// kernel per block), summed as [`Kernel::eval_expansion`] sums: the same values as
+    /// `eval` at each point.
     fn eval_many(&self, z: &Signal) -> Vec<f64> {
-        (0..z.len())
-            .into_par_iter()
-            .map(|k| self.eval(z.sample(k)))
-            .collect()
+        let n = self.centres.len();
+        if n == 0 || z.channels() != self.centres.channels() {
+            return (0..z.len()).map(|k| self.eval(z.sample(k))).collect();
+        }
+        // Blocks of at most 2²² kernel values (32 MiB).
+        let block = ((1usize << 22) / n).max(1);
+        let p = z.channels();
+        let mut out = Vec::with_capacity(z.len());
+        let mut k = vec![0.0; block.min(z.len()) * n];
+        for t0 in (0..z.len()).step_by(block) {
+            let rows = block.min(z.len() - t0);
+            let points = Signal::new(p, z.as_slice()[t0 * p..(t0 + rows) * p].to_vec())
+                .expect("a block of a signal is a signal");
+            let buf = &mut k[..rows * n];
+            self.kernel.fill_cross(
+                &points,
+                &self.centres,
+                MatMut::from_row_major_slice_mut(buf, rows, n),
+            );
+            out.extend(buf.chunks_exact(n).map(|row| {
+                self.alpha
+                    .iter()
+                    .zip(row)
+                    .filter(|(a, _)| **a != 0.0)
+                    .map(|(a, v)| a * v)
+                    .sum::<f64>()
+            }));
+        }
+        out
     }
 
     fn stored(&self) -> Option<crate::stored::StoredMap> {

@@ -31,7 +31,7 @@ use crate::stored::StoredKernel;
 #[derive(Clone)]
 pub enum UserKernel {
     /// A kernel k(z₁, z₂): estimates on it are kernel expansions.
-    Kernel(Arc<dyn Kernel>),
+    Kernel(SharedKernel),
     /// A feature map ψ with weights λ: estimates on it are feature expansions.
     Features(Arc<dyn FeatureMap>),
 }
@@ -39,8 +39,58 @@ pub enum UserKernel {
 impl fmt::Debug for UserKernel {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            UserKernel::Kernel(k) => write!(f, "Kernel({})", k.describe()),
+            UserKernel::Kernel(k) => write!(f, "Kernel({})", k.kernel.describe()),
             UserKernel::Features(m) => write!(f, "Features(dim = {})", m.dim()),
+        }
+    }
+}
+
+/// The same kernel at another width, or `None` when it has none.
+type AtWidth = dyn Fn(f64) -> Option<Result<Arc<dyn Kernel>>> + Send + Sync;
+
+/// A kernel behind a trait object that can still be set to another width (what a stored
+/// estimate whose σ was selected needs).
+#[derive(Clone)]
+pub struct SharedKernel {
+    kernel: Arc<dyn Kernel>,
+    at_width: Arc<AtWidth>,
+}
+
+impl SharedKernel {
+    /// The kernel `kernel`.
+    pub fn new<K: Kernel + 'static>(kernel: Arc<K>) -> Self {
+        let base = Arc::clone(&kernel);
+        Self {
+            kernel,
+            at_width: Arc::new(move |w| {
+                base.with_width(w)
+                    .map(|k| k.map(|k| Arc::new(k) as Arc<dyn Kernel>))
+            }),
+        }
+    }
+
+    /// The kernel as registered.
+    pub fn kernel(&self) -> &Arc<dyn Kernel> {
+        &self.kernel
+    }
+
+    /// The kernel at `width` (as registered for `None` or its own width).
+    ///
+    /// # Errors
+    /// [`Error::InconsistentStored`] for a width given to a kernel without one, and the
+    /// kernel's own error for a width it refuses.
+    pub fn at_width(&self, name: &str, width: Option<f64>) -> Result<Arc<dyn Kernel>> {
+        match width {
+            None => Ok(Arc::clone(&self.kernel)),
+            Some(w) if self.kernel.width() == Some(w) => Ok(Arc::clone(&self.kernel)),
+            Some(w) => (self.at_width)(w).unwrap_or_else(|| {
+                Err(Error::InconsistentStored {
+                    item: format!("user kernel `{name}`"),
+                    detail: format!(
+                        "the estimate used it at width {w}, but the kernel given has no width"
+                    ),
+                })
+            }),
         }
     }
 }
@@ -67,9 +117,10 @@ impl UserKernels {
         Self::default()
     }
 
-    /// The registry with the kernel `kernel` under `name` (replacing one of that name).
-    pub fn with_kernel(self, name: impl Into<String>, kernel: Arc<dyn Kernel>) -> Self {
-        self.with(name.into(), UserKernel::Kernel(kernel))
+    /// The registry with the kernel `kernel` under `name` (replacing one of that name). The
+    /// name identifies the kernel: two different kernels need two names.
+    pub fn with_kernel<K: Kernel + 'static>(self, name: impl Into<String>, kernel: Arc<K>) -> Self {
+        self.with(name.into(), UserKernel::Kernel(SharedKernel::new(kernel)))
     }
 
     /// The registry with the feature map `features` under `name` (replacing one of that name).
@@ -117,8 +168,8 @@ impl UserKernels {
 /// The registry entry of a kernel whose stored form is [`StoredKernel::User`], if it is one.
 pub(crate) fn user_kernel_of<K: Kernel + 'static>(kernel: &Arc<K>) -> UserKernels {
     match kernel.stored_kernel() {
-        Some(StoredKernel::User { name }) => {
-            UserKernels::new().with_kernel(name, Arc::clone(kernel) as Arc<dyn Kernel>)
+        Some(StoredKernel::User { name, .. }) => {
+            UserKernels::new().with_kernel(name, Arc::clone(kernel))
         }
         _ => UserKernels::new(),
     }
@@ -222,7 +273,7 @@ impl<F: FeatureMap + 'static> Dispersion for FeatureDispersion<F> {
 
     fn user_kernels(&self) -> UserKernels {
         match self.map.map.stored_features() {
-            Some(StoredKernel::User { name }) => {
+            Some(StoredKernel::User { name, .. }) => {
                 UserKernels::new().with_features(name, Arc::clone(&self.map) as Arc<dyn FeatureMap>)
             }
             _ => UserKernels::new(),
@@ -246,6 +297,31 @@ impl<F: FeatureMap> fmt::Debug for Features<F> {
 impl<F: FeatureMap> Kernel for Features<F> {
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
         crate::dispersion::feature_kernel(&self.map, a, b)
+    }
+
+    /// K(a_i, b_j) = ψ(a_i)ᵀΛψ(b_j) as one product of the two feature matrices (each
+    /// evaluated in one call), for the solvers that work with Gram matrices.
+    fn fill_cross(&self, rows: &Signal, cols: &Signal, out: MatMut<'_, f64>) {
+        let m = self.map.dim();
+        let mut a = vec![0.0; rows.len() * m];
+        self.map.eval_rows(rows, 0, self.map.weights(), &mut a);
+        let mut b = vec![0.0; cols.len() * m];
+        self.map.eval_rows(cols, 0, &vec![1.0; m], &mut b);
+        faer::linalg::matmul::matmul(
+            out,
+            faer::Accum::Replace,
+            faer::MatRef::from_row_major_slice(&a, rows.len(), m),
+            faer::MatRef::from_row_major_slice(&b, cols.len(), m).transpose(),
+            1.0,
+            faer::get_global_parallelism(),
+        );
+    }
+
+    fn fill_gram_columns(&self, z: &Signal, cols: Range<usize>, out: MatMut<'_, f64>) {
+        let p = z.channels();
+        let picked = Signal::new(p, z.as_slice()[cols.start * p..cols.end * p].to_vec())
+            .expect("columns of a signal are a signal");
+        self.fill_cross(z, &picked, out);
     }
     fn describe(&self) -> String {
         self.name.clone()

@@ -426,8 +426,10 @@ impl Estimate {
     ///
     /// # Errors
     /// [`Error::DimensionMismatch`] for a wrong number of maps or an initial state of the wrong
-    /// size, [`Error::InvalidStructure`] when a map has no stored form (a closure, a
-    /// user-defined kernel; the message names the block).
+    /// size, [`Error::InvalidStructure`] when a map has no stored form (a closure, or a
+    /// user-defined kernel whose `stored_kernel` is `None`; the message names the block). A
+    /// user kernel stored by name ([`crate::dispersion::user`]) is taken from the model's
+    /// dispersions.
     pub fn from_maps(
         model: &Model,
         maps: &[&dyn Interpolant],

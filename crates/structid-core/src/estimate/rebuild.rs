@@ -49,7 +49,7 @@ impl StoredKernel {
             StoredKernel::Stacked { parts, width_part } => {
                 Arc::new(stacked(parts, *width_part, user)?)
             }
-            StoredKernel::User { name } => match user.get(name)? {
+            StoredKernel::User { name, .. } => match user.get(name)? {
                 UserKernel::Features(f) => Arc::clone(f),
                 UserKernel::Kernel(_) => return Err(user_mismatch(name, "a kernel", "features")),
             },
@@ -76,8 +76,10 @@ impl StoredKernel {
             StoredKernel::Stacked { parts, width_part } => {
                 boxed(stacked(parts, *width_part, user)?, centres, alpha)
             }
-            StoredKernel::User { name } => match user.get(name)? {
-                UserKernel::Kernel(k) => boxed(DynKernel(Arc::clone(k)), centres, alpha),
+            StoredKernel::User { name, width } => match user.get(name)? {
+                UserKernel::Kernel(k) => {
+                    boxed(DynKernel(k.at_width(name, *width)?), centres, alpha)
+                }
                 UserKernel::Features(_) => {
                     return Err(user_mismatch(name, "a feature map", "a kernel"));
                 }
