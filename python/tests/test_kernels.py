@@ -61,6 +61,7 @@ def test_a_numpy_gaussian_equals_the_built_in_one(data):
     close(mine.maps["N"].value, builtin.maps["N"].value, 1e-10)
     close(mine.maps["N"].std, builtin.maps["N"].std, 1e-10)
     assert mine.maps["N"].dispersion == "np-gaussian"
+    assert mine.report["settings"]["blocks"][0]["kind"] == "user"
     # β chosen by marginal likelihood: the same criterion on the same Gram matrix.
     auto_builtin = structid.identify(model, u, y, beta="auto")
     auto_mine = structid.identify(model, u, y, beta="auto",

@@ -227,6 +227,18 @@ pub fn identify_model_file(req: &IdentifyRequest<'_>) -> Result<IdentifyOutcome>
     let sigma = selection.as_ref().and_then(|s| s.sigma).or(req.sigma);
     let mut report = Report::new(mf, &id, &settings, req.sigma)?;
     report.selection = selection.clone();
+    // A block with a dispersion of its own is not the model file's.
+    for b in report.settings.blocks.iter_mut().filter(|b| {
+        req.dispersions
+            .iter()
+            .any(|(name, _)| name.as_deref().is_none_or(|n| n == b.name))
+    }) {
+        b.kind = "user".into();
+        b.sigma_source = match req.sigma {
+            Some(_) => "override".into(),
+            None => "the dispersion's own".into(),
+        };
+    }
     let estimate = Estimate::from_identification(&model, &id, req.data, &settings)?
         .with_signal_names(SignalNames {
             u: mf.signals.u.clone(),
