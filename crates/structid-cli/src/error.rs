@@ -108,6 +108,12 @@ impl From<structid_workflow::WorkflowError> for CliError {
             W::Core(e) => e.into(),
             W::Discover(e) => e.into(),
             W::Request(m) => Self::input(m),
+            e @ W::NotNominal(_) => Self {
+                code: EXIT_INPUT,
+                context: None,
+                hint: hint(&e),
+                error: Box::new(e),
+            },
             W::InvalidOption {
                 option,
                 value,

@@ -60,10 +60,9 @@ pub fn nominal_model(mf: &ModelFile, label: &str) -> Result<Nominal> {
         _ if !mf.blocks.is_empty() => known_maps_nominal(mf, label)?,
         Some(spec) if spec.structure.is_none() => Nominal::from_polynomial(&spec.model)?,
         Some(spec) => {
-            return Err(request(format!(
+            return Err(WorkflowError::NotNominal(format!(
                 "`{label}` has [linear] structure = \"{}\"; discovery needs structure = \"lti\" \
-                 (a linear model estimated from the data, or an [lft] without \
-                 [[nonlinearity]])",
+                 (a linear model, or an [lft] without [[nonlinearity]])",
                 spec.structure_name()
             )));
         }

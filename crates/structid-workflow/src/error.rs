@@ -20,6 +20,10 @@ pub enum WorkflowError {
     /// A request that cannot be carried out as given; the message says what to change.
     #[error("{0}")]
     Request(String),
+    /// A model file that cannot be the nominal model of a discovery; the message says why
+    /// (the remedy: a linear nominal model estimated from the data).
+    #[error("{0}")]
+    NotNominal(String),
     /// An option out of its range: the front end names it its own way (`--max-iterations`,
     /// `max_iterations`).
     #[error("invalid value {value} for {option}: {rule}")]

@@ -62,6 +62,7 @@ fn direct(e: &(dyn std::error::Error + 'static)) -> Option<Remedy> {
         WorkflowError::Core(c) => of_core(c),
         WorkflowError::Discover(d) => of_discover(d),
         WorkflowError::Io(structid_io::IoError::Core(c)) => of_core(c),
+        WorkflowError::NotNominal(_) => Some(Remedy::LinearNominal),
         _ => None,
     }
 }
@@ -104,6 +105,10 @@ mod tests {
             explanation: "z of `N2` needs the output of `N1`".into(),
         };
         assert_eq!(remedy(&poor()), Some(Remedy::LinearNominal));
+        assert_eq!(
+            remedy(&WorkflowError::NotNominal("structure = \"input\"".into())),
+            Some(Remedy::LinearNominal)
+        );
         assert_eq!(
             remedy(&WorkflowError::Discover(poor())),
             Some(Remedy::LinearNominal)
