@@ -212,6 +212,19 @@ pub(crate) fn files_label(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
+/// The absolute paths of several data files for a report, or none for one file (which
+/// `data_file_absolute` names).
+pub(crate) fn absolute_files(paths: &[PathBuf]) -> Vec<String> {
+    if paths.len() > 1 {
+        paths
+            .iter()
+            .map(|p| absolute(p).display().to_string())
+            .collect()
+    } else {
+        Vec::new()
+    }
+}
+
 /// An absolute, canonical form of an existing path (absolute but not canonical when it cannot
 /// be resolved), for reports that must not depend on the working directory.
 pub(crate) fn absolute(p: &Path) -> PathBuf {
@@ -239,14 +252,7 @@ fn reproduction(
     Reproduction {
         model_file_absolute: absolute(&a.model).display().to_string(),
         data_file_absolute: absolute(&a.data[0]).display().to_string(),
-        data_files_absolute: if a.data.len() > 1 {
-            a.data
-                .iter()
-                .map(|p| absolute(p).display().to_string())
-                .collect()
-        } else {
-            Vec::new()
-        },
+        data_files_absolute: absolute_files(&a.data),
         beta,
         sigma,
         solver_requested: value_name(a.solver),

@@ -13,7 +13,7 @@ use structid_plot::{Chart, Series, render_chart_svg};
 use structid_workflow::{RefineRequest, refine_model_file};
 
 use crate::error::CliError;
-use crate::identify::{absolute, write_estimate};
+use crate::identify::{absolute, absolute_files, write_estimate};
 use crate::{AutoOr, InitialStateArg};
 
 /// Arguments of `structid refine`.
@@ -262,14 +262,7 @@ fn reproduction(
     Reproduction {
         model_file_absolute: absolute(model_path).display().to_string(),
         data_file_absolute: absolute(data_file).display().to_string(),
-        data_files_absolute: if a.data.len() > 1 {
-            a.data
-                .iter()
-                .map(|p| absolute(p).display().to_string())
-                .collect()
-        } else {
-            Vec::new()
-        },
+        data_files_absolute: absolute_files(&a.data),
         beta: r.beta,
         sigma: None,
         solver_requested: "auto".into(),
