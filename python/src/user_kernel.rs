@@ -27,6 +27,8 @@ static PENDING: Mutex<Option<PyErr>> = Mutex::new(None);
 
 /// Held by the native call that may call Python kernels, so that such calls from several
 /// Python threads run one at a time and each exception is raised by the call that caused it.
+/// It is not reentrant: a Python kernel must not itself call a structid function that
+/// evaluates Python kernels.
 static CALLS: Mutex<()> = Mutex::new(());
 
 fn keep(err: PyErr) {
