@@ -10,7 +10,7 @@ import pytest
 import structid
 from conftest import read_csv, read_json, write_csv
 
-RTOL = 1e-9
+RTOL = 1e-12
 
 
 def close(a, b, rtol=RTOL, atol=1e-12):
@@ -61,11 +61,11 @@ def test_fourier_features(cli, files):
 def test_total_variation(cli, files):
     out, fit = run_both(cli, files, ["--beta", "0.01", "--dispersion", "tv"],
                         beta=0.01, dispersion=structid.total_variation())
-    # An interior-point solution: equal up to the solver's tolerance, not bit for bit.
+    # The same interior-point solver on the same data through the same workflow.
     report = read_json(out / "report.json")
     est = read_csv(out / "estimate.csv")
-    close(fit.w_hat[:, 0], est["N"], rtol=1e-6, atol=1e-8)
-    close(fit.cost["total"], report["cost"]["total"], rtol=1e-6)
+    close(fit.w_hat[:, 0], est["N"], rtol=1e-12)
+    close(fit.cost["total"], report["cost"]["total"], rtol=1e-12)
     assert fit.maps["N"].std is None
 
 

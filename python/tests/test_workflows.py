@@ -22,10 +22,10 @@ def test_spray_matches_the_demo(cli, tmp_path):
         fit = structid.identify(exp.model, exp.u, exp.y, beta=row["beta"])
         centred = lambda a, b: np.sqrt(np.mean(((a - a.mean()) - (b - b.mean())) ** 2))
         np.testing.assert_allclose(centred(fit.w_hat[:, 0], exp.w_true[:, 0]),
-                                   row["centred_rms_error_f"], rtol=1e-9)
+                                   row["centred_rms_error_f"], rtol=1e-12)
         np.testing.assert_allclose(centred(fit.w_hat[:, 1], exp.w_true[:, 1]),
-                                   row["centred_rms_error_g"], rtol=1e-9)
-        np.testing.assert_allclose(fit.cost["total"], row["cost_total"], rtol=1e-9)
+                                   row["centred_rms_error_g"], rtol=1e-12)
+        np.testing.assert_allclose(fit.cost["total"], row["cost_total"], rtol=1e-12)
 
 
 def test_refine_matches_the_tool(cli, tmp_path, records):
@@ -44,7 +44,7 @@ def test_refine_matches_the_tool(cli, tmp_path, records):
     tool = structid.Model.from_file(out / "model.toml")
     assert r.model == tool
     np.testing.assert_allclose(r.fit.w_hat[:, 0], read_csv(out / "estimate.csv")["N"],
-                               rtol=1e-9, atol=1e-12)
+                               rtol=1e-12, atol=1e-12)
     report = read_json(out / "report.json")["refinement"]
     assert r.best == report["best"]
     assert len(r.iterations) == len(report["iterations"])
@@ -72,7 +72,7 @@ def test_refine_of_an_lft_model_matches_the_tool(cli, tmp_path, records):
     assert r.model == structid.Model.from_file(out / "model.toml")
     assert "[linear]" in r.model.to_toml()
     np.testing.assert_allclose(r.fit.w_hat[:, 0], read_csv(out / "estimate.csv")["N"],
-                               rtol=1e-9, atol=1e-12)
+                               rtol=1e-12, atol=1e-12)
 
 
 def _hammerstein_record(rng, n):
@@ -108,30 +108,30 @@ def test_refine_over_several_records_matches_the_tool(cli, tmp_path, initial_sta
                         beta=0.001, initial_state=initial_state)
     assert r.model == structid.Model.from_file(out / "model.toml")
     np.testing.assert_allclose(r.fit.w_hat[:, 0], read_csv(out / "estimate.csv")["N"],
-                               rtol=1e-9, atol=1e-12)
+                               rtol=1e-12, atol=1e-12)
     assert r.fit.w_hat.shape[0] == 250 + 200
     report = read_json(out / "report.json")["refinement"]
     assert r.best == report["best"]
     assert len(r.iterations) == len(report["iterations"])
     for mine, tool in zip(r.iterations, report["iterations"]):
         for key in ("cost_after_maps", "estimation_rms", "validation_rms"):
-            np.testing.assert_allclose(mine[key], tool[key], rtol=1e-9)
+            np.testing.assert_allclose(mine[key], tool[key], rtol=1e-12)
     kept = r.iterations[r.best]["validation_rms"]
     assert kept < r.iterations[0]["validation_rms"]
     # The kept validation error, recomputed: each validation record simulated from rest.
     v = r.fit.validate([recs[2][0], recs[3][0]], [recs[2][1], recs[3][1]])
     assert isinstance(v, structid.RecordsValidation) and len(v.records) == 2
     assert v.samples == 150 + 120
-    np.testing.assert_allclose(v.rms[0], kept, rtol=1e-9)
+    np.testing.assert_allclose(v.rms[0], kept, rtol=1e-12)
     vout = tmp_path / "validation"
     cli("validate", "--model", out / "model.toml", "--estimate", out, "--data", paths[2],
         "--data", paths[3], "--out", vout)
     overall = read_json(vout / "validation.json")["overall"]["outputs"][0]
-    np.testing.assert_allclose(v.rms[0], overall["rms"], rtol=1e-9)
-    np.testing.assert_allclose(v.fit_percent[0], overall["fit_percent"], rtol=1e-9)
+    np.testing.assert_allclose(v.rms[0], overall["rms"], rtol=1e-12)
+    np.testing.assert_allclose(v.fit_percent[0], overall["fit_percent"], rtol=1e-12)
     for i, rec in enumerate(v.records):
         one = read_json(vout / f"record_{i + 1}" / "validation.json")["outputs"][0]
-        np.testing.assert_allclose(rec.rms[0], one["rms"], rtol=1e-9)
+        np.testing.assert_allclose(rec.rms[0], one["rms"], rtol=1e-12)
     # The glued record is a different problem.
     glued = structid.refine(model, np.concatenate([recs[0][0], recs[1][0]]),
                             np.concatenate([recs[0][1], recs[1][1]]), beta=0.001,
@@ -174,17 +174,17 @@ def test_discover_matches_the_tool(cli, duffing):
     # The linear rival is the tool's: G with one more mode, two more poles than the nominal.
     rival, tool_rival = found.linear_rival, report["linear_rival"]
     assert rival is not None and tool_rival is not None
-    np.testing.assert_allclose(rival["validation_rms"], tool_rival["validation_rms"], rtol=1e-6)
-    np.testing.assert_allclose(rival["den"], tool_rival["g"]["den"], rtol=1e-9)
+    np.testing.assert_allclose(rival["validation_rms"], tool_rival["validation_rms"], rtol=1e-12)
+    np.testing.assert_allclose(rival["den"], tool_rival["g"]["den"], rtol=1e-12)
     assert len(rival["den"]) == 5
     if rival["p_worse"] is not None:
         np.testing.assert_allclose(rival["p_worse"], tool_rival["comparison"]["p_worse"],
-                                   rtol=1e-6)
+                                   rtol=1e-12)
     tool = {h["location"]: h["validation_rms"] for h in report["hypotheses"]}
     mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
     assert tool.keys() == mine.keys()
     for k in tool:
-        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-6)
+        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-12)
     # The augmented model simulates the validation record far better than the nominal one.
     sim = found.finding.estimate.simulate(uv)["y"][:, 0]
     assert np.sqrt(np.mean((sim - yv) ** 2)) < 0.5 * found.nominal_validation_rms
@@ -196,7 +196,7 @@ def test_discover_matches_the_tool(cli, duffing):
     assert [r["label"] for r in rows] == [r["label"] for r in tool_rows]
     for mine_row, tool_row in zip(rows, tool_rows):
         np.testing.assert_allclose(mine_row["validation_rms"], tool_row["validation_rms"],
-                                   rtol=1e-6)
+                                   rtol=1e-12)
     eligible = [r for r in rows if r["eligible"]]
     assert min(eligible, key=lambda r: r["validation_rms"])["as_good"]
     assert not any(r["as_good"] for r in rows if not r["eligible"])
@@ -234,9 +234,9 @@ def test_discover_around_a_model_with_maps_and_options_matches_the_tool(cli, duf
     assert set(mine) == set(tool) and set(mine) <= {"input", "output"}
     # The nominal model with its fixed map simulates the validation record as the tool's.
     np.testing.assert_allclose(found.nominal_validation_rms,
-                               report["gap_before"]["validation"]["rms"], rtol=1e-9)
+                               report["gap_before"]["validation"]["rms"], rtol=1e-12)
     for k in tool:
-        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-6)
+        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-12)
     with pytest.raises(structid.StructidError, match="sigma_fraction"):
         structid.discover(nominal, u, y, uv, yv, sigma_fraction=-1.0)
     with pytest.raises(structid.StructidError, match="elsewhere"):
@@ -273,14 +273,14 @@ def test_discover_on_several_records_matches_the_tool(cli, tmp_path):
     mine = {h["location"]: h["validation_rms"] for h in found.hypotheses}
     assert tool.keys() == mine.keys()
     for k in tool:
-        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-6)
+        np.testing.assert_allclose(mine[k], tool[k], rtol=1e-12)
     gap = report["gap_before"]["validation"]
-    np.testing.assert_allclose(found.nominal_validation_rms, gap["rms"], rtol=1e-9)
+    np.testing.assert_allclose(found.nominal_validation_rms, gap["rms"], rtol=1e-12)
     np.testing.assert_allclose(found.extra["nominal_validation_rms_records"],
-                               [r["rms"] for r in gap["records"]], rtol=1e-9)
+                               [r["rms"] for r in gap["records"]], rtol=1e-12)
     after = report["finding"]["gap_after"]["validation"]
     np.testing.assert_allclose(found.extra["validation_rms_records"],
-                               [r["rms"] for r in after["records"]], rtol=1e-6)
+                               [r["rms"] for r in after["records"]], rtol=1e-12)
     assert len(found.extra["nominal_estimation_rms_records"]) == 2
     # Lists of different lengths are refused with a clear message.
     with pytest.raises(structid.StructidError, match="lists of arrays"):
@@ -325,4 +325,4 @@ def test_a_backlash_at_the_input_is_reported_with_its_play(cli, tmp_path):
         "--out", tmp_path / "found")
     report = read_json(tmp_path / "found" / "report.json")
     np.testing.assert_allclose(report["finding"]["input_hysteresis"]["threshold"],
-                               h["threshold"], rtol=1e-9)
+                               h["threshold"], rtol=1e-12)
