@@ -56,8 +56,8 @@ def test_linear_equals_the_tool(tmp_path, cli, method):
     cli("linear", "--data", data, "--orders", "2,3,0", "--method", method, "-o", out)
     num, den = model_file_polynomials(out)
     fit = structid.linear(u, y, (2, 3, 0), method=method)
-    np.testing.assert_allclose(fit.den, den, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(fit.num[0], num[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fit.den, den, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(fit.num[0], num[0], rtol=1e-12, atol=1e-12)
     # and both are near the truth, whose output the fit simulates to within the noise
     np.testing.assert_allclose(fit.den, A_TRUE, atol=0.02)
     assert fit.fit_percent[0] > 95.0
@@ -75,8 +75,8 @@ def test_several_records_equal_the_tool_and_not_the_glued_record(tmp_path, cli):
     cli("linear", "--data", a, "--data", b, "--orders", "2,3,0", "--method", "arx", "-o", out)
     num, den = model_file_polynomials(out)
     fit = structid.linear([u1, u2], [y1, y2], (2, 3, 0), method="arx")
-    np.testing.assert_allclose(fit.den, den, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(fit.num[0], num[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fit.den, den, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(fit.num[0], num[0], rtol=1e-12, atol=1e-12)
     assert len(fit.fit_percent) == 2
     glued = structid.linear(np.concatenate([u1, u2]), np.concatenate([y1, y2]), (2, 3, 0),
                             method="arx")
