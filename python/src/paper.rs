@@ -43,6 +43,7 @@ fn experiment<'py>(
                 dispersion: dispersion.clone(),
                 truth: None,
                 operator: None,
+                shape: None,
             })
             .collect(),
         discover: None,

@@ -93,6 +93,7 @@ fn gaussian_block(
         dispersion: DispersionSpec::Gaussian { sigma: Some(sigma) },
         truth: Some(TruthSpec::Expression(truth.into())),
         operator: None,
+        shape: None,
     }
 }
 

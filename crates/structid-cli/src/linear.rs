@@ -471,6 +471,7 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
             dispersion: map_dispersion(&a)?,
             truth: None,
             operator: None,
+            shape: None,
         }],
     };
     let mf = ModelFile {

@@ -137,6 +137,7 @@ pub use model::interpolant::Interpolant;
 pub use model::lft::{Lft, LftDims, LftMatrices};
 pub use model::maps::{ExprMap, LookupTable};
 pub use model::measurability::ZSource;
+pub use model::monotone::Monotonicity;
 pub use model::order::BlockPlace;
 pub use model::parametric::ParametricMap;
 pub use model::simulate::{MapBinding, Simulation};

@@ -140,6 +140,7 @@ pub fn model_file(
             dispersion,
             truth: Some(truth),
             operator: None,
+            shape: None,
         })
         .chain(known_blocks(nominal_file)?)
         .collect(),
@@ -190,6 +191,7 @@ fn known_blocks(nominal_file: &ModelFile) -> std::result::Result<Vec<BlockSpec>,
                 dispersion: b.dispersion.clone(),
                 truth: Some(truth),
                 operator: b.operator.clone(),
+                shape: b.shape,
             })
         })
         .collect()

@@ -148,7 +148,7 @@ impl GaussianFeatures {
     }
 
     /// The Gram matrix K_cc of the centres.
-    fn gram(&self) -> DMatrix<f64> {
+    pub(crate) fn gram(&self) -> DMatrix<f64> {
         let m = self.centres.len();
         DMatrix::from_fn(m, m, |i, j| self.kernel(&self.centres[i], &self.centres[j]))
     }

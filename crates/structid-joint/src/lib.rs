@@ -67,6 +67,7 @@ pub mod fourier_features;
 pub mod hammerstein_wiener;
 pub mod latent;
 pub mod model;
+pub mod monotone;
 pub mod operator;
 pub mod shooting;
 pub mod step;
@@ -82,6 +83,7 @@ pub use fourier_features::FourierFeatures;
 pub use hammerstein_wiener::{hammerstein_wiener_model, hammerstein_wiener_start};
 pub use latent::{SmoothedMaps, smooth_maps};
 pub use model::{JointBlock, JointModel, LftEntry, LftMatrix};
+pub use monotone::MonotoneFeatures;
 pub use operator::OperatorBlock;
 pub use wiener_hammerstein::{
     SplitScore, WienerHammersteinSettings, WienerHammersteinSettingsBuilder,

@@ -12,7 +12,9 @@
 //! a `fourier` dispersion, as Fourier features on its input's range ([`FourierFeatures`]), each
 //! block whose `truth` declares `parameters` as that parametric family ([`FamilyMap`], its
 //! parameters fitted and written back), and each `operator` block as the hysteresis operator it
-//! declares. A static block starts from its
+//! declares. A static block with a `shape` is a monotone map ([`MonotoneFeatures`], its slope
+//! the square of a Gaussian kernel expansion), increasing or decreasing everywhere, beyond the
+//! data too. A static block starts from its
 //! `truth` when the file gives one (a previous estimate written as a table, a guess), from zero
 //! otherwise. Its centres are spread over the range its input covers when the starting model
 //! is simulated on the estimation data, so a block of an unmeasured signal gets centres where
@@ -30,7 +32,7 @@ use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, TruthSpec};
 use structid_joint::{
     BlockMap, FamilyMap, FixedMap, FourierFeatures, GaussianFeatures, JointBlock, JointFit,
-    JointModel, JointSettings, OperatorBlock, fit,
+    JointModel, JointSettings, MonotoneFeatures, OperatorBlock, fit,
 };
 
 use crate::error::{Result, WorkflowError};
@@ -476,9 +478,21 @@ fn assemble(
                 (points, values)
             }
         };
-        let map: Box<dyn BlockMap> = match fourier(&spec.dispersion, &r, beta)? {
-            Some(ff) => Box::new(ff.fitted_to(&points, &values)?),
-            None => Box::new(f.fitted_to(&points, &values)?),
+        let map: Box<dyn BlockMap> = match (spec.shape, fourier(&spec.dispersion, &r, beta)?) {
+            (Some(_), Some(_)) => {
+                return Err(WorkflowError::Request(format!(
+                    "block `{}` declares `shape` with a `fourier` dispersion; a monotone map's \
+                     slope is a Gaussian kernel expansion, so give it a `gaussian` dispersion",
+                    spec.name
+                )));
+            }
+            (Some(direction), None) => {
+                let centres = f.centres().iter().map(|c| c[0]).collect();
+                let m = MonotoneFeatures::new(centres, f.sigma(), beta, direction)?;
+                Box::new(m.fitted_to(&points, &values)?)
+            }
+            (None, Some(ff)) => Box::new(ff.fitted_to(&points, &values)?),
+            (None, None) => Box::new(f.fitted_to(&points, &values)?),
         };
         blocks.push(JointBlock::new(
             spec.name.clone(),

@@ -130,6 +130,7 @@ pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHa
         dispersion: DispersionSpec::Gaussian { sigma: None },
         truth: None,
         operator: None,
+        shape: None,
     };
     let blocks = match req.structure {
         BlockStructure::WienerHammerstein => vec![block("N", 0)],

@@ -6,6 +6,7 @@ pub mod interpolant;
 pub mod lft;
 pub mod maps;
 pub mod measurability;
+pub mod monotone;
 pub mod order;
 pub mod parametric;
 pub mod series;

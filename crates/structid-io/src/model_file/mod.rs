@@ -148,7 +148,7 @@ use discover::{RawDiscover, parse_discover};
 use dispersion::parse_dispersion;
 use lft::{RawLft, parse_lft};
 use linear::{RawLinear, parse_linear};
-use nonlinearity::{RawBlock, parse_index_list, parse_truth};
+use nonlinearity::{RawBlock, parse_index_list, parse_shape, parse_truth};
 use signals::{RawSignals, check_names};
 use source::plural;
 
@@ -378,6 +378,7 @@ impl ModelFile {
                 }
                 None => None,
             };
+            let shape = parse_shape(rb, &name, inputs.len(), truth.as_ref(), &src)?;
             blocks.push(BlockSpec {
                 name,
                 inputs,
@@ -385,6 +386,7 @@ impl ModelFile {
                 dispersion,
                 truth,
                 operator,
+                shape,
             });
             block_lines.push(entry_line);
         }
@@ -475,6 +477,14 @@ impl ModelFile {
                 "block `{}` is a hysteresis operator, which identification by the dispersion \
                  criterion cannot fit (it fits static maps); fit the model by its simulation \
                  error with the joint fit",
+                b.name
+            )));
+        }
+        if let Some(b) = self.blocks.iter().find(|b| b.shape.is_some()) {
+            return Err(IoError::InvalidArgument(format!(
+                "block `{}` declares `shape`, which identification by the dispersion criterion \
+                 cannot keep (it fits unconstrained maps); fit the model by its simulation error \
+                 with the joint fit, or remove `shape`",
                 b.name
             )));
         }

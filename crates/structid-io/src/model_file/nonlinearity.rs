@@ -105,6 +105,9 @@ pub struct BlockSpec {
     pub truth: Option<TruthSpec>,
     /// A hysteresis operator instead of a static map (`operator = { kind = … }`).
     pub operator: Option<super::operator::OperatorSpec>,
+    /// A declared direction of a scalar map (`shape = "increasing"`), which the joint fit
+    /// keeps by construction.
+    pub shape: Option<structid_core::Monotonicity>,
 }
 
 impl BlockSpec {
@@ -128,6 +131,46 @@ pub(super) struct RawBlock {
     table: Option<Spanned<String>>,
     parameters: Option<Spanned<toml::Value>>,
     pub(super) operator: Option<Spanned<toml::Value>>,
+    pub(super) shape: Option<Spanned<String>>,
+}
+
+/// The block's `shape`: a direction, for a static map of one input that is not a named family.
+pub(super) fn parse_shape(
+    raw: &RawBlock,
+    block: &str,
+    dim: usize,
+    truth: Option<&TruthSpec>,
+    src: &Source<'_>,
+) -> Result<Option<structid_core::Monotonicity>, IoError> {
+    let Some(shape) = &raw.shape else {
+        return Ok(None);
+    };
+    let line = src.line(shape.span().start);
+    let direction: structid_core::Monotonicity = shape.get_ref().parse().map_err(|_| {
+        err_at(
+            line,
+            format!(
+                "block `{block}`: unknown shape `{}`; a map's shape is \"increasing\" or \"decreasing\"",
+                shape.get_ref()
+            ),
+        )
+    })?;
+    let why = if raw.operator.is_some() {
+        Some("a hysteresis operator has no static shape")
+    } else if matches!(truth, Some(TruthSpec::Family { .. })) {
+        Some("a named family keeps the form of its law")
+    } else if dim != 1 {
+        Some("a map of several inputs has no single direction")
+    } else {
+        None
+    };
+    match why {
+        Some(why) => Err(err_at(
+            line,
+            format!("block `{block}` declares `shape`, but {why}; remove `shape`"),
+        )),
+        None => Ok(Some(direction)),
+    }
 }
 
 fn load_table_truth(

@@ -60,6 +60,7 @@ impl ModelFile {
                 dispersion: b.dispersion.clone(),
                 truth: None,
                 operator: None,
+                shape: None,
             })
             .collect();
         let file = if blocks.len() <= 1 {

@@ -61,6 +61,7 @@ fn canonical_form_parses_exactly_as_written() {
             dispersion: DispersionSpec::Gaussian { sigma: Some(0.4) },
             truth: Some(TruthSpec::Expression("tanh(z0)".into())),
             operator: None,
+            shape: None,
         }]
     );
     let truth = m.truth_maps().unwrap().unwrap();
@@ -1142,4 +1143,43 @@ fn a_parametric_family_parses_evaluates_round_trips_and_its_errors_name_the_line
         "table = \"map.csv\"\nparameters = { k = 1.0 }",
     ));
     assert!(e.contains("not a table") && e.contains("line 27"), "{e}");
+}
+
+#[test]
+fn a_shape_is_read_written_and_refused_where_it_cannot_hold() {
+    let with = |line: &str| CANONICAL.replace("truth = \"tanh(z0)\"", line);
+    let m = ModelFile::parse(&with("shape = \"decreasing\""), None).unwrap();
+    assert_eq!(
+        m.blocks[0].shape,
+        Some(structid_core::Monotonicity::Decreasing)
+    );
+    let again = ModelFile::parse(&m.to_toml_string(), None).unwrap();
+    assert_eq!(again.blocks, m.blocks);
+    // Identification by the dispersion criterion fits unconstrained maps: it says so.
+    let refused = m.to_model(None, None).unwrap_err().to_string();
+    assert!(
+        refused.contains("`shape`") && refused.contains("joint fit"),
+        "{refused}"
+    );
+
+    let e = err(&with("shape = \"upwards\""));
+    assert!(
+        e.contains("line 26") && e.contains("unknown shape `upwards`"),
+        "{e}"
+    );
+    let e = err(&with(
+        "truth = \"k*z0\"\nparameters = { k = 1.0 }\nshape = \"increasing\"",
+    ));
+    assert!(e.contains("named family"), "{e}");
+    let two = with("shape = \"increasing\"")
+        .replace("Cz = [[0.0]]", "Cz = [[0.0], [1.0]]")
+        .replace("Dzu = [[1.0]]", "Dzu = [[1.0], [0.0]]")
+        .replace("Dze = [[0.0]]", "Dze = [[0.0], [0.0]]")
+        .replace("Dzw = [[0.0]]", "Dzw = [[0.0], [0.0]]")
+        .replace(
+            "inputs = [0]               # indices into z",
+            "inputs = [0, 1]",
+        );
+    let e = err(&two);
+    assert!(e.contains("several inputs"), "{e}");
 }

@@ -52,6 +52,9 @@ impl ModelFile {
                 let _ = writeln!(s, "operator = {}", op.to_toml());
                 continue;
             }
+            if let Some(shape) = b.shape {
+                let _ = writeln!(s, "shape = {}", toml_string(shape.as_str()));
+            }
             match &b.dispersion {
                 DispersionSpec::Gaussian { sigma: None } => {
                     s.push_str("dispersion = { kind = \"gaussian\" }   # sigma = 0.1 × range of the block's z\n");
