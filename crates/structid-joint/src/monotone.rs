@@ -272,9 +272,10 @@ impl MonotoneFeatures {
     /// The parameters that fit the values `w` at the scalar points `z` in the least-squares
     /// sense with this map's dispersion, min Σ_k (N(z_k) − w_k)² + n·β·θᵀK_ccθ, as far as a
     /// local search finds (the problem is not convex). The search starts from the square root
-    /// of the slope of an unconstrained kernel fit, clipped to a small share of the mean slope
-    /// where it goes the wrong way, so a flat or reversed stretch of `w` still starts the map
-    /// off a stationary point. A target that is not monotone gets the monotone map closest to
+    /// of the slope of an unconstrained kernel fit, clipped below at a thousandth of the mean
+    /// slope (the range of `w` over the range of `z`, or a unit rise when `w` is constant), so
+    /// a flat or reversed stretch of `w` still starts the map off a stationary point. For the
+    /// same reason the fit's tail slope b² is kept at least that floor. A target that is not monotone gets the monotone map closest to
     /// it.
     ///
     /// # Errors
@@ -283,13 +284,23 @@ impl MonotoneFeatures {
         let free = GaussianFeatures::new(self.root.centres().to_vec(), self.sigma(), self.beta())?
             .fitted_to(z, w)?;
         let zs: Vec<f64> = z.iter().map(|p| p[0]).collect();
-        let start = self.root_start(&free, &zs, w)?;
-        Ok(start.polished(&zs, w))
+        let (start, floor) = self.root_start(&free, &zs, w)?;
+        let mut out = start.polished(&zs, w);
+        if out.tail_root * out.tail_root < floor {
+            // A flat tail is where a flat map sits, a stationary point of any later fit.
+            let s = out.direction.sign();
+            let before: f64 = zs.iter().map(|z| out.integral(*z, None)).sum();
+            out.tail_root = floor.sqrt().copysign(out.tail_root);
+            let after: f64 = zs.iter().map(|z| out.integral(*z, None)).sum();
+            out.level -= s * (after - before) / zs.len() as f64;
+        }
+        Ok(out)
     }
 
     /// The start of [`fitted_to`](Self::fitted_to): h fitted to the root of the free fit's
-    /// clipped slope on a grid over the points and centres, then a₀ by least squares.
-    fn root_start(&self, free: &GaussianFeatures, z: &[f64], w: &[f64]) -> Result<Self> {
+    /// clipped slope on a grid over the points and centres, then a₀ by least squares; and the
+    /// floor of the slope.
+    fn root_start(&self, free: &GaussianFeatures, z: &[f64], w: &[f64]) -> Result<(Self, f64)> {
         let cs = self.centres();
         let lo = z.iter().chain(&cs).copied().fold(f64::INFINITY, f64::min);
         let hi = z
@@ -313,12 +324,9 @@ impl MonotoneFeatures {
         let span = (hi - lo).max(f64::MIN_POSITIVE);
         let w_range = w.iter().copied().fold(f64::NEG_INFINITY, f64::max)
             - w.iter().copied().fold(f64::INFINITY, f64::min);
-        let mean_abs = slopes.iter().map(|v| v.abs()).sum::<f64>() / slopes.len() as f64;
-        let floor = 1e-3
-            * [mean_abs, w_range / span, 1.0 / span]
-                .into_iter()
-                .find(|v| *v > 0.0)
-                .unwrap_or(1.0);
+        // A thousandth of the mean slope of a monotone map through the values (of a unit
+        // rise when they are all equal).
+        let floor = 1e-3 * if w_range > 0.0 { w_range } else { 1.0 } / span;
         let roots: Vec<f64> = slopes.iter().map(|v| v.max(floor).sqrt()).collect();
         let mut row = vec![0.0; m + 2];
         let mut columns = vec![vec![0.0; grid.len()]; m + 1];
@@ -339,7 +347,7 @@ impl MonotoneFeatures {
             .map(|(zk, wk)| wk - s * out.integral(*zk, None))
             .sum::<f64>()
             / z.len() as f64;
-        Ok(out)
+        Ok((out, floor))
     }
 
     /// Levenberg–Marquardt on Σ_k (N(z_k) − w_k)² + n·‖Rθ‖² from `self`: a dense solve in the
