@@ -6,8 +6,8 @@
 //! cargo run --release -p structid-benchmarks --example cascaded_tanks_physical -- [PATH/dataBenchmark.csv]
 //! ```
 //!
-//! Prints the β search (validation RMS on the last 25 % of the estimation record), then the
-//! estimation and test RMS of the chosen model next to the published figures.
+//! Prints the search over structures and β (validation RMS on the last 25 % of the estimation
+//! record), then the estimation and test RMS of the chosen model next to the published figures.
 
 use structid::io::CascadedTanks;
 use structid_benchmarks::tanks::PUBLISHED;
@@ -28,22 +28,40 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(v) = std::env::var("TANKS_SEGMENT") {
         settings.segment_length = v.parse()?;
     }
-    if let Ok(v) = std::env::var("TANKS_NONLINEAR") {
-        for (slot, c) in settings.nonlinear.iter_mut().zip(v.chars()) {
-            *slot = c == '1';
-        }
+    // Structures as comma-separated masks of the free maps, e.g. TANKS_STRUCTURES=1111,1110.
+    if let Ok(v) = std::env::var("TANKS_STRUCTURES") {
+        settings.structures = v
+            .split(',')
+            .map(|mask| std::array::from_fn(|i| mask.as_bytes().get(i) == Some(&b'1')))
+            .collect();
+    }
+    if let Ok(v) = std::env::var("TANKS_MONOTONE") {
+        settings.monotone = v != "0";
     }
     let r = run(&tanks, &settings)?;
-    println!("β search (simulation RMS [V]):");
+    let mask = |m: &[bool; 4]| {
+        m.iter()
+            .map(|f| if *f { '1' } else { '0' })
+            .collect::<String>()
+    };
+    println!(
+        "structure and β search (simulation RMS [V]; free maps: upper outflow, lower outflow, sensor, upper overflow):"
+    );
     for t in &r.trials {
         println!(
-            "  β = {:<8e} fitting part {:.4}  validation part {:.4}",
-            t.beta, t.fit_rms, t.validation_rms
+            "  {} β = {:<8e} fitting part {:.4}  validation part {:.4}",
+            mask(&t.nonlinear),
+            t.beta,
+            t.fit_rms,
+            t.validation_rms
         );
     }
     println!(
-        "chosen β = {:e}; cost {:.4e} from {:.4e}",
-        r.beta, r.fit.cost, r.fit.initial_cost
+        "chosen {} β = {:e}; cost {:.4e} from {:.4e}",
+        mask(&r.nonlinear),
+        r.beta,
+        r.fit.cost,
+        r.fit.initial_cost
     );
     for s in &r.fit.stages {
         println!(

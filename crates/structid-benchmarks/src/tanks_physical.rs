@@ -31,10 +31,12 @@
 use std::time::Instant;
 
 use nalgebra::DMatrix;
+use structid_core::Monotonicity;
 use structid_core::{Data, Lft, LftMatrices, Signal};
 use structid_io::CascadedTanks;
 use structid_joint::{
-    GaussianFeatures, JointBlock, JointError, JointFit, JointModel, JointSettings, LftMatrix, fit,
+    BlockMap, GaussianFeatures, JointBlock, JointError, JointFit, JointModel, JointSettings,
+    LftMatrix, MonotoneFeatures, fit,
 };
 
 /// Settings of the physical pipeline.
@@ -53,11 +55,15 @@ pub struct PhysicalSettings {
     pub segment_length: usize,
     /// Fraction of the estimation record held out for validation.
     pub validation_fraction: f64,
-    /// Per map (upper outflow, lower outflow, sensor, upper overflow): whether its kernel part
-    /// is fitted (otherwise it stays affine). By default the upper overflow stays affine: it
-    /// reads the same latent level as the upper outflow, and two free maps of one signal are
-    /// told apart only by the share h that reaches the lower tank.
-    pub nonlinear: [bool; 4],
+    /// The structures tried, each a choice per map (upper outflow, lower outflow, sensor,
+    /// upper overflow) of whether its kernel part is fitted (otherwise it stays affine). By
+    /// default the upper overflow is tried both ways: it reads the same latent level as the
+    /// upper outflow, and two free maps of one signal are told apart only by the share h that
+    /// reaches the lower tank. The validation part decides, with β.
+    pub structures: Vec<[bool; 4]>,
+    /// Whether every map is increasing ([`MonotoneFeatures`]): an outflow, a spill and a level
+    /// sensor all grow with the level, beyond the data too.
+    pub monotone: bool,
 }
 
 impl Default for PhysicalSettings {
@@ -67,14 +73,17 @@ impl Default for PhysicalSettings {
             centres: 10,
             segment_length: 128,
             validation_fraction: 0.25,
-            nonlinear: [true, true, true, false],
+            structures: vec![[true, true, true, true], [true, true, true, false]],
+            monotone: true,
         }
     }
 }
 
-/// One β tried.
+/// One structure and β tried.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct BetaTrial {
+    /// Which maps were free ([`PhysicalSettings::structures`]).
+    pub nonlinear: [bool; 4],
     /// β.
     pub beta: f64,
     /// Simulation RMS on the fitting part, volts.
@@ -86,8 +95,10 @@ pub struct BetaTrial {
 /// What the pipeline found.
 #[derive(Clone, Debug)]
 pub struct PhysicalResult {
-    /// Each β tried, scored on the validation part.
+    /// Each structure and β tried, scored on the validation part.
     pub trials: Vec<BetaTrial>,
+    /// The structure chosen.
+    pub nonlinear: [bool; 4],
     /// The β chosen.
     pub beta: f64,
     /// The model refitted on the whole estimation record.
@@ -137,15 +148,15 @@ fn affine(
     f.fitted_to(&z, &w)
 }
 
-fn model(blocks: [GaussianFeatures; 4], g: f64, h: f64) -> Result<JointModel, JointError> {
+fn model(blocks: [Box<dyn BlockMap>; 4], g: f64, h: f64) -> Result<JointModel, JointError> {
     let [n1, n2, n3, n4] = blocks;
     JointModel::new(
         lft(g, h)?,
         vec![
-            JointBlock::new("upper outflow", vec![0], 0, Box::new(n1)),
-            JointBlock::new("lower outflow", vec![1], 1, Box::new(n2)),
-            JointBlock::new("sensor", vec![1], 2, Box::new(n3)),
-            JointBlock::new("upper overflow", vec![0], 3, Box::new(n4)),
+            JointBlock::new("upper outflow", vec![0], 0, n1),
+            JointBlock::new("lower outflow", vec![1], 1, n2),
+            JointBlock::new("sensor", vec![1], 2, n3),
+            JointBlock::new("upper overflow", vec![0], 3, n4),
         ],
     )?
     .with_free(LftMatrix::Bw, 1, 0)?
@@ -179,10 +190,10 @@ fn linear_start(d: &Data, settings: &JointSettings) -> Result<JointFit, JointErr
     let g = ymax * 0.5 * k / umean;
     let start = model(
         [
-            affine(0.0, 2.0 * x1, 5, frozen, 0.0, k)?,
-            affine(0.0, ymax, 5, frozen, 0.0, k)?,
-            affine(0.0, ymax, 5, frozen, 0.0, 1.0)?,
-            affine(0.0, 2.0 * x1, 5, frozen, 0.0, 0.0)?,
+            Box::new(affine(0.0, 2.0 * x1, 5, frozen, 0.0, k)?),
+            Box::new(affine(0.0, ymax, 5, frozen, 0.0, k)?),
+            Box::new(affine(0.0, ymax, 5, frozen, 0.0, 1.0)?),
+            Box::new(affine(0.0, 2.0 * x1, 5, frozen, 0.0, 0.0)?),
         ],
         g,
         0.5,
@@ -191,14 +202,15 @@ fn linear_start(d: &Data, settings: &JointSettings) -> Result<JointFit, JointErr
 }
 
 /// Re-centres each map over the range its input covers in `base`'s simulation of `d`,
-/// keeping its affine part, with dispersion weight β.
+/// keeping its values there, with dispersion weight β (increasing maps when `monotone`).
 fn recentred(
     base: &JointFit,
     d: &Data,
-    centres: usize,
+    settings: &PhysicalSettings,
     beta: f64,
     nonlinear: [bool; 4],
 ) -> Result<(JointModel, Vec<Vec<f64>>), JointError> {
+    let centres = settings.centres;
     let sim = base.model.simulate(d.u(), Some(&base.initial_states[0]))?;
     let range = |c: usize| {
         let v = sim.z.channel(c);
@@ -219,17 +231,25 @@ fn recentred(
             .map(|k| vec![lo + (hi - lo) * k as f64 / 39.0])
             .collect();
         let w: Vec<f64> = z.iter().map(|z| b.map.eval(&mut [], z)).collect();
-        let f = GaussianFeatures::on_interval(
-            lo,
-            hi,
-            centres,
-            1.5 * (hi - lo) / (centres - 1) as f64,
-            beta,
-        )?;
-        maps.push(f.fitted_to(&z, &w)?);
+        let sigma = 1.5 * (hi - lo) / (centres - 1) as f64;
+        let map: Box<dyn BlockMap> = if settings.monotone {
+            let f = MonotoneFeatures::on_interval(
+                lo,
+                hi,
+                centres,
+                sigma,
+                beta,
+                Monotonicity::Increasing,
+            )?;
+            Box::new(f.fitted_to(&z, &w)?)
+        } else {
+            let f = GaussianFeatures::on_interval(lo, hi, centres, sigma, beta)?;
+            Box::new(f.fitted_to(&z, &w)?)
+        };
+        maps.push(map);
     }
     let p = base.model.parameters();
-    let maps: [GaussianFeatures; 4] = maps.try_into().expect("four maps");
+    let maps: [Box<dyn BlockMap>; 4] = maps.try_into().expect("four maps");
     Ok((model(maps, p[0], p[1])?, base.initial_states.clone()))
 }
 
@@ -250,15 +270,13 @@ pub fn run(
         .build()?;
     let linear = linear_start(&fit_data, &single)?;
     let mut trials = Vec::new();
-    let mut best: Option<(f64, f64)> = None;
-    for &beta in &settings.betas {
-        let (start, x0) = recentred(
-            &linear,
-            &fit_data,
-            settings.centres,
-            beta,
-            settings.nonlinear,
-        )?;
+    let mut best: Option<([bool; 4], f64, f64)> = None;
+    for (&nonlinear, &beta) in settings
+        .structures
+        .iter()
+        .flat_map(|s| settings.betas.iter().map(move |b| (s, b)))
+    {
+        let (start, x0) = recentred(&linear, &fit_data, settings, beta, nonlinear)?;
         let x0: Vec<Vec<f64>> = x0.iter().map(|x| x[..2].to_vec()).collect();
         let f = fit(&start, &fit_data, Some(&x0), &shooting)?;
         // Simulated through the whole estimation record from the fitted start: the validation
@@ -266,24 +284,20 @@ pub fn run(
         let sim = f.model.simulate(all.u(), Some(&f.initial_states[0]))?;
         let y = sim.y.channel(0);
         let trial = BetaTrial {
+            nonlinear,
             beta,
             fit_rms: rms(&est.y[..n_fit], &y[..n_fit]),
             validation_rms: rms(&est.y[n_fit..], &y[n_fit..]),
         };
-        if best.is_none_or(|(_, v)| trial.validation_rms < v) {
-            best = Some((beta, trial.validation_rms));
+        if best.is_none_or(|(_, _, v)| trial.validation_rms < v) {
+            best = Some((nonlinear, beta, trial.validation_rms));
         }
         trials.push(trial);
     }
-    let beta = best.expect("at least one β").0;
+    let (nonlinear, beta, _) =
+        best.ok_or_else(|| JointError::InvalidModel("no structure or no β to try".into()))?;
     let linear_all = linear_start(&all, &single)?;
-    let (start, x0) = recentred(
-        &linear_all,
-        &all,
-        settings.centres,
-        beta,
-        settings.nonlinear,
-    )?;
+    let (start, x0) = recentred(&linear_all, &all, settings, beta, nonlinear)?;
     let x0: Vec<Vec<f64>> = x0.iter().map(|x| x[..2].to_vec()).collect();
     let fitted = fit(&start, &all, Some(&x0), &shooting)?;
     let sim = fitted
@@ -298,6 +312,7 @@ pub fn run(
     let test_rms = rms(&tanks.test.y, &test_simulation);
     Ok(PhysicalResult {
         trials,
+        nonlinear,
         beta,
         fit: fitted,
         estimation_rms,
