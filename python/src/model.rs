@@ -147,7 +147,8 @@ impl Model {
         Ok(d)
     }
 
-    /// The blocks: name, z inputs, w output, dispersion kind and σ, truth.
+    /// The blocks: name, z inputs, w output, dispersion kind and σ, truth, shape
+    /// (`"increasing"`, `"decreasing"` or None).
     #[getter]
     fn blocks<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
         self.file
@@ -161,6 +162,7 @@ impl Model {
                 d.set_item("dispersion", b.dispersion.kind())?;
                 d.set_item("sigma", b.dispersion.sigma())?;
                 d.set_item("truth", b.truth.as_ref().map(|t| t.describe()))?;
+                d.set_item("shape", b.shape.map(|s| s.as_str()))?;
                 Ok(d)
             })
             .collect()

@@ -118,6 +118,45 @@ def test_a_named_family_is_fitted_from_python_and_written_back_with_its_paramete
     assert r.cost <= r.initial_cost
 
 
+def test_a_declared_shape_is_kept_beyond_the_data_as_in_the_cli(cli, tmp_path):
+    # The saturation declared increasing and started from nothing: the fitted map is increasing
+    # well beyond the range the data cover, and the CLI gives the same fit.
+    shaped = TRUTH.replace('truth = "0.8*tanh(z0/0.8)"', 'shape = "increasing"')
+    model = structid.Model.from_toml(shaped)
+    assert model.blocks[1]["shape"] == "increasing" and model.blocks[0]["shape"] is None
+    u = inputs(2000, 0.0)
+    r = structid.refine_joint(model, u, plant(u), beta=1e-8, out=tmp_path / "py")
+    est = write_csv(tmp_path / "est.csv", {"u": u, "y": plant(u)})
+    start = tmp_path / "start.toml"
+    start.write_text(shaped)
+    cli("refine", "--joint", "--model", start, "--data", est, "--beta", "1e-8",
+        "--out", tmp_path / "cli")
+    np.testing.assert_allclose(r.cost, read_json(tmp_path / "cli" / "joint.json")["cost"],
+                               rtol=1e-12)
+    assert r.cost <= 1e-3 * r.initial_cost
+    table = np.loadtxt(tmp_path / "py" / "map_limit.csv", delimiter=",", skiprows=1)
+    assert np.all(np.diff(table[:, 1]) >= 0)
+    assert 'shape = "increasing"' in r.model.to_toml()
+    # Identification by the dispersion criterion cannot keep a shape, and says so.
+    static = structid.Model.from_toml("""
+[lft]
+A = []
+Dye = [[1.0]]
+Dyw = [[1.0]]
+Dzu = [[1.0]]
+[signals]
+u = ["u"]
+y = ["y"]
+[[nonlinearity]]
+name = "f"
+inputs = [0]
+output = 0
+shape = "increasing"
+""")
+    with pytest.raises(structid.StructidError, match="shape.*joint fit"):
+        structid.identify(static, u, np.tanh(u))
+
+
 def test_refine_joint_errors_are_python_exceptions():
     model = structid.Model.from_toml(START)
     u = inputs(200, 0.0)
