@@ -6,9 +6,9 @@ use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::Signal;
-use structid_io::{LinearSpec, ModelFile, SignalNames};
+use structid_linear::PolynomialModel;
 use structid_linear::response::{bode, poles, step_response, zeros};
-use structid_linear::{ArxSettings, OeSettings, Orders, PolynomialModel, arx_records, oe_records};
+use structid_workflow::linear::{LinearMethod, LinearRequest, OrderChoice, fit_linear};
 
 use crate::convert::{error, invalid, signal, vector};
 
@@ -68,19 +68,9 @@ pub fn linear_fit<'py>(
                 yv.len()
             )));
         }
-        records.push((us, Signal::from_fn(yv.len(), 1, |k, _| yv[k])));
+        records.push((us, Signal::new(1, yv).map_err(error)?));
     }
     let m = records[0].0.channels();
-    if let Some((i, _)) = records
-        .iter()
-        .enumerate()
-        .find(|(_, (u, _))| u.channels() != m)
-    {
-        return Err(invalid(format!(
-            "record {i} has {} input columns and record 0 has {m}",
-            records[i].0.channels()
-        )));
-    }
     let inputs = inputs.unwrap_or_else(|| {
         if m == 1 {
             vec!["u".into()]
@@ -88,77 +78,29 @@ pub fn linear_fit<'py>(
             (0..m).map(|i| format!("u{i}")).collect()
         }
     });
-    if inputs.len() != m {
-        return Err(invalid(format!(
-            "{} input names for {m} input columns",
-            inputs.len()
-        )));
-    }
-    let output = output.unwrap_or_else(|| "y".into());
-    let orders = Orders::new(na, vec![nb; m], vec![nk; m]).map_err(error)?;
-    let mut arx_b = ArxSettings::builder().integrators(integrators);
-    let mut oe_b = OeSettings::builder()
-        .transient(transient)
-        .integrators(integrators);
-    if let Some(ts) = sample_time {
-        arx_b = arx_b.sample_time(ts);
-        oe_b = oe_b.sample_time(ts);
-    }
-    let arx_settings = arx_b.build().map_err(error)?;
-    let oe_settings = oe_b.arx(arx_settings.clone()).build().map_err(error)?;
-    let method = method.to_ascii_lowercase();
-    let fitted = py.detach(|| {
-        let pairs: Vec<(&Signal, &Signal)> = records.iter().map(|(u, y)| (u, y)).collect();
-        match method.as_str() {
-            "arx" => arx_records(&pairs, &orders, &arx_settings).map(|f| Fitted {
-                model: f.model,
-                cost: f.cost,
-                covariance: f.parameter_covariance,
-                parameter_std: f.parameter_std,
-                iterations: 0,
-                converged: true,
-                warning: None,
-            }),
-            _ => oe_records(&pairs, &orders, &oe_settings).map(|f| Fitted {
-                model: f.model,
-                cost: f.cost,
-                covariance: f.parameter_covariance,
-                parameter_std: f.parameter_std,
-                iterations: f.iterations,
-                converged: f.converged,
-                warning: f.warning.as_ref().map(ToString::to_string),
-            }),
+    let method = match method.to_ascii_lowercase().as_str() {
+        "arx" => LinearMethod::Arx,
+        "oe" => LinearMethod::Oe,
+        other => {
+            return Err(invalid(format!(
+                "unknown method {other:?}: use \"arx\" or \"oe\""
+            )));
         }
-    });
-    if !matches!(method.as_str(), "arx" | "oe") {
-        return Err(invalid(format!(
-            "unknown method {method:?}: use \"arx\" or \"oe\""
-        )));
-    }
-    let f = fitted.map_err(error)?;
-    let fit_percent: Vec<f64> = records
-        .iter()
-        .map(|(u, y)| {
-            let sim = f.model.simulate(u).map_err(error)?;
-            Ok(structid_core::validation::metrics::fit_percent(
-                &y.channel(0),
-                &sim,
-            ))
-        })
-        .collect::<PyResult<_>>()?;
-    let spec = LinearSpec::from_linear(&f.model, None);
-    let mf = ModelFile {
-        lft: spec.lft().map_err(error)?,
-        linear: Some(spec),
-        signals: SignalNames {
-            u: inputs,
-            y: vec![output],
-            z: None,
-        },
-        blocks: Vec::new(),
-        discover: None,
-        path: None,
     };
+    let request = LinearRequest {
+        records,
+        inputs,
+        output: output.unwrap_or_else(|| "y".into()),
+        orders: OrderChoice::Given([na, nb, nk]),
+        method,
+        integrators,
+        transient,
+        sample_time,
+        map: None,
+    };
+    let f = py
+        .detach(|| fit_linear(&request, &|_, _| {}))
+        .map_err(error)?;
     let out = PyDict::new(py);
     out.set_item("num", f.model.num.clone())?;
     out.set_item("den", vector(py, f.model.den.clone()))?;
@@ -175,21 +117,10 @@ pub fn linear_fit<'py>(
     )?;
     out.set_item("iterations", f.iterations)?;
     out.set_item("converged", f.converged)?;
-    out.set_item("warning", f.warning)?;
-    out.set_item("fit_percent", fit_percent)?;
-    out.set_item("toml", mf.to_toml_string())?;
+    out.set_item("warning", f.warning.as_ref().map(ToString::to_string))?;
+    out.set_item("fit_percent", f.fit_percent)?;
+    out.set_item("toml", f.model_file.to_toml_string())?;
     Ok(out)
-}
-
-/// What both fits give.
-struct Fitted {
-    model: PolynomialModel,
-    cost: f64,
-    covariance: Option<DMatrix<f64>>,
-    parameter_std: Vec<f64>,
-    iterations: usize,
-    converged: bool,
-    warning: Option<String>,
 }
 
 /// The responses of G = `num[input]`/`den`: the Bode magnitude and unwrapped phase at the

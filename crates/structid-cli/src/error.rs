@@ -122,6 +122,16 @@ impl From<structid_workflow::WorkflowError> for CliError {
                 "invalid value {value} for --{}: {rule}",
                 option.replace('_', "-")
             )),
+            W::OptionConflict { options, rule } => {
+                let flags: Vec<String> = options
+                    .iter()
+                    .map(|o| format!("--{}", o.replace('_', "-")))
+                    .collect();
+                Self::input(format!(
+                    "{}: {rule}",
+                    structid_workflow::error::and_list(&flags)
+                ))
+            }
             other => Self {
                 code: EXIT_RUNTIME,
                 context: None,

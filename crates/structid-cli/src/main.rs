@@ -367,7 +367,7 @@ enum SolverArg {
 }
 
 /// Values of `--initial-state`.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum InitialStateArg {
     /// x₀ = 0.
     Zero,

@@ -35,7 +35,43 @@ pub enum WorkflowError {
         /// What it must be.
         rule: String,
     },
+    /// Options that do not go together: the front end names them its own way.
+    #[error("{}: {rule}", and_list(options))]
+    OptionConflict {
+        /// The options, in snake case.
+        options: Vec<&'static str>,
+        /// Why they conflict.
+        rule: String,
+    },
 }
 
 /// `Result` with [`WorkflowError`].
 pub type Result<T> = std::result::Result<T, WorkflowError>;
+
+impl From<structid_linear::LinearError> for WorkflowError {
+    /// Through the model layer's error, which carries the linear layer's as it is.
+    fn from(e: structid_linear::LinearError) -> Self {
+        Self::Core(e.into())
+    }
+}
+
+/// `a`, `a and b`, `a, b and c`.
+///
+/// ```
+/// assert_eq!(structid_workflow::error::and_list(&["a", "b", "c"]), "a, b and c");
+/// assert_eq!(structid_workflow::error::and_list(&["a"]), "a");
+/// ```
+pub fn and_list<S: AsRef<str>>(items: &[S]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.as_ref().to_string(),
+        [init @ .., last] => format!(
+            "{} and {}",
+            init.iter()
+                .map(AsRef::as_ref)
+                .collect::<Vec<_>>()
+                .join(", "),
+            last.as_ref()
+        ),
+    }
+}

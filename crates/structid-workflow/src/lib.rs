@@ -13,6 +13,7 @@
 //! | [`joint`] | a model file fitted as a whole by its simulation error (`structid refine --joint`), and the simulation of model files with hysteresis operators |
 //! | [`wiener_hammerstein`](mod@wiener_hammerstein) | block-structured models with every block unknown, from data: Wiener–Hammerstein (`structid wiener-hammerstein`) and Hammerstein–Wiener (`structid hammerstein-wiener`) |
 //! | [`simulation_score`] | validation by simulation alone of a model with a latent block or an operator (`structid validate` of such a model) |
+//! | [`linear`](mod@linear) | the linear part G from records, orders given or selected, ARX or output error, written as a model file with a map at a site (`structid linear`) |
 //! | [`linear_start`] | discovery from a record alone: the best linear approximation as the nominal model, [`structid_discover`]'s search for what it is missing, and test records scored with both (the Silverbox discovery in Python) |
 //! | [`discover_report`] | the reports of a discovery: report.md, report.json and the summary `structid discover` prints (the presentation of [`structid_discover`]'s results, which carry data only) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
@@ -23,6 +24,7 @@ pub mod error;
 pub mod free;
 pub mod identify;
 pub mod joint;
+pub mod linear;
 pub mod linear_start;
 pub mod options;
 pub mod refine;
@@ -41,6 +43,9 @@ pub use identify::{
 pub use joint::{
     BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
+};
+pub use linear::{
+    LinearMethod, LinearOutcome, LinearRequest, MapKind, MapRequest, OrderChoice, fit_linear,
 };
 pub use linear_start::{
     LinearStartDiscovery, LinearStartRequest, TestScore, discover_from_linear_start,
