@@ -15,15 +15,21 @@
 //! when it overflows; a share h of it (free) reaches the lower tank:
 //! x₁⁺ gains −w₄ and x₂⁺ gains h·w₄. The integrators (A = I) are held fixed.
 //!
+//! Every map is increasing ([`MonotoneFeatures`], the default): an outflow, a spill and a level
+//! sensor all grow with the level, and a map that may not turn back cannot extrapolate an
+//! outflow negative beyond the levels the data reached.
+//!
 //! Pipeline ([`run`]):
 //! 1. The estimation record is split into a fitting part (the first 75 %) and a validation part.
 //! 2. A linear start: every map affine (their kernel parts held near zero by a large β),
 //!    fitted jointly with g, h and the initial state by single shooting on the fitting part.
 //! 3. The maps' centres are placed over the ranges their inputs cover in that linear
 //!    simulation (latent x₁ included), and the whole model is fitted by multiple shooting
-//!    then single shooting, for each β of a grid.
-//! 4. β is chosen by the simulation RMS on the validation part (simulated on from the end of
-//!    the fitting part); the chosen model is refitted on the whole estimation record.
+//!    then single shooting, for each structure (which maps are free,
+//!    [`PhysicalSettings::structures`]) and each β of a grid.
+//! 4. The structure and β are chosen by the simulation RMS on the validation part (simulated
+//!    on from the end of the fitting part); the chosen model is refitted on the whole
+//!    estimation record.
 //! 5. The test record is simulated once, from u alone, from the initial state estimated on the
 //!    estimation record (the benchmark's description says both records start from the same
 //!    state).

@@ -251,15 +251,24 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
         .iter()
         .map(|d| read_signals(d, &a))
         .collect::<Result<_, _>>()?;
-    let pb = crate::progress::bar(Some(0), "candidate orders");
+    let pb = matches!(req.orders, OrderChoice::Selected { .. })
+        .then(|| crate::progress::bar(Some(0), "candidate orders"));
     let fitted = fit_linear(&req, &|done, total| {
-        pb.set_length(total);
-        pb.set_position(done);
+        if let Some(pb) = &pb {
+            pb.set_length(total);
+            pb.set_position(done);
+            if done == total {
+                pb.finish_and_clear();
+            }
+        }
     });
-    pb.finish_and_clear();
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
     let out = fitted.map_err(|e| {
+        let from_records = !matches!(e, structid_workflow::WorkflowError::Request(_));
         let e = CliError::from(e);
-        if a.data.len() > 1 || a.method == MethodArg::Arx {
+        if from_records && (a.data.len() > 1 || a.method == MethodArg::Arx) {
             e.context(format!(
                 "the --data files ({})",
                 crate::identify::files_label(&a.data)

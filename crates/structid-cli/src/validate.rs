@@ -397,8 +397,8 @@ fn validate_record(a: ValidateArgs) -> Result<RecordScore, CliError> {
         ),
     };
 
-    // Validate. Dispersions play no part here; σ = 1 only makes every block buildable.
-    let vmodel = vmf.to_model(Some(1.0), None)?;
+    // Validate: the maps are given, so dispersions (and shapes) play no part.
+    let vmodel = vmf.structure_model()?;
     let maps: Vec<&dyn Interpolant> = vmodel
         .blocks()
         .iter()

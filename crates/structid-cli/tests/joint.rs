@@ -580,3 +580,54 @@ fn a_fourier_dispersion_makes_the_joint_map_fourier_features() {
         err.sqrt()
     );
 }
+
+#[test]
+fn a_shaped_map_is_refined_then_validated_from_the_written_file() {
+    // Both maps static and in series; the saturation declared increasing and started from
+    // nothing. `refine --joint` keeps the shape in the file it writes, and `validate` of that
+    // file runs (its maps are given, so there is nothing to constrain), with an error at the
+    // noise level.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = TRUTH.replace(
+        r#"operator = { kind = "play", half_width = 0.2 }"#,
+        r#"truth = "max(z0 - 0.2, 0) + min(z0 + 0.2, 0)""#,
+    );
+    let data = simulated(d, "truth", &truth, 2000, 0.0, 3);
+    let val = simulated(d, "val", &truth, 1000, 1.1, 4);
+    let start = d.join("start.toml");
+    std::fs::write(
+        &start,
+        truth.replace("truth = \"0.8*tanh(z0/0.8)\"", "shape = \"increasing\""),
+    )
+    .unwrap();
+    let out = d.join("fit");
+    ok(&[
+        "refine",
+        "--joint",
+        "--model",
+        p(&start),
+        "--data",
+        p(&data),
+        "--beta",
+        "1e-8",
+        "--out",
+        p(&out),
+    ]);
+    let written = std::fs::read_to_string(out.join("model.toml")).unwrap();
+    assert!(written.contains("shape = \"increasing\""), "{written}");
+    let limit = csv_column(&out.join("map_limit.csv"), "value");
+    assert!(limit.windows(2).all(|w| w[1] >= w[0]));
+    ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--data",
+        p(&val),
+        "--out",
+        p(&d.join("v")),
+    ]);
+    let v = json(&d.join("v").join("validation.json"));
+    let rms = v["outputs"][0]["rms"].as_f64().unwrap();
+    assert!(rms < 0.0075, "{rms}");
+}

@@ -437,6 +437,14 @@ fn assemble(
             blocks.push(b.clone());
             continue;
         }
+        let family = matches!(spec.truth, Some(TruthSpec::Family { .. }));
+        if spec.shape.is_some() && (family || spec.inputs.len() != 1) {
+            return Err(WorkflowError::Request(format!(
+                "block `{}` declares a shape, which only a static map of one input that is not \
+                 a named family can have",
+                spec.name
+            )));
+        }
         if let Some(law) = spec
             .truth
             .as_ref()

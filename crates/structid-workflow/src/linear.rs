@@ -86,7 +86,7 @@ impl FromStr for MapKind {
 /// The map a linear model file carries at its site.
 #[derive(Clone, Debug)]
 pub struct MapRequest {
-    /// Where: output feedback or the input.
+    /// Where: output feedback or the input (other sites are refused).
     pub site: Site,
     /// Its name.
     pub name: String,
@@ -217,6 +217,14 @@ impl LinearRequest {
                 rule: rule.into(),
             })
         };
+        if !matches!(m.site, Site::Input | Site::OutputFeedback) {
+            return Err(WorkflowError::InvalidOption {
+                option: "structure",
+                value: m.site.name().to_string(),
+                rule: "a linear model file places its map at the input or in output feedback"
+                    .into(),
+            });
+        }
         if m.site == Site::Input && self.inputs.len() != 1 {
             return conflict(
                 vec!["structure"],

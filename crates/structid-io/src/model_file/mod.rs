@@ -491,6 +491,22 @@ impl ModelFile {
         self.build_model(sigma_override, z_for_defaults)
     }
 
+    /// The core [`Model`] of the file's structure, every block with a placeholder dispersion:
+    /// what simulates and validates the file with maps that are given (its truths, an
+    /// estimate), where dispersions play no part. Unlike [`to_model`](Self::to_model) it
+    /// accepts a block with a `shape` (its map is given, so there is nothing to constrain).
+    /// A hysteresis operator is still refused: it is no static map.
+    pub fn structure_model(&self) -> Result<Model, IoError> {
+        if let Some(b) = self.blocks.iter().find(|b| b.operator.is_some()) {
+            return Err(IoError::InvalidArgument(format!(
+                "block `{}` is a hysteresis operator, not a static map; simulate the model with \
+                 its operators through the joint model",
+                b.name
+            )));
+        }
+        self.build_model(Some(1.0), None)
+    }
+
     fn build_model(
         &self,
         sigma_override: Option<f64>,
