@@ -6,34 +6,50 @@ use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_core::Signal;
+use structid_core::Site;
+use structid_linear::OrderCriterion;
 use structid_linear::PolynomialModel;
 use structid_linear::response::{bode, poles, step_response, zeros};
-use structid_workflow::linear::{LinearMethod, LinearRequest, OrderChoice, fit_linear};
+use structid_workflow::linear::{LinearMethod, LinearRequest, MapRequest, OrderChoice, fit_linear};
 
 use crate::convert::{error, invalid, signal, vector};
 
 /// Fits G = B(q)/A(q) (one output, the columns of each `u` its inputs) to one or several
-/// records by ARX (`method = "arx"`) or output error (`"oe"`, each record simulated from
-/// rest), with `integrators` poles fixed at z = 1 (0, 1 or 2) and `transient` samples of
-/// each record left out of the OE cost. Returns the model's polynomials, the cost, the
-/// parameter covariance, the simulation fit of every record, and the model file text
-/// (`[linear]` and `[signals]`, as `structid linear -o` writes it).
+/// records ([`structid_workflow::linear::fit_linear`], as `structid linear`): the orders given
+/// (`orders = (na, nb, nk)`) or selected (`select` over NA, NB ≤ `max_order` and NK in
+/// `delays`, `validation` a record for `select = "validation"`), by ARX (`method = "arx"`) or
+/// output error (`"oe"`, each record from rest or, with `initial_state = "estimate"`, from its
+/// estimated state), with `integrators` poles held at z = 1 and `transient` samples of each
+/// record left out of the OE cost; a map at `structure` (`"lti"`, `"output-feedback"`,
+/// `"input"`) when asked. Returns the model's polynomials, the orders and how they were
+/// chosen, the cost, the parameter covariance, the simulation fit of every record, and the
+/// model file text (as `structid linear -o` writes it).
 #[pyfunction]
-#[pyo3(signature = (u, y, na, nb, nk, method, integrators=0, sample_time=None, transient=0,
-                    inputs=None, output=None))]
+#[pyo3(signature = (u, y, orders, method, initial_state="zero", integrators=0, sample_time=None,
+                    transient=0, inputs=None, output=None, select="bic", max_order=6,
+                    delays=(1, 3), validation=None, structure="lti", map="N",
+                    dispersion="fourier", trend=None, separate_numerator=false))]
 pub fn linear_fit<'py>(
     py: Python<'py>,
     u: Vec<PyReadonlyArray2<'py, f64>>,
     y: Vec<PyReadonlyArray1<'py, f64>>,
-    na: usize,
-    nb: usize,
-    nk: usize,
+    orders: Option<[usize; 3]>,
     method: &str,
+    initial_state: &str,
     integrators: usize,
     sample_time: Option<f64>,
     transient: usize,
     inputs: Option<Vec<String>>,
     output: Option<String>,
+    select: &str,
+    max_order: usize,
+    delays: (usize, usize),
+    validation: Option<(PyReadonlyArray2<'py, f64>, PyReadonlyArray1<'py, f64>)>,
+    structure: &str,
+    map: &str,
+    dispersion: &str,
+    trend: Option<usize>,
+    separate_numerator: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     if u.len() != y.len() || u.is_empty() {
         return Err(invalid(format!(
@@ -51,24 +67,7 @@ pub fn linear_fit<'py>(
                 format!("{s} of record {i}")
             }
         };
-        let us = signal(ui, &what("u"))?;
-        let yv: Vec<f64> = yi.as_array().iter().copied().collect();
-        if let Some((k, x)) = yv.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-            return Err(invalid(format!(
-                "{} has the non-finite value {x} at sample {k}",
-                what("y")
-            )));
-        }
-        if yv.len() != us.len() {
-            return Err(invalid(format!(
-                "{} has {} samples and {} has {}",
-                what("u"),
-                us.len(),
-                what("y"),
-                yv.len()
-            )));
-        }
-        records.push((us, Signal::new(1, yv).map_err(error)?));
+        records.push(pair(ui, yi, &what("u"), &what("y"))?);
     }
     let m = records[0].0.channels();
     let inputs = inputs.unwrap_or_else(|| {
@@ -78,25 +77,67 @@ pub fn linear_fit<'py>(
             (0..m).map(|i| format!("u{i}")).collect()
         }
     });
-    let method = match method.to_ascii_lowercase().as_str() {
-        "arx" => LinearMethod::Arx,
-        "oe" => LinearMethod::Oe,
-        other => {
+    let method = match (method.to_ascii_lowercase().as_str(), initial_state) {
+        ("arx", "zero") => LinearMethod::Arx,
+        ("oe", "zero") => LinearMethod::Oe,
+        ("oe", "estimate") => LinearMethod::OeWithInitialState,
+        ("arx", "estimate") => {
+            return Err(invalid(
+                "initial_state=\"estimate\" applies to the output-error fit (method=\"oe\")",
+            ));
+        }
+        (m, "zero" | "estimate") => {
             return Err(invalid(format!(
-                "unknown method {other:?}: use \"arx\" or \"oe\""
+                "unknown method {m:?}: use \"arx\" or \"oe\""
             )));
         }
+        (_, s) => {
+            return Err(invalid(format!(
+                "unknown initial_state {s:?}: use \"zero\" or \"estimate\""
+            )));
+        }
+    };
+    let orders = match orders {
+        Some(o) => OrderChoice::Given(o),
+        None => OrderChoice::Selected {
+            criterion: criterion(select, validation)?,
+            max_order,
+            delays,
+        },
+    };
+    let site = match structure {
+        "lti" => None,
+        other => Some(Site::parse(other).ok_or_else(|| {
+            invalid(format!(
+                "unknown structure {other:?}: use \"lti\", \"output-feedback\" or \"input\""
+            ))
+        })?),
+    };
+    let map = match site {
+        Some(site) => Some(MapRequest {
+            site,
+            name: map.to_string(),
+            kind: dispersion.parse().map_err(error)?,
+            trend,
+            separate_numerator,
+        }),
+        None if separate_numerator => {
+            return Err(invalid(
+                "separate_numerator applies to structure=\"output-feedback\" only",
+            ));
+        }
+        None => None,
     };
     let request = LinearRequest {
         records,
         inputs,
         output: output.unwrap_or_else(|| "y".into()),
-        orders: OrderChoice::Given([na, nb, nk]),
+        orders,
         method,
         integrators,
         transient,
         sample_time,
-        map: None,
+        map,
     };
     let f = py
         .detach(|| fit_linear(&request, &|_, _| {}))
@@ -105,6 +146,11 @@ pub fn linear_fit<'py>(
     out.set_item("num", f.model.num.clone())?;
     out.set_item("den", vector(py, f.model.den.clone()))?;
     out.set_item("sample_time", f.model.sample_time)?;
+    out.set_item(
+        "orders",
+        (f.orders.na, f.orders.nb.clone(), f.orders.nk.clone()),
+    )?;
+    out.set_item("selection", f.selection.clone())?;
     out.set_item("cost", f.cost)?;
     out.set_item("parameter_std", vector(py, f.parameter_std))?;
     out.set_item(
@@ -121,6 +167,57 @@ pub fn linear_fit<'py>(
     out.set_item("fit_percent", f.fit_percent)?;
     out.set_item("toml", f.model_file.to_toml_string())?;
     Ok(out)
+}
+
+/// One record (u, y) with y one channel, its values finite and as long as u.
+fn pair(
+    u: &PyReadonlyArray2<'_, f64>,
+    y: &PyReadonlyArray1<'_, f64>,
+    u_name: &str,
+    y_name: &str,
+) -> PyResult<(Signal, Signal)> {
+    let us = signal(u, u_name)?;
+    let yv: Vec<f64> = y.as_array().iter().copied().collect();
+    if let Some((k, x)) = yv.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        return Err(invalid(format!(
+            "{y_name} has the non-finite value {x} at sample {k}"
+        )));
+    }
+    if yv.len() != us.len() {
+        return Err(invalid(format!(
+            "{u_name} has {} samples and {y_name} has {}",
+            us.len(),
+            yv.len()
+        )));
+    }
+    Ok((us, Signal::new(1, yv).map_err(error)?))
+}
+
+/// The order-selection criterion named `select`; `validation` is its record for
+/// `"validation"`.
+fn criterion(
+    select: &str,
+    validation: Option<(PyReadonlyArray2<'_, f64>, PyReadonlyArray1<'_, f64>)>,
+) -> PyResult<OrderCriterion> {
+    Ok(match (select, validation) {
+        ("aic", None) => OrderCriterion::Aic,
+        ("bic", None) => OrderCriterion::Bic,
+        ("fpe", None) => OrderCriterion::Fpe,
+        ("validation", Some((u, y))) => {
+            let (u, y) = pair(&u, &y, "the validation u", "the validation y")?;
+            OrderCriterion::Validation { u, y }
+        }
+        ("validation", None) | ("aic" | "bic" | "fpe", Some(_)) => {
+            return Err(invalid(
+                "select=\"validation\" and validation=(u, y) go together",
+            ));
+        }
+        (other, _) => {
+            return Err(invalid(format!(
+                "unknown select {other:?}: use \"aic\", \"bic\", \"fpe\" or \"validation\""
+            )));
+        }
+    })
 }
 
 /// The responses of G = `num[input]`/`den`: the Bode magnitude and unwrapped phase at the

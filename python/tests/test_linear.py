@@ -145,6 +145,40 @@ def test_read_data_reads_mat_and_numpy_files_by_name(tmp_path):
     np.testing.assert_array_equal(c["y"], csv["y"])
 
 
+@pytest.mark.parametrize("select", ["bic", "validation"])
+def test_selection_structure_and_initial_state_equal_the_tool(tmp_path, cli, select):
+    # Orders selected, a map in output feedback with its own numerator, the initial state
+    # estimated: the same model file as `structid linear` with the same options.
+    u, y = record(5, n=800, noise=0.02)
+    vu, vy = record(6, n=400, noise=0.02)
+    data = write_csv(tmp_path / "d.csv", {"u": u, "y": y})
+    val = write_csv(tmp_path / "v.csv", {"u": vu, "y": vy})
+    out = tmp_path / "g.toml"
+    args = ["linear", "--data", data, "--select", select, "--max-order", "3",
+            "--min-delay", "1", "--max-delay", "2", "--initial-state", "estimate",
+            "--structure", "output-feedback", "--separate-numerator", "--map", "spring",
+            "--dispersion", "gaussian", "--trend", "3", "-o", out]
+    if select == "validation":
+        args += ["--validation-data", val]
+    cli(*args)
+    fit = structid.linear(u, y, select=select, max_order=3, delays=(1, 2),
+                          validation=(vu, vy) if select == "validation" else None,
+                          initial_state="estimate", structure="output-feedback",
+                          separate_numerator=True, map="spring", dispersion="gaussian", trend=3)
+    assert fit.toml == out.read_text()
+    na, nb, nk = fit.orders
+    assert 1 <= na <= 3 and 1 <= nb[0] <= 3 and nk[0] in (1, 2)
+    if select == "validation":
+        # The simulation error on a fresh record finds the truth's orders: second order,
+        # two numerator coefficients after a delay of one sample. (BIC on the ARX equation
+        # error, with output noise, may take more.)
+        assert fit.orders == (2, [2], [1]), fit.orders
+    criterion, candidates = fit.selection
+    assert candidates == 3 * 3 * 2
+    assert criterion.lower().startswith(select[:3])
+    assert fit.model.blocks[0]["name"] == "spring"
+
+
 def test_bad_input_gets_a_clear_error(tmp_path):
     with pytest.raises(structid.StructidError, match="qx"):
         structid.read_data(ARRAYS / "signals_v5.mat", "u=vir,y=qx")
@@ -161,5 +195,11 @@ def test_bad_input_gets_a_clear_error(tmp_path):
         structid.linear(u, y_nan, (2, 2, 1))
     with pytest.raises(structid.StructidError, match="method"):
         structid.linear(u, y, (2, 2, 1), method="n4sid")
+    with pytest.raises(structid.StructidError, match="validation"):
+        structid.linear(u, y, select="validation")
+    with pytest.raises(structid.StructidError, match="structure"):
+        structid.linear(u, y, (2, 2, 1), structure="rate-feedback")
+    with pytest.raises(structid.StructidError, match="transient"):
+        structid.linear(u, y, (2, 2, 1), method="arx", transient=5)
     with pytest.raises(structid.StructidError, match="0 … 0.5"):
         structid.response([0.0, 1.0], [1.0, -0.5], frequencies=[0.7])
