@@ -113,15 +113,10 @@ impl GaussianFeatures {
     /// assert_eq!(f.centres(), &[vec![0.0], vec![1.0], vec![2.0]]);
     /// ```
     pub fn on_interval(lo: f64, hi: f64, count: usize, sigma: f64, beta: f64) -> Result<Self> {
-        if !(lo.is_finite() && hi.is_finite() && hi > lo) || count < 2 {
-            return Err(invalid(
-                "interval",
-                hi - lo,
-                "needs finite lo < hi and at least two centres",
-            ));
-        }
-        let step = (hi - lo) / (count - 1) as f64;
-        let centres = (0..count).map(|j| vec![lo + step * j as f64]).collect();
+        let centres = evenly_spaced(lo, hi, count)?
+            .into_iter()
+            .map(|c| vec![c])
+            .collect();
         Self::new(centres, sigma, beta)
     }
 
@@ -248,6 +243,20 @@ impl GaussianFeatures {
         grad[0] = slope;
         value
     }
+}
+
+/// `count` ≥ 2 points spread evenly over [lo, hi], both ends included: the centres of a
+/// scalar feature map.
+pub(crate) fn evenly_spaced(lo: f64, hi: f64, count: usize) -> Result<Vec<f64>> {
+    if !(lo.is_finite() && hi.is_finite() && hi > lo) || count < 2 {
+        return Err(invalid(
+            "interval",
+            hi - lo,
+            "needs finite lo < hi and at least two centres",
+        ));
+    }
+    let step = (hi - lo) / (count - 1) as f64;
+    Ok((0..count).map(|j| lo + step * j as f64).collect())
 }
 
 /// A feature map's parameters `p` split into its m kernel coefficients and its `trend`

@@ -32,8 +32,8 @@ use nalgebra::{DMatrix, DVector};
 use structid_core::Monotonicity;
 
 use crate::block::{BlockJacobian, BlockMap};
-use crate::error::{Result, invalid};
-use crate::features::{GaussianFeatures, regularised_fit, split_parameters};
+use crate::error::Result;
+use crate::features::{GaussianFeatures, evenly_spaced, regularised_fit, split_parameters};
 
 /// One product K(t, c_i)·K(t, c_j), i ≤ j: its weight exp(−(c_i − c_j)²/4σ²)/(2σ√π) (doubled
 /// when i < j, since θ_iθ_j appears twice in the sum) and its midpoint.
@@ -171,20 +171,7 @@ impl MonotoneFeatures {
         beta: f64,
         direction: Monotonicity,
     ) -> Result<Self> {
-        if !(lo.is_finite() && hi.is_finite() && hi > lo) || count < 2 {
-            return Err(invalid(
-                "interval",
-                hi - lo,
-                "needs finite lo < hi and at least two centres",
-            ));
-        }
-        let step = (hi - lo) / (count - 1) as f64;
-        Self::new(
-            (0..count).map(|j| lo + step * j as f64).collect(),
-            sigma,
-            beta,
-            direction,
-        )
+        Self::new(evenly_spaced(lo, hi, count)?, sigma, beta, direction)
     }
 
     /// The direction the map goes.
