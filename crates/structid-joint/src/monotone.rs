@@ -42,9 +42,16 @@ struct Pair {
     i: usize,
     j: usize,
     weight: f64,
+    /// Index into [`MonotoneFeatures::midpoints`].
+    mid: usize,
+}
+
+/// A midpoint m shared by one or more pairs (evenly spaced centres have only 2m − 1 of them
+/// for m(m + 1)/2 pairs), with Φ at √2(r − m)/σ.
+#[derive(Clone, Debug, PartialEq)]
+struct Midpoint {
+    at: f64,
     at_reference: NormalAt,
-    scale: f64,
-    mid: f64,
 }
 
 /// Φ(a) and 1 − Φ(a) at a fixed argument, both kept so that a difference Φ(x) − Φ(a) is
@@ -106,7 +113,9 @@ pub struct MonotoneFeatures {
     level: f64,
     reference: f64,
     centre_at_reference: Vec<NormalAt>,
+    /// The pairs, ordered by midpoint, so that one Φ serves a run of them.
     pairs: Vec<Pair>,
+    midpoints: Vec<Midpoint>,
 }
 
 impl MonotoneFeatures {
@@ -132,24 +141,7 @@ impl MonotoneFeatures {
             .iter()
             .map(|c| NormalAt::new((reference - c) / sigma))
             .collect();
-        let mut pairs = Vec::with_capacity(m * (m + 1) / 2);
-        let scale = std::f64::consts::SQRT_2 / sigma;
-        for i in 0..m {
-            for j in i..m {
-                let d = centres[i] - centres[j];
-                let mid = 0.5 * (centres[i] + centres[j]);
-                let once = (-d * d / (4.0 * sigma * sigma)).exp()
-                    / (2.0 * sigma * std::f64::consts::PI.sqrt());
-                pairs.push(Pair {
-                    i,
-                    j,
-                    weight: if i == j { once } else { 2.0 * once },
-                    at_reference: NormalAt::new(scale * (reference - mid)),
-                    scale,
-                    mid,
-                });
-            }
-        }
+        let (pairs, midpoints) = pairs_by_midpoint(&centres, sigma, reference);
         Ok(Self {
             root,
             direction,
@@ -159,6 +151,7 @@ impl MonotoneFeatures {
             reference,
             centre_at_reference,
             pairs,
+            midpoints,
         })
     }
 
@@ -233,12 +226,18 @@ impl MonotoneFeatures {
             }
         }
         value += 2.0 * b * cross;
+        let scale = std::f64::consts::SQRT_2 / sigma;
+        let mut current = (usize::MAX, 0.0);
         for p in &self.pairs {
             let (ti, tj) = (self.theta[p.i], self.theta[p.j]);
             if ti == 0.0 && tj == 0.0 && grad.is_none() {
                 continue;
             }
-            let q = p.weight * p.at_reference.diff_from(p.scale * (z - p.mid));
+            if current.0 != p.mid {
+                let mp = &self.midpoints[p.mid];
+                current = (p.mid, mp.at_reference.diff_from(scale * (z - mp.at)));
+            }
+            let q = p.weight * current.1;
             value += q * ti * tj;
             if let Some(g) = grad.as_deref_mut() {
                 // The weight of an off-diagonal pair is already doubled.
@@ -416,6 +415,41 @@ impl MonotoneFeatures {
     }
 }
 
+/// Every pair i ≤ j of `centres` with its weight exp(−(c_i − c_j)²/4σ²)/(2σ√π) (doubled when
+/// i < j), ordered by midpoint; midpoints that agree to rounding are one.
+fn pairs_by_midpoint(centres: &[f64], sigma: f64, reference: f64) -> (Vec<Pair>, Vec<Midpoint>) {
+    let m = centres.len();
+    let mut raw: Vec<(f64, usize, usize)> = (0..m)
+        .flat_map(|i| (i..m).map(move |j| (i, j)))
+        .map(|(i, j)| (0.5 * (centres[i] + centres[j]), i, j))
+        .collect();
+    raw.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let span = centres.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+    let scale = std::f64::consts::SQRT_2 / sigma;
+    let (mut pairs, mut midpoints): (Vec<Pair>, Vec<Midpoint>) = (Vec::new(), Vec::new());
+    for (mid, i, j) in raw {
+        if midpoints
+            .last()
+            .is_none_or(|last| (mid - last.at).abs() > 1e-12 * span.max(f64::MIN_POSITIVE))
+        {
+            midpoints.push(Midpoint {
+                at: mid,
+                at_reference: NormalAt::new(scale * (reference - mid)),
+            });
+        }
+        let d = centres[i] - centres[j];
+        let once =
+            (-d * d / (4.0 * sigma * sigma)).exp() / (2.0 * sigma * std::f64::consts::PI.sqrt());
+        pairs.push(Pair {
+            i,
+            j,
+            weight: if i == j { once } else { 2.0 * once },
+            mid: midpoints.len() - 1,
+        });
+    }
+    (pairs, midpoints)
+}
+
 /// The points sorted by z and averaged in at most `bins` runs of equal count: what the polish
 /// of [`MonotoneFeatures::fitted_to`] fits, so that its cost does not grow with the record
 /// (a smoothed latent signal has a point per sample). Returns the mean z, the mean w and the
@@ -526,6 +560,8 @@ mod tests {
         let f = MonotoneFeatures::on_interval(-1.0, 2.0, 5, 0.6, 0.0, Monotonicity::Increasing)
             .unwrap();
         let f = f.with_values(&p).unwrap();
+        // Five evenly spaced centres: 15 pairs share 9 midpoints.
+        assert_eq!((f.pairs.len(), f.midpoints.len()), (15, 9));
         for z in [-4.0, -1.0, 0.3, 0.5, 1.7, 6.0] {
             let closed = f.integral(z, None);
             let numeric = quadrature(&f, z);
