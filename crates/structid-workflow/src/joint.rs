@@ -690,7 +690,8 @@ pub(crate) fn over_betas(
 }
 
 /// The fitted model as a model file, with each static map tabulated over the range its input
-/// covers in the fitted model's simulation of the data.
+/// covers in the fitted model's simulation of the data (a shaped map over one more range width
+/// on each side).
 pub(crate) fn written(
     mf: &ModelFile,
     f: &JointFit,
@@ -723,17 +724,22 @@ pub(crate) fn written(
             }
             continue;
         }
-        // 401 points along one input, a 41 × 41 grid over two: far finer than the centres, so
-        // the table keeps the fitted map.
-        let per_axis = if spec.inputs.len() == 1 { 401 } else { 41 };
+        // 400 intervals across the range along one input, 40 per axis over two: far finer than
+        // the centres, so the table keeps the fitted map. A map with a declared shape goes its
+        // way beyond the data by construction, so its table carries on at the same spacing over
+        // one more range width on each side, along the map's tail slope; other maps are held at
+        // the edges of the range they were fitted on.
+        let intervals = if spec.inputs.len() == 1 { 400 } else { 40 };
+        let extra = if spec.shape.is_some() { intervals } else { 0 };
         let axes: Vec<Vec<f64>> = spec
             .inputs
             .iter()
             .map(|&i| {
                 let (lo, hi) = ranges[i];
                 let hi = if hi > lo { hi } else { lo + 1.0 };
-                (0..per_axis)
-                    .map(|j| lo + (hi - lo) * j as f64 / (per_axis - 1) as f64)
+                let step = (hi - lo) / intervals as f64;
+                (0..=intervals + 2 * extra)
+                    .map(|j| lo + step * (j as f64 - extra as f64))
                     .collect()
             })
             .collect();

@@ -369,5 +369,26 @@ fn a_declared_shape_holds_beyond_the_data_and_is_written_back() {
         let d: structid_core::Monotonicity = direction.parse().unwrap();
         assert!(d.holds(&wide), "{direction}: not monotone beyond the data");
         assert_eq!(out.model_file.blocks[0].shape, Some(d));
+        // The written file follows the fitted map beyond the data as well: on an input half
+        // as large again, its simulation is the fitted model's (up to the table's linear
+        // interpolation).
+        let dir = tempfile::tempdir().unwrap();
+        write_joint_outputs(&out, dir.path(), &structid_io::OutputGuard::new()).unwrap();
+        let back = ModelFile::from_path(&dir.path().join("model.toml")).unwrap();
+        let wide = Signal::from_fn(u.len(), 1, |k, _| 1.5 * u.get(k, 0));
+        let from_file = simulate_model_file(&back, &wide, None)
+            .unwrap()
+            .y
+            .channel(0);
+        let fitted = out.fit.model.simulate(&wide, None).unwrap().y.channel(0);
+        let diff = from_file
+            .iter()
+            .zip(&fitted)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            diff < 1e-3,
+            "{direction}: written model differs by {diff} beyond the data"
+        );
     }
 }

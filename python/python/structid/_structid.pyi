@@ -135,9 +135,14 @@ def multi_input(samples: int = 1500, noise_std: float = 0.1, sigma: float = 0.5,
 def write_result(directory: str, estimate: Estimate, report: str, csv_names: List[str],
                  csv_columns: List[Array1], model_toml: Optional[str] = None) -> None: ...
 def read_columns(path: str, vars: Optional[str] = None) -> Dict[str, Array1]: ...
-def linear_fit(u: List[Array2], y: List[Array1], na: int, nb: int, nk: int, method: str,
-               integrators: int = 0, sample_time: Optional[float] = None, transient: int = 0,
-               inputs: Optional[List[str]] = None, output: Optional[str] = None) -> Dict[str, Any]: ...
+def linear_fit(u: List[Array2], y: List[Array1], orders: Optional[List[int]], method: str,
+               initial_state: str = "zero", integrators: int = 0,
+               sample_time: Optional[float] = None, transient: int = 0,
+               inputs: Optional[List[str]] = None, output: Optional[str] = None,
+               select: str = "bic", max_order: int = 6, delays: Tuple[int, int] = (1, 3),
+               validation: Optional[Tuple[Array2, Array1]] = None, structure: str = "lti",
+               map: str = "N", dispersion: str = "fourier", trend: Optional[int] = None,
+               separate_numerator: bool = False) -> Dict[str, Any]: ...
 def linear_response(num: List[List[float]], den: List[float], frequencies: List[float], steps: int,
                     input: int = 0, covariance: Optional[List[List[float]]] = None,
                     sample_time: Optional[float] = None) -> Dict[str, Any]: ...
