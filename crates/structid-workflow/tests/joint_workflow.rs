@@ -335,13 +335,6 @@ fn a_declared_shape_holds_beyond_the_data_and_is_written_back() {
         })
         .unwrap();
         let map = &out.fit.model.blocks()[0].map;
-        eprintln!(
-            "{direction}: rms {:?} cost {} from {} p {:?}",
-            out.fit.rms,
-            out.fit.cost,
-            out.fit.initial_cost,
-            map.parameters()
-        );
         let (lo, hi) = u
             .channel(0)
             .iter()
