@@ -137,6 +137,23 @@ impl Model {
         Self::checked(&file)
     }
 
+    /// The same model with block `name` declared monotone (`"increasing"`, `"decreasing"`) or,
+    /// with `None`, unconstrained; the model file's own rules for `shape` apply.
+    #[pyo3(signature = (block, shape))]
+    fn with_shape(&self, block: &str, shape: Option<&str>) -> PyResult<Self> {
+        let mut file = self.file.clone();
+        let b = file
+            .blocks
+            .iter_mut()
+            .find(|b| b.name == block)
+            .ok_or_else(|| invalid(format!("the model has no block `{block}`")))?;
+        b.shape = shape
+            .map(str::parse::<structid_core::Monotonicity>)
+            .transpose()
+            .map_err(error)?;
+        Self::checked(&file)
+    }
+
     /// The data columns: `{"u": [...], "y": [...], "z": [...] or None}`.
     #[getter]
     fn signals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

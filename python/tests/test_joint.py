@@ -123,6 +123,14 @@ def test_a_declared_shape_is_kept_beyond_the_data_as_in_the_cli(cli, tmp_path):
     # well beyond the range the data cover, and the CLI gives the same fit.
     shaped = TRUTH.replace('truth = "0.8*tanh(z0/0.8)"', 'shape = "increasing"')
     model = structid.Model.from_toml(shaped)
+    # The same declaration made from Python, and refused where the file would refuse it.
+    unshaped = structid.Model.from_toml(TRUTH.replace('truth = "0.8*tanh(z0/0.8)"\n', ""))
+    assert unshaped.with_shape("limit", "increasing").to_toml() == model.to_toml()
+    assert model.with_shape("limit", None).blocks[1]["shape"] is None
+    with pytest.raises(structid.StructidError, match="hysteresis operator has no static shape"):
+        model.with_shape("backlash", "increasing")
+    with pytest.raises(structid.StructidError, match="upwards"):
+        model.with_shape("limit", "upwards")
     assert model.blocks[1]["shape"] == "increasing" and model.blocks[0]["shape"] is None
     u = inputs(2000, 0.0)
     r = structid.refine_joint(model, u, plant(u), beta=1e-8, out=tmp_path / "py")

@@ -145,6 +145,12 @@ class Model:
         """Block ``block`` with a known true map (an expression in z0, z1, …) for :meth:`simulate`."""
         return Model(self._native.with_truth(block, expression))
 
+    def with_shape(self, block: str, shape: Optional[str]) -> "Model":
+        """Block ``block`` declared monotone, ``"increasing"`` or ``"decreasing"`` (``None``
+        removes the declaration): :func:`structid.refine_joint` then keeps the map going that
+        way everywhere, beyond the data too (``shape = …`` in the model file)."""
+        return Model(self._native.with_shape(block, shape))
+
     # --- views ------------------------------------------------------------------------------
 
     @property

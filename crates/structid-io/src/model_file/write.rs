@@ -48,12 +48,14 @@ impl ModelFile {
                     .join(", ")
             );
             let _ = writeln!(s, "output = {}", b.output);
+            // Written whatever the block, so that a file read back refuses a shape where a
+            // model file would.
+            if let Some(shape) = b.shape {
+                let _ = writeln!(s, "shape = {}", toml_string(shape.as_str()));
+            }
             if let Some(op) = &b.operator {
                 let _ = writeln!(s, "operator = {}", op.to_toml());
                 continue;
-            }
-            if let Some(shape) = b.shape {
-                let _ = writeln!(s, "shape = {}", toml_string(shape.as_str()));
             }
             match &b.dispersion {
                 DispersionSpec::Gaussian { sigma: None } => {
