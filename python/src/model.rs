@@ -30,6 +30,22 @@ impl Model {
         Ok(Self { file: back })
     }
 
+    /// The same model with block `block` changed by `change`, checked as a model file is.
+    fn with_block(
+        &self,
+        block: &str,
+        change: impl FnOnce(&mut structid_io::BlockSpec),
+    ) -> PyResult<Self> {
+        let mut file = self.file.clone();
+        let b = file
+            .blocks
+            .iter_mut()
+            .find(|b| b.name == block)
+            .ok_or_else(|| invalid(format!("the model has no block `{block}`")))?;
+        change(b);
+        Self::checked(&file)
+    }
+
     /// A model from a model file that a workflow produced (already checked, its tables in
     /// memory).
     pub(crate) fn from_file_value(file: ModelFile) -> PyResult<Self> {
@@ -127,31 +143,19 @@ impl Model {
     /// The same model with block `name`'s truth (a model-file expression in z0, z1, …), for
     /// `simulate`.
     fn with_truth(&self, block: &str, expression: &str) -> PyResult<Self> {
-        let mut file = self.file.clone();
-        let b = file
-            .blocks
-            .iter_mut()
-            .find(|b| b.name == block)
-            .ok_or_else(|| invalid(format!("the model has no block `{block}`")))?;
-        b.truth = Some(structid_io::TruthSpec::Expression(expression.into()));
-        Self::checked(&file)
+        let truth = structid_io::TruthSpec::Expression(expression.into());
+        self.with_block(block, |b| b.truth = Some(truth))
     }
 
     /// The same model with block `name` declared monotone (`"increasing"`, `"decreasing"`) or,
     /// with `None`, unconstrained; the model file's own rules for `shape` apply.
     #[pyo3(signature = (block, shape))]
     fn with_shape(&self, block: &str, shape: Option<&str>) -> PyResult<Self> {
-        let mut file = self.file.clone();
-        let b = file
-            .blocks
-            .iter_mut()
-            .find(|b| b.name == block)
-            .ok_or_else(|| invalid(format!("the model has no block `{block}`")))?;
-        b.shape = shape
+        let shape = shape
             .map(str::parse::<structid_core::Monotonicity>)
             .transpose()
             .map_err(error)?;
-        Self::checked(&file)
+        self.with_block(block, |b| b.shape = shape)
     }
 
     /// The data columns: `{"u": [...], "y": [...], "z": [...] or None}`.
