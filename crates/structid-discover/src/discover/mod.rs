@@ -108,9 +108,11 @@
 //!    **Is it stationary?** The named family is refined again on [`SEGMENTS`] consecutive
 //!    segments of the estimation record, and a trend of a parameter over them larger than
 //!    the segments' scatter allows (a t test at α) makes the finding
-//!    [`Classification::TimeVarying`] ([`Stationarity`]). When no block closes a real gap, a
-//!    gain at the best location is tested the same way: a drifting gain that an estimated G
-//!    absorbed on average leaves such a gap.
+//!    [`Classification::TimeVarying`] ([`Stationarity`]). A gain at the input and at the
+//!    output of the best model found (the augmented model, or the nominal one when no block
+//!    closes a real gap, with the best location then probed too) is tested the same way,
+//!    whatever form was chosen: a drifting gain that an estimated G or a static block
+//!    absorbed on average leaves a gap that looks like another effect.
 //! 6. **How much better is the model with it?** The augmented model (named expression or
 //!    table) is examined like the nominal one on both records: the gap before and after, and
 //!    the shrink of the validation RMS. A gap whose tests failed but which no candidate block

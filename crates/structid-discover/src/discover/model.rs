@@ -65,11 +65,11 @@ pub enum Classification {
     Unnamed,
     /// The effect depends on the direction of z: "dynamic: hysteresis or backlash suspected".
     Dynamic,
-    /// A family was chosen, but re-estimated on consecutive segments of the estimation record
-    /// its parameters follow a trend larger than their scatter allows
-    /// ([`Stationarity`](super::Stationarity)): the effect changes over time. The fit is the
-    /// whole record's; the augmented model carries it, or, when the time variation was found
-    /// in a gain because no block closed the gap, the best static approximation found.
+    /// Re-estimated on consecutive segments of the estimation record, the chosen family's
+    /// parameters, or a gain at the input or output of the best model found, follow a trend
+    /// larger than their scatter allows ([`Stationarity`](super::Stationarity)): the effect
+    /// changes over time. The fit is the whole record's (the family's, or the drifting gain's);
+    /// the augmented model carries the best static approximation found.
     TimeVarying(EffectFit),
 }
 

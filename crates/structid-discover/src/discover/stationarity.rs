@@ -1,6 +1,11 @@
-//! Is the named map the same over the whole record? The chosen family is refined by output
-//! error on each of [`SEGMENTS`] consecutive segments of the estimation record, and the trend
-//! of each parameter over the segments is tested.
+//! Is the model the same over the whole record? Two probes, one test.
+//!
+//! - The chosen family is refined by output error on each of [`SEGMENTS`] consecutive
+//!   segments of the estimation record ([`check_stationarity`]).
+//! - A gain w = a·z is refined the same way at the input and at the output of the best model
+//!   found, whatever its form ([`drifting_gain`]): a gain that drifts (an actuator or a sensor
+//!   whose sensitivity changes with temperature, wear or supply) leaves a gap that a static
+//!   block at the right site closes only on average, and that may look like any effect.
 //!
 //! For parameter j with estimates θ_{s,j} on segments s = 1…S at centred times t_s, the
 //! least-squares slope is b̂_j = Σ t_s·θ_{s,j} / Σ t_s². Its variance is estimated from the
@@ -10,16 +15,17 @@
 //! of the segments' output-error fits (s²·(JᵀJ)⁻¹, each widened by √(V̂/γ̂₀), the ratio of its
 //! simulation residual's Newey–West long-run variance to its variance, since that residual is
 //! correlated over many samples). Then t_j = b̂_j / √(σ̂_j²/Σ t_s²) has a Student t
-//! distribution with S − 2 degrees of freedom under a stationary map. The map is
+//! distribution with S − 2 degrees of freedom under a stationary model. The model is
 //! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2m) for m compared
-//! parameters (Bonferroni), α being the selection rule's significance level: under a
-//! stationary map the chance of that verdict is at most α. A drift moves every segment's
-//! estimate the same way and leaves little scatter about the line; a misfit that depends on
-//! the excitation moves them at random and leaves as much scatter as slope.
+//! parameters over all probes (Bonferroni), α being the selection rule's significance level:
+//! under a stationary model the chance of that verdict is at most α. A drift moves every
+//! segment's estimate the same way and leaves little scatter about the line; a misfit that
+//! depends on the excitation moves them at random and leaves as much scatter as slope.
 
 use structid_core::Data;
 use structid_core::ExprMap;
 use structid_core::validation::comparison::{default_bandwidth, long_run_variance};
+use structid_core::validation::distributions::student_t_quantile;
 
 use crate::effects::EffectFit;
 use crate::hypotheses::{Hypothesis, Nominal, Site};
@@ -28,9 +34,10 @@ use super::fit::simulation_errors;
 use super::polish::polish;
 use super::{Classification, DiscoverSettings, Finding};
 
-/// How many consecutive segments of the estimation record the map is re-estimated on: four
-/// leave the scatter about a straight trend two degrees of freedom.
-pub const SEGMENTS: usize = 4;
+/// How many consecutive segments of the estimation record the map is re-estimated on: eight
+/// leave the scatter about a straight trend six degrees of freedom, against which a trend
+/// test has useful power (the t quantile at 1 − 0.05/8 is 3.7 with six, 7.6 with two).
+pub const SEGMENTS: usize = 8;
 
 /// The named family refined on each segment of the estimation record, and the verdict.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -43,6 +50,9 @@ pub struct Stationarity {
     pub parameter: String,
     /// The critical value: the Student t quantile (S − 2 degrees of freedom) at 1 − α/(2m).
     pub critical: f64,
+    /// Where the probe sat when it was a gain at another site than the finding's (the gain
+    /// drifts there); `None` when the finding's own map was re-estimated.
+    pub site: Option<Site>,
     /// Whether the map changes over the record: `statistic > critical`.
     pub time_varying: bool,
 }
@@ -58,9 +68,12 @@ impl Stationarity {
                     .map_or_else(|| "—".into(), |p| format!("{:.4e}", p.value))
             })
             .collect();
+        let probe = self
+            .site
+            .map_or_else(String::new, |s| format!(" of a gain at the {}", s.name()));
         format!(
-            "{} over {} consecutive segments of the estimation record: {} (trend t = {:.1} \
-             against {:.1} at the selection level): {}",
+            "{}{probe} over {} consecutive segments of the estimation record: {} (trend t = \
+             {:.1} against {:.1} at the selection level): {}",
             self.parameter,
             self.segments.len(),
             values.join(", "),
@@ -78,11 +91,14 @@ impl Stationarity {
 /// The trend test for `fit` at `h` on [`SEGMENTS`] segments of `est` (see the [module
 /// documentation](self)); `None` when a segment cannot be refined or simulated, or no
 /// parameter can be compared.
+///
+/// `probes` is the number of such tests made on one model (each a Bonferroni share of α).
 pub(super) fn stationarity(
     fit: &EffectFit,
     h: &Hypothesis,
     est: &Data,
     settings: &DiscoverSettings,
+    probes: usize,
 ) -> Option<Stationarity> {
     let fits: Vec<(EffectFit, f64)> = est
         .segments(SEGMENTS)
@@ -110,13 +126,15 @@ pub(super) fn stationarity(
     if compared == 0 {
         return None;
     }
-    let critical = student_t2_quantile(1.0 - settings.significance / (2.0 * compared as f64));
+    let tests = (compared * probes.max(1)) as f64;
+    let critical = student_t_quantile(1.0 - settings.significance / (2.0 * tests), SEGMENTS - 2);
     Some(Stationarity {
         segments: fits.into_iter().map(|(f, _)| f).collect(),
         statistic: worst.0,
         parameter: worst.1,
         critical,
         time_varying: worst.0 > critical,
+        site: None,
     })
 }
 
@@ -150,12 +168,6 @@ fn trend_statistic(fits: &[(EffectFit, f64)], name: &str) -> Option<f64> {
     } else {
         None
     }
-}
-
-/// The quantile of Student's t with two degrees of freedom at probability `p` (closed form:
-/// t = (2p − 1)/√(2p(1 − p))).
-fn student_t2_quantile(p: f64) -> f64 {
-    (2.0 * p - 1.0) / (2.0 * p * (1.0 - p)).sqrt()
 }
 
 /// `fit` refined on `part`, with the factor √(V̂/γ̂₀) (at least 1) by which its residual's
@@ -202,7 +214,7 @@ pub(super) fn check_stationarity(
         return;
     };
     let h = augmented_hypothesis(finding, nominal);
-    let Some(check) = stationarity(fit, &h, est, settings) else {
+    let Some(check) = stationarity(fit, &h, est, settings, 1) else {
         return;
     };
     if check.time_varying {
@@ -215,51 +227,93 @@ pub(super) fn check_stationarity(
     finding.stationarity = Some(check);
 }
 
-/// Whether a gap that no static block closes is a linear part that changes over the record:
-/// a gain at the finding's location (w = a·z, from the block's neutral value) re-estimated on
-/// consecutive segments
-/// of the estimation record ([`stationarity`]). A gain that drifts is
-/// absorbed on average by an estimated G, which leaves a residual that no static map
-/// explains; the segments' gains follow the drift. When they do, the finding becomes [`Classification::TimeVarying`].
-pub(super) fn drifting_linear_part(
+/// Whether a linear part of `model` drifts over the estimation record: a gain w = a·z at
+/// each of `sites` (from the block's neutral value: a = 1 where it passes a signal on, 0
+/// where it feeds back) re-estimated on [`SEGMENTS`] consecutive segments ([`stationarity`],
+/// one Bonferroni share per site). The most significant drift, with the gain refined on the
+/// whole record, or `None` when no gain drifts.
+///
+/// `model` is the best model found (the augmented model of a finding, or the nominal one when
+/// no block closes the gap): a drift is what that model leaves, whatever form it chose.
+pub(super) fn drifting_gain(
+    model: &Nominal,
+    sites: &[Site],
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(EffectFit, Stationarity)> {
+    let dispersion: std::sync::Arc<dyn structid_core::Dispersion> =
+        std::sync::Arc::new(structid_core::PolynomialDispersion::new(1).ok()?);
+    let mut best: Option<(EffectFit, Stationarity, Hypothesis)> = None;
+    for &site in sites {
+        let neutral = match site {
+            Site::OutputFeedback | Site::RateFeedback => 0.0,
+            _ => 1.0,
+        };
+        let Ok(mut gain) = crate::effects::fit_effect_with(
+            crate::effects::Effect::Gain,
+            false,
+            &[-1.0, 1.0],
+            &[-1.0, 1.0],
+        ) else {
+            continue;
+        };
+        gain.parameters[0].value = neutral;
+        let Ok(h) = model.hypothesis(site, std::sync::Arc::clone(&dispersion)) else {
+            continue;
+        };
+        let Some(mut check) = stationarity(&gain, &h, est, settings, sites.len()) else {
+            continue;
+        };
+        check.site = Some(site);
+        let margin = check.statistic / check.critical;
+        if check.time_varying
+            && best
+                .as_ref()
+                .is_none_or(|(_, b, _)| margin > b.statistic / b.critical)
+        {
+            best = Some((gain, check, h));
+        }
+    }
+    let (gain, check, h) = best?;
+    let whole = h
+        .data(est)
+        .map(|data| polish(&gain, &h, &data, settings))
+        .unwrap_or(gain);
+    Some((whole, check))
+}
+
+/// Makes `finding` time-varying when a gain of `model` drifts at one of `sites` (those of
+/// them where `model` has a location) or at its input or output ([`drifting_gain`]); whether
+/// it did.
+pub(super) fn check_drift(
     finding: &mut Finding,
-    nominal: &Nominal,
+    model: &Nominal,
+    sites: &[Site],
     est: &Data,
     settings: &DiscoverSettings,
 ) -> bool {
-    // The block's neutral value: w = z where it passes a signal on (input, output), w = 0
-    // where it feeds back.
-    let neutral = match finding.location {
-        Site::OutputFeedback | Site::RateFeedback => 0.0,
-        _ => 1.0,
-    };
-    let Ok(mut gain) = crate::effects::fit_effect_with(
-        crate::effects::Effect::Gain,
-        false,
-        &[-1.0, 1.0],
-        &[-1.0, 1.0],
-    ) else {
+    let available = model.locations();
+    let mut probes: Vec<Site> = Vec::new();
+    for &s in sites.iter().chain(&[Site::Input, Site::Output]) {
+        if !probes.contains(&s) && available.contains(&s) {
+            probes.push(s);
+        }
+    }
+    let sites = probes;
+    let Some((gain, mut check)) = drifting_gain(model, &sites, est, settings) else {
         return false;
     };
-    gain.parameters[0].value = neutral;
-    let h = augmented_hypothesis(finding, nominal);
-    match stationarity(&gain, &h, est, settings) {
-        Some(check) if check.time_varying => {
-            finding.remarks.push(format!(
-                "no static block closes the gap, and a gain at this location drifts over the \
-                 estimation record: {}",
-                check.describe()
-            ));
-            let whole = h
-                .data(est)
-                .map(|data| polish(&gain, &h, &data, settings))
-                .unwrap_or(gain);
-            finding.classification = Classification::TimeVarying(whole);
-            finding.stationarity = Some(check);
-            true
-        }
-        _ => false,
+    if check.site == Some(finding.location) {
+        check.site = None;
     }
+    finding.remarks.push(format!(
+        "a gain drifts over the estimation record: {}; no static name describes the whole \
+         record",
+        check.describe()
+    ));
+    finding.classification = Classification::TimeVarying(gain);
+    finding.stationarity = Some(check);
+    true
 }
 
 /// The hypothesis of a finding's augmented model (its LFT, location and known maps).
@@ -312,7 +366,7 @@ mod tests {
             .map(|v| gain(*v, 0.002))
             .collect();
         let t = trend_statistic(&scatter, "gain").unwrap();
-        assert!(t < student_t2_quantile(0.975), "{t}");
+        assert!(t < student_t_quantile(0.975, 2), "{t}");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use super::context::Context;
 use super::fit::simulation_errors;
 use super::linear_rival::{self, LinearRival};
 use super::naming::verdict_text;
-use super::stationarity::{augmented_hypothesis, check_stationarity, drifting_linear_part};
+use super::stationarity::{augmented_hypothesis, check_drift, check_stationarity};
 use super::{
     Classification, Discovery, FEEDBACK_HYSTERESIS_SHARE, Finding, HypothesisResult,
     MIN_CONFIRMING_SHRINK, NoiseLevel, PARTIAL_SHRINK, PAST_DISTURBANCE_SHRINK,
@@ -98,9 +98,10 @@ pub(super) fn confirm(
         MIN_CONFIRMING_SHRINK
     };
     let gap_level = settings.gap.noise_ratio * noise.std;
+    let location = finding.location;
     if finding.shrink < confirming
         && !dynamic_found
-        && !(real && drifting_linear_part(&mut finding, &cx.nominal, cx.est, settings))
+        && !(real && check_drift(&mut finding, &cx.nominal, &[location], cx.est, settings))
     {
         let (kind, verdict) = unconfirmed(&cx, &finding, &hypotheses, &noise, real);
         let rival = (kind == Verdict::Unexplained)
@@ -123,6 +124,13 @@ pub(super) fn confirm(
         finding.remarks.push(c);
     }
     check_stationarity(&mut finding, &cx.nominal, cx.est, settings);
+    // Whatever form was chosen, a linear part that drifts under it makes the effect
+    // time-varying.
+    if !matches!(finding.classification, Classification::TimeVarying(_))
+        && let Ok(model) = finding.augmented.as_nominal(&cx.nominal)
+    {
+        check_drift(&mut finding, &model, &[], cx.est, settings);
+    }
     let verdict = confirmed(&cx, &mut finding, &noise);
     let mut d = cx.discovery(
         Verdict::MissingEffect,
