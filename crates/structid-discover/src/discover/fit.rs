@@ -279,7 +279,7 @@ pub(super) fn simulation_errors(
 
 /// The simulation of [`simulation_rms`] on every record of `data`, `None` when it fails or
 /// diverges.
-fn simulated(
+pub(super) fn simulated(
     h: &Hypothesis,
     map: &dyn Interpolant,
     data: &Data,

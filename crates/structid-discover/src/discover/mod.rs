@@ -108,11 +108,10 @@
 //!    **Is it stationary?** The named family is refined again on [`SEGMENTS`] consecutive
 //!    segments of the estimation record, and a trend of a parameter over them larger than
 //!    the segments' scatter allows (a t test at α) makes the finding
-//!    [`Classification::TimeVarying`] ([`Stationarity`]). A gain at the input and at the
-//!    output of the best model found (the augmented model, or the nominal one when no block
-//!    closes a real gap, with the best location then probed too) is tested the same way,
-//!    whatever form was chosen: a drifting gain that an estimated G or a static block
-//!    absorbed on average leaves a gap that looks like another effect.
+//!    [`Classification::TimeVarying`] ([`Stationarity`]). A gain in series with the best
+//!    model found, at its input and at its output, is tested the same way whatever form was
+//!    chosen (even when no block confirmed the gap): a drifting gain that an estimated G or a
+//!    static block absorbed on average leaves a gap that looks like another effect.
 //! 6. **How much better is the model with it?** The augmented model (named expression or
 //!    table) is examined like the nominal one on both records: the gap before and after, and
 //!    the shrink of the validation RMS. A gap whose tests failed but which no candidate block

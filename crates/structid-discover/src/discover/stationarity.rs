@@ -16,9 +16,9 @@
 //! simulation residual's Newey–West long-run variance to its variance, since that residual is
 //! correlated over many samples). Then t_j = b̂_j / √(σ̂_j²/Σ t_s²) has a Student t
 //! distribution with S − 2 degrees of freedom under a stationary model. The model is
-//! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2m) for m compared
-//! parameters over all probes (Bonferroni), α being the selection rule's significance level:
-//! under a stationary model the chance of that verdict is at most α. A drift moves every
+//! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2·2m) for m compared
+//! parameters in each of the two probes (Bonferroni), α being the selection rule's
+//! significance level: under a stationary model the chance of that verdict is at most α. A drift moves every
 //! segment's estimate the same way and leaves little scatter about the line; a misfit that
 //! depends on the excitation moves them at random and leaves as much scatter as slope.
 
@@ -30,7 +30,7 @@ use structid_core::validation::distributions::student_t_quantile;
 use crate::effects::EffectFit;
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
-use super::fit::simulation_errors;
+use super::fit::{simulated, simulation_errors};
 use super::polish::polish;
 use super::{Classification, DiscoverSettings, Finding};
 
@@ -141,32 +141,59 @@ pub(super) fn stationarity(
 /// |t| of the trend of parameter `name` over the segments' fits, `None` when a segment lacks
 /// it or its standard error is not finite.
 fn trend_statistic(fits: &[(EffectFit, f64)], name: &str) -> Option<f64> {
-    let s = fits.len();
-    let mut values = Vec::with_capacity(s);
-    let mut se2 = 0.0;
-    for (f, inflation) in fits {
-        let p = f.parameter(name)?;
-        let se = p.half_width() * inflation / 1.96;
-        if !se.is_finite() {
-            return None;
-        }
-        values.push(p.value);
-        se2 += se * se / s as f64;
+    let estimates = fits
+        .iter()
+        .map(|(f, inflation)| {
+            let p = f.parameter(name)?;
+            Some((p.value, p.half_width() * inflation / 1.96))
+        })
+        .collect::<Option<Vec<_>>>()?;
+    trend_of(&estimates)
+}
+
+/// |t| of the trend of the estimates (value, standard error), in time order (see the [module
+/// documentation](self)); `None` when a standard error is not finite or the variance is 0.
+fn trend_of(estimates: &[(f64, f64)]) -> Option<f64> {
+    let s = estimates.len();
+    if s < 3
+        || estimates
+            .iter()
+            .any(|(v, se)| !v.is_finite() || !se.is_finite())
+    {
+        return None;
     }
+    let se2 = estimates.iter().map(|(_, se)| se * se).sum::<f64>() / s as f64;
     let t: Vec<f64> = (0..s).map(|i| i as f64 - 0.5 * (s - 1) as f64).collect();
     let tt: f64 = t.iter().map(|v| v * v).sum();
-    let mean = values.iter().sum::<f64>() / s as f64;
-    let slope = t.iter().zip(&values).map(|(t, v)| t * v).sum::<f64>() / tt;
+    let mean = estimates.iter().map(|(v, _)| v).sum::<f64>() / s as f64;
+    let slope = t
+        .iter()
+        .zip(estimates)
+        .map(|(t, (v, _))| t * v)
+        .sum::<f64>()
+        / tt;
     let rss: f64 = t
         .iter()
-        .zip(&values)
-        .map(|(t, v)| (v - mean - slope * t).powi(2))
+        .zip(estimates)
+        .map(|(t, (v, _))| (v - mean - slope * t).powi(2))
         .sum();
     let variance = (rss / (s - 2) as f64).max(se2);
     if variance > 0.0 {
         Some(slope.abs() / (variance / tt).sqrt())
     } else {
         None
+    }
+}
+
+/// √(V̂/γ̂₀), at least 1: how much the serial correlation of a residual widens the standard
+/// errors computed as if it were white (V̂ its Newey–West long-run variance, γ̂₀ its variance).
+fn inflation(errors: &[f64]) -> f64 {
+    let lrv = long_run_variance(errors, default_bandwidth(errors));
+    let variance = long_run_variance(errors, 0);
+    if variance > 0.0 {
+        (lrv / variance).max(1.0).sqrt()
+    } else {
+        1.0
     }
 }
 
@@ -191,14 +218,7 @@ fn segment_fit(
     if errors.len() < 3 {
         return None;
     }
-    let lrv = long_run_variance(&errors, default_bandwidth(&errors));
-    let variance = long_run_variance(&errors, 0);
-    let inflation = if variance > 0.0 {
-        (lrv / variance).max(1.0).sqrt()
-    } else {
-        1.0
-    };
-    Some((refined, inflation))
+    Some((refined, inflation(&errors)))
 }
 
 /// Re-estimates a named finding's family on consecutive segments of the estimation record
@@ -214,7 +234,7 @@ pub(super) fn check_stationarity(
         return;
     };
     let h = augmented_hypothesis(finding, nominal);
-    let Some(check) = stationarity(fit, &h, est, settings, 1) else {
+    let Some(check) = stationarity(fit, &h, est, settings, TEST_FAMILIES) else {
         return;
     };
     if check.time_varying {
@@ -227,85 +247,188 @@ pub(super) fn check_stationarity(
     finding.stationarity = Some(check);
 }
 
-/// Whether a linear part of `model` drifts over the estimation record: a gain w = a·z at
-/// each of `sites` (from the block's neutral value: a = 1 where it passes a signal on, 0
-/// where it feeds back) re-estimated on [`SEGMENTS`] consecutive segments ([`stationarity`],
-/// one Bonferroni share per site). The most significant drift, with the gain refined on the
-/// whole record, or `None` when no gain drifts.
+/// The two families of tests a finding meets, the chosen family's parameters and the probe
+/// gains: each gets half of α, so that a stationary model is called time-varying with a
+/// chance of at most α in all.
+const TEST_FAMILIES: usize = 2;
+
+/// Where a probe gain sits in series with the best model found: before it (y ≈ M(a·u)) or
+/// after it (y ≈ a·M(u)).
+const PROBES: [Site; 2] = [Site::Input, Site::Output];
+
+/// Whether a gain in series with the best model found drifts over the estimation record: the
+/// augmented model M of `finding`, with every map it found held as fitted, and a gain a at
+/// its input (y ≈ M(a·u)) or its output (y ≈ a·M(u)) refined by its simulation error on
+/// each of [`SEGMENTS`] consecutive segments, and the trend of a tested as in
+/// [`stationarity`] (one Bonferroni share per site). The most significant drift, with the
+/// gain refined on the whole record, or `None` when no gain drifts.
 ///
-/// `model` is the best model found (the augmented model of a finding, or the nominal one when
-/// no block closes the gap): a drift is what that model leaves, whatever form it chose.
+/// The probe scales the signals M reads and writes, so it is a model whatever M holds at its
+/// input or output. A drift is what the best model leaves, whatever form it chose: an actuator
+/// or a sensor whose sensitivity drifts is absorbed on average by G or by a static block.
 pub(super) fn drifting_gain(
-    model: &Nominal,
-    sites: &[Site],
+    finding: &Finding,
+    nominal: &Nominal,
     est: &Data,
     settings: &DiscoverSettings,
 ) -> Option<(EffectFit, Stationarity)> {
-    let dispersion: std::sync::Arc<dyn structid_core::Dispersion> =
-        std::sync::Arc::new(structid_core::PolynomialDispersion::new(1).ok()?);
-    let mut best: Option<(EffectFit, Stationarity, Hypothesis)> = None;
-    for &site in sites {
-        let neutral = match site {
-            Site::OutputFeedback | Site::RateFeedback => 0.0,
-            _ => 1.0,
-        };
-        let Ok(mut gain) = crate::effects::fit_effect_with(
-            crate::effects::Effect::Gain,
-            false,
-            &[-1.0, 1.0],
-            &[-1.0, 1.0],
-        ) else {
+    let h = augmented_hypothesis(finding, nominal);
+    let map = finding.augmented.map.interpolant().ok()?;
+    let parts = est.segments(SEGMENTS).ok()?;
+    let mut best: Option<Stationarity> = None;
+    for site in PROBES {
+        let Some(fits) = parts
+            .iter()
+            .map(|part| series_gain(&h, map.as_ref(), part, site, settings))
+            .collect::<Option<Vec<(f64, f64)>>>()
+        else {
             continue;
         };
-        gain.parameters[0].value = neutral;
-        let Ok(h) = model.hypothesis(site, std::sync::Arc::clone(&dispersion)) else {
+        let Some(statistic) = trend_of(&fits) else {
             continue;
         };
-        let Some(mut check) = stationarity(&gain, &h, est, settings, sites.len()) else {
-            continue;
+        let critical = student_t_quantile(
+            1.0 - settings.significance / (2.0 * PROBES.len() as f64),
+            SEGMENTS - 2,
+        );
+        let check = Stationarity {
+            segments: fits.iter().map(|&(a, se)| gain_fit(a, se)).collect(),
+            statistic,
+            parameter: "gain".into(),
+            critical,
+            time_varying: statistic > critical,
+            site: Some(site),
         };
-        check.site = Some(site);
-        let margin = check.statistic / check.critical;
-        if check.time_varying
-            && best
-                .as_ref()
-                .is_none_or(|(_, b, _)| margin > b.statistic / b.critical)
-        {
-            best = Some((gain, check, h));
+        if check.time_varying && best.as_ref().is_none_or(|b| statistic > b.statistic) {
+            best = Some(check);
         }
     }
-    let (gain, check, h) = best?;
-    let whole = h
-        .data(est)
-        .map(|data| polish(&gain, &h, &data, settings))
-        .unwrap_or(gain);
-    Some((whole, check))
+    let check = best?;
+    let site = check.site?;
+    let (a, se) = series_gain(&h, map.as_ref(), est, site, settings)?;
+    Some((gain_fit(a, se), check))
 }
 
-/// Makes `finding` time-varying when a gain of `model` drifts at one of `sites` (those of
-/// them where `model` has a location) or at its input or output ([`drifting_gain`]); whether
-/// it did.
+/// A gain `a` with standard error `se`, as an effect fit (its 95 % interval a ± 1.96·se).
+fn gain_fit(a: f64, se: f64) -> EffectFit {
+    let mut fit = crate::effects::fit_effect_with(
+        crate::effects::Effect::Gain,
+        false,
+        &[-1.0, 1.0],
+        &[-a, a],
+    )
+    .expect("a gain fits two points");
+    fit.parameters[0].value = a;
+    fit.parameters[0].interval = (a - 1.96 * se, a + 1.96 * se);
+    fit
+}
+
+/// The probe gain of [`drifting_gain`] at `site`, refined on `part`: its value and its
+/// standard error √(s²/ΣJ²), widened by √(V̂/γ̂₀) for the residual's serial correlation as
+/// the segments' family fits are. At the output the least-squares gain is in closed form;
+/// at the input it is found by Gauss–Newton from a = 1. `None` when a simulation fails.
+fn series_gain(
+    h: &Hypothesis,
+    map: &dyn structid_core::Interpolant,
+    part: &Data,
+    site: Site,
+    settings: &DiscoverSettings,
+) -> Option<(f64, f64)> {
+    let simulate = |a: f64| -> Option<(Vec<f64>, Vec<f64>)> {
+        let data = match site {
+            Site::Input => scaled_input(part, a).ok()?,
+            _ => part.clone(),
+        };
+        let v = simulated(h, map, &h.data(&data).ok()?, settings)?;
+        let k: Vec<usize> = v.scored.iter().flat_map(|r| r.clone()).collect();
+        Some((
+            k.iter().map(|&k| v.measured[k]).collect(),
+            k.iter().map(|&k| v.simulated[k]).collect(),
+        ))
+    };
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let (y, mut yhat) = simulate(1.0)?;
+    let (a, jacobian) = match site {
+        Site::Input => {
+            let mut a: f64 = 1.0;
+            let mut cost = dot(&y, &y) - 2.0 * dot(&y, &yhat) + dot(&yhat, &yhat);
+            let mut jacobian = Vec::new();
+            for _ in 0..20 {
+                let step = 1e-4 * a.abs().max(1e-3);
+                let (_, ahead) = simulate(a + step)?;
+                jacobian = ahead
+                    .iter()
+                    .zip(&yhat)
+                    .map(|(p, q)| (p - q) / step)
+                    .collect();
+                let r: Vec<f64> = y.iter().zip(&yhat).map(|(y, q)| y - q).collect();
+                let jj = dot(&jacobian, &jacobian);
+                if jj <= 0.0 {
+                    return None;
+                }
+                let mut delta = dot(&jacobian, &r) / jj;
+                // Halve the step until the cost falls (the map makes the error non-quadratic).
+                let mut accepted = false;
+                for _ in 0..10 {
+                    if let Some((_, trial)) = simulate(a + delta) {
+                        let c: f64 = y.iter().zip(&trial).map(|(y, q)| (y - q).powi(2)).sum();
+                        if c <= cost {
+                            (a, cost, yhat) = (a + delta, c, trial);
+                            accepted = true;
+                            break;
+                        }
+                    }
+                    delta *= 0.5;
+                }
+                if !accepted || delta.abs() <= 1e-8 * a.abs().max(1e-8) {
+                    break;
+                }
+            }
+            (a, jacobian)
+        }
+        _ => {
+            let a = dot(&yhat, &y) / dot(&yhat, &yhat);
+            yhat.iter_mut().for_each(|q| *q *= a);
+            (a, yhat.iter().map(|q| q / a).collect())
+        }
+    };
+    let r: Vec<f64> = y.iter().zip(&yhat).map(|(y, q)| y - q).collect();
+    let n = r.len();
+    let jj = dot(&jacobian, &jacobian);
+    if n < 3 || !a.is_finite() || jj <= 0.0 {
+        return None;
+    }
+    let s2 = dot(&r, &r) / (n - 1) as f64;
+    Some((a, (s2 / jj).sqrt() * inflation(&r)))
+}
+
+/// `part` with every record's input scaled by `a`.
+fn scaled_input(part: &Data, a: f64) -> structid_core::Result<Data> {
+    let records = part
+        .records()
+        .into_iter()
+        .map(|r| {
+            let u = r.u();
+            Data::new(
+                structid_core::Signal::from_fn(u.len(), u.channels(), |k, c| a * u.get(k, c)),
+                r.y().clone(),
+            )
+        })
+        .collect::<structid_core::Result<Vec<_>>>()?;
+    Data::from_records(records)
+}
+
+/// Makes `finding` time-varying when a gain in series with its augmented model drifts
+/// ([`drifting_gain`]); whether it did.
 pub(super) fn check_drift(
     finding: &mut Finding,
-    model: &Nominal,
-    sites: &[Site],
+    nominal: &Nominal,
     est: &Data,
     settings: &DiscoverSettings,
 ) -> bool {
-    let available = model.locations();
-    let mut probes: Vec<Site> = Vec::new();
-    for &s in sites.iter().chain(&[Site::Input, Site::Output]) {
-        if !probes.contains(&s) && available.contains(&s) {
-            probes.push(s);
-        }
-    }
-    let sites = probes;
-    let Some((gain, mut check)) = drifting_gain(model, &sites, est, settings) else {
+    let Some((gain, check)) = drifting_gain(finding, nominal, est, settings) else {
         return false;
     };
-    if check.site == Some(finding.location) {
-        check.site = None;
-    }
     finding.remarks.push(format!(
         "a gain drifts over the estimation record: {}; no static name describes the whole \
          record",

@@ -98,10 +98,9 @@ pub(super) fn confirm(
         MIN_CONFIRMING_SHRINK
     };
     let gap_level = settings.gap.noise_ratio * noise.std;
-    let location = finding.location;
     if finding.shrink < confirming
         && !dynamic_found
-        && !(real && check_drift(&mut finding, &cx.nominal, &[location], cx.est, settings))
+        && !(real && check_drift(&mut finding, &cx.nominal, cx.est, settings))
     {
         let (kind, verdict) = unconfirmed(&cx, &finding, &hypotheses, &noise, real);
         let rival = (kind == Verdict::Unexplained)
@@ -126,10 +125,8 @@ pub(super) fn confirm(
     check_stationarity(&mut finding, &cx.nominal, cx.est, settings);
     // Whatever form was chosen, a linear part that drifts under it makes the effect
     // time-varying.
-    if !matches!(finding.classification, Classification::TimeVarying(_))
-        && let Ok(model) = finding.augmented.as_nominal(&cx.nominal)
-    {
-        check_drift(&mut finding, &model, &[], cx.est, settings);
+    if !matches!(finding.classification, Classification::TimeVarying(_)) {
+        check_drift(&mut finding, &cx.nominal, cx.est, settings);
     }
     let verdict = confirmed(&cx, &mut finding, &noise);
     let mut d = cx.discovery(
