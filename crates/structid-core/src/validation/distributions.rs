@@ -111,7 +111,7 @@ pub fn student_t_two_sided(t: f64, dof: usize) -> f64 {
     let (s, c2) = (theta.sin(), theta.cos().powi(2));
     // Terms c_j cos^{2j}θ (even ν) or cos^{2j+1}θ (odd ν), each from the last by the ratio
     // (2j − 1)/(2j) or (2j)/(2j + 1).
-    if nu % 2 == 0 {
+    if nu.is_multiple_of(2) {
         let mut term = 1.0;
         let mut sum = 1.0;
         for j in 1..nu / 2 {

@@ -468,11 +468,27 @@ mod tests {
     }
 
     #[test]
-    fn the_t2_quantile_matches_the_tables() {
-        // Student t, 2 degrees of freedom: 2.920 at 0.95, 4.303 at 0.975, 9.925 at 0.995.
-        for (p, t) in [(0.95, 2.920), (0.975, 4.303), (0.995, 9.925)] {
-            assert!((student_t2_quantile(p) - t).abs() < 1e-3, "{p}");
-        }
+    fn a_drift_of_fifteen_percent_over_the_segments_passes_the_critical_value() {
+        // Eight segments of a gain falling linearly by 15 %, each known to ±2 % (one standard
+        // error): the t statistic is the slope over its standard error, √Σt² · 0.15/7 / 0.02.
+        let values: Vec<(f64, f64)> = (0..SEGMENTS)
+            .map(|s| (1.0 - 0.15 * s as f64 / (SEGMENTS - 1) as f64, 0.02))
+            .collect();
+        let t = trend_of(&values).unwrap();
+        let tt: f64 = (0..SEGMENTS)
+            .map(|i| (i as f64 - 0.5 * (SEGMENTS - 1) as f64).powi(2))
+            .sum();
+        let expected = 0.15 / (SEGMENTS - 1) as f64 / (0.02 / tt.sqrt());
+        assert!((t - expected).abs() < 1e-9 * expected, "{t} {expected}");
+        let tests = (TEST_FAMILIES * PROBES.len()) as f64;
+        let critical = student_t_quantile(1.0 - 0.05 / (2.0 * tests), SEGMENTS - 2);
+        assert!(t > critical, "{t} against {critical}");
+        // The same values out of time order: no trend beyond the scatter.
+        let shuffled: Vec<(f64, f64)> = [3, 6, 0, 5, 2, 7, 1, 4]
+            .iter()
+            .map(|&i| values[i])
+            .collect();
+        assert!(trend_of(&shuffled).unwrap() < critical);
     }
 
     #[test]
