@@ -90,7 +90,7 @@ fn discovery_dict<'py>(
             let x = PyDict::new(py);
             x.set_item("location", nominal.key(f.location))?;
             x.set_item("description", nominal.describe(f.location))?;
-            x.set_item("effect", f.classification.describe_at(f.location))?;
+            x.set_item("effect", f.effect())?;
             x.set_item("estimator", &f.estimator)?;
             x.set_item("nonparametric_rms", f.nonparametric_rms)?;
             x.set_item("validation_rms", f.augmented.validation_gap.rms)?;

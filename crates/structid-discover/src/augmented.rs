@@ -198,6 +198,23 @@ fn known_blocks(nominal_file: &ModelFile) -> std::result::Result<Vec<BlockSpec>,
 }
 
 impl Finding {
+    /// The effect in words, in the physics of its site ([`Classification::describe_at`]); for
+    /// a drift found in a probe gain in series with the model
+    /// ([`Stationarity::site`](crate::discover::Stationarity::site)), where that gain sits.
+    pub fn effect(&self) -> String {
+        match (
+            &self.classification,
+            self.stationarity.as_ref().and_then(|s| s.site),
+        ) {
+            (Classification::TimeVarying(_), Some(site)) => format!(
+                "time-varying: a gain at the {} that drifts over the record (beside the best \
+                 static block found)",
+                site.name()
+            ),
+            (c, _) => c.describe_at(self.location),
+        }
+    }
+
     /// The augmented model as a model file next to which its table ([`TABLE_FILE`]) is
     /// written: see [`model_file`]. The block's dispersion is the one its map was estimated
     /// with: [`quadratic_dispersion_spec`] at the hypothesis' σ with `trend_degree`
@@ -310,13 +327,7 @@ impl Finding {
         };
         let notes = vec![
             ("location".to_string(), nominal.key(self.location)),
-            (
-                "effect".to_string(),
-                format!(
-                    "{} ({kind})",
-                    self.classification.describe_at(self.location)
-                ),
-            ),
+            ("effect".to_string(), format!("{} ({kind})", self.effect())),
             (
                 "initial_state".to_string(),
                 initial_state_name(initial_state(self.location).1).to_string(),

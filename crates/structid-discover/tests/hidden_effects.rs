@@ -149,7 +149,7 @@ fn hysteresis_is_reported_as_dynamic() {
         let f = d.finding.as_ref();
         let is_dynamic = f.is_some_and(|f| f.classification == Classification::Dynamic);
         eprintln!(
-            "seed {seed}: {:?} → {} at {:?} (direction explains {:.2}, t = {:.1})",
+            "seed {seed}: {:?} → {} at {:?} (direction explains {:.2}, t = {:.1}), input {:?}",
             match case.hidden {
                 Hidden::Backlash { .. } => "backlash",
                 _ => "Bouc–Wen",
@@ -159,6 +159,7 @@ fn hysteresis_is_reported_as_dynamic() {
             f.map(|f| f.location.name()),
             f.map(|f| f.direction.explained).unwrap_or(0.0),
             f.map(|f| f.direction.t_statistic).unwrap_or(0.0),
+            case.input,
         );
         dynamic += usize::from(is_dynamic);
         // A map written as a table (dynamic or unnamed) extrapolates as its hypothesis was

@@ -104,6 +104,9 @@ fn erfc(x: f64) -> f64 {
 pub fn student_t_two_sided(t: f64, dof: usize) -> f64 {
     let nu = dof.max(1);
     let t = t.abs();
+    if t.is_nan() {
+        return f64::NAN;
+    }
     if t.is_infinite() {
         return 1.0;
     }
@@ -134,14 +137,18 @@ pub fn student_t_two_sided(t: f64, dof: usize) -> f64 {
 }
 
 /// The `p` quantile of Student's t with `dof` degrees of freedom, for 0.5 ≤ p < 1: the root of
-/// (1 + [`student_t_two_sided`])/2 = p, by bisection to a relative width of 1e-12.
+/// (1 + [`student_t_two_sided`])/2 = p, by bisection to a relative width of 1e-12 (0 below
+/// p = 0.5, ∞ at p ≥ 1, NaN for NaN).
 ///
 /// ```
 /// use structid_core::validation::distributions::student_t_quantile;
 /// assert!((student_t_quantile(0.975, 6) - 2.446_912).abs() < 1e-5);
 /// ```
 pub fn student_t_quantile(p: f64, dof: usize) -> f64 {
-    if p.is_nan() || p <= 0.5 {
+    if p.is_nan() {
+        return f64::NAN;
+    }
+    if p <= 0.5 {
         return 0.0;
     }
     if p >= 1.0 {
@@ -183,6 +190,8 @@ mod tests {
                 "ν = {nu}, p = {p}: {q} against {t}"
             );
         }
+        assert!(student_t_quantile(f64::NAN, 3).is_nan());
+        assert!(student_t_two_sided(f64::NAN, 3).is_nan());
         // Many degrees of freedom approach the normal.
         let z = normal_quantile(0.975);
         assert!((student_t_quantile(0.975, 2000) - z).abs() < 2e-3);

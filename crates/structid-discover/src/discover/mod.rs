@@ -105,7 +105,7 @@
 //!    over blocks of the validation record ([`crate::table::compare_blocks`]) does not call
 //!    worse than the best at the level α ([`DiscoverSettings::significance`]). A family chosen is *named*; the
 //!    nonparametric map chosen is an "unnamed static effect", kept as a table.
-//!    **Is it stationary?** The named family is refined again on [`SEGMENTS`] consecutive
+//!    **Is it stationary?** The named family is refined again on [`segment_count`] consecutive
 //!    segments of the estimation record, and a trend of a parameter over them larger than
 //!    the segments' scatter allows (a t test at α) makes the finding
 //!    [`Classification::TimeVarying`] ([`Stationarity`]). A gain in series with the best
@@ -178,7 +178,7 @@ pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCu
 pub use naming::parsimonious;
 pub use noise::SMALLER_RATIO;
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
-pub use stationarity::{SEGMENTS, Stationarity};
+pub use stationarity::{MIN_SEGMENT_SAMPLES, MIN_SEGMENTS, SEGMENTS, Stationarity, segment_count};
 
 use std::time::Instant;
 

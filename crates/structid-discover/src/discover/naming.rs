@@ -318,21 +318,7 @@ pub(super) fn verdict_text(nominal: &Nominal, before: &Gap, f: &Finding) -> Stri
                 crate::effects::physical_name(fit, f.location)
             )
         }
-        Classification::TimeVarying(_)
-            if f.stationarity.as_ref().is_some_and(|s| s.site.is_some()) =>
-        {
-            let site = f
-                .stationarity
-                .as_ref()
-                .and_then(|s| s.site)
-                .unwrap_or(f.location);
-            format!(
-                "time-varying: a gain {} drifts over the record; the best static \
-                 approximation",
-                nominal.describe(site)
-            )
-        }
-        other => other.describe_at(f.location),
+        _ => f.effect(),
     };
     format!(
         "missing effect: {what}, {}; validation RMS {:.4e} → {:.4e} ({}), fit {:.1} % → {:.1} %",

@@ -217,10 +217,10 @@ pub(super) fn better(
          validation RMS {})",
         super::rms_text(first.validation_gap.rms),
         super::rms_text(second.validation_gap.rms),
-        first.finding.as_ref().map_or_else(
-            || first.verdict_kind.describe().to_string(),
-            |f| f.classification.describe_at(f.location)
-        ),
+        first
+            .finding
+            .as_ref()
+            .map_or_else(|| first.verdict_kind.describe().to_string(), |f| f.effect()),
         super::rms_text(first_rms)
     ));
     super::against_given(&mut f, given, start, &first.validation_gap, val, settings)?;

@@ -1,6 +1,6 @@
 //! Is the model the same over the whole record? Two probes, one test.
 //!
-//! - The chosen family is refined by output error on each of [`SEGMENTS`] consecutive
+//! - The chosen family is refined by output error on each of S consecutive
 //!   segments of the estimation record ([`check_stationarity`]).
 //! - A gain w = a·z is refined the same way at the input and at the output of the best model
 //!   found, whatever its form ([`drifting_gain`]): a gain that drifts (an actuator or a sensor
@@ -16,9 +16,11 @@
 //! simulation residual's Newey–West long-run variance to its variance, since that residual is
 //! correlated over many samples). Then t_j = b̂_j / √(σ̂_j²/Σ t_s²) has a Student t
 //! distribution with S − 2 degrees of freedom under a stationary model. The model is
-//! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2·2m) for m compared
-//! parameters in each of the two probes (Bonferroni), α being the selection rule's
-//! significance level: under a stationary model the chance of that verdict is at most α. A drift moves every
+//! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2·m·F) for m compared
+//! parameters in each of the F families of tests the finding meets (Bonferroni), α being the
+//! selection rule's significance level: under a stationary model the chance of that verdict
+//! is at most α. Neither test is made when the excitation itself changes over the record
+//! ([`excitation_changes`]). A drift moves every
 //! segment's estimate the same way and leaves little scatter about the line; a misfit that
 //! depends on the excitation moves them at random and leaves as much scatter as slope.
 
@@ -34,10 +36,27 @@ use super::fit::{simulated, simulation_errors};
 use super::polish::polish;
 use super::{Classification, DiscoverSettings, Finding};
 
-/// How many consecutive segments of the estimation record the map is re-estimated on: eight
-/// leave the scatter about a straight trend six degrees of freedom, against which a trend
-/// test has useful power (the t quantile at 1 − 0.05/8 is 3.7 with six, 7.6 with two).
+/// The most consecutive segments S of the estimation record a model is re-estimated on:
+/// eight leave the scatter about a straight trend six degrees of freedom, against which a
+/// trend test has useful power (the t quantile at 1 − 0.05/8 is 3.5 with six, 8.9 with two).
 pub const SEGMENTS: usize = 8;
+
+/// The fewest segments: four leave the scatter two degrees of freedom.
+pub const MIN_SEGMENTS: usize = 4;
+
+/// The fewest samples a segment holds when the record allows more than [`MIN_SEGMENTS`]: the
+/// segments' output-error intervals and the long-run variance that widens them are
+/// large-sample results, and on shorter stretches they understate the scatter, which the
+/// trend test then reads as a drift.
+pub const MIN_SEGMENT_SAMPLES: usize = 250;
+
+/// How many segments S the records of `est` are cut into: as many as keep
+/// [`MIN_SEGMENT_SAMPLES`] in each segment of the shortest record, between [`MIN_SEGMENTS`]
+/// and [`SEGMENTS`].
+pub fn segment_count(est: &Data) -> usize {
+    let shortest = est.records().iter().map(Data::len).min().unwrap_or(0);
+    (shortest / MIN_SEGMENT_SAMPLES).clamp(MIN_SEGMENTS, SEGMENTS)
+}
 
 /// The named family refined on each segment of the estimation record, and the verdict.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -48,7 +67,9 @@ pub struct Stationarity {
     pub statistic: f64,
     /// The parameter it belongs to (`offset` for the offset).
     pub parameter: String,
-    /// The critical value: the Student t quantile (S − 2 degrees of freedom) at 1 − α/(2m).
+    /// The critical value: the Student t quantile (S − 2 degrees of freedom) at
+    /// 1 − α/(2·m·F), m parameters compared and F ≤ 2 the families of tests the finding meets
+    /// (its family's parameters when it is named, and the probe gains).
     pub critical: f64,
     /// Where the probe sat when it was a gain at another site than the finding's (the gain
     /// drifts there); `None` when the finding's own map was re-estimated.
@@ -88,20 +109,17 @@ impl Stationarity {
     }
 }
 
-/// The trend test for `fit` at `h` on [`SEGMENTS`] segments of `est` (see the [module
+/// The trend test for `fit` at `h` on [`segment_count`] segments of `est` (see the [module
 /// documentation](self)); `None` when a segment cannot be refined or simulated, or no
 /// parameter can be compared.
-///
-/// `probes` is the number of such tests made on one model (each a Bonferroni share of α).
 pub(super) fn stationarity(
     fit: &EffectFit,
     h: &Hypothesis,
     est: &Data,
     settings: &DiscoverSettings,
-    probes: usize,
 ) -> Option<Stationarity> {
     let fits: Vec<(EffectFit, f64)> = est
-        .segments(SEGMENTS)
+        .segments(segment_count(est))
         .ok()?
         .iter()
         .map(|part| segment_fit(fit, h, part, settings))
@@ -126,8 +144,7 @@ pub(super) fn stationarity(
     if compared == 0 {
         return None;
     }
-    let tests = (compared * probes.max(1)) as f64;
-    let critical = student_t_quantile(1.0 - settings.significance / (2.0 * tests), SEGMENTS - 2);
+    let critical = critical_value(settings.significance, compared, fits.len(), TEST_FAMILIES);
     Some(Stationarity {
         segments: fits.into_iter().map(|(f, _)| f).collect(),
         statistic: worst.0,
@@ -233,8 +250,11 @@ pub(super) fn check_stationarity(
     let Classification::Named(fit) = &finding.classification else {
         return;
     };
+    if excitation_changes(est, settings.significance) {
+        return;
+    }
     let h = augmented_hypothesis(finding, nominal);
-    let Some(check) = stationarity(fit, &h, est, settings, TEST_FAMILIES) else {
+    let Some(check) = stationarity(fit, &h, est, settings) else {
         return;
     };
     if check.time_varying {
@@ -247,9 +267,48 @@ pub(super) fn check_stationarity(
     finding.stationarity = Some(check);
 }
 
-/// The two families of tests a finding meets, the chosen family's parameters and the probe
-/// gains: each gets half of α, so that a stationary model is called time-varying with a
-/// chance of at most α in all.
+/// Why stationarity is not tested on a record whose excitation changes.
+const EXCITATION_CHANGES: &str = "the excitation changes over the estimation record (its level \
+     or its spectrum follows a trend over the segments): a model that drifts cannot be told from \
+     an effect that depends on the excitation, so stationarity was not tested";
+
+/// Whether the input's level or spectrum follows a trend over the [`segment_count`] segments
+/// of `est` (a sweep, a ramp of amplitude): the input's RMS and its lag-one autocorrelation
+/// (the cosine of its mean frequency, for a narrow band) per segment, each tested for a
+/// trend against its scatter about the line as the models' parameters are, at α/2 each.
+///
+/// A trend test over time is calibrated under a model that describes the effect; under an
+/// approximate one (the static map of a hysteresis, a family that bends to another's shape)
+/// the misfit, and with it every segment's estimate, moves with the excitation, and an
+/// excitation that changes over the record turns that into a trend.
+pub(super) fn excitation_changes(est: &Data, alpha: f64) -> bool {
+    let Ok(parts) = est.segments(segment_count(est)) else {
+        return false;
+    };
+    let (mut level, mut colour) = (Vec::new(), Vec::new());
+    for part in &parts {
+        let u = part.u().channel(0);
+        let n = u.len() as f64;
+        let mean = u.iter().sum::<f64>() / n;
+        let var = u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        let lag1 = u
+            .windows(2)
+            .map(|w| (w[0] - mean) * (w[1] - mean))
+            .sum::<f64>()
+            / n;
+        level.push((var.sqrt(), 0.0));
+        colour.push((if var > 0.0 { lag1 / var } else { 0.0 }, 0.0));
+    }
+    let critical = student_t_quantile(1.0 - alpha / 4.0, parts.len().max(3) - 2);
+    [level, colour]
+        .iter()
+        .any(|v| trend_of(v).is_some_and(|t| t > critical))
+}
+
+/// The most families of tests a finding meets, the chosen family's parameters (a named
+/// finding only) and the probe gains: α is shared equally among the families a finding
+/// meets, so that a stationary model is called time-varying with a chance of at most α in
+/// all (Bonferroni).
 const TEST_FAMILIES: usize = 2;
 
 /// Where a probe gain sits in series with the best model found: before it (y ≈ M(a·u)) or
@@ -259,22 +318,25 @@ const PROBES: [Site; 2] = [Site::Input, Site::Output];
 /// Whether a gain in series with the best model found drifts over the estimation record: the
 /// augmented model M of `finding`, with every map it found held as fitted, and a gain a at
 /// its input (y ≈ M(a·u)) or its output (y ≈ a·M(u)) refined by its simulation error on
-/// each of [`SEGMENTS`] consecutive segments, and the trend of a tested as in
+/// each of [`segment_count`] consecutive segments, and the trend of a tested as in
 /// [`stationarity`] (one Bonferroni share per site). The most significant drift, with the
 /// gain refined on the whole record, or `None` when no gain drifts.
 ///
 /// The probe scales the signals M reads and writes, so it is a model whatever M holds at its
 /// input or output. A drift is what the best model leaves, whatever form it chose: an actuator
 /// or a sensor whose sensitivity drifts is absorbed on average by G or by a static block.
+///
+/// `families` is the number of families of tests the finding meets (see [`TEST_FAMILIES`]).
 pub(super) fn drifting_gain(
     finding: &Finding,
     nominal: &Nominal,
     est: &Data,
     settings: &DiscoverSettings,
+    families: usize,
 ) -> Option<(EffectFit, Stationarity)> {
     let h = augmented_hypothesis(finding, nominal);
     let map = finding.augmented.map.interpolant().ok()?;
-    let parts = est.segments(SEGMENTS).ok()?;
+    let parts = est.segments(segment_count(est)).ok()?;
     let mut best: Option<Stationarity> = None;
     for site in PROBES {
         let Some(fits) = parts
@@ -287,10 +349,7 @@ pub(super) fn drifting_gain(
         let Some(statistic) = trend_of(&fits) else {
             continue;
         };
-        let critical = student_t_quantile(
-            1.0 - settings.significance / (2.0 * PROBES.len() as f64),
-            SEGMENTS - 2,
-        );
+        let critical = critical_value(settings.significance, PROBES.len(), fits.len(), families);
         let check = Stationarity {
             segments: fits.iter().map(|&(a, se)| gain_fit(a, se)).collect(),
             statistic,
@@ -307,6 +366,14 @@ pub(super) fn drifting_gain(
     let site = check.site?;
     let (a, se) = series_gain(&h, map.as_ref(), est, site, settings)?;
     Some((gain_fit(a, se), check))
+}
+
+/// The critical value of a trend's |t| over `segments` segments among `tests` parameters of
+/// one of `families` families: the Student t quantile with S − 2 degrees of freedom at
+/// 1 − α/(2·`tests`·`families`) (Bonferroni over the tests and the families).
+fn critical_value(alpha: f64, tests: usize, segments: usize, families: usize) -> f64 {
+    let tests = (tests.max(1) * families.max(1)) as f64;
+    student_t_quantile(1.0 - alpha / (2.0 * tests), segments.max(3) - 2)
 }
 
 /// A gain `a` with standard error `se`, as an effect fit (its 95 % interval a ± 1.96·se).
@@ -347,20 +414,20 @@ fn series_gain(
         ))
     };
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let sse = |y: &[f64], q: &[f64]| y.iter().zip(q).map(|(y, q)| (y - q).powi(2)).sum::<f64>();
     let (y, mut yhat) = simulate(1.0)?;
+    // dŷ/da at a, by a forward difference.
+    let derivative = |a: f64, at: &[f64]| -> Option<Vec<f64>> {
+        let step = 1e-4 * a.abs().max(1e-3);
+        let (_, ahead) = simulate(a + step)?;
+        Some(ahead.iter().zip(at).map(|(p, q)| (p - q) / step).collect())
+    };
     let (a, jacobian) = match site {
         Site::Input => {
             let mut a: f64 = 1.0;
-            let mut cost = dot(&y, &y) - 2.0 * dot(&y, &yhat) + dot(&yhat, &yhat);
-            let mut jacobian = Vec::new();
+            let mut cost = sse(&y, &yhat);
             for _ in 0..20 {
-                let step = 1e-4 * a.abs().max(1e-3);
-                let (_, ahead) = simulate(a + step)?;
-                jacobian = ahead
-                    .iter()
-                    .zip(&yhat)
-                    .map(|(p, q)| (p - q) / step)
-                    .collect();
+                let jacobian = derivative(a, &yhat)?;
                 let r: Vec<f64> = y.iter().zip(&yhat).map(|(y, q)| y - q).collect();
                 let jj = dot(&jacobian, &jacobian);
                 if jj <= 0.0 {
@@ -371,7 +438,7 @@ fn series_gain(
                 let mut accepted = false;
                 for _ in 0..10 {
                     if let Some((_, trial)) = simulate(a + delta) {
-                        let c: f64 = y.iter().zip(&trial).map(|(y, q)| (y - q).powi(2)).sum();
+                        let c = sse(&y, &trial);
                         if c <= cost {
                             (a, cost, yhat) = (a + delta, c, trial);
                             accepted = true;
@@ -384,18 +451,19 @@ fn series_gain(
                     break;
                 }
             }
-            (a, jacobian)
+            (a, derivative(a, &yhat)?)
         }
         _ => {
             let a = dot(&yhat, &y) / dot(&yhat, &yhat);
+            let unscaled = yhat.clone();
             yhat.iter_mut().for_each(|q| *q *= a);
-            (a, yhat.iter().map(|q| q / a).collect())
+            (a, unscaled)
         }
     };
     let r: Vec<f64> = y.iter().zip(&yhat).map(|(y, q)| y - q).collect();
     let n = r.len();
     let jj = dot(&jacobian, &jacobian);
-    if n < 3 || !a.is_finite() || jj <= 0.0 {
+    if n < 3 || !a.is_finite() || jj.is_nan() || jj <= 0.0 {
         return None;
     }
     let s2 = dot(&r, &r) / (n - 1) as f64;
@@ -409,10 +477,14 @@ fn scaled_input(part: &Data, a: f64) -> structid_core::Result<Data> {
         .into_iter()
         .map(|r| {
             let u = r.u();
-            Data::new(
+            let scaled = Data::new(
                 structid_core::Signal::from_fn(u.len(), u.channels(), |k, c| a * u.get(k, c)),
                 r.y().clone(),
-            )
+            )?;
+            match r.z() {
+                Some(z) => scaled.with_z(z.clone()),
+                None => Ok(scaled),
+            }
         })
         .collect::<structid_core::Result<Vec<_>>>()?;
     Data::from_records(records)
@@ -426,9 +498,25 @@ pub(super) fn check_drift(
     est: &Data,
     settings: &DiscoverSettings,
 ) -> bool {
-    let Some((gain, check)) = drifting_gain(finding, nominal, est, settings) else {
+    if excitation_changes(est, settings.significance) {
+        finding.remarks.push(EXCITATION_CHANGES.into());
+        return false;
+    }
+    // A finding whose family was tested already shares α with that test (`TEST_FAMILIES`).
+    let families = if finding.stationarity.is_some() {
+        TEST_FAMILIES
+    } else {
+        1
+    };
+    let Some((gain, check)) = drifting_gain(finding, nominal, est, settings, families) else {
         return false;
     };
+    if let Some(family) = &finding.stationarity {
+        finding.remarks.push(format!(
+            "the family's own parameters: {}",
+            family.describe()
+        ));
+    }
     finding.remarks.push(format!(
         "a gain drifts over the estimation record: {}; no static name describes the whole \
          record",
@@ -480,8 +568,9 @@ mod tests {
             .sum();
         let expected = 0.15 / (SEGMENTS - 1) as f64 / (0.02 / tt.sqrt());
         assert!((t - expected).abs() < 1e-9 * expected, "{t} {expected}");
-        let tests = (TEST_FAMILIES * PROBES.len()) as f64;
-        let critical = student_t_quantile(1.0 - 0.05 / (2.0 * tests), SEGMENTS - 2);
+        let critical = critical_value(0.05, PROBES.len(), SEGMENTS, TEST_FAMILIES);
+        // The quantile at 1 − 0.05/8 with six degrees of freedom (tables: 3.52).
+        assert!((critical - 3.5212).abs() < 1e-3, "{critical}");
         assert!(t > critical, "{t} against {critical}");
         // The same values out of time order: no trend beyond the scatter.
         let shuffled: Vec<(f64, f64)> = [3, 6, 0, 5, 2, 7, 1, 4]
@@ -489,6 +578,41 @@ mod tests {
             .map(|&i| values[i])
             .collect();
         assert!(trend_of(&shuffled).unwrap() < critical);
+    }
+
+    #[test]
+    fn a_sweep_or_a_ramp_changes_the_excitation_and_noise_does_not() {
+        let len = 4000;
+        let data = |u: Vec<f64>| {
+            let sig = |v: &[f64]| structid_core::Signal::from_fn(v.len(), 1, |k, _| v[k]);
+            Data::new(sig(&u), sig(&vec![0.0; u.len()])).unwrap()
+        };
+        // Pseudo-random noise of constant level (a fixed linear congruential sequence).
+        let mut x: u64 = 12345;
+        let noise: Vec<f64> = (0..len)
+            .map(|_| {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            })
+            .collect();
+        assert!(!excitation_changes(&data(noise.clone()), 0.05));
+        // The same noise with a level that grows fourfold.
+        let ramp: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v * (1.0 + 3.0 * k as f64 / len as f64))
+            .collect();
+        assert!(excitation_changes(&data(ramp), 0.05));
+        // A sine sweep from 0.01 to 0.2 cycles per sample at constant level.
+        let sweep: Vec<f64> = (0..len)
+            .map(|k| {
+                let t = k as f64;
+                (std::f64::consts::TAU * (0.01 * t + 0.5 * 0.19 * t * t / len as f64)).sin()
+            })
+            .collect();
+        assert!(excitation_changes(&data(sweep), 0.05));
     }
 
     #[test]

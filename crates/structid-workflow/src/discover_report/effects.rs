@@ -5,11 +5,7 @@ use super::*;
 /// What one step of an iteration found, in a few words.
 pub(super) fn step_effect(r: &Nominal, d: &Discovery) -> String {
     match &d.finding {
-        Some(f) => format!(
-            "{} {}",
-            f.classification.describe_at(f.location),
-            location_text(r, f.location)
-        ),
+        Some(f) => format!("{} {}", f.effect(), location_text(r, f.location)),
         None => d.verdict_kind.describe().to_string(),
     }
 }
@@ -88,7 +84,7 @@ pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
                 "verdict_kind": d.verdict_kind,
                 "verdict": d.verdict,
                 "location": f.map(|f| step.nominal.key(f.location)),
-                "effect": f.map(|f| f.classification.describe_at(f.location)),
+                "effect": f.map(|f| f.effect()),
                 "expression": f.and_then(|f| match &f.augmented.map {
                     AugmentedMap::Expression(x) => Some(x.clone()),
                     AugmentedMap::Table { .. } => None,

@@ -129,7 +129,7 @@ pub fn json(
                 "location": r.nominal.key(f.location),
                 "description": r.nominal.describe(f.location),
                 "equivalent_locations": f.equivalent_locations.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>(),
-                "classification": { "kind": kind, "description": f.classification.describe_at(f.location) },
+                "classification": { "kind": kind, "description": f.effect() },
                 "named_effect": named,
                 "estimator": f.estimator,
                 "nonparametric_validation_rms": f.nonparametric_rms,

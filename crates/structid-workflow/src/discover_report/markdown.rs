@@ -586,7 +586,7 @@ pub(super) fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f
     let _ = writeln!(
         s,
         "**{}** ({kind}) {}.\n",
-        f.classification.describe_at(f.location),
+        f.effect(),
         r.nominal.describe(f.location)
     );
     if let Some(h) = &f.input_hysteresis {
