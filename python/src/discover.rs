@@ -107,6 +107,7 @@ fn discovery_dict<'py>(
                 "stationarity",
                 f.stationarity.as_ref().map(|s| s.describe()),
             )?;
+            x.set_item("poor_model", f.poor_model)?;
             let table = f
                 .table
                 .iter()

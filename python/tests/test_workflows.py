@@ -210,6 +210,9 @@ def test_discover_matches_the_tool(cli, duffing):
         assert all(r["parameters"] >= chosen[0]["parameters"]
                    for r in families if r["as_good"] and r["eligible"])
     assert found.finding.time_varying is False
+    # The cubic explains the output: not a poor model, in the tool's report too.
+    assert found.finding.poor_model is False
+    assert report["finding"]["poor_model"] is False
     with pytest.raises(structid.StructidError, match="significance"):
         structid.discover(nominal, u, y, uv, yv, significance=0.7)
 

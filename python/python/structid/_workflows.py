@@ -246,10 +246,14 @@ class Finding:
     backlash), ``description``, ``validation_rms`` and ``without_hysteresis_rms``; None when
     none was fitted or it did not explain the gap."""
     time_varying: bool = False
-    """Whether the map changes over the estimation record (its parameters, re-estimated on
-    consecutive segments, follow a trend larger than their scatter allows)."""
+    """Whether the effect changes over the estimation record (the family's parameters, or a
+    gain in series with the model, re-estimated on consecutive segments, follow a trend larger
+    than their scatter allows)."""
     stationarity: Optional[str] = None
-    """That test in one sentence (None when no family was tested)."""
+    """That test in one sentence (None when none was made)."""
+    poor_model: bool = False
+    """Whether the augmented model is still a poor model: on the validation record it explains
+    less than half of the output's variance and misses it by more than the noise."""
     table: List[Dict[str, Any]] = field(default_factory=list)
     """The candidate table at the finding's location, one dict per row: ``label``,
     ``parameters``, ``validation_rms``, ``eligible``, ``p_worse_than_best`` (the

@@ -179,6 +179,7 @@ pub use naming::parsimonious;
 pub use noise::SMALLER_RATIO;
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
 pub use stationarity::{MIN_SEGMENT_SAMPLES, MIN_SEGMENTS, SEGMENTS, Stationarity, segment_count};
+pub use verdict::POOR_MODEL_R2;
 
 use std::time::Instant;
 
@@ -239,6 +240,10 @@ pub struct Finding {
     pub classification: Classification,
     /// Remarks for the engineer (e.g. "a gain error means the linear model was wrong").
     pub remarks: Vec<String>,
+    /// The augmented model does not predict the validation output better than the output's
+    /// mean over each scored stretch (the paired block test at α): whatever its shrink, it is
+    /// still a poor model, and the verdict says so.
+    pub poor_model: bool,
     /// The augmented model.
     pub augmented: Augmented,
     /// RMS of the validation gap before / after (≥ 1 when the effect helps).

@@ -581,6 +581,7 @@ pub(super) fn name_and_add(
         table: rows,
         selection,
         stationarity: None,
+        poor_model: false,
     })
 }
 

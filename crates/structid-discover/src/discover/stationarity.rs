@@ -53,6 +53,18 @@ pub const MIN_SEGMENT_SAMPLES: usize = 250;
 /// How many segments S the records of `est` are cut into: as many as keep
 /// [`MIN_SEGMENT_SAMPLES`] in each segment of the shortest record, between [`MIN_SEGMENTS`]
 /// and [`SEGMENTS`].
+///
+/// ```
+/// use structid_core::{Data, Signal};
+/// use structid_discover::discover::segment_count;
+/// let record = |n: usize| {
+///     let s = Signal::from_fn(n, 1, |k, _| (0.1 * k as f64).sin());
+///     Data::new(s.clone(), s).unwrap()
+/// };
+/// assert_eq!(segment_count(&record(1200)), 4); // four segments of 300 samples
+/// assert_eq!(segment_count(&record(1500)), 6); // 250 each
+/// assert_eq!(segment_count(&record(8000)), 8);
+/// ```
 pub fn segment_count(est: &Data) -> usize {
     let shortest = est.records().iter().map(Data::len).min().unwrap_or(0);
     (shortest / MIN_SEGMENT_SAMPLES).clamp(MIN_SEGMENTS, SEGMENTS)

@@ -269,7 +269,62 @@ fn confirmed(cx: &Context<'_>, finding: &mut Finding, noise: &NoiseLevel) -> Str
             finding.remarks.push(UNLOCATED_DIRECTION_EFFECT.to_string());
         }
     }
+    let g = &finding.augmented.validation_gap;
+    let gap_level = cx.settings.gap.noise_ratio * noise.std;
+    if let Some(r2) = poor_model(&g.residual, &g.simulated, &g.scored, gap_level) {
+        let poor = format!(
+            "the best model found is still a poor model: on the validation record it explains \
+             {:.0} % of the output's variance about its mean (R² = {r2:.2}, below {:.0} %) and \
+             misses it by more than the noise; the effect lies beyond the forms tried, or the \
+             nominal model is far from the plant",
+            100.0 * r2.max(0.0),
+            100.0 * POOR_MODEL_R2
+        );
+        verdict.push_str(&format!(". A poor model: {poor}"));
+        finding.remarks.push(poor);
+        finding.poor_model = true;
+    }
     verdict
+}
+
+/// The share of the output's variance a model must explain not to be called poor: a model
+/// that leaves more than half of it unexplained says less about the output than it leaves
+/// unsaid (R² < 1/2, a fit below 29 %).
+pub const POOR_MODEL_R2: f64 = 0.5;
+
+/// Whether a model with simulation residual `residual` and simulated output `simulated` (the
+/// measured output is their sum) is a poor model on the `scored` stretches: it explains less
+/// than [`POOR_MODEL_R2`] of the output's variance about its mean on each stretch, and its RMS
+/// error exceeds `gap_level` (above the noise, so that a record whose output is mostly noise
+/// does not make the true model poor). Its R² when poor, `None` otherwise. The shrink of a gap
+/// says how much better a model is than the nominal one; this says whether it predicts the
+/// output at all.
+pub(super) fn poor_model(
+    residual: &[f64],
+    simulated: &[f64],
+    scored: &[std::ops::Range<usize>],
+    gap_level: f64,
+) -> Option<f64> {
+    let (mut total, mut left, mut n) = (0.0, 0.0, 0usize);
+    for r in scored {
+        let r = r.start.min(residual.len())..r.end.min(residual.len()).min(simulated.len());
+        if r.is_empty() {
+            continue;
+        }
+        let mean = r.clone().map(|k| residual[k] + simulated[k]).sum::<f64>() / r.len() as f64;
+        total += r
+            .clone()
+            .map(|k| (residual[k] + simulated[k] - mean).powi(2))
+            .sum::<f64>();
+        left += residual[r.clone()].iter().map(|e| e * e).sum::<f64>();
+        n += r.len();
+    }
+    if n == 0 || total <= 0.0 {
+        return None;
+    }
+    let r2 = 1.0 - left / total;
+    let rms = (left / n as f64).sqrt();
+    (r2 < POOR_MODEL_R2 && rms > gap_level).then_some(r2)
 }
 
 /// The verdict when no block confirms the gap: the gap is what a fitted input disturbance
@@ -371,4 +426,47 @@ fn tried(cx: &Context<'_>, hypotheses: &[HypothesisResult]) -> String {
         })
         .collect::<Vec<_>>()
         .join("; ")
+}
+
+#[cfg(test)]
+mod poor_model_tests {
+    use super::poor_model;
+
+    /// A deterministic output: two sines and a slow trend.
+    fn output(n: usize) -> Vec<f64> {
+        (0..n)
+            .map(|k| {
+                let t = k as f64;
+                (0.05 * t).sin() + 0.5 * (0.31 * t).cos() + 0.2 * (0.003 * t).sin()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_model_that_predicts_nothing_is_poor_and_a_close_one_is_not() {
+        let y = output(2000);
+        let scored = [std::ops::Range {
+            start: 0,
+            end: 2000,
+        }];
+        // ŷ = 0.01·y, a model whose output is almost zero: R² ≈ 0.02, far above the noise.
+        let small: Vec<f64> = y.iter().map(|v| 0.01 * v).collect();
+        let r: Vec<f64> = y.iter().zip(&small).map(|(y, s)| y - s).collect();
+        let r2 = poor_model(&r, &small, &scored, 0.01).expect("poor");
+        let mean = y.iter().sum::<f64>() / y.len() as f64;
+        let total: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+        let left: f64 = r.iter().map(|e| e * e).sum();
+        assert!((r2 - (1.0 - left / total)).abs() < 1e-12);
+        // ŷ = y − e with a small, fast error e: R² near 1.
+        let e: Vec<f64> = (0..y.len())
+            .map(|k| 0.01 * (1.7 * k as f64).sin())
+            .collect();
+        let yhat: Vec<f64> = y.iter().zip(&e).map(|(y, e)| y - e).collect();
+        assert!(poor_model(&e, &yhat, &scored, 0.001).is_none());
+        // Half the output: R² about 0.75, not poor.
+        let half: Vec<f64> = y.iter().map(|v| 0.5 * v).collect();
+        assert!(poor_model(&half, &half, &scored, 0.01).is_none());
+        // A record that is mostly noise: the poor R² is all noise, below the gap level.
+        assert!(poor_model(&r, &small, &scored, 10.0).is_none());
+    }
 }

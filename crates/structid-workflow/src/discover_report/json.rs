@@ -137,6 +137,7 @@ pub fn json(
                 "families": families,
                 "candidate_table": json_value(&f.table)?,
                 "stationarity": json_value(&f.stationarity)?,
+                "poor_model": f.poor_model,
                 "selection": json_value(&f.selection)?,
                 "direction": json_value(&f.direction)?,
                 "input_hysteresis": json_value(&f.input_hysteresis)?,
