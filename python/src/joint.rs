@@ -155,6 +155,10 @@ fn wh_records(records: Vec<(Vec<f64>, Vec<f64>)>, what: &str) -> PyResult<struct
     structid_core::Data::from_records(data).map_err(error)
 }
 
+/// One division of the best linear approximation between the blocks, for Python: the front
+/// block's numerator and denominator, the back block's, and its validation RMS.
+type Division = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
+
 /// A Wiener–Hammerstein model with both blocks unknown (see `structid wiener-hammerstein`).
 /// Records are (u, y) pairs of 1-D arrays. Returns a dict with the fitted `model`, `bla`
 /// (num, den), `divisions` (front num/den, back num/den, rms; best first), `beta`, `trials`,
@@ -232,7 +236,7 @@ pub fn wiener_hammerstein_records<'py>(
     let d = PyDict::new(py);
     joint_items(&d, &outcome.joint)?;
     d.set_item("bla", (outcome.bla.num[0].clone(), outcome.bla.den.clone()))?;
-    let divisions: Vec<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64)> = outcome
+    let divisions: Vec<Division> = outcome
         .divisions
         .iter()
         .map(|s| {
