@@ -14,7 +14,7 @@ use rand_distr::{Distribution, Normal};
 use structid_core::{Data, Signal};
 use structid_discover::discover::{Classification, DiscoverSettings, Verdict, discover};
 use structid_discover::hypotheses::{Nominal, Site};
-use structid_linear::PolynomialModel;
+use structid_linear::{OeSettings, Orders, PolynomialModel, oe};
 
 /// G(q) = (0.3 q⁻¹ + 0.2 q⁻²)/(1 − 1.2 q⁻¹ + 0.5 q⁻²), sample time 0.1 s.
 fn plant() -> PolynomialModel {
@@ -101,4 +101,38 @@ fn a_steady_sensor_gain_error_is_not_time_varying() {
     if let Some(st) = f.and_then(|f| f.stationarity.as_ref()) {
         assert!(!st.time_varying, "{}", st.describe());
     }
+}
+
+/// The drifting sensor behind a nominal estimated from the drifting record itself, as a user
+/// would have it (output error, the plant's orders): G absorbs the mean gain, and the drift
+/// must still be found (run with `--ignored`; not met). The residual a drifting gain leaves,
+/// (a(t) − ā)·G·u, is as broadband as the output, so the noise level read from the residuals
+/// counts it as noise, the gap is judged to be noise, and the verdict is "no missing effect".
+#[test]
+#[ignore]
+fn a_drift_behind_a_nominal_estimated_from_the_drifting_record_is_time_varying() {
+    let gain = |t: f64| 1.0 - 0.15 * t;
+    let est = record(11, 3000, gain);
+    let val = record(12, 3000, gain);
+    let nominal = oe(
+        est.u(),
+        est.y(),
+        &Orders::siso(2, 2, 1),
+        &OeSettings::builder().sample_time(0.1).build().unwrap(),
+    )
+    .unwrap()
+    .model;
+    let d = discover(
+        &Nominal::from_polynomial(&nominal).unwrap(),
+        &est,
+        &val,
+        &DiscoverSettings::default(),
+    )
+    .unwrap();
+    let f = d.finding.as_ref().expect(&d.verdict);
+    assert!(
+        matches!(f.classification, Classification::TimeVarying(_)),
+        "{}",
+        d.verdict
+    );
 }
