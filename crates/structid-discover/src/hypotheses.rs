@@ -639,7 +639,13 @@ impl Hypothesis {
         }
         let z = match full.z() {
             Some(z) => z.clone(),
-            None => self.model.lft().compute_z(data.u(), data.y())?.0,
+            None => match self.model.lft().compute_z(data.u(), data.y()) {
+                Ok((z, _)) => z,
+                // The unknown block's own z may need the known maps' outputs (a sensor map
+                // behind a known actuator map): only the known maps' z must come from the
+                // record.
+                Err(e) => self.known_z(data).map_err(|_| e)?,
+            },
         };
         let len = data.len();
         let mut columns = vec![data.u().channel(0)];
@@ -666,6 +672,23 @@ impl Hypothesis {
             Arc::clone(&self.model.blocks()[0].dispersion),
         );
         Ok((Model::new(self.block_lft()?, vec![block])?, id_data))
+    }
+
+    /// The z rows of the known maps computed from the record, after a zero row in place of
+    /// the unknown block's: what [`Hypothesis::identification`] needs when the unknown
+    /// block's z is not itself computable from u and y. Every map output is kept in the LFT,
+    /// so that the known maps' z are refused when the unknown block's output reaches them.
+    fn known_z(&self, data: &Data) -> Result<Signal> {
+        let lft = self.model.lft();
+        let d = lft.dims();
+        let rows: Vec<usize> = (1..d.z).collect();
+        let cols: Vec<usize> = (0..d.w).collect();
+        let known = crate::known::select_channels(lft, &rows, &cols)?
+            .compute_z(data.u(), data.y())?
+            .0;
+        Ok(Signal::from_fn(data.len(), d.z, |k, c| {
+            if c == 0 { 0.0 } else { known.get(k, c - 1) }
+        }))
     }
 
     /// Simulates the augmented model with `map` in its block N from `u`, with the noise `e`

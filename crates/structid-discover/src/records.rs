@@ -11,7 +11,9 @@
 
 use std::ops::Range;
 
-use structid_core::validation::{ValidationSettings, validate_records};
+use structid_core::validation::records::pool_record;
+use structid_core::validation::windows::simulate_scored;
+use structid_core::validation::{Scoring, ValidationSettings, validate_records};
 use structid_core::{Data, Error, Interpolant, Model, Result};
 
 /// `data`'s records, each passed through `f`, stacked again into one [`Data`] with the same
@@ -107,6 +109,11 @@ impl Simulated {
 
 /// Simulates `model` with `maps` on every record of `data` ([`validate`] record by record,
 /// with `settings`) and pools the simulation RMS and fit over the records' scored samples.
+///
+/// A model beyond measurability (maps in series, a map of a latent signal) has no one-step
+/// predictor, which [`validate`] fits the initial state with; under free-run scoring it is
+/// simulated from rest instead, as the sensor site always is. Under windowed scoring, whose
+/// windows start from states fitted to the measured z, it is an error.
 pub fn simulate(
     model: &Model,
     maps: &[&dyn Interpolant],
@@ -122,10 +129,15 @@ pub fn simulate(
         fit_percent: f64::NAN,
         records: Vec::new(),
     };
-    let all = validate_records(model, maps, data, settings).map_err(|e| match e {
-        Error::InRecord { record, source } => in_record(*source, record - 1, data),
-        other => other,
-    })?;
+    let all = match validate_records(model, maps, data, settings) {
+        Err(e) if beyond_measurability(&e) && settings.scoring() == Scoring::Free => {
+            return from_rest(model, maps, data, settings.settle());
+        }
+        other => other.map_err(|e| match e {
+            Error::InRecord { record, source } => in_record(*source, record - 1, data),
+            other => other,
+        })?,
+    };
     for (v, start) in all.records.iter().zip(bounds) {
         let count = v.scored.iter().map(|s| s.len()).sum::<usize>();
         out.scored
@@ -139,6 +151,46 @@ pub fn simulate(
         [one] => (one.rms[0], one.fit_percent[0]),
         _ => (all.pooled[0].rms(), all.pooled[0].fit_percent()),
     };
+    Ok(out)
+}
+
+/// Whether `e` says that z cannot be computed from u and y.
+fn beyond_measurability(e: &Error) -> bool {
+    match e {
+        Error::InRecord { source, .. } => beyond_measurability(source),
+        Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. } => true,
+        _ => false,
+    }
+}
+
+/// [`simulate`] by a free run from rest on each record, scored after `settle` samples.
+fn from_rest(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settle: usize,
+) -> Result<Simulated> {
+    let mut out = Simulated {
+        simulated: Vec::with_capacity(data.len()),
+        measured: data.y().channel(0),
+        scored: Vec::new(),
+        rms: f64::NAN,
+        fit_percent: f64::NAN,
+        records: Vec::new(),
+    };
+    let mut pooled = Vec::new();
+    for (r, (record, start)) in data.records().iter().zip(data.record_bounds()).enumerate() {
+        let sim = simulate_scored(model, maps, record, Scoring::Free, None, settle)
+            .map_err(|e| in_record(e, r, data))?;
+        pool_record(&mut pooled, record.y(), &sim.simulated, &sim.scored);
+        let count = sim.scored.iter().map(|s| s.len()).sum::<usize>();
+        out.records.push((sim.rms(record.y(), 0), count));
+        out.scored
+            .extend(sim.scored.iter().map(|s| s.start + start..s.end + start));
+        out.simulated.extend(sim.simulated.channel(0));
+    }
+    let fit = &pooled[0];
+    (out.rms, out.fit_percent) = (fit.rms(), fit.fit_percent());
     Ok(out)
 }
 

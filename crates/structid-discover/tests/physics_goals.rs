@@ -867,7 +867,27 @@ fn two_effects_tally(seeds: std::ops::Range<u64>) -> usize {
         let steps: Vec<String> = effects
             .steps
             .iter()
-            .map(|s| line(&case, &s.discovery))
+            .map(|s| {
+                let fails: Vec<String> = s
+                    .discovery
+                    .hypotheses
+                    .iter()
+                    .map(|h| {
+                        format!(
+                            "{} {} val {:.3e} {:?}",
+                            h.location.name(),
+                            h.dispersion,
+                            h.validation_rms,
+                            h.failure
+                        )
+                    })
+                    .collect();
+                format!(
+                    "{}\n      DBG {}",
+                    line(&case, &s.discovery),
+                    fails.join("\n      DBG ")
+                )
+            })
             .collect();
         eprintln!(
             "seed {seed}: {} at {} + {} at {} → both {found} ({:?})\n    {}",
@@ -901,7 +921,14 @@ fn two_effects_goal_of_the_issue() {
 #[test]
 #[ignore]
 fn two_effects_of_the_tuning_seeds() {
-    let both = two_effects_tally(0..10);
+    let seeds = std::env::var("DBG_SEEDS")
+        .ok()
+        .map(|v| {
+            let (a, b) = v.split_once("..").unwrap();
+            a.parse().unwrap()..b.parse().unwrap()
+        })
+        .unwrap_or(0..10);
+    let both = two_effects_tally(seeds);
     assert!(both >= 8, "{both}/10");
 }
 

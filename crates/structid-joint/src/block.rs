@@ -82,6 +82,12 @@ pub trait BlockMap: Send + Sync + fmt::Debug {
     fn affine_part(&self) -> Option<(f64, Vec<f64>)> {
         None
     }
+    /// A static map of one input as an expression in `z0` (the syntax of
+    /// [`structid_core::ExprMap`]) that evaluates to the same values: how a fitted map is
+    /// written without losing its fit. `None` (the default) when the map has no such form.
+    fn expression(&self) -> Option<String> {
+        None
+    }
     /// A boxed copy.
     fn boxed(&self) -> Box<dyn BlockMap>;
 }

@@ -358,6 +358,40 @@ impl BlockMap for GaussianFeatures {
         "gaussian features"
     }
 
+    /// The map of a scalar input as an expression in `z0` (the syntax of
+    /// [`structid_core::ExprMap`]): the sum of its kernels and its trend, exact to the
+    /// printed digits, so that a written map keeps its fit and extrapolates with its trend.
+    /// `None` for a map of several inputs.
+    ///
+    /// ```
+    /// use structid_core::{ExprMap, Interpolant};
+    /// use structid_joint::{BlockMap, GaussianFeatures};
+    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 5, 1.0, 0.0).unwrap().with_trend_degree(3).unwrap();
+    /// let f = f.with_parameters(&[0.3, -1.2, 0.5, 2.0, -0.7, 0.1, 1.0, 0.0, -0.25]).unwrap();
+    /// let g = ExprMap::parse(&f.expression().unwrap(), 1).unwrap();
+    /// for z in [-3.0, -0.4, 0.0, 1.7, 2.5] {
+    ///     assert!((g.eval(&[z]) - f.eval(&mut [], &[z])).abs() < 1e-12);
+    /// }
+    /// ```
+    fn expression(&self) -> Option<String> {
+        if self.centres[0].len() != 1 {
+            return None;
+        }
+        let s2 = self.sigma * self.sigma;
+        let scale = (2.0 * std::f64::consts::PI * s2).powf(-0.5);
+        let kernels = self.theta.iter().zip(&self.centres).map(|(t, c)| {
+            // Plain decimals (the parser reads no exponent), and the square inside the
+            // negation (a leading minus binds tighter than ^).
+            format!("({})*exp(-((z0-({}))^2)/({}))", t * scale, c[0], 2.0 * s2)
+        });
+        let trend = self
+            .affine
+            .iter()
+            .enumerate()
+            .map(|(k, a)| format!("({a})*z0^{k}"));
+        Some(kernels.chain(trend).collect::<Vec<_>>().join(" + "))
+    }
+
     fn input_len(&self) -> usize {
         self.centres[0].len()
     }

@@ -10,6 +10,13 @@
 //! ```
 //!
 //! so it never ends at a higher cost than it started from.
+//!
+//! Without the polish ([`JointSettingsBuilder::polish`]`(false)`) the multiple-shooting
+//! criterion itself is the fit's criterion, and the result is the start or the
+//! multiple-shooting result, whichever has the lower multiple-shooting cost. With a
+//! continuity weight of zero the segments are independent windows, each from its own fitted
+//! state: the criterion of a windowed simulation, for a plant whose free run drifts (an
+//! integrator) and whose single-shooting criterion therefore measures the drift, not the fit.
 
 use structid_core::Data;
 use structid_linear::levenberg_marquardt::{
@@ -102,7 +109,8 @@ impl JointSettingsBuilder {
         self.0.segment_length = Some(len);
         self
     }
-    /// Continuity weight μ (> 0).
+    /// Continuity weight μ (> 0; 0 for independent windows, allowed only without the
+    /// single-shooting polish).
     pub fn continuity_weight(mut self, mu: f64) -> Self {
         self.0.continuity_weight = mu;
         self
@@ -139,11 +147,13 @@ impl JointSettingsBuilder {
                 "must be at least 2 samples",
             ));
         }
-        if !(s.continuity_weight.is_finite() && s.continuity_weight > 0.0) {
+        let independent = s.continuity_weight == 0.0 && !s.polish && s.segment_length.is_some();
+        if !(s.continuity_weight.is_finite() && (s.continuity_weight > 0.0 || independent)) {
             return Err(invalid(
                 "continuity_weight",
                 s.continuity_weight,
-                "must be finite and positive",
+                "must be finite and positive (zero, for independent windows, only with segments \
+                 and without the single-shooting polish)",
             ));
         }
         if s.max_iterations == 0 {
@@ -176,9 +186,10 @@ pub struct JointFit {
     pub model: JointModel,
     /// Each record's stacked initial state ξ₀ (see [`JointModel::stacked_state_len`]).
     pub initial_states: Vec<Vec<f64>>,
-    /// The single-shooting criterion C at the start.
+    /// The single-shooting criterion C at the start (the multiple-shooting criterion without
+    /// the polish, see the [module docs](self)).
     pub initial_cost: f64,
-    /// C at the end (never above `initial_cost`).
+    /// The same criterion at the end (never above `initial_cost`).
     pub cost: f64,
     /// RMS simulation error per output channel over all records at the end.
     pub rms: Vec<f64>,
@@ -215,12 +226,24 @@ pub fn fit(
     })?;
     let mut best = (model.clone(), starts.clone(), initial_cost);
     let mut stages = Vec::new();
+    let mut initial_cost = initial_cost;
     if let Some(len) = settings.segment_length {
         let (m, xi, stage) = run_stage(model, data, &starts, Some(len), settings)?;
-        if let Some(c) = single_cost(&m, data, &xi)
-            && c < best.2
-        {
-            best = (m, xi, c);
+        if settings.polish {
+            if let Some(c) = single_cost(&m, data, &xi)
+                && c < best.2
+            {
+                best = (m, xi, c);
+            }
+        } else {
+            // The multiple-shooting criterion is the fit's own.
+            let (first, last) = (stage.costs[0], *stage.costs.last().expect("the start"));
+            initial_cost = first;
+            best = if last < first {
+                (m, xi, last)
+            } else {
+                (model.clone(), starts.clone(), first)
+            };
         }
         stages.push(stage);
     }

@@ -111,6 +111,26 @@ fn check_markov_finite(h: &DMatrix<f64>, output: &str) -> Result<()> {
 }
 
 impl Lft {
+    /// Whether the noise reaches neither the state nor z (B_e = 0 and D_ze = 0): an
+    /// output-error model, whose z is a function of u alone (the simulation's) and whose
+    /// one-step predictor is the simulation, whatever the maps' places.
+    ///
+    /// ```
+    /// use nalgebra::dmatrix;
+    /// use structid_core::{Lft, LftMatrices};
+    /// let m = |be: f64| LftMatrices {
+    ///     a: dmatrix![0.5], bu: dmatrix![1.0], be: dmatrix![be], bw: dmatrix![1.0],
+    ///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![0.0],
+    ///     cz: dmatrix![1.0], dzu: dmatrix![0.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+    /// };
+    /// assert!(Lft::new(m(0.0)).unwrap().noise_free_z());
+    /// assert!(!Lft::new(m(0.3)).unwrap().noise_free_z());
+    /// ```
+    pub fn noise_free_z(&self) -> bool {
+        let m = self.matrices();
+        m.be.iter().chain(m.dze.iter()).all(|v| *v == 0.0)
+    }
+
     /// Decides whether z can be computed from u and y, and how.
     ///
     /// Returns [`Error::NotMeasurable`] with an explanation otherwise.

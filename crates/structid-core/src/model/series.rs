@@ -11,8 +11,11 @@
 //!   z_b = z_own,b(u, y) + D_zw[b, :]·ŵ,   ŵ_b = N̂_b(z_b),   b in evaluation order
 //! ```
 //!
-//! A latent block (its z_own not computable from u and y) has no such z: a model with one can
-//! be simulated, not predicted one step ahead.
+//! A latent block (its z_own not computable from u and y) has no such z in general: a model
+//! with one can be simulated, not predicted one step ahead. The exception is an output-error
+//! model, whose noise reaches neither the state nor z (B_e = 0, D_ze = 0): there every z is a
+//! function of u alone, the simulation's from rest, and the one-step predictor is the
+//! simulation ([`crate::Lft::noise_free_z`]).
 
 use structid_lti::Signal;
 
@@ -50,10 +53,29 @@ impl Model {
     /// ```
     ///
     /// # Errors
-    /// [`Error::AlgebraicLoop`] for a cycle, [`Error::NotMeasurable`] naming the latent blocks,
+    /// [`Error::AlgebraicLoop`] for a cycle, [`Error::NotMeasurable`] naming the latent blocks
+    /// (unless the noise reaches neither the state nor z, when z is simulated from rest),
     /// [`Error::DimensionMismatch`] for a wrong number of maps, [`Error::Numerical`] when a map
     /// returns a non-finite value, and [`crate::Lft::compute_z`]'s errors.
     pub fn compute_z_with_maps(
+        &self,
+        u: &Signal,
+        y: &Signal,
+        maps: &[&dyn Interpolant],
+    ) -> Result<Signal> {
+        match self.compute_z_in_order(u, y, maps) {
+            Err(Error::NotMeasurable { .. } | Error::OutOfReach { .. })
+                if self.lft().noise_free_z() =>
+            {
+                Ok(self.simulate(maps, u, None, None)?.z)
+            }
+            other => other,
+        }
+    }
+
+    /// [`Model::compute_z_with_maps`] without the output-error case: each block's own z
+    /// from u and y, the maps evaluated in order.
+    fn compute_z_in_order(
         &self,
         u: &Signal,
         y: &Signal,

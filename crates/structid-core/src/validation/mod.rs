@@ -486,8 +486,11 @@ pub(crate) fn measured_residual(
     // record with Ψ at rest instead, i.e. taken as measured, as identification takes it.
     // Maps in series: z is computed once, with the maps evaluated in order, and then taken as
     // measured (the one-step predictor needs only z and ŵ = N̂(z), whatever D_zw is).
+    // An output-error model with a latent z (a sensor map behind an actuator map) has its z
+    // simulated from u, and is treated as maps in series are.
     let with_z;
-    let series = lft.matrices().dzw.iter().any(|v| *v != 0.0);
+    let series = lft.matrices().dzw.iter().any(|v| *v != 0.0)
+        || (data.z().is_none() && lft.noise_free_z() && lft.measurability().is_err());
     let data = match (initial_state, data.z()) {
         (InitialState::Estimate, None) if series => {
             return Err(Error::NotMeasurable {

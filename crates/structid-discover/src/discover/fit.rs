@@ -228,7 +228,17 @@ pub(super) fn z_of(h: &Hypothesis, data: &Data) -> Result<Vec<f64>> {
     match data.z() {
         Some(z) => Ok(z.channel(0)),
         None => crate::records::stacked(data, |r| {
-            Ok(h.model.lft().compute_z(r.u(), r.y())?.0.channel(0))
+            match h.model.lft().compute_z(r.u(), r.y()) {
+                Ok((z, _)) => Ok(z.channel(0)),
+                // A sensor map behind a known actuator map reads the known map's output:
+                // its z comes from the record through the LFT identification uses, which
+                // takes the known maps' outputs as inputs.
+                Err(e) if !h.known.is_empty() => h
+                    .identification(r)
+                    .and_then(|(model, id)| Ok(model.lft().compute_z(id.u(), id.y())?.0.channel(0)))
+                    .map_err(|_| e),
+                Err(e) => Err(e),
+            }
         }),
     }
 }

@@ -7,6 +7,7 @@ use structid_core::{Data, Error, Result};
 
 use crate::hypotheses::Nominal;
 
+use super::second_block::{SecondBlock, second_blocks};
 use super::{Classification, DiscoverSettings, Discovery, Finding, Verdict, discover};
 
 /// Settings of [`discover_effects`].
@@ -144,6 +145,10 @@ pub struct Step {
     pub discovery: Discovery,
     /// Whether its finding was adopted as the next nominal model (and counts as an effect).
     pub adopted: bool,
+    /// The second-block row ([`SecondBlock`]) that re-estimated this step's map before the
+    /// next step, when one cut the validation RMS of the step's augmented model by the
+    /// required share: the map the next step builds on is that row's first map.
+    pub second_block: Option<SecondBlock>,
 }
 
 /// Everything [`discover_effects`] found.
@@ -195,12 +200,23 @@ impl Effects {
 /// augmented model (every map found so far fixed inside it, [`super::Augmented::as_nominal`])
 /// as the next nominal model, and repeats.
 ///
+/// A map found while another effect is unmodelled carries that effect's bias, so a step
+/// that finds nothing more is not yet the end: the last adopted map and a second block at
+/// each other site are fitted jointly ([`SecondBlock`]), and when the best of those rows cuts
+/// the validation RMS of the adopted model by [`EffectsSettings::min_improvement`], the
+/// adopted map is replaced by its joint re-estimate and the step is run again from there.
+/// The same rows decide a step whose effect looks dynamic: if a static second block explains
+/// the direction dependence as well (it cuts the RMS of the static approximation by the
+/// same share), the step's static approximation is built on; otherwise the iteration stops
+/// at the dynamic effect.
+///
 /// It stops when a step's verdict is "no missing effect", "unexplained" or "the linear model
-/// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented model cuts the validation RMS of the model it
-/// started from by less than [`EffectsSettings::min_improvement`] (10 % by default; that step
-/// is reported but not adopted), or after [`EffectsSettings::max_effects`] steps. Every step
-/// after the first is scored as the first was (the scoring the first step resolved), so that
-/// their RMS values compare.
+/// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented
+/// model cuts the validation RMS of the model it started from by less than
+/// [`EffectsSettings::min_improvement`] (10 % by default; that step is reported but not
+/// adopted), in each case unless a second-block row carries it on as above, or after
+/// [`EffectsSettings::max_effects`] adopted steps. Every step after the first is scored as the
+/// first was (the scoring the first step resolved), so that their RMS values compare.
 ///
 /// Errors: those of [`discover`] on the first step. A later step that fails stops the
 /// iteration with its error.
@@ -218,40 +234,65 @@ pub fn discover_effects(
     let stop = loop {
         let d = discover(&current, est, val, &settings)?;
         settings.scoring = Some(d.scoring);
-        let outcome = match (&d.verdict_kind, &d.finding) {
-            (Verdict::NoMissingEffect, _) => Err(StopReason::NoMissingEffect),
-            (Verdict::LinearModel, _) => Err(StopReason::LinearModel),
-            (Verdict::Unexplained, _) | (Verdict::MissingEffect, None) => {
-                Err(StopReason::Unexplained)
-            }
-            (Verdict::MissingEffect, Some(f)) => {
-                let ratio = f.augmented.validation_gap.rms / d.validation_gap.rms;
-                if matches!(f.classification, Classification::Dynamic) {
-                    Err(StopReason::Dynamic)
-                } else if matches!(f.classification, Classification::TimeVarying(_)) {
-                    Err(StopReason::TimeVarying)
-                } else if ratio.is_nan() || ratio > 1.0 - effects.min_improvement {
-                    Err(StopReason::NoImprovement { ratio })
-                } else {
-                    Ok(f.augmented.as_nominal(&current)?)
-                }
-            }
-        };
-        let adopted = outcome.is_ok();
-        steps.push(Step {
+        let adopted_so_far = steps.iter().filter(|s| s.adopted).count();
+        let more = adopted_so_far + 1 < effects.max_effects;
+        let mut step = Step {
             nominal: current.clone(),
             discovery: d,
-            adopted,
-        });
-        match outcome {
-            Err(reason) => break reason,
-            Ok(next) => {
-                if steps.len() >= effects.max_effects {
-                    break StopReason::MaxEffects;
+            adopted: false,
+            second_block: None,
+        };
+        match judge(&step, effects) {
+            Ok(()) => step.adopted = true,
+            Err(StopReason::Dynamic) if more => {
+                // Is the direction dependence a second, static effect?
+                let f = step.discovery.finding.as_ref().expect("a dynamic finding");
+                step.second_block = best_second_block(&current, f, est, val, &settings, effects);
+                step.adopted = step.second_block.is_some();
+                if !step.adopted {
+                    steps.push(step);
+                    break StopReason::Dynamic;
                 }
-                current = next;
+            }
+            Err(reason) => {
+                // Did the last adopted map hide the next effect?
+                let last = steps.iter_mut().rev().find(|s| s.adopted);
+                let retry = last.filter(|s| s.second_block.is_none()).and_then(|last| {
+                    let f = last.discovery.finding.as_ref()?;
+                    let row = best_second_block(&last.nominal, f, est, val, &settings, effects)?;
+                    let next = with_first_map(f, &row, &last.nominal).ok()?;
+                    last.second_block = Some(row);
+                    Some(next)
+                });
+                steps.push(step);
+                match retry {
+                    Some(next) => {
+                        current = next;
+                        continue;
+                    }
+                    None => break reason,
+                }
             }
         }
+        let next = match &step.second_block {
+            Some(row) => with_first_map(
+                step.discovery.finding.as_ref().expect("adopted"),
+                row,
+                &current,
+            )?,
+            None => step
+                .discovery
+                .finding
+                .as_ref()
+                .expect("adopted")
+                .augmented
+                .as_nominal(&current)?,
+        };
+        steps.push(step);
+        if adopted_so_far + 1 >= effects.max_effects {
+            break StopReason::MaxEffects;
+        }
+        current = next;
     };
     Ok(Effects {
         steps,
@@ -259,4 +300,58 @@ pub fn discover_effects(
         settings: effects.clone(),
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Whether a step's finding is adopted as it stands, or why not.
+fn judge(step: &Step, effects: &EffectsSettings) -> std::result::Result<(), StopReason> {
+    let d = &step.discovery;
+    match (&d.verdict_kind, &d.finding) {
+        (Verdict::NoMissingEffect, _) => Err(StopReason::NoMissingEffect),
+        (Verdict::LinearModel, _) => Err(StopReason::LinearModel),
+        (Verdict::Unexplained, _) | (Verdict::MissingEffect, None) => Err(StopReason::Unexplained),
+        (Verdict::MissingEffect, Some(f)) => {
+            let ratio = f.augmented.validation_gap.rms / d.validation_gap.rms;
+            if matches!(f.classification, Classification::Dynamic) {
+                Err(StopReason::Dynamic)
+            } else if matches!(f.classification, Classification::TimeVarying(_)) {
+                Err(StopReason::TimeVarying)
+            } else if ratio.is_nan() || ratio > 1.0 - effects.min_improvement {
+                Err(StopReason::NoImprovement { ratio })
+            } else {
+                Ok(())
+            }
+        }
+    }
+}
+
+/// The second-block row of `first` (found on `nominal`) with the lowest validation RMS, when
+/// it cuts the validation RMS of `first`'s augmented model by the required share.
+fn best_second_block(
+    nominal: &Nominal,
+    first: &Finding,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Option<SecondBlock> {
+    let reference = first.augmented.validation_gap.rms;
+    let rows = second_blocks(nominal, first, est, val, settings);
+    for r in &rows {
+        eprintln!(
+            "DBG row {:?}+{:?}: est {:.4e} val {:.4e} ref {:.4e} {:.1}s",
+            r.first_location, r.site, r.estimation_rms, r.validation_rms, reference, r.seconds
+        );
+    }
+    rows.into_iter()
+        .filter(|r| r.validation_rms <= (1.0 - effects.min_improvement) * reference)
+        .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+}
+
+/// `nominal` with `first`'s block holding the first map of `row` (re-estimated jointly with
+/// a second block) instead of its own.
+fn with_first_map(first: &Finding, row: &SecondBlock, nominal: &Nominal) -> Result<Nominal> {
+    let mut augmented = first.augmented.clone();
+    augmented.map = row.first_map.clone();
+    augmented.fit = None;
+    augmented.as_nominal(nominal)
 }
