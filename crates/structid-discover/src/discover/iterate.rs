@@ -335,14 +335,8 @@ fn best_second_block(
     effects: &EffectsSettings,
 ) -> Option<SecondBlock> {
     let reference = first.augmented.validation_gap.rms;
-    let rows = second_blocks(nominal, first, est, val, settings);
-    for r in &rows {
-        eprintln!(
-            "DBG row {:?}+{:?}: est {:.4e} val {:.4e} ref {:.4e} {:.1}s",
-            r.first_location, r.site, r.estimation_rms, r.validation_rms, reference, r.seconds
-        );
-    }
-    rows.into_iter()
+    second_blocks(nominal, first, est, val, settings)
+        .into_iter()
         .filter(|r| r.validation_rms <= (1.0 - effects.min_improvement) * reference)
         .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
 }

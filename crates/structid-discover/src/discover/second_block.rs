@@ -29,11 +29,14 @@ use structid_joint::{
     BlockMap, FixedMap, GaussianFeatures, JointBlock, JointModel, JointSettings, fit,
 };
 
+use structid_core::selection::{Criterion, SelectionSettings, select};
+use structid_core::{IdentifySettings, InitialState};
+
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::DiscoverSettings;
 use super::Finding;
-use super::fit::simulation_rms;
+use super::fit::{initial_state, simulation_rms};
 use super::model::AugmentedMap;
 
 /// One row "the first block and a second one at `site`", fitted jointly.
@@ -102,7 +105,9 @@ pub(super) fn second_blocks(
         .collect()
 }
 
-/// The row of `site` ([`second_blocks`]), `None` when it cannot be built or fitted.
+/// The row of `site` ([`second_blocks`]): the better validated of the pair identified by
+/// the paper's criterion ([`identified_pair`]) and the pair fitted by simulation error
+/// ([`jointly_fitted_pair`]); `None` when neither can be built or fitted.
 fn second_block(
     nominal: &Nominal,
     with_first: &Nominal,
@@ -113,14 +118,96 @@ fn second_block(
     settings: &DiscoverSettings,
 ) -> Option<SecondBlock> {
     let t0 = Instant::now();
-    let h = with_first
-        .hypothesis(site, placeholder()?)
-        .map_err(|e| eprintln!("DBG hyp {site:?} {e}"))
-        .ok()?;
-    let Some((start, first_range, second_range)) = joint_start(&h, first, est) else {
-        eprintln!("DBG start failed {site:?}");
+    let pairs = [
+        identified_pair(with_first, site, est, settings),
+        jointly_fitted_pair(with_first, first, site, est, settings),
+    ];
+    let mut best: Option<SecondBlock> = None;
+    for (first_map, second_map) in pairs.into_iter().flatten() {
+        let row = scored(
+            nominal, first, site, first_map, second_map, est, val, settings,
+        )?;
+        if best
+            .as_ref()
+            .is_none_or(|b| row.validation_rms < b.validation_rms)
+        {
+            best = Some(row);
+        }
+    }
+    best.map(|b| SecondBlock {
+        seconds: t0.elapsed().as_secs_f64(),
+        ..b
+    })
+}
+
+/// Both maps identified together by the paper's criterion, when the first map is the only
+/// known one and both blocks' z are computable from the record (an actuator, a stiffness, a
+/// friction): the quadratic dispersion of the workflow on each, sized to its z's range, one
+/// β by marginal likelihood, as every single block of the workflow is identified.
+fn identified_pair(
+    with_first: &Nominal,
+    site: Site,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(AugmentedMap, AugmentedMap)> {
+    let probe = with_first.hypothesis(site, placeholder()?).ok()?;
+    if probe.known.len() != 1 {
         return None;
+    }
+    let est_h = probe.data(est).ok()?;
+    let z = match est_h.z() {
+        Some(z) => z.clone(),
+        None => probe.model.lft().compute_z(est_h.u(), est_h.y()).ok()?.0,
     };
+    let ranges = [
+        super::fit::minmax(&z.channel(0)),
+        super::fit::minmax(&z.channel(1)),
+    ];
+    let dispersions: Vec<_> = ranges
+        .iter()
+        .map(|(lo, hi)| super::fit::quadratic_dispersion(hi - lo, settings).ok())
+        .collect::<Option<_>>()?;
+    let mut next = dispersions.into_iter();
+    let model = probe
+        .model
+        .with_dispersions(|_| next.next().expect("two blocks"));
+    let identify = IdentifySettings::builder()
+        .initial_state(InitialState::Zero)
+        .build()
+        .ok()?;
+    let selection = SelectionSettings::builder()
+        .criterion(Criterion::MarginalLikelihood)
+        .widen_decades(0.0)
+        .build()
+        .ok()?;
+    let sel = select(&model, &est_h, None, &identify, &selection).ok()?;
+    let id = match initial_state(site).0 {
+        InitialState::Zero => sel.identification,
+        x0 => structid_core::identify(
+            &sel.model,
+            &est_h,
+            &identify.with_initial_state(x0).with_beta(sel.beta).ok()?,
+        )
+        .ok()?,
+    };
+    let table = |b: usize| {
+        let block = &id.blocks[b];
+        let (lo, hi) = super::fit::minmax(&block.z.channel(0));
+        sampled(&|z| block.map.eval(&[z]), (lo, hi))
+    };
+    Some((table(1)?, table(0)?))
+}
+
+/// Both maps fitted together by simulation error (see the [module docs](self)).
+fn jointly_fitted_pair(
+    with_first: &Nominal,
+    first: &Finding,
+    site: Site,
+    est: &Data,
+    settings: &DiscoverSettings,
+) -> Option<(AugmentedMap, AugmentedMap)> {
+    let h = with_first.hypothesis(site, placeholder()?).ok()?;
+    let (start, first_range, second_range) = joint_start(&h, first, est)?;
     let mut joint = JointSettings::builder()
         .max_iterations(ITERATIONS)
         .polish(segment_length(settings).is_none());
@@ -128,18 +215,27 @@ fn second_block(
         // Independent windows, as the model is scored.
         joint = joint.segment_length(len).continuity_weight(0.0);
     }
-    let fitted = fit(&start, est, None, &joint.build().ok()?)
-        .map_err(|e| eprintln!("DBG fit {site:?} {e}"))
-        .ok()?;
-    eprintln!(
-        "DBG fit {site:?}: cost {:.3e} -> {:.3e}, rms {:?}",
-        fitted.initial_cost, fitted.cost, fitted.rms
-    );
+    let fitted = fit(&start, est, None, &joint.build().ok()?).ok()?;
     let blocks = fitted.model.blocks();
-    let first_map = written(blocks[1].map.as_ref(), first_range)?;
-    let second_map = written(blocks[0].map.as_ref(), second_range)?;
-    // The row is scored as every model of the workflow: the first map as re-estimated in
-    // the nominal model, the second in the unknown block of the hypothesis at `site`.
+    Some((
+        written(blocks[1].map.as_ref(), first_range)?,
+        written(blocks[0].map.as_ref(), second_range)?,
+    ))
+}
+
+/// The row of a pair of maps: the first map in place of `first`'s in `nominal`, the second
+/// in the unknown block of the hypothesis at `site`, scored as every model of the workflow.
+#[allow(clippy::too_many_arguments)]
+fn scored(
+    nominal: &Nominal,
+    first: &Finding,
+    site: Site,
+    first_map: AugmentedMap,
+    second_map: AugmentedMap,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Option<SecondBlock> {
     let mut refitted = first.augmented.clone();
     refitted.map = first_map.clone();
     refitted.fit = None;
@@ -156,7 +252,7 @@ fn second_block(
         validation_rms: scored_rms(&h, second.as_ref(), val, settings),
         first_map,
         second_map,
-        seconds: t0.elapsed().as_secs_f64(),
+        seconds: 0.0,
     })
 }
 
@@ -323,11 +419,20 @@ fn written(map: &dyn BlockMap, (lo, hi): Range) -> Option<AugmentedMap> {
     if let Some(e) = map.expression() {
         return Some(AugmentedMap::Expression(e));
     }
+    sampled(&|z| map.eval(&mut [], &[z]), (lo, hi))
+}
+
+/// `f` sampled over `range` at [`POINTS_PER_SPACING`] points per spacing of [`CENTRES`]
+/// centres (the resolution of the workflow's kernels), as a table.
+fn sampled(f: &dyn Fn(f64) -> f64, (lo, hi): Range) -> Option<AugmentedMap> {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
     let n = POINTS_PER_SPACING * (CENTRES - 1) + 1;
     let z: Vec<f64> = (0..n)
         .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
         .collect();
-    let w: Vec<f64> = z.iter().map(|&z| map.eval(&mut [], &[z])).collect();
+    let w: Vec<f64> = z.iter().map(|&z| f(z)).collect();
     LookupTable::one_d(z.clone(), w.clone()).ok()?;
     Some(AugmentedMap::Table { z, w })
 }
