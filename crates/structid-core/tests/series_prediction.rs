@@ -173,3 +173,88 @@ fn a_latent_block_has_no_z_from_the_record_and_says_which() {
     .unwrap_err();
     assert!(matches!(err, Error::NotMeasurable { .. }), "{err}");
 }
+
+/// An output-error Hammerstein–Wiener model: w₀ = N₀(u) drives G, the sensor map N₁ reads
+/// G's output (a state: latent for u and y), y = w₁ + e. The noise reaches neither the state
+/// nor z, so z is the noise-free simulation's and the one-step predictor is the simulation.
+fn hammerstein_wiener(be: f64) -> Model {
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![1.2, -0.5; 1.0, 0.0],
+        bu: dmatrix![0.0; 0.0],
+        be: dmatrix![be; 0.0],
+        bw: dmatrix![1.0, 0.0; 0.0, 0.0],
+        cy: dmatrix![0.0, 0.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![0.0, 1.0],
+        cz: dmatrix![0.0, 0.0; 0.3, 0.2],
+        dzu: dmatrix![1.0; 0.0],
+        dze: dmatrix![0.0; 0.0],
+        dzw: dmatrix![0.0, 0.0; 0.0, 0.0],
+    })
+    .unwrap();
+    let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
+    Model::new(
+        lft,
+        vec![
+            NonlinearBlock::new("actuator", vec![0], 0, d.clone()),
+            NonlinearBlock::new("sensor", vec![1], 1, d),
+        ],
+    )
+    .unwrap()
+}
+
+fn dead_zone(z: &[f64]) -> f64 {
+    z[0].signum() * (z[0].abs() - 0.3).max(0.0)
+}
+fn sensor(z: &[f64]) -> f64 {
+    (2.0 * z[0]).tanh()
+}
+
+#[test]
+fn an_output_error_sensor_behind_an_actuator_is_predicted_by_its_simulation() {
+    let len = 400;
+    let u = Signal::from_fn(len, 1, |k, _| 1.5 * (0.11 * k as f64).sin());
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let n = Normal::new(0.0, 0.02).unwrap();
+    let e: Vec<f64> = (0..len).map(|_| n.sample(&mut rng)).collect();
+    // The plant written out: x_k = 1.2·x_(k−1) − 0.5·x_(k−2) + dz(u_(k−1)), z₁ = 0.3·x + 0.2·x_(k−1).
+    let (mut x, mut y, mut z1) = (vec![0.0; len], vec![0.0; len], vec![0.0; len]);
+    for k in 0..len {
+        let at = |v: &[f64], lag: usize| if k >= lag { v[k - lag] } else { 0.0 };
+        x[k] = 1.2 * at(&x, 1) - 0.5 * at(&x, 2)
+            + if k >= 1 {
+                dead_zone(&[u.get(k - 1, 0)])
+            } else {
+                0.0
+            };
+        z1[k] = 0.3 * x[k] + 0.2 * at(&x, 1);
+        y[k] = sensor(&[z1[k]]) + e[k];
+    }
+    let data = Data::new(u.clone(), Signal::new(1, y).unwrap()).unwrap();
+    let maps: [&dyn Interpolant; 2] = [&dead_zone, &sensor];
+    let model = hammerstein_wiener(0.0);
+    let z = model
+        .compute_z_with_maps(data.u(), data.y(), &maps)
+        .unwrap();
+    for k in 0..len {
+        assert!((z.get(k, 1) - z1[k]).abs() < 1e-12, "z₁ at {k}");
+    }
+    let settings = ValidationSettings::builder()
+        .initial_state(structid_core::InitialState::Zero)
+        .build()
+        .unwrap();
+    let report = validate(&model, &maps, &data, &settings).unwrap();
+    for k in 0..len {
+        assert!(
+            (report.prediction_error.get(k, 0) - e[k]).abs() < 1e-12,
+            "ε at {k}"
+        );
+    }
+    // With noise inside the state, z is not a function of u alone: still refused.
+    let noisy = hammerstein_wiener(0.5);
+    assert!(matches!(
+        noisy.compute_z_with_maps(data.u(), data.y(), &maps),
+        Err(Error::NotMeasurable { .. } | Error::OutOfReach { .. })
+    ));
+}

@@ -306,6 +306,52 @@ fn multiple_and_single_shooting_agree_at_the_optimum_of_a_stable_plant() {
     );
 }
 
+/// Independent windows (continuity weight zero, no polish): each window from its own fitted
+/// state, the criterion a windowed simulation scores. The fit ends at no higher cost of that
+/// criterion than its start, and on a stable plant it finds the pole and the map the single
+/// shot finds.
+#[test]
+fn independent_windows_fit_the_windowed_criterion() {
+    let data = hammerstein_data(1500, 3000);
+    let windows = JointSettings::builder()
+        .segment_length(150)
+        .continuity_weight(0.0)
+        .polish(false)
+        .build()
+        .unwrap();
+    let out = fit(&hammerstein_start(0.6), &data, None, &windows).unwrap();
+    assert!(
+        out.cost < 0.1 * out.initial_cost,
+        "{} → {}",
+        out.initial_cost,
+        out.cost
+    );
+    assert_eq!(out.stages.len(), 1);
+    assert_eq!(out.stages[0].name, "multiple shooting");
+    let pole = out.model.parameters()[0];
+    assert!((pole - 0.85).abs() < 0.02, "pole {pole}");
+    let n = out.model.blocks()[0].map.as_ref();
+    for k in 0..21 {
+        let z = -1.0 + 0.1 * k as f64;
+        assert!(
+            (n.eval(&mut [], &[z]) - (1.5 * z).tanh()).abs() < 0.05,
+            "at {z}"
+        );
+    }
+    // Zero weight only where the windows are the criterion.
+    for b in [
+        JointSettings::builder().continuity_weight(0.0),
+        JointSettings::builder()
+            .continuity_weight(0.0)
+            .segment_length(150),
+        JointSettings::builder()
+            .continuity_weight(0.0)
+            .polish(false),
+    ] {
+        assert!(b.build().is_err());
+    }
+}
+
 #[test]
 fn a_cycle_of_maps_and_bad_settings_are_clear_errors() {
     let f = GaussianFeatures::on_interval(-1.0, 1.0, 3, 0.5, 0.0).unwrap();
