@@ -30,7 +30,7 @@ use structid_joint::{
 };
 
 use structid_core::selection::{Criterion, SelectionSettings, select};
-use structid_core::{IdentifySettings, InitialState};
+use structid_core::{IdentifySettings, InitialState, Signal};
 
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
@@ -123,7 +123,7 @@ fn second_block(
         jointly_fitted_pair(with_first, first, site, est, settings),
     ];
     let mut best: Option<SecondBlock> = None;
-    for (first_map, second_map) in pairs.into_iter().flatten() {
+    for (first_map, second_map) in pairs.into_iter().flatten().flatten() {
         let row = scored(
             nominal, first, site, first_map, second_map, est, val, settings,
         )?;
@@ -149,7 +149,7 @@ fn identified_pair(
     site: Site,
     est: &Data,
     settings: &DiscoverSettings,
-) -> Option<(AugmentedMap, AugmentedMap)> {
+) -> Option<Vec<(AugmentedMap, AugmentedMap)>> {
     let probe = with_first.hypothesis(site, placeholder()?).ok()?;
     if probe.known.len() != 1 {
         return None;
@@ -190,12 +190,14 @@ fn identified_pair(
         )
         .ok()?,
     };
-    let table = |b: usize| {
-        let block = &id.blocks[b];
-        let (lo, hi) = super::fit::minmax(&block.z.channel(0));
-        sampled(&|z| block.map.eval(&[z]), (lo, hi))
-    };
-    Some((table(1)?, table(0)?))
+    let (a, b) = (&id.blocks[1], &id.blocks[0]);
+    let range = |z: &Signal| super::fit::minmax(&z.channel(0));
+    extrapolations(
+        &|z| a.map.eval(&[z]),
+        range(&a.z),
+        &|z| b.map.eval(&[z]),
+        range(&b.z),
+    )
 }
 
 /// Both maps fitted together by simulation error (see the [module docs](self)).
@@ -205,7 +207,7 @@ fn jointly_fitted_pair(
     site: Site,
     est: &Data,
     settings: &DiscoverSettings,
-) -> Option<(AugmentedMap, AugmentedMap)> {
+) -> Option<Vec<(AugmentedMap, AugmentedMap)>> {
     let h = with_first.hypothesis(site, placeholder()?).ok()?;
     let (start, first_range, second_range) = joint_start(&h, first, est)?;
     let mut joint = JointSettings::builder()
@@ -217,10 +219,18 @@ fn jointly_fitted_pair(
     }
     let fitted = fit(&start, est, None, &joint.build().ok()?).ok()?;
     let blocks = fitted.model.blocks();
-    Some((
-        written(blocks[1].map.as_ref(), first_range)?,
-        written(blocks[0].map.as_ref(), second_range)?,
-    ))
+    let (a, b) = (blocks[1].map.as_ref(), blocks[0].map.as_ref());
+    let mut pairs = extrapolations(
+        &|z| a.eval(&mut [], &[z]),
+        first_range,
+        &|z| b.eval(&mut [], &[z]),
+        second_range,
+    )?;
+    // The expansions written in their own form keep their fit and their trend exactly.
+    if let (Some(ea), Some(eb)) = (a.expression(), b.expression()) {
+        pairs.push((AugmentedMap::Expression(ea), AugmentedMap::Expression(eb)));
+    }
+    Some(pairs)
 }
 
 /// The row of a pair of maps: the first map in place of `first`'s in `nominal`, the second
@@ -411,15 +421,24 @@ fn features_through(range: Range, energy: f64, f: &dyn Fn(f64) -> f64) -> Option
         .ok()
 }
 
-/// A fitted expansion written in its own form, an expression of its kernels and trend
-/// ([`BlockMap::expression`]): it keeps its fit, oscillations included, and extrapolates with
-/// its trend. A map without that form is sampled as a table over `range` at
-/// [`POINTS_PER_SPACING`] points per centre spacing.
-fn written(map: &dyn BlockMap, (lo, hi): Range) -> Option<AugmentedMap> {
-    if let Some(e) = map.expression() {
-        return Some(AugmentedMap::Expression(e));
-    }
-    sampled(&|z| map.eval(&mut [], &[z]), (lo, hi))
+/// A pair of maps written two ways, as every map of the workflow is ranked: held at their
+/// edge values beyond the range they were estimated on, and extrapolated by their own trend
+/// over half that range again on each side (and held beyond). Outside the estimation range
+/// a map is an extrapolation, and the validation decides which one; the site does not.
+fn extrapolations(
+    first: &dyn Fn(f64) -> f64,
+    first_range: Range,
+    second: &dyn Fn(f64) -> f64,
+    second_range: Range,
+) -> Option<Vec<(AugmentedMap, AugmentedMap)>> {
+    let widened = |(lo, hi): Range| (lo - 0.5 * (hi - lo), hi + 0.5 * (hi - lo));
+    Some(vec![
+        (sampled(first, first_range)?, sampled(second, second_range)?),
+        (
+            sampled(first, widened(first_range))?,
+            sampled(second, widened(second_range))?,
+        ),
+    ])
 }
 
 /// `f` sampled over `range` at [`POINTS_PER_SPACING`] points per spacing of [`CENTRES`]
@@ -428,7 +447,8 @@ fn sampled(f: &dyn Fn(f64) -> f64, (lo, hi): Range) -> Option<AugmentedMap> {
     if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let n = POINTS_PER_SPACING * (CENTRES - 1) + 1;
+    // Twice the spacings: a widened range keeps the resolution over the estimated one.
+    let n = 2 * POINTS_PER_SPACING * (CENTRES - 1) + 1;
     let z: Vec<f64> = (0..n)
         .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
         .collect();
