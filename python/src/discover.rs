@@ -285,6 +285,17 @@ pub fn discover_columns<'py>(
                 .map(|step| {
                     let x = PyDict::new(py);
                     x.set_item("adopted", step.adopted)?;
+                    let row = match &step.second_block {
+                        Some(row) => {
+                            let r = PyDict::new(py);
+                            r.set_item("site", step.nominal.key(row.site))?;
+                            r.set_item("estimation_rms", row.estimation_rms)?;
+                            r.set_item("validation_rms", row.validation_rms)?;
+                            Some(r)
+                        }
+                        None => None,
+                    };
+                    x.set_item("second_block", row)?;
                     x.set_item("verdict", &step.discovery.verdict)?;
                     x.set_item(
                         "effect",

@@ -329,3 +329,24 @@ def test_a_backlash_at_the_input_is_reported_with_its_play(cli, tmp_path):
     report = read_json(tmp_path / "found" / "report.json")
     np.testing.assert_allclose(report["finding"]["input_hysteresis"]["threshold"],
                                h["threshold"], rtol=1e-12)
+
+
+def test_discover_effects_matches_the_tool(cli, duffing):
+    """``effects=2`` runs the iteration as ``--effects 2`` does: the same steps, the same
+    adoption, and the same second-block row where a step's map was re-estimated with one."""
+    nominal, (u, y, uv, yv), d = duffing
+    cli("discover", "--model", d / "nominal.toml", "--data", d / "est.csv", "--validate",
+        d / "val.csv", "--out", d / "effects", "--effects", "2")
+    tool = read_json(d / "effects" / "report.json")["effects"]
+    found = structid.discover(nominal, u, y, uv, yv, effects=2)
+    steps = found.extra["steps"]
+    assert len(steps) == len(tool["steps"]) >= 1
+    assert steps[0]["adopted"] and "cubic" in steps[0]["effect"]
+    for mine, theirs in zip(steps, tool["steps"]):
+        assert mine["adopted"] == theirs["adopted"]
+        assert (mine["second_block"] is None) == (theirs["second_block"] is None)
+        if mine["second_block"] is not None:
+            assert mine["second_block"]["site"] == theirs["second_block"]["site"]
+            np.testing.assert_allclose(mine["second_block"]["validation_rms"],
+                                       theirs["second_block"]["validation_rms"], rtol=1e-12)
+    assert found.extra["stop"] == tool["stop_text"]

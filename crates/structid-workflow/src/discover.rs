@@ -376,8 +376,10 @@ pub fn discover_model_file(req: &DiscoverRequest<'_>) -> Result<DiscoverOutcome>
     )?;
     let at = effects.steps.iter().rposition(|s| s.adopted).unwrap_or(0);
     let mut model = req.model.clone();
-    for step in &effects.steps[..at] {
-        if let Some(f) = &step.discovery.finding {
+    // Each adopted step's map as the next step built on it (re-estimated with a second
+    // block, when one was).
+    for step in effects.steps[..at].iter().filter(|s| s.adopted) {
+        if let Some(f) = step.adopted_finding() {
             model = f.augmented_file(&model, req.settings.trend_degree())?.model;
         }
     }

@@ -151,6 +151,29 @@ pub struct Step {
     pub second_block: Option<SecondBlock>,
 }
 
+impl Step {
+    /// The step's finding as the next step builds on it: as found, or with its map replaced
+    /// by the first map of its second-block row ([`Step::second_block`]) and a remark that
+    /// says so (its named family, fitted before the row, is dropped). `None` when the step
+    /// found nothing.
+    pub fn adopted_finding(&self) -> Option<Finding> {
+        let mut f = self.discovery.finding.clone()?;
+        if let Some(row) = &self.second_block {
+            f.augmented.map = row.first_map.clone();
+            f.augmented.fit = None;
+            f.remarks.push(format!(
+                "the map was re-estimated together with a second block {} (validation RMS {} \
+                 with both blocks, against {} with this one alone): the next step builds on \
+                 the re-estimated map",
+                row.site.describe(),
+                super::rms_text(row.validation_rms),
+                super::rms_text(f.augmented.validation_gap.rms)
+            ));
+        }
+        Some(f)
+    }
+}
+
 /// Everything [`discover_effects`] found.
 #[derive(Clone, Debug)]
 pub struct Effects {
@@ -260,9 +283,15 @@ pub fn discover_effects(
                 let retry = last.filter(|s| s.second_block.is_none()).and_then(|last| {
                     let f = last.discovery.finding.as_ref()?;
                     let row = best_second_block(&last.nominal, f, est, val, &settings, effects)?;
-                    let next = with_first_map(f, &row, &last.nominal).ok()?;
                     last.second_block = Some(row);
-                    Some(next)
+                    match last.adopted_finding()?.augmented.as_nominal(&last.nominal) {
+                        Ok(next) => Some(next),
+                        Err(_) => {
+                            // Not built on: not recorded as adopted either.
+                            last.second_block = None;
+                            None
+                        }
+                    }
                 });
                 steps.push(step);
                 match retry {
@@ -274,20 +303,11 @@ pub fn discover_effects(
                 }
             }
         }
-        let next = match &step.second_block {
-            Some(row) => with_first_map(
-                step.discovery.finding.as_ref().expect("adopted"),
-                row,
-                &current,
-            )?,
-            None => step
-                .discovery
-                .finding
-                .as_ref()
-                .expect("adopted")
-                .augmented
-                .as_nominal(&current)?,
-        };
+        let next = step
+            .adopted_finding()
+            .expect("an adopted step has a finding")
+            .augmented
+            .as_nominal(&current)?;
         steps.push(step);
         if adopted_so_far + 1 >= effects.max_effects {
             break StopReason::MaxEffects;
@@ -339,13 +359,4 @@ fn best_second_block(
         .into_iter()
         .filter(|r| r.validation_rms <= (1.0 - effects.min_improvement) * reference)
         .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
-}
-
-/// `nominal` with `first`'s block holding the first map of `row` (re-estimated jointly with
-/// a second block) instead of its own.
-fn with_first_map(first: &Finding, row: &SecondBlock, nominal: &Nominal) -> Result<Nominal> {
-    let mut augmented = first.augmented.clone();
-    augmented.map = row.first_map.clone();
-    augmented.fit = None;
-    augmented.as_nominal(nominal)
 }

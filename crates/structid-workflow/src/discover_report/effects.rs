@@ -2,6 +2,18 @@
 
 use super::*;
 
+/// The second-block row of a step in a few words, empty without one.
+fn second_block_text(step: &structid_discover::discover::Step) -> String {
+    match &step.second_block {
+        Some(row) => format!(
+            "; re-estimated with a second block {} (validation RMS {} with both)",
+            location_text(&step.nominal, row.site),
+            rms_text(row.validation_rms)
+        ),
+        None => String::new(),
+    }
+}
+
 /// What one step of an iteration found, in a few words.
 pub(super) fn step_effect(r: &Nominal, d: &Discovery) -> String {
     match &d.finding {
@@ -24,7 +36,11 @@ pub fn effects_markdown(effects: &Effects) -> String {
     let _ = writeln!(
         s,
         "Each step runs discovery on the model the previous adopted step left (its maps fixed \
-         in the loop), and is adopted when it cuts the validation RMS by at least {:.0} %.\n",
+         in the loop), and is adopted when it cuts the validation RMS by at least {:.0} %. \
+         When a step finds nothing more, or an effect that looks dynamic, the last map is \
+         fitted again together with a second block at each other site; a pair that cuts the \
+         validation RMS by the same share replaces the map, and the search goes on from \
+         there.\n",
         100.0 * effects.settings.min_improvement()
     );
     let _ = writeln!(
@@ -38,7 +54,11 @@ pub fn effects_markdown(effects: &Effects) -> String {
             s,
             "| {} | {} | {} | {} | {} | {} |",
             i + 1,
-            cell(&step_effect(&step.nominal, d)),
+            cell(&format!(
+                "{}{}",
+                step_effect(&step.nominal, d),
+                second_block_text(step)
+            )),
             rms_text(d.validation_gap.rms),
             after.map(rms_text).unwrap_or_else(|| "—".into()),
             after
@@ -93,6 +113,14 @@ pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
                 "validation_rms_before": d.validation_gap.rms,
                 "validation_rms_after": f.map(|f| f.augmented.validation_gap.rms),
                 "adopted": step.adopted,
+                "second_block": step.second_block.as_ref().map(|row| json!({
+                    "site": step.nominal.key(row.site),
+                    "estimation_rms": row.estimation_rms,
+                    "validation_rms": row.validation_rms,
+                    "first_map": row.first_map,
+                    "second_map": row.second_map,
+                    "seconds": row.seconds,
+                })),
                 "seconds": d.seconds,
             })
         })
@@ -116,9 +144,10 @@ pub fn effects_summary(effects: &Effects) -> String {
         let d = &step.discovery;
         let _ = writeln!(
             s,
-            "step {}: {}; validation RMS {} → {}{}",
+            "step {}: {}{}; validation RMS {} → {}{}",
             i + 1,
             step_effect(&step.nominal, d),
+            second_block_text(step),
             rms_text(d.validation_gap.rms),
             d.finding
                 .as_ref()
