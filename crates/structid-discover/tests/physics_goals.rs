@@ -885,10 +885,10 @@ fn two_effects_tally(seeds: std::ops::Range<u64>) -> usize {
 }
 
 /// The issue's goal: with two static effects at two sites, `--effects 2` finds both in at
-/// least 80 % of the cases (run with `--ignored`; not met, measured 1 of 10, as on the cases
-/// the iteration may be tuned on: two static effects at two sites often leave a direction
-/// effect that the first step reports as dynamic, and a first map fitted while the second
-/// effect is unmodelled carries its bias into the second step, which keeps it fixed).
+/// least 80 % of the cases (run with `--ignored`; not met, measured 2 of 10, and 4 of 10 on the
+/// cases the iteration may be tuned on: the second-block rows find an effect that the first
+/// map hid where the plant is open loop, but friction beside a spring or an actuator effect in
+/// a position loop still reads as a direction effect at the first site).
 #[test]
 #[ignore]
 fn two_effects_goal_of_the_issue() {
