@@ -108,6 +108,8 @@ impl From<structid_workflow::WorkflowError> for CliError {
             W::Core(e) => e.into(),
             W::Discover(e) => e.into(),
             W::Request(m) => Self::input(m),
+            W::Failed(m) => Self::runtime(m),
+            W::InContext { context, source } => Self::from(*source).context(context),
             e @ W::NotNominal(_) => Self {
                 code: EXIT_INPUT,
                 context: None,

@@ -20,6 +20,17 @@ pub enum WorkflowError {
     /// A request that cannot be carried out as given; the message says what to change.
     #[error("{0}")]
     Request(String),
+    /// A failure while carrying out a request; the message says what failed.
+    #[error("{0}")]
+    Failed(String),
+    /// Another error, with what was being done when it happened.
+    #[error("{context}: {source}")]
+    InContext {
+        /// What was being done (`validation`, `experiment `a`, model …`).
+        context: String,
+        /// The error.
+        source: Box<WorkflowError>,
+    },
     /// A model file that cannot be the nominal model of a discovery; the message says why
     /// (the remedy: a linear nominal model estimated from the data).
     #[error("{0}")]
@@ -43,6 +54,22 @@ pub enum WorkflowError {
         /// Why they conflict.
         rule: String,
     },
+}
+
+impl WorkflowError {
+    /// The error with what was being done when it happened.
+    ///
+    /// ```
+    /// use structid_workflow::WorkflowError;
+    /// let e = WorkflowError::Failed("no solution".into()).context("validation");
+    /// assert_eq!(e.to_string(), "validation: no solution");
+    /// ```
+    pub fn context(self, context: impl Into<String>) -> Self {
+        Self::InContext {
+            context: context.into(),
+            source: Box::new(self),
+        }
+    }
 }
 
 /// `Result` with [`WorkflowError`].

@@ -17,11 +17,15 @@
 //! | [`linear_start`] | discovery from a record alone: the best linear approximation as the nominal model, [`structid_discover`]'s search for what it is missing, and test records scored with both (the Silverbox discovery in Python) |
 //! | [`discover_report`] | the reports of a discovery: report.md, report.json and the summary `structid discover` prints (the presentation of [`structid_discover`]'s results, which carry data only) |
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
+//! | [`compare`] | comparison sweeps of dispersions, β values and noise seeds: the cases, each case's identification and scores, and the tables of their results (`structid compare`) |
+//! | [`grid`] | grids over a signal's range, on which maps are evaluated for tables and figures |
 
+pub mod compare;
 pub mod discover;
 pub mod discover_report;
 pub mod error;
 pub mod free;
+pub mod grid;
 pub mod identify;
 pub mod joint;
 pub mod linear;

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 use structid_io::OutputGuard;
 use structid_plot::{Chart, Series, render_grid_svg};
 
-use crate::compare::results::{BlockRecord, CaseRecord};
 use crate::error::CliError;
+use structid_workflow::compare::results::{BlockRecord, CaseRecord};
 
 /// Pixel size of one panel.
 const PANEL: (u32, u32) = (640, 460);
@@ -95,9 +95,9 @@ fn beta_label(r: &CaseRecord) -> String {
         ("auto", Some(b)) => format!(
             "auto {}: β = {}",
             r.selection,
-            crate::compare::results::short(b)
+            structid_workflow::compare::results::short(b)
         ),
-        (_, Some(b)) => format!("β = {}", crate::compare::results::short(b)),
+        (_, Some(b)) => format!("β = {}", structid_workflow::compare::results::short(b)),
         (s, None) => format!("β = {s}"),
     }
 }
@@ -274,7 +274,7 @@ pub fn write_figures(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::compare::results::{CASE_FORMAT, GridRecord, Values};
+    use structid_workflow::compare::results::{CASE_FORMAT, GridRecord, Values};
 
     fn rec(index: usize, disp: &str, beta: &str, seed: u64, level: f64, ok: bool) -> CaseRecord {
         let z: Vec<f64> = (0..21).map(|i| -1.0 + 0.1 * i as f64).collect();

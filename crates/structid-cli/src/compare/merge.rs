@@ -7,8 +7,10 @@ use std::path::{Path, PathBuf};
 use structid_io::OutputGuard;
 
 use crate::compare::figures::write_figures;
-use crate::compare::results::{CASE_FORMAT, CASES_DIR, CaseRecord, case_files, write_tables};
 use crate::error::CliError;
+use structid_workflow::compare::results::{
+    CASE_FORMAT, CASES_DIR, CaseRecord, case_files, write_tables,
+};
 
 /// Runs `structid compare merge DIR... --out OUT`.
 pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(), CliError> {

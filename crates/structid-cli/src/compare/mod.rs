@@ -7,17 +7,15 @@
 //!
 //! The configuration ([`structid_io::sweep_file`]) lists experiments (a model file with
 //! measured or simulated data) and dispersions (a kind, its parameters and β values); every
-//! combination, with every seed of a simulated experiment, is a case ([`cases`]). Cases run in
-//! parallel ([`mod@run`]); each writes `DIR/cases/<id>.json` as soon as it finishes, and the tables
-//! `results.csv`/`results.md` ([`results`]) are rebuilt from the case files after each case.
+//! combination, with every seed of a simulated experiment, is a case
+//! ([`structid_workflow::compare`]). Cases run in parallel ([`mod@run`]); each writes
+//! `DIR/cases/<id>.json` as soon as it finishes, and the tables `results.csv`/`results.md` are
+//! rebuilt from the case files after each case.
 //! The figures ([`figures`]) follow at the end. `merge` combines the case files of shard
 //! directories and rebuilds the same tables and figures.
 
-pub mod cases;
-pub mod config;
 pub mod figures;
 pub mod merge;
-pub mod results;
 pub mod run;
 
 use std::path::PathBuf;
@@ -25,7 +23,7 @@ use std::path::PathBuf;
 use clap::{Args, Subcommand};
 
 use crate::error::CliError;
-use cases::Shard;
+use structid_workflow::compare::cases::Shard;
 
 /// Arguments of `structid compare`.
 #[derive(Debug, Args)]

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use structid_io::{OutputGuard, format_number};
 
-use crate::error::CliError;
+use crate::error::{Result, WorkflowError};
 use structid_core::selection::Trial;
 
 /// Identifies case files of this version.
@@ -25,13 +25,13 @@ pub const CASES_DIR: &str = "cases";
 pub struct Values(pub Vec<f64>);
 
 impl Serialize for Values {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         s.collect_seq(self.0.iter().map(|v| v.is_finite().then_some(*v)))
     }
 }
 
 impl<'de> Deserialize<'de> for Values {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
         let v: Vec<Option<f64>> = Vec::deserialize(d)?;
         Ok(Values(
             v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect(),
@@ -152,10 +152,10 @@ impl CaseRecord {
     }
 
     /// The JSON of the case file.
-    pub fn to_json(&self) -> Result<String, CliError> {
+    pub fn to_json(&self) -> Result<String> {
         serde_json::to_string_pretty(self)
             .map(|s| s + "\n")
-            .map_err(|e| CliError::runtime(format!("cannot serialise a case: {e}")))
+            .map_err(|e| WorkflowError::Failed(format!("cannot serialise a case: {e}")))
     }
 
     /// The JSON without the run time, for comparing two runs of the same case.
@@ -175,13 +175,13 @@ pub fn read_case(path: &Path) -> Option<CaseRecord> {
 }
 
 /// The `*.json` files of `dir/cases`, sorted by name.
-pub fn case_files(dir: &Path) -> Result<Vec<PathBuf>, CliError> {
+pub fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let cases = dir.join(CASES_DIR);
     if !cases.is_dir() {
         return Ok(Vec::new());
     }
     let entries = std::fs::read_dir(&cases)
-        .map_err(|e| CliError::runtime(format!("cannot list `{}`: {e}", cases.display())))?;
+        .map_err(|e| WorkflowError::Failed(format!("cannot list `{}`: {e}", cases.display())))?;
     let mut out: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
@@ -372,10 +372,10 @@ fn columns(records: &[&CaseRecord]) -> Vec<Column> {
 }
 
 /// `results.csv`: one row per case in case-list order.
-pub fn results_csv(records: &[&CaseRecord]) -> Result<Vec<u8>, CliError> {
+pub fn results_csv(records: &[&CaseRecord]) -> Result<Vec<u8>> {
     let cols = columns(records);
     let mut w = csv::Writer::from_writer(Vec::new());
-    let err = |e: csv::Error| CliError::runtime(format!("cannot format results.csv: {e}"));
+    let err = |e: csv::Error| WorkflowError::Failed(format!("cannot format results.csv: {e}"));
     w.write_record(cols.iter().map(|c| c.csv.as_str()))
         .map_err(err)?;
     for r in records {
@@ -383,7 +383,7 @@ pub fn results_csv(records: &[&CaseRecord]) -> Result<Vec<u8>, CliError> {
             .map_err(err)?;
     }
     w.into_inner()
-        .map_err(|e| CliError::runtime(format!("cannot format results.csv: {e}")))
+        .map_err(|e| WorkflowError::Failed(format!("cannot format results.csv: {e}")))
 }
 
 fn md_row(cells: impl IntoIterator<Item = String>) -> String {
@@ -550,7 +550,7 @@ pub fn write_tables(
     dir: &Path,
     records: &BTreeMap<usize, CaseRecord>,
     total_cases: usize,
-) -> Result<(), CliError> {
+) -> Result<()> {
     let recs: Vec<&CaseRecord> = records.values().collect();
     guard.write(&dir.join("results.csv"), &results_csv(&recs)?)?;
     guard.write(

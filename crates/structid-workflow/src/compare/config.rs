@@ -8,7 +8,7 @@ use structid_io::sweep_file::{ExperimentData, SweepExperiment, SweepPath};
 use structid_io::{DataTable, ModelFile, SweepFile, TruthSpec};
 
 use crate::compare::cases::Fnv;
-use crate::error::CliError;
+use crate::error::{Result, WorkflowError};
 
 /// A sweep ready to run: the configuration and its experiments with their files loaded.
 pub struct Sweep {
@@ -63,7 +63,7 @@ const VALIDATION_SEED_OFFSET: u64 = 0x5851_f42d_4c95_7f2d;
 impl Experiment {
     /// The estimation record and, when the experiment has one, the validation record. Simulated
     /// experiments are simulated here with noise seed `seed` (required for them).
-    pub fn records(&self, seed: Option<u64>) -> Result<(Data, Option<Data>), CliError> {
+    pub fn records(&self, seed: Option<u64>) -> Result<(Data, Option<Data>)> {
         match &self.data {
             Source::Measured {
                 estimation,
@@ -77,7 +77,7 @@ impl Experiment {
                 maps,
             } => {
                 let seed = seed.ok_or_else(|| {
-                    CliError::runtime(format!(
+                    WorkflowError::Failed(format!(
                         "experiment `{}` is simulated and needs a seed",
                         self.name
                     ))
@@ -109,7 +109,7 @@ fn simulate(
     u: &Signal,
     noise_std: f64,
     seed: u64,
-) -> Result<Data, CliError> {
+) -> Result<Data> {
     let maps: Vec<&dyn Interpolant> = maps.iter().map(|m| m.as_ref()).collect();
     let sim = mf.simulate(&maps, u, noise_std, seed)?;
     let data = Data::new(u.clone(), sim.y)?;
@@ -119,7 +119,7 @@ fn simulate(
     })
 }
 
-fn read_bytes(path: &Path, fp: &mut Fnv) -> Result<(), CliError> {
+fn read_bytes(path: &Path, fp: &mut Fnv) -> Result<()> {
     let bytes = std::fs::read(path).map_err(|source| structid_io::IoError::Read {
         path: path.to_path_buf(),
         source,
@@ -161,7 +161,7 @@ fn context(exp: &SweepExperiment, what: &str, p: &SweepPath) -> String {
 }
 
 /// Reads the sweep configuration at `path` and every file it names.
-pub fn load(path: &Path) -> Result<Sweep, CliError> {
+pub fn load(path: &Path) -> Result<Sweep> {
     let file = SweepFile::from_path(path)?;
     let mut inputs = vec![path.to_path_buf()];
     let mut experiments = Vec::with_capacity(file.experiments.len());
@@ -186,7 +186,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
         }
         let model_path = file.resolve(&exp.model);
         let mf = ModelFile::from_path(&model_path)
-            .map_err(|e| CliError::from(e).context(context(exp, "model", &exp.model)))?;
+            .map_err(|e| WorkflowError::from(e).context(context(exp, "model", &exp.model)))?;
         read_bytes(&model_path, &mut fp)?;
         inputs.push(model_path.clone());
         let base = model_path
@@ -204,11 +204,11 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
             .blocks
             .iter()
             .map(|b| b.truth_map())
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut read_table = |what: &str, p: &SweepPath| -> Result<DataTable, CliError> {
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let mut read_table = |what: &str, p: &SweepPath| -> Result<DataTable> {
             let full = file.resolve(p);
             let t = DataTable::read(&full)
-                .map_err(|e| CliError::from(e).context(context(exp, what, p)))?;
+                .map_err(|e| WorkflowError::from(e).context(context(exp, what, p)))?;
             read_bytes(&full, &mut fp)?;
             inputs.push(full);
             Ok(t)
@@ -220,13 +220,13 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
             } => {
                 let est = read_table("estimation data", estimation)?;
                 let est = mf.select_data(&est).map_err(|e| {
-                    CliError::from(e).context(context(exp, "estimation data", estimation))
+                    WorkflowError::from(e).context(context(exp, "estimation data", estimation))
                 })?;
                 let val = match validation {
                     Some(v) => {
                         let t = read_table("validation data", v)?;
                         Some(mf.select_data(&t).map_err(|e| {
-                            CliError::from(e).context(context(exp, "validation data", v))
+                            WorkflowError::from(e).context(context(exp, "validation data", v))
                         })?)
                     }
                     None => None,
@@ -238,7 +238,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
             }
             ExperimentData::Simulated(sim) => {
                 mf.evaluation_order().map_err(|e| {
-                    CliError::from(e).context(format!(
+                    WorkflowError::from(e).context(format!(
                         "experiment `{}` (line {}): cannot simulate `{}`",
                         exp.name,
                         sim.line,
@@ -253,7 +253,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
                     .map(|(b, _)| format!("`{}`", b.name))
                     .collect();
                 if !missing.is_empty() {
-                    return Err(CliError::input(format!(
+                    return Err(WorkflowError::Request(format!(
                         "experiment `{}` (line {}) is simulated, but block(s) {} of `{}` have no `truth`; \
                          simulation needs the true map of every block",
                         exp.name,
@@ -264,7 +264,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
                 }
                 let select_u = |t: DataTable, what: &str, p: &SweepPath| {
                     t.select(&mf.signals.u).map_err(|e| {
-                        CliError::from(e).context(format!(
+                        WorkflowError::from(e).context(format!(
                             "{}: reading the inputs named in [signals].u",
                             context(exp, what, p)
                         ))
@@ -281,7 +281,7 @@ pub fn load(path: &Path) -> Result<Sweep, CliError> {
                 };
                 let maps = mf
                     .truth_maps()?
-                    .ok_or_else(|| CliError::runtime("a block has no truth map"))?;
+                    .ok_or_else(|| WorkflowError::Failed("a block has no truth map".into()))?;
                 Source::Simulated {
                     input,
                     validation_input,
