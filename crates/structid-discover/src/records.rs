@@ -112,8 +112,9 @@ impl Simulated {
 ///
 /// A model beyond measurability (maps in series, a map of a latent signal) has no one-step
 /// predictor, which [`validate`] fits the initial state with; under free-run scoring it is
-/// simulated from rest instead, as the sensor site always is. Under windowed scoring, whose
-/// windows start from states fitted to the measured z, it is an error.
+/// simulated from rest instead, as the sensor site always is. Under windowed scoring its
+/// windows start from states fitted to z as [`Model::compute_z_with_maps`] gives it (the
+/// noise-free simulation's for an output-error model), or it is an error.
 pub fn simulate(
     model: &Model,
     maps: &[&dyn Interpolant],

@@ -361,7 +361,7 @@ impl BlockMap for GaussianFeatures {
     /// The map of a scalar input as an expression in `z0` (the syntax of
     /// [`structid_core::ExprMap`]): the sum of its kernels and its trend, exact to the
     /// printed digits, so that a written map keeps its fit and extrapolates with its trend.
-    /// `None` for a map of several inputs.
+    /// `None` for a map of several inputs or with a coefficient that is not finite.
     ///
     /// ```
     /// use structid_core::{ExprMap, Interpolant};
@@ -374,11 +374,12 @@ impl BlockMap for GaussianFeatures {
     /// }
     /// ```
     fn expression(&self) -> Option<String> {
-        if self.centres[0].len() != 1 {
-            return None;
-        }
         let s2 = self.sigma * self.sigma;
         let scale = (2.0 * std::f64::consts::PI * s2).powf(-0.5);
+        let finite = self.theta.iter().chain(&self.affine).all(|v| v.is_finite());
+        if self.centres[0].len() != 1 || !finite || !scale.is_finite() {
+            return None;
+        }
         let kernels = self.theta.iter().zip(&self.centres).map(|(t, c)| {
             // Plain decimals (the parser reads no exponent), and the square inside the
             // negation (a leading minus binds tighter than ^).

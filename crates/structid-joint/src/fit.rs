@@ -11,12 +11,12 @@
 //!
 //! so it never ends at a higher cost than it started from.
 //!
-//! Without the polish ([`JointSettingsBuilder::polish`]`(false)`) the multiple-shooting
-//! criterion itself is the fit's criterion, and the result is the start or the
-//! multiple-shooting result, whichever has the lower multiple-shooting cost. With a
-//! continuity weight of zero the segments are independent windows, each from its own fitted
-//! state: the criterion of a windowed simulation, for a plant whose free run drifts (an
-//! integrator) and whose single-shooting criterion therefore measures the drift, not the fit.
+//! With a continuity weight of zero (allowed only with segments and without the polish) the
+//! segments are independent windows, each from its own fitted state: the criterion of a
+//! windowed simulation, for a plant whose free run drifts (an integrator) and whose
+//! single-shooting criterion therefore measures the drift, not the fit. That criterion is
+//! then the fit's own, and the result is the start or the windows' fit, whichever has the
+//! lower cost by it.
 
 use structid_core::Data;
 use structid_linear::levenberg_marquardt::{
@@ -186,8 +186,8 @@ pub struct JointFit {
     pub model: JointModel,
     /// Each record's stacked initial state ξ₀ (see [`JointModel::stacked_state_len`]).
     pub initial_states: Vec<Vec<f64>>,
-    /// The single-shooting criterion C at the start (the multiple-shooting criterion without
-    /// the polish, see the [module docs](self)).
+    /// The single-shooting criterion C at the start (the criterion of independent windows
+    /// when the continuity weight is zero, see the [module docs](self)).
     pub initial_cost: f64,
     /// The same criterion at the end (never above `initial_cost`).
     pub cost: f64,
@@ -229,7 +229,7 @@ pub fn fit(
     let mut initial_cost = initial_cost;
     if let Some(len) = settings.segment_length {
         let (m, xi, stage) = run_stage(model, data, &starts, Some(len), settings)?;
-        if settings.polish {
+        if settings.continuity_weight > 0.0 {
             if let Some(c) = single_cost(&m, data, &xi)
                 && c < best.2
             {

@@ -489,8 +489,13 @@ pub(crate) fn measured_residual(
     // An output-error model with a latent z (a sensor map behind an actuator map) has its z
     // simulated from u, and is treated as maps in series are.
     let with_z;
+    let measurability = if data.z().is_none() {
+        Some(lft.measurability())
+    } else {
+        None
+    };
     let series = lft.matrices().dzw.iter().any(|v| *v != 0.0)
-        || (data.z().is_none() && lft.noise_free_z() && lft.measurability().is_err());
+        || (lft.noise_free_z() && matches!(measurability, Some(Err(_))));
     let data = match (initial_state, data.z()) {
         (InitialState::Estimate, None) if series => {
             return Err(Error::NotMeasurable {
@@ -507,7 +512,7 @@ pub(crate) fn measured_residual(
                 .with_z(model.compute_z_with_maps(data.u(), data.y(), maps)?)?;
             &with_z
         }
-        (InitialState::Estimate, None) if matches!(lft.measurability(), Ok(crate::ZSource::Dynamic { ref system }) if system.order() > 0) =>
+        (InitialState::Estimate, None) if matches!(measurability, Some(Ok(crate::ZSource::Dynamic { ref system })) if system.order() > 0) =>
         {
             with_z = data.clone().with_z(lft.compute_z(data.u(), data.y())?.0)?;
             &with_z

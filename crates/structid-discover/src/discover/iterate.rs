@@ -28,7 +28,8 @@ impl Default for EffectsSettings {
 }
 
 impl EffectsSettings {
-    /// At most `max_effects` steps (≥ 1).
+    /// At most `max_effects` adopted steps (≥ 1; a step that is run again after a second-block
+    /// row, or that is not adopted, does not count).
     ///
     /// ```
     /// use structid_discover::discover::EffectsSettings;
@@ -62,7 +63,7 @@ impl EffectsSettings {
         Ok(self)
     }
 
-    /// The most steps.
+    /// The most adopted steps.
     pub fn max_effects(&self) -> usize {
         self.max_effects
     }
@@ -94,7 +95,7 @@ pub enum StopReason {
         /// Validation RMS after / before the step.
         ratio: f64,
     },
-    /// [`EffectsSettings::max_effects`] steps were run.
+    /// [`EffectsSettings::max_effects`] steps were adopted.
     MaxEffects,
     /// The linear model was wrong ([`Verdict::LinearModel`]: the last step's block is a gain,
     /// or G with one more mode closes the gap); G is to be re-estimated before looking
@@ -128,7 +129,7 @@ impl StopReason {
                                         re-estimate it before looking further"
                 .into(),
             StopReason::MaxEffects => format!(
-                "{} effect(s) were looked for, the most allowed",
+                "{} effect(s) were found, the most allowed",
                 settings.max_effects
             ),
         }
@@ -229,9 +230,11 @@ impl Effects {
 /// the validation RMS of the adopted model by [`EffectsSettings::min_improvement`], the
 /// adopted map is replaced by its joint re-estimate and the step is run again from there.
 /// The same rows decide a step whose effect looks dynamic: if a static second block explains
-/// the direction dependence as well (it cuts the RMS of the static approximation by the
-/// same share), the step's static approximation is built on; otherwise the iteration stops
-/// at the dynamic effect.
+/// the direction dependence as well (it cuts the RMS of the static approximation, or of the
+/// model the step started from when that is lower, by the same share), the step's static
+/// approximation is built on; otherwise the iteration stops at the dynamic effect. A row was
+/// validated as a pair: when the next step does not find its second effect, the map goes back
+/// to what it was (a dynamic step is then not adopted) and the iteration stops.
 ///
 /// It stops when a step's verdict is "no missing effect", "unexplained" or "the linear model
 /// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented
@@ -254,6 +257,9 @@ pub fn discover_effects(
     let mut steps: Vec<Step> = Vec::new();
     let mut current = nominal.clone();
     let mut settings = settings.clone();
+    // The step whose map a second-block row replaced, until the next step confirms the row
+    // by adopting an effect: the row was validated as a pair, not its first map alone.
+    let mut unconfirmed: Option<usize> = None;
     let stop = loop {
         let d = discover(&current, est, val, &settings)?;
         settings.scoring = Some(d.scoring);
@@ -265,37 +271,53 @@ pub fn discover_effects(
             adopted: false,
             second_block: None,
         };
-        match judge(&step, effects) {
+        let verdict = judge(&step, effects);
+        if verdict.is_ok() {
+            unconfirmed = None;
+        } else if let Some(i) = unconfirmed.take() {
+            // The row's second effect was not found: back to the map as it was found.
+            let dynamic = steps[i].second_block.take().is_some()
+                && judge(&steps[i], effects) == Err(StopReason::Dynamic);
+            steps[i].adopted &= !dynamic;
+            steps.push(step);
+            break if dynamic {
+                StopReason::Dynamic
+            } else {
+                verdict.err().expect("not adopted")
+            };
+        }
+        match verdict {
             Ok(()) => step.adopted = true,
             Err(StopReason::Dynamic) if more => {
                 // Is the direction dependence a second, static effect?
                 let f = step.discovery.finding.as_ref().expect("a dynamic finding");
-                step.second_block = best_second_block(&current, f, est, val, &settings, effects);
+                let reference = f
+                    .augmented
+                    .validation_gap
+                    .rms
+                    .min(step.discovery.validation_gap.rms);
+                step.second_block =
+                    best_second_block(&current, f, reference, est, val, &settings, effects);
                 step.adopted = step.second_block.is_some();
                 if !step.adopted {
                     steps.push(step);
                     break StopReason::Dynamic;
                 }
+                unconfirmed = Some(steps.len());
             }
             Err(reason) => {
                 // Did the last adopted map hide the next effect?
-                let last = steps.iter_mut().rev().find(|s| s.adopted);
-                let retry = last.filter(|s| s.second_block.is_none()).and_then(|last| {
-                    let f = last.discovery.finding.as_ref()?;
-                    let row = best_second_block(&last.nominal, f, est, val, &settings, effects)?;
-                    last.second_block = Some(row);
-                    match last.adopted_finding()?.augmented.as_nominal(&last.nominal) {
-                        Ok(next) => Some(next),
-                        Err(_) => {
-                            // Not built on: not recorded as adopted either.
-                            last.second_block = None;
-                            None
-                        }
-                    }
+                let last = steps
+                    .iter()
+                    .rposition(|s| s.adopted && s.second_block.is_none());
+                let retry = last.and_then(|i| {
+                    retry_with_second_block(&mut steps[i], est, val, &settings, effects)
+                        .map(|next| (i, next))
                 });
                 steps.push(step);
                 match retry {
-                    Some(next) => {
+                    Some((i, next)) => {
+                        unconfirmed = Some(i);
                         current = next;
                         continue;
                     }
@@ -344,17 +366,38 @@ fn judge(step: &Step, effects: &EffectsSettings) -> std::result::Result<(), Stop
     }
 }
 
+/// Sets the second-block row of an adopted step that hid the next effect, when one beats it,
+/// and returns the nominal model the step is run again from (the step's map replaced by the
+/// row's first map).
+fn retry_with_second_block(
+    last: &mut Step,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Option<Nominal> {
+    let f = last.discovery.finding.as_ref()?;
+    let reference = f.augmented.validation_gap.rms;
+    let row = best_second_block(&last.nominal, f, reference, est, val, settings, effects)?;
+    last.second_block = Some(row);
+    let next = last.adopted_finding()?.augmented.as_nominal(&last.nominal);
+    if next.is_err() {
+        last.second_block = None;
+    }
+    next.ok()
+}
+
 /// The second-block row of `first` (found on `nominal`) with the lowest validation RMS, when
-/// it cuts the validation RMS of `first`'s augmented model by the required share.
+/// it cuts `reference` (the validation RMS of the model to improve on) by the required share.
 fn best_second_block(
     nominal: &Nominal,
     first: &Finding,
+    reference: f64,
     est: &Data,
     val: &Data,
     settings: &DiscoverSettings,
     effects: &EffectsSettings,
 ) -> Option<SecondBlock> {
-    let reference = first.augmented.validation_gap.rms;
     second_blocks(nominal, first, est, val, settings)
         .into_iter()
         .filter(|r| r.validation_rms <= (1.0 - effects.min_improvement) * reference)

@@ -178,7 +178,7 @@ pub use linear_rival::LinearRival;
 pub use model::{Augmented, AugmentedMap, Classification, HypothesisResult, MapCurve};
 pub use naming::parsimonious;
 pub use noise::SMALLER_RATIO;
-pub use second_block::SecondBlock;
+pub use second_block::{SecondBlock, second_blocks};
 pub use settings::{DiscoverSettings, DiscoverSettingsBuilder};
 pub use stationarity::{MIN_SEGMENT_SAMPLES, MIN_SEGMENTS, SEGMENTS, Stationarity, segment_count};
 pub use verdict::POOR_MODEL_R2;

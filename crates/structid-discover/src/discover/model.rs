@@ -107,7 +107,8 @@ impl Classification {
 /// The map the augmented model carries.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub enum AugmentedMap {
-    /// A named family: its expression in `z0` (model-file `truth` syntax).
+    /// A map in closed form, its expression in `z0` (model-file `truth` syntax): a named
+    /// family, or a kernel expansion written exactly (a second-block row's).
     Expression(String),
     /// The nonparametric estimate sampled on a grid (piecewise linear, edge values held).
     Table {

@@ -23,7 +23,6 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use structid_core::validation::Scoring;
-use structid_core::validation::windows::simulate_scored;
 use structid_core::{Data, Interpolant, LookupTable, PolynomialDispersion};
 use structid_joint::{
     BlockMap, FixedMap, GaussianFeatures, JointBlock, JointModel, JointSettings, fit,
@@ -84,10 +83,26 @@ const DISPERSION_SHARE: f64 = 1e-6;
 const ITERATIONS: usize = 30;
 
 /// The second-block rows: for each site of `nominal` other than the first finding's, the
-/// first block's map and a map at that site fitted jointly on `est` and scored on `val`.
-/// `nominal` is the model the first finding was found on; `settings.scoring` must be
-/// resolved. Rows whose model cannot be built or fitted are left out.
-pub(super) fn second_blocks(
+/// first block's map and a map at that site fitted together on `est` and scored on `val` (see
+/// the [module docs](self)). `nominal` is the model the first finding was found on, and
+/// `settings` those it was found with, their scoring resolved ([`super::Discovery::scoring`]).
+/// Rows whose model cannot be built or fitted are left out.
+///
+/// ```no_run
+/// # use structid_core::Data;
+/// # use structid_discover::discover::{DiscoverSettings, discover, second_blocks};
+/// # use structid_discover::hypotheses::Nominal;
+/// # fn rows(nominal: &Nominal, est: &Data, val: &Data) {
+/// let d = discover(nominal, est, val, &DiscoverSettings::default()).unwrap();
+/// let settings = DiscoverSettings::builder().scoring(d.scoring).build().unwrap();
+/// if let Some(first) = &d.finding {
+///     for row in second_blocks(nominal, first, est, val, &settings) {
+///         println!("{:?} + {:?}: {}", row.first_location, row.site, row.validation_rms);
+///     }
+/// }
+/// # }
+/// ```
+pub fn second_blocks(
     nominal: &Nominal,
     first: &Finding,
     est: &Data,
@@ -124,9 +139,11 @@ fn second_block(
     ];
     let mut best: Option<SecondBlock> = None;
     for (first_map, second_map) in pairs.into_iter().flatten().flatten() {
-        let row = scored(
+        let Some(row) = scored(
             nominal, first, site, first_map, second_map, est, val, settings,
-        )?;
+        ) else {
+            continue;
+        };
         if best
             .as_ref()
             .is_none_or(|b| row.validation_rms < b.validation_rms)
@@ -258,48 +275,12 @@ fn scored(
     Some(SecondBlock {
         first_location: first.location,
         site,
-        estimation_rms: scored_rms(&h, second.as_ref(), est, settings),
-        validation_rms: scored_rms(&h, second.as_ref(), val, settings),
+        estimation_rms: simulation_rms(&h, second.as_ref(), est, settings),
+        validation_rms: simulation_rms(&h, second.as_ref(), val, settings),
         first_map,
         second_map,
         seconds: 0.0,
     })
-}
-
-/// The simulation RMS of `h` with `second` in its unknown block on `data`, scored as every
-/// simulation of the workflow. A pair of maps beyond measurability (a sensor map behind an
-/// actuator map: maps in series) has no one-step predictor to fit its initial state from;
-/// under free-run scoring it is scored by its free run from rest, as the sensor site always
-/// is. Infinite when the simulation fails or diverges.
-fn scored_rms(
-    h: &Hypothesis,
-    second: &dyn Interpolant,
-    data: &Data,
-    settings: &DiscoverSettings,
-) -> f64 {
-    let rms = simulation_rms(h, second, data, settings);
-    if rms.is_finite() || !matches!(settings.scoring, None | Some(Scoring::Free)) {
-        return rms;
-    }
-    let maps = h.maps(second);
-    let (mut sum, mut count) = (0.0, 0usize);
-    for record in data.records() {
-        let Ok(sim) = simulate_scored(
-            &h.model,
-            &maps,
-            &record,
-            Scoring::Free,
-            None,
-            settings.settle,
-        ) else {
-            return f64::INFINITY;
-        };
-        let r = sim.scored_residual(record.y(), 0);
-        sum += r.iter().map(|v| v * v).sum::<f64>();
-        count += r.len();
-    }
-    let rms = (sum / count.max(1) as f64).sqrt();
-    if rms.is_finite() { rms } else { f64::INFINITY }
 }
 
 /// The dispersion of a hypothesis built only for its structure.
@@ -377,26 +358,29 @@ fn neutral(site: Site) -> f64 {
 /// The range of the second block's z on `est`: measured for the input and the feedback
 /// sites, else from a simulation of the hypothesis with the block neutral.
 fn second_range(h: &Hypothesis, est: &Data) -> Option<(f64, f64)> {
-    let z = match h.location {
-        Site::Input => est.u().channel(0),
-        Site::OutputFeedback => est.y().channel(0),
-        Site::RateFeedback => {
-            let y = est.y().channel(0);
-            y.windows(2)
-                .map(|p| (p[1] - p[0]) / h.sample_time)
-                .collect()
-        }
-        Site::Output | Site::Declared { .. } => {
-            let slope = neutral(h.location);
-            let neutral = move |z: &[f64]| slope * z[0];
-            let neutral: &dyn Interpolant = &neutral;
-            let sim = h
-                .model
-                .simulate(&h.maps(neutral), est.u(), None, None)
-                .ok()?;
-            sim.z.channel(0)
-        }
-    };
+    // Record by record: no difference or simulation runs across a record boundary.
+    let z = crate::records::stacked(est, |r| {
+        Ok(match h.location {
+            Site::Input => r.u().channel(0),
+            Site::OutputFeedback => r.y().channel(0),
+            Site::RateFeedback => {
+                let y = r.y().channel(0);
+                y.windows(2)
+                    .map(|p| (p[1] - p[0]) / h.sample_time)
+                    .collect()
+            }
+            Site::Output | Site::Declared { .. } => {
+                let slope = neutral(h.location);
+                let neutral = move |z: &[f64]| slope * z[0];
+                let neutral: &dyn Interpolant = &neutral;
+                h.model
+                    .simulate(&h.maps(neutral), r.u(), None, None)?
+                    .z
+                    .channel(0)
+            }
+        })
+    })
+    .ok()?;
     Some(super::fit::minmax(&z))
 }
 

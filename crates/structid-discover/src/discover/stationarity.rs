@@ -183,31 +183,43 @@ fn trend_statistic(fits: &[(EffectFit, f64)], name: &str) -> Option<f64> {
 /// |t| of the trend of the estimates (value, standard error), in time order (see the [module
 /// documentation](self)); `None` when a standard error is not finite or the variance is 0.
 fn trend_of(estimates: &[(f64, f64)]) -> Option<f64> {
+    let at: Vec<(f64, f64, f64)> = estimates
+        .iter()
+        .enumerate()
+        .map(|(i, &(v, se))| (i as f64, v, se))
+        .collect();
+    trend_at(&at)
+}
+
+/// [`trend_of`] for estimates (position, value, standard error) at the given positions in
+/// time: the segments that could be estimated, when others could not.
+fn trend_at(estimates: &[(f64, f64, f64)]) -> Option<f64> {
     let s = estimates.len();
     if s < 3
         || estimates
             .iter()
-            .any(|(v, se)| !v.is_finite() || !se.is_finite())
+            .any(|(_, v, se)| !v.is_finite() || !se.is_finite())
     {
         return None;
     }
-    let se2 = estimates.iter().map(|(_, se)| se * se).sum::<f64>() / s as f64;
-    let t: Vec<f64> = (0..s).map(|i| i as f64 - 0.5 * (s - 1) as f64).collect();
+    let se2 = estimates.iter().map(|(_, _, se)| se * se).sum::<f64>() / s as f64;
+    let centre = estimates.iter().map(|(t, _, _)| t).sum::<f64>() / s as f64;
+    let t: Vec<f64> = estimates.iter().map(|(t, _, _)| t - centre).collect();
     let tt: f64 = t.iter().map(|v| v * v).sum();
-    let mean = estimates.iter().map(|(v, _)| v).sum::<f64>() / s as f64;
+    let mean = estimates.iter().map(|(_, v, _)| v).sum::<f64>() / s as f64;
     let slope = t
         .iter()
         .zip(estimates)
-        .map(|(t, (v, _))| t * v)
+        .map(|(t, (_, v, _))| t * v)
         .sum::<f64>()
         / tt;
     let rss: f64 = t
         .iter()
         .zip(estimates)
-        .map(|(t, (v, _))| (v - mean - slope * t).powi(2))
+        .map(|(t, (_, v, _))| (v - mean - slope * t).powi(2))
         .sum();
     let variance = (rss / (s - 2) as f64).max(se2);
-    if variance > 0.0 {
+    if variance > 0.0 && tt > 0.0 {
         Some(slope.abs() / (variance / tt).sqrt())
     } else {
         None
@@ -331,7 +343,8 @@ const PROBES: [Site; 2] = [Site::Input, Site::Output];
 /// augmented model M of `finding`, with every map it found held as fitted, and a gain a at
 /// its input (y ≈ M(a·u)) or its output (y ≈ a·M(u)) refined by its simulation error on
 /// each of [`segment_count`] consecutive segments, and the trend of a tested as in
-/// [`stationarity`] (one Bonferroni share per site). The most significant drift, with the
+/// [`stationarity`] (one Bonferroni share per site). A segment whose simulation fails is left
+/// out, the trend fitted at the places of the others (at least [`MIN_SEGMENTS`]). The most significant drift, with the
 /// gain refined on the whole record, or `None` when no gain drifts.
 ///
 /// The probe scales the signals M reads and writes, so it is a model whatever M holds at its
@@ -351,16 +364,23 @@ pub(super) fn drifting_gain(
     let parts = est.segments(segment_count(est)).ok()?;
     let mut best: Option<Stationarity> = None;
     for site in PROBES {
-        let Some(fits) = parts
+        // A segment on which the gain cannot be refined (its simulation fails) is left out;
+        // the trend is fitted at the others' places, and needs MIN_SEGMENTS of them.
+        let at: Vec<(f64, f64, f64)> = parts
             .iter()
-            .map(|part| series_gain(&h, map.as_ref(), part, site, settings))
-            .collect::<Option<Vec<(f64, f64)>>>()
-        else {
+            .enumerate()
+            .filter_map(|(i, part)| {
+                let (a, se) = series_gain(&h, map.as_ref(), part, site, settings)?;
+                Some((i as f64, a, se))
+            })
+            .collect();
+        if at.len() < MIN_SEGMENTS {
+            continue;
+        }
+        let Some(statistic) = trend_at(&at) else {
             continue;
         };
-        let Some(statistic) = trend_of(&fits) else {
-            continue;
-        };
+        let fits: Vec<(f64, f64)> = at.iter().map(|&(_, a, se)| (a, se)).collect();
         let critical = critical_value(settings.significance, PROBES.len(), fits.len(), families);
         let check = Stationarity {
             segments: fits.iter().map(|&(a, se)| gain_fit(a, se)).collect(),
@@ -590,6 +610,30 @@ mod tests {
             .map(|&i| values[i])
             .collect();
         assert!(trend_of(&shuffled).unwrap() < critical);
+    }
+
+    /// With a segment left out, the trend is the least-squares slope at the places of the
+    /// others, its standard error from those places: the closed form on the positions
+    /// 0, 1, 3, 4, 5 of a gain falling by 0.02 a segment, each known to ±0.01.
+    #[test]
+    fn a_trend_at_the_places_of_the_segments_that_remain() {
+        let places = [0.0, 1.0, 3.0, 4.0, 5.0];
+        let at: Vec<(f64, f64, f64)> = places.iter().map(|&t| (t, 1.0 - 0.02 * t, 0.01)).collect();
+        let centre = places.iter().sum::<f64>() / 5.0;
+        let tt: f64 = places.iter().map(|t| (t - centre).powi(2)).sum();
+        let expected = 0.02 / (0.01 / tt.sqrt());
+        let t = trend_at(&at).unwrap();
+        assert!((t - expected).abs() < 1e-9 * expected, "{t} {expected}");
+        // Equally spaced places are trend_of's.
+        let even: Vec<(f64, f64)> = (0..5).map(|i| (1.0 - 0.02 * i as f64, 0.01)).collect();
+        let on_places: Vec<(f64, f64, f64)> = even
+            .iter()
+            .enumerate()
+            .map(|(i, &(v, se))| (i as f64, v, se))
+            .collect();
+        assert_eq!(trend_of(&even), trend_at(&on_places));
+        // One place only repeated: no trend can be fitted.
+        assert_eq!(trend_at(&[(2.0, 1.0, 0.01); 4]), None);
     }
 
     #[test]

@@ -251,7 +251,9 @@ pub fn run_case(ctx: &Context<'_>, case: &Case) -> CaseRecord {
     }));
     match outcome {
         Ok(Ok(())) => {}
-        Ok(Err(e)) => rec.status = format!("error: {}", one_line(&e)),
+        Ok(Err(e)) => {
+            rec.status = format!("error: {}", one_line(&structid_io::ErrorChain(&e)));
+        }
         Err(payload) => {
             let msg = payload
                 .downcast_ref::<&str>()

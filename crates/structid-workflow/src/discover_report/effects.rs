@@ -2,6 +2,15 @@
 
 use super::*;
 
+/// A second-block row's map in report.json: its expression, or the number of points of its
+/// table (the table itself is in the model file the step's successor writes).
+fn map_json(map: &AugmentedMap) -> Value {
+    match map {
+        AugmentedMap::Expression(x) => json!({ "expression": x }),
+        AugmentedMap::Table { z, .. } => json!({ "points": z.len() }),
+    }
+}
+
 /// The second-block row of a step in a few words, empty without one.
 fn second_block_text(step: &structid_discover::discover::Step) -> String {
     match &step.second_block {
@@ -117,8 +126,8 @@ pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
                     "site": step.nominal.key(row.site),
                     "estimation_rms": row.estimation_rms,
                     "validation_rms": row.validation_rms,
-                    "first_map": row.first_map,
-                    "second_map": row.second_map,
+                    "first_map": map_json(&row.first_map),
+                    "second_map": map_json(&row.second_map),
                     "seconds": row.seconds,
                 })),
                 "seconds": d.seconds,
