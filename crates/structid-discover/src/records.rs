@@ -83,6 +83,18 @@ pub struct Simulated {
 }
 
 impl Simulated {
+    /// Nothing simulated yet of `data`: its measured output, no scored sample.
+    fn of(data: &Data) -> Self {
+        Self {
+            simulated: Vec::with_capacity(data.len()),
+            measured: data.y().channel(0),
+            scored: Vec::new(),
+            rms: f64::NAN,
+            fit_percent: f64::NAN,
+            records: Vec::new(),
+        }
+    }
+
     /// The residual y − ŷ at the scored samples, record after record.
     pub fn scored_residual(&self) -> Vec<f64> {
         self.scored
@@ -122,14 +134,7 @@ pub fn simulate(
     settings: &ValidationSettings,
 ) -> Result<Simulated> {
     let bounds = data.record_bounds();
-    let mut out = Simulated {
-        simulated: Vec::with_capacity(data.len()),
-        measured: data.y().channel(0),
-        scored: Vec::new(),
-        rms: f64::NAN,
-        fit_percent: f64::NAN,
-        records: Vec::new(),
-    };
+    let mut out = Simulated::of(data);
     let all = match validate_records(model, maps, data, settings) {
         Err(e) if beyond_measurability(&e) && settings.scoring() == Scoring::Free => {
             return from_rest(model, maps, data, settings.settle());
@@ -171,14 +176,7 @@ fn from_rest(
     data: &Data,
     settle: usize,
 ) -> Result<Simulated> {
-    let mut out = Simulated {
-        simulated: Vec::with_capacity(data.len()),
-        measured: data.y().channel(0),
-        scored: Vec::new(),
-        rms: f64::NAN,
-        fit_percent: f64::NAN,
-        records: Vec::new(),
-    };
+    let mut out = Simulated::of(data);
     let mut pooled = Vec::new();
     for (r, (record, start)) in data.records().iter().zip(data.record_bounds()).enumerate() {
         let sim = simulate_scored(model, maps, record, Scoring::Free, None, settle)
