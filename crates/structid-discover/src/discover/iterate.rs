@@ -283,7 +283,7 @@ pub fn discover_effects(
             break if dynamic {
                 StopReason::Dynamic
             } else {
-                verdict.err().expect("not adopted")
+                verdict.expect_err("not adopted")
             };
         }
         match verdict {

@@ -127,6 +127,12 @@ impl FromStr for Shard {
 #[derive(Clone, Debug)]
 pub struct Fnv(u64);
 
+impl Default for Fnv {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Fnv {
     /// The empty hash.
     pub fn new() -> Self {
