@@ -229,7 +229,7 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
             Chart::new(
                 format!(
                     "β = {} (RMS f {:.3}, g {:.3})",
-                    structid_workflow::compare::results::short(r.beta),
+                    structid_workflow::text::short(r.beta),
                     r.rms_f,
                     r.rms_g
                 ),

@@ -554,7 +554,7 @@ fn summary(report: &Report, id: &Identification, written: &[PathBuf], seconds: f
         "identified {} block(s) from {} samples with β = {} ({} solver, {:.2} s)",
         id.blocks.len(),
         report.samples,
-        structid_workflow::compare::results::short(report.settings.beta),
+        structid_workflow::text::short(report.settings.beta),
         d.solver,
         seconds
     );

@@ -449,7 +449,7 @@ fn summary(r: &structid_core::refine::Refinement, written: &[PathBuf], seconds: 
         r.iterations.len(),
         r.best,
         r.stop_reason,
-        structid_workflow::compare::results::short(r.beta)
+        structid_workflow::text::short(r.beta)
     );
     let _ = writeln!(
         s,

@@ -19,6 +19,7 @@
 //! | [`free`] | the free entries of G, as the CLI and Python name them (`A`, `Bw[1][0]`) |
 //! | [`compare`] | comparison sweeps of dispersions, β values and noise seeds: the cases, each case's identification and scores, and the tables of their results (`structid compare`) |
 //! | [`grid`] | grids over a signal's range, on which maps are evaluated for tables and figures |
+//! | [`text`] | numbers as the reports and summaries print them (β with four significant digits) |
 
 pub mod compare;
 pub mod discover;
@@ -34,6 +35,7 @@ pub mod options;
 pub mod refine;
 pub mod remedy;
 pub mod simulation_score;
+pub mod text;
 pub mod wiener_hammerstein;
 
 pub use discover::{

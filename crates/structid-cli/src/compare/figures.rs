@@ -95,9 +95,9 @@ fn beta_label(r: &CaseRecord) -> String {
         ("auto", Some(b)) => format!(
             "auto {}: β = {}",
             r.selection,
-            structid_workflow::compare::results::short(b)
+            structid_workflow::text::short(b)
         ),
-        (_, Some(b)) => format!("β = {}", structid_workflow::compare::results::short(b)),
+        (_, Some(b)) => format!("β = {}", structid_workflow::text::short(b)),
         (s, None) => format!("β = {s}"),
     }
 }

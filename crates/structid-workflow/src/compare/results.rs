@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use structid_io::{OutputGuard, format_number};
 
 use crate::error::{Result, WorkflowError};
+use crate::text::short;
 use structid_core::selection::Trial;
 
 /// Identifies case files of this version.
@@ -222,32 +223,6 @@ impl Cell {
             Cell::Number(Some(v)) => short(*v),
             Cell::Number(None) => String::new(),
             Cell::Seconds(s) => format!("{s:.3}"),
-        }
-    }
-}
-
-/// Four significant digits, scientific notation outside [10⁻³, 10⁵).
-pub fn short(v: f64) -> String {
-    if !v.is_finite() {
-        return v.to_string();
-    }
-    if v == 0.0 {
-        return "0".into();
-    }
-    let a = v.abs();
-    if !(1e-3..1e5).contains(&a) {
-        let s = format!("{v:.3e}");
-        match s.split_once('e') {
-            Some((m, e)) => format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.')),
-            None => s,
-        }
-    } else {
-        let decimals = (3.0 - a.log10().floor()).clamp(0.0, 6.0) as usize;
-        let s = format!("{v:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
         }
     }
 }
