@@ -489,13 +489,16 @@ pub(crate) fn measured_residual(
     // An output-error model with a latent z (a sensor map behind an actuator map) has its z
     // simulated from u, and is treated as maps in series are.
     let with_z;
-    let measurability = if data.z().is_none() {
+    // Needed only where z is not given and either the output-error case or an estimated
+    // initial state asks how z is computed: computed once, and only then.
+    let dzw_zero = lft.matrices().dzw.iter().all(|v| *v == 0.0);
+    let asks = (dzw_zero && lft.noise_free_z()) || initial_state == InitialState::Estimate;
+    let measurability = if data.z().is_none() && asks {
         Some(lft.measurability())
     } else {
         None
     };
-    let series = lft.matrices().dzw.iter().any(|v| *v != 0.0)
-        || (lft.noise_free_z() && matches!(measurability, Some(Err(_))));
+    let series = !dzw_zero || (lft.noise_free_z() && matches!(measurability, Some(Err(_))));
     let data = match (initial_state, data.z()) {
         (InitialState::Estimate, None) if series => {
             return Err(Error::NotMeasurable {
