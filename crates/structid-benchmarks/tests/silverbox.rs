@@ -76,12 +76,13 @@ fn the_joint_fit_by_simulation_error_improves_every_test_split() {
         assert_eq!(split, &t.split);
         assert!(*rms < t.rms, "{split}: {rms} ≥ {}", t.rms);
     }
-    // The goals are 0.30 / 0.25 / 0.30 mV; measured 0.298 / 0.248 / 0.313 mV. The
-    // bounds leave room for the last bits of a parallel solve, which move a 30-iteration fit.
+    // The goals are 0.30 / 0.25 / 0.30 mV; measured 0.298 / 0.248 / 0.259 mV. The
+    // arrow's bounds leave room for the last bits of a parallel solve, which move a
+    // 30-iteration fit.
     for (split, bound) in [
         ("test-arrow-full", 0.31e-3),
         ("test-arrow-no-extrapolation", 0.26e-3),
-        ("test-multisine", 0.33e-3),
+        ("test-multisine", 0.30e-3),
     ] {
         let rms = j.tests.iter().find(|t| t.0 == split).unwrap().1;
         assert!(rms < bound, "{split}: {:.4} mV", 1e3 * rms);

@@ -197,6 +197,45 @@ pub struct JointFit {
     pub stages: Vec<Stage>,
 }
 
+/// The stacked initial state ξ₀ = [x₀; s₀] of each record of `data` that best explains it by
+/// simulation, with every parameter of `model` held ([`JointModel::held`]): how a fitted
+/// model is started on a new record whose first samples may be used to settle its state (a
+/// test window that opens in the middle of an excitation). The fit is the single-shooting
+/// Levenberg–Marquardt of [`fit`](crate::fit()) with `settings`' iterations and tolerance,
+/// from rest.
+///
+/// ```
+/// use nalgebra::dmatrix;
+/// use structid_core::{Data, Lft, LftMatrices, Signal};
+/// use structid_joint::{FixedMap, JointBlock, JointModel, JointSettings, fit_initial_state};
+/// let lft = Lft::new(LftMatrices {
+///     a: dmatrix![0.9], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![1.0],
+///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![0.0],
+///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+/// }).unwrap();
+/// let n = FixedMap::new(std::sync::Arc::new(|z: &[f64]| z[0].tanh()), 1);
+/// let model = JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, Box::new(n))]).unwrap();
+/// let u = Signal::from_fn(50, 1, |k, _| (0.3 * k as f64).sin());
+/// let y = model.simulate(&u, Some(&[2.0])).unwrap().y;
+/// let x0 = fit_initial_state(&model, &Data::new(u, y).unwrap(), &JointSettings::default()).unwrap();
+/// assert!((x0[0][0] - 2.0).abs() < 1e-6);
+/// ```
+///
+/// # Errors
+/// Those of [`fit`](crate::fit()).
+pub fn fit_initial_state(
+    model: &JointModel,
+    data: &Data,
+    settings: &JointSettings,
+) -> Result<Vec<Vec<f64>>> {
+    let settings = JointSettings {
+        segment_length: None,
+        estimate_initial_state: true,
+        ..settings.clone()
+    };
+    Ok(fit(&model.held(), data, None, &settings)?.initial_states)
+}
+
 /// Fits `model` to `data` (one or several records) by its simulation error; `x0` optionally
 /// gives each record's starting LFT state (zero otherwise).
 ///

@@ -1,5 +1,6 @@
-//! A known static map inside a joint model: it takes part in simulation and in the
-//! sensitivities, and has no parameters.
+//! Blocks without free parameters inside a joint model: a known static map ([`FixedMap`]),
+//! and a parametrised block whose parameters are held where they are ([`HeldMap`]). Both
+//! take part in simulation and in the sensitivities.
 
 use std::sync::Arc;
 
@@ -76,6 +77,80 @@ impl BlockMap for FixedMap {
             jac.dw_dz[i] = (up - down) / (2.0 * h);
         }
         self.map.eval(z)
+    }
+
+    fn boxed(&self) -> Box<dyn BlockMap> {
+        Box::new(self.clone())
+    }
+}
+/// A parametrised block with its parameters held: it evaluates, and passes on its
+/// derivatives with respect to z and to its state, as the block does, and offers no parameter
+/// to a fit. [`JointModel::held`](crate::JointModel::held) holds every block of a model this
+/// way, so that a fit moves only the initial states.
+///
+/// ```
+/// use structid_joint::{BlockJacobian, BlockMap, GaussianFeatures, HeldMap};
+/// let map = GaussianFeatures::on_interval(-1.0, 1.0, 5, 0.5, 0.0).unwrap();
+/// let held = HeldMap::new(Box::new(map.clone()));
+/// assert!(held.parameters().is_empty());
+/// let (mut a, mut b) = (BlockJacobian::for_map(&held), BlockJacobian::for_map(&map));
+/// assert_eq!(held.eval_jacobian(&mut [], &[0.3], &mut a), map.eval_jacobian(&mut [], &[0.3], &mut b));
+/// assert_eq!(a.dw_dz, b.dw_dz);
+/// ```
+#[derive(Clone, Debug)]
+pub struct HeldMap {
+    block: Box<dyn BlockMap>,
+}
+
+impl HeldMap {
+    /// `block` with its current parameters held.
+    pub fn new(block: Box<dyn BlockMap>) -> Self {
+        Self { block }
+    }
+}
+
+impl BlockMap for HeldMap {
+    fn kind(&self) -> &'static str {
+        self.block.kind()
+    }
+
+    fn input_len(&self) -> usize {
+        self.block.input_len()
+    }
+
+    fn state_len(&self) -> usize {
+        self.block.state_len()
+    }
+
+    fn parameters(&self) -> Vec<f64> {
+        Vec::new()
+    }
+
+    fn with_parameters(&self, _p: &[f64]) -> Result<Box<dyn BlockMap>> {
+        Ok(Box::new(self.clone()))
+    }
+
+    fn initial_state(&self, z0: &[f64], state: &mut [f64]) {
+        self.block.initial_state(z0, state);
+    }
+
+    fn eval(&self, state: &mut [f64], z: &[f64]) -> f64 {
+        self.block.eval(state, z)
+    }
+
+    fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
+        // The block's own buffers hold its parameter derivatives, which are dropped.
+        let mut own = BlockJacobian::for_map(self.block.as_ref());
+        let w = self.block.eval_jacobian(state, z, &mut own);
+        jac.dw_dz.copy_from_slice(&own.dw_dz);
+        jac.dw_ds.copy_from_slice(&own.dw_ds);
+        jac.ds_ds.copy_from_slice(&own.ds_ds);
+        jac.ds_dz.copy_from_slice(&own.ds_dz);
+        w
+    }
+
+    fn expression(&self) -> Option<String> {
+        self.block.expression()
     }
 
     fn boxed(&self) -> Box<dyn BlockMap> {

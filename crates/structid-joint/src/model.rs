@@ -235,6 +235,26 @@ impl JointModel {
         Ok(self)
     }
 
+    /// The model with nothing free: every entry of G fixed and every block held at its
+    /// current parameters ([`crate::HeldMap`]). It simulates as `self` does, from the same
+    /// stacked initial states, and a fit of it moves only those states
+    /// ([`crate::fit_initial_state`]).
+    pub fn held(&self) -> Self {
+        Self {
+            lft: self.lft.clone(),
+            free: Vec::new(),
+            blocks: self
+                .blocks
+                .iter()
+                .map(|b| JointBlock {
+                    map: Box::new(crate::HeldMap::new(b.map.clone())),
+                    ..b.clone()
+                })
+                .collect(),
+            order: self.order.clone(),
+        }
+    }
+
     /// The LFT at the current parameters.
     pub fn lft(&self) -> &Lft {
         &self.lft

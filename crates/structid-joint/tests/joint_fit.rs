@@ -6,7 +6,9 @@ use proptest::prelude::*;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
 use structid_core::{Data, Lft, LftMatrices, MapBinding, Signal};
-use structid_joint::{GaussianFeatures, JointBlock, JointModel, JointSettings, LftMatrix, fit};
+use structid_joint::{
+    BlockMap, GaussianFeatures, JointBlock, JointModel, JointSettings, LftMatrix, fit,
+};
 
 fn noise(len: usize, std: f64, seed: u64) -> Vec<f64> {
     let mut rng = StdRng::seed_from_u64(seed);
@@ -567,5 +569,62 @@ fn a_hammerstein_wiener_model_is_fitted_from_its_best_linear_approximation() {
         let err = rms_modulo(&truth.w.channel(c), &sim.w.channel(c), true);
         println!("{name}: {:.2} % of its range", 100.0 * err);
         assert!(err < 0.10, "{name}: {err}");
+    }
+}
+
+/// x⁺ = A x + B_u u + B_w w, y = x₁, w = N(x₁) in feedback: a lightly damped second-order plant
+/// whose stiffness is a kernel expansion.
+fn resonant_model(damping: f64, map_scale: f64) -> JointModel {
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![1.0, 0.1; -0.3, 1.0 - damping],
+        bu: dmatrix![0.0; 0.1],
+        be: dmatrix![0.0; 0.0],
+        bw: dmatrix![0.0; -0.1],
+        cy: dmatrix![1.0, 0.0],
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![0.0],
+        cz: dmatrix![1.0, 0.0],
+        dzu: dmatrix![0.0],
+        dze: dmatrix![0.0],
+        dzw: dmatrix![0.0],
+    })
+    .unwrap();
+    let f = GaussianFeatures::on_interval(-2.0, 2.0, 7, 0.8, 0.0).unwrap();
+    let n = f.parameters().len();
+    let p: Vec<f64> = (0..n)
+        .map(|i| map_scale * ((i as f64) * 1.3).sin())
+        .collect();
+    let f = f.with_parameters(&p).unwrap();
+    JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, f)])
+        .unwrap()
+        .with_free(LftMatrix::A, 1, 1)
+        .unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(8))]
+    /// A window that opens in the middle of the motion: the initial state fitted with the
+    /// model held is the one it was simulated from, and the model's parameters do not move.
+    #[test]
+    fn the_initial_state_of_a_window_is_recovered_with_the_model_held(
+        damping in 0.02f64..0.2,
+        scale in 0.0f64..0.3,
+        x1 in -1.5f64..1.5,
+        x2 in -1.5f64..1.5,
+        seed in 0u64..50,
+    ) {
+        use structid_joint::fit_initial_state;
+        let model = resonant_model(damping, scale);
+        let u = input(60, 0.5, 3000 + seed);
+        let y = model.simulate(&u, Some(&[x1, x2])).unwrap().y;
+        let data = Data::new(u, y).unwrap();
+        let before = model.parameters();
+        let x0 = fit_initial_state(&model, &data, &JointSettings::default()).unwrap();
+        prop_assert_eq!(x0.len(), 1);
+        prop_assert!((x0[0][0] - x1).abs() < 1e-6 && (x0[0][1] - x2).abs() < 1e-6, "{:?}", x0);
+        prop_assert_eq!(&model.parameters(), &before);
+        prop_assert!(model.held().parameters().is_empty());
+        prop_assert_eq!(model.blocks()[0].map.parameters().len(), before.len() - 1);
     }
 }
