@@ -6,8 +6,8 @@ use std::sync::OnceLock;
 
 use clap::{Args, Subcommand};
 use structid_io::{
-    CascadedTanks, ColumnRef, CsvOptions, DataTable, IoError, ModelFile, OutputGuard, Record,
-    Silverbox, SilverboxSplit, TanksSplit, Vars,
+    CascadedTanks, ColumnRef, CsvOptions, DataTable, IoError, OutputGuard, Record, Silverbox,
+    SilverboxSplit, TanksSplit, Vars,
 };
 
 use crate::error::CliError;
@@ -21,6 +21,11 @@ pub fn set_vars(vars: Vars) {
     let _ = VARS.set(vars);
 }
 
+/// The `--vars` selection of this run, if any.
+pub fn vars() -> Option<&'static Vars> {
+    VARS.get()
+}
+
 /// Parses `--vars`.
 pub fn parse_vars(s: &str) -> Result<Vars, String> {
     s.parse()
@@ -31,24 +36,6 @@ pub fn parse_vars(s: &str) -> Result<Vars, String> {
 /// --input): CSV, MAT-file, `.npy` or `.npz`, with the signals and names of `--vars`.
 pub fn read_table(path: &Path) -> Result<DataTable, IoError> {
     DataTable::read_vars(path, VARS.get())
-}
-
-/// A record of `discover` read with [`read_table`].
-pub fn read_record(
-    mf: &ModelFile,
-    path: &Path,
-) -> Result<structid_workflow::discover_report::Record, IoError> {
-    let table = read_table(path)?;
-    let data = mf.select_data(&table)?;
-    let time =
-        structid_workflow::discover_report::TimeAxis::new(&table, data.len(), mf.lft.sample_time());
-    Ok(structid_workflow::discover_report::Record {
-        path: path.to_path_buf(),
-        paths: vec![path.to_path_buf()],
-        table,
-        data,
-        time,
-    })
 }
 
 /// Subcommands of `structid data`.

@@ -107,6 +107,8 @@ impl From<structid_workflow::WorkflowError> for CliError {
             W::Io(e) => e.into(),
             W::Core(e) => e.into(),
             W::Discover(e) => e.into(),
+            W::Plot(e) => e.into(),
+            W::Linear(e) => e.into(),
             W::Request(m) => Self::input(m),
             W::Failed(m) => Self::runtime(m),
             W::InContext { context, source } => Self::from(*source).context(context),
@@ -257,28 +259,6 @@ pub fn noise_std(flag: &str, v: f64) -> Result<f64, CliError> {
         )));
     }
     Ok(v)
-}
-
-/// Refuses simulated columns that are not finite (the model's gains and the noise level
-/// overflow together), naming the column and the first sample, so that no file of
-/// non-finite numbers (which no command reads back) is written.
-pub fn finite_columns<S: AsRef<str>>(
-    names: &[S],
-    columns: &[Vec<f64>],
-    noise_std: f64,
-) -> Result<(), CliError> {
-    for (name, c) in names.iter().zip(columns) {
-        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
-            return Err(CliError::input(format!(
-                "the simulated column `{}` is not finite at sample {k} ({}): the model's gains and \
-                 --noise-std {noise_std:e} overflow together; give a smaller --noise-std, or rescale \
-                 the model. Nothing was written",
-                name.as_ref(),
-                c[k]
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// Checks a command-line number that must be finite and non-negative.

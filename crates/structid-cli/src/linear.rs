@@ -279,7 +279,8 @@ pub fn run(a: LinearArgs) -> Result<(), CliError> {
     })?;
     guard.write(&a.out, out.model_file.to_toml_string().as_bytes())?;
     let figure = figure_path(&a.out);
-    let svg = crate::figures::linear_svg(&out.model, out.covariance.as_ref(), &a.input)?;
+    let svg =
+        structid_workflow::figures::linear_svg(&out.model, out.covariance.as_ref(), &a.input)?;
     guard.write(&figure, svg.as_bytes())?;
     print_summary(&a, &out);
     println!("wrote {} and {}", a.out.display(), figure.display());

@@ -32,7 +32,6 @@ mod data;
 mod demo;
 mod discover;
 mod error;
-mod figures;
 mod identify;
 mod input;
 mod linear;
@@ -42,7 +41,6 @@ mod simulate;
 mod staticness;
 mod stored;
 mod validate;
-mod validation_files;
 mod wiener_hammerstein;
 
 use std::path::PathBuf;
@@ -373,6 +371,15 @@ enum InitialStateArg {
     Zero,
     /// x₀ estimated.
     Estimate,
+}
+
+impl From<InitialStateArg> for structid_core::InitialState {
+    fn from(a: InitialStateArg) -> Self {
+        match a {
+            InitialStateArg::Zero => Self::Zero,
+            InitialStateArg::Estimate => Self::Estimate,
+        }
+    }
 }
 
 /// Arguments of `structid simulate`.

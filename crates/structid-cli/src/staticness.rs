@@ -9,7 +9,7 @@ use structid_io::OutputGuard;
 use structid_plot::{Chart, Series, render_chart_svg};
 
 use crate::error::CliError;
-use crate::figures::{MAX_DOTS, subsample};
+use structid_workflow::grid::{MAX_DOTS, subsample};
 
 /// Arguments of `structid static`.
 #[derive(Debug, Args)]

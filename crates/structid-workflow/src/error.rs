@@ -17,6 +17,13 @@ pub enum WorkflowError {
     /// The joint fit.
     #[error(transparent)]
     Joint(#[from] structid_joint::JointError),
+    /// A figure that could not be drawn.
+    #[error("cannot draw a figure")]
+    Plot(#[from] structid_plot::PlotError),
+    /// Estimating or analysing a linear block on its data or orders (NaN, too few samples, a
+    /// singular regression, an unstable start), kept apart from the model layer's errors.
+    #[error("linear estimation")]
+    Linear(#[source] structid_linear::LinearError),
     /// A request that cannot be carried out as given; the message says what to change.
     #[error("{0}")]
     Request(String),

@@ -1,6 +1,7 @@
 //! The reports of a discovery, the presentation layer of `structid_discover`: `report.md`
 //! ([`markdown()`]), `report.json` ([`json()`]) and the summary a run prints ([`summary`]),
-//! with the records they describe ([`Record`]).
+//! with the records they describe ([`Record`]); the figures ([`figures`]) and the writing of
+//! every file of a run ([`files`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -208,6 +209,8 @@ pub struct ReportContext<'a> {
 }
 
 mod effects;
+pub mod figures;
+pub mod files;
 mod json;
 mod markdown;
 

@@ -11,9 +11,8 @@ use structid_plot::{
 use serde_json::Value;
 use structid_core::{Data, Signal};
 
-use crate::ValidateArgs;
-use crate::error::CliError;
-pub(crate) use structid_io::validation_report::outputs_json;
+use crate::{Result, WorkflowError};
+pub use structid_io::validation_report::outputs_json;
 
 /// Buckets of the thinned lines of simulation.svg: about one per pixel column of its panels
 /// (at most two points each).
@@ -21,7 +20,7 @@ const PLOT_BUCKETS: usize = 1000;
 
 /// Column names of simulation.csv: `time`, then per output `<y>`, `<y>_sim`,
 /// `<y>_prediction_error` (generic `y<c>` names if the model's names would collide).
-pub(crate) fn simulation_names(y_names: &[String]) -> Vec<String> {
+pub fn simulation_names(y_names: &[String]) -> Vec<String> {
     let build = |names: &[String]| {
         let mut out = vec!["time".to_string()];
         for n in names {
@@ -47,13 +46,13 @@ pub(crate) fn simulation_names(y_names: &[String]) -> Vec<String> {
 /// below, the simulation error y − ŷ. Records longer than the figure is wide are thinned to
 /// the minimum and maximum of each pixel column ([`decimate_min_max`]), so that peaks of the
 /// error survive and the file stays small.
-pub(crate) fn simulation_svg(
+pub fn simulation_svg(
     report: &ValidationReport,
     measured: &structid_lti::Signal,
     time: &[f64],
     y_names: &[String],
     time_label: &str,
-) -> Result<String, CliError> {
+) -> Result<String> {
     type Xy = (Vec<f64>, Vec<f64>);
     let series: Vec<(Xy, Xy, Xy)> = (0..y_names.len())
         .map(|c| {
@@ -90,11 +89,13 @@ pub(crate) fn simulation_svg(
     Ok(render_grid_svg(&charts, 1, (1000, 400))?)
 }
 
-pub(crate) fn residuals_svg(
+/// The residual figure: per output, the autocorrelation of the one-step prediction error ε
+/// and its cross-correlation with each input, with their 99 % bands.
+pub fn residuals_svg(
     report: &ValidationReport,
     y_names: &[String],
     u_names: &[String],
-) -> Result<String, CliError> {
+) -> Result<String> {
     let as_f64 = |t: &CorrelationTest| t.lags.iter().map(|&l| l as f64).collect::<Vec<f64>>();
     let lags: Vec<(Vec<f64>, Vec<Vec<f64>>)> = report
         .whiteness
@@ -135,7 +136,8 @@ pub(crate) fn residuals_svg(
     )?)
 }
 
-pub(crate) fn fmt_pct(v: f64) -> String {
+/// A fit in percent as the summaries print it (`undefined` for a constant output).
+pub fn fmt_pct(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.2} %")
     } else {
@@ -143,7 +145,9 @@ pub(crate) fn fmt_pct(v: f64) -> String {
     }
 }
 
-pub(crate) fn pass(t: &CorrelationTest) -> String {
+/// A correlation test as the summaries print it: pass or FAIL, its statistic, critical value
+/// and the lags outside the band.
+pub fn pass(t: &CorrelationTest) -> String {
     format!(
         "{} ({} = {:.1}, 1 % critical value {:.1}; {} of {} lags outside the 99 % band)",
         if t.passes() { "pass" } else { "FAIL" },
@@ -160,7 +164,7 @@ pub(crate) fn pass(t: &CorrelationTest) -> String {
 }
 
 /// The files a validation writes, in order.
-pub(crate) const OUTPUTS: [&str; 4] = [
+pub const OUTPUTS: [&str; 4] = [
     "validation.json",
     "simulation.csv",
     "simulation.svg",
@@ -168,29 +172,40 @@ pub(crate) const OUTPUTS: [&str; 4] = [
 ];
 
 /// Checks `--settle` and `--max-lag` against the length of the validation record.
-pub(crate) fn check_lengths(a: &ValidateArgs, vdata: &Data) -> Result<(), CliError> {
-    if a.settle >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --settle: it must be less than the number of samples of `{}` ({})",
-            a.settle,
-            a.data[0].display(),
-            vdata.len()
-        )));
+pub fn check_lengths(
+    settle: usize,
+    max_lag: usize,
+    path: &std::path::Path,
+    vdata: &Data,
+) -> Result<()> {
+    if settle >= vdata.len() {
+        return Err(WorkflowError::InvalidOption {
+            option: "settle",
+            value: settle.to_string(),
+            rule: format!(
+                "it must be less than the number of samples of `{}` ({})",
+                path.display(),
+                vdata.len()
+            ),
+        });
     }
-    if a.max_lag >= vdata.len() {
-        return Err(CliError::input(format!(
-            "invalid value {} for --max-lag: it must be less than the number of samples of `{}` ({})",
-            a.max_lag,
-            a.data[0].display(),
-            vdata.len()
-        )));
+    if max_lag >= vdata.len() {
+        return Err(WorkflowError::InvalidOption {
+            option: "max_lag",
+            value: max_lag.to_string(),
+            rule: format!(
+                "it must be less than the number of samples of `{}` ({})",
+                path.display(),
+                vdata.len()
+            ),
+        });
     }
     Ok(())
 }
 
 /// The samples a report scored, as `[start, end)` pairs (one for a free run after the
 /// settling samples, one per window otherwise).
-pub(crate) fn scored_json(report: &ValidationReport) -> serde_json::Value {
+pub fn scored_json(report: &ValidationReport) -> serde_json::Value {
     serde_json::json!(
         report
             .scored

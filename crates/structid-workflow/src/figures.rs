@@ -1,4 +1,5 @@
-//! Grids over the data range and SVG figures of estimated maps.
+//! Grids over the data range and SVG figures of estimated maps and linear parts (`map_<block>.svg`
+//! of `structid identify` and `structid refine`, linear.svg of `structid linear`).
 
 use structid_core::{BlockEstimate, Identification, Interpolant, Lft};
 use structid_lti::Signal;
@@ -6,9 +7,7 @@ use structid_plot::{
     Chart, HeatMap, Panel, PlotError, Series, render_chart_svg, render_panels_svg,
 };
 
-pub use structid_workflow::grid::{
-    BAND_Z, GRID_1D, GRID_2D, MAX_DOTS, linspace, mean, span, subsample,
-};
+use crate::grid::{BAND_Z, GRID_1D, GRID_2D, MAX_DOTS, linspace, span, subsample};
 
 /// An estimated map evaluated for output.
 pub enum MapGrid {
@@ -150,7 +149,7 @@ pub fn partial_residuals(lft: &Lft, id: &Identification, output: usize) -> Optio
 /// without them) behind it, the truth and, with the posterior standard deviation `std` (at
 /// [`MapGrid::points`]), the shaded 95 % band N̂ ± 1.96·std; for two inputs, heat maps of the
 /// estimate, the truth and the standard deviation, beside the partial residuals against the
-/// estimate at the data points ([`partial_check`]) when given; for more, that check, else ŵ
+/// estimate at the data points (the staticness check) when given; for more, that check, else ŵ
 /// against the truth at the data points (or ŵ over time without a truth).
 pub fn map_svg(
     est: &BlockEstimate,
@@ -310,7 +309,7 @@ pub fn linear_svg(
     model: &structid_linear::PolynomialModel,
     covariance: Option<&nalgebra::DMatrix<f64>>,
     input_names: &[String],
-) -> Result<String, crate::error::CliError> {
+) -> crate::Result<String> {
     use structid_linear::response::{bode, poles, step_response, zeros};
     let ts = model.sample_time;
     let scale = ts.map_or(1.0, |t| 1.0 / t);
@@ -342,7 +341,7 @@ pub fn linear_svg(
     }
     let mut curves = Vec::new();
     for i in 0..model.inputs() {
-        let b = bode(model, i, &freqs, covariance)?;
+        let b = bode(model, i, &freqs, covariance).map_err(crate::WorkflowError::Linear)?;
         let band: Option<(Vec<f64>, Vec<f64>)> = b
             .iter()
             .map(|p| {
@@ -363,7 +362,7 @@ pub fn linear_svg(
             lo,
             hi,
             phase: b.iter().map(|p| p.phase.to_degrees()).collect(),
-            step: step_response(model, i, steps)?,
+            step: step_response(model, i, steps).map_err(crate::WorkflowError::Linear)?,
             zeros: (
                 z.iter().map(|z| z.0).collect(),
                 z.iter().map(|z| z.1).collect(),
