@@ -250,3 +250,17 @@ pub fn dispersion(d: &Bound<'_, PyDict>) -> PyResult<DispersionSpec> {
 pub fn json<T: serde::Serialize + ?Sized>(value: &T) -> PyResult<String> {
     serde_json::to_string(value).map_err(|e| invalid(format!("cannot serialise: {e}")))
 }
+
+/// A block's dictionary with its `name`, z `inputs` and w `output`; the caller adds the rest.
+pub(crate) fn block_dict<'py>(
+    py: Python<'py>,
+    name: &str,
+    inputs: &[usize],
+    output: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", name)?;
+    d.set_item("inputs", inputs.to_vec())?;
+    d.set_item("output", output)?;
+    Ok(d)
+}

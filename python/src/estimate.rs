@@ -12,7 +12,7 @@ use structid_core::validation::{ValidationReport, ValidationSettings};
 use structid_core::{Data, Estimate, Identification};
 use structid_io::{OutputGuard, estimate_json, read_estimate};
 
-use crate::convert::{self, error, invalid};
+use crate::convert::{self, block_dict, error, invalid};
 use crate::user_kernel::{UserDispersion, detach};
 
 /// A fitted model: the linear block with every estimated map, as `estimate.json` stores it.
@@ -136,10 +136,7 @@ impl Fitted {
             .blocks()
             .iter()
             .map(|b| {
-                let d = PyDict::new(py);
-                d.set_item("name", &b.name)?;
-                d.set_item("inputs", b.inputs.clone())?;
-                d.set_item("output", b.output)?;
+                let d = block_dict(py, &b.name, &b.inputs, b.output)?;
                 d.set_item("dispersion", &b.dispersion)?;
                 Ok(d)
             })

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_io::{ModelFile, OutputGuard};
-use structid_joint::JointSettings;
+use structid_joint::{JointSettings, JointSettingsBuilder};
 use structid_workflow::{
     BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs,
 };
@@ -15,6 +15,32 @@ use crate::convert::{self, error, invalid};
 use crate::model::Model;
 
 type Named = Vec<(String, Vec<f64>)>;
+
+/// Whether the `initial_state` argument (`"zero"` or `"estimate"`) asks for x₀ to be estimated.
+fn estimate_initial_state(initial_state: &str) -> PyResult<bool> {
+    match initial_state {
+        "estimate" => Ok(true),
+        "zero" => Ok(false),
+        other => Err(invalid(format!(
+            "initial_state `{other}` is neither \"zero\" nor \"estimate\""
+        ))),
+    }
+}
+
+/// The joint fit's settings from the Python arguments (checked when built).
+fn joint_settings(
+    iterations: usize,
+    estimate_x0: bool,
+    segment_length: Option<usize>,
+) -> JointSettingsBuilder {
+    let fit = JointSettings::builder()
+        .max_iterations(iterations)
+        .estimate_initial_state(estimate_x0);
+    match segment_length {
+        Some(l) => fit.segment_length(l),
+        None => fit,
+    }
+}
 
 fn records(mf: &ModelFile, named: Vec<Named>, what: &str) -> PyResult<structid_core::Data> {
     let data = named
@@ -53,21 +79,8 @@ pub fn refine_joint_columns<'py>(
         .map(|v| records(&mf, v, "validation"))
         .transpose()?;
     let beta = BetaChoice::from_options(beta, validation).map_err(error)?;
-    let estimate_x0 = match initial_state {
-        "estimate" => true,
-        "zero" => false,
-        other => {
-            return Err(invalid(format!(
-                "initial_state `{other}` is neither \"zero\" nor \"estimate\""
-            )));
-        }
-    };
-    let mut fit = JointSettings::builder()
-        .max_iterations(iterations)
-        .estimate_initial_state(estimate_x0);
-    if let Some(l) = segment_length {
-        fit = fit.segment_length(l);
-    }
+    let estimate_x0 = estimate_initial_state(initial_state)?;
+    let fit = joint_settings(iterations, estimate_x0, segment_length);
     let settings = JointWorkflowSettings {
         beta,
         centres,
@@ -197,25 +210,12 @@ pub fn wiener_hammerstein_records<'py>(
     let validation = validation
         .map(|v| wh_records(v, "validation"))
         .transpose()?;
-    let estimate_x0 = match initial_state {
-        "estimate" => true,
-        "zero" => false,
-        other => {
-            return Err(invalid(format!(
-                "initial_state `{other}` is neither \"zero\" nor \"estimate\""
-            )));
-        }
-    };
+    let estimate_x0 = estimate_initial_state(initial_state)?;
     let start = WienerHammersteinSettings::builder()
         .centres(centres)
         .build()
         .map_err(error)?;
-    let mut fit = JointSettings::builder()
-        .max_iterations(iterations)
-        .estimate_initial_state(estimate_x0);
-    if let Some(l) = segment_length {
-        fit = fit.segment_length(l);
-    }
+    let fit = joint_settings(iterations, estimate_x0, segment_length);
     let req = WienerHammersteinRequest {
         structure,
         data: &data,

@@ -10,7 +10,7 @@ use structid_core::Signal;
 use structid_io::ModelFile;
 use structid_linear::PolynomialModel;
 
-use crate::convert::{self, error, invalid};
+use crate::convert::{self, block_dict, error, invalid};
 
 /// A structured model: the known linear block, the names of the data columns and the unknown
 /// static maps with their dispersions. Immutable; `with_dispersion` returns a new model.
@@ -176,10 +176,7 @@ impl Model {
             .blocks
             .iter()
             .map(|b| {
-                let d = PyDict::new(py);
-                d.set_item("name", &b.name)?;
-                d.set_item("inputs", b.inputs.clone())?;
-                d.set_item("output", b.output)?;
+                let d = block_dict(py, &b.name, &b.inputs, b.output)?;
                 d.set_item("dispersion", b.dispersion.kind())?;
                 d.set_item("sigma", b.dispersion.sigma())?;
                 d.set_item("truth", b.truth.as_ref().map(|t| t.describe()))?;

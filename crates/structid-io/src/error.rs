@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 #[non_exhaustive]
 pub enum IoError {
     /// A model file is malformed (TOML syntax or content).
-    #[error("{}", model_message(path.as_deref(), *line, *column, message))]
+    #[error("{}", file_message("model file", path.as_deref(), *line, *column, message))]
     Model {
         /// The model file, when it was read from disk.
         path: Option<PathBuf>,
@@ -25,7 +25,7 @@ pub enum IoError {
     },
 
     /// A sweep configuration file (`structid compare --config`) is malformed.
-    #[error("{}", sweep_message(path.as_deref(), *line, *column, message))]
+    #[error("{}", file_message("sweep config", path.as_deref(), *line, *column, message))]
     Sweep {
         /// The configuration file, when it was read from disk.
         path: Option<PathBuf>,
@@ -273,33 +273,18 @@ fn list(names: &[String]) -> String {
     s
 }
 
-fn model_message(
+/// `message` about the file of kind `what` (e.g. "model file") at `path`, with the line and
+/// column where known.
+fn file_message(
+    what: &str,
     path: Option<&Path>,
     line: Option<usize>,
     column: Option<usize>,
     message: &str,
 ) -> String {
     let mut s = match path {
-        Some(p) => format!("model file `{}`: {message}", p.display()),
-        None => format!("model file: {message}"),
-    };
-    match (line, column) {
-        (Some(l), Some(c)) => s.push_str(&format!(" (line {l}, column {c})")),
-        (Some(l), None) => s.push_str(&format!(" (line {l})")),
-        _ => {}
-    }
-    s
-}
-
-fn sweep_message(
-    path: Option<&Path>,
-    line: Option<usize>,
-    column: Option<usize>,
-    message: &str,
-) -> String {
-    let mut s = match path {
-        Some(p) => format!("sweep config `{}`: {message}", p.display()),
-        None => format!("sweep config: {message}"),
+        Some(p) => format!("{what} `{}`: {message}", p.display()),
+        None => format!("{what}: {message}"),
     };
     match (line, column) {
         (Some(l), Some(c)) => s.push_str(&format!(" (line {l}, column {c})")),

@@ -4,7 +4,7 @@ use faer::Mat;
 use nalgebra::DMatrix;
 use structid_lti::Signal;
 
-use crate::error::{LinearError, check_finite, check_sample_time};
+use crate::error::{LinearError, check_finite, check_non_negative, check_sample_time};
 use crate::integrators::{
     MAX_INTEGRATORS, convolve, difference, full_covariance, integrator_polynomial,
 };
@@ -157,13 +157,7 @@ impl ArxSettingsBuilder {
     /// ```
     pub fn build(self) -> Result<ArxSettings, LinearError> {
         check_sample_time(self.0.sample_time)?;
-        let r = self.0.ridge;
-        if !(r.is_finite() && r >= 0.0) {
-            return Err(LinearError::param(
-                "ridge",
-                format!("must be non-negative and finite, got {r}"),
-            ));
-        }
+        check_non_negative("ridge", self.0.ridge)?;
         let c = self.0.max_condition;
         if c.is_nan() || c <= 1.0 {
             return Err(LinearError::param(
@@ -242,17 +236,7 @@ pub fn arx(
     // A'(q) (1 − q⁻¹)ᴺ y = B u + e is an ARX model of the differenced output.
     let yd = difference(&yv, n);
     let (free, cov) = fit_arx(&uc, &yd, orders, settings, orders.max_lag() + n)?;
-    let den = convolve(&free.model.den, &integrator_polynomial(n));
-    let model = PolynomialModel::new(free.model.num, den, free.model.sample_time)?;
-    let cov = full_covariance(&cov, orders.nb.iter().sum(), orders.na, n);
-    let parameter_std = std_from(&cov);
-    Ok(ArxFit {
-        model,
-        parameter_std,
-        parameter_covariance: Some(cov),
-        integrators: n,
-        ..free
-    })
+    with_integrators(free, &cov, orders, n)
 }
 
 /// [`arx`] over several records (experiments) of the same system, given as `(u, y)` pairs:
@@ -305,9 +289,20 @@ pub fn arx_records(
     if n == 0 {
         return Ok(free);
     }
+    with_integrators(free, &cov, orders, n)
+}
+
+/// The fit `free` of the differenced output (free parameter covariance `cov`) as the fit
+/// of the model with its `n` integrators at `z = 1` put back into the denominator.
+fn with_integrators(
+    free: ArxFit,
+    cov: &DMatrix<f64>,
+    orders: &Orders,
+    n: usize,
+) -> Result<ArxFit, LinearError> {
     let den = convolve(&free.model.den, &integrator_polynomial(n));
     let model = PolynomialModel::new(free.model.num, den, free.model.sample_time)?;
-    let cov = full_covariance(&cov, orders.nb.iter().sum(), orders.na, n);
+    let cov = full_covariance(cov, orders.nb.iter().sum(), orders.na, n);
     let parameter_std = std_from(&cov);
     Ok(ArxFit {
         model,

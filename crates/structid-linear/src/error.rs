@@ -146,11 +146,38 @@ pub(crate) fn check_finite(signal: &str, data: &[f64], channels: usize) -> Resul
 
 /// Checks a sample time (positive and finite) if given.
 pub(crate) fn check_sample_time(ts: Option<f64>) -> Result<(), LinearError> {
-    match ts {
-        Some(t) if !(t.is_finite() && t > 0.0) => Err(LinearError::param(
-            "sample_time",
-            format!("must be positive and finite, got {t}"),
-        )),
-        _ => Ok(()),
+    ts.map_or(Ok(()), |t| check_positive("sample_time", t))
+}
+
+/// Checks that the setting `name` is positive and finite.
+pub(crate) fn check_positive(name: &str, v: f64) -> Result<(), LinearError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(LinearError::param(
+            name,
+            format!("must be positive and finite, got {v}"),
+        ))
+    }
+}
+
+/// Checks that the setting `name` is non-negative and finite.
+pub(crate) fn check_non_negative(name: &str, v: f64) -> Result<(), LinearError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(LinearError::param(
+            name,
+            format!("must be non-negative and finite, got {v}"),
+        ))
+    }
+}
+
+/// Checks that the count `name` is at least 1.
+pub(crate) fn check_at_least_one(name: &str, n: usize) -> Result<(), LinearError> {
+    if n == 0 {
+        Err(LinearError::param(name, "must be at least 1"))
+    } else {
+        Ok(())
     }
 }

@@ -55,7 +55,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::error::LinearError;
+use crate::error::{LinearError, check_at_least_one, check_non_negative, check_positive};
 
 /// A nonlinear least-squares problem `min_θ Σ_k r_k(θ)²`.
 ///
@@ -372,33 +372,11 @@ impl LmSettingsBuilder {
     /// ```
     pub fn build(self) -> Result<LmSettings, LinearError> {
         let s = self.0;
-        let positive = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(LinearError::param(
-                    name,
-                    format!("must be positive and finite, got {v}"),
-                ))
-            }
-        };
-        if s.max_iterations == 0 {
-            return Err(LinearError::param("max_iterations", "must be at least 1"));
-        }
-        if s.max_step_attempts == 0 {
-            return Err(LinearError::param(
-                "max_step_attempts",
-                "must be at least 1",
-            ));
-        }
-        if !(s.tolerance.is_finite() && s.tolerance >= 0.0) {
-            return Err(LinearError::param(
-                "tolerance",
-                format!("must be non-negative and finite, got {}", s.tolerance),
-            ));
-        }
-        positive("initial_damping", s.initial_damping)?;
-        positive("min_damping", s.min_damping)?;
+        check_at_least_one("max_iterations", s.max_iterations)?;
+        check_at_least_one("max_step_attempts", s.max_step_attempts)?;
+        check_non_negative("tolerance", s.tolerance)?;
+        check_positive("initial_damping", s.initial_damping)?;
+        check_positive("min_damping", s.min_damping)?;
         if !(s.damping_increase.is_finite() && s.damping_increase > 1.0) {
             return Err(LinearError::param(
                 "damping_increase",

@@ -4,12 +4,14 @@ use nalgebra::{DMatrix, DVector};
 use structid_lti::{Signal, filter_row};
 
 use crate::arx::{ArxSettings, check_integrators, fit_arx_records, prepare_data, std_from};
-use crate::error::{LinearError, check_sample_time};
+use crate::error::{
+    LinearError, check_at_least_one, check_non_negative, check_positive, check_sample_time,
+};
 use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
 use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
 use crate::normal_equations::NormalEquations;
 use crate::orders::Orders;
-use crate::polynomial::{PolynomialModel, root_radius, schur_stable};
+use crate::polynomial::{PolynomialModel, root_radius, schur_stable, split_parameters};
 
 /// Settings of [`output_error`] and [`oe`] (build with [`OeSettings::builder`];
 /// [`Default`] is valid).
@@ -240,21 +242,9 @@ impl OeSettingsBuilder {
     /// ```
     pub fn build(self) -> Result<OeSettings, LinearError> {
         let s = self.0;
-        if s.max_iterations == 0 {
-            return Err(LinearError::param("max_iterations", "must be at least 1"));
-        }
-        if !(s.tolerance.is_finite() && s.tolerance >= 0.0) {
-            return Err(LinearError::param(
-                "tolerance",
-                format!("must be non-negative and finite, got {}", s.tolerance),
-            ));
-        }
-        if !(s.initial_damping.is_finite() && s.initial_damping > 0.0) {
-            return Err(LinearError::param(
-                "initial_damping",
-                format!("must be positive and finite, got {}", s.initial_damping),
-            ));
-        }
+        check_at_least_one("max_iterations", s.max_iterations)?;
+        check_non_negative("tolerance", s.tolerance)?;
+        check_positive("initial_damping", s.initial_damping)?;
         check_sample_time(s.sample_time)?;
         check_integrators(s.integrators)?;
         Ok(s)
@@ -820,17 +810,7 @@ impl Problem<'_> {
     }
 
     fn split(&self, theta: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
-        let mut off = 0;
-        let mut num = Vec::with_capacity(self.orders.inputs());
-        for (&nb, &nk) in self.orders.nb.iter().zip(&self.orders.nk) {
-            let mut b = vec![0.0; nk];
-            b.extend_from_slice(&theta[off..off + nb]);
-            off += nb;
-            num.push(b);
-        }
-        let mut den = vec![1.0];
-        den.extend_from_slice(&theta[off..]);
-        (den, num)
+        split_parameters(self.orders, theta)
     }
 
     fn stable(&self, theta: &[f64]) -> bool {

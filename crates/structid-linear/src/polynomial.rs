@@ -86,16 +86,7 @@ impl PolynomialModel {
                 theta.len(),
             ));
         }
-        let mut off = 0;
-        let mut num = Vec::with_capacity(orders.inputs());
-        for (&nb, &nk) in orders.nb.iter().zip(&orders.nk) {
-            let mut b = vec![0.0; nk];
-            b.extend_from_slice(&theta[off..off + nb]);
-            off += nb;
-            num.push(b);
-        }
-        let mut den = vec![1.0];
-        den.extend_from_slice(&theta[off..]);
+        let (den, num) = split_parameters(orders, theta);
         Self::new(num, den, sample_time)
     }
 
@@ -360,6 +351,23 @@ pub(crate) fn root_radius(den: &[f64]) -> f64 {
         .iter()
         .map(|z| z.norm())
         .fold(0.0, f64::max)
+}
+
+/// Splits `θ = (b…, a…)` of the given orders into the denominator (with its leading 1) and
+/// the numerators (each with its `nk` leading zeros); `theta` has `orders.parameters()`
+/// entries.
+pub(crate) fn split_parameters(orders: &Orders, theta: &[f64]) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let mut off = 0;
+    let mut num = Vec::with_capacity(orders.inputs());
+    for (&nb, &nk) in orders.nb.iter().zip(&orders.nk) {
+        let mut b = vec![0.0; nk];
+        b.extend_from_slice(&theta[off..off + nb]);
+        off += nb;
+        num.push(b);
+    }
+    let mut den = vec![1.0];
+    den.extend_from_slice(&theta[off..]);
+    (den, num)
 }
 
 #[cfg(test)]

@@ -269,11 +269,7 @@ impl BlockedRecursion {
                 {
                     load_state(s0.subcols(j0, w), b * cin, cur, row_major, k);
                 }
-                let wv = if row_major {
-                    MatRef::from_row_major_slice(&cur[..], k, w)
-                } else {
-                    MatRef::from_column_major_slice(&cur[..], k, w)
-                };
+                let wv = packed_view(cur, k, w, row_major);
                 matmul(
                     oc.rb_mut().subrows_mut(t0 * cout, bk * cout),
                     accum,
@@ -296,17 +292,7 @@ impl BlockedRecursion {
                     );
                 }
                 if n > 0 && step + 1 < nb {
-                    let sv = if row_major {
-                        MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)
-                    } else {
-                        MatMut::from_column_major_slice_with_stride_mut(
-                            &mut nxt[b * cin..],
-                            n,
-                            w,
-                            k,
-                        )
-                    };
-                    matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
+                    self.carry_state(wv, nxt, w, row_major);
                     std::mem::swap(&mut cur, &mut nxt);
                 }
             }
@@ -357,11 +343,7 @@ impl BlockedRecursion {
                     step == 0,
                     k,
                 );
-                let wv = if row_major {
-                    MatRef::from_row_major_slice(&cur[..], k, w)
-                } else {
-                    MatRef::from_column_major_slice(&cur[..], k, w)
-                };
+                let wv = packed_view(cur, k, w, row_major);
                 matmul(
                     xc.rb_mut().subrows_mut(t0 * cout, bk * cout),
                     Accum::Replace,
@@ -371,22 +353,35 @@ impl BlockedRecursion {
                     Par::Seq,
                 );
                 if n > 0 && step + 1 < nb {
-                    let sv = if row_major {
-                        MatMut::from_row_major_slice_mut(&mut nxt[b * cin * w..], n, w)
-                    } else {
-                        MatMut::from_column_major_slice_with_stride_mut(
-                            &mut nxt[b * cin..],
-                            n,
-                            w,
-                            k,
-                        )
-                    };
-                    matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
+                    self.carry_state(wv, nxt, w, row_major);
                     std::mem::swap(&mut cur, &mut nxt);
                 }
             }
             j0 += w;
         }
+    }
+}
+
+impl BlockedRecursion {
+    /// Writes the state after the block packed in `wv` (`M2 wv`) into the state rows of the
+    /// packed buffer `nxt` of the next block (`w` columns, row- or column-major).
+    fn carry_state(&self, wv: MatRef<'_, f64>, nxt: &mut [f64], w: usize, row_major: bool) {
+        let (n, skip) = (self.n, self.b * self.cin);
+        let sv = if row_major {
+            MatMut::from_row_major_slice_mut(&mut nxt[skip * w..], n, w)
+        } else {
+            MatMut::from_column_major_slice_with_stride_mut(&mut nxt[skip..], n, w, skip + n)
+        };
+        matmul(sv, Accum::Replace, self.m2.as_ref(), wv, 1.0, Par::Seq);
+    }
+}
+
+/// The packed buffer `buf` as a `k x w` matrix (row- or column-major).
+fn packed_view(buf: &[f64], k: usize, w: usize, row_major: bool) -> MatRef<'_, f64> {
+    if row_major {
+        MatRef::from_row_major_slice(buf, k, w)
+    } else {
+        MatRef::from_column_major_slice(buf, k, w)
     }
 }
 

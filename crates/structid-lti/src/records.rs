@@ -74,6 +74,52 @@ impl Recordwise {
         );
     }
 
+    /// The channels of `x` and `out` of a forward (`m`, `p`) or adjoint (`p`, `m`)
+    /// application, after checking the lengths `x_len` and `out_len` (in samples times
+    /// channels) against the record bounds.
+    fn checked_channels(&self, adjoint: bool, x_len: usize, out_len: usize) -> (usize, usize) {
+        let (m, p) = (self.inputs(), self.outputs());
+        if adjoint {
+            self.check(m, p, out_len, x_len);
+            (p, m)
+        } else {
+            self.check(m, p, x_len, out_len);
+            (m, p)
+        }
+    }
+
+    /// Runs `f` on each record's part of `x` and `out` (forward or `adjoint`).
+    fn per_record(
+        &self,
+        x: &[f64],
+        out: &mut [f64],
+        adjoint: bool,
+        f: impl Fn(&[f64], &mut [f64]),
+    ) {
+        let (cx, co) = self.checked_channels(adjoint, x.len(), out.len());
+        for (s, l) in self.segments() {
+            f(&x[s * cx..(s + l) * cx], &mut out[s * co..(s + l) * co]);
+        }
+    }
+
+    /// Runs `f` on each record's rows of the column blocks `x` and `out` (forward or
+    /// `adjoint`).
+    fn per_record_columns(
+        &self,
+        x: MatRef<'_, f64>,
+        mut out: MatMut<'_, f64>,
+        adjoint: bool,
+        f: impl Fn(MatRef<'_, f64>, MatMut<'_, f64>),
+    ) {
+        let (cx, co) = self.checked_channels(adjoint, x.nrows(), out.nrows());
+        for (s, l) in self.segments() {
+            f(
+                x.subrows(s * cx, l * cx),
+                out.rb_mut().subrows_mut(s * co, l * co),
+            );
+        }
+    }
+
     fn segments(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.bounds.windows(2).map(|w| (w[0], w[1] - w[0]))
     }
@@ -97,59 +143,29 @@ impl LinearSystem for Recordwise {
     }
 
     fn apply(&self, u: &[f64], y: &mut [f64]) {
-        let (m, p) = (self.inputs(), self.outputs());
-        self.check(m, p, u.len(), y.len());
-        for (s, l) in self.segments() {
-            self.inner
-                .apply(&u[s * m..(s + l) * m], &mut y[s * p..(s + l) * p]);
-        }
+        self.per_record(u, y, false, |u, y| self.inner.apply(u, y));
     }
 
     fn apply_adjoint(&self, y: &[f64], u: &mut [f64]) {
-        let (m, p) = (self.inputs(), self.outputs());
-        self.check(m, p, u.len(), y.len());
-        for (s, l) in self.segments() {
-            self.inner
-                .apply_adjoint(&y[s * p..(s + l) * p], &mut u[s * m..(s + l) * m]);
-        }
+        self.per_record(y, u, true, |y, u| self.inner.apply_adjoint(y, u));
     }
 
-    fn apply_columns(
-        &self,
-        x: MatRef<'_, f64>,
-        mut out: MatMut<'_, f64>,
-        accum: Accum,
-        alpha: f64,
-    ) {
-        let (m, p) = (self.inputs(), self.outputs());
-        self.check(m, p, x.nrows(), out.nrows());
-        for (s, l) in self.segments() {
-            self.inner.apply_columns(
-                x.subrows(s * m, l * m),
-                out.rb_mut().subrows_mut(s * p, l * p),
-                accum,
-                alpha,
-            );
-        }
+    fn apply_columns(&self, x: MatRef<'_, f64>, out: MatMut<'_, f64>, accum: Accum, alpha: f64) {
+        self.per_record_columns(x, out, false, |x, out| {
+            self.inner.apply_columns(x, out, accum, alpha)
+        });
     }
 
     fn apply_adjoint_columns(
         &self,
         x: MatRef<'_, f64>,
-        mut out: MatMut<'_, f64>,
+        out: MatMut<'_, f64>,
         accum: Accum,
         alpha: f64,
     ) {
-        let (m, p) = (self.inputs(), self.outputs());
-        self.check(m, p, out.nrows(), x.nrows());
-        for (s, l) in self.segments() {
-            self.inner.apply_adjoint_columns(
-                x.subrows(s * p, l * p),
-                out.rb_mut().subrows_mut(s * m, l * m),
-                accum,
-                alpha,
-            );
-        }
+        self.per_record_columns(x, out, true, |x, out| {
+            self.inner.apply_adjoint_columns(x, out, accum, alpha)
+        });
     }
 }
 

@@ -93,6 +93,47 @@ struct RowMajor {
     d: Vec<f64>,
 }
 
+/// The matrix accessors and dimensions shared by [`StateSpace`] and
+/// [`ContinuousStateSpace`] (both hold private fields `a`, `b`, `c`, `d`).
+macro_rules! abcd_accessors {
+    () => {
+        /// State matrix `A` (`n x n`).
+        pub fn a(&self) -> &DMatrix<f64> {
+            &self.a
+        }
+
+        /// Input matrix `B` (`n x m`).
+        pub fn b(&self) -> &DMatrix<f64> {
+            &self.b
+        }
+
+        /// Output matrix `C` (`p x n`).
+        pub fn c(&self) -> &DMatrix<f64> {
+            &self.c
+        }
+
+        /// Feedthrough matrix `D` (`p x m`).
+        pub fn d(&self) -> &DMatrix<f64> {
+            &self.d
+        }
+
+        /// Number of states `n`.
+        pub fn order(&self) -> usize {
+            self.a.nrows()
+        }
+
+        /// Number of inputs `m`.
+        pub fn inputs(&self) -> usize {
+            self.b.ncols()
+        }
+
+        /// Number of outputs `p`.
+        pub fn outputs(&self) -> usize {
+            self.c.nrows()
+        }
+    };
+}
+
 /// A discrete-time state-space system
 /// `x_{k+1} = A x_k + B u_k`, `y_k = C x_k + D u_k`.
 ///
@@ -198,40 +239,7 @@ impl StateSpace {
         self.sample_time
     }
 
-    /// State matrix `A` (`n x n`).
-    pub fn a(&self) -> &DMatrix<f64> {
-        &self.a
-    }
-
-    /// Input matrix `B` (`n x m`).
-    pub fn b(&self) -> &DMatrix<f64> {
-        &self.b
-    }
-
-    /// Output matrix `C` (`p x n`).
-    pub fn c(&self) -> &DMatrix<f64> {
-        &self.c
-    }
-
-    /// Feedthrough matrix `D` (`p x m`).
-    pub fn d(&self) -> &DMatrix<f64> {
-        &self.d
-    }
-
-    /// Number of states `n`.
-    pub fn order(&self) -> usize {
-        self.a.nrows()
-    }
-
-    /// Number of inputs `m`.
-    pub fn inputs(&self) -> usize {
-        self.b.ncols()
-    }
-
-    /// Number of outputs `p`.
-    pub fn outputs(&self) -> usize {
-        self.c.nrows()
-    }
+    abcd_accessors!();
 
     /// The first `count` Markov parameters: `h_0 = D`, `h_j = C A^{j-1} B`.
     pub fn markov_parameters(&self, count: usize) -> Vec<DMatrix<f64>> {
@@ -869,40 +877,7 @@ impl ContinuousStateSpace {
         Ok(ContinuousStateSpace { a, b, c, d })
     }
 
-    /// State matrix `A`.
-    pub fn a(&self) -> &DMatrix<f64> {
-        &self.a
-    }
-
-    /// Input matrix `B`.
-    pub fn b(&self) -> &DMatrix<f64> {
-        &self.b
-    }
-
-    /// Output matrix `C`.
-    pub fn c(&self) -> &DMatrix<f64> {
-        &self.c
-    }
-
-    /// Feedthrough matrix `D`.
-    pub fn d(&self) -> &DMatrix<f64> {
-        &self.d
-    }
-
-    /// Number of states.
-    pub fn order(&self) -> usize {
-        self.a.nrows()
-    }
-
-    /// Number of inputs.
-    pub fn inputs(&self) -> usize {
-        self.b.ncols()
-    }
-
-    /// Number of outputs.
-    pub fn outputs(&self) -> usize {
-        self.c.nrows()
-    }
+    abcd_accessors!();
 
     /// Zero-order-hold discretisation with sample time `ts` (positive, finite):
     /// `exp([[A, B], [0, 0]] ts) = [[Ad, Bd], [0, I]]`; the result is `(Ad, Bd, C, D)` with

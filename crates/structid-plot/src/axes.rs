@@ -3,7 +3,10 @@
 use std::ops::Range;
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
+
+use crate::error::{PlotError, backend_err};
 
 /// Running min/max of finite values.
 #[derive(Default)]
@@ -146,6 +149,58 @@ pub(crate) fn label_counts(area: &DrawingArea<SVGBackend<'_>, Shift>) -> (usize,
     let x = (w.saturating_sub(Y_LABEL_AREA) / 70).clamp(2, 10) as usize;
     let y = (h.saturating_sub(X_LABEL_AREA + TITLE_SIZE) / 35).clamp(2, 10) as usize;
     (x, y)
+}
+
+/// The coordinate system of a panel: `f64` on both axes.
+pub(crate) type PanelCoords<'c, 'b> =
+    ChartContext<'c, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Builds the `xr` by `yr` axes of a panel on `area` and draws them: tick labels that fit
+/// the area, the axis descriptions `labels` (x, y) and, when given, `title` as the caption.
+/// A `heat_map` panel has a narrow right margin (its colour bar follows) and no grid lines
+/// (the cells would hide them); other panels get light grid lines.
+pub(crate) fn draw_axes<'c, 'b>(
+    area: &DrawingArea<SVGBackend<'b>, Shift>,
+    title: Option<&str>,
+    xr: &Range<f64>,
+    yr: &Range<f64>,
+    labels: (&str, &str),
+    heat_map: bool,
+) -> Result<PanelCoords<'c, 'b>, PlotError> {
+    let mut builder = ChartBuilder::on(area);
+    if let Some(title) = title {
+        builder.caption(title, (FONT, TITLE_SIZE));
+    }
+    builder.margin(MARGIN);
+    if heat_map {
+        builder.margin_right(4);
+    }
+    let mut cc = builder
+        .x_label_area_size(X_LABEL_AREA)
+        .y_label_area_size(Y_LABEL_AREA)
+        .build_cartesian_2d(xr.clone(), yr.clone())
+        .map_err(backend_err)?;
+    let xf = tick_formatter(xr.start, xr.end);
+    let yf = tick_formatter(yr.start, yr.end);
+    let (xn, yn) = label_counts(area);
+    let mut mesh = cc.configure_mesh();
+    if heat_map {
+        mesh.disable_mesh();
+    }
+    mesh.x_labels(xn)
+        .y_labels(yn)
+        .x_desc(labels.0)
+        .y_desc(labels.1)
+        .axis_desc_style((FONT, DESC_SIZE))
+        .label_style((FONT, TICK_SIZE))
+        .x_label_formatter(&xf)
+        .y_label_formatter(&yf);
+    if !heat_map {
+        mesh.light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(215, 215, 215));
+    }
+    mesh.draw().map_err(backend_err)?;
+    Ok(cc)
 }
 
 #[cfg(test)]

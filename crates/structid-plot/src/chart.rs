@@ -6,10 +6,7 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axes::{
-    Bounds, DESC_SIZE, FONT, MARGIN, TICK_SIZE, TITLE_SIZE, X_LABEL_AREA, Y_LABEL_AREA,
-    label_counts, tick_formatter,
-};
+use crate::axes::{Bounds, FONT, MARGIN, TICK_SIZE, TITLE_SIZE, draw_axes};
 use crate::error::{PlotError, backend_err};
 use crate::layout::{DEFAULT_SIZE, check_size, render_tiled};
 
@@ -259,30 +256,8 @@ pub(crate) fn draw_chart(
         (area.clone(), None)
     };
 
-    let mut cc = ChartBuilder::on(&plot)
-        .caption(&chart.title, (FONT, TITLE_SIZE))
-        .margin(MARGIN)
-        .x_label_area_size(X_LABEL_AREA)
-        .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(xr.clone(), yr.clone())
-        .map_err(backend_err)?;
-
-    let xf = tick_formatter(xr.start, xr.end);
-    let yf = tick_formatter(yr.start, yr.end);
-    let (xn, yn) = label_counts(&plot);
-    cc.configure_mesh()
-        .x_labels(xn)
-        .y_labels(yn)
-        .x_desc(chart.x_label.as_str())
-        .y_desc(chart.y_label.as_str())
-        .axis_desc_style((FONT, DESC_SIZE))
-        .label_style((FONT, TICK_SIZE))
-        .x_label_formatter(&xf)
-        .y_label_formatter(&yf)
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .draw()
-        .map_err(backend_err)?;
+    let labels = (chart.x_label.as_str(), chart.y_label.as_str());
+    let mut cc = draw_axes(&plot, Some(&chart.title), &xr, &yr, labels, false)?;
 
     // Scatters at the back (the data behind a fit), then bands, then lines on top of both.
     let mut order: Vec<usize> = (0..chart.series.len()).collect();

@@ -5,10 +5,7 @@ use std::ops::Range;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axes::{
-    Bounds, DESC_SIZE, FONT, MARGIN, TICK_SIZE, TITLE_SIZE, X_LABEL_AREA, Y_LABEL_AREA,
-    format_value, label_counts, tick_formatter, widen,
-};
+use crate::axes::{Bounds, FONT, TICK_SIZE, draw_axes, format_value, widen};
 use crate::chart::series_colour;
 use crate::error::{PlotError, backend_err};
 use crate::layout::render_tiled;
@@ -128,29 +125,8 @@ fn draw_correlation(
 ) -> Result<(), PlotError> {
     let (xr, yr, width) = chart.layout()?;
     area.fill(&WHITE).map_err(backend_err)?;
-    let mut cc = ChartBuilder::on(area)
-        .caption(&chart.title, (FONT, TITLE_SIZE))
-        .margin(MARGIN)
-        .x_label_area_size(X_LABEL_AREA)
-        .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(xr.clone(), yr.clone())
-        .map_err(backend_err)?;
-    let xf = tick_formatter(xr.start, xr.end);
-    let yf = tick_formatter(yr.start, yr.end);
-    let (xn, yn) = label_counts(area);
-    cc.configure_mesh()
-        .x_labels(xn)
-        .y_labels(yn)
-        .x_desc(chart.x_label.as_str())
-        .y_desc(chart.y_label.as_str())
-        .axis_desc_style((FONT, DESC_SIZE))
-        .label_style((FONT, TICK_SIZE))
-        .x_label_formatter(&xf)
-        .y_label_formatter(&yf)
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .draw()
-        .map_err(backend_err)?;
+    let labels = (chart.x_label.as_str(), chart.y_label.as_str());
+    let mut cc = draw_axes(area, Some(&chart.title), &xr, &yr, labels, false)?;
 
     let bar_colour = series_colour(0);
     let b = chart.bound;

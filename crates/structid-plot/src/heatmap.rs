@@ -7,8 +7,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::axes::{
-    Bounds, DESC_SIZE, FONT, MARGIN, TICK_SIZE, TITLE_SIZE, X_LABEL_AREA, Y_LABEL_AREA,
-    clamp_finite, format_value, label_counts, tick_formatter, widen,
+    Bounds, FONT, MARGIN, TICK_SIZE, TITLE_SIZE, X_LABEL_AREA, clamp_finite, draw_axes,
+    format_value, widen,
 };
 use crate::error::{PlotError, backend_err};
 use crate::layout::render_tiled;
@@ -198,28 +198,8 @@ pub(crate) fn draw_heatmap(
     let ex = cell_edges(map.xs);
     let ey = cell_edges(map.ys);
     let (xr, yr) = (edge_range(&ex), edge_range(&ey));
-    let mut cc = ChartBuilder::on(&plot_area)
-        .margin(MARGIN)
-        .margin_right(4)
-        .x_label_area_size(X_LABEL_AREA)
-        .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(xr.clone(), yr.clone())
-        .map_err(backend_err)?;
-    let xf = tick_formatter(xr.start, xr.end);
-    let yf = tick_formatter(yr.start, yr.end);
-    let (xn, yn) = label_counts(&plot_area);
-    cc.configure_mesh()
-        .disable_mesh()
-        .x_labels(xn)
-        .y_labels(yn)
-        .x_desc(map.x_label.as_str())
-        .y_desc(map.y_label.as_str())
-        .axis_desc_style((FONT, DESC_SIZE))
-        .label_style((FONT, TICK_SIZE))
-        .x_label_formatter(&xf)
-        .y_label_formatter(&yf)
-        .draw()
-        .map_err(backend_err)?;
+    let labels = (map.x_label.as_str(), map.y_label.as_str());
+    let mut cc = draw_axes(&plot_area, None, &xr, &yr, labels, true)?;
 
     let nx = map.xs.len();
     let span = vhi - vlo;

@@ -373,35 +373,44 @@ impl Play {
     }
 }
 
+/// The [`HysteresisOperator`] methods of an operator with one parameter (the field `$param`,
+/// checked by `Self::new`) and one state, the follower `b`, relaxed to `z0`: [`Play`] and
+/// [`Stop`].
+macro_rules! one_follower_operator {
+    ($kind:literal, $param:ident) => {
+        fn kind(&self) -> &'static str {
+            $kind
+        }
+
+        fn state_len(&self) -> usize {
+            1
+        }
+
+        fn parameters(&self) -> Vec<f64> {
+            vec![self.$param]
+        }
+
+        fn parameter_names(&self) -> Vec<String> {
+            vec![stringify!($param).into()]
+        }
+
+        fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn HysteresisOperator>> {
+            check_count($kind, p, 1)?;
+            Ok(Box::new(Self::new(p[0])?))
+        }
+
+        fn boxed(&self) -> Box<dyn HysteresisOperator> {
+            Box::new(self.clone())
+        }
+
+        fn initial_state(&self, z0: f64, state: &mut [f64]) {
+            state[0] = z0;
+        }
+    };
+}
+
 impl HysteresisOperator for Play {
-    fn kind(&self) -> &'static str {
-        "play"
-    }
-
-    fn state_len(&self) -> usize {
-        1
-    }
-
-    fn parameters(&self) -> Vec<f64> {
-        vec![self.half_width]
-    }
-
-    fn parameter_names(&self) -> Vec<String> {
-        vec!["half_width".into()]
-    }
-
-    fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn HysteresisOperator>> {
-        check_count("play", p, 1)?;
-        Ok(Box::new(Self::new(p[0])?))
-    }
-
-    fn boxed(&self) -> Box<dyn HysteresisOperator> {
-        Box::new(self.clone())
-    }
-
-    fn initial_state(&self, z0: f64, state: &mut [f64]) {
-        state[0] = z0;
-    }
+    one_follower_operator!("play", half_width);
 
     fn step(&self, state: &mut [f64], z: f64) -> f64 {
         let c = self.half_width;
@@ -471,34 +480,7 @@ fn positive(name: &str, value: f64) -> Result<f64> {
 }
 
 impl HysteresisOperator for Stop {
-    fn kind(&self) -> &'static str {
-        "stop"
-    }
-
-    fn state_len(&self) -> usize {
-        1
-    }
-
-    fn parameters(&self) -> Vec<f64> {
-        vec![self.threshold]
-    }
-
-    fn parameter_names(&self) -> Vec<String> {
-        vec!["threshold".into()]
-    }
-
-    fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn HysteresisOperator>> {
-        check_count("stop", p, 1)?;
-        Ok(Box::new(Self::new(p[0])?))
-    }
-
-    fn boxed(&self) -> Box<dyn HysteresisOperator> {
-        Box::new(self.clone())
-    }
-
-    fn initial_state(&self, z0: f64, state: &mut [f64]) {
-        state[0] = z0;
-    }
+    one_follower_operator!("stop", threshold);
 
     fn step(&self, state: &mut [f64], z: f64) -> f64 {
         let (b, c) = (state[0], self.threshold);

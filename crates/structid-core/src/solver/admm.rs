@@ -266,15 +266,19 @@ pub(crate) fn solve_with(
         missing: missing.as_deref(),
         bounds,
     };
-    let mut wstep = WStep::new(
-        &real.ss,
-        &variances(rho),
-        &channels,
-        len,
-        initial,
-        beta,
-        rho,
-    )?;
+    // The w-step of ADMM penalty ρ (rebuilt when ρ adapts).
+    let w_step = |rho: f64| {
+        WStep::new(
+            &real.ss,
+            &variances(rho),
+            &channels,
+            len,
+            initial,
+            beta,
+            rho,
+        )
+    };
+    let mut wstep = w_step(rho)?;
     // The blocks as ADMM iterates them: chains without the nodes that no kept output sees.
     let tv_z: Vec<&Signal> = problem
         .blocks()
@@ -426,15 +430,7 @@ pub(crate) fn solve_with(
                 let factor = target / rho;
                 rho = target;
                 u.iter_mut().flatten().for_each(|v| *v /= factor);
-                wstep = WStep::new(
-                    &real.ss,
-                    &variances(rho),
-                    &channels,
-                    len,
-                    initial,
-                    beta,
-                    rho,
-                )?;
+                wstep = w_step(rho)?;
                 rho_changes += 1;
             }
         }
@@ -516,8 +512,8 @@ pub(crate) fn solve_with(
             Slot::Quadratic(j) => q_parts[*j].take(),
         })
         .collect();
-    let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
-    let mut warnings = out.warnings;
+    let mut out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
+    let mut warnings = std::mem::take(&mut out.warnings);
     let status = if converged {
         SolveStatus::Solved
     } else {
@@ -555,32 +551,20 @@ pub(crate) fn solve_with(
             ));
         }
     }
-    Ok(Identification {
-        posterior: None,
-        w_hat: out.assembled.w_hat,
-        e_hat: out.e_hat,
-        blocks: out.assembled.blocks,
-        cost: out.cost,
-        z_source: problem.z_source().clone(),
-        initial_state: x0,
-        diagnostics: Diagnostics {
-            solver: SolverKind::Admm,
-            status,
-            status_detail: unconverged,
-            system_size: len * nin,
-            dropped_samples: out.dropped,
-            dropped_max_abs_residual: out.dropped_max,
-            condition_lower_bound: f64::NAN,
-            feasibility_residual: out.feasibility,
-            peak_memory_bytes: peak,
-            timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
-            iterations,
-            primal_residual: Some(r_pri),
-            dual_residual: Some(r_dual),
-            warnings,
-            ..Diagnostics::default()
-        },
-    })
+    let diagnostics = Diagnostics {
+        solver: SolverKind::Admm,
+        status,
+        status_detail: unconverged,
+        system_size: len * nin,
+        peak_memory_bytes: peak,
+        timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
+        iterations,
+        primal_residual: Some(r_pri),
+        dual_residual: Some(r_dual),
+        warnings,
+        ..Diagnostics::default()
+    };
+    Ok(out.into_identification(problem, x0, diagnostics))
 }
 
 /// Where ADMM stood when it reached its iteration limit.

@@ -430,35 +430,23 @@ pub(crate) fn solve_with(
             .flat_map(|&s| (0..n).map(move |j| x[lay.x(s, j)]))
             .collect()
     });
-    let out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
-    warnings.extend(out.warnings);
+    let mut out = finish_tv(problem, parts, e_hat, x0.as_deref(), &dropped, beta)?;
+    warnings.extend(std::mem::take(&mut out.warnings));
     let t_end = Instant::now();
     let nnz = a_mat.nnz() + p_mat.nnz();
-    Ok(Identification {
-        posterior: None,
-        w_hat: out.assembled.w_hat,
-        e_hat: out.e_hat,
-        blocks: out.assembled.blocks,
-        cost: out.cost,
-        z_source: problem.z_source().clone(),
-        initial_state: x0,
-        diagnostics: Diagnostics {
-            solver: SolverKind::Clarabel,
-            status,
-            status_detail,
-            system_size: lay.total + rows,
-            dropped_samples: out.dropped,
-            dropped_max_abs_residual: out.dropped_max,
-            condition_lower_bound: f64::NAN,
-            feasibility_residual: out.feasibility,
-            // The KKT matrix and its LDLᵀ factor: a rough guide (fill-in is problem dependent).
-            peak_memory_bytes: (nnz as u64) * 16 * 4,
-            timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
-            iterations,
-            primal_residual: Some(sol.r_prim),
-            dual_residual: Some(sol.r_dual),
-            warnings,
-            ..Diagnostics::default()
-        },
-    })
+    let diagnostics = Diagnostics {
+        solver: SolverKind::Clarabel,
+        status,
+        status_detail,
+        system_size: lay.total + rows,
+        // The KKT matrix and its LDLᵀ factor: a rough guide (fill-in is problem dependent).
+        peak_memory_bytes: (nnz as u64) * 16 * 4,
+        timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
+        iterations,
+        primal_residual: Some(sol.r_prim),
+        dual_residual: Some(sol.r_dual),
+        warnings,
+        ..Diagnostics::default()
+    };
+    Ok(out.into_identification(problem, x0, diagnostics))
 }

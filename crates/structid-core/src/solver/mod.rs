@@ -23,7 +23,7 @@ use crate::dispersion::total_variation::TvPenalty;
 use crate::dispersion::{Penalty, QuadraticPenalty};
 use crate::error::{Error, Result};
 use crate::identify::problem::{Problem, ProblemBlock};
-use crate::identify::result::{BlockEstimate, CostTerms, Timings};
+use crate::identify::result::{BlockEstimate, CostTerms, Diagnostics, Identification, Timings};
 use crate::model::interpolant::Interpolant;
 
 /// One block's solution before assembly: ŵ at the samples, D_i and the interpolant.
@@ -179,6 +179,35 @@ pub(crate) struct TvOutcome {
     pub(crate) dropped: Vec<usize>,
     pub(crate) dropped_max: f64,
     pub(crate) warnings: Vec<String>,
+}
+
+impl TvOutcome {
+    /// The estimate of a total-variation solve (no posterior): this outcome, x̂₀ and the
+    /// solver's `diagnostics`, completed with the dropped samples, the feasibility residual
+    /// and no condition bound.
+    pub(crate) fn into_identification(
+        self,
+        problem: &Problem,
+        x0: Option<Vec<f64>>,
+        diagnostics: Diagnostics,
+    ) -> Identification {
+        Identification {
+            posterior: None,
+            w_hat: self.assembled.w_hat,
+            e_hat: self.e_hat,
+            blocks: self.assembled.blocks,
+            cost: self.cost,
+            z_source: problem.z_source().clone(),
+            initial_state: x0,
+            diagnostics: Diagnostics {
+                dropped_samples: self.dropped,
+                dropped_max_abs_residual: self.dropped_max,
+                condition_lower_bound: f64::NAN,
+                feasibility_residual: self.feasibility,
+                ..diagnostics
+            },
+        }
+    }
 }
 
 /// Builds the estimate from the block parts, checking feasibility with the problem's own

@@ -6,7 +6,7 @@ use structid_core::{Lft, Site};
 use toml::Spanned;
 
 use super::lft::Dim;
-use super::source::{Source, err_at, plural};
+use super::source::{Source, check_unique_name, err_at, plural};
 use crate::error::IoError;
 
 /// A candidate location declared in `[discover]`: a block reading z row `z` and writing
@@ -121,38 +121,18 @@ pub(super) fn parse_discover(
                 ),
             ));
         }
-        if let Some(j) = out.locations.iter().position(|l| l.name == name) {
-            return Err(err_at(
-                name_line,
-                format!(
-                    "two [discover] locations are named `{name}` (lines {} and {name_line}); names \
-                     must be unique",
-                    lines[j]
-                ),
-            ));
-        }
+        let earlier = out.locations.iter().position(|l| l.name == name);
+        check_unique_name("[discover] locations", &name, name_line, earlier, &lines)?;
         let owner = format!("[discover] location `{name}`");
         let (z, z_line) = index(&r.z, "z", &owner)?;
         if z >= dz.value {
-            return Err(err_at(
-                z_line,
-                format!(
-                    "{owner} reads z row {z} but the model has {} (indices 0…): {}",
-                    plural(dz.value, "z row"),
-                    dz.source
-                ),
-            ));
+            let what = format!("{owner} reads z row {z}");
+            return Err(dz.out_of_range(z_line, &what, "z row"));
         }
         let (w, w_line) = index(&r.w, "w", &owner)?;
         if w >= dw.value {
-            return Err(err_at(
-                w_line,
-                format!(
-                    "{owner} writes w column {w} but the model has {} (indices 0…): {}",
-                    plural(dw.value, "w column"),
-                    dw.source
-                ),
-            ));
+            let what = format!("{owner} writes w column {w}");
+            return Err(dw.out_of_range(w_line, &what, "w column"));
         }
         if let Some(j) = out.locations.iter().position(|l| l.z == z && l.w == w) {
             return Err(err_at(
@@ -177,16 +157,8 @@ pub(super) fn parse_discover(
     for entry in &raw.states {
         let r = entry.get_ref();
         let (name, name_line) = name_of(&r.name, "state")?;
-        if let Some(j) = out.states.iter().position(|s| s.name == name) {
-            return Err(err_at(
-                name_line,
-                format!(
-                    "two [discover] states are named `{name}` (lines {} and {name_line}); names \
-                     must be unique",
-                    lines[j]
-                ),
-            ));
-        }
+        let earlier = out.states.iter().position(|s| s.name == name);
+        check_unique_name("[discover] states", &name, name_line, earlier, &lines)?;
         let owner = format!("[discover] state `{name}`");
         let (state, state_line) = index(&r.state, "state", &owner)?;
         if state >= n {

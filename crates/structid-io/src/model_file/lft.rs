@@ -171,6 +171,21 @@ pub(super) struct Dim {
     pub(super) line: Option<usize>,
 }
 
+impl Dim {
+    /// The error at `line` for `what` (e.g. "block `b` writes w[3]") reaching past this
+    /// dimension, counted in `unit`s.
+    pub(super) fn out_of_range(&self, line: usize, what: &str, unit: &str) -> IoError {
+        err_at(
+            line,
+            format!(
+                "{what} but the model has {} (indices 0…): {}",
+                plural(self.value, unit),
+                self.source
+            ),
+        )
+    }
+}
+
 fn infer_cols(mats: &[&MatIn], what: &str, sym: &str) -> Dim {
     for m in mats {
         if let Some(c) = m.known_cols() {

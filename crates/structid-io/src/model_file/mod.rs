@@ -141,6 +141,7 @@ pub use linear::{LINEAR_STRUCTURES, LinearSpec, parse_linear_structure};
 pub use nonlinearity::{BlockSpec, TruthSpec};
 pub use operator::OperatorSpec;
 pub use signals::SignalNames;
+use source::check_unique_name;
 pub(crate) use source::{Source, err_at, toml_error, value_kind};
 pub use structure::SiteBlock;
 
@@ -317,15 +318,14 @@ impl ModelFile {
                     "a [[nonlinearity]] block has an empty name",
                 ));
             }
-            if let Some(j) = blocks.iter().position(|b| b.name == name) {
-                return Err(err_at(
-                    name_line,
-                    format!(
-                        "two [[nonlinearity]] blocks are named `{name}` (lines {} and {name_line}); names must be unique",
-                        block_lines[j]
-                    ),
-                ));
-            }
+            let earlier = blocks.iter().position(|b| b.name == name);
+            check_unique_name(
+                "[[nonlinearity]] blocks",
+                &name,
+                name_line,
+                earlier,
+                &block_lines,
+            )?;
             let inputs = parse_index_list(&rb.inputs, &name, &src)?;
             if let Some(&bad) = inputs.iter().find(|&&i| i >= dz.value) {
                 return Err(err_at(
@@ -340,14 +340,8 @@ impl ModelFile {
             let out_line = src.line(rb.output.span().start);
             let output = *rb.output.get_ref();
             if output < 0 || output as u64 >= dw.value as u64 {
-                return Err(err_at(
-                    out_line,
-                    format!(
-                        "block `{name}` writes w[{output}] but the model has {} (indices 0…): {}",
-                        plural(dw.value, "w signal"),
-                        dw.source
-                    ),
-                ));
+                let what = format!("block `{name}` writes w[{output}]");
+                return Err(dw.out_of_range(out_line, &what, "w signal"));
             }
             let output = output as usize;
             if let Some(j) = owner[output] {

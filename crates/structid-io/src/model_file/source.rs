@@ -61,6 +61,28 @@ pub(crate) fn err_at(line: usize, message: impl Into<String>) -> IoError {
     }
 }
 
+/// Refuses a second entry named `name` (at `line`) among `what` (e.g. "[discover] states"):
+/// `earlier` is the index of the entry already so named, if any, and `lines` holds the lines
+/// of the entries read so far.
+pub(super) fn check_unique_name(
+    what: &str,
+    name: &str,
+    line: usize,
+    earlier: Option<usize>,
+    lines: &[usize],
+) -> Result<(), IoError> {
+    match earlier {
+        Some(j) => Err(err_at(
+            line,
+            format!(
+                "two {what} are named `{name}` (lines {} and {line}); names must be unique",
+                lines[j]
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 pub(super) fn plural(n: usize, word: &str) -> String {
     if n == 1 {
         format!("{n} {word}")
