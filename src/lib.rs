@@ -71,3 +71,6 @@ pub use structid_lti as lti;
 pub use structid_plot as plot;
 /// The workflows under the command-line tool and Python, as typed requests and results.
 pub use structid_workflow as workflow;
+
+#[cfg(doctest)]
+mod readme_doctests;
