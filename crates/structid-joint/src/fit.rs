@@ -222,12 +222,18 @@ pub struct JointFit {
 /// ```
 ///
 /// # Errors
-/// Those of [`fit`](crate::fit()).
+/// Those of [`fit`](crate::fit()): data whose channels do not match the model, or a model
+/// that cannot be simulated on a record. A model without states gets an empty state per
+/// record.
 pub fn fit_initial_state(
     model: &JointModel,
     data: &Data,
     settings: &JointSettings,
 ) -> Result<Vec<Vec<f64>>> {
+    if model.stacked_state_len() == 0 {
+        // Nothing to fit: the simulation does not depend on a start.
+        return Ok(vec![Vec::new(); data.record_count()]);
+    }
     let settings = JointSettings {
         segment_length: None,
         estimate_initial_state: true,

@@ -97,15 +97,21 @@ impl BlockMap for FixedMap {
 /// assert_eq!(held.eval_jacobian(&mut [], &[0.3], &mut a), map.eval_jacobian(&mut [], &[0.3], &mut b));
 /// assert_eq!(a.dw_dz, b.dw_dz);
 /// ```
+///
+/// Each evaluation of the Jacobian fills the block's own buffers (its parameter derivatives
+/// included, which are then dropped), so a held block costs what the free one does per
+/// sample: it is meant for the short fits of initial states.
 #[derive(Clone, Debug)]
 pub struct HeldMap {
     block: Box<dyn BlockMap>,
+    held: usize,
 }
 
 impl HeldMap {
     /// `block` with its current parameters held.
     pub fn new(block: Box<dyn BlockMap>) -> Self {
-        Self { block }
+        let held = block.parameters().len();
+        Self { block, held }
     }
 }
 
@@ -140,7 +146,15 @@ impl BlockMap for HeldMap {
 
     fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
         // The block's own buffers hold its parameter derivatives, which are dropped.
-        let mut own = BlockJacobian::for_map(self.block.as_ref());
+        let (p, ns, np) = (z.len(), state.len(), self.held);
+        let mut own = BlockJacobian {
+            dw_dz: vec![0.0; p],
+            dw_ds: vec![0.0; ns],
+            dw_dp: vec![0.0; np],
+            ds_ds: vec![0.0; ns * ns],
+            ds_dz: vec![0.0; ns * p],
+            ds_dp: vec![0.0; ns * np],
+        };
         let w = self.block.eval_jacobian(state, z, &mut own);
         jac.dw_dz.copy_from_slice(&own.dw_dz);
         jac.dw_ds.copy_from_slice(&own.dw_ds);

@@ -256,7 +256,10 @@ pub fn write_refinement(
             write_record(guard, path, refined, &records.data)?;
             path.clone()
         }
-        None => data[0].clone(),
+        None => data
+            .first()
+            .cloned()
+            .ok_or_else(|| WorkflowError::Request("no estimation data file was given".into()))?,
     };
     let mut report = outcome.report.clone();
     report.model_file = Some(model_path.display().to_string());
