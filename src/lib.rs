@@ -69,7 +69,9 @@ pub use structid_lti as lti;
 /// SVG figures: charts, grids of charts and heat maps (feature `plot`, on by default).
 #[cfg(feature = "plot")]
 pub use structid_plot as plot;
-/// The workflows under the command-line tool and Python, as typed requests and results.
+/// The workflows under the command-line tool and Python, as typed requests and results
+/// (feature `workflow`, on by default; it writes figures, so it brings `plot` with it).
+#[cfg(feature = "workflow")]
 pub use structid_workflow as workflow;
 
 #[cfg(doctest)]

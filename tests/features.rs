@@ -1,5 +1,5 @@
-//! The facade's Cargo features: without the default `plot` feature, nothing of the plotting
-//! stack is built.
+//! The facade's Cargo features: without the default `plot` and `workflow` features, nothing
+//! of the plotting stack is built.
 
 use std::process::Command;
 
@@ -29,5 +29,9 @@ fn plotting_is_optional() {
     let lean = tree(&["--no-default-features"]);
     assert!(!lean.contains("plotters"), "{lean}");
     assert!(!lean.contains("structid-plot"), "{lean}");
+    assert!(!lean.contains("structid-workflow"), "{lean}");
+    // The workflows write figures: asking for them brings the plotting stack.
+    let workflows = tree(&["--no-default-features", "--features", "workflow"]);
+    assert!(workflows.contains("plotters"), "{workflows}");
     assert!(lean.contains("structid-core"), "{lean}");
 }
