@@ -164,17 +164,10 @@ pub fn initial_state(name: &str) -> PyResult<InitialState> {
 
 /// `auto`, `exact`, `features`, `clarabel` or `admm`.
 pub fn solver(name: &str) -> PyResult<SolverChoice> {
-    Ok(match name {
-        "auto" => SolverChoice::Auto,
-        "exact" => SolverChoice::Exact,
-        "features" => SolverChoice::Features,
-        "clarabel" => SolverChoice::Clarabel,
-        "admm" => SolverChoice::Admm,
-        other => {
-            return Err(invalid(format!(
-                "solver `{other}` is not one of auto, exact, features, clarabel, admm"
-            )));
-        }
+    SolverChoice::from_name(name).ok_or_else(|| {
+        invalid(format!(
+            "solver `{name}` is not one of auto, exact, features, clarabel, admm"
+        ))
     })
 }
 

@@ -14,6 +14,7 @@ use std::sync::{Arc, Mutex};
 use numpy::PyReadonlyArray2;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyUntypedArrayMethods};
+use pyo3::BoundObject;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use structid_core::dispersion::user::FeatureDispersion;
@@ -165,10 +166,7 @@ impl PyKernel {
 
     fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let args = (self.func.clone_ref(py), self.name.clone(), self.width);
-        Ok((
-            py.get_type::<Self>().into_any(),
-            args.into_pyobject(py)?.into_any(),
-        ))
+        reduce_to::<Self, _>(py, args)
     }
 
     /// The name it is stored under.
@@ -320,10 +318,7 @@ impl PyFeatures {
             self.weights.clone(),
             self.name.clone(),
         );
-        Ok((
-            py.get_type::<Self>().into_any(),
-            args.into_pyobject(py)?.into_any(),
-        ))
+        reduce_to::<Self, _>(py, args)
     }
 
     /// The name it is stored under.
@@ -536,4 +531,19 @@ impl UserDispersion {
         }
         Ok(out)
     }
+}
+
+/// The `__reduce__` pair (the class `T`, the arguments of its constructor) by which pickle
+/// rebuilds a kernel or feature map from the Python function it wraps.
+fn reduce_to<'py, T: pyo3::PyTypeInfo, A: IntoPyObject<'py>>(
+    py: Python<'py>,
+    args: A,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    Ok((
+        py.get_type::<T>().into_any(),
+        args.into_pyobject(py)
+            .map_err(Into::into)?
+            .into_bound()
+            .into_any(),
+    ))
 }

@@ -280,11 +280,7 @@ pub fn run(sb: &Silverbox, settings: &SilverboxSettings) -> Result<SilverboxResu
 
     let mut tests = Vec::new();
     let map = refinement.identification.blocks[0].map.as_ref();
-    for split in [
-        SilverboxSplit::TestArrowFull,
-        SilverboxSplit::TestArrowNoExtrapolation,
-        SilverboxSplit::TestMultisine,
-    ] {
+    for split in SilverboxSplit::TESTS {
         let rec = sb.split(split);
         let data = rec.data().map_err(io)?;
         let y_sim = simulate(&refinement.model, map, data.u())?;

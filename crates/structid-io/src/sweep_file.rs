@@ -707,21 +707,15 @@ fn parse_dispersion_entry(
     }
     let solver = match &r.solver {
         None => SolverChoice::Auto,
-        Some(s) => match s.get_ref().as_str() {
-            "auto" => SolverChoice::Auto,
-            "exact" => SolverChoice::Exact,
-            "features" => SolverChoice::Features,
-            "clarabel" => SolverChoice::Clarabel,
-            "admm" => SolverChoice::Admm,
-            other => {
-                return Err(err(
-                    src.line(s.span().start),
-                    format!(
-                        "{owner}: unknown solver `{other}`; use auto, exact, features, clarabel or admm"
-                    ),
-                ));
-            }
-        },
+        Some(s) => SolverChoice::from_name(s.get_ref()).ok_or_else(|| {
+            err(
+                src.line(s.span().start),
+                format!(
+                    "{owner}: unknown solver `{}`; use auto, exact, features, clarabel or admm",
+                    s.get_ref()
+                ),
+            )
+        })?,
     };
     Ok(SweepDispersion {
         name,

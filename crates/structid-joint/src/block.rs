@@ -34,7 +34,11 @@ impl BlockJacobian {
     /// assert_eq!((j.dw_dz.len(), j.dw_dp.len(), j.ds_ds.len()), (1, 7, 0));
     /// ```
     pub fn for_map(map: &dyn BlockMap) -> Self {
-        let (p, ns, np) = (map.input_len(), map.state_len(), map.parameters().len());
+        Self::zeros(map.input_len(), map.state_len(), map.parameters().len())
+    }
+
+    /// Zeroed buffers for `p` inputs, `ns` states and `np` parameters.
+    pub(crate) fn zeros(p: usize, ns: usize, np: usize) -> Self {
         Self {
             dw_dz: vec![0.0; p],
             dw_ds: vec![0.0; ns],

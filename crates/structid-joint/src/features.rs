@@ -195,13 +195,14 @@ impl GaussianFeatures {
     ) -> Result<Self> {
         let (m, p) = (self.centres.len(), self.centres[0].len());
         let np = m + self.affine.len();
-        let columns = regressor_columns(z, y, p, np, &|zk, row| self.features(zk, row))?;
-        let n = z.len();
-        let sol = regularised_fit(columns, y, filter, &(self.gram() * (self.beta * n as f64)))?;
-        let mut out = self.clone();
-        out.theta = sol.rows(0, m).iter().copied().collect();
-        out.affine = sol.rows(m, np - m).iter().copied().collect();
-        Ok(out)
+        let penalty = self.gram() * (self.beta * z.len() as f64);
+        let features = |zk: &[f64], row: &mut [f64]| self.features(zk, row);
+        let (theta, affine) = fit_linear_map(z, y, p, np, &features, filter, &penalty)?;
+        Ok(Self {
+            theta,
+            affine,
+            ..self.clone()
+        })
     }
 
     /// The regressors [K(z, c_1) … K(z, c_m), 1, z₁ … z_p] of the parameters at `z`.
@@ -277,6 +278,27 @@ pub(crate) fn split_parameters(p: &[f64], m: usize, trend: usize) -> Result<(Vec
 
 /// The columns φ_i(z_k) of the `np` regressors `features` writes at each point, after
 /// checking the points (p inputs each, finite, one value each).
+/// The fit of a map linear in its `np` parameters: the regressor columns of `features` at the
+/// points `z`, seen through `filter`, fitted to `y` with `penalty` on the first
+/// `penalty.nrows()` (the map's own) parameters; returns those and the affine rest apart.
+pub(crate) fn fit_linear_map(
+    z: &[Vec<f64>],
+    y: &[f64],
+    p: usize,
+    np: usize,
+    features: &dyn Fn(&[f64], &mut [f64]),
+    filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
+    penalty: &DMatrix<f64>,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let columns = regressor_columns(z, y, p, np, features)?;
+    let sol = regularised_fit(columns, y, filter, penalty)?;
+    let m = penalty.nrows();
+    Ok((
+        sol.rows(0, m).iter().copied().collect(),
+        sol.rows(m, np - m).iter().copied().collect(),
+    ))
+}
+
 pub(crate) fn regressor_columns(
     z: &[Vec<f64>],
     y: &[f64],

@@ -146,15 +146,7 @@ impl BlockMap for HeldMap {
 
     fn eval_jacobian(&self, state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
         // The block's own buffers hold its parameter derivatives, which are dropped.
-        let (p, ns, np) = (z.len(), state.len(), self.held);
-        let mut own = BlockJacobian {
-            dw_dz: vec![0.0; p],
-            dw_ds: vec![0.0; ns],
-            dw_dp: vec![0.0; np],
-            ds_ds: vec![0.0; ns * ns],
-            ds_dz: vec![0.0; ns * p],
-            ds_dp: vec![0.0; ns * np],
-        };
+        let mut own = BlockJacobian::zeros(z.len(), state.len(), self.held);
         let w = self.block.eval_jacobian(state, z, &mut own);
         jac.dw_dz.copy_from_slice(&own.dw_dz);
         jac.dw_ds.copy_from_slice(&own.dw_ds);

@@ -20,7 +20,7 @@ use structid_core::{Combination, FeatureMap, FourierKernel, FourierWeights};
 
 use crate::block::{BlockJacobian, BlockMap};
 use crate::error::{Result, invalid};
-use crate::features::{regressor_columns, regularised_fit, split_parameters};
+use crate::features::{fit_linear_map, split_parameters};
 
 /// A Fourier-feature map plus an unpenalised affine part.
 #[derive(Clone, Debug, PartialEq)]
@@ -113,17 +113,18 @@ impl FourierFeatures {
     ) -> Result<Self> {
         let (m, p) = (self.coef.len(), self.kernel.inputs());
         let np = m + self.affine.len();
-        let columns = regressor_columns(z, y, p, np, &|zk, row| self.features(zk, row))?;
         let n = z.len() as f64;
         let penalty = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
             m,
             self.kernel.weights()[1..].iter().map(|l| self.beta * n / l),
         ));
-        let sol = regularised_fit(columns, y, filter, &penalty)?;
-        let mut out = self.clone();
-        out.coef = sol.rows(0, m).iter().copied().collect();
-        out.affine = sol.rows(m, np - m).iter().copied().collect();
-        Ok(out)
+        let features = |zk: &[f64], row: &mut [f64]| self.features(zk, row);
+        let (coef, affine) = fit_linear_map(z, y, p, np, &features, filter, &penalty)?;
+        Ok(Self {
+            coef,
+            affine,
+            ..self.clone()
+        })
     }
 
     /// The regressors [ψ₁(z) … ψ_(m−1)(z), 1, z₁ … z_p].
@@ -134,6 +135,17 @@ impl FourierFeatures {
         out[..m].copy_from_slice(&psi[1..]);
         out[m] = 1.0;
         out[m + 1..].copy_from_slice(z);
+    }
+
+    /// N(z) from the kernel values `psi` = [ψ₀(z) … ψ_(m−1)(z)] at `z` (ψ₀ is the constant
+    /// feature, which the affine part carries).
+    fn value(&self, psi: &[f64], z: &[f64]) -> f64 {
+        psi[1..]
+            .iter()
+            .zip(&self.coef)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            + self.affine_value(z)
     }
 
     fn affine_value(&self, z: &[f64]) -> f64 {
@@ -170,12 +182,7 @@ impl BlockMap for FourierFeatures {
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {
         let mut psi = vec![0.0; self.coef.len() + 1];
         self.kernel.eval_into(z, &mut psi);
-        psi[1..]
-            .iter()
-            .zip(&self.coef)
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            + self.affine_value(z)
+        self.value(&psi, z)
     }
 
     fn eval_jacobian(&self, _state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
@@ -191,12 +198,7 @@ impl BlockMap for FourierFeatures {
                     .map(|j| self.coef[j] * grad[(j + 1) * p + i])
                     .sum::<f64>();
         }
-        psi[1..]
-            .iter()
-            .zip(&self.coef)
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            + self.affine_value(z)
+        self.value(&psi, z)
     }
 
     fn regulariser(&self) -> Option<DMatrix<f64>> {

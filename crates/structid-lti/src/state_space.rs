@@ -376,31 +376,9 @@ impl StateSpace {
                 st[k * n..(k + 1) * n].copy_from_slice(&x);
             }
             let yk = &mut y[k * p..(k + 1) * p];
-            for i in 0..p {
-                let crow = &c[i * n..(i + 1) * n];
-                let drow = &d[i * m..(i + 1) * m];
-                let mut acc = 0.0;
-                for j in 0..n {
-                    acc += crow[j] * x[j];
-                }
-                for j in 0..m {
-                    acc += drow[j] * uk[j];
-                }
-                yk[i] = acc;
-            }
+            set_sum_of_products(c, &x[..n], d, uk, yk);
             if n > 0 {
-                for i in 0..n {
-                    let arow = &a[i * n..(i + 1) * n];
-                    let brow = &b[i * m..(i + 1) * m];
-                    let mut acc = 0.0;
-                    for j in 0..n {
-                        acc += arow[j] * x[j];
-                    }
-                    for j in 0..m {
-                        acc += brow[j] * uk[j];
-                    }
-                    xn[i] = acc;
-                }
+                set_sum_of_products(a, &x[..n], b, uk, &mut xn);
                 std::mem::swap(&mut x, &mut xn);
             }
         }
@@ -450,15 +428,7 @@ impl StateSpace {
     /// The subsystem driven by the inputs `idx` (columns of `B` and `D`, in that order);
     /// `A`, `C` and the sample time are kept.
     pub fn select_inputs(&self, idx: &[usize]) -> Result<StateSpace, LtiError> {
-        if let Some(&bad) = idx.iter().find(|&&i| i >= self.inputs()) {
-            return Err(LtiError::param(
-                "input index",
-                format!(
-                    "{bad} is out of range for a system with {} inputs",
-                    self.inputs()
-                ),
-            ));
-        }
+        check_channels(idx, self.inputs(), "input")?;
         let mut s = StateSpace::new(
             self.a.clone(),
             self.b.select_columns(idx.iter()),
@@ -472,15 +442,7 @@ impl StateSpace {
     /// The subsystem seen from the outputs `idx` (rows of `C` and `D`, in that order);
     /// `A`, `B` and the sample time are kept.
     pub fn select_outputs(&self, idx: &[usize]) -> Result<StateSpace, LtiError> {
-        if let Some(&bad) = idx.iter().find(|&&i| i >= self.outputs()) {
-            return Err(LtiError::param(
-                "output index",
-                format!(
-                    "{bad} is out of range for a system with {} outputs",
-                    self.outputs()
-                ),
-            ));
-        }
+        check_channels(idx, self.outputs(), "output")?;
         let mut s = StateSpace::new(
             self.a.clone(),
             self.b.clone(),
@@ -741,39 +703,15 @@ impl LinearSystem for StateSpace {
             let uk = &mut u[k * m..(k + 1) * m];
             // u_k = D^T y_k + B^T s_{k+1}
             uk.fill(0.0);
-            for i in 0..p {
-                let drow = &d[i * m..(i + 1) * m];
-                let yi = yk[i];
-                for j in 0..m {
-                    uk[j] += drow[j] * yi;
-                }
-            }
+            add_transposed_product(d, yk, uk);
             if n == 0 {
                 continue;
             }
-            for i in 0..n {
-                let brow = &b[i * m..(i + 1) * m];
-                let si = s[i];
-                for j in 0..m {
-                    uk[j] += brow[j] * si;
-                }
-            }
+            add_transposed_product(b, &s, uk);
             // s_k = A^T s_{k+1} + C^T y_k
             sn.fill(0.0);
-            for i in 0..n {
-                let arow = &a[i * n..(i + 1) * n];
-                let si = s[i];
-                for j in 0..n {
-                    sn[j] += arow[j] * si;
-                }
-            }
-            for i in 0..p {
-                let crow = &c[i * n..(i + 1) * n];
-                let yi = yk[i];
-                for j in 0..n {
-                    sn[j] += crow[j] * yi;
-                }
-            }
+            add_transposed_product(a, &s, &mut sn);
+            add_transposed_product(c, yk, &mut sn);
             std::mem::swap(&mut s, &mut sn);
         }
     }
@@ -782,34 +720,29 @@ impl LinearSystem for StateSpace {
     /// with rows `X_k`, `Y_k = T_b X_k + Gamma S`, `S <- A^b S + R X_k`, each as one
     /// (SIMD) matrix product on the packed `[X_k; S]`; columns are split across faer's
     /// global thread pool (`faer::get_global_parallelism()`).
-    fn apply_columns(
-        &self,
-        x: MatRef<'_, f64>,
-        mut out: MatMut<'_, f64>,
-        accum: Accum,
-        alpha: f64,
-    ) {
-        let (n, m, p) = (self.order(), self.inputs(), self.outputs());
-        assert_eq!(
-            x.ncols(),
-            out.ncols(),
-            "x and out must have the same number of columns"
-        );
-        let len = horizon(m, p, x.nrows(), out.nrows());
-        if trivial_columns(m, p, len, &mut out, accum) {
-            return;
-        }
-        if n == 0 {
-            static_columns(to_faer(&self.d).as_ref(), len, x, out, accum, alpha);
-        } else {
-            self.blocked(len, false).run(len, x, out, accum, alpha);
-        }
+    fn apply_columns(&self, x: MatRef<'_, f64>, out: MatMut<'_, f64>, accum: Accum, alpha: f64) {
+        self.columns(false, x, out, accum, alpha);
     }
 
     /// Blocked backward recursion with the transposed block matrices (costate `n x ncols`).
     fn apply_adjoint_columns(
         &self,
         x: MatRef<'_, f64>,
+        out: MatMut<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
+        self.columns(true, x, out, accum, alpha);
+    }
+}
+
+impl StateSpace {
+    /// The forward (`adjoint = false`) or adjoint column application: the adjoint swaps the
+    /// input and output channels and runs the transposed block matrices backwards in time.
+    fn columns(
+        &self,
+        adjoint: bool,
+        x: MatRef<'_, f64>,
         mut out: MatMut<'_, f64>,
         accum: Accum,
         alpha: f64,
@@ -820,21 +753,61 @@ impl LinearSystem for StateSpace {
             out.ncols(),
             "x and out must have the same number of columns"
         );
-        let len = horizon(p, m, x.nrows(), out.nrows());
-        if trivial_columns(p, m, len, &mut out, accum) {
+        let (from, to) = if adjoint { (p, m) } else { (m, p) };
+        let len = horizon(from, to, x.nrows(), out.nrows());
+        if trivial_columns(from, to, len, &mut out, accum) {
             return;
         }
         if n == 0 {
-            static_columns(
-                to_faer(&self.d).as_ref().transpose(),
-                len,
-                x,
-                out,
-                accum,
-                alpha,
-            );
+            let d = to_faer(&self.d);
+            let d = if adjoint {
+                d.as_ref().transpose()
+            } else {
+                d.as_ref()
+            };
+            static_columns(d, len, x, out, accum, alpha);
         } else {
-            self.blocked(len, true).run(len, x, out, accum, alpha);
+            self.blocked(len, adjoint).run(len, x, out, accum, alpha);
+        }
+    }
+}
+
+/// Refuses an index of `idx` at or beyond the `count` channels (`what`: input or output).
+fn check_channels(idx: &[usize], count: usize, what: &str) -> Result<(), LtiError> {
+    match idx.iter().find(|&&i| i >= count) {
+        Some(&bad) => Err(LtiError::param(
+            format!("{what} index"),
+            format!("{bad} is out of range for a system with {count} {what}s"),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// `out = P·x + Q·u` for row-major `P` (`out.len()` × `x.len()`) and `Q` (`out.len()` ×
+/// `u.len()`): one step of the state or output equation.
+fn set_sum_of_products(p: &[f64], x: &[f64], q: &[f64], u: &[f64], out: &mut [f64]) {
+    let (n, m) = (x.len(), u.len());
+    for (i, o) in out.iter_mut().enumerate() {
+        let prow = &p[i * n..(i + 1) * n];
+        let qrow = &q[i * m..(i + 1) * m];
+        let mut acc = 0.0;
+        for (pj, xj) in prow.iter().zip(x) {
+            acc += pj * xj;
+        }
+        for (qj, uj) in qrow.iter().zip(u) {
+            acc += qj * uj;
+        }
+        *o = acc;
+    }
+}
+
+/// `out += Mᵀ·v` for a row-major `M` with `v.len()` rows and `out.len()` columns.
+fn add_transposed_product(mat: &[f64], v: &[f64], out: &mut [f64]) {
+    let cols = out.len();
+    for (i, &vi) in v.iter().enumerate() {
+        let row = &mat[i * cols..(i + 1) * cols];
+        for (o, r) in out.iter_mut().zip(row) {
+            *o += r * vi;
         }
     }
 }

@@ -15,9 +15,9 @@ use structid_core::{Data, Estimate, InitialState};
 use structid_io::{OutputGuard, Vars, read_estimate};
 
 use crate::paths::{absolute, initial_state_name, json_text};
-use crate::validate::{RecordValidation, ValidationOptions};
+use crate::validate::{RecordValidation, ValidationOptions, write_output_scores};
 use crate::validation_files::{
-    OUTPUTS, RecordScore, check_lengths, fmt_pct, outputs_json, pass, residuals_svg, scored_json,
+    OUTPUTS, RecordScore, check_lengths, fmt_pct, outputs_json, residuals_svg, scored_json,
     simulation_names, simulation_svg,
 };
 use crate::{Result, WorkflowError};
@@ -172,14 +172,7 @@ pub fn validate_stored(
         let _ = writeln!(s, "initial state: estimated, x₀ = [{}]", v.join(", "));
     }
     for (c, name) in y_names.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "output {name}: simulation RMS {:.4e}, fit {}; one-step prediction RMS {:.4e}",
-            report.rms[c],
-            fmt_pct(report.fit_percent[c]),
-            report.prediction_rms[c]
-        );
-        let _ = writeln!(s, "  whiteness of ε: {}", pass(&report.whiteness[c]));
+        write_output_scores(&mut s, &report, c, name);
     }
     let _ = writeln!(s, "wrote:");
     for p in &written {

@@ -810,14 +810,7 @@ fn summary(
         }
     }
     for (c, name) in y_names.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "output {name}: simulation RMS {:.4e}, fit {}; one-step prediction RMS {:.4e}",
-            report.rms[c],
-            fmt_pct(report.fit_percent[c]),
-            report.prediction_rms[c]
-        );
-        let _ = writeln!(s, "  whiteness of ε: {}", pass(&report.whiteness[c]));
+        write_output_scores(&mut s, report, c, name);
         for (j, u) in u_names.iter().enumerate() {
             let _ = writeln!(
                 s,
@@ -834,4 +827,17 @@ fn summary(
         let _ = writeln!(s, "  {}", p.display());
     }
     s
+}
+
+/// The summary lines of output `c` (named `name`): its simulation and one-step prediction
+/// scores and the whiteness of its residual, as both validations print them.
+pub(crate) fn write_output_scores(s: &mut String, report: &ValidationReport, c: usize, name: &str) {
+    let _ = writeln!(
+        s,
+        "output {name}: simulation RMS {:.4e}, fit {}; one-step prediction RMS {:.4e}",
+        report.rms[c],
+        fmt_pct(report.fit_percent[c]),
+        report.prediction_rms[c]
+    );
+    let _ = writeln!(s, "  whiteness of ε: {}", pass(&report.whiteness[c]));
 }

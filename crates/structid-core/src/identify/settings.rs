@@ -37,6 +37,25 @@ impl SolverChoice {
             SolverChoice::Admm => "admm",
         }
     }
+
+    /// The choice whose [`name`](Self::name) is `name`, if any.
+    ///
+    /// ```
+    /// use structid_core::SolverChoice;
+    /// assert_eq!(SolverChoice::from_name("admm"), Some(SolverChoice::Admm));
+    /// assert_eq!(SolverChoice::from_name("newton"), None);
+    /// ```
+    pub fn from_name(name: &str) -> Option<Self> {
+        [
+            SolverChoice::Auto,
+            SolverChoice::Exact,
+            SolverChoice::Features,
+            SolverChoice::Clarabel,
+            SolverChoice::Admm,
+        ]
+        .into_iter()
+        .find(|c| c.name() == name)
+    }
 }
 
 /// Settings of [`identify()`](crate::identify()); build them with [`IdentifySettings::builder`].

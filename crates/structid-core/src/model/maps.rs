@@ -29,16 +29,8 @@ pub struct ExprMap {
 impl ExprMap {
     /// Parses `text` as a map of `dim` inputs.
     pub fn parse(text: &str, dim: usize) -> Result<Self> {
-        let err = |reason: String| Error::Expression {
-            expression: text.to_string(),
-            reason,
-        };
-        if let Some(name) = unknown_function(text) {
-            return Err(err(format!(
-                "unknown function `{name}`; the functions are {}",
-                function_names().join(", ")
-            )));
-        }
+        let err = |reason: String| expression_error(text, reason);
+        check_functions(text)?;
         let expr = exmex::parse::<f64>(text).map_err(|e| err(e.to_string()))?;
         let mut slots = Vec::new();
         for name in expr.var_names() {
@@ -76,6 +68,29 @@ impl ExprMap {
     /// Number of inputs.
     pub fn dim(&self) -> usize {
         self.dim
+    }
+}
+
+/// An [`Error::Expression`] about `text`.
+pub(crate) fn expression_error(text: &str, reason: String) -> Error {
+    Error::Expression {
+        expression: text.to_string(),
+        reason,
+    }
+}
+
+/// Rejects a call to a function the parser does not know, naming it and the known ones,
+/// before the parser would report it in terms of its own grammar.
+pub(crate) fn check_functions(text: &str) -> Result<()> {
+    match unknown_function(text) {
+        Some(name) => Err(expression_error(
+            text,
+            format!(
+                "unknown function `{name}`; the functions are {}",
+                function_names().join(", ")
+            ),
+        )),
+        None => Ok(()),
     }
 }
 

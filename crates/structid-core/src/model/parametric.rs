@@ -18,7 +18,7 @@ use exmex::{BinOp, Express, FlatEx, MakeOperators, Operator};
 
 use crate::error::{Error, Result};
 use crate::model::interpolant::Interpolant;
-use crate::model::maps::{function_names, unknown_function};
+use crate::model::maps::{check_functions, expression_error, function_names};
 
 /// A dual number v + d·ε: a value and its derivative along one direction.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -241,16 +241,8 @@ impl ParametricMap {
     /// parameter name that is an input's or a constant's; [`Error::InvalidParameter`] for a
     /// value that is not finite.
     pub fn parse(text: &str, dim: usize, parameters: Vec<(String, f64)>) -> Result<Self> {
-        let err = |reason: String| Error::Expression {
-            expression: text.to_string(),
-            reason,
-        };
-        if let Some(name) = unknown_function(text) {
-            return Err(err(format!(
-                "unknown function `{name}`; the functions are {}",
-                function_names().join(", ")
-            )));
-        }
+        let err = |reason: String| expression_error(text, reason);
+        check_functions(text)?;
         let constants = ["PI", "π", "E", "e", "TAU", "τ"];
         for (i, (name, v)) in parameters.iter().enumerate() {
             let input_like = name == "z"

@@ -182,19 +182,15 @@ pub fn without_blocks(nominal: &Lft) -> Result<Lft> {
     let d = nominal.dims();
     with_time(
         nominal,
+        // The u, e → y part is kept; only the w and z channels change.
         LftMatrices {
-            a: m.a.clone(),
-            bu: m.bu.clone(),
-            be: m.be.clone(),
             bw: DMatrix::zeros(d.states, 0),
-            cy: m.cy.clone(),
-            dyu: m.dyu.clone(),
-            dye: m.dye.clone(),
             dyw: DMatrix::zeros(d.y, 0),
             cz: DMatrix::zeros(0, d.states),
             dzu: DMatrix::zeros(0, d.u),
             dze: DMatrix::zeros(0, d.e),
             dzw: DMatrix::zeros(0, 0),
+            ..m.clone()
         },
     )
 }
@@ -767,19 +763,15 @@ fn declared(nominal: &Lft, z: usize, w: usize) -> Result<Lft> {
     let m = nominal.matrices();
     with_time(
         nominal,
+        // The u, e → y part is kept; only the w and z channels change.
         LftMatrices {
-            a: m.a.clone(),
-            bu: m.bu.clone(),
-            be: m.be.clone(),
             bw: m.bw.columns(w, 1).into_owned(),
-            cy: m.cy.clone(),
-            dyu: m.dyu.clone(),
-            dye: m.dye.clone(),
             dyw: m.dyw.columns(w, 1).into_owned(),
             cz: m.cz.rows(z, 1).into_owned(),
             dzu: m.dzu.rows(z, 1).into_owned(),
             dze: m.dze.rows(z, 1).into_owned(),
             dzw: DMatrix::from_element(1, 1, m.dzw[(z, w)]),
+            ..m.clone()
         },
     )
 }

@@ -339,16 +339,7 @@ impl BetaScore for DenseScore {
 
 /// D·Dᵀ (n_y × n_y) of a static noise path y = D·e.
 fn static_noise_covariance(noise: &dyn LinearSystem) -> DMatrix<f64> {
-    let (ny, ne) = (noise.outputs(), noise.inputs());
-    let mut d = DMatrix::<f64>::zeros(ny, ne);
-    let mut unit = vec![0.0; ne];
-    let mut col = vec![0.0; ny];
-    for c in 0..ne {
-        unit.iter_mut().for_each(|v| *v = 0.0);
-        unit[c] = 1.0;
-        noise.apply(&unit, &mut col);
-        d.column_mut(c).copy_from_slice(&col);
-    }
+    let d = crate::solver::features::static_gain(noise, noise.outputs(), noise.inputs());
     &d * d.transpose()
 }
 

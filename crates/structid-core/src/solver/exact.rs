@@ -382,16 +382,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             dropped_samples: dropped,
             dropped_max_abs_residual: dropped_max,
             diagonal_jitter: jitter,
-            condition_lower_bound: if dmin > 0.0 {
-                (dmax / dmin).powi(2)
-            } else {
-                f64::INFINITY
-            },
-            feasibility_residual: if r2 > 0.0 {
-                (res2 / r2).sqrt()
-            } else {
-                res2.sqrt()
-            },
+            condition_lower_bound: super::condition_lower_bound(dmax, dmin),
+            feasibility_residual: super::relative_residual(res2, r2),
             peak_memory_bytes: need,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings,

@@ -750,16 +750,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             dropped_samples: Vec::new(),
             dropped_max_abs_residual: 0.0,
             diagonal_jitter: 0.0,
-            condition_lower_bound: if lo > 0.0 {
-                (hi / lo).powi(2)
-            } else {
-                f64::INFINITY
-            },
-            feasibility_residual: if r2 > 0.0 {
-                (res2 / r2).sqrt()
-            } else {
-                res2.sqrt()
-            },
+            condition_lower_bound: super::condition_lower_bound(hi, lo),
+            feasibility_residual: super::relative_residual(res2, r2),
             peak_memory_bytes: 8 * (cols * cols + 4 * chunk * ny * cols + chunk * m) as u64,
             timings: Timings::from_instants(t_start, t_prepared, t_assembled, t_factored, t_end),
             warnings,
@@ -875,7 +867,11 @@ impl RecordWhiteners {
 }
 
 /// D of a static noise path, found by applying it to unit impulses.
-fn static_gain(noise: &dyn LinearSystem, ny: usize, ne: usize) -> nalgebra::DMatrix<f64> {
+pub(crate) fn static_gain(
+    noise: &dyn LinearSystem,
+    ny: usize,
+    ne: usize,
+) -> nalgebra::DMatrix<f64> {
     let mut d = nalgebra::DMatrix::zeros(ny, ne);
     let mut unit = vec![0.0; ne];
     let mut col = vec![0.0; ny];

@@ -274,13 +274,29 @@ pub(crate) fn finish_tv(
         assembled,
         cost,
         e_hat: Signal::new(ne, e_hat)?,
-        feasibility: if r2 > 0.0 {
-            (res2 / r2).sqrt()
-        } else {
-            res2.sqrt()
-        },
+        feasibility: relative_residual(res2, r2),
         dropped: dropped_idx,
         dropped_max,
         warnings,
     })
+}
+
+/// ‖fit − r‖ / ‖r‖ from the two squared norms; the absolute ‖fit − r‖ when r is zero, so a
+/// zero right-hand side still reports how far the fit is from it.
+pub(crate) fn relative_residual(res2: f64, r2: f64) -> f64 {
+    if r2 > 0.0 {
+        (res2 / r2).sqrt()
+    } else {
+        res2.sqrt()
+    }
+}
+
+/// (max / min)² from the extreme diagonal (or singular) values of a factor, a lower bound on the
+/// condition number of the system it factors; infinite when the smallest is zero.
+pub(crate) fn condition_lower_bound(max: f64, min: f64) -> f64 {
+    if min > 0.0 {
+        (max / min).powi(2)
+    } else {
+        f64::INFINITY
+    }
 }

@@ -189,18 +189,10 @@ fn without_w(lft: &Lft) -> Result<Lft, IoError> {
     let m = lft.matrices();
     let d = lft.dims();
     let nominal = Lft::new(LftMatrices {
-        a: m.a.clone(),
-        bu: m.bu.clone(),
-        be: m.be.clone(),
         bw: DMatrix::zeros(d.states, 0),
-        cy: m.cy.clone(),
-        dyu: m.dyu.clone(),
-        dye: m.dye.clone(),
         dyw: DMatrix::zeros(d.y, 0),
-        cz: m.cz.clone(),
-        dzu: m.dzu.clone(),
-        dze: m.dze.clone(),
         dzw: DMatrix::zeros(d.z, 0),
+        ..m.clone()
     })?;
     Ok(match lft.sample_time() {
         Some(ts) => nominal.with_sample_time(ts)?,

@@ -276,15 +276,8 @@ pub fn summary(
                 }
             },
         }
-        let _ = writeln!(
-            s,
-            "validation RMS: {} → {} ({}), fit {} → {}",
-            e(d.validation_gap.rms),
-            e(f.augmented.validation_gap.rms),
-            structid_discover::gap::shrink_text(f.shrink, 2),
-            pct(d.validation_gap.fit_percent),
-            pct(f.augmented.validation_gap.fit_percent)
-        );
+        let (rms, fit) = validation_change(d, f);
+        let _ = writeln!(s, "validation RMS: {rms}, fit {fit}");
         if let Some(w) = r.augmented {
             let _ = writeln!(
                 s,

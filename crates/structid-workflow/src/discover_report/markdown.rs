@@ -694,6 +694,25 @@ pub(super) fn families_md(s: &mut String, f: &Finding) {
     s.push('\n');
 }
 
+/// The validation gap of the nominal → the augmented model, as the summary and the report
+/// both give it: the RMS with the shrink factor, and the fit in percent.
+pub(super) fn validation_change(d: &Discovery, f: &Finding) -> (String, String) {
+    let after = &f.augmented.validation_gap;
+    (
+        format!(
+            "{} → {} ({})",
+            e(d.validation_gap.rms),
+            e(after.rms),
+            structid_discover::gap::shrink_text(f.shrink, 2)
+        ),
+        format!(
+            "{} → {}",
+            pct(d.validation_gap.fit_percent),
+            pct(after.fit_percent)
+        ),
+    )
+}
+
 /// Section 6 of the report: the augmented model's gap and the shrink.
 pub(super) fn gap_after_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f: &Finding) {
     let _ = writeln!(s, "## 6. The gap after: augmented model\n");
@@ -711,15 +730,8 @@ pub(super) fn gap_after_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>,
         }
     );
     gap_table(s, &f.augmented.estimation_gap, &f.augmented.validation_gap);
-    let _ = writeln!(
-        s,
-        "**Shrink factor:** validation RMS {} → {} ({}); fit {} → {}.\n",
-        e(d.validation_gap.rms),
-        e(f.augmented.validation_gap.rms),
-        structid_discover::gap::shrink_text(f.shrink, 2),
-        pct(d.validation_gap.fit_percent),
-        pct(f.augmented.validation_gap.fit_percent)
-    );
+    let (rms, fit) = validation_change(d, f);
+    let _ = writeln!(s, "**Shrink factor:** validation RMS {rms}; fit {fit}.\n");
     if d.validation_gap.records.len() > 1 {
         let per: Vec<String> = d
             .validation_gap
