@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 
 use structid_io::{ModelFile, OutputGuard, TruthSpec};
 
+use crate::{Result, WorkflowError};
+
 /// A file-name-safe form of a block name: letters, digits, `_`, `-` and `.` are kept, anything
 /// else becomes `_`; names that collide get a numeric suffix.
 ///
@@ -124,6 +126,22 @@ pub fn json_text(doc: &serde_json::Value) -> crate::Result<String> {
         .map_err(|e| crate::WorkflowError::Failed(format!("cannot serialise the report: {e}")))?;
     text.push('\n');
     Ok(text)
+}
+
+/// Refuses a file of a result set whose run did not finish: its directory's completion marker
+/// (see [`structid_io::output`]) does not list it. Files in directories without a marker
+/// (written by hand, or by an older structid) are taken as they are.
+pub fn check_complete(path: &Path) -> Result<()> {
+    if path.is_file() && !structid_io::output::is_complete(path) {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        return Err(WorkflowError::Request(format!(
+            "`{}` belongs to an incomplete set of results: the run that wrote it did not finish \
+             (it is not listed in `{}`); run that command again",
+            path.display(),
+            dir.join(structid_io::output::COMPLETE_MARKER).display()
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -60,3 +60,12 @@ pub fn read_record(
         time,
     })
 }
+
+/// The time axis of a record of `len` samples and its label: seconds with a sample time,
+/// samples without.
+pub fn time_axis(sample_time: Option<f64>, len: usize) -> (Vec<f64>, &'static str) {
+    match sample_time {
+        Some(ts) => ((0..len).map(|k| k as f64 * ts).collect(), "time [s]"),
+        None => ((0..len).map(|k| k as f64).collect(), "sample"),
+    }
+}

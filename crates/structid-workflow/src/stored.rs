@@ -24,7 +24,7 @@ use crate::{Result, WorkflowError};
 
 /// The estimate and the names of its channels (u0, u1, … / y0, … when it has none).
 fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>)> {
-    check_complete(path)?;
+    crate::paths::check_complete(path)?;
     let estimate = read_estimate(path)?;
     let d = estimate.lft().dims();
     let (u, y) = match estimate.signals() {
@@ -37,22 +37,6 @@ fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>)> {
     Ok((estimate, u, y))
 }
 
-/// Refuses a file of a result set whose run did not finish: its directory's completion marker
-/// (see [`structid_io::output`]) does not list it. Files in directories without a marker
-/// (written by hand, or by an older structid) are taken as they are.
-pub fn check_complete(path: &Path) -> Result<()> {
-    if path.is_file() && !structid_io::output::is_complete(path) {
-        let dir = path.parent().unwrap_or(Path::new("."));
-        return Err(WorkflowError::Request(format!(
-            "`{}` belongs to an incomplete set of results: the run that wrote it did not finish \
-             (it is not listed in `{}`); run that command again",
-            path.display(),
-            dir.join(structid_io::output::COMPLETE_MARKER).display()
-        )));
-    }
-    Ok(())
-}
-
 /// The record of `path` with the estimate's input and output columns.
 fn record(path: &Path, u: &[String], y: &[String], vars: Option<&Vars>) -> Result<Data> {
     let table = crate::records::read_table(path, vars)?;
@@ -63,15 +47,6 @@ fn record(path: &Path, u: &[String], y: &[String], vars: Option<&Vars>) -> Resul
         .select(y)
         .map_err(|e| WorkflowError::from(e).context("reading the estimate's output columns"))?;
     Ok(Data::new(us, ys)?)
-}
-
-/// The time axis of a record of `len` samples and its label: seconds with a sample time,
-/// samples without.
-pub fn time_axis(sample_time: Option<f64>, len: usize) -> (Vec<f64>, &'static str) {
-    match sample_time {
-        Some(ts) => ((0..len).map(|k| k as f64 * ts).collect(), "time [s]"),
-        None => ((0..len).map(|k| k as f64).collect(), "sample"),
-    }
 }
 
 /// Validates the stored estimate `path` on the record of `o` (the model file `model`, if
@@ -104,7 +79,7 @@ pub fn validate_stored(
 
     guard.begin_set(&o.out, Some(&OUTPUTS))?;
     let len = report.samples;
-    let (time, time_label) = time_axis(estimate.lft().sample_time(), len);
+    let (time, time_label) = crate::records::time_axis(estimate.lft().sample_time(), len);
     let mut columns = vec![time.clone()];
     for c in 0..y_names.len() {
         columns.push(data.y().channel(c));
@@ -306,7 +281,7 @@ pub fn predict(r: &PredictRequest<'_>) -> Result<String> {
     let data = record(r.data, &u_names, &y_names, r.vars)?;
     let pred = estimate.predict(&data, &settings)?;
     guard.begin_set(r.out, Some(&PREDICT_OUTPUTS))?;
-    let (time, _) = time_axis(estimate.lft().sample_time(), data.len());
+    let (time, _) = crate::records::time_axis(estimate.lft().sample_time(), data.len());
     let mut names = vec!["time".to_string()];
     let mut columns = vec![time];
     for (c, y) in y_names.iter().enumerate() {

@@ -181,7 +181,7 @@ pub fn open_estimate_dir(dir: &Path, model_path: &Path) -> Result<EstimateDir> {
             dir.display()
         )));
     }
-    crate::stored::check_complete(&dir.join("report.json"))?;
+    crate::paths::check_complete(&dir.join("report.json"))?;
     let model = ModelFile::from_path(model_path)?;
     let report_path = dir.join("report.json");
     let record = ReportRecord::read(&report_path)?;
@@ -484,7 +484,7 @@ fn write_files(
 ) -> Result<Vec<PathBuf>> {
     let y_names = &vmf.signals.y;
     let u_names = &vmf.signals.u;
-    let (time, time_label) = crate::stored::time_axis(vmf.lft.sample_time(), report.samples);
+    let (time, time_label) = crate::records::time_axis(vmf.lft.sample_time(), report.samples);
     let mut columns = vec![time.clone()];
     for c in 0..y_names.len() {
         columns.push(vdata.y().channel(c));
