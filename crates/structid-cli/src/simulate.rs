@@ -1,7 +1,6 @@
-//! `structid simulate` ([`structid_workflow::simulate`], or with a stored estimate
-//! [`structid_workflow::stored`]).
+//! `structid simulate` ([`structid_workflow::simulate`]).
 
-use structid_workflow::simulate::{SimulateRequest, simulate_to_csv};
+use structid_workflow::simulate::{SimulateRequest, SimulationSource, simulate};
 
 use crate::SimulateArgs;
 use crate::error::CliError;
@@ -9,17 +8,17 @@ use crate::error::CliError;
 /// Runs `structid simulate`.
 pub fn run(a: SimulateArgs) -> Result<(), CliError> {
     let noise_std = crate::error::noise_std("--noise-std", a.noise_std)?;
-    let model_path = match (&a.model, &a.estimate) {
-        (_, Some(e)) => return crate::stored::simulate(&a, e, noise_std),
-        (Some(m), None) => m.clone(),
+    let source = match (&a.model, &a.estimate) {
+        (_, Some(e)) => SimulationSource::Estimate(e),
+        (Some(m), None) => SimulationSource::ModelFile(m),
         (None, None) => {
             return Err(CliError::input(
                 "give --model MODEL.toml or --estimate FILE.json",
             ));
         }
     };
-    let text = simulate_to_csv(&SimulateRequest {
-        model: &model_path,
+    let text = simulate(&SimulateRequest {
+        source,
         input: &a.input,
         out: &a.out,
         noise_std,

@@ -1,27 +1,11 @@
-//! The commands that read a stored estimate (estimate.json): `simulate --estimate FILE.json`
-//! and `predict` (`validate --estimate FILE.json` is in [`crate::validate`]); the workflows are
+//! `structid predict`, which reads a stored estimate (estimate.json); `simulate --estimate` is
+//! in [`crate::simulate`] and `validate --estimate` in [`crate::validate`]. The workflows are
 //! [`structid_workflow::stored`]'s.
 
-use std::path::Path;
+use structid_workflow::stored::PredictRequest;
 
-use structid_workflow::stored::{PredictRequest, SimulateStored};
-
+use crate::PredictArgs;
 use crate::error::CliError;
-use crate::{PredictArgs, SimulateArgs};
-
-/// `structid simulate --estimate FILE.json`.
-pub fn simulate(a: &SimulateArgs, path: &Path, noise_std: f64) -> Result<(), CliError> {
-    let text = structid_workflow::stored::simulate_stored(&SimulateStored {
-        estimate: path,
-        input: &a.input,
-        out: &a.out,
-        noise_std,
-        seed: a.seed,
-        vars: crate::data::vars(),
-    })?;
-    print!("{text}");
-    Ok(())
-}
 
 /// `structid predict`.
 pub fn predict(a: PredictArgs) -> Result<(), CliError> {

@@ -1,19 +1,31 @@
-//! Simulation of a model file with the `truth` map of every block in the loop, written as a
-//! CSV file of u, y, z and w columns (`structid simulate --model`).
+//! Simulation on an input record, written as a CSV file (`structid simulate`): of a model
+//! file with the `truth` map of every block in the loop (u, y, z and w columns), or of a stored
+//! estimate (u and y columns).
 
 use std::path::Path;
+
+use structid_core::paper::gaussian_noise;
 
 use structid_io::{ModelFile, OutputGuard, Vars};
 
 use crate::paths::protect_inputs;
-use crate::stored::finite_columns;
 use crate::{Result, WorkflowError};
 
-/// A simulation of a model file.
+/// What is simulated.
+#[derive(Clone, Copy, Debug)]
+pub enum SimulationSource<'a> {
+    /// A model file; every block needs a `truth` (or an operator).
+    ModelFile(&'a Path),
+    /// A stored estimate (`estimate.json`).
+    Estimate(&'a Path),
+}
+
+/// A simulation of a model file or of a stored estimate on an input record.
 pub struct SimulateRequest<'a> {
-    /// The model file; every block needs a `truth` (or an operator).
-    pub model: &'a Path,
-    /// The file of the input columns named in `[signals].u`.
+    /// The model simulated.
+    pub source: SimulationSource<'a>,
+    /// The file of the input columns (the model's `[signals].u`, or the estimate's input
+    /// names).
     pub input: &'a Path,
     /// The CSV file to write.
     pub out: &'a Path,
@@ -26,11 +38,18 @@ pub struct SimulateRequest<'a> {
     pub vars: Option<&'a Vars>,
 }
 
+/// Simulates the request's model and writes the CSV file; returns the line to print.
+pub fn simulate(r: &SimulateRequest<'_>) -> Result<String> {
+    match r.source {
+        SimulationSource::ModelFile(path) => simulate_model_file(path, r),
+        SimulationSource::Estimate(path) => simulate_estimate(path, r),
+    }
+}
+
 /// Simulates the model file with its true maps on the inputs and writes the u, y and z
 /// columns plus one `w_<block>` column per block; returns the line to print.
-pub fn simulate_to_csv(r: &SimulateRequest<'_>) -> Result<String> {
+fn simulate_model_file(model_path: &Path, r: &SimulateRequest<'_>) -> Result<String> {
     let noise_std = r.noise_std;
-    let model_path = r.model;
     let mf = ModelFile::from_path(model_path)?;
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, &mf, model_path, &[r.input]);
@@ -94,4 +113,67 @@ pub fn simulate_to_csv(r: &SimulateRequest<'_>) -> Result<String> {
         r.out.display(),
         names.join(", ")
     ))
+}
+
+/// Simulates a stored estimate on an input record and writes the inputs and the simulated
+/// outputs as a CSV file; returns the line to print.
+fn simulate_estimate(path: &Path, r: &SimulateRequest<'_>) -> Result<String> {
+    let noise_std = r.noise_std;
+    let mut guard = OutputGuard::new();
+    guard.protect(path);
+    guard.protect(r.input);
+    guard.check_out_file(r.out)?;
+    let (estimate, u_names, y_names) = crate::stored::load(path)?;
+    let table = crate::records::read_table(r.input, r.vars)?;
+    let u = table
+        .select(&u_names)
+        .map_err(|e| WorkflowError::from(e).context("reading the estimate's input columns"))?;
+    let dims = estimate.lft().dims();
+    let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), dims.e, noise_std, r.seed));
+    let sim = estimate
+        .model()
+        .simulate(&estimate.maps(), &u, e.as_ref(), None)?;
+    let mut names = u_names.clone();
+    names.extend(y_names.iter().cloned());
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(WorkflowError::Request(format!(
+                "the estimate's channel name `{n}` appears twice; cannot write distinct columns"
+            )));
+        }
+    }
+    let mut columns: Vec<Vec<f64>> = (0..dims.u).map(|c| u.channel(c)).collect();
+    columns.extend((0..dims.y).map(|c| sim.y.channel(c)));
+    finite_columns(&names, &columns, noise_std)?;
+    guard.write_csv(r.out, &names, &columns)?;
+    Ok(format!(
+        "simulated the stored estimate `{}` on {} samples ({} noise, std {noise_std}); wrote {} with columns {}\n",
+        path.display(),
+        u.len(),
+        if noise_std > 0.0 { "Gaussian" } else { "no" },
+        r.out.display(),
+        names.join(", ")
+    ))
+}
+
+/// Refuses simulated columns that are not finite (the model's gains and the noise level
+/// overflow together), naming the column and the first sample, so that no file of
+/// non-finite numbers (which no command reads back) is written.
+pub fn finite_columns<S: AsRef<str>>(
+    names: &[S],
+    columns: &[Vec<f64>],
+    noise_std: f64,
+) -> Result<()> {
+    for (name, c) in names.iter().zip(columns) {
+        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+            return Err(WorkflowError::Request(format!(
+                "the simulated column `{}` is not finite at sample {k} ({}): the model's gains and \
+                 --noise-std {noise_std:e} overflow together; give a smaller --noise-std, or rescale \
+                 the model. Nothing was written",
+                name.as_ref(),
+                c[k]
+            )));
+        }
+    }
+    Ok(())
 }

@@ -1,6 +1,7 @@
-//! The workflows that read a stored estimate (estimate.json): its validation on a record, its
-//! simulation and its k-step-ahead prediction (`structid validate --estimate FILE.json`,
-//! `structid simulate --estimate FILE.json`, `structid predict`). None of them needs the model
+//! The workflows that read a stored estimate (estimate.json): its validation on a record and
+//! its k-step-ahead prediction (`structid validate --estimate FILE.json`, `structid predict`;
+//! its simulation is [`crate::simulate`]'s, a source of [`crate::simulate::SimulateRequest`]).
+//! None of them needs the model
 //! file or the estimation data: the estimate carries the linear block, the maps and the
 //! channel names.
 
@@ -9,8 +10,6 @@ use std::path::{Path, PathBuf};
 
 use serde_json::json;
 use structid_core::estimate::PredictionSettings;
-use structid_core::paper::gaussian_noise;
-use structid_core::validation::ValidationSettings;
 use structid_core::{Data, Estimate, InitialState};
 use structid_io::{OutputGuard, Vars, read_estimate};
 
@@ -23,7 +22,7 @@ use crate::validation_files::{
 use crate::{Result, WorkflowError};
 
 /// The estimate and the names of its channels (u0, u1, … / y0, … when it has none).
-fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>)> {
+pub(crate) fn load(path: &Path) -> Result<(Estimate, Vec<String>, Vec<String>)> {
     crate::paths::check_complete(path)?;
     let estimate = read_estimate(path)?;
     let d = estimate.lft().dims();
@@ -69,13 +68,7 @@ pub fn validate_stored(
     let (estimate, u_names, y_names) = load(path)?;
     let data = record(&o.data, &u_names, &y_names, vars)?;
     check_lengths(o.settle, o.max_lag, &o.data, &data)?;
-    let settings = ValidationSettings::builder()
-        .initial_state(o.initial_state)
-        .max_lag(o.max_lag)
-        .settle(o.settle)
-        .scoring(o.scoring)
-        .build()?;
-    let report = estimate.validate(&data, &settings)?;
+    let report = estimate.validate(&data, &o.settings()?)?;
 
     guard.begin_set(&o.out, Some(&OUTPUTS))?;
     let len = report.samples;
@@ -162,85 +155,6 @@ pub fn validate_stored(
         },
         summary: s,
     })
-}
-
-/// A simulation of a stored estimate.
-pub struct SimulateStored<'a> {
-    /// The stored estimate.
-    pub estimate: &'a Path,
-    /// The file of the input columns (the estimate's input names).
-    pub input: &'a Path,
-    /// The CSV file to write.
-    pub out: &'a Path,
-    /// Standard deviation of the white Gaussian noise on every noise channel.
-    pub noise_std: f64,
-    /// Seed of the noise generator.
-    pub seed: u64,
-    /// The signals picked from the input file.
-    pub vars: Option<&'a Vars>,
-}
-
-/// Simulates a stored estimate on an input record and writes the inputs and the simulated
-/// outputs as a CSV file; returns the line to print.
-pub fn simulate_stored(r: &SimulateStored<'_>) -> Result<String> {
-    let (path, noise_std) = (r.estimate, r.noise_std);
-    let mut guard = OutputGuard::new();
-    guard.protect(path);
-    guard.protect(r.input);
-    guard.check_out_file(r.out)?;
-    let (estimate, u_names, y_names) = load(path)?;
-    let table = crate::records::read_table(r.input, r.vars)?;
-    let u = table
-        .select(&u_names)
-        .map_err(|e| WorkflowError::from(e).context("reading the estimate's input columns"))?;
-    let dims = estimate.lft().dims();
-    let e = (noise_std > 0.0).then(|| gaussian_noise(u.len(), dims.e, noise_std, r.seed));
-    let sim = estimate
-        .model()
-        .simulate(&estimate.maps(), &u, e.as_ref(), None)?;
-    let mut names = u_names.clone();
-    names.extend(y_names.iter().cloned());
-    for (i, n) in names.iter().enumerate() {
-        if names[..i].contains(n) {
-            return Err(WorkflowError::Request(format!(
-                "the estimate's channel name `{n}` appears twice; cannot write distinct columns"
-            )));
-        }
-    }
-    let mut columns: Vec<Vec<f64>> = (0..dims.u).map(|c| u.channel(c)).collect();
-    columns.extend((0..dims.y).map(|c| sim.y.channel(c)));
-    finite_columns(&names, &columns, noise_std)?;
-    guard.write_csv(r.out, &names, &columns)?;
-    Ok(format!(
-        "simulated the stored estimate `{}` on {} samples ({} noise, std {noise_std}); wrote {} with columns {}\n",
-        path.display(),
-        u.len(),
-        if noise_std > 0.0 { "Gaussian" } else { "no" },
-        r.out.display(),
-        names.join(", ")
-    ))
-}
-
-/// Refuses simulated columns that are not finite (the model's gains and the noise level
-/// overflow together), naming the column and the first sample, so that no file of
-/// non-finite numbers (which no command reads back) is written.
-pub fn finite_columns<S: AsRef<str>>(
-    names: &[S],
-    columns: &[Vec<f64>],
-    noise_std: f64,
-) -> Result<()> {
-    for (name, c) in names.iter().zip(columns) {
-        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
-            return Err(WorkflowError::Request(format!(
-                "the simulated column `{}` is not finite at sample {k} ({}): the model's gains and \
-                 --noise-std {noise_std:e} overflow together; give a smaller --noise-std, or rescale \
-                 the model. Nothing was written",
-                name.as_ref(),
-                c[k]
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// The files of a prediction.

@@ -44,6 +44,18 @@ pub struct ValidationOptions {
     pub scoring: Scoring,
 }
 
+impl ValidationOptions {
+    /// The validation settings these options ask for.
+    pub fn settings(&self) -> Result<ValidationSettings> {
+        Ok(ValidationSettings::builder()
+            .initial_state(self.initial_state)
+            .max_lag(self.max_lag)
+            .settle(self.settle)
+            .scoring(self.scoring)
+            .build()?)
+    }
+}
+
 /// One record's validation: what it scored and the summary to print.
 pub struct RecordValidation {
     /// What the record scored, with its validation.json.
@@ -465,13 +477,7 @@ fn run_validation(
             (None, None) => Err(WorkflowError::Failed("no maps to validate".into())),
         })
         .collect::<Result<_>>()?;
-    let settings = ValidationSettings::builder()
-        .initial_state(o.initial_state)
-        .max_lag(o.max_lag)
-        .settle(o.settle)
-        .scoring(o.scoring)
-        .build()?;
-    Ok(validate(&vmodel, &maps, vdata, &settings)?)
+    Ok(validate(&vmodel, &maps, vdata, &o.settings()?)?)
 }
 
 /// simulation.csv, simulation.svg and residuals.svg of a validation; returns their paths.
