@@ -61,6 +61,7 @@ fn remove_stale(out: &Path, written: &[PathBuf]) -> Vec<PathBuf> {
 }
 
 /// The discovery to write and what its files are written from.
+#[derive(Clone, Copy, Debug)]
 pub struct DiscoveryFiles<'a> {
     /// The nominal model file as given.
     pub model_path: &'a Path,
@@ -215,14 +216,7 @@ pub fn write_discovery(
     // Reports.
     let context = ReportContext {
         version: env!("CARGO_PKG_VERSION"),
-        command: r.command,
-        model_path: r.model_path,
-        out: r.out,
-        nominal_file: r.model,
-        nominal: r.nominal,
-        settings: r.settings,
-        estimation: r.estimation,
-        validation: r.validation,
+        run: r,
         augmented: written.as_ref(),
         figures: &figures,
         max_lag,

@@ -85,8 +85,8 @@ pub fn json(
         .iter()
         .map(|h| {
             json!({
-                "location": r.nominal.key(h.location),
-                "description": r.nominal.describe(h.location),
+                "location": r.run.nominal.key(h.location),
+                "description": r.run.nominal.describe(h.location),
                 "dispersion": h.dispersion,
                 "beta": h.beta,
                 "sigma": h.sigma,
@@ -126,9 +126,9 @@ pub fn json(
                 }
             };
             json!({
-                "location": r.nominal.key(f.location),
-                "description": r.nominal.describe(f.location),
-                "equivalent_locations": f.equivalent_locations.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>(),
+                "location": r.run.nominal.key(f.location),
+                "description": r.run.nominal.describe(f.location),
+                "equivalent_locations": f.equivalent_locations.iter().map(|l| r.run.nominal.key(*l)).collect::<Vec<_>>(),
                 "classification": { "kind": kind, "description": f.effect() },
                 "named_effect": named,
                 "estimator": f.estimator,
@@ -145,8 +145,8 @@ pub fn json(
                 "map": map,
                 "curve": curve,
                 "gap_after": {
-                    "estimation": gap_json(&f.augmented.estimation_gap, &r.estimation.time)?,
-                    "validation": gap_json(&f.augmented.validation_gap, &r.validation.time)?,
+                    "estimation": gap_json(&f.augmented.estimation_gap, &r.run.estimation.time)?,
+                    "validation": gap_json(&f.augmented.validation_gap, &r.run.validation.time)?,
                 },
                 "shrink": f.shrink,
             })
@@ -168,26 +168,26 @@ pub fn json(
         }),
         _ => Value::Null,
     };
-    let s = r.settings;
+    let s = r.run.settings;
     Ok(json!({
         "tool": format!("structid {}", r.version),
         "version": r.version,
-        "command": r.command,
+        "command": r.run.command,
         "inputs": {
-            "model_file": r.model_path.display().to_string(),
-            "model_file_absolute": absolute(r.model_path).display().to_string(),
-            "data_file": r.estimation.path.display().to_string(),
-            "data_file_absolute": absolute(&r.estimation.path).display().to_string(),
-            "validation_file": r.validation.path.display().to_string(),
-            "validation_file_absolute": absolute(&r.validation.path).display().to_string(),
-            "data_files": r.estimation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "validation_files": r.validation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "estimation_samples": r.estimation.data.len(),
-            "validation_samples": r.validation.data.len(),
-            "sample_time": r.nominal_file.lft.sample_time(),
+            "model_file": r.run.model_path.display().to_string(),
+            "model_file_absolute": absolute(r.run.model_path).display().to_string(),
+            "data_file": r.run.estimation.path.display().to_string(),
+            "data_file_absolute": absolute(&r.run.estimation.path).display().to_string(),
+            "validation_file": r.run.validation.path.display().to_string(),
+            "validation_file_absolute": absolute(&r.run.validation.path).display().to_string(),
+            "data_files": r.run.estimation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "validation_files": r.run.validation.paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "estimation_samples": r.run.estimation.data.len(),
+            "validation_samples": r.run.validation.data.len(),
+            "sample_time": r.run.model.lft.sample_time(),
         },
         "settings": {
-            "locations": s.locations().map(|l| l.iter().map(|l| r.nominal.key(*l)).collect::<Vec<_>>()),
+            "locations": s.locations().map(|l| l.iter().map(|l| r.run.nominal.key(*l)).collect::<Vec<_>>()),
             "total_variation": s.total_variation(),
             "settle": s.settle(),
             "sigma_fraction": s.sigma_fraction(),
@@ -208,8 +208,8 @@ pub fn json(
         "linear_rival": json_value(&d.linear_rival)?,
         "seconds": d.seconds,
         "gap_before": {
-            "estimation": gap_json(&d.estimation_gap, &r.estimation.time)?,
-            "validation": gap_json(&d.validation_gap, &r.validation.time)?,
+            "estimation": gap_json(&d.estimation_gap, &r.run.estimation.time)?,
+            "validation": gap_json(&d.validation_gap, &r.run.validation.time)?,
         },
         "hypotheses": hypotheses,
         "finding": finding,
@@ -231,10 +231,10 @@ pub fn summary(
     let _ = writeln!(
         s,
         "discovery on {} ({} samples) and {} ({} samples), {:.1} s",
-        r.estimation.names(),
-        r.estimation.data.len(),
-        r.validation.names(),
-        r.validation.data.len(),
+        r.run.estimation.names(),
+        r.run.estimation.data.len(),
+        r.run.validation.names(),
+        r.run.validation.data.len(),
         seconds
     );
     let _ = writeln!(s, "verdict: {}", d.verdict);
@@ -242,7 +242,7 @@ pub fn summary(
         let _ = writeln!(
             s,
             "best location: {} (of {} hypotheses)",
-            location_text(r.nominal, f.location),
+            location_text(r.run.nominal, f.location),
             d.hypotheses.len()
         );
         match &f.classification {

@@ -326,9 +326,9 @@ pub(super) fn validate_command(
 ) -> String {
     format!(
         "structid validate --model {} --data {} --out {} --initial-state {}{}",
-        r.out.join("augmented.toml").display(),
-        r.validation.files("--data"),
-        r.out.join("validation").display(),
+        r.run.out.join("augmented.toml").display(),
+        r.run.validation.files("--data"),
+        r.run.out.join("validation").display(),
         initial_state_name(w.initial_state),
         scoring_argument(scoring)
     )
@@ -341,9 +341,9 @@ pub(super) fn validate_estimate_command(
 ) -> String {
     format!(
         "structid validate --estimate {} --data {} --out {} --initial-state {}{}",
-        r.out.join(ESTIMATE_FILE).display(),
-        r.validation.files("--data"),
-        r.out.join("validation-estimate").display(),
+        r.run.out.join(ESTIMATE_FILE).display(),
+        r.run.validation.files("--data"),
+        r.run.out.join("validation-estimate").display(),
         initial_state_name(w.initial_state),
         scoring_argument(scoring)
     )
@@ -353,9 +353,9 @@ pub(super) fn identify_command(r: &ReportContext<'_>, f: &Finding) -> String {
     let beta = f.hypothesis.beta;
     format!(
         "structid identify --model {} --data {} --out {} --beta {} --initial-state {}",
-        r.out.join("augmented.toml").display(),
-        r.estimation.files("--data"),
-        r.out.join("identify").display(),
+        r.run.out.join("augmented.toml").display(),
+        r.run.estimation.files("--data"),
+        r.run.out.join("identify").display(),
         format_number(beta),
         initial_state_name(initial_state(f.location).1)
     )
@@ -400,12 +400,12 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
         s,
         "Nominal model `{}` ({}); estimation record {} ({} samples), validation record {} \
          ({} samples); {:.1} s.\n",
-        r.model_path.display(),
-        nominal_text(r.nominal_file),
-        r.estimation.names(),
-        r.estimation.data.len(),
-        r.validation.names(),
-        r.validation.data.len(),
+        r.run.model_path.display(),
+        nominal_text(r.run.model),
+        r.run.estimation.names(),
+        r.run.estimation.data.len(),
+        r.run.validation.names(),
+        r.run.validation.data.len(),
         d.seconds
     );
 
@@ -413,7 +413,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     let _ = writeln!(s, "## 1. The gap: nominal model against the records\n");
     gap_table(&mut s, &d.estimation_gap, &d.validation_gap);
 
-    let band = r.settings.gap().band;
+    let band = r.run.settings.gap().band;
     let _ = writeln!(s, "## 2. Where in time\n");
     let _ = writeln!(
         s,
@@ -422,8 +422,8 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     windows_section(
         &mut s,
         [
-            ("estimation", &d.estimation_gap, &r.estimation.time),
-            ("validation", &d.validation_gap, &r.validation.time),
+            ("estimation", &d.estimation_gap, &r.run.estimation.time),
+            ("validation", &d.validation_gap, &r.run.validation.time),
         ],
         band,
     );
@@ -436,7 +436,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
             s,
             "No hypotheses were tried: the nominal model's residual is within {}× its noise \
              level and passes every test on both records.\n",
-            r.settings.gap().noise_ratio
+            r.run.settings.gap().noise_ratio
         );
     } else {
         if d.finding.is_none() {
@@ -464,7 +464,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
                 s,
                 "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
                 i + 1,
-                cell(&location_text(r.nominal, h.location)),
+                cell(&location_text(r.run.nominal, h.location)),
                 cell(&h.dispersion),
                 e(h.beta),
                 h.sigma.map(g4).unwrap_or_else(|| "fixed".into()),
@@ -492,7 +492,7 @@ pub fn markdown(d: &Discovery, r: &ReportContext<'_>) -> String {
     }
     s.push('\n');
     let _ = writeln!(s, "## Reproduce\n");
-    let _ = writeln!(s, "```sh\n{}", r.command);
+    let _ = writeln!(s, "```sh\n{}", r.run.command);
     if let (Some(f), Some(w)) = (&d.finding, r.augmented) {
         let _ = writeln!(s, "{}", validate_command(r, w, d.scoring));
         let _ = writeln!(s, "{}", validate_estimate_command(r, w, d.scoring));
@@ -587,7 +587,7 @@ pub(super) fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f
         s,
         "**{}** ({kind}) {}.\n",
         f.effect(),
-        r.nominal.describe(f.location)
+        r.run.nominal.describe(f.location)
     );
     if let Some(h) = &f.input_hysteresis {
         let _ = writeln!(
@@ -624,15 +624,15 @@ pub(super) fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f
         if f.equivalent_locations.len() > 1 {
             f.equivalent_locations
                 .iter()
-                .map(|l| format!("`{}`", r.nominal.key(*l)))
+                .map(|l| format!("`{}`", r.run.nominal.key(*l)))
                 .collect::<Vec<_>>()
                 .join(", ")
         } else {
-            format!("none besides `{}`", r.nominal.key(f.location))
+            format!("none besides `{}`", r.run.nominal.key(f.location))
         }
     );
     s.push('\n');
-    candidate_table(s, f, r.settings.significance());
+    candidate_table(s, f, r.run.settings.significance());
     if let Some(st) = &f.stationarity {
         let _ = writeln!(s, "Stationarity: {}.\n", st.describe());
     }
@@ -645,7 +645,7 @@ pub(super) fn finding_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>, f
         100.0 * f.direction.explained,
         f.direction.t_statistic,
         f.direction.samples,
-        100.0 * r.settings.hysteresis_threshold(),
+        100.0 * r.run.settings.hysteresis_threshold(),
         if f.direction.dynamic {
             "dynamic (hysteresis or backlash suspected)"
         } else {
@@ -719,7 +719,7 @@ pub(super) fn gap_after_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>,
     let _ = writeln!(
         s,
         "The nominal model with N {} ({}).\n",
-        r.nominal.describe(f.location),
+        r.run.nominal.describe(f.location),
         match &f.augmented.map {
             AugmentedMap::Expression(x) => format!("N(z) = `{x}`"),
             AugmentedMap::Table { z, .. } => format!(
@@ -743,7 +743,8 @@ pub(super) fn gap_after_md(s: &mut String, d: &Discovery, r: &ReportContext<'_>,
                 format!(
                     "record {} ({}): {} → {} ({:.2}×)",
                     i + 1,
-                    r.validation
+                    r.run
+                        .validation
                         .paths
                         .get(i)
                         .map(|p| format!("`{}`", p.display()))

@@ -14,8 +14,7 @@ use structid_core::validation::Scoring;
 
 use structid_discover::augmented::{AugmentedFile, BLOCK, ESTIMATE_FILE, initial_state_name};
 use structid_discover::discover::{
-    AugmentedMap, Classification, DiscoverSettings, Discovery, Effects, Finding, initial_state,
-    rms_text,
+    AugmentedMap, Classification, Discovery, Effects, Finding, initial_state, rms_text,
 };
 use structid_discover::effects::EffectFit;
 use structid_discover::gap::Gap;
@@ -184,22 +183,8 @@ impl Record {
 pub struct ReportContext<'a> {
     /// The tool's version, e.g. `0.1.0`.
     pub version: &'a str,
-    /// The command line that ran the discovery.
-    pub command: &'a str,
-    /// The nominal model file as given.
-    pub model_path: &'a Path,
-    /// The output directory.
-    pub out: &'a Path,
-    /// The nominal model file.
-    pub nominal_file: &'a ModelFile,
-    /// The nominal model.
-    pub nominal: &'a Nominal,
-    /// The settings of the discovery.
-    pub settings: &'a DiscoverSettings,
-    /// The estimation record.
-    pub estimation: &'a Record,
-    /// The validation record.
-    pub validation: &'a Record,
+    /// The run: its inputs, settings and output directory.
+    pub run: &'a files::DiscoveryFiles<'a>,
     /// The augmented model file written (`augmented.toml`), if any.
     pub augmented: Option<&'a AugmentedFile>,
     /// The figures written: file name and what it shows.
