@@ -123,10 +123,22 @@ fn trim_scientific(s: &str) -> String {
     }
 }
 
-/// Compact number formatting for colour-bar extremes (4 significant digits).
-pub(crate) fn format_value(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
+/// A number with four significant digits, in scientific notation outside [10⁻³, 10⁵), trailing
+/// zeros dropped: how the figures' labels and the reports print values.
+///
+/// ```
+/// use structid_plot::format_value;
+/// assert_eq!(format_value(0.012345), "0.01235");
+/// assert_eq!(format_value(123.0), "123");
+/// assert_eq!(format_value(1.5e-7), "1.5e-7");
+/// assert_eq!(format_value(-0.0), "0");
+/// ```
+pub fn format_value(v: f64) -> String {
+    if !v.is_finite() {
         return v.to_string();
+    }
+    if v == 0.0 {
+        return "0".into();
     }
     let a = v.abs();
     if !(1e-3..1e5).contains(&a) {

@@ -37,6 +37,7 @@ mod heatmap;
 mod layout;
 mod panels;
 
+pub use axes::format_value;
 pub use chart::{Chart, Series, SeriesStyle, render_chart_svg, render_grid_svg, write_chart_svg};
 pub use correlation::{CorrelationChart, render_correlation_svg};
 pub use decimate::decimate_min_max;

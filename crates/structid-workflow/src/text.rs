@@ -9,26 +9,6 @@
 /// assert_eq!(short(1.5e-7), "1.5e-7");
 /// ```
 pub fn short(v: f64) -> String {
-    if !v.is_finite() {
-        return v.to_string();
-    }
-    if v == 0.0 {
-        return "0".into();
-    }
-    let a = v.abs();
-    if !(1e-3..1e5).contains(&a) {
-        let s = format!("{v:.3e}");
-        match s.split_once('e') {
-            Some((m, e)) => format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.')),
-            None => s,
-        }
-    } else {
-        let decimals = (3.0 - a.log10().floor()).clamp(0.0, 6.0) as usize;
-        let s = format!("{v:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
-        }
-    }
+    // The figures label their values the same way.
+    structid_plot::format_value(v)
 }
