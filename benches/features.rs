@@ -8,15 +8,14 @@
 //! (2·2048·65² flop, one thread).
 
 use std::hint::black_box;
-use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
-use structid::{
-    FourierDispersion, FourierWeights, IdentifySettings, SolverChoice, identify, scenarios,
-};
+use structid::scenarios;
+
+mod common;
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("features");
@@ -24,28 +23,9 @@ fn bench(c: &mut Criterion) {
         .sample_size(10)
         .measurement_time(Duration::from_secs(10))
         .warm_up_time(Duration::from_secs(1));
-    let disp = Arc::new(
-        FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 })
-            .unwrap()
-            .with_harmonics(31),
-    );
-    let settings = IdentifySettings::builder()
-        .beta(1e-4)
-        .solver(SolverChoice::Features)
-        .build()
-        .unwrap();
     for len in [10_000usize, 100_000, 1_000_000] {
-        let exp = scenarios::hammerstein_coloured(len, 4, 0.3, disp.clone(), 11).unwrap();
-        group.bench_with_input(BenchmarkId::new("identify", len), &len, |b, _| {
-            b.iter(|| {
-                black_box(
-                    identify(&exp.model, &exp.data, &settings)
-                        .unwrap()
-                        .cost
-                        .total,
-                )
-            })
-        });
+        let (exp, settings) = scenarios::feature_benchmark(len).unwrap();
+        common::bench_identify(&mut group, "identify", len, &exp, &settings);
     }
     group.finish();
 

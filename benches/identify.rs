@@ -1,14 +1,15 @@
 //! Exact Gaussian identification against its floor, a faer Cholesky of the same size.
 //!
-//! SISO Hammerstein with a 4th-order L_yw (see `structid::scenarios::hammerstein`), L = 500,
+//! SISO Hammerstein with a 4th-order L_yw (`structid::scenarios::gaussian_benchmark`), L = 500,
 //! 1000, 2000, 4000. Run: `cargo bench --bench identify`. Figures go in BENCHMARKS.md.
 
 use std::hint::black_box;
-use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use structid::{IdentifySettings, KernelDispersion, identify, scenarios};
+use structid::scenarios;
+
+mod common;
 
 fn random_spd(n: usize) -> faer::Mat<f64> {
     // Deterministic pseudo-random entries; A·Aᵀ + n·I is comfortably positive definite.
@@ -28,26 +29,9 @@ fn bench(c: &mut Criterion) {
         .sample_size(10)
         .measurement_time(Duration::from_secs(8))
         .warm_up_time(Duration::from_secs(1));
-    let settings = IdentifySettings::builder().beta(1e-3).build().unwrap();
     for len in [500usize, 1000, 2000, 4000] {
-        let exp = scenarios::hammerstein(
-            len,
-            4,
-            0.1,
-            Arc::new(KernelDispersion::gaussian(0.2).unwrap()),
-            42,
-        )
-        .unwrap();
-        group.bench_with_input(BenchmarkId::new("identify", len), &len, |b, _| {
-            b.iter(|| {
-                black_box(
-                    identify(&exp.model, &exp.data, &settings)
-                        .unwrap()
-                        .cost
-                        .total,
-                )
-            })
-        });
+        let (exp, settings) = scenarios::gaussian_benchmark(len).unwrap();
+        common::bench_identify(&mut group, "identify", len, &exp, &settings);
         let spd = random_spd(len);
         group.bench_with_input(BenchmarkId::new("faer_llt", len), &len, |b, _| {
             b.iter(|| black_box(spd.llt(faer::Side::Lower).unwrap()))

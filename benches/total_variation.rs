@@ -13,25 +13,21 @@
 //! * `tv_cv`: β by blocked 5-fold cross-validation at L = 2000, white input, solver auto
 //!   (ADMM with held-out samples);
 //! * `graph_tv_admm`: graph total variation (p = 2, k = 8), one block h(z) = 1[z₁ + z₂ > 0]
-//!   behind a 2nd-order block, white inputs, ADMM at L = 2000 and 2·10⁴.
+//!   behind a 2nd-order block ([`structid::scenarios::graph_hammerstein`]), white inputs, ADMM
+//!   at L = 2000 and 2·10⁴.
 
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use nalgebra::DMatrix;
-use structid::paper::{Experiment, gaussian_noise};
-use structid::scenarios::{Excitation, hammerstein_map, mixed_hammerstein};
+use structid::scenarios::{Excitation, graph_hammerstein, mixed_hammerstein, relay_hammerstein};
 use structid::selection::{Criterion as Cv, SelectionSettings, select};
 use structid::{
-    Dispersion, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, Lft,
-    LftMatrices, Model, NonlinearBlock, SolverChoice, TotalVariation, identify,
+    Dispersion, FourierDispersion, FourierWeights, IdentifySettings, KernelDispersion, SolverChoice,
 };
 
-fn relay(z: f64) -> f64 {
-    if z >= 0.3 { 1.0 } else { -0.5 }
-}
+mod common;
 
 fn run(
     c: &mut Criterion,
@@ -40,41 +36,15 @@ fn run(
     white_lens: &[usize],
     sine_lens: &[usize],
 ) {
-    let mut group = c.benchmark_group(group_name);
-    group
-        .sample_size(10)
-        .measurement_time(Duration::from_secs(5))
-        .warm_up_time(Duration::from_millis(500));
-    let settings = IdentifySettings::builder()
-        .beta(0.01)
-        .solver(solver)
-        .build()
-        .unwrap();
+    let mut group = group(c, group_name);
+    let settings = settings(solver);
     for (name, excitation, lens) in [
         ("white", Excitation::White, white_lens),
         ("sine", Excitation::Sine { periods: 3.0 }, sine_lens),
     ] {
         for &len in lens {
-            let exp = hammerstein_map(
-                len,
-                2,
-                0.1,
-                &relay,
-                excitation,
-                Arc::new(TotalVariation::new()),
-                7,
-            )
-            .unwrap();
-            group.bench_with_input(BenchmarkId::new(name, len), &len, |b, _| {
-                b.iter(|| {
-                    black_box(
-                        identify(&exp.model, &exp.data, &settings)
-                            .unwrap()
-                            .cost
-                            .total,
-                    )
-                })
-            });
+            let exp = relay_hammerstein(len, excitation).unwrap();
+            common::bench_identify(&mut group, name, len, &exp, &settings);
         }
     }
     group.finish();
@@ -117,20 +87,8 @@ fn settings(solver: SolverChoice) -> IdentifySettings {
 fn bench_million(c: &mut Criterion) {
     let mut g = group(c, "tv_admm_million");
     let len = 1_000_000;
-    let exp = hammerstein_map(
-        len,
-        2,
-        0.1,
-        &relay,
-        Excitation::White,
-        Arc::new(TotalVariation::new()),
-        7,
-    )
-    .unwrap();
-    let s = settings(SolverChoice::Admm);
-    g.bench_with_input(BenchmarkId::new("white", len), &len, |b, _| {
-        b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
-    });
+    let exp = relay_hammerstein(len, Excitation::White).unwrap();
+    common::bench_identify(&mut g, "white", len, &exp, &settings(SolverChoice::Admm));
     g.finish();
 }
 
@@ -155,9 +113,7 @@ fn bench_mixed(c: &mut Criterion) {
     for (name, smooth) in kinds {
         for len in [10_000, 100_000] {
             let exp = mixed_hammerstein(len, Arc::clone(&smooth), 3).unwrap();
-            g.bench_with_input(BenchmarkId::new(name, len), &len, |b, _| {
-                b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
-            });
+            common::bench_identify(&mut g, name, len, &exp, &s);
         }
     }
     g.finish();
@@ -167,16 +123,7 @@ fn bench_mixed(c: &mut Criterion) {
 fn bench_cv(c: &mut Criterion) {
     let mut g = group(c, "tv_cv");
     let len = 2000;
-    let exp = hammerstein_map(
-        len,
-        2,
-        0.1,
-        &relay,
-        Excitation::White,
-        Arc::new(TotalVariation::new()),
-        7,
-    )
-    .unwrap();
+    let exp = relay_hammerstein(len, Excitation::White).unwrap();
     let how = SelectionSettings::builder()
         .criterion(Cv::CrossValidation { folds: 5 })
         .build()
@@ -188,42 +135,13 @@ fn bench_cv(c: &mut Criterion) {
     g.finish();
 }
 
-/// y = G·h(u₁, u₂) + e with h = 1[z₁ + z₂ > 0], G a random stable 2nd-order block, white
-/// Gaussian inputs, noise std 0.1, graph total variation (k = 8 neighbours).
-fn graph_experiment(len: usize, seed: u64) -> Experiment {
-    let g = structid_lti::testing::random_stable_system(seed, 2, 1, 1, 0.9);
-    let lft = Lft::new(LftMatrices {
-        a: g.a().clone(),
-        bu: DMatrix::zeros(2, 2),
-        be: DMatrix::zeros(2, 1),
-        bw: g.b().clone(),
-        cy: g.c().clone(),
-        dyu: DMatrix::zeros(1, 2),
-        dye: DMatrix::identity(1, 1),
-        dyw: g.d().clone(),
-        cz: DMatrix::zeros(2, 2),
-        dzu: DMatrix::identity(2, 2),
-        dze: DMatrix::zeros(2, 1),
-        dzw: DMatrix::zeros(2, 1),
-    })
-    .unwrap();
-    let block = NonlinearBlock::new("h", vec![0, 1], 0, Arc::new(TotalVariation::new()));
-    let model = Model::new(lft, vec![block]).unwrap();
-    let u = gaussian_noise(len, 2, 1.0, seed + 1);
-    let noise = gaussian_noise(len, 1, 0.1, seed + 2);
-    let h = |z: &[f64]| if z[0] + z[1] > 0.0 { 1.0 } else { 0.0 };
-    Experiment::simulate(model, &[&h], u, noise).unwrap()
-}
-
 /// Graph total variation (p = 2) by ADMM.
 fn bench_graph(c: &mut Criterion) {
     let mut g = group(c, "graph_tv_admm");
     let s = settings(SolverChoice::Admm);
     for len in [2000, 20_000] {
-        let exp = graph_experiment(len, 5);
-        g.bench_with_input(BenchmarkId::new("white", len), &len, |b, _| {
-            b.iter(|| black_box(identify(&exp.model, &exp.data, &s).unwrap().cost.total))
-        });
+        let exp = graph_hammerstein(len, 5).unwrap();
+        common::bench_identify(&mut g, "white", len, &exp, &s);
     }
     g.finish();
 }

@@ -5,13 +5,10 @@
 //! `cargo run --release --example feature_scaling -- [L ...]`
 //! Peak memory: `/usr/bin/time -v target/release/examples/feature_scaling 1000000`.
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use structid::validation::metrics::rms_difference;
-use structid::{
-    FourierDispersion, FourierWeights, IdentifySettings, SolverChoice, identify, scenarios,
-};
+use structid::{identify, scenarios};
 
 fn main() {
     let sizes: Vec<usize> = std::env::args()
@@ -23,18 +20,8 @@ fn main() {
     } else {
         sizes
     };
-    let disp = Arc::new(
-        FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 })
-            .unwrap()
-            .with_harmonics(31),
-    );
-    let settings = IdentifySettings::builder()
-        .beta(1e-4)
-        .solver(SolverChoice::Features)
-        .build()
-        .unwrap();
     for len in sizes {
-        let exp = scenarios::hammerstein_coloured(len, 4, 0.3, disp.clone(), 11).unwrap();
+        let (exp, settings) = scenarios::feature_benchmark(len).unwrap();
         let t = Instant::now();
         let id = identify(&exp.model, &exp.data, &settings).unwrap();
         let total = t.elapsed().as_secs_f64();

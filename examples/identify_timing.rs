@@ -4,10 +4,9 @@
 //! `cargo run --release --example identify_timing -- 4000`
 //! Peak memory: `/usr/bin/time -v target/release/examples/identify_timing 4000`.
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use structid::{IdentifySettings, KernelDispersion, identify, scenarios};
+use structid::{identify, scenarios};
 
 fn main() {
     let len: usize = std::env::args()
@@ -15,15 +14,7 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(2000);
     let only_identify = std::env::args().any(|a| a == "--identify-only");
-    let exp = scenarios::hammerstein(
-        len,
-        4,
-        0.1,
-        Arc::new(KernelDispersion::gaussian(0.2).unwrap()),
-        42,
-    )
-    .unwrap();
-    let settings = IdentifySettings::builder().beta(1e-3).build().unwrap();
+    let (exp, settings) = scenarios::gaussian_benchmark(len).unwrap();
     for _ in 0..3 {
         let t = Instant::now();
         let id = identify(&exp.model, &exp.data, &settings).unwrap();

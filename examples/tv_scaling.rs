@@ -6,12 +6,11 @@
 //! (`adaptive`: ADMM with ρ balancing; `cv`: select β by blocked 5-fold cross-validation
 //! instead of one fit at β = 0.01).
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use structid::scenarios::{Excitation, hammerstein_map};
+use structid::scenarios::{Excitation, relay_hammerstein};
 use structid::validation::metrics::rms_difference;
-use structid::{IdentifySettings, SolverChoice, TotalVariation, identify};
+use structid::{IdentifySettings, SolverChoice, identify};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -33,7 +32,6 @@ fn main() {
     } else {
         sizes
     };
-    let relay = |z: f64| if z >= 0.3 { 1.0 } else { -0.5 };
     let admm = structid::solver::admm::AdmmSettings::builder()
         .adaptive(args.iter().any(|a| a == "adaptive"))
         .build()
@@ -45,16 +43,7 @@ fn main() {
         .build()
         .unwrap();
     for len in sizes {
-        let exp = hammerstein_map(
-            len,
-            2,
-            0.1,
-            &relay,
-            excitation,
-            Arc::new(TotalVariation::new()),
-            7,
-        )
-        .unwrap();
+        let exp = relay_hammerstein(len, excitation).unwrap();
         let t = Instant::now();
         if args.iter().any(|a| a == "cv") {
             use structid::selection::{Criterion, SelectionSettings, select};

@@ -1,28 +1,14 @@
 //! Identification at scale with the feature-space solver (release mode: about 3 s).
 
-use std::sync::Arc;
-
 use structid::validation::metrics::rms_difference;
-use structid::{
-    FourierDispersion, FourierWeights, IdentifySettings, SolverChoice, identify, scenarios,
-};
+use structid::{identify, scenarios};
 
 /// Consistency: on a Hammerstein system with a known map (tanh), 4th-order IIR path and
 /// coloured noise, the map error falls from L = 10⁴ to L = 10⁶.
 #[test]
 fn feature_solver_error_falls_from_ten_thousand_to_a_million_samples() {
-    let disp = Arc::new(
-        FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 })
-            .unwrap()
-            .with_harmonics(31),
-    );
-    let settings = IdentifySettings::builder()
-        .beta(1e-4)
-        .solver(SolverChoice::Features)
-        .build()
-        .unwrap();
     let err = |len: usize| {
-        let exp = scenarios::hammerstein_coloured(len, 4, 0.3, disp.clone(), 11).unwrap();
+        let (exp, settings) = scenarios::feature_benchmark(len).unwrap();
         let id = identify(&exp.model, &exp.data, &settings).unwrap();
         assert!(id.diagnostics.feasibility_residual < 1e-9);
         assert_eq!(id.diagnostics.solver.name(), "features");

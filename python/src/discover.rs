@@ -296,6 +296,10 @@ pub fn discover_columns<'py>(
                         None => None,
                     };
                     x.set_item("second_block", row)?;
+                    x.set_item(
+                        "dynamic_verdict",
+                        step.dynamic.as_ref().map(|d| d.verdict.clone()),
+                    )?;
                     x.set_item("verdict", &step.discovery.verdict)?;
                     x.set_item(
                         "effect",

@@ -13,9 +13,9 @@
 //! Environment overrides: `TANKS_ORDERS=1,2,3`, `TANKS_DEGREE=3`, `TANKS_SIGMA=0.2`,
 //! `TANKS_NO_KERNEL`, `TANKS_NO_OVERFLOW`, `TANKS_NO_REFIT`.
 
-use structid::io::{CascadedTanks, write_atomic};
-use structid::plot::{Chart, Series, render_chart_svg};
-use structid_benchmarks::tanks::{PUBLISHED, TanksSettings, run};
+use structid::io::CascadedTanks;
+use structid::plot::{Chart, Series};
+use structid_benchmarks::tanks::{Candidate, PUBLISHED, TanksSettings, run};
 
 mod common;
 
@@ -23,15 +23,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (path, out) = common::benchmark_args("cascaded_tanks/dataBenchmark.csv", "cascaded_tanks");
     let tanks = CascadedTanks::load(&path)?;
     let mut settings = TanksSettings::default();
-    if let Ok(v) = std::env::var("TANKS_ORDERS") {
-        settings.orders = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?;
-    }
-    if let Ok(v) = std::env::var("TANKS_DEGREE") {
-        settings.trend_degree = v.parse()?;
-    }
-    if let Ok(v) = std::env::var("TANKS_SIGMA") {
-        settings.sigma_fraction = v.parse()?;
-    }
+    common::env_override_list("TANKS_ORDERS", &mut settings.orders)?;
+    common::env_override("TANKS_DEGREE", &mut settings.trend_degree)?;
+    common::env_override("TANKS_SIGMA", &mut settings.sigma_fraction)?;
     if std::env::var_os("TANKS_NO_KERNEL").is_some() {
         settings.kernel = false;
     }
@@ -58,18 +52,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "structure"
     );
     for c in &r.candidates {
-        let map = if !c.structure.has_map() {
-            "-"
-        } else if c.kernel {
-            "fourier+poly"
-        } else {
-            "polynomial"
-        };
         print!(
-            "  {:<26} {}  {:<12} {:>8.3}  {:>12.3}  {:>12}  {:>7.1}",
-            c.structure.name(),
-            c.order,
-            map,
+            "  {} {:>8.3}  {:>12.3}  {:>12}  {:>7.1}",
+            candidate_columns(c),
             c.validation_rms,
             c.validation_rms_clipped,
             c.iterations,
@@ -95,18 +80,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     for (i, m) in r.models.iter().enumerate() {
         let c = &m.candidate;
-        let map = if !c.structure.has_map() {
-            "-"
-        } else if c.kernel {
-            "fourier+poly"
-        } else {
-            "polynomial"
-        };
         println!(
-            "  {:<26} {}  {:<12} {:<4}  {:>10.3}  {:>10.3}  {:>19.3}  {:>13.3}{}",
-            c.structure.name(),
-            c.order,
-            map,
+            "  {} {:<4}  {:>10.3}  {:>10.3}  {:>19.3}  {:>13.3}{}",
+            candidate_columns(c),
             if m.clipped { "yes" } else { "no" },
             c.score(),
             m.estimation_rms,
@@ -141,11 +117,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )
     .with(Series::line("measured", &t, &r.measured))
     .with(Series::line("simulated (chosen model)", &t, &m.simulated));
-    write_atomic(
-        &out.join("test.svg"),
-        render_chart_svg(&chart)?.as_bytes(),
-        &[&path],
-    )?;
+    common::write_chart(&out, "test.svg", &chart, &path)?;
     let models: Vec<_> = r
         .models
         .iter()
@@ -171,11 +143,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "overflow_level": r.overflow_level,
         "seconds": r.seconds,
     });
-    write_atomic(
-        &out.join("results.json"),
-        serde_json::to_string_pretty(&json)?.as_bytes(),
-        &[&path],
-    )?;
+    common::write_results(&out, &json, &path)?;
     println!("wrote {}/{{test.svg, results.json}}", out.display());
     Ok(())
+}
+
+/// The columns that name a candidate in both tables: structure, order, and its map (none, or
+/// the expansion it was fitted with).
+fn candidate_columns(c: &Candidate) -> String {
+    let map = if !c.structure.has_map() {
+        "-"
+    } else if c.kernel {
+        "fourier+poly"
+    } else {
+        "polynomial"
+    };
+    format!("{:<26} {}  {:<12}", c.structure.name(), c.order, map)
 }

@@ -19,15 +19,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (path, _) = common::benchmark_args("cascaded_tanks/dataBenchmark.csv", "cascaded_tanks");
     let tanks = CascadedTanks::load(&path)?;
     let mut settings = PhysicalSettings::default();
-    if let Ok(v) = std::env::var("TANKS_BETAS") {
-        settings.betas = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
-    }
-    if let Ok(v) = std::env::var("TANKS_CENTRES") {
-        settings.centres = v.parse()?;
-    }
-    if let Ok(v) = std::env::var("TANKS_SEGMENT") {
-        settings.segment_length = v.parse()?;
-    }
+    common::env_override_list("TANKS_BETAS", &mut settings.betas)?;
+    common::env_override("TANKS_CENTRES", &mut settings.centres)?;
+    common::env_override("TANKS_SEGMENT", &mut settings.segment_length)?;
     // Structures as comma-separated masks of the free maps, e.g. TANKS_STRUCTURES=1111,1110.
     if let Ok(v) = std::env::var("TANKS_STRUCTURES") {
         settings.structures = v

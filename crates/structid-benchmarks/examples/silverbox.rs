@@ -11,8 +11,8 @@
 //! arrow-test simulation error over time) and `results.json`.
 
 use structid::Signal;
-use structid::io::{Silverbox, write_atomic};
-use structid::plot::{Chart, Series, render_chart_svg};
+use structid::io::Silverbox;
+use structid::plot::{Chart, Series};
 use structid_benchmarks::silverbox::{SilverboxSettings, run};
 
 mod common;
@@ -21,18 +21,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (path, out) = common::benchmark_args("silverbox/SNLS80mV.csv", "silverbox");
     let sb = Silverbox::load(&path)?;
     let mut settings = SilverboxSettings::default();
-    if let Ok(v) = std::env::var("SB_SIGMA") {
-        settings.sigma_fraction = v.parse()?;
-    }
-    if let Ok(v) = std::env::var("SB_ORDERS") {
-        settings.orders = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?;
-    }
-    if let Ok(v) = std::env::var("SB_DEGREE") {
-        settings.trend_degree = v.parse()?;
-    }
-    if let Ok(v) = std::env::var("SB_SCALE") {
-        settings.trend_scale = v.parse()?;
-    }
+    common::env_override("SB_SIGMA", &mut settings.sigma_fraction)?;
+    common::env_override_list("SB_ORDERS", &mut settings.orders)?;
+    common::env_override("SB_DEGREE", &mut settings.trend_degree)?;
+    common::env_override("SB_SCALE", &mut settings.trend_scale)?;
     if std::env::var_os("SB_TUNE").is_some() {
         settings.tune_sigma = true;
     }
@@ -98,11 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .with(Series::dots("ŵ at estimation samples (every 30th)", &z, &w))
         .with(Series::band("95 % band", &grid, &[], &lower, &upper))
         .with(Series::line("N̂(y)", &grid, &nhat));
-    write_atomic(
-        &out.join("map.svg"),
-        render_chart_svg(&map)?.as_bytes(),
-        &[&path],
-    )?;
+    common::write_chart(&out, "map.svg", &map, &path)?;
     let arrow = &r.tests[0];
     let t: Vec<f64> = (0..arrow.measured.len())
         .map(|k| k as f64 * sb.sample_time)
@@ -119,11 +107,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "y − ŷ [mV]",
     )
     .with(Series::line("error", &t, &err));
-    write_atomic(
-        &out.join("error.svg"),
-        render_chart_svg(&chart)?.as_bytes(),
-        &[&path],
-    )?;
+    common::write_chart(&out, "error.svg", &chart, &path)?;
     let json = serde_json::json!({
         "candidates": r.candidates,
         "chosen": r.chosen,
@@ -134,11 +118,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "tests": r.tests,
         "seconds": r.seconds,
     });
-    write_atomic(
-        &out.join("results.json"),
-        serde_json::to_string_pretty(&json)?.as_bytes(),
-        &[&path],
-    )?;
+    common::write_results(&out, &json, &path)?;
     println!(
         "wrote {}/{{map.svg, error.svg, results.json}}",
         out.display()

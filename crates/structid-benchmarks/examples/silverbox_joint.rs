@@ -27,15 +27,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("alternation: {:<28} {:.4} mV", t.split, 1e3 * t.rms);
     }
     let mut js = JointSilverboxSettings::default();
-    if let Ok(v) = std::env::var("SB_BETAS") {
-        js.betas = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
-    }
-    if let Ok(v) = std::env::var("SB_SECOND_MAP") {
-        js.second_map = v.parse()?;
-    }
-    if let Ok(v) = std::env::var("SB_ITERATIONS") {
-        js.max_iterations = v.parse()?;
-    }
+    common::env_override_list("SB_BETAS", &mut js.betas)?;
+    common::env_override("SB_SECOND_MAP", &mut js.second_map)?;
+    common::env_override("SB_ITERATIONS", &mut js.max_iterations)?;
     let j = run_joint(&sb, &base, &js)?;
     for (b, v) in &j.trials {
         println!("joint: β = {b:e}, validation {:.4} mV", 1e3 * v);

@@ -5,8 +5,10 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use structid_lti::Signal;
 
-use crate::dispersion::Dispersion;
+use crate::dispersion::fourier::{FourierDispersion, FourierWeights};
+use crate::dispersion::{Dispersion, KernelDispersion};
 use crate::error::Result;
+use crate::identify::{IdentifySettings, SolverChoice};
 use crate::model::lft::{Lft, LftMatrices};
 use crate::model::structure::Structure;
 use crate::paper::{Experiment, gaussian_noise};
@@ -21,7 +23,15 @@ pub fn hammerstein(
     dispersion: Arc<dyn Dispersion>,
     seed: u64,
 ) -> Result<Experiment> {
-    hammerstein_with_noise(len, order, noise_std, false, dispersion, seed)
+    hammerstein_map(
+        len,
+        order,
+        noise_std,
+        &f64::tanh,
+        Excitation::White,
+        dispersion,
+        seed,
+    )
 }
 
 /// The input of a synthetic Hammerstein experiment.
@@ -62,22 +72,11 @@ pub fn hammerstein_coloured(
     dispersion: Arc<dyn Dispersion>,
     seed: u64,
 ) -> Result<Experiment> {
-    hammerstein_with_noise(len, order, noise_std, true, dispersion, seed)
-}
-
-fn hammerstein_with_noise(
-    len: usize,
-    order: usize,
-    noise_std: f64,
-    coloured: bool,
-    dispersion: Arc<dyn Dispersion>,
-    seed: u64,
-) -> Result<Experiment> {
     build_hammerstein(
         len,
         order,
         noise_std,
-        coloured,
+        true,
         &f64::tanh,
         Excitation::White,
         dispersion,
@@ -172,20 +171,7 @@ pub fn mixed_hammerstein_with_radius(
     seed: u64,
 ) -> Result<Experiment> {
     let g = structid_lti::testing::random_stable_system(seed, 2, 2, 1, radius);
-    let lft = Lft::new(LftMatrices {
-        a: g.a().clone(),
-        bu: DMatrix::zeros(2, 2),
-        be: DMatrix::zeros(2, 1),
-        bw: g.b().clone(),
-        cy: g.c().clone(),
-        dyu: DMatrix::zeros(1, 2),
-        dye: DMatrix::identity(1, 1),
-        dyw: g.d().clone(),
-        cz: DMatrix::zeros(2, 2),
-        dzu: DMatrix::identity(2, 2),
-        dze: DMatrix::zeros(2, 1),
-        dzw: DMatrix::zeros(2, 2),
-    })?;
+    let lft = maps_of_the_inputs(&g, 2)?;
     let blocks = vec![
         crate::model::NonlinearBlock::new("smooth", vec![0], 0, smooth),
         crate::model::NonlinearBlock::new(
@@ -199,6 +185,96 @@ pub fn mixed_hammerstein_with_radius(
     let u = gaussian_noise(len, 2, 1.0, seed + 1);
     let noise = gaussian_noise(len, 1, 0.05, seed + 2);
     let f = |z: &[f64]| z[0].tanh();
-    let h = |z: &[f64]| if z[0] >= 0.3 { 1.0 } else { -0.5 };
+    let h = |z: &[f64]| relay(z[0]);
     Experiment::simulate(model, &[&f, &h], u, noise)
+}
+
+/// y = G·h(u₁, u₂) + e with h = 1[z₁ + z₂ > 0], G a random stable 2nd-order block (spectral
+/// radius 0.9, reproducible from `seed`), u₁ and u₂ white Gaussian of unit variance, noise std
+/// 0.1, and graph total variation on the two-input map: the `graph_tv_admm` benchmark.
+///
+/// ```
+/// use structid_core::scenarios::graph_hammerstein;
+/// let exp = graph_hammerstein(50, 5).unwrap();
+/// assert_eq!(exp.model.blocks()[0].inputs, [0, 1]);
+/// ```
+pub fn graph_hammerstein(len: usize, seed: u64) -> Result<Experiment> {
+    let g = structid_lti::testing::random_stable_system(seed, 2, 1, 1, 0.9);
+    let lft = maps_of_the_inputs(&g, 2)?;
+    let block = crate::model::NonlinearBlock::new(
+        "h",
+        vec![0, 1],
+        0,
+        Arc::new(crate::dispersion::total_variation::TotalVariation::new()),
+    );
+    let model = crate::model::Model::new(lft, vec![block])?;
+    let u = gaussian_noise(len, 2, 1.0, seed + 1);
+    let noise = gaussian_noise(len, 1, 0.1, seed + 2);
+    let h = |z: &[f64]| if z[0] + z[1] > 0.0 { 1.0 } else { 0.0 };
+    Experiment::simulate(model, &[&h], u, noise)
+}
+
+/// The LFT of maps that read the `inputs` measured inputs directly (z = u) and drive the LTI
+/// block `g` (w → y, one output), with white noise on y: y = G·N(u) + e.
+fn maps_of_the_inputs(g: &structid_lti::StateSpace, inputs: usize) -> Result<Lft> {
+    let (n, nw) = (g.order(), g.b().ncols());
+    Lft::new(LftMatrices {
+        a: g.a().clone(),
+        bu: DMatrix::zeros(n, inputs),
+        be: DMatrix::zeros(n, 1),
+        bw: g.b().clone(),
+        cy: g.c().clone(),
+        dyu: DMatrix::zeros(1, inputs),
+        dye: DMatrix::identity(1, 1),
+        dyw: g.d().clone(),
+        cz: DMatrix::zeros(inputs, n),
+        dzu: DMatrix::identity(inputs, inputs),
+        dze: DMatrix::zeros(inputs, 1),
+        dzw: DMatrix::zeros(inputs, nw),
+    })
+}
+
+/// The relay of the total-variation problems: 1 for z ≥ 0.3 and −0.5 below, a jump that no
+/// smooth dispersion follows.
+pub fn relay(z: f64) -> f64 {
+    if z >= 0.3 { 1.0 } else { -0.5 }
+}
+
+/// The total-variation benchmark (`cargo bench --bench total_variation`, the `tv_scaling`
+/// example): [`hammerstein_map`] with a 2nd-order G, the [`relay`] map, noise std 0.1, total
+/// variation and seed 7.
+pub fn relay_hammerstein(len: usize, excitation: Excitation) -> Result<Experiment> {
+    hammerstein_map(
+        len,
+        2,
+        0.1,
+        &relay,
+        excitation,
+        Arc::new(crate::dispersion::total_variation::TotalVariation::new()),
+        7,
+    )
+}
+
+/// The feature-space solver's benchmark (`cargo bench --bench features`, the `feature_scaling`
+/// example, BENCHMARKS.md): [`hammerstein_coloured`] with a 4th-order G, noise std 0.3 and seed
+/// 11, a Gaussian-like Fourier dispersion (σ = 0.2, 31 harmonics: m = 63 features), and the
+/// settings it is timed with (β = 10⁻⁴, the feature-space solver).
+pub fn feature_benchmark(len: usize) -> Result<(Experiment, IdentifySettings)> {
+    let disp =
+        FourierDispersion::new(FourierWeights::GaussianLike { sigma: 0.2 })?.with_harmonics(31);
+    let exp = hammerstein_coloured(len, 4, 0.3, Arc::new(disp), 11)?;
+    let settings = IdentifySettings::builder()
+        .beta(1e-4)
+        .solver(SolverChoice::Features)
+        .build()?;
+    Ok((exp, settings))
+}
+
+/// The exact Gaussian solver's benchmark (`cargo bench --bench identify`, the `identify_timing`
+/// example, BENCHMARKS.md): [`hammerstein`] with a 4th-order G, noise std 0.1, a Gaussian
+/// dispersion of σ = 0.2 and seed 42, and the β it is timed with, 10⁻³.
+pub fn gaussian_benchmark(len: usize) -> Result<(Experiment, IdentifySettings)> {
+    let exp = hammerstein(len, 4, 0.1, Arc::new(KernelDispersion::gaussian(0.2)?), 42)?;
+    let settings = IdentifySettings::builder().beta(1e-3).build()?;
+    Ok((exp, settings))
 }

@@ -45,7 +45,7 @@ use structid_discover::discover::{
     PARTIAL_SHRINK, UNLOCATED_DIRECTION_EFFECT, Verdict, discover, discover_effects, initial_state,
     rate_explains,
 };
-use structid_discover::hypotheses::Nominal;
+use structid_discover::hypotheses::{Nominal, Site};
 use structid_testcases::parallel;
 use structid_testcases::physics::{
     Expected, NominalSource, PhysicsCase, PhysicsKind, generate, generate_with_length,
@@ -370,6 +370,14 @@ fn dynamic_goal_of_the_issue() {
     let cases = HELD_OUT_DYNAMIC.end - HELD_OUT_DYNAMIC.start;
     let dynamic = dynamic_tally(HELD_OUT_DYNAMIC);
     assert!(dynamic as f64 >= 0.85 * cases as f64, "{dynamic}/{cases}");
+}
+
+/// The hysteresis cases the rules may be tuned on (run with `--ignored`).
+#[test]
+#[ignore]
+fn dynamic_effects_of_the_tuning_seeds() {
+    let dynamic = dynamic_tally(0..30);
+    assert!(dynamic >= 24, "{dynamic}/30");
 }
 
 /// How many of the drifting-gain cases `seeds` are reported as time-varying.
@@ -717,7 +725,7 @@ fn a_rate_map_that_barely_beats_the_position_does_not_hide_a_hysteresis() {
     let rate = d
         .hypotheses
         .iter()
-        .filter(|h| h.location == structid_discover::hypotheses::Site::RateFeedback)
+        .filter(|h| h.location == Site::RateFeedback)
         .map(|h| h.validation_rms)
         .fold(f64::INFINITY, f64::min);
     assert!(rate.is_finite());
@@ -766,11 +774,7 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
     assert_eq!(d.verdict_kind, Verdict::MissingEffect, "{}", d.verdict);
     let f = d.finding.as_ref().unwrap();
     assert!(
-        matches!(
-            f.location,
-            structid_discover::hypotheses::Site::OutputFeedback
-                | structid_discover::hypotheses::Site::RateFeedback
-        ),
+        matches!(f.location, Site::OutputFeedback | Site::RateFeedback),
         "{}",
         d.verdict
     );
@@ -793,7 +797,6 @@ fn a_strong_direction_effect_in_feedback_is_missing_whatever_the_shrink() {
 /// found as an elasto-plastic stop (λ > 0) yielding within 20 % of that level.
 #[test]
 fn a_hysteresis_at_the_input_behind_an_estimated_nominal_is_dynamic_with_its_parameters() {
-    use structid_discover::hypotheses::Site;
     use structid_testcases::physics::PhysicalEffect;
     for seed in [0, 9] {
         let (case, d) = dynamic_finding(seed);
@@ -885,10 +888,12 @@ fn two_effects_tally(seeds: std::ops::Range<u64>) -> usize {
 }
 
 /// The issue's goal: with two static effects at two sites, `--effects 2` finds both in at
-/// least 80 % of the cases (run with `--ignored`; not met, measured 2 of 10, and 4 of 10 on the
-/// cases the iteration may be tuned on: the second-block rows find an effect that the first
-/// map hid where the plant is open loop, but friction beside a spring or an actuator effect in
-/// a position loop still reads as a direction effect at the first site).
+/// least 80 % of the cases (run with `--ignored`; not met, measured 3 of 10, and 6 of the first
+/// 10 cases the iteration may be tuned on: the second-block rows find an effect that the first
+/// map hid where the plant is open loop, and a static reading of a dynamic-looking step finds
+/// friction beside a hardening or cubic spring; Stribeck friction beside a spring, and friction
+/// beside an actuator effect in a position loop, still read as a direction effect or leave a
+/// second map that gains less than the required share).
 #[test]
 #[ignore]
 fn two_effects_goal_of_the_issue() {
@@ -914,6 +919,48 @@ fn two_effects_of_the_tuning_seeds() {
     assert!(both as f64 >= 0.8 * n as f64, "{both}/{n}");
 }
 
+/// Friction beside a hardening spring in a position loop leaves a direction dependence at
+/// the spring's site, so that the first step reads as dynamic there. Read statically, the
+/// spring is named, and the next step finds the friction: together they validate better than
+/// the dynamic reading by the required share, and `--effects 2` reports both, the first step
+/// keeping its dynamic reading.
+#[test]
+fn friction_beside_a_spring_is_read_as_two_static_effects() {
+    let case = generate(PhysicsKind::TwoEffects, 8);
+    let (second, _) = case.second.as_ref().unwrap();
+    assert_eq!(
+        (case.effect.as_ref().unwrap().1, second.1),
+        (Site::OutputFeedback, Site::RateFeedback)
+    );
+    let nominal = Nominal::from_polynomial(&case.nominal).unwrap();
+    let effects = discover_effects(
+        &nominal,
+        &case.estimation,
+        &case.validation,
+        &DiscoverSettings::default(),
+        &EffectsSettings::default().with_max_effects(2).unwrap(),
+    )
+    .unwrap();
+    let dynamic = effects.steps[0]
+        .dynamic
+        .as_ref()
+        .expect("the first step's dynamic reading");
+    let d = dynamic.finding.as_ref().unwrap();
+    assert_eq!(
+        d.classification,
+        Classification::Dynamic,
+        "{}",
+        dynamic.verdict
+    );
+    let found: Vec<Site> = effects.findings().iter().map(|f| f.location).collect();
+    assert_eq!(found, vec![Site::OutputFeedback, Site::RateFeedback]);
+    let last = effects.last().unwrap().augmented.validation_gap.rms;
+    assert!(
+        last <= 0.9 * d.augmented.validation_gap.rms,
+        "{last} vs {d:?}"
+    );
+}
+
 /// A friction map adopted in a first step reads ẏ, which the input disturbance of an
 /// integrating plant drives: with that disturbance as a second noise channel, the map's z has
 /// no causal filter from y. The second step then searches with the output noise alone instead
@@ -924,12 +971,7 @@ fn a_known_friction_map_behind_an_integrator_is_searched_around() {
     let nominal = Nominal::from_polynomial(&case.nominal).unwrap();
     let first = run(&case);
     let f = first.finding.as_ref().expect("a first finding");
-    assert_eq!(
-        f.location,
-        structid_discover::hypotheses::Site::RateFeedback,
-        "{}",
-        first.verdict
-    );
+    assert_eq!(f.location, Site::RateFeedback, "{}", first.verdict);
     let next = f.augmented.as_nominal(&nominal).unwrap();
     assert_eq!(next.known_maps().len(), 1);
     let second = discover(

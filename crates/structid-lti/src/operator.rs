@@ -233,16 +233,11 @@ impl BlockedRecursion {
         init: Option<MatRef<'_, f64>>,
         mut fin: Option<MatMut<'_, f64>>,
     ) {
-        let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
+        let (b, cin, n) = (self.b, self.cin, self.n);
         let k = b * cin + n;
         let nb = len.div_ceil(b);
         let nc = x.ncols();
-        // pack in the layout of x so that packing is a plain copy of contiguous runs
-        let row_major = x.col_stride() == 1 && x.row_stride() != 1;
-        let chunk = col_chunk(row_major);
-        let wmax = chunk.min(nc);
-        let mut buf0 = vec![0.0; k * wmax];
-        let mut buf1 = vec![0.0; k * wmax];
+        let (row_major, chunk, mut buf0, mut buf1) = self.scratch(x);
         let mut j0 = 0;
         while j0 < nc {
             let w = chunk.min(nc - j0);
@@ -251,33 +246,15 @@ impl BlockedRecursion {
             let mut cur = &mut buf0[..k * w];
             let mut nxt = &mut buf1[..k * w];
             for step in 0..nb {
-                let blk = if self.reverse { nb - 1 - step } else { step };
-                let t0 = blk * b;
-                let bk = b.min(len - t0);
-                pack(
-                    xc,
-                    t0 * cin,
-                    bk * cin,
-                    b * cin,
-                    cur,
-                    row_major,
-                    step == 0,
-                    k,
-                );
+                let (t0, bk) = self.block_at(step, nb, len);
+                self.pack_block(xc, t0, bk, cur, row_major, step == 0);
                 if step == 0
                     && let Some(s0) = init
                 {
                     load_state(s0.subcols(j0, w), b * cin, cur, row_major, k);
                 }
                 let wv = packed_view(cur, k, w, row_major);
-                matmul(
-                    oc.rb_mut().subrows_mut(t0 * cout, bk * cout),
-                    accum,
-                    self.m1.as_ref().subrows(0, bk * cout),
-                    wv,
-                    alpha,
-                    Par::Seq,
-                );
+                self.block_output(oc.rb_mut(), t0, bk, wv, accum, alpha);
                 if n > 0
                     && step + 1 == nb
                     && let Some(f) = fin.as_mut()
@@ -314,15 +291,11 @@ impl BlockedRecursion {
 
     /// One sequential in-place pass over the columns of `x` (see [`Self::run_in_place`]).
     fn leaf_in_place(&self, len: usize, mut x: MatMut<'_, f64>) {
-        let (b, cin, cout, n) = (self.b, self.cin, self.cout, self.n);
-        let k = b * cin + n;
-        let nb = len.div_ceil(b);
+        let n = self.n;
+        let k = self.b * self.cin + n;
+        let nb = len.div_ceil(self.b);
         let nc = x.ncols();
-        let row_major = x.col_stride() == 1 && x.row_stride() != 1;
-        let chunk = col_chunk(row_major);
-        let wmax = chunk.min(nc);
-        let mut buf0 = vec![0.0; k * wmax];
-        let mut buf1 = vec![0.0; k * wmax];
+        let (row_major, chunk, mut buf0, mut buf1) = self.scratch(x.rb());
         let mut j0 = 0;
         while j0 < nc {
             let w = chunk.min(nc - j0);
@@ -330,28 +303,10 @@ impl BlockedRecursion {
             let mut cur = &mut buf0[..k * w];
             let mut nxt = &mut buf1[..k * w];
             for step in 0..nb {
-                let blk = if self.reverse { nb - 1 - step } else { step };
-                let t0 = blk * b;
-                let bk = b.min(len - t0);
-                pack(
-                    xc.rb(),
-                    t0 * cin,
-                    bk * cin,
-                    b * cin,
-                    cur,
-                    row_major,
-                    step == 0,
-                    k,
-                );
+                let (t0, bk) = self.block_at(step, nb, len);
+                self.pack_block(xc.rb(), t0, bk, cur, row_major, step == 0);
                 let wv = packed_view(cur, k, w, row_major);
-                matmul(
-                    xc.rb_mut().subrows_mut(t0 * cout, bk * cout),
-                    Accum::Replace,
-                    self.m1.as_ref().subrows(0, bk * cout),
-                    wv,
-                    1.0,
-                    Par::Seq,
-                );
+                self.block_output(xc.rb_mut(), t0, bk, wv, Accum::Replace, 1.0);
                 if n > 0 && step + 1 < nb {
                     self.carry_state(wv, nxt, w, row_major);
                     std::mem::swap(&mut cur, &mut nxt);
@@ -363,6 +318,71 @@ impl BlockedRecursion {
 }
 
 impl BlockedRecursion {
+    /// The scratch of a sequential pass over the columns of `x`: whether `x` is row-major (the
+    /// packed buffers take its layout, so that packing copies contiguous runs), how many
+    /// columns are packed at once, and the two packed buffers of the current and next block.
+    fn scratch(&self, x: MatRef<'_, f64>) -> (bool, usize, Vec<f64>, Vec<f64>) {
+        let k = self.b * self.cin + self.n;
+        let row_major = x.col_stride() == 1 && x.row_stride() != 1;
+        let chunk = col_chunk(row_major);
+        let wmax = chunk.min(x.ncols());
+        (row_major, chunk, vec![0.0; k * wmax], vec![0.0; k * wmax])
+    }
+
+    /// The first sample and the length of the block processed at `step` of `nb` over `len`
+    /// samples: in time order, or from the last block back for the adjoint.
+    fn block_at(&self, step: usize, nb: usize, len: usize) -> (usize, usize) {
+        let blk = if self.reverse { nb - 1 - step } else { step };
+        let t0 = blk * self.b;
+        (t0, self.b.min(len - t0))
+    }
+
+    /// Packs the samples `t0..t0 + bk` of `x` into `cur` (see [`pack`]); the first block
+    /// zeroes the state rows.
+    fn pack_block(
+        &self,
+        x: MatRef<'_, f64>,
+        t0: usize,
+        bk: usize,
+        cur: &mut [f64],
+        row_major: bool,
+        first: bool,
+    ) {
+        let (b, cin) = (self.b, self.cin);
+        pack(
+            x,
+            t0 * cin,
+            bk * cin,
+            b * cin,
+            cur,
+            row_major,
+            first,
+            b * cin + self.n,
+        );
+    }
+
+    /// The rows of the block at `t0` (`bk` samples) in `out`: `M1 wv` from the packed `wv`,
+    /// written or added (`accum`), times `alpha`.
+    fn block_output(
+        &self,
+        out: MatMut<'_, f64>,
+        t0: usize,
+        bk: usize,
+        wv: MatRef<'_, f64>,
+        accum: Accum,
+        alpha: f64,
+    ) {
+        let cout = self.cout;
+        matmul(
+            out.subrows_mut(t0 * cout, bk * cout),
+            accum,
+            self.m1.as_ref().subrows(0, bk * cout),
+            wv,
+            alpha,
+            Par::Seq,
+        );
+    }
+
     /// Writes the state after the block packed in `wv` (`M2 wv`) into the state rows of the
     /// packed buffer `nxt` of the next block (`w` columns, row- or column-major).
     fn carry_state(&self, wv: MatRef<'_, f64>, nxt: &mut [f64], w: usize, row_major: bool) {

@@ -1271,6 +1271,10 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             effect,
             accepted,
         };
+    // A case of one family: the family's name is what the report should say.
+    let fits = |effect: Effect, params: Vec<f64>, accepted: Vec<Accepted>| {
+        exp(effect.name(), Some((effect, params)), accepted)
+    };
     match c {
         C::Drift => (
             P::DriftingGain {
@@ -1282,9 +1286,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let level = uniform(rng, 0.3, 0.7) * r.u_peak;
             (
                 P::Saturation { level },
-                exp(
-                    E::Saturation.name(),
-                    Some((E::Saturation, vec![1.0, level])),
+                fits(
+                    E::Saturation,
+                    vec![1.0, level],
                     vec![
                         ok(E::Saturation, &[("knee", level)]),
                         ok(
@@ -1300,9 +1304,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let width = uniform(rng, 0.1, 0.3) * r.u_peak;
             (
                 P::DeadZone { width },
-                exp(
-                    E::DeadZone.name(),
-                    Some((E::DeadZone, vec![1.0, width])),
+                fits(
+                    E::DeadZone,
+                    vec![1.0, width],
                     vec![
                         ok(E::DeadZone, &[("width", width)]),
                         ok(E::GapSpring, &[("gap", width)]),
@@ -1314,9 +1318,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let level = uniform(rng, 0.3, 0.7) * r.u_peak;
             (
                 P::OneSidedClip { level },
-                exp(
-                    E::ClipAbove.name(),
-                    Some((E::ClipAbove, vec![1.0, level])),
+                fits(
+                    E::ClipAbove,
+                    vec![1.0, level],
                     vec![
                         ok(E::ClipAbove, &[("knee", level)]),
                         ok(E::AsymmetricSaturation, &[("upper_knee", level)]),
@@ -1328,9 +1332,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let level = uniform(rng, 0.3, 0.6) * r.u_peak;
             (
                 P::TanhSaturation { level },
-                exp(
-                    E::SmoothSaturation.name(),
-                    Some((E::SmoothSaturation, vec![1.0, level])),
+                fits(
+                    E::SmoothSaturation,
+                    vec![1.0, level],
                     vec![
                         ok(E::SmoothSaturation, &[("knee", level)]),
                         ok(E::Saturation, &[]),
@@ -1344,9 +1348,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let upper = uniform(rng, 0.3, 0.7) * r.y_peak;
             (
                 P::SensorClip { lower, upper },
-                exp(
-                    E::AsymmetricSaturation.name(),
-                    Some((E::AsymmetricSaturation, vec![1.0, lower, upper])),
+                fits(
+                    E::AsymmetricSaturation,
+                    vec![1.0, lower, upper],
                     vec![
                         ok(
                             E::AsymmetricSaturation,
@@ -1361,9 +1365,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let level = -uniform(rng, 0.0, 0.3) * r.y_peak;
             (
                 P::Rectification { level },
-                exp(
-                    E::ClipBelow.name(),
-                    Some((E::ClipBelow, vec![1.0, level])),
+                fits(
+                    E::ClipBelow,
+                    vec![1.0, level],
                     vec![
                         ok(E::ClipBelow, &[("level", level)]),
                         ok(E::AsymmetricSaturation, &[("lower", level)]),
@@ -1376,9 +1380,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let step = 2.0 * r.y_peak / uniform(rng, 6.0, 20.0);
             (
                 P::Quantisation { step },
-                exp(
-                    E::Quantisation.name(),
-                    Some((E::Quantisation, vec![step])),
+                fits(
+                    E::Quantisation,
+                    vec![step],
                     vec![ok(E::Quantisation, &[("step", step)])],
                 ),
             )
@@ -1388,9 +1392,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let k = uniform(rng, 0.5, 2.0) * stiff;
             (
                 P::GapSpring { stiffness: k, gap },
-                exp(
-                    E::GapSpring.name(),
-                    Some((E::GapSpring, vec![k, gap])),
+                fits(
+                    E::GapSpring,
+                    vec![k, gap],
                     vec![
                         ok(E::GapSpring, &[("stiffness", k), ("gap", gap)]),
                         ok(E::DeadZone, &[("gain", k), ("width", gap)]),
@@ -1417,7 +1421,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     stiffness: k,
                     power,
                 },
-                exp(law.name(), Some((law, vec![k, power])), accepted),
+                fits(law, vec![k, power], accepted),
             )
         }
         C::Cubic => {
@@ -1426,9 +1430,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
             let cubic = E::OddPolynomial { degree: 3 };
             (
                 P::CubicSpring { a1, a3 },
-                exp(
-                    cubic.name(),
-                    Some((cubic, vec![a1, a3])),
+                fits(
+                    cubic,
+                    vec![a1, a3],
                     vec![
                         ok(cubic, &[("a3", a3)]),
                         ok(
@@ -1449,9 +1453,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     fv_pos: fv,
                     fv_neg: fv,
                 },
-                exp(
-                    E::CoulombViscous.name(),
-                    Some((E::CoulombViscous, vec![fc, fv])),
+                fits(
+                    E::CoulombViscous,
+                    vec![fc, fv],
                     vec![
                         ok(E::CoulombViscous, &[("coulomb", fc)]),
                         ok(E::Coulomb, &[("coulomb", fc)]),
@@ -1490,9 +1494,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     fv_pos: fv,
                     fv_neg: fv2,
                 },
-                exp(
-                    E::AsymmetricCoulombViscous.name(),
-                    Some((E::AsymmetricCoulombViscous, vec![fp, fn_, fv, fv2])),
+                fits(
+                    E::AsymmetricCoulombViscous,
+                    vec![fp, fn_, fv, fv2],
                     vec![
                         ok(
                             E::AsymmetricCoulombViscous,
@@ -1529,12 +1533,9 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
                     vs,
                     fv,
                 },
-                exp(
-                    E::AsymmetricStribeck.name(),
-                    Some((
-                        E::AsymmetricStribeck,
-                        vec![fp, fn_, s * fp, s * fn_, vs, fv],
-                    )),
+                fits(
+                    E::AsymmetricStribeck,
+                    vec![fp, fn_, s * fp, s * fn_, vs, fv],
                     vec![
                         ok(
                             E::AsymmetricStribeck,

@@ -59,7 +59,7 @@ fn memory_bytes(len: usize, outputs: usize) -> u64 {
     n.saturating_mul(n)
         .saturating_mul(2)
         .saturating_add(n.saturating_mul(g))
-        .saturating_add(l * g)
+        .saturating_add(l.saturating_mul(g))
         .saturating_mul(8)
 }
 

@@ -150,6 +150,11 @@ pub struct Step {
     /// next step, when one cut the validation RMS of the step's augmented model by the
     /// required share: the map the next step builds on is that row's first map.
     pub second_block: Option<SecondBlock>,
+    /// When the step's effect looked dynamic and its static reading was built on instead
+    /// (see [`discover_effects`]): the dynamic discovery, which [`Step::discovery`] (the
+    /// static reading) replaced. It is put back when the next step does not confirm a second
+    /// effect.
+    pub dynamic: Option<Discovery>,
 }
 
 impl Step {
@@ -229,12 +234,18 @@ impl Effects {
 /// each other site are fitted jointly ([`SecondBlock`]), and when the best of those rows cuts
 /// the validation RMS of the adopted model by [`EffectsSettings::min_improvement`], the
 /// adopted map is replaced by its joint re-estimate and the step is run again from there.
-/// The same rows decide a step whose effect looks dynamic: if a static second block explains
-/// the direction dependence as well (it cuts the RMS of the static approximation, or of the
-/// model the step started from when that is lower, by the same share), the step's static
-/// approximation is built on; otherwise the iteration stops at the dynamic effect. A row was
-/// validated as a pair: when the next step does not find its second effect, the map goes back
-/// to what it was (a dynamic step is then not adopted) and the iteration stops.
+/// A step whose effect looks dynamic may instead be two static effects, the direction
+/// dependence being what the second leaves beside the first (friction beside a spring). Its
+/// *static reading* ([`discover`] at the same site with the direction test set aside) is
+/// built on when it names a family there, and the next step must then find a second effect at
+/// another site that, with the first, cuts the validation RMS of the dynamic step's best model
+/// (its static approximation, the model it started from, or a hysteresis fitted at the input)
+/// by [`EffectsSettings::min_improvement`]. Without a named static reading, the second-block
+/// rows decide: if a static second block explains the direction dependence as well (it cuts
+/// the same reference by the same share), the step's static approximation is built on;
+/// otherwise the iteration stops at the dynamic effect. A static reading and a row are each
+/// validated as a pair: when the next step does not find the second effect, the step goes
+/// back to what it was (a dynamic step is then not adopted) and the iteration stops.
 ///
 /// It stops when a step's verdict is "no missing effect", "unexplained" or "the linear model
 /// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented
@@ -270,11 +281,25 @@ pub fn discover_effects(
             discovery: d,
             adopted: false,
             second_block: None,
+            dynamic: None,
         };
-        let verdict = judge(&step, effects);
+        let mut verdict = judge(&step, effects);
+        if verdict.is_ok()
+            && let Some(i) = unconfirmed
+            && !confirms_static_reading(&steps[i], &step, effects)
+        {
+            verdict = Err(StopReason::Dynamic);
+        }
         if verdict.is_ok() {
             unconfirmed = None;
         } else if let Some(i) = unconfirmed.take() {
+            if let Some(dynamic) = steps[i].dynamic.take() {
+                // The static reading's second effect was not found: the effect is dynamic.
+                steps[i].discovery = dynamic;
+                steps[i].adopted = false;
+                steps.push(step);
+                break StopReason::Dynamic;
+            }
             // The row's second effect was not found: back to the map as it was found.
             let dynamic = steps[i].second_block.take().is_some()
                 && judge(&steps[i], effects) == Err(StopReason::Dynamic);
@@ -290,6 +315,19 @@ pub fn discover_effects(
             Ok(()) => step.adopted = true,
             Err(StopReason::Dynamic) if more => {
                 // Is the direction dependence a second, static effect?
+                if let Some(reading) = static_reading(&current, &step, est, val, &settings) {
+                    step.dynamic = Some(std::mem::replace(&mut step.discovery, reading));
+                    step.adopted = true;
+                    unconfirmed = Some(steps.len());
+                    let next = step
+                        .adopted_finding()
+                        .expect("a static reading has a finding")
+                        .augmented
+                        .as_nominal(&current)?;
+                    steps.push(step);
+                    current = next;
+                    continue;
+                }
                 let f = step.discovery.finding.as_ref().expect("a dynamic finding");
                 let reference = f
                     .augmented
@@ -341,6 +379,66 @@ pub fn discover_effects(
         stop,
         settings: effects.clone(),
         seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The static reading of a step whose effect looked dynamic: [`discover`] on the same
+/// nominal model at the dynamic finding's site alone, with the direction test set aside (its
+/// threshold at 1: no share of the residual exceeds it), when it names a family there. A
+/// direction dependence at one site is also what a second static effect leaves that the
+/// first map cannot carry (friction beside a spring); the reading is the first map of that
+/// explanation, and the next step must find the second ([`confirms_static_reading`]).
+fn static_reading(
+    nominal: &Nominal,
+    step: &Step,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Option<Discovery> {
+    let site = step.discovery.finding.as_ref()?.location;
+    let mut at_site = settings.clone();
+    at_site.locations = Some(vec![site]);
+    at_site.hysteresis_threshold = 1.0;
+    let mut d = discover(nominal, est, val, &at_site).ok()?;
+    if let Some(f) = d.finding.as_mut() {
+        f.remarks.push(
+            "the direction dependence first found here (hysteresis or backlash suspected) was \
+             read as a static map here and a second static effect elsewhere, which the next \
+             step found: together they validate better than the dynamic reading"
+                .into(),
+        );
+    }
+    let named = d
+        .finding
+        .as_ref()
+        .is_some_and(|f| matches!(f.classification, Classification::Named(_)));
+    (d.verdict_kind == Verdict::MissingEffect && named).then_some(d)
+}
+
+/// Whether `next`, adopted on top of a static reading (`reading`), confirms it: the two
+/// static maps together cut the validation RMS of the dynamic step's best model (its static
+/// approximation, the model it started from, or the hysteresis fitted at the input) by the
+/// required share. A step that was not a static reading is confirmed by being adopted.
+fn confirms_static_reading(reading: &Step, next: &Step, effects: &EffectsSettings) -> bool {
+    let Some(dynamic) = &reading.dynamic else {
+        return true;
+    };
+    let Some(f) = &dynamic.finding else {
+        return false;
+    };
+    let reference = f
+        .augmented
+        .validation_gap
+        .rms
+        .min(dynamic.validation_gap.rms)
+        .min(
+            f.input_hysteresis
+                .as_ref()
+                .map_or(f64::INFINITY, |h| h.validation_rms),
+        );
+    next.discovery.finding.as_ref().is_some_and(|g| {
+        g.location != f.location
+            && g.augmented.validation_gap.rms <= (1.0 - effects.min_improvement) * reference
     })
 }
 

@@ -197,13 +197,19 @@ pub(super) fn first_finding(
     })
 }
 
-/// When the finding names nothing (dynamic, or no family validates), or its augmented model
-/// does not confirm it (it closes less than [`super::MIN_CONFIRMING_SHRINK`] of the gap), a
-/// named family elsewhere may still explain the data better than that fit's table: a
-/// nonparametric estimate in a feedback loop (a spring seen from the noisy measured position
-/// under a controller) can validate worse than the parametric map refined by output error
-/// from it. Up to [`ALTERNATIVE_LOCATIONS`] other locations are named, and one that validates
-/// clearly better ([`ALTERNATIVE_FACTOR`]) is the finding.
+/// When the finding names nothing (dynamic, or no family validates), its augmented model does
+/// not confirm it (it closes less than [`super::MIN_CONFIRMING_SHRINK`] of the gap), or it
+/// explains only part of the gap (a shrink under [`super::PARTIAL_SHRINK`], and what it leaves
+/// is still a missing effect by the gap test), a named family elsewhere may explain
+/// the data better: a nonparametric estimate in a feedback loop (a spring seen from the noisy
+/// measured position under a controller, a friction seen from a differentiated position) can
+/// validate worse than the parametric map refined by output error from it, and so rank its
+/// location behind another. Up to [`ALTERNATIVE_LOCATIONS`] other locations are named, and the
+/// named map among them that validates best is the finding when it is better than the
+/// finding's augmented model by the table's paired test at α ([`better_at`]). A dynamic
+/// finding also asks for half its RMS ([`ALTERNATIVE_FACTOR`]): a hysteresis is approximated
+/// statically at several locations, each a little better or worse, and a significant
+/// difference among approximations is no evidence of a static effect.
 pub(super) fn named_alternative(
     cx: &Context<'_>,
     finding: Finding,
@@ -212,10 +218,14 @@ pub(super) fn named_alternative(
     if matches!(finding.classification, Classification::Named(_))
         // A NaN shrink is not "less than the confirming shrink", as the verdict reads it.
         && (finding.shrink >= super::MIN_CONFIRMING_SHRINK || finding.shrink.is_nan())
+        && !(finding.shrink < super::PARTIAL_SHRINK
+            && finding.augmented.validation_gap.missing_effect)
     {
         return finding;
     }
     by_validation(fitted);
+    let dynamic = finding.classification == Classification::Dynamic;
+    let alpha = cx.settings.significance;
     let mut tried = vec![finding.location];
     let mut best: Option<Finding> = None;
     let mut attempts = 0;
@@ -224,8 +234,7 @@ pub(super) fn named_alternative(
         let location = fitted[i].result.location;
         // A map of the rate depends on the direction of motion and so imitates hysteresis;
         // a dynamic finding yields to it only through the position-vs-rate rule.
-        let rate_for_dynamic =
-            location == Site::RateFeedback && finding.classification == Classification::Dynamic;
+        let rate_for_dynamic = location == Site::RateFeedback && dynamic;
         if tried.contains(&location)
             || rate_for_dynamic
             || !fitted[i].result.validation_rms.is_finite()
@@ -238,13 +247,16 @@ pub(super) fn named_alternative(
         let direction = direction_test(&fitted[i], &cx.settings)
             .ok()
             .unwrap_or_else(DirectionTest::none);
-        let bar = best.as_ref().map_or(
-            ALTERNATIVE_FACTOR * finding.augmented.validation_gap.rms,
-            |b| b.augmented.validation_gap.rms,
-        );
+        let bar = best
+            .as_ref()
+            .map_or(f64::INFINITY, |b| b.augmented.validation_gap.rms);
         if let Ok(alt) = add_at(cx, fitted, i, direction)
             && matches!(alt.classification, Classification::Named(_))
             && alt.augmented.validation_gap.rms < bar
+            && better_at(&alt, &finding, alpha)
+            && (!dynamic
+                || alt.augmented.validation_gap.rms
+                    < ALTERNATIVE_FACTOR * finding.augmented.validation_gap.rms)
         {
             best = Some(alt);
         }
@@ -254,13 +266,34 @@ pub(super) fn named_alternative(
     };
     alt.remarks.push(format!(
         "the best nonparametric fit was at {} ({}, validation RMS {}); this named map \
-         validates better ({})",
+         validates better ({}, by the paired test of the validation errors over blocks at \
+         α = {alpha})",
         cx.nominal.key(finding.location),
         finding.classification.describe(),
         rms_text(finding.augmented.validation_gap.rms),
         rms_text(alt.augmented.validation_gap.rms)
     ));
     alt
+}
+
+/// Whether `a`'s augmented model validates better than `b`'s by the candidate table's paired
+/// test at level `alpha` ([`crate::table::compare_blocks`]), on the validation samples both
+/// score.
+fn better_at(a: &Finding, b: &Finding, alpha: f64) -> bool {
+    let (ga, gb) = (&a.augmented.validation_gap, &b.augmented.validation_gap);
+    let scored = |g: &crate::gap::Gap| {
+        let mut mask = vec![false; g.residual.len()];
+        for r in &g.scored {
+            mask[r.clone()].iter_mut().for_each(|m| *m = true);
+        }
+        mask
+    };
+    let (ma, mb) = (scored(ga), scored(gb));
+    let (ea, eb): (Vec<f64>, Vec<f64>) = (0..ma.len().min(mb.len()))
+        .filter(|&k| ma[k] && mb[k])
+        .map(|k| (ga.residual[k], gb.residual[k]))
+        .unzip();
+    crate::table::compare_blocks(&ea, &eb).is_some_and(|c| c.better_at(alpha))
 }
 
 /// A static block that leaves a gap larger than the noise may be the static shadow of a

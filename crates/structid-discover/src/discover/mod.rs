@@ -336,14 +336,16 @@ pub const SENSOR_HYSTERESIS_SHARE: f64 = 0.25;
 /// the physics generator's effect-free closed loops.
 pub const FEEDBACK_HYSTERESIS_SHARE: f64 = 0.25;
 
-/// When the best nonparametric fit names nothing, at most this many other locations (in
-/// order of validation RMS) are named too, and the named map among them that validates best,
-/// if clearly better than the best fit's table ([`ALTERNATIVE_FACTOR`]), is the finding.
+/// When the finding names nothing, does not confirm itself, or leaves a missing effect, at
+/// most this many other locations (in order of validation RMS) are named too, and the named
+/// map among them that validates best, if better than the finding by the table's paired test,
+/// is the finding (see `locate::named_alternative`). It bounds the work: each costs a naming.
 const ALTERNATIVE_LOCATIONS: usize = 3;
 
-/// A named map at another location replaces a finding that names nothing only when its
-/// validation RMS is at most this share of the finding's: a hysteresis is approximated about
-/// as well by static maps at several locations, and a small gain is no evidence.
+/// A named map at another location replaces a dynamic finding only when its validation RMS is
+/// also at most this share of the finding's: the effect size at which a static map is taken to
+/// explain what the direction test attributed to a hysteresis, which static maps at several
+/// locations approximate about equally (a significant but small gain is no evidence).
 const ALTERNATIVE_FACTOR: f64 = 0.5;
 
 /// When a fit about as good as the best depends on the direction of its z, the best
@@ -608,8 +610,10 @@ fn discover_once(
     let mut directions = locate::directions(&fitted, &cx.settings);
     let chosen = locate::choose(&fitted, &mut directions, &cx.settings);
     let finding = locate::first_finding(&cx, &mut fitted, &directions, chosen)?;
-    let finding = locate::named_alternative(&cx, finding, &mut fitted);
+    // The hysteresis at the input is weighed against the static block found first: a named
+    // map elsewhere then replaces a dynamic finding only by a clear margin.
     let finding = locate::hysteresis_at_input(&cx, finding, &mut fitted, &noise);
+    let finding = locate::named_alternative(&cx, finding, &mut fitted);
     let finding = settle_g(&cx, finding, second_pass)?;
     Ok(verdict::confirm(cx, finding, hypotheses, noise))
 }

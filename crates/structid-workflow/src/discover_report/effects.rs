@@ -11,15 +11,19 @@ fn map_json(map: &AugmentedMap) -> Value {
     }
 }
 
-/// The second-block row of a step in a few words, empty without one.
+/// The second-block row of a step, or its static reading of a dynamic effect, in a few
+/// words; empty without either.
 fn second_block_text(step: &structid_discover::discover::Step) -> String {
-    match &step.second_block {
-        Some(row) => format!(
+    match (&step.second_block, &step.dynamic) {
+        (Some(row), _) => format!(
             "; re-estimated with a second block {} (validation RMS {} with both)",
             location_text(&step.nominal, row.site),
             rms_text(row.validation_rms)
         ),
-        None => String::new(),
+        (None, Some(_)) => "; a direction dependence read as this static map beside a second \
+                            effect"
+            .into(),
+        (None, None) => String::new(),
     }
 }
 
@@ -46,10 +50,12 @@ pub fn effects_markdown(effects: &Effects) -> String {
         s,
         "Each step runs discovery on the model the previous adopted step left (its maps fixed \
          in the loop), and is adopted when it cuts the validation RMS by at least {:.0} %. \
-         When a step finds nothing more, or an effect that looks dynamic, the last map is \
-         fitted again together with a second block at each other site; a pair that cuts the \
-         validation RMS by the same share replaces the map, and the search goes on from \
-         there.\n",
+         An effect that looks dynamic may be two static ones: its site's static map, named, is \
+         built on when the next step finds a second effect that together with it cuts the \
+         validation RMS of the dynamic reading by the same share. When a step finds nothing \
+         more, or such a pair is not found, the last map is fitted again together with a \
+         second block at each other site; a pair that cuts the validation RMS by the same \
+         share replaces the map, and the search goes on from there.\n",
         100.0 * effects.settings.min_improvement()
     );
     let _ = writeln!(
@@ -130,6 +136,7 @@ pub fn effects_json(effects: &Effects) -> Result<Value, serde_json::Error> {
                     "second_map": map_json(&row.second_map),
                     "seconds": row.seconds,
                 })),
+                "dynamic_verdict": step.dynamic.as_ref().map(|d| d.verdict.clone()),
                 "seconds": d.seconds,
             })
         })
