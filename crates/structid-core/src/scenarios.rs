@@ -14,8 +14,8 @@ use crate::model::structure::Structure;
 use crate::paper::{Experiment, gaussian_noise};
 
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
-/// (spectral radius 0.9, reproducible from `seed`), N = tanh, u uniform on [−2, 2] and white
-/// noise of standard deviation `noise_std`.
+/// (spectral radius 0.9, reproducible from `seed`), N = tanh, u white noise squashed to
+/// (−2, 2) ([`Excitation::White`]) and white noise of standard deviation `noise_std`.
 pub fn hammerstein(
     len: usize,
     order: usize,

@@ -320,7 +320,8 @@ def discover(nominal: Model, u: object, y: object, u_val: object, y_val: object,
     is chosen (``Finding.table``). The other keywords are the options of ``structid
     discover``: ``effects`` (up to N effects, one at a time; the result is the last adopted
     step's, ``extra["steps"]`` lists every step, with the second-block row that re-estimated
-    its map when one did, and ``extra["stop"]`` why it stopped),
+    its map when one did and, in ``dynamic_verdict``, the dynamic verdict a static reading
+    replaced, and ``extra["stop"]`` why it stopped),
     ``locations`` (e.g. ``["input", "output-feedback"]``), ``scoring`` (``"auto"``,
     ``"free"`` or ``"LENGTH:INIT"``), ``keep_nominal``, ``sigma_fraction``, ``trend`` and
     ``hysteresis_threshold`` (None: the defaults)."""

@@ -251,12 +251,15 @@ impl Effects {
 /// was wrong", when a step finds a dynamic or a time-varying effect, when a step's augmented
 /// model cuts the validation RMS of the model it started from by less than
 /// [`EffectsSettings::min_improvement`] (10 % by default; that step is reported but not
-/// adopted), in each case unless a second-block row carries it on as above, or after
+/// adopted), in each case unless a static reading or a second-block row carries it on as
+/// above, or after
 /// [`EffectsSettings::max_effects`] adopted steps. Every step after the first is scored as the
 /// first was (the scoring the first step resolved), so that their RMS values compare.
 ///
 /// Errors: those of [`discover`] on the first step. A later step that fails stops the
-/// iteration with its error.
+/// iteration with its error, unless it was to confirm a pair: the pair is then not
+/// confirmed, and a dynamic step goes back to its dynamic verdict (its rows still tried after
+/// a static reading), where the iteration stops.
 pub fn discover_effects(
     nominal: &Nominal,
     est: &Data,
@@ -272,7 +275,24 @@ pub fn discover_effects(
     // by adopting an effect: the row was validated as a pair, not its first map alone.
     let mut unconfirmed: Option<usize> = None;
     let stop = loop {
-        let d = discover(&current, est, val, &settings)?;
+        let d = match discover(&current, est, val, &settings) {
+            Ok(d) => d,
+            Err(e) => {
+                let Some(i) = unconfirmed.take() else {
+                    return Err(e);
+                };
+                // The step that was to confirm a pair failed: the pair is not confirmed.
+                match unconfirm(&mut steps[i], est, val, &settings, effects) {
+                    Unconfirmed::Retry(next) => {
+                        unconfirmed = Some(i);
+                        current = next;
+                        continue;
+                    }
+                    Unconfirmed::Stop(Some(reason)) => break reason,
+                    Unconfirmed::Stop(None) => return Err(e),
+                }
+            }
+        };
         settings.scoring = Some(d.scoring);
         let adopted_so_far = steps.iter().filter(|s| s.adopted).count();
         let more = adopted_so_far + 1 < effects.max_effects;
@@ -293,55 +313,32 @@ pub fn discover_effects(
         if verdict.is_ok() {
             unconfirmed = None;
         } else if let Some(i) = unconfirmed.take() {
-            if let Some(dynamic) = steps[i].dynamic.take() {
-                // The static reading's second effect was not found: the effect is dynamic.
-                steps[i].discovery = dynamic;
-                steps[i].adopted = false;
-                steps.push(step);
-                break StopReason::Dynamic;
-            }
-            // The row's second effect was not found: back to the map as it was found.
-            let dynamic = steps[i].second_block.take().is_some()
-                && judge(&steps[i], effects) == Err(StopReason::Dynamic);
-            steps[i].adopted &= !dynamic;
             steps.push(step);
-            break if dynamic {
-                StopReason::Dynamic
-            } else {
-                verdict.expect_err("not adopted")
-            };
+            match unconfirm(&mut steps[i], est, val, &settings, effects) {
+                Unconfirmed::Retry(next) => {
+                    unconfirmed = Some(i);
+                    current = next;
+                    continue;
+                }
+                Unconfirmed::Stop(reason) => {
+                    break reason.unwrap_or_else(|| verdict.expect_err("not adopted"));
+                }
+            }
         }
         match verdict {
             Ok(()) => step.adopted = true,
             Err(StopReason::Dynamic) if more => {
                 // Is the direction dependence a second, static effect?
-                if let Some(reading) = static_reading(&current, &step, est, val, &settings) {
-                    step.dynamic = Some(std::mem::replace(&mut step.discovery, reading));
-                    step.adopted = true;
-                    unconfirmed = Some(steps.len());
-                    let next = step
-                        .adopted_finding()
-                        .expect("a static reading has a finding")
-                        .augmented
-                        .as_nominal(&current)?;
-                    steps.push(step);
-                    current = next;
-                    continue;
-                }
-                let f = step.discovery.finding.as_ref().expect("a dynamic finding");
-                let reference = f
-                    .augmented
-                    .validation_gap
-                    .rms
-                    .min(step.discovery.validation_gap.rms);
-                step.second_block =
-                    best_second_block(&current, f, reference, est, val, &settings, effects);
-                step.adopted = step.second_block.is_some();
-                if !step.adopted {
+                let next = with_static_reading(&mut step, est, val, &settings)
+                    .or_else(|| with_second_block(&mut step, est, val, &settings, effects));
+                let Some(next) = next else {
                     steps.push(step);
                     break StopReason::Dynamic;
-                }
+                };
                 unconfirmed = Some(steps.len());
+                steps.push(step);
+                current = next;
+                continue;
             }
             Err(reason) => {
                 // Did the last adopted map hide the next effect?
@@ -380,6 +377,97 @@ pub fn discover_effects(
         settings: effects.clone(),
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// What becomes of a step whose pair (its static reading, or its second-block row) the next
+/// step did not confirm.
+enum Unconfirmed {
+    /// The step was put back and now carries a second-block row: run again from this nominal
+    /// model, which the next step must confirm in turn.
+    Retry(Nominal),
+    /// The step was put back; the iteration stops, for this reason when it is the step's own
+    /// (`None`: the reason is the next step's).
+    Stop(Option<StopReason>),
+}
+
+/// Puts `step` back as it was before its unconfirmed pair. A row is dropped (a dynamic step
+/// is then not adopted). A static reading gives way to the dynamic discovery it replaced,
+/// which the second-block rows then decide, as they decide a dynamic step without a reading.
+fn unconfirm(
+    step: &mut Step,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Unconfirmed {
+    if step.second_block.take().is_some() {
+        let dynamic = judge(step, effects) == Err(StopReason::Dynamic);
+        step.adopted &= !dynamic;
+        return Unconfirmed::Stop(dynamic.then_some(StopReason::Dynamic));
+    }
+    let Some(dynamic) = step.dynamic.take() else {
+        return Unconfirmed::Stop(None);
+    };
+    step.discovery = dynamic;
+    step.adopted = false;
+    match with_second_block(step, est, val, settings, effects) {
+        Some(next) => Unconfirmed::Retry(next),
+        None => Unconfirmed::Stop(Some(StopReason::Dynamic)),
+    }
+}
+
+/// Puts a dynamic step's static reading ([`static_reading`]) in place of its discovery, keeps
+/// the dynamic discovery in [`Step::dynamic`] and adopts the step; returns the nominal model
+/// the next step runs from, or `None` (the step unchanged) without a reading. The reading is
+/// the first of a pair: it is adopted without a gain of its own, and the next step confirms
+/// the pair ([`confirms_static_reading`]).
+fn with_static_reading(
+    step: &mut Step,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+) -> Option<Nominal> {
+    let reading = static_reading(&step.nominal, step, est, val, settings)?;
+    let next = reading
+        .finding
+        .as_ref()?
+        .augmented
+        .as_nominal(&step.nominal)
+        .ok()?;
+    step.dynamic = Some(std::mem::replace(&mut step.discovery, reading));
+    step.adopted = true;
+    Some(next)
+}
+
+/// Sets the best second-block row of a dynamic step, when one cuts the validation RMS of
+/// its static approximation (or of the model it started from, when lower) by the required
+/// share, and adopts the step; returns the nominal model the next step runs from (the step's
+/// map replaced by the row's first map), or `None` (the step unchanged).
+fn with_second_block(
+    step: &mut Step,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Option<Nominal> {
+    let f = step.discovery.finding.as_ref()?;
+    let reference = f
+        .augmented
+        .validation_gap
+        .rms
+        .min(step.discovery.validation_gap.rms);
+    step.second_block = best_second_block(&step.nominal, f, reference, est, val, settings, effects);
+    step.second_block.as_ref()?;
+    match step.adopted_finding()?.augmented.as_nominal(&step.nominal) {
+        Ok(next) => {
+            step.adopted = true;
+            Some(next)
+        }
+        Err(_) => {
+            step.second_block = None;
+            None
+        }
+    }
 }
 
 /// The static reading of a step whose effect looked dynamic: [`discover`] on the same

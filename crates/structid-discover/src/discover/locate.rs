@@ -1,7 +1,8 @@
 //! The locating stage of [`discover`](super::discover): which estimate of the candidates
 //! stage becomes the finding, by its validation RMS and the direction dependence of what it
-//! leaves; a named map elsewhere when it names nothing, and a hysteresis at the input when no
-//! static block closes the gap.
+//! leaves; then a hysteresis at the input when no static block closes the gap, and a named map
+//! elsewhere when the finding names nothing, does not confirm itself or explains only part of
+//! the gap.
 
 use crate::hypotheses::Site;
 use crate::hysteresis::DirectionTest;
@@ -204,12 +205,15 @@ pub(super) fn first_finding(
 /// the data better: a nonparametric estimate in a feedback loop (a spring seen from the noisy
 /// measured position under a controller, a friction seen from a differentiated position) can
 /// validate worse than the parametric map refined by output error from it, and so rank its
-/// location behind another. Up to [`ALTERNATIVE_LOCATIONS`] other locations are named, and the
-/// named map among them that validates best is the finding when it is better than the
-/// finding's augmented model by the table's paired test at α ([`better_at`]). A dynamic
-/// finding also asks for half its RMS ([`ALTERNATIVE_FACTOR`]): a hysteresis is approximated
-/// statically at several locations, each a little better or worse, and a significant
-/// difference among approximations is no evidence of a static effect.
+/// location behind another. Up to [`ALTERNATIVE_LOCATIONS`] other locations are named; among
+/// the named maps that validate better than the finding's augmented model by the table's
+/// paired test at α ([`better_at`]), the one with the lowest validation RMS is the finding. A
+/// dynamic finding also asks for less than half the RMS of its best model, its static
+/// approximation or the hysteresis fitted at the input ([`ALTERNATIVE_FACTOR`]): a hysteresis
+/// is approximated statically at several locations, each a little better or worse, and a
+/// significant difference among approximations is no evidence of a static effect. This runs
+/// after [`hysteresis_at_input`], which weighs the hysteresis against the static block found
+/// first.
 pub(super) fn named_alternative(
     cx: &Context<'_>,
     finding: Finding,
@@ -225,6 +229,13 @@ pub(super) fn named_alternative(
     }
     by_validation(fitted);
     let dynamic = finding.classification == Classification::Dynamic;
+    // A dynamic finding's best model: its static approximation, or the hysteresis fitted at
+    // the input when there is one.
+    let dynamic_rms = finding
+        .input_hysteresis
+        .as_ref()
+        .map_or(f64::INFINITY, |h| h.validation_rms)
+        .min(finding.augmented.validation_gap.rms);
     let alpha = cx.settings.significance;
     let mut tried = vec![finding.location];
     let mut best: Option<Finding> = None;
@@ -254,9 +265,7 @@ pub(super) fn named_alternative(
             && matches!(alt.classification, Classification::Named(_))
             && alt.augmented.validation_gap.rms < bar
             && better_at(&alt, &finding, alpha)
-            && (!dynamic
-                || alt.augmented.validation_gap.rms
-                    < ALTERNATIVE_FACTOR * finding.augmented.validation_gap.rms)
+            && (!dynamic || alt.augmented.validation_gap.rms < ALTERNATIVE_FACTOR * dynamic_rms)
         {
             best = Some(alt);
         }

@@ -336,14 +336,15 @@ pub const SENSOR_HYSTERESIS_SHARE: f64 = 0.25;
 /// the physics generator's effect-free closed loops.
 pub const FEEDBACK_HYSTERESIS_SHARE: f64 = 0.25;
 
-/// When the finding names nothing, does not confirm itself, or leaves a missing effect, at
-/// most this many other locations (in order of validation RMS) are named too, and the named
+/// When the finding names nothing, does not confirm itself, or explains only part of the gap
+/// (a shrink under [`PARTIAL_SHRINK`] that still leaves a missing effect), at most this many
+/// other locations (in order of validation RMS) are named too, and the named
 /// map among them that validates best, if better than the finding by the table's paired test,
 /// is the finding (see `locate::named_alternative`). It bounds the work: each costs a naming.
 const ALTERNATIVE_LOCATIONS: usize = 3;
 
 /// A named map at another location replaces a dynamic finding only when its validation RMS is
-/// also at most this share of the finding's: the effect size at which a static map is taken to
+/// also below this share of the finding's best model's: the effect size at which a static map is taken to
 /// explain what the direction test attributed to a hysteresis, which static maps at several
 /// locations approximate about equally (a significant but small gain is no evidence).
 const ALTERNATIVE_FACTOR: f64 = 0.5;
