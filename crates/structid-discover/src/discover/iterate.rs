@@ -285,7 +285,7 @@ pub fn discover_effects(
                 match unconfirm(&mut steps[i], est, val, &settings, effects) {
                     Unconfirmed::Retry(next) => {
                         unconfirmed = Some(i);
-                        current = next;
+                        current = *next;
                         continue;
                     }
                     Unconfirmed::Stop(Some(reason)) => break reason,
@@ -317,7 +317,7 @@ pub fn discover_effects(
             match unconfirm(&mut steps[i], est, val, &settings, effects) {
                 Unconfirmed::Retry(next) => {
                     unconfirmed = Some(i);
-                    current = next;
+                    current = *next;
                     continue;
                 }
                 Unconfirmed::Stop(reason) => {
@@ -384,7 +384,7 @@ pub fn discover_effects(
 enum Unconfirmed {
     /// The step was put back and now carries a second-block row: run again from this nominal
     /// model, which the next step must confirm in turn.
-    Retry(Nominal),
+    Retry(Box<Nominal>),
     /// The step was put back; the iteration stops, for this reason when it is the step's own
     /// (`None`: the reason is the next step's).
     Stop(Option<StopReason>),
@@ -411,7 +411,7 @@ fn unconfirm(
     step.discovery = dynamic;
     step.adopted = false;
     match with_second_block(step, est, val, settings, effects) {
-        Some(next) => Unconfirmed::Retry(next),
+        Some(next) => Unconfirmed::Retry(Box::new(next)),
         None => Unconfirmed::Stop(Some(StopReason::Dynamic)),
     }
 }
