@@ -271,8 +271,9 @@ pub fn discover_effects(
     let mut steps: Vec<Step> = Vec::new();
     let mut current = nominal.clone();
     let mut settings = settings.clone();
-    // The step whose map a second-block row replaced, until the next step confirms the row
-    // by adopting an effect: the row was validated as a pair, not its first map alone.
+    // The step whose map a second-block row replaced, or whose dynamic discovery a static
+    // reading replaced, until the next step confirms it by adopting an effect: a row, or a
+    // reading, stands as a pair, not as its first map alone.
     let mut unconfirmed: Option<usize> = None;
     let stop = loop {
         let d = match discover(&current, est, val, &settings) {
@@ -506,9 +507,14 @@ fn static_reading(
 /// Whether `next`, adopted on top of a static reading (`reading`), confirms it: the two
 /// static maps together cut the validation RMS of the dynamic step's best model (its static
 /// approximation, the model it started from, or the hysteresis fitted at the input) by the
-/// required share. A step that was not a static reading is confirmed by being adopted.
+/// required share. A step that was not a static reading, or whose pair under test is a
+/// second-block row, is confirmed by being adopted.
 fn confirms_static_reading(reading: &Step, next: &Step, effects: &EffectsSettings) -> bool {
-    let Some(dynamic) = &reading.dynamic else {
+    let Some(dynamic) = reading
+        .dynamic
+        .as_ref()
+        .filter(|_| reading.second_block.is_none())
+    else {
         return true;
     };
     let Some(f) = &dynamic.finding else {
