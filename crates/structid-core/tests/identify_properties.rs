@@ -671,9 +671,12 @@ proptest! {
         prop_assert!(rel(&w_ref, &w) < 1e-6, "ŵ differs: {}", rel(&w_ref, &w));
         // x₀ through what it does to y (O·x₀): a direction of x₀ that O barely maps to y is
         // as ill-determined for the dense reference as for the solver, and both answers are
-        // minimisers when their outputs agree.
+        // minimisers when their outputs agree. The reference forms K⁻¹ and the particular
+        // solution explicitly and is itself good to about 1e-6 relative (a short record with
+        // two outputs and a small β was seen to differ by 1.6e-6 while ŵ agreed to 6e-7), so
+        // the bound is 1e-5: a wrong x₀ differs at the scale of O·x₀ itself.
         let (ox_ref, ox) = (&o * &x0_ref, &o * &x0);
-        prop_assert!((&ox_ref - &ox).norm() <= 1e-6 * ox_ref.norm().max(1e-3), "O·x₀ {ox_ref} vs {ox}");
+        prop_assert!((&ox_ref - &ox).norm() <= 1e-5 * ox_ref.norm().max(1e-3), "O·x₀ {ox_ref} vs {ox}");
         let e = DVector::from_column_slice(id.e_hat.as_slice());
         let lhs = &d.t_ye * &e + &d.t_yw * &w + &o * &x0;
         prop_assert!(rel(&lhs, &d.r) < 1e-9);
