@@ -457,18 +457,9 @@ fn with_second_block(
         .validation_gap
         .rms
         .min(step.discovery.validation_gap.rms);
-    step.second_block = best_second_block(&step.nominal, f, reference, est, val, settings, effects);
-    step.second_block.as_ref()?;
-    match step.adopted_finding()?.augmented.as_nominal(&step.nominal) {
-        Ok(next) => {
-            step.adopted = true;
-            Some(next)
-        }
-        Err(_) => {
-            step.second_block = None;
-            None
-        }
-    }
+    let next = with_row(step, reference, est, val, settings, effects)?;
+    step.adopted = true;
+    Some(next)
 }
 
 /// The static reading of a step whose effect looked dynamic: [`discover`] on the same
@@ -568,13 +559,33 @@ fn retry_with_second_block(
     settings: &DiscoverSettings,
     effects: &EffectsSettings,
 ) -> Option<Nominal> {
-    let f = last.discovery.finding.as_ref()?;
-    let reference = f.augmented.validation_gap.rms;
-    let row = best_second_block(&last.nominal, f, reference, est, val, settings, effects)?;
-    last.second_block = Some(row);
-    let next = last.adopted_finding()?.augmented.as_nominal(&last.nominal);
+    let reference = last
+        .discovery
+        .finding
+        .as_ref()?
+        .augmented
+        .validation_gap
+        .rms;
+    with_row(last, reference, est, val, settings, effects)
+}
+
+/// Sets the best second-block row of `step`'s finding when it cuts `reference` by the
+/// required share, and returns the nominal model with the row's first map in place of the
+/// step's; `None` (no row set) when no row does or that model cannot be built.
+fn with_row(
+    step: &mut Step,
+    reference: f64,
+    est: &Data,
+    val: &Data,
+    settings: &DiscoverSettings,
+    effects: &EffectsSettings,
+) -> Option<Nominal> {
+    let f = step.discovery.finding.as_ref()?;
+    let row = best_second_block(&step.nominal, f, reference, est, val, settings, effects)?;
+    step.second_block = Some(row);
+    let next = step.adopted_finding()?.augmented.as_nominal(&step.nominal);
     if next.is_err() {
-        last.second_block = None;
+        step.second_block = None;
     }
     next.ok()
 }
