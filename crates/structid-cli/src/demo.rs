@@ -13,6 +13,12 @@ pub fn spray(a: SprayArgs) -> Result<(), CliError> {
         seed: a.seed,
     })?;
     print!("{text}");
+    println!(
+        "re-run the identification with:\n  structid identify --model {} --data {} --out {}",
+        a.out.join("model.toml").display(),
+        a.out.join("data.csv").display(),
+        a.out.join("identify").display()
+    );
     Ok(())
 }
 

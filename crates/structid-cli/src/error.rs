@@ -123,18 +123,26 @@ impl From<structid_workflow::WorkflowError> for CliError {
                 value,
                 rule,
             } => Self::input(format!(
-                "invalid value {value} for --{}: {rule}",
-                option.replace('_', "-")
+                "invalid value {value} for {}: {rule}",
+                flag(option)
             )),
             W::OptionConflict { options, rule } => {
-                let flags: Vec<String> = options
-                    .iter()
-                    .map(|o| format!("--{}", o.replace('_', "-")))
-                    .collect();
-                Self::input(format!(
-                    "{}: {rule}",
-                    structid_workflow::error::and_list(&flags)
-                ))
+                Self::input(format!("{}: {rule}", flags(&options)))
+            }
+            W::UseInstead {
+                options,
+                rule,
+                instead,
+            } => Self::input(format!(
+                "{}: {rule}; give {} instead",
+                flags(&options),
+                flag(instead)
+            )),
+            W::MissingOption { option, rule } => {
+                Self::input(format!("no {} given: {rule}", flag(option)))
+            }
+            W::InvalidInput { input, path, why } => {
+                Self::input(format!("{} `{}` {why}", flag(input), path.display()))
             }
             other => Self {
                 code: EXIT_RUNTIME,
@@ -144,6 +152,18 @@ impl From<structid_workflow::WorkflowError> for CliError {
             },
         }
     }
+}
+
+/// The flag of a library option named in snake case: `validation_fraction` is
+/// `--validation-fraction`.
+fn flag(option: &str) -> String {
+    format!("--{}", option.replace('_', "-"))
+}
+
+/// The flags of library options, as a list (`--data and --validation-fraction`).
+fn flags(options: &[&str]) -> String {
+    let flags: Vec<String> = options.iter().map(|o| flag(o)).collect();
+    structid_workflow::error::and_list(&flags)
 }
 
 /// What `structid refine --joint` does that identification by the dispersion cannot.
@@ -269,5 +289,61 @@ pub fn non_negative(flag: &str, v: f64) -> Result<f64, CliError> {
         Err(CliError::input(format!(
             "invalid value {v} for {flag}: it must be a finite number, zero or greater"
         )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use structid_workflow::WorkflowError as W;
+
+    /// The library names options in snake case; the tool words them as its flags.
+    #[test]
+    fn library_options_are_worded_as_flags() {
+        let cases = [
+            (
+                W::InvalidOption {
+                    option: "validation_fraction",
+                    value: "0.9".into(),
+                    rule: "too few samples".into(),
+                },
+                "invalid value 0.9 for --validation-fraction: too few samples",
+            ),
+            (
+                W::OptionConflict {
+                    options: vec!["beta", "sigma_auto"],
+                    rule: "pick one".into(),
+                },
+                "--beta and --sigma-auto: pick one",
+            ),
+            (
+                W::UseInstead {
+                    options: vec!["validation_fraction", "data"],
+                    rule: "one record only".into(),
+                    instead: "validation_data",
+                },
+                "--validation-fraction and --data: one record only; give --validation-data instead",
+            ),
+            (
+                W::MissingOption {
+                    option: "estimate",
+                    rule: "block `N` has no truth".into(),
+                },
+                "no --estimate given: block `N` has no truth",
+            ),
+            (
+                W::InvalidInput {
+                    input: "model",
+                    path: "m.toml".into(),
+                    why: "is not the model of the estimate".into(),
+                },
+                "--model `m.toml` is not the model of the estimate",
+            ),
+        ];
+        for (e, expected) in cases {
+            let c = CliError::from(e);
+            assert_eq!(c.code(), EXIT_INPUT);
+            assert_eq!(c.to_string(), expected);
+        }
     }
 }

@@ -741,7 +741,10 @@ fn refine_over_several_records() {
         "--out",
         p(&d.join("x")),
     ]);
-    assert!(e.contains("--validation-data"), "{e}");
+    assert!(
+        e.contains("--validation-fraction and --data") && e.contains("give --validation-data"),
+        "{e}"
+    );
     // A validation record shorter than --settle is named.
     let e = input_error(&[
         "refine",

@@ -276,11 +276,17 @@ fn validate_errors_are_readable() {
     // A model with other blocks.
     let ham = example_model("hammerstein.toml");
     let e = input_error(&refs(&args(&ham, &estimate, &val, &out)));
-    assert!(e.contains("is not the model of the estimate"), "{e}");
+    assert!(
+        e.contains("--model `") && e.contains("is not the model of the estimate"),
+        "{e}"
+    );
     assert!(e.contains("`N`") && e.contains("`f`, `g`"), "{e}");
     // A missing estimate directory, and a directory that is not an estimate.
     let e = input_error(&refs(&args(&model, &dir.path().join("nope"), &val, &out)));
-    assert!(e.contains("does not exist"), "{e}");
+    assert!(
+        e.contains("--estimate `") && e.contains("does not exist"),
+        "{e}"
+    );
     let e = input_error(&refs(&args(&model, dir.path(), &val, &out)));
     assert!(e.contains("has no report.json"), "{e}");
     // Outputs that would overwrite inputs.
@@ -366,7 +372,7 @@ fn validate_without_estimate_uses_the_true_maps() {
     for s in [
         "validated the true maps",
         "400 samples",
-        "no --estimate",
+        "no estimate given",
         "output y: simulation RMS",
     ] {
         assert!(o.stdout.contains(s), "missing `{s}` in:\n{}", o.stdout);

@@ -312,13 +312,6 @@ pub fn spray(a: &DemoRequest<'_>) -> Result<String> {
     for p in &written {
         let _ = writeln!(s, "  {}", p.display());
     }
-    let _ = writeln!(
-        s,
-        "re-run the identification with:\n  structid identify --model {} --data {} --out {}",
-        a.out.join("model.toml").display(),
-        a.out.join("data.csv").display(),
-        a.out.join("identify").display()
-    );
     Ok(s)
 }
 

@@ -61,6 +61,36 @@ pub enum WorkflowError {
         /// Why they conflict.
         rule: String,
     },
+    /// Options that do not go together where another option does what was meant: the front
+    /// end names all of them its own way.
+    #[error("{}: {rule}; give {instead} instead", and_list(options))]
+    UseInstead {
+        /// The options given, in snake case.
+        options: Vec<&'static str>,
+        /// Why they do not go together.
+        rule: String,
+        /// The option to give instead, in snake case.
+        instead: &'static str,
+    },
+    /// An option the request needs but was not given: the front end names it its own way.
+    #[error("no {option} given: {rule}")]
+    MissingOption {
+        /// The option, in snake case (`estimate`).
+        option: &'static str,
+        /// Why it is needed, and what else would do.
+        rule: String,
+    },
+    /// An input file or directory that does not fit the request: the front end names the
+    /// input its own way (`--model`, `model`).
+    #[error("{input} `{}` {why}", path.display())]
+    InvalidInput {
+        /// The input, in snake case (`model`, `estimate`).
+        input: &'static str,
+        /// The file or directory given.
+        path: std::path::PathBuf,
+        /// What is wrong with it, as a predicate (`is not the model of the estimate: …`).
+        why: String,
+    },
 }
 
 impl WorkflowError {
@@ -107,5 +137,60 @@ pub fn and_list<S: AsRef<str>>(items: &[S]) -> String {
                 .join(", "),
             last.as_ref()
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The library's messages name options as Python names keyword arguments, never as
+    /// command-line flags, and keep the data they carry.
+    #[test]
+    fn option_errors_name_no_flags_and_carry_their_data() {
+        let cases = [
+            (
+                WorkflowError::InvalidOption {
+                    option: "validation_fraction",
+                    value: "1.5".into(),
+                    rule: "it must lie strictly between 0 and 1".into(),
+                },
+                vec!["validation_fraction", "1.5", "strictly between"],
+            ),
+            (
+                WorkflowError::UseInstead {
+                    options: vec!["validation_fraction", "data"],
+                    rule: "one record only".into(),
+                    instead: "validation_data",
+                },
+                vec![
+                    "validation_fraction and data",
+                    "one record only",
+                    "validation_data",
+                ],
+            ),
+            (
+                WorkflowError::MissingOption {
+                    option: "estimate",
+                    rule: "block `N` has no truth".into(),
+                },
+                vec!["no estimate given", "block `N` has no truth"],
+            ),
+            (
+                WorkflowError::InvalidInput {
+                    input: "model",
+                    path: "dir/m.toml".into(),
+                    why: "is not the model of the estimate".into(),
+                },
+                vec!["model `dir/m.toml` is not the model of the estimate"],
+            ),
+        ];
+        for (e, parts) in cases {
+            let m = e.to_string();
+            assert!(!m.contains("--"), "{m}");
+            for p in parts {
+                assert!(m.contains(p), "`{p}` missing in: {m}");
+            }
+        }
     }
 }

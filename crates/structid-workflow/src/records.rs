@@ -39,7 +39,7 @@ pub fn read_records(mf: &ModelFile, paths: &[PathBuf], vars: Option<&Vars>) -> R
             .enumerate()
             .map(|(i, p)| format!("record {} = `{}`", i + 1, p.display()))
             .collect();
-        WorkflowError::Core(e).context(format!("the --data files ({})", files.join(", ")))
+        WorkflowError::Core(e).context(format!("the data files ({})", files.join(", ")))
     })
 }
 

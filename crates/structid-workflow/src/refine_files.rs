@@ -64,13 +64,16 @@ pub fn split_records(mf: &ModelFile, a: &RefineData<'_>) -> Result<RefineRecords
         });
     }
     if a.validation_fraction.is_some() && a.data.len() > 1 {
-        return Err(WorkflowError::Request(format!(
-            "--validation-fraction holds out the end of one record, and {} --data records were \
-             given: the held-out samples of a record do not start at rest, and each record would \
-             need its own settling; hold out whole records instead, passing them as \
-             --validation-data V.csv (repeat it for several)",
-            a.data.len()
-        )));
+        return Err(WorkflowError::UseInstead {
+            options: vec!["validation_fraction", "data"],
+            rule: format!(
+                "a validation fraction holds out the end of one record, and {} data records were \
+                 given: the held-out samples of a record do not start at rest, and each record \
+                 would need its own settling; hold out whole records",
+                a.data.len()
+            ),
+            instead: "validation_data",
+        });
     }
     let data_label = files_label(a.data);
     let all = read_records(mf, a.data, a.vars)?;
@@ -81,7 +84,7 @@ pub fn split_records(mf: &ModelFile, a: &RefineData<'_>) -> Result<RefineRecords
         (false, _) => {
             let vd = read_records(mf, a.validation_data, a.vars).map_err(|e| {
                 e.context(format!(
-                    "the --validation-data files ({})",
+                    "the validation data files ({})",
                     files_label(a.validation_data)
                 ))
             })?;
@@ -90,12 +93,16 @@ pub fn split_records(mf: &ModelFile, a: &RefineData<'_>) -> Result<RefineRecords
         (true, Some(f)) => {
             let at = ((1.0 - f) * all.len() as f64).round() as usize;
             if at < 10 || all.len() - at <= a.settle {
-                return Err(WorkflowError::Request(format!(
-                    "--validation-fraction {f} leaves {at} estimation and {} validation samples \
-                         (after {} settling ones); both parts need samples",
-                    all.len() - at,
-                    a.settle
-                )));
+                return Err(WorkflowError::InvalidOption {
+                    option: "validation_fraction",
+                    value: f.to_string(),
+                    rule: format!(
+                        "it leaves {at} estimation and {} validation samples (after {} settling \
+                         ones); both parts need samples",
+                        all.len() - at,
+                        a.settle
+                    ),
+                });
             }
             // The validation record is the whole file, simulated from its start and scored
             // after the estimation part: the held-out samples do not start at rest.

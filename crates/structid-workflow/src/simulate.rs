@@ -166,13 +166,17 @@ pub fn finite_columns<S: AsRef<str>>(
 ) -> Result<()> {
     for (name, c) in names.iter().zip(columns) {
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
-            return Err(WorkflowError::Request(format!(
-                "the simulated column `{}` is not finite at sample {k} ({}): the model's gains and \
-                 --noise-std {noise_std:e} overflow together; give a smaller --noise-std, or rescale \
-                 the model. Nothing was written",
-                name.as_ref(),
-                c[k]
-            )));
+            return Err(WorkflowError::InvalidOption {
+                option: "noise_std",
+                value: format!("{noise_std:e}"),
+                rule: format!(
+                    "the simulated column `{}` is not finite at sample {k} ({}): the model's \
+                     gains and the noise overflow together; give a smaller noise standard \
+                     deviation, or rescale the model. Nothing was written",
+                    name.as_ref(),
+                    c[k]
+                ),
+            });
         }
     }
     Ok(())

@@ -84,31 +84,37 @@ pub fn check_max_lag(max_lag: usize) -> Result<()> {
     Ok(())
 }
 
-/// Checks that `--model` has the blocks of the estimate (same names, same number of inputs).
+/// Checks that the model file has the blocks of the estimate (same names, same number of inputs).
 fn check_blocks(model: &ModelFile, model_path: &Path, record: &ReportRecord) -> Result<()> {
     let mut ours: Vec<&str> = model.blocks.iter().map(|b| b.name.as_str()).collect();
     let mut theirs: Vec<&str> = record.blocks.iter().map(|b| b.name.as_str()).collect();
     ours.sort_unstable();
     theirs.sort_unstable();
     if ours != theirs {
-        return Err(WorkflowError::Request(format!(
-            "--model `{}` is not the model of the estimate: its blocks are {} but the estimate's are {}",
-            model_path.display(),
-            list(&ours),
-            list(&theirs)
-        )));
+        return Err(WorkflowError::InvalidInput {
+            input: "model",
+            path: model_path.to_path_buf(),
+            why: format!(
+                "is not the model of the estimate: its blocks are {} but the estimate's are {}",
+                list(&ours),
+                list(&theirs)
+            ),
+        });
     }
     for b in &model.blocks {
         if let Some(r) = record.blocks.iter().find(|r| r.name == b.name)
             && r.inputs.len() != b.inputs.len()
         {
-            return Err(WorkflowError::Request(format!(
-                "--model `{}` is not the model of the estimate: block `{}` reads {} input(s) there but {} in the estimate",
-                model_path.display(),
-                b.name,
-                b.inputs.len(),
-                r.inputs.len()
-            )));
+            return Err(WorkflowError::InvalidInput {
+                input: "model",
+                path: model_path.to_path_buf(),
+                why: format!(
+                    "is not the model of the estimate: block `{}` reads {} input(s) there but {} in the estimate",
+                    b.name,
+                    b.inputs.len(),
+                    r.inputs.len()
+                ),
+            });
         }
     }
     Ok(())
@@ -120,7 +126,7 @@ fn check_estimate(dir: &Path, mf: &ModelFile, id: &Identification) -> Result<f64
     let mismatch = |detail: String| {
         WorkflowError::Request(format!(
             "the estimate directory `{}` does not match its report.json: {detail}. The model or data file may \
-             have changed since `structid identify` wrote it; run `structid identify` again",
+             have changed since the identification wrote it; run the identification again",
             dir.display()
         ))
     };
@@ -181,15 +187,17 @@ pub struct EstimateDir {
 /// it.
 pub fn open_estimate_dir(dir: &Path, model_path: &Path) -> Result<EstimateDir> {
     if !dir.is_dir() {
-        return Err(WorkflowError::Request(format!(
-            "the estimate directory `{}` does not exist or is not a directory; give the --out directory of \
-             `structid identify`",
-            dir.display()
-        )));
+        return Err(WorkflowError::InvalidInput {
+            input: "estimate",
+            path: dir.to_path_buf(),
+            why: "does not exist or is not a directory; give the output directory of an \
+                  identification"
+                .into(),
+        });
     }
     if !dir.join("report.json").is_file() {
         return Err(WorkflowError::Request(format!(
-            "`{}` has no report.json: it is not an output directory of `structid identify`",
+            "`{}` has no report.json: it is not the output directory of an identification",
             dir.display()
         )));
     }
@@ -200,7 +208,7 @@ pub fn open_estimate_dir(dir: &Path, model_path: &Path) -> Result<EstimateDir> {
     let reproduction = record.reproduction.clone().ok_or_else(|| {
         WorkflowError::Request(format!(
             "`{}` was written by an older structid that does not record how to reproduce the estimate; \
-             run `structid identify` again",
+             run the identification again",
             report_path.display()
         ))
     })?;
@@ -373,13 +381,17 @@ pub fn validate_model_file(r: ValidateRequest<'_>) -> Result<RecordValidation> {
                 .map(|b| b.name.as_str())
                 .collect();
             if !missing.is_empty() {
-                return Err(WorkflowError::Request(format!(
-                    "without --estimate, `structid validate` checks the true maps of `{}`, but block(s) {} have \
-                     no `truth`; give every block a truth (truth = \"expression in z0, z1, …\" or \
-                     truth = {{ table = \"file.csv\" }}), or validate an estimate with --estimate DIR",
-                    model_path.display(),
-                    list(&missing)
-                )));
+                return Err(WorkflowError::MissingOption {
+                    option: "estimate",
+                    rule: format!(
+                        "without an estimate the validation checks the true maps of `{}`, but \
+                         block(s) {} have no `truth`; give every block a truth (truth = \
+                         \"expression in z0, z1, …\" or truth = {{ table = \"file.csv\" }}), or \
+                         validate an estimate",
+                        model_path.display(),
+                        list(&missing)
+                    ),
+                });
             }
             protect_inputs(&mut guard, &vmf, model_path, &[&o.data]);
             (vmf, None)
@@ -399,7 +411,7 @@ pub fn validate_model_file(r: ValidateRequest<'_>) -> Result<RecordValidation> {
         && vmf.lft != rb.recorded.model.lft
     {
         warnings.push(format!(
-            "the linear block of --model `{}` differs from that of the estimate's model file `{}`; the maps \
+            "the linear block of the model file `{}` differs from that of the estimate's model file `{}`; the maps \
              were estimated with the latter",
             model_path.display(),
             rb.recorded.model_path.display()
@@ -586,11 +598,15 @@ fn simulation_only(
     vars: Option<&Vars>,
 ) -> Result<RecordValidation> {
     if matches!(o.initial_state, InitialState::Estimate) {
-        return Err(WorkflowError::Request(format!(
-            "`{}` has no one-step predictor ({why}): it is validated by its simulation from \
-             rest; drop --initial-state estimate",
-            model_path.display()
-        )));
+        return Err(WorkflowError::InvalidOption {
+            option: "initial_state",
+            value: "estimate".into(),
+            rule: format!(
+                "`{}` has no one-step predictor ({why}): it is validated by its simulation \
+                 from rest, with a zero initial state",
+                model_path.display()
+            ),
+        });
     }
     let mut guard = OutputGuard::new();
     protect_inputs(&mut guard, vmf, model_path, &[&o.data]);
@@ -803,7 +819,7 @@ fn summary(
             );
         }
         None => {
-            let _ = writeln!(s, "maps: the `truth` of every block (no --estimate given)");
+            let _ = writeln!(s, "maps: the `truth` of every block (no estimate given)");
         }
     }
     match &report.initial_state {

@@ -138,8 +138,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
             suggestion: format!(
                 "The exact solver stores the dense {n}×{n} matrix M. For the whole record use a \
                  dispersion with finitely many features, which the feature solver handles in memory \
-                 linear in L (`--dispersion gaussian-lowrank` for the Gaussian kernel by a low-rank \
-                 approximation, or `--dispersion fourier`), or total variation by ADMM; otherwise \
+                 linear in L (the dispersion `gaussian-lowrank` for the Gaussian kernel by a \
+                 low-rank approximation, or `fourier`), or total variation by ADMM; otherwise \
                  identify on a window of at most about {max_len} samples, or raise the memory limit \
                  if the machine has the memory."
             ),

@@ -99,7 +99,7 @@ impl FromStr for Shard {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        let usage = "write it as i/n with 0 ≤ i < n, e.g. --shard 0/4 for the first of four shards";
+        let usage = "write it as i/n with 0 ≤ i < n, e.g. 0/4 for the first of four shards";
         let (i, n) = s
             .split_once('/')
             .ok_or_else(|| format!("`{s}` is not of the form i/n; {usage}"))?;

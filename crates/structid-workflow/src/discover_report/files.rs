@@ -267,7 +267,7 @@ pub fn validation_is_estimation(data: &[PathBuf], validation: &[PathBuf]) -> Opt
         .iter()
         .any(|v| data.iter().any(|d| canonical(d) == canonical(v)))
         .then_some(
-            "a --validation-data file is a --data file: the hypotheses are ranked and \
+            "a validation data file is also an estimation data file: the hypotheses are ranked and \
              the effect is named on a record they were estimated on, which favours whatever \
              overfits; give a separate validation record",
         )
