@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use structid_core::validation::{Scoring, Windows};
-use structid_core::{Data, Dispersion, Model, NonlinearBlock, PolynomialDispersion, Site};
+use structid_core::{Data, Site};
 use structid_discover::discover::{
     DiscoverSettings, Discovery, Effects, EffectsSettings, discover, discover_effects,
 };
@@ -91,22 +91,9 @@ fn known_maps_nominal(mf: &ModelFile, label: &str) -> Result<Nominal> {
         .truth_maps()
         .map_err(|e| context(e.to_string()))?
         .ok_or_else(|| context("a block has no truth".into()))?;
-    // The dispersions are not used (the maps are fixed): placeholders keep the model valid.
-    let placeholder: Arc<dyn Dispersion> =
-        Arc::new(PolynomialDispersion::new(1).map_err(|e| context(e.to_string()))?);
-    let blocks = mf
-        .blocks
-        .iter()
-        .map(|b| {
-            NonlinearBlock::new(
-                b.name.clone(),
-                b.inputs.clone(),
-                b.output,
-                Arc::clone(&placeholder),
-            )
-        })
-        .collect();
-    let model = Model::new(mf.lft.clone(), blocks).map_err(|e| context(e.to_string()))?;
+    // The maps are fixed, so the model of the file's structure serves: its dispersions play
+    // no part.
+    let model = mf.structure_model().map_err(|e| context(e.to_string()))?;
     Nominal::from_model(&model, maps.into_iter().map(Arc::from).collect())
         .map_err(|e| context(e.to_string()))
 }
