@@ -41,8 +41,8 @@ use std::ops::Range;
 
 use structid_core::validation::distributions::chi_square_quantile;
 use structid_core::validation::residual_tests::{autocorrelation, cross_correlation};
-use structid_core::validation::{Scoring, ValidationSettings, validate};
-use structid_core::{Data, InitialState, Interpolant, Model, Result};
+use structid_core::validation::{Scoring, ValidationSettings, simulate_scored, validate};
+use structid_core::{Data, InitialState, Interpolant, Model, Result, Signal};
 
 use crate::localise::{Region, exceedance_windows, operating_regions};
 
@@ -725,6 +725,59 @@ fn pool(
     }
 }
 
+/// A model's simulation on one record, as scored, and its one-step prediction error.
+struct Run {
+    simulated: Signal,
+    scored: Vec<std::ops::Range<usize>>,
+    rms: f64,
+    fit_percent: f64,
+    /// `None` for a model without a one-step predictor: maps in series, or a z that no
+    /// filter of y recovers.
+    prediction_error: Option<Vec<f64>>,
+}
+
+/// The [`Run`] of `model` on `data`. Maps in series are predicted from a record at rest
+/// (their z computed from u, y and the maps upstream from a zero state, which an estimated
+/// initial state would contradict); a model with no one-step predictor is only simulated.
+fn run(
+    model: &Model,
+    maps: &[&dyn Interpolant],
+    data: &Data,
+    settings: &GapSettings,
+) -> Result<Run> {
+    let validation = |initial_state| {
+        ValidationSettings::builder()
+            .initial_state(initial_state)
+            .scoring(settings.scoring)
+            .max_lag(settings.max_lag)
+            .build()
+    };
+    for x0 in [settings.initial_state, InitialState::Zero] {
+        match validate(model, maps, data, &validation(x0)?) {
+            Ok(v) => {
+                return Ok(Run {
+                    rms: v.rms[0],
+                    fit_percent: v.fit_percent[0],
+                    prediction_error: Some(v.prediction_error.channel(0)),
+                    simulated: v.simulated,
+                    scored: v.scored,
+                });
+            }
+            Err(e) if !crate::records::beyond_measurability(&e) => return Err(e),
+            Err(_) => {}
+        }
+    }
+    let settle = validation(InitialState::Zero)?.settle();
+    let sim = simulate_scored(model, maps, data, settings.scoring, None, settle)?;
+    Ok(Run {
+        rms: sim.rms(data.y(), 0),
+        fit_percent: sim.fit_percent(data.y(), 0),
+        prediction_error: None,
+        simulated: sim.simulated,
+        scored: sim.scored,
+    })
+}
+
 /// The gap of one record, with its innovations and scored samples.
 fn gap_record(
     model: &Model,
@@ -733,32 +786,23 @@ fn gap_record(
     candidates: &[(String, Vec<f64>)],
     settings: &GapSettings,
 ) -> Result<RecordPart> {
-    let v = validate(
-        model,
-        maps,
-        data,
-        &ValidationSettings::builder()
-            .initial_state(settings.initial_state)
-            .scoring(settings.scoring)
-            .max_lag(settings.max_lag)
-            .build()?,
-    )?;
+    let v = run(model, maps, data, settings)?;
     let y = data.y().channel(0);
     let simulated = v.simulated.channel(0);
     let residual: Vec<f64> = y.iter().zip(&simulated).map(|(a, b)| a - b).collect();
     // Without a noise model (output error), the one-step prediction error is the free-run
     // simulation error, which drifts for a model with integrators; the tests then run on the
-    // windowed simulation residual at its scored samples instead.
-    let tested: Vec<usize> = match settings.scoring {
-        Scoring::Windowed(_) if model.lft().t_ye().order() == 0 => {
-            v.scored.iter().flat_map(|r| r.clone()).collect()
-        }
-        _ => (0..residual.len()).collect(),
+    // windowed simulation residual at its scored samples instead, as they do for a model
+    // without a one-step predictor.
+    let one_step =
+        !matches!(settings.scoring, Scoring::Windowed(_)) || model.lft().t_ye().order() != 0;
+    let tested: Vec<usize> = match &v.prediction_error {
+        Some(_) if one_step => (0..residual.len()).collect(),
+        _ => v.scored.iter().flat_map(|r| r.clone()).collect(),
     };
-    let innovations: Vec<f64> = if tested.len() == residual.len() {
-        v.prediction_error.channel(0)
-    } else {
-        tested.iter().map(|&k| residual[k]).collect()
+    let innovations: Vec<f64> = match &v.prediction_error {
+        Some(e) if one_step => e.clone(),
+        _ => tested.iter().map(|&k| residual[k]).collect(),
     };
     let n = innovations.len();
     // A quantised output (few distinct values) makes most differences exactly zero and the
@@ -842,7 +886,7 @@ fn gap_record(
         .map(|(name, s)| (name.as_str(), s.as_slice()))
         .collect();
     let regions = operating_regions(&residual, &signals, settings.min_region_share);
-    let rms = v.rms[0];
+    let rms = v.rms;
     let prediction_rms = structid_core::validation::metrics::rms(&innovations);
     let verdict = conclude(tests, prediction_rms, noise_std, &[&y], settings);
     let scored_samples = v.scored.iter().map(|r| r.len()).sum();
@@ -852,7 +896,7 @@ fn gap_record(
         rms,
         scored: v.scored.clone(),
         prediction_rms,
-        fit_percent: v.fit_percent[0],
+        fit_percent: v.fit_percent,
         noise_std,
         noise,
         tests: verdict.tests,
@@ -863,7 +907,7 @@ fn gap_record(
         verdict: verdict.text,
         records: vec![RecordGap {
             rms,
-            fit_percent: v.fit_percent[0],
+            fit_percent: v.fit_percent,
             samples: scored_samples,
         }],
     };

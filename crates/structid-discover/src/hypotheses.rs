@@ -560,9 +560,12 @@ impl Nominal {
         blocks.extend(self.known.iter().enumerate().map(|(i, k)| {
             NonlinearBlock::new(&k.known.name, vec![i + 1], i + 1, Arc::clone(&placeholder))
         }));
+        let model = Model::new(lft, blocks)?;
+        // Maps in series are evaluated in order; a cycle of maps has no order.
+        model.evaluation_order()?;
         Ok(Hypothesis {
             location,
-            model: Model::new(lft, blocks)?,
+            model,
             sample_time: self.lft.sample_time().unwrap_or(1.0),
             known: self.known_maps(),
         })

@@ -108,7 +108,8 @@ pub(crate) fn select_channels(lft: &Lft, z: &[usize], w: &[usize]) -> Result<Lft
 /// The LFT with a new block at `site` around `p`, the nominal LFT whose w columns and z rows
 /// are exactly those of its known blocks (see the [module documentation](self)): the new
 /// block at w column 0 and z row 0, the known ones after it in their order. A declared site
-/// is not handled here (its channels are selected from the nominal LFT instead).
+/// is not handled here (its channels are selected from the nominal LFT instead). The new
+/// block may read a known block's output (D_zw ≠ 0): maps in series.
 pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
     let d = p.dims();
     if d.u != 1 || d.y != 1 {
@@ -260,9 +261,9 @@ pub(crate) fn wrap(p: &Lft, site: Site) -> Result<Lft> {
             ));
         }
     };
-    let lft = with_time(p, matrices)?;
-    lft.check_no_algebraic_loop()?;
-    Ok(lft)
+    // A new block in series with a known one (D_zw ≠ 0) is simulated in order and fitted by
+    // simulation error; only a cycle of maps is refused, by the model built on this LFT.
+    with_time(p, matrices)
 }
 
 /// The known block that is an actuator map, if exactly one is: its z row reads u alone
@@ -402,6 +403,32 @@ mod tests {
                 Site::Output,
                 cubic,
                 plant(&u, |u, _, _| sat(u), cubic),
+            ),
+            // Maps in series: each new block reads the known sensor map's output or sits
+            // before it, and simulates in order.
+            (
+                known(Site::Output, cubic),
+                Site::Input,
+                sat,
+                plant(&u, |u, _, _| sat(u), cubic),
+            ),
+            (
+                known(Site::Output, sat),
+                Site::OutputFeedback,
+                cubic,
+                plant(&u, |u, y, _| u - cubic(y), sat),
+            ),
+            (
+                known(Site::Output, sat),
+                Site::RateFeedback,
+                friction,
+                plant(&u, |u, y, y1| u - friction((y - y1) / ts), sat),
+            ),
+            (
+                known(Site::Output, sat),
+                Site::Output,
+                cubic,
+                plant(&u, |u, _, _| u, |x| cubic(sat(x))),
             ),
         ];
         for (nominal, location, map, expected) in cases {

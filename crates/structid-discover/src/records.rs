@@ -161,7 +161,7 @@ pub fn simulate(
 }
 
 /// Whether `e` says that z cannot be computed from u and y.
-fn beyond_measurability(e: &Error) -> bool {
+pub(crate) fn beyond_measurability(e: &Error) -> bool {
     match e {
         Error::InRecord { source, .. } => beyond_measurability(source),
         Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. } => true,

@@ -9,6 +9,7 @@ use structid_core::{Data, Result};
 use crate::effects::name_effect;
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
+use super::by_simulation::{beyond_measurability, fitted_by_simulation};
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation, identify_hypothesis};
 use super::naming::{naming_settings, non_smooth, subsample};
@@ -65,7 +66,7 @@ impl<'a> Search<'a> {
         let mut failed = Vec::new();
         for (i, &location) in locations.iter().enumerate() {
             let t = Instant::now();
-            match self.identify_at(location, self.settings) {
+            match self.identify_at(location, self.settings, true) {
                 Ok(f) => fitted.push(f),
                 Err(e) => failed.push(failure(location, "", t, &e)),
             }
@@ -84,9 +85,19 @@ impl<'a> Search<'a> {
 
     /// The disturbance path is a noise model like any other: where it cannot be used (its
     /// whitening filter is unstable when an estimated G has a zero outside the unit circle),
-    /// the location is identified with the nominal model's own noise path.
-    fn identify_at(&self, location: Site, settings: &DiscoverSettings) -> Result<Fitted> {
+    /// the location is identified with the nominal model's own noise path. A location whose
+    /// z the record does not give is fitted by simulation error instead, when
+    /// `by_simulation` ([`super::by_simulation`]).
+    fn identify_at(
+        &self,
+        location: Site,
+        settings: &DiscoverSettings,
+        by_simulation: bool,
+    ) -> Result<Fitted> {
         let (est, val) = (self.est, self.val);
+        if by_simulation && beyond_measurability(self.given, location, est) {
+            return fitted_by_simulation(self.given, location, est, val, settings);
+        }
         match identify_hypothesis(self.nominal, location, est, val, settings) {
             Err(_) if self.input_noise.is_some() => {
                 identify_hypothesis(self.given, location, est, val, settings)
@@ -122,7 +133,8 @@ impl<'a> Search<'a> {
             ..self.settings.clone()
         };
         for &location in locations {
-            let Ok(f) = self.identify_at(location, &finer) else {
+            // A fit by simulation error has its own resolution, the finer pass's kernel not.
+            let Ok(f) = self.identify_at(location, &finer, false) else {
                 continue;
             };
             let coarse = fitted.iter().position(|c| c.result.location == location);

@@ -151,6 +151,7 @@
 //! println!("{}", d.verdict);
 //! ```
 
+mod by_simulation;
 mod candidates;
 mod context;
 mod direction;

@@ -22,19 +22,17 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::validation::Scoring;
-use structid_core::{Data, Interpolant, LookupTable, PolynomialDispersion};
-use structid_joint::{
-    BlockMap, FixedMap, GaussianFeatures, JointBlock, JointModel, JointSettings, fit,
-};
-
 use structid_core::selection::{Criterion, SelectionSettings, select};
-use structid_core::{IdentifySettings, InitialState, Signal};
+use structid_core::{Data, IdentifySettings, InitialState, Signal};
+use structid_joint::{BlockMap, FixedMap, JointBlock, JointModel, fit};
 
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::DiscoverSettings;
 use super::Finding;
+use super::by_simulation::{
+    Range, energy, features_through, joint_settings, neutral, padded, placeholder, sampled, z_range,
+};
 use super::fit::{initial_state, simulation_rms};
 use super::model::AugmentedMap;
 
@@ -58,29 +56,6 @@ pub struct SecondBlock {
     /// Wall-clock seconds of the fit and the scoring.
     pub seconds: f64,
 }
-
-/// Centres of each map's kernel expansion: the resolution of a nonparametric map of the
-/// workflow (its Fourier kernel has a width of a tenth of z's range).
-const CENTRES: usize = 15;
-
-/// The degree of each expansion's unpenalised trend: the cubic trend of the workflow's
-/// nonparametric maps, which carries a stiffening spring or a saturating gain beyond the
-/// range the centres cover.
-const TREND_DEGREE: usize = 3;
-
-/// Points per centre spacing at which a fitted expansion is written as a table, so that the
-/// piecewise-linear table follows the expansion's curvature (a Gaussian of width one spacing
-/// is resolved by four points within 1 % of its peak).
-const POINTS_PER_SPACING: usize = 4;
-
-/// The share of the output's mean square that a map's dispersion costs at the scale of its
-/// values: small enough that the fit is decided by the data, large enough to keep the normal
-/// equations of an expansion with overlapping kernels well posed.
-const DISPERSION_SHARE: f64 = 1e-6;
-
-/// Levenberg–Marquardt iterations of one joint fit: the start is close (the first map as
-/// found), and rows are compared, not polished.
-const ITERATIONS: usize = 30;
 
 /// The second-block rows: for each site of `nominal` other than the first finding's, the
 /// first block's map and a map at that site fitted together on `est` and scored on `val` (see
@@ -167,7 +142,7 @@ fn identified_pair(
     est: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Vec<(AugmentedMap, AugmentedMap)>> {
-    let probe = with_first.hypothesis(site, placeholder()?).ok()?;
+    let probe = with_first.hypothesis(site, placeholder().ok()?).ok()?;
     if probe.known.len() != 1 {
         return None;
     }
@@ -225,16 +200,9 @@ fn jointly_fitted_pair(
     est: &Data,
     settings: &DiscoverSettings,
 ) -> Option<Vec<(AugmentedMap, AugmentedMap)>> {
-    let h = with_first.hypothesis(site, placeholder()?).ok()?;
+    let h = with_first.hypothesis(site, placeholder().ok()?).ok()?;
     let (start, first_range, second_range) = joint_start(&h, first, est)?;
-    let mut joint = JointSettings::builder()
-        .max_iterations(ITERATIONS)
-        .polish(segment_length(settings).is_none());
-    if let Some(len) = segment_length(settings) {
-        // Independent windows, as the model is scored.
-        joint = joint.segment_length(len).continuity_weight(0.0);
-    }
-    let fitted = fit(&start, est, None, &joint.build().ok()?).ok()?;
+    let fitted = fit(&start, est, None, &joint_settings(settings).ok()?).ok()?;
     let blocks = fitted.model.blocks();
     let (a, b) = (blocks[1].map.as_ref(), blocks[0].map.as_ref());
     let mut pairs = extrapolations(
@@ -269,7 +237,7 @@ fn scored(
     let h = refitted
         .as_nominal(nominal)
         .ok()?
-        .hypothesis(site, placeholder()?)
+        .hypothesis(site, placeholder().ok()?)
         .ok()?;
     let second = second_map.interpolant().ok()?;
     Some(SecondBlock {
@@ -283,32 +251,17 @@ fn scored(
     })
 }
 
-/// The dispersion of a hypothesis built only for its structure.
-fn placeholder() -> Option<Arc<dyn structid_core::Dispersion>> {
-    Some(Arc::new(PolynomialDispersion::new(1).ok()?))
-}
-
-/// Multiple shooting on the scoring's windows for a model scored in windows (its free run
-/// drifts); single shooting otherwise.
-fn segment_length(settings: &DiscoverSettings) -> Option<usize> {
-    match settings.scoring {
-        Some(Scoring::Windowed(w)) => Some(w.length()),
-        _ => None,
-    }
-}
-
 /// The joint model of hypothesis `h` (block 0 the second block, block 1 the first finding's,
 /// then the nominal model's known maps, held fixed), with the ranges its two expansions cover:
 /// the second map neutral over the range of its z, the first map as found over the range it
 /// was estimated on.
 fn joint_start(h: &Hypothesis, first: &Finding, est: &Data) -> Option<(JointModel, Range, Range)> {
     let model = &h.model;
-    let y = est.y().channel(0);
-    let energy = y.iter().map(|v| v * v).sum::<f64>() / y.len().max(1) as f64;
+    let energy = energy(est);
     let first_map = first.augmented.map.interpolant().ok()?;
     let first_range = padded(super::fit::minmax(&first.hypothesis.curve.z))?;
     let first_block = features_through(first_range, energy, &|z| first_map.eval(&[z]))?;
-    let second_range = padded(second_range(h, est)?)?;
+    let second_range = padded(z_range(h, est)?)?;
     let slope = neutral(h.location);
     let second_block = features_through(second_range, energy, &|z| slope * z)?;
     let block = |i: usize, name: &str, map: Box<dyn BlockMap>| {
@@ -335,76 +288,6 @@ fn joint_start(h: &Hypothesis, first: &Finding, est: &Data) -> Option<(JointMode
     ))
 }
 
-/// An interval of z.
-type Range = (f64, f64);
-
-/// `range` widened by a tenth of its width on each side (a map is asked for a little beyond
-/// the z it was fitted on when validated), `None` for an empty or non-finite range.
-fn padded((lo, hi): Range) -> Option<Range> {
-    let pad = 0.1 * (hi - lo);
-    (lo.is_finite() && hi.is_finite() && hi > lo).then_some((lo - pad, hi + pad))
-}
-
-/// The slope of the neutral map at `site`: 1 where the block sits in the signal path (it
-/// passes its input on), 0 where it sits in feedback or at a declared place (it adds
-/// nothing).
-fn neutral(site: Site) -> f64 {
-    match site {
-        Site::Input | Site::Output => 1.0,
-        Site::OutputFeedback | Site::RateFeedback | Site::Declared { .. } => 0.0,
-    }
-}
-
-/// The range of the second block's z on `est`: measured for the input and the feedback
-/// sites, else from a simulation of the hypothesis with the block neutral.
-fn second_range(h: &Hypothesis, est: &Data) -> Option<(f64, f64)> {
-    // Record by record: no difference or simulation runs across a record boundary.
-    let z = crate::records::stacked(est, |r| {
-        Ok(match h.location {
-            Site::Input => r.u().channel(0),
-            Site::OutputFeedback => r.y().channel(0),
-            Site::RateFeedback => {
-                let y = r.y().channel(0);
-                y.windows(2)
-                    .map(|p| (p[1] - p[0]) / h.sample_time)
-                    .collect()
-            }
-            Site::Output | Site::Declared { .. } => {
-                let slope = neutral(h.location);
-                let neutral = move |z: &[f64]| slope * z[0];
-                let neutral: &dyn Interpolant = &neutral;
-                h.model
-                    .simulate(&h.maps(neutral), r.u(), None, None)?
-                    .z
-                    .channel(0)
-            }
-        })
-    })
-    .ok()?;
-    Some(super::fit::minmax(&z))
-}
-
-/// A kernel expansion on [`CENTRES`] centres over `range`, fitted to `f` there.
-fn features_through(range: Range, energy: f64, f: &dyn Fn(f64) -> f64) -> Option<GaussianFeatures> {
-    let (lo, hi) = range;
-    let spacing = (hi - lo) / (CENTRES - 1) as f64;
-    let points = 4 * CENTRES;
-    let z: Vec<Vec<f64>> = (0..points)
-        .map(|k| vec![lo + (hi - lo) * k as f64 / (points - 1) as f64])
-        .collect();
-    let w: Vec<f64> = z.iter().map(|z| f(z[0])).collect();
-    // A map's dispersion scales as (its values)² × (its range): β makes it cost
-    // DISPERSION_SHARE of the output's mean square at that scale.
-    let scale = w.iter().map(|v| v * v).sum::<f64>() / points as f64;
-    let beta = DISPERSION_SHARE * energy / (scale.max(energy) * (hi - lo)).max(f64::MIN_POSITIVE);
-    GaussianFeatures::on_interval(lo, hi, CENTRES, spacing, beta)
-        .ok()?
-        .with_trend_degree(TREND_DEGREE)
-        .ok()?
-        .fitted_to(&z, &w)
-        .ok()
-}
-
 /// A pair of maps written two ways, as every map of the workflow is ranked: held at their
 /// edge values beyond the range they were estimated on, and extrapolated by their own trend
 /// over half that range again on each side (and held beyond). Outside the estimation range
@@ -423,20 +306,4 @@ fn extrapolations(
             sampled(second, widened(second_range))?,
         ),
     ])
-}
-
-/// `f` sampled over `range` at [`POINTS_PER_SPACING`] points per spacing of [`CENTRES`]
-/// centres (the resolution of the workflow's kernels), as a table.
-fn sampled(f: &dyn Fn(f64) -> f64, (lo, hi): Range) -> Option<AugmentedMap> {
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    // Twice the spacings: a widened range keeps the resolution over the estimated one.
-    let n = 2 * POINTS_PER_SPACING * (CENTRES - 1) + 1;
-    let z: Vec<f64> = (0..n)
-        .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
-        .collect();
-    let w: Vec<f64> = z.iter().map(|&z| f(z)).collect();
-    LookupTable::one_d(z.clone(), w.clone()).ok()?;
-    Some(AugmentedMap::Table { z, w })
 }
