@@ -448,6 +448,15 @@ mod fit_tests {
         Signal::from_fn(len, 1, |k, _| levels.get(k / 25, 0))
     }
 
+    /// Output-error settings of the axis tests: one integrator held at z = 1, 10 ms samples.
+    fn one_integrator() -> OeSettings {
+        OeSettings::builder()
+            .integrators(1)
+            .sample_time(0.01)
+            .build()
+            .unwrap()
+    }
+
     /// Data of the axis with white output noise of `level` times the output's spread.
     fn axis_data(level: f64) -> (Signal, Signal, f64) {
         let (g, p) = integrating_axis(1.0, 2.0, 4.0, 0.01);
@@ -497,11 +506,7 @@ mod fit_tests {
     #[test]
     fn oe_with_a_fixed_integrator_fits_the_axis() {
         let (u, y, p) = axis_data(0.02);
-        let s = OeSettings::builder()
-            .integrators(1)
-            .sample_time(0.01)
-            .build()
-            .unwrap();
+        let s = one_integrator();
         let fit = oe(&u, &y, &Orders::siso(1, 2, 1), &s).unwrap();
         assert!(fit.fit_percent > 80.0, "fit {}", fit.fit_percent);
         assert_eq!(fit.warning, None);
@@ -531,11 +536,7 @@ mod fit_tests {
         let y0 = lag.simulate(&u).unwrap();
         let e = white(8, 3000, 1e-3, 1);
         let y = Signal::new(1, y0.iter().zip(e.as_slice()).map(|(a, b)| a + b).collect()).unwrap();
-        let s = OeSettings::builder()
-            .integrators(1)
-            .sample_time(0.01)
-            .build()
-            .unwrap();
+        let s = one_integrator();
         let fit = oe(&u, &y, &Orders::siso(1, 2, 1), &s).unwrap();
         let ratio = integrator_cancellation(&fit.model).unwrap();
         assert!(ratio < CANCELLATION, "|B(1)|/Σ|b| = {ratio}");
