@@ -57,15 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         r.fit.cost,
         r.fit.initial_cost
     );
-    for s in &r.fit.stages {
-        println!(
-            "  {} ({} segments): {} steps, {:?}",
-            s.name,
-            s.segments,
-            s.costs.len() - 1,
-            s.status
-        );
-    }
+    common::print_stages("  ", &r.fit.stages);
     println!(
         "estimation RMS {:.4} V; test RMS {:.4} V ({:.1} s)",
         r.estimation_rms, r.test_rms, r.seconds

@@ -34,15 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (b, v) in &j.trials {
         println!("joint: β = {b:e}, validation {:.4} mV", 1e3 * v);
     }
-    for s in &j.fit.stages {
-        println!(
-            "joint: {} ({} segments) {} steps, {:?}",
-            s.name,
-            s.segments,
-            s.costs.len() - 1,
-            s.status
-        );
-    }
+    common::print_stages("joint: ", &j.fit.stages);
     for (split, rms) in &j.tests {
         println!("joint: {split:<28} {:.4} mV", 1e3 * rms);
     }

@@ -81,3 +81,18 @@ pub fn write_results(
     write_atomic(&out.join("results.json"), text.as_bytes(), &[data])?;
     Ok(())
 }
+
+/// Prints each stage of a joint fit on a line of its own after `prefix`: its name, segments,
+/// accepted steps and how it ended.
+#[allow(dead_code)]
+pub fn print_stages(prefix: &str, stages: &[structid_joint::Stage]) {
+    for s in stages {
+        println!(
+            "{prefix}{} ({} segments): {} steps, {:?}",
+            s.name,
+            s.segments,
+            s.costs.len() - 1,
+            s.status
+        );
+    }
+}
