@@ -78,6 +78,16 @@ impl fmt::Debug for Penalty {
     }
 }
 
+/// The quadratic penalty of `d` at the points `z`, for tests of what only quadratic penalties
+/// have; panics for any other penalty.
+#[cfg(test)]
+pub(crate) fn quadratic_penalty(d: &dyn Dispersion, z: &Signal) -> Box<dyn QuadraticPenalty> {
+    match d.penalty(z).unwrap() {
+        Penalty::Quadratic(q) => q,
+        other => panic!("expected a quadratic penalty, got {other:?}"),
+    }
+}
+
 /// Gram columns per panel of [`QuadraticPenalty::gram_times`] (narrow: the panel adds to the
 /// exact solver's L×L memory).
 const GRAM_TIMES_PANEL: usize = 64;

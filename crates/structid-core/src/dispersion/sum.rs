@@ -302,19 +302,13 @@ impl Interpolant for SumInterpolant {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::dispersion::quadratic_penalty;
     use crate::{FourierDispersion, FourierWeights, KernelDispersion, PolynomialDispersion};
 
     fn gram(p: &dyn QuadraticPenalty) -> Mat<f64> {
         let mut k = Mat::zeros(p.len(), p.len());
         p.fill_columns(0..p.len(), k.as_mut());
         k
-    }
-
-    fn quadratic(d: &dyn Dispersion, z: &Signal) -> Box<dyn QuadraticPenalty> {
-        match d.penalty(z).unwrap() {
-            Penalty::Quadratic(q) => q,
-            _ => unreachable!(),
-        }
     }
 
     #[test]
@@ -327,23 +321,23 @@ mod tests {
         ] {
             let sum = SumDispersion::new(vec![first.clone(), poly.clone()]).unwrap();
             let (ks, k1, k2) = (
-                gram(&*quadratic(&sum, &z)),
-                gram(&*quadratic(&*first, &z)),
-                gram(&*quadratic(&*poly, &z)),
+                gram(&*quadratic_penalty(&sum, &z)),
+                gram(&*quadratic_penalty(&*first, &z)),
+                gram(&*quadratic_penalty(&*poly, &z)),
             );
             let err = (&ks - &k1 - &k2).norm_max();
             assert!(err < 1e-12 * k1.norm_max(), "{}: {err}", sum.describe());
             // Interpolants add with a common α; cross columns and diagonals add.
             let alpha: Vec<f64> = (0..30).map(|k| (k as f64 * 0.7).cos()).collect();
             let p = Signal::from_channels(&[vec![-1.3, 0.2, 0.9]]).unwrap();
-            let s = quadratic(&sum, &z).interpolant(alpha.clone());
+            let s = quadratic_penalty(&sum, &z).interpolant(alpha.clone());
             let (a, b) = (
-                quadratic(&*first, &z).interpolant(alpha.clone()),
-                quadratic(&*poly, &z).interpolant(alpha),
+                quadratic_penalty(&*first, &z).interpolant(alpha.clone()),
+                quadratic_penalty(&*poly, &z).interpolant(alpha),
             );
             let mut cs = Mat::zeros(30, 3);
-            assert!(quadratic(&sum, &z).cross_columns(&p, cs.as_mut()));
-            let diag = quadratic(&sum, &z).diagonal_at(&p).unwrap();
+            assert!(quadratic_penalty(&sum, &z).cross_columns(&p, cs.as_mut()));
+            let diag = quadratic_penalty(&sum, &z).diagonal_at(&p).unwrap();
             for j in 0..3 {
                 let x = p.sample(j);
                 assert!((s.eval(x) - a.eval(x) - b.eval(x)).abs() < 1e-9);
@@ -355,7 +349,7 @@ mod tests {
 
     fn first_kernel_at(d: &dyn Dispersion, z: &Signal, x: &[f64]) -> f64 {
         let p = Signal::from_channels(&[vec![x[0]]]).unwrap();
-        quadratic(d, z).diagonal_at(&p).unwrap()[0]
+        quadratic_penalty(d, z).diagonal_at(&p).unwrap()[0]
     }
 
     #[test]
@@ -375,11 +369,11 @@ mod tests {
         assert!(wider.describe().contains("polynomial"));
         // Feature weights at another width: the Fourier block changes, the monomials do not.
         let z = Signal::from_fn(40, 1, |k, _| k as f64 / 39.0);
-        let (m, _) = quadratic(&sum, &z)
+        let (m, _) = quadratic_penalty(&sum, &z)
             .features()
             .map(|(m, z)| (m, z.len()))
             .unwrap();
-        let direct = quadratic(&*wider, &z)
+        let direct = quadratic_penalty(&*wider, &z)
             .features()
             .unwrap()
             .0

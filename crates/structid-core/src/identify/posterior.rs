@@ -424,14 +424,7 @@ mod tests {
     use super::*;
     use crate::dispersion::fourier::{FourierDispersion, FourierWeights};
     use crate::dispersion::low_rank::LowRankGaussian;
-    use crate::dispersion::{Dispersion, KernelDispersion, Penalty};
-
-    fn quadratic(d: &dyn Dispersion, z: &Signal) -> Box<dyn QuadraticPenalty> {
-        match d.penalty(z).unwrap() {
-            Penalty::Quadratic(q) => q,
-            _ => unreachable!(),
-        }
-    }
+    use crate::dispersion::{Dispersion, KernelDispersion, quadratic_penalty};
 
     #[test]
     fn cross_columns_and_diagonal_match_the_kernel_for_every_quadratic_penalty() {
@@ -446,7 +439,7 @@ mod tests {
                 Box::new(LowRankGaussian::new(0.4, 1e-10).unwrap()),
             ];
             for d in &dispersions {
-                let pen = quadratic(d.as_ref(), &z);
+                let pen = quadratic_penalty(d.as_ref(), &z);
                 let mut cross = Mat::<f64>::zeros(40, 9);
                 assert!(pen.cross_columns(&pts, cross.as_mut()));
                 // The cross-Gram against the samples themselves is the Gram matrix.

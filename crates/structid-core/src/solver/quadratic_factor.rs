@@ -242,14 +242,8 @@ const DIAGONAL_BY_COLUMNS: usize = 20_000;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Dispersion, KernelDispersion, Penalty, PolynomialDispersion};
-
-    fn quadratic(d: &dyn Dispersion, z: &Signal) -> Box<dyn QuadraticPenalty> {
-        match d.penalty(z).unwrap() {
-            Penalty::Quadratic(q) => q,
-            _ => unreachable!(),
-        }
-    }
+    use crate::dispersion::quadratic_penalty;
+    use crate::{KernelDispersion, PolynomialDispersion};
 
     #[test]
     fn pivoted_factor_reproduces_the_gram_matrix_and_its_interpolant() {
@@ -257,7 +251,7 @@ mod tests {
         let z = Signal::from_fn(len, 1, |k, _| {
             ((k as f64 * 0.754_877_666).fract() - 0.5) * 4.0
         });
-        let pen = quadratic(&KernelDispersion::gaussian(0.5).unwrap(), &z);
+        let pen = quadratic_penalty(&KernelDispersion::gaussian(0.5).unwrap(), &z);
         let f = QuadraticFactor::new(pen.as_ref(), &z, 1000, "f").unwrap();
         assert!(
             !f.is_featured() && !f.capped && f.rank < 60,
@@ -291,7 +285,7 @@ mod tests {
     fn features_give_an_exact_factor() {
         let len = 50;
         let z = Signal::from_fn(len, 1, |k, _| k as f64 / 49.0 - 0.5);
-        let pen = quadratic(&PolynomialDispersion::new(3).unwrap(), &z);
+        let pen = quadratic_penalty(&PolynomialDispersion::new(3).unwrap(), &z);
         let f = QuadraticFactor::new(pen.as_ref(), &z, 100, "f").unwrap();
         assert!(f.is_featured());
         assert_eq!(f.rank, 4);
