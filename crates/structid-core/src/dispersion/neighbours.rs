@@ -796,24 +796,11 @@ impl PiecewiseLinear {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use structid_lti::testing::SplitMix64;
 
-    /// SplitMix64: a tiny deterministic generator, so the fixed-seed tests need no `rand`.
-    struct Rng(u64);
-    impl Rng {
-        fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        /// Uniform in [lo, hi).
-        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn points(&mut self, n: usize, dim: usize) -> Vec<f64> {
-            (0..n * dim).map(|_| self.uniform(-1.0, 1.0)).collect()
-        }
+    /// `n` points of `dim` coordinates, each uniform in [−1, 1).
+    fn points(rng: &mut SplitMix64, n: usize, dim: usize) -> Vec<f64> {
+        (0..n * dim).map(|_| rng.uniform_in(-1.0, 1.0)).collect()
     }
 
     /// Brute-force distances from q to every point, as (index, distance) sorted by distance.
@@ -1081,9 +1068,9 @@ mod tests {
 
     #[test]
     fn point_round_trips_original_indices() {
-        let mut rng = Rng(1);
+        let mut rng = SplitMix64::new(1);
         for dim in 1..=4 {
-            let pts = rng.points(500, dim);
+            let pts = points(&mut rng, 500, dim);
             let tree = KdTree::new(&pts, dim);
             assert_eq!(tree.dim(), dim);
             for i in 0..500 {
@@ -1095,13 +1082,13 @@ mod tests {
     #[test]
     fn kdtree_fixed_seed_large_matches_brute_force() {
         // Larger than the proptest clouds, so the tree is several levels deep with 16-leaves.
-        let mut rng = Rng(2);
+        let mut rng = SplitMix64::new(2);
         for dim in 1..=4 {
-            let pts = rng.points(3000, dim);
+            let pts = points(&mut rng, 3000, dim);
             let tree = KdTree::new(&pts, dim);
             let mut out = Vec::new();
             for _ in 0..50 {
-                let q: Vec<f64> = (0..dim).map(|_| rng.uniform(-1.2, 1.2)).collect();
+                let q: Vec<f64> = (0..dim).map(|_| rng.uniform_in(-1.2, 1.2)).collect();
                 for k in [1, 8, 40] {
                     tree.nearest(&q, k, None, &mut out);
                     check_knn(&pts, dim, &q, k, None, &out).unwrap();
@@ -1134,10 +1121,10 @@ mod tests {
     #[test]
     fn knn_graph_matches_brute_force_exactly() {
         // Continuous random points: no ties, so the graph is unique and can be compared exactly.
-        let mut rng = Rng(3);
+        let mut rng = SplitMix64::new(3);
         for dim in 1..=3 {
             let n = 400;
-            let pts = rng.points(n, dim);
+            let pts = points(&mut rng, n, dim);
             for k in [1, 3, 8] {
                 let mut want = Vec::new();
                 for i in 0..n {
@@ -1174,10 +1161,10 @@ mod tests {
 
     #[test]
     fn interpolants_reproduce_node_values() {
-        let mut rng = Rng(4);
+        let mut rng = SplitMix64::new(4);
         for dim in 1..=3 {
-            let pts = rng.points(300, dim);
-            let values: Vec<f64> = (0..300).map(|_| rng.uniform(-5.0, 5.0)).collect();
+            let pts = points(&mut rng, 300, dim);
+            let values: Vec<f64> = (0..300).map(|_| rng.uniform_in(-5.0, 5.0)).collect();
             for w in [
                 Weighting::Nearest,
                 Weighting::InverseDistance {
@@ -1203,8 +1190,8 @@ mod tests {
 
     #[test]
     fn constant_stays_constant() {
-        let mut rng = Rng(5);
-        let pts = rng.points(200, 2);
+        let mut rng = SplitMix64::new(5);
+        let pts = points(&mut rng, 200, 2);
         // 0.1 is not exactly representable, so Σ w v / Σ w would drift by ulps without the clamp.
         for c in [0.1, -3.7, 1e300] {
             for w in [
@@ -1220,7 +1207,7 @@ mod tests {
             ] {
                 let f = ScatteredInterpolant::new(KdTree::new(&pts, 2), vec![c; 200], w);
                 for _ in 0..200 {
-                    let q = [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)];
+                    let q = [rng.uniform_in(-2.0, 2.0), rng.uniform_in(-2.0, 2.0)];
                     assert_eq!(f.eval(&q), c, "{w:?}");
                 }
             }
