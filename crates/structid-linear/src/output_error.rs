@@ -8,7 +8,9 @@ use crate::error::{
     LinearError, check_at_least_one, check_non_negative, check_positive, check_sample_time,
 };
 use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
-use crate::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus};
+use crate::levenberg_marquardt::{
+    LeastSquaresProblem, LevenbergMarquardt, LmFit, LmSettings, LmStatus,
+};
 use crate::normal_equations::NormalEquations;
 use crate::orders::Orders;
 use crate::polynomial::{PolynomialModel, root_radius, schur_stable, split_parameters};
@@ -301,6 +303,54 @@ pub struct OeFit {
     pub warning: Option<OeWarning>,
 }
 
+impl OeFit {
+    /// The fit of `model` found by a Levenberg–Marquardt search over `samples` scored
+    /// samples, with `integrators` poles held at `z = 1`: the solver's sums of squares become
+    /// mean costs, and a search that ends because no damped step lowers the cost any more
+    /// counts as converged (a stationary point to working precision, as this fit has always
+    /// reported it). What the search alone does not tell is left unknown: standard deviations
+    /// NaN (one per parameter of `fit.theta`), no covariance, fit per cent NaN, no warning; a
+    /// caller that knows them sets them.
+    ///
+    /// ```
+    /// # use nalgebra::{DMatrix, DVector};
+    /// # use structid_linear::levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+    /// use structid_linear::{OeFit, PolynomialModel};
+    /// // Four samples of y = 2 fitted by a gain θ: r(θ) = (θ − 2, θ − 2, θ − 2, θ − 2).
+    /// # struct Gain;
+    /// # impl LeastSquaresProblem for Gain {
+    /// #     fn residuals(&mut self, th: &[f64]) -> Option<DVector<f64>> { Some(DVector::from_element(4, th[0] - 2.0)) }
+    /// #     fn jacobian(&mut self, _: &[f64], _: &DVector<f64>) -> Option<DMatrix<f64>> { Some(DMatrix::from_element(4, 1, 1.0)) }
+    /// # }
+    /// let lm = LevenbergMarquardt::default().minimize(&mut Gain, &[0.0]).unwrap();
+    /// let model = PolynomialModel::new(vec![vec![lm.theta[0]]], vec![1.0], None).unwrap();
+    /// let fit = OeFit::from_lm(model, &lm, 4, 0);
+    /// assert_eq!((fit.initial_cost, fit.iterations), (4.0, lm.costs.len()));
+    /// assert!(fit.converged && fit.parameter_std[0].is_nan() && fit.warning.is_none());
+    /// ```
+    pub fn from_lm(
+        model: PolynomialModel,
+        fit: &LmFit,
+        samples: usize,
+        integrators: usize,
+    ) -> Self {
+        let n = samples as f64;
+        OeFit {
+            model,
+            cost: fit.cost / n,
+            initial_cost: fit.initial_cost / n,
+            iterations: fit.costs.len(),
+            costs: fit.costs.iter().map(|c| c / n).collect(),
+            parameter_std: vec![f64::NAN; fit.theta.len()],
+            parameter_covariance: None,
+            converged: matches!(fit.status, LmStatus::Converged(_) | LmStatus::NoProgress),
+            integrators,
+            fit_percent: f64::NAN,
+            warning: None,
+        }
+    }
+}
+
 /// A degenerate output-error fit, reported by [`OeFit::warning`].
 ///
 /// ```
@@ -572,7 +622,6 @@ fn refine(
             }
             other => other,
         })?;
-    let n = scored as f64;
     let nb_total: usize = orders.nb.iter().sum();
     let parameter_covariance = fit
         .covariance(&mut problem)
@@ -603,21 +652,12 @@ fn refine(
     {
         warning = Some(OeWarning::IntegratorCancelled { ratio, fit_percent });
     }
-    // The solver minimises the sum of squares; the reported cost is its mean.
     Ok(OeFit {
-        model,
-        cost: fit.cost / n,
-        initial_cost: fit.initial_cost / n,
-        iterations: fit.costs.len(),
-        costs: fit.costs.iter().map(|c| c / n).collect(),
         parameter_std,
         parameter_covariance,
-        // No damped step lowering the cost is a stationary point to working precision,
-        // which this fit has always reported as converged.
-        converged: matches!(fit.status, LmStatus::Converged(_) | LmStatus::NoProgress),
-        integrators: n_int,
         fit_percent,
         warning,
+        ..OeFit::from_lm(model, &fit, scored, n_int)
     })
 }
 

@@ -229,30 +229,18 @@ pub(super) fn fit(
     let fit = LevenbergMarquardt::new(lm)
         .minimize(&mut problem, &theta0)
         .map_err(linear_error)?;
-    let n = data.len().max(1) as f64;
     let mut model = PolynomialModel::from_parameters(&problem.orders, &fit.theta, g.sample_time)
         .map_err(linear_error)?;
     model.num.truncate(m);
     if n_integrators > 0 {
         model.den = integrators::inflate(&model.den, n_integrators);
     }
-    Ok(OeFit {
+    // The fit is through the map (y ≈ N̂(G·u)), not G's own simulation: no linear fit
+    // percentage or degeneracy warning applies, and no parameter uncertainty is computed.
+    Ok(OeFit::from_lm(
         model,
-        cost: fit.cost / n,
-        initial_cost: fit.initial_cost / n,
-        iterations: fit.costs.len(),
-        costs: fit.costs.iter().map(|c| c / n).collect(),
-        parameter_std: vec![f64::NAN; fit.theta.len()],
-        parameter_covariance: None,
-        integrators: n_integrators,
-        // The fit is through the map (y ≈ N̂(G·u)), not G's own simulation: no linear fit
-        // percentage or degeneracy warning applies.
-        fit_percent: f64::NAN,
-        warning: None,
-        converged: fit.status.is_converged()
-            || matches!(
-                fit.status,
-                structid_linear::levenberg_marquardt::LmStatus::NoProgress
-            ),
-    })
+        &fit,
+        data.len().max(1),
+        n_integrators,
+    ))
 }
