@@ -18,7 +18,7 @@ pub fn output_error_with_state(
     settings: &OeSettings,
     free_initial_state: bool,
 ) -> Result<OeFit> {
-    oe_fit(&[(inputs, y)], g, settings, free_initial_state, 0)
+    output_error_records_with_state(&[(inputs, y)], g, settings, free_initial_state, 0)
 }
 
 /// The best linear approximation of order n from `data` (one input, one output): na = nb = n
@@ -72,7 +72,7 @@ pub fn output_error_with_integrators(
     free_initial_state: bool,
     integrators: usize,
 ) -> Result<OeFit> {
-    oe_fit(&[(inputs, y)], g, settings, free_initial_state, integrators)
+    output_error_records_with_state(&[(inputs, y)], g, settings, free_initial_state, integrators)
 }
 
 /// [`output_error_with_integrators`] over several records (experiments) of the same system,
@@ -105,48 +105,6 @@ pub fn output_error_with_integrators(
 /// # Ok::<(), structid_core::Error>(())
 /// ```
 pub fn output_error_records_with_state(
-    records: &[(&Signal, &Signal)],
-    g: &PolynomialModel,
-    settings: &OeSettings,
-    free_initial_state: bool,
-    integrators: usize,
-) -> Result<OeFit> {
-    oe_fit(records, g, settings, free_initial_state, integrators)
-}
-
-/// [`output_error_records_with_state`] on stacked signals with record bounds `[0, L₁, …, L]`.
-pub(super) fn oe_fit_stacked(
-    inputs: &Signal,
-    y: &Signal,
-    bounds: &[usize],
-    g: &PolynomialModel,
-    settings: &OeSettings,
-    free_initial_state: bool,
-    integrators: usize,
-) -> Result<OeFit> {
-    if bounds.len() <= 2 {
-        return oe_fit(&[(inputs, y)], g, settings, free_initial_state, integrators);
-    }
-    let parts: Vec<(Signal, Signal)> = bounds
-        .windows(2)
-        .map(|w| (inputs.slice(w[0]..w[1]), y.slice(w[0]..w[1])))
-        .collect();
-    let pairs: Vec<(&Signal, &Signal)> = parts.iter().map(|(u, y)| (u, y)).collect();
-    oe_fit(&pairs, g, settings, free_initial_state, integrators)
-}
-
-/// The number of states of a realisation of `g`: its longest numerator's or its denominator's
-/// degree, whichever is larger (the length of an initial state's free response).
-pub(super) fn state_order(g: &PolynomialModel) -> usize {
-    g.num
-        .iter()
-        .map(|b| b.len().saturating_sub(1))
-        .chain([g.den.len().saturating_sub(1)])
-        .max()
-        .unwrap_or(0)
-}
-
-pub(super) fn oe_fit(
     records: &[(&Signal, &Signal)],
     g: &PolynomialModel,
     settings: &OeSettings,
@@ -233,6 +191,44 @@ pub(super) fn oe_fit(
         fit.model.den = integrators::inflate(&fit.model.den, integrators);
     }
     Ok(fit)
+}
+
+/// [`output_error_records_with_state`] on stacked signals with record bounds `[0, L₁, …, L]`.
+pub(super) fn oe_fit_stacked(
+    inputs: &Signal,
+    y: &Signal,
+    bounds: &[usize],
+    g: &PolynomialModel,
+    settings: &OeSettings,
+    free_initial_state: bool,
+    integrators: usize,
+) -> Result<OeFit> {
+    if bounds.len() <= 2 {
+        return output_error_records_with_state(
+            &[(inputs, y)],
+            g,
+            settings,
+            free_initial_state,
+            integrators,
+        );
+    }
+    let parts: Vec<(Signal, Signal)> = bounds
+        .windows(2)
+        .map(|w| (inputs.slice(w[0]..w[1]), y.slice(w[0]..w[1])))
+        .collect();
+    let pairs: Vec<(&Signal, &Signal)> = parts.iter().map(|(u, y)| (u, y)).collect();
+    output_error_records_with_state(&pairs, g, settings, free_initial_state, integrators)
+}
+
+/// The number of states of a realisation of `g`: its longest numerator's or its denominator's
+/// degree, whichever is larger (the length of an initial state's free response).
+pub(super) fn state_order(g: &PolynomialModel) -> usize {
+    g.num
+        .iter()
+        .map(|b| b.len().saturating_sub(1))
+        .chain([g.den.len().saturating_sub(1)])
+        .max()
+        .unwrap_or(0)
 }
 
 /// The numerator I (`order` coefficients) whose impulse response I/F·δ best fits the
