@@ -1250,6 +1250,16 @@ struct Ranges {
     v_peak: f64,
 }
 
+/// Friction levels `(Fc⁺, Fc⁻)` of which one, drawn at random, is `ratio` times the other
+/// `fc`.
+fn uneven_levels(rng: &mut StdRng, fc: f64, ratio: f64) -> (f64, f64) {
+    if rng.random::<bool>() {
+        (fc * ratio, fc)
+    } else {
+        (fc, fc * ratio)
+    }
+}
+
 /// An accepted family with its key parameters.
 fn ok(effect: Effect, key: &[(&str, f64)]) -> Accepted {
     Accepted {
@@ -1477,11 +1487,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
         C::CvAsym => {
             let fc = uniform(rng, 0.1, 0.3) * r.u_rms;
             let ratio = uniform(rng, 1.3, 1.8);
-            let (fp, fn_) = if rng.random::<bool>() {
-                (fc * ratio, fc)
-            } else {
-                (fc, fc * ratio)
-            };
+            let (fp, fn_) = uneven_levels(rng, fc, ratio);
             let fv = uniform(rng, 0.0, 0.3) * r.u_rms / r.v_peak;
             let fv2 = fv * uniform(rng, 0.5, 1.5);
             // A symmetric family with an offset is the same map when the viscous slopes agree:
@@ -1516,11 +1522,7 @@ fn draw_effect(rng: &mut StdRng, c: Choice, r: &Ranges, stiff: f64) -> (Physical
         C::Strib => {
             let fc = uniform(rng, 0.1, 0.3) * r.u_rms;
             let ratio = uniform(rng, 1.2, 1.6);
-            let (fp, fn_) = if rng.random::<bool>() {
-                (fc * ratio, fc)
-            } else {
-                (fc, fc * ratio)
-            };
+            let (fp, fn_) = uneven_levels(rng, fc, ratio);
             let s = uniform(rng, 1.3, 2.0);
             let vs = uniform(rng, 0.05, 0.2) * r.v_peak;
             let fv = uniform(rng, 0.0, 0.2) * r.u_rms / r.v_peak;
