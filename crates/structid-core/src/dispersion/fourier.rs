@@ -25,7 +25,9 @@ use rayon::prelude::*;
 use structid_lti::Signal;
 
 use crate::dispersion::kernel::Kernel;
-use crate::dispersion::{Dispersion, FeatureMap, Penalty, QuadraticPenalty};
+use crate::dispersion::{
+    Dispersion, FeatureMap, Penalty, QuadraticPenalty, eval_cols_by_rows, eval_rows_by_sample,
+};
 use crate::error::{Error, Result, positive_finite};
 use crate::model::interpolant::Interpolant;
 
@@ -567,14 +569,10 @@ impl FeatureMap for FourierKernel {
     /// by side, which the compiler vectorises); the same operations as
     /// [`eval_into`](FeatureMap::eval_into), hence the same values.
     fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
-        let m = self.dim();
-        if self.affine.len() != 1 || z.channels() != 1 || m.is_multiple_of(2) {
-            for (k, row) in rows.chunks_exact_mut(m).enumerate() {
-                self.eval_into(z.sample(t0 + k), row);
-                row.iter_mut().zip(scale).for_each(|(v, s)| *v *= s);
-            }
-            return;
+        if !self.one_input_fast(z) {
+            return eval_rows_by_sample(self, z, t0, scale, rows);
         }
+        let m = self.dim();
         let zs = &z.as_slice()[t0..t0 + rows.len() / m];
         for (zl, block) in zs.chunks(LANES).zip(rows.chunks_mut(LANES * m)) {
             let (c1, s1) = self.unit_angles(zl);
@@ -603,16 +601,11 @@ impl FeatureMap for FourierKernel {
         scale: &[f64],
         rows: &mut [f64],
     ) {
-        let (m, w) = (self.dim(), cols.len());
-        if w == 0 {
-            return;
-        }
         if !self.one_input_fast(z) {
-            let mut full = vec![0.0; m];
-            for (k, row) in rows.chunks_exact_mut(w).enumerate() {
-                self.eval_rows(z, t0 + k, scale, &mut full);
-                row.copy_from_slice(&full[cols.clone()]);
-            }
+            return eval_cols_by_rows(self, z, t0, cols, scale, rows);
+        }
+        let w = cols.len();
+        if w == 0 {
             return;
         }
         let zs = &z.as_slice()[t0..t0 + rows.len() / w];

@@ -88,6 +88,45 @@ pub(crate) fn quadratic_penalty(d: &dyn Dispersion, z: &Signal) -> Box<dyn Quadr
     }
 }
 
+/// [`FeatureMap::eval_rows`] by [`FeatureMap::eval_into`], one sample at a time: the
+/// trait's default, and what a map with a faster evaluation falls back to where that does not
+/// apply.
+pub(crate) fn eval_rows_by_sample<M: FeatureMap + ?Sized>(
+    map: &M,
+    z: &Signal,
+    t0: usize,
+    scale: &[f64],
+    rows: &mut [f64],
+) {
+    let m = map.dim();
+    for (k, row) in rows.chunks_exact_mut(m).enumerate() {
+        map.eval_into(z.sample(t0 + k), row);
+        row.iter_mut().zip(scale).for_each(|(v, s)| *v *= s);
+    }
+}
+
+/// [`FeatureMap::eval_cols`] by whole rows of [`FeatureMap::eval_rows`], keeping the columns
+/// `cols`: the trait's default, and what a map with a faster evaluation falls back to where
+/// that does not apply.
+pub(crate) fn eval_cols_by_rows<M: FeatureMap + ?Sized>(
+    map: &M,
+    z: &Signal,
+    t0: usize,
+    cols: Range<usize>,
+    scale: &[f64],
+    rows: &mut [f64],
+) {
+    let (m, w) = (map.dim(), cols.len());
+    if w == 0 {
+        return;
+    }
+    let mut full = vec![0.0; m];
+    for (k, row) in rows.chunks_exact_mut(w).enumerate() {
+        map.eval_rows(z, t0 + k, scale, &mut full);
+        row.copy_from_slice(&full[cols.clone()]);
+    }
+}
+
 /// Gram columns per panel of [`QuadraticPenalty::gram_times`] (narrow: the panel adds to the
 /// exact solver's L×L memory).
 const GRAM_TIMES_PANEL: usize = 64;
@@ -201,11 +240,7 @@ pub trait FeatureMap: Send + Sync {
     /// The default evaluates [`eval_into`](Self::eval_into) sample by sample; a map with a
     /// faster batched evaluation overrides it with the same values.
     fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
-        let m = self.dim();
-        for (k, row) in rows.chunks_exact_mut(m).enumerate() {
-            self.eval_into(z.sample(t0 + k), row);
-            row.iter_mut().zip(scale).for_each(|(v, s)| *v *= s);
-        }
+        eval_rows_by_sample(self, z, t0, scale, rows)
     }
 
     /// [`eval_rows`](Self::eval_rows) for the features `cols` only: writes
@@ -223,15 +258,7 @@ pub trait FeatureMap: Send + Sync {
         scale: &[f64],
         rows: &mut [f64],
     ) {
-        let (m, w) = (self.dim(), cols.len());
-        if w == 0 {
-            return;
-        }
-        let mut full = vec![0.0; m];
-        for (k, row) in rows.chunks_exact_mut(w).enumerate() {
-            self.eval_rows(z, t0 + k, scale, &mut full);
-            row.copy_from_slice(&full[cols.clone()]);
-        }
+        eval_cols_by_rows(self, z, t0, cols, scale, rows)
     }
 
     /// Values per sample that [`prepare_rows`](Self::prepare_rows) writes: the part of the
