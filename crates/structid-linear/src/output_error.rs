@@ -307,10 +307,10 @@ impl OeFit {
     /// The fit of `model` found by a Levenberg–Marquardt search over `samples` scored
     /// samples, with `integrators` poles held at `z = 1`: the solver's sums of squares become
     /// mean costs, and a search that ends because no damped step lowers the cost any more
-    /// counts as converged (a stationary point to working precision, as this fit has always
-    /// reported it). What the search alone does not tell is left unknown: standard deviations
-    /// NaN (one per parameter of `fit.theta`), no covariance, fit per cent NaN, no warning; a
-    /// caller that knows them sets them.
+    /// counts as converged (a stationary point to working precision). What the search alone
+    /// does not tell is left unknown: standard deviations NaN (one per parameter of
+    /// `fit.theta`), no covariance, fit per cent NaN, no warning; a caller that knows them
+    /// sets them.
     ///
     /// ```
     /// # use nalgebra::{DMatrix, DVector};
