@@ -359,21 +359,17 @@ mod tests {
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
-    use structid_linear::PolynomialModel;
 
     use super::super::{Classification, discover};
 
-    fn g() -> PolynomialModel {
-        PolynomialModel {
-            den: vec![1.0, -1.5, 0.7],
-            num: vec![vec![0.0, 0.1, 0.1]],
-            sample_time: Some(0.05),
-        }
-    }
-
     /// The nominal G with a known sensor map y = x + 0.3·x³.
     fn with_sensor() -> Nominal {
-        let first = hypothesis(&g(), Site::Output, placeholder().unwrap()).unwrap();
+        let first = hypothesis(
+            &super::super::tests::nominal(),
+            Site::Output,
+            placeholder().unwrap(),
+        )
+        .unwrap();
         let sensor: Arc<dyn Interpolant> = Arc::new(|z: &[f64]| z[0] + 0.3 * z[0].powi(3));
         Nominal::from_model(&first.model, vec![sensor]).unwrap()
     }

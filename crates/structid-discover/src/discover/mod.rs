@@ -928,7 +928,8 @@ mod tests {
         }
     }
 
-    fn nominal() -> PolynomialModel {
+    /// A lightly damped second-order G (T_s = 0.05), the nominal model of the unit tests.
+    pub(super) fn nominal() -> PolynomialModel {
         PolynomialModel {
             den: vec![1.0, -1.5, 0.7],
             num: vec![vec![0.0, 0.1, 0.1]],
