@@ -51,6 +51,7 @@ pub mod distributions;
 pub mod metrics;
 pub mod records;
 pub mod residual_tests;
+mod simulated_state;
 pub mod windows;
 
 pub use records::{RecordsValidation, validate_records};

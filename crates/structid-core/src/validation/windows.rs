@@ -32,6 +32,13 @@
 //! [`crate::Lft::measurability`]). A direction that neither sees keeps the value 0: it reaches
 //! nothing the simulation scores. [`state_from_record`] is this estimate on any record slice.
 //!
+//! **Beyond measurability** (maps in series, a sensor map ahead of which z is reached only
+//! through the map's inverse, a map of an unmeasured state) there is no measured z to fix ŵ
+//! at, and the state reaches y only through the maps. Each window's state is then fitted to y
+//! over the same samples by nonlinear least squares through the simulation with the maps in
+//! the loop, searched from the state the previous window's simulation reached (module
+//! `simulated_state`); the directions y does not see keep that value.
+//!
 //! [`simulate_scored`] is the one simulation that [`crate::validate`], prediction's fallback and
 //! the discovery workflow score models with; [`ScoredSimulation::rms`] is its RMS over the scored
 //! samples.
@@ -45,6 +52,7 @@ use crate::error::{Error, Result};
 use crate::model::interpolant::Interpolant;
 use crate::model::{Data, Model};
 use crate::validation::metrics::fit_percent;
+use crate::validation::simulated_state::simulated_window_state;
 
 /// Windows of a windowed simulation: `length` samples each, the state fitted on the first
 /// half of them (at least `init`) and all but the first `init` scored. Build with [`Windows::new`] or [`Windows::for_record`].
@@ -207,6 +215,15 @@ impl ScoredSimulation {
             .map(|k| y.get(k, c) - self.simulated.get(k, c))
             .collect()
     }
+}
+
+/// Whether `e` says that z cannot be computed from u and y (the errors of
+/// [`Model::compute_z_with_maps`] for a model beyond measurability).
+fn beyond_measurability(e: &Error) -> bool {
+    matches!(
+        e,
+        Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. }
+    )
 }
 
 /// The measured z of `data` for `model`: the data's own z columns, or z computed from u and y,
@@ -434,17 +451,31 @@ pub fn simulate_scored(
             (sim.y, scored, vec![x0.map(<[f64]>::to_vec)])
         }
         Scoring::Windowed(windows) => {
-            let z = measured_z(model, maps, data)?;
-            let w = opened_w(model, maps, &z)?;
+            // The maps' outputs at the measured z, or none beyond measurability, where each
+            // window's state is fitted through the simulation instead.
+            let opened = match measured_z(model, maps, data) {
+                Ok(z) => {
+                    let w = opened_w(model, maps, &z)?;
+                    Some((z, w))
+                }
+                Err(e) if beyond_measurability(&e) => None,
+                Err(e) => return Err(e),
+            };
             let mut simulated = Signal::zeros(len, ny);
             let mut scored = Vec::new();
             let mut states = Vec::new();
+            // The state the previous window's simulation reached: the next one's start.
+            let mut carried = vec![0.0; model.lft().dims().states];
             for range in windows.ranges(len) {
                 let init = windows.init.min(range.len().saturating_sub(1)).max(1);
                 let fitted = range.start..range.start + (range.len() / 2).max(init);
-                let x = window_state(model, data, &z, &w, fitted, None)?;
+                let x = match &opened {
+                    Some((z, w)) => window_state(model, data, z, w, fitted, None)?,
+                    None => simulated_window_state(model, maps, data, fitted, &carried)?,
+                };
                 let u = data.u().slice(range.clone());
                 let sim = model.simulate(maps, &u, None, Some(&x))?;
+                carried = sim.final_state;
                 for k in 0..range.len() {
                     simulated
                         .sample_mut(range.start + k)
@@ -503,6 +534,80 @@ mod tests {
         })
         .unwrap();
         Model::new(lft, vec![]).unwrap()
+    }
+
+    /// Windowed scoring as it was before models beyond measurability were scored: every
+    /// window's state by the linear fit at the measured z. A measurable model must still get
+    /// exactly this.
+    fn linear_windows(
+        model: &Model,
+        maps: &[&dyn Interpolant],
+        data: &Data,
+        windows: Windows,
+    ) -> (Signal, Vec<Option<Vec<f64>>>) {
+        let z = measured_z(model, maps, data).unwrap();
+        let w = opened_w(model, maps, &z).unwrap();
+        let mut simulated = Signal::zeros(data.len(), model.lft().dims().y);
+        let mut states = Vec::new();
+        for range in windows.ranges(data.len()) {
+            let init = windows.init.min(range.len().saturating_sub(1)).max(1);
+            let fitted = range.start..range.start + (range.len() / 2).max(init);
+            let x = window_state(model, data, &z, &w, fitted, None).unwrap();
+            let u = data.u().slice(range.clone());
+            let sim = model.simulate(maps, &u, None, Some(&x)).unwrap();
+            for k in 0..range.len() {
+                simulated
+                    .sample_mut(range.start + k)
+                    .copy_from_slice(sim.y.sample(k));
+            }
+            states.push(Some(x));
+        }
+        (simulated, states)
+    }
+
+    /// A measurable model (a Hammerstein model on a slow plant, with noise in its record) is
+    /// scored bit for bit as by the linear window states.
+    #[test]
+    fn a_measurable_model_keeps_the_linear_window_states_exactly() {
+        let lft = crate::Lft::new(crate::LftMatrices {
+            a: dmatrix![0.995],
+            bu: dmatrix![0.0],
+            be: dmatrix![0.0],
+            bw: dmatrix![0.05],
+            cy: dmatrix![1.0],
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: dmatrix![0.0],
+            cz: dmatrix![0.0],
+            dzu: dmatrix![1.0],
+            dze: dmatrix![0.0],
+            dzw: dmatrix![0.0],
+        })
+        .unwrap();
+        let d = std::sync::Arc::new(crate::KernelDispersion::gaussian(0.5).unwrap());
+        let model = Model::new(lft, vec![crate::NonlinearBlock::new("N", vec![0], 0, d)]).unwrap();
+        let sat = |z: &[f64]| (1.5 * z[0]).tanh();
+        let u = Signal::from_fn(1500, 1, |k, _| (0.02 * k as f64).sin() + 0.4);
+        let clean = model.simulate(&[&sat], &u, None, Some(&[2.0])).unwrap().y;
+        let y = Signal::from_fn(1500, 1, |k, _| {
+            clean.get(k, 0) + 0.01 * (k as f64 * 1.3).sin()
+        });
+        let data = Data::new(u, y).unwrap();
+        let windows = Windows::new(200, 20).unwrap();
+        let new =
+            simulate_scored(&model, &[&sat], &data, Scoring::Windowed(windows), None, 0).unwrap();
+        let (simulated, states) = linear_windows(&model, &[&sat], &data, windows);
+        assert_eq!(new.simulated, simulated);
+        assert_eq!(new.states, states);
+        // And the integrator without maps.
+        let model = integrator(0.02);
+        let u = Signal::from_fn(700, 1, |k, _| (0.03 * k as f64).sin());
+        let y = Signal::from_fn(700, 1, |k, _| 1.0 + 0.1 * (0.07 * k as f64).cos());
+        let data = Data::new(u, y).unwrap();
+        let new = simulate_scored(&model, &[], &data, Scoring::Windowed(windows), None, 0).unwrap();
+        let (simulated, states) = linear_windows(&model, &[], &data, windows);
+        assert_eq!(new.simulated, simulated);
+        assert_eq!(new.states, states);
     }
 
     #[test]
