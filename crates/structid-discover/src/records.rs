@@ -13,7 +13,7 @@ use std::ops::Range;
 
 use structid_core::validation::records::pool_record;
 use structid_core::validation::windows::simulate_scored;
-use structid_core::validation::{Scoring, ValidationSettings, validate_records};
+use structid_core::validation::{ValidationSettings, validate_records};
 use structid_core::{Data, Error, Interpolant, Model, Result};
 
 /// `data`'s records, each passed through `f`, stacked again into one [`Data`] with the same
@@ -123,10 +123,11 @@ impl Simulated {
 /// with `settings`) and pools the simulation RMS and fit over the records' scored samples.
 ///
 /// A model beyond measurability (maps in series, a map of a latent signal) has no one-step
-/// predictor, which [`validate`] fits the initial state with; under free-run scoring it is
-/// simulated from rest instead, as the sensor site always is. Under windowed scoring its
-/// windows start from states fitted to z as [`Model::compute_z_with_maps`] gives it (the
-/// noise-free simulation's for an output-error model), or it is an error.
+/// predictor, which [`validate`] fits the initial state with; it is scored by
+/// [`simulate_scored`] alone instead: under free-run scoring simulated from rest, as the
+/// sensor site always is; under windowed scoring each window from its own state, fitted to z
+/// as [`Model::compute_z_with_maps`] gives it (the noise-free simulation's for an
+/// output-error model) or, where the record gives no z, to y through the simulation.
 pub fn simulate(
     model: &Model,
     maps: &[&dyn Interpolant],
@@ -136,8 +137,8 @@ pub fn simulate(
     let bounds = data.record_bounds();
     let mut out = Simulated::of(data);
     let all = match validate_records(model, maps, data, settings) {
-        Err(e) if beyond_measurability(&e) && settings.scoring() == Scoring::Free => {
-            return from_rest(model, maps, data, settings.settle());
+        Err(e) if beyond_measurability(&e) => {
+            return without_prediction(model, maps, data, settings);
         }
         other => other.map_err(|e| match e {
             Error::InRecord { record, source } => in_record(*source, record - 1, data),
@@ -169,17 +170,19 @@ pub(crate) fn beyond_measurability(e: &Error) -> bool {
     }
 }
 
-/// [`simulate`] by a free run from rest on each record, scored after `settle` samples.
-fn from_rest(
+/// [`simulate`] by [`simulate_scored`] on each record with the scoring and settling samples
+/// of `settings`: a free run from rest, or windows.
+fn without_prediction(
     model: &Model,
     maps: &[&dyn Interpolant],
     data: &Data,
-    settle: usize,
+    settings: &ValidationSettings,
 ) -> Result<Simulated> {
+    let (scoring, settle) = (settings.scoring(), settings.settle());
     let mut out = Simulated::of(data);
     let mut pooled = Vec::new();
     for (r, (record, start)) in data.records().iter().zip(data.record_bounds()).enumerate() {
-        let sim = simulate_scored(model, maps, record, Scoring::Free, None, settle)
+        let sim = simulate_scored(model, maps, record, scoring, None, settle)
             .map_err(|e| in_record(e, r, data))?;
         pool_record(&mut pooled, record.y(), &sim.simulated, &sim.scored);
         let count = sim.scored.iter().map(|s| s.len()).sum::<usize>();
@@ -221,7 +224,86 @@ pub fn in_record(e: Error, r: usize, data: &Data) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use structid_core::Signal;
+    use nalgebra::{DMatrix, dmatrix};
+    use std::sync::Arc;
+    use structid_core::validation::Scoring;
+    use structid_core::validation::Windows;
+    use structid_core::{KernelDispersion, Lft, LftMatrices, NonlinearBlock, Signal};
+
+    /// y = N₂(G·N₁(u)) + e with an integrating G with a direct term (maps in series), the
+    /// noise reaching the state: the record gives no z.
+    fn series_model() -> Model {
+        let lft = Lft::new(LftMatrices {
+            a: dmatrix![1.8, -0.8; 1.0, 0.0],
+            bu: DMatrix::zeros(2, 1),
+            be: dmatrix![0.1; 0.0],
+            bw: dmatrix![1.0, 0.0; 0.0, 0.0],
+            cy: DMatrix::zeros(1, 2),
+            dyu: dmatrix![0.0],
+            dye: dmatrix![1.0],
+            dyw: dmatrix![0.0, 1.0],
+            cz: dmatrix![0.0, 0.0; 0.033, -0.003],
+            dzu: dmatrix![1.0; 0.0],
+            dze: dmatrix![0.0; 0.0],
+            dzw: dmatrix![0.0, 0.0; 0.01, 0.0],
+        })
+        .unwrap();
+        let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
+        Model::new(
+            lft,
+            vec![
+                NonlinearBlock::new("actuator", vec![0], 0, d.clone()),
+                NonlinearBlock::new("sensor", vec![1], 1, d),
+            ],
+        )
+        .unwrap()
+    }
+
+    /// A model beyond measurability is scored in windows on every record, each record and
+    /// window from its own state: the exact model at round-off, where a free run from rest
+    /// misses each record's integrated initial state.
+    #[test]
+    fn a_model_beyond_measurability_is_scored_in_windows() {
+        let model = series_model();
+        let act = |z: &[f64]| (1.5 * z[0]).tanh();
+        let sen = |z: &[f64]| z[0] + 0.1 * z[0].powi(3);
+        let maps: [&dyn Interpolant; 2] = [&act, &sen];
+        let record = |len: usize, x0: [f64; 2], f: f64| {
+            let u = Signal::from_fn(len, 1, |k, _| {
+                (f * k as f64).sin() + 0.4 * (0.37 * k as f64).cos()
+            });
+            let y = model.simulate(&maps, &u, None, Some(&x0)).unwrap().y;
+            Data::new(u, y).unwrap()
+        };
+        let data = Data::from_records(vec![
+            record(1200, [3.0, 2.9], 0.05),
+            record(900, [-2.0, -2.0], 0.03),
+        ])
+        .unwrap();
+        let windowed = ValidationSettings::builder()
+            .scoring(Scoring::Windowed(Windows::new(150, 20).unwrap()))
+            .build()
+            .unwrap();
+        assert!(beyond_measurability(
+            &validate_records(&model, &maps, &data, &windowed).unwrap_err()
+        ));
+        let win = simulate(&model, &maps, &data, &windowed).unwrap();
+        let scale = structid_core::validation::metrics::rms(&win.measured);
+        assert!(win.rms < 1e-8 * scale, "{} of {scale}", win.rms);
+        assert_eq!(win.simulated.len(), 2100);
+        // 8 + 6 windows, each scored after its first 20 samples.
+        assert_eq!(win.scored.len(), 14);
+        assert_eq!(
+            win.records.iter().map(|r| r.1).sum::<usize>(),
+            2100 - 14 * 20
+        );
+        let free = ValidationSettings::builder()
+            .scoring(Scoring::Free)
+            .build()
+            .unwrap();
+        let from_rest = simulate(&model, &maps, &data, &free).unwrap();
+        assert!(from_rest.rms > 0.1, "{}", from_rest.rms);
+    }
 
     fn rec(len: usize, offset: f64) -> Data {
         let u = Signal::from_fn(len, 1, |k, _| offset + k as f64);
