@@ -42,7 +42,7 @@ use crate::model::{Data, Model};
 /// Central differences are accurate to about 10⁻¹⁰ relative, so a direction y truly does not
 /// see shows near there; a direction seen a hundred million times more weakly than the best
 /// one is not determined by noisy data anyway.
-pub(crate) const CUTOFF: f64 = 1e-8;
+const CUTOFF: f64 = 1e-8;
 
 /// The central-difference step relative to the state's scale: truncation error ~ step² and
 /// round-off ~ ε/step, both near 10⁻¹⁰ of the Jacobian.
