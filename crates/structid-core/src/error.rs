@@ -267,6 +267,31 @@ pub enum Error {
 /// Result alias used across `structid-core`.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+impl Error {
+    /// Whether the error says that z cannot be computed from u and y (the paper's
+    /// measurability): maps in series, a z that no filter of y recovers, or one beyond a
+    /// filter's reach, in any record. Such a model is still simulated, and fitted by
+    /// simulation error; it has no one-step predictor.
+    ///
+    /// ```
+    /// use structid_core::Error;
+    /// let e = Error::SeriesMaps { row: 0, col: 1, value: 1.0 };
+    /// assert!(e.beyond_measurability());
+    /// let in_record = Error::InRecord { record: 2, source: Box::new(e) };
+    /// assert!(in_record.beyond_measurability());
+    /// assert!(!Error::Numerical("diverged".into()).beyond_measurability());
+    /// ```
+    pub fn beyond_measurability(&self) -> bool {
+        match self {
+            Error::InRecord { source, .. } => source.beyond_measurability(),
+            Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. } => {
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
 fn cycle_text(cycle: &[String]) -> String {
     cycle
         .iter()

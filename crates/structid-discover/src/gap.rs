@@ -763,7 +763,7 @@ fn run(
                     scored: v.scored,
                 });
             }
-            Err(e) if !crate::records::beyond_measurability(&e) => return Err(e),
+            Err(e) if !e.beyond_measurability() => return Err(e),
             Err(_) => {}
         }
     }

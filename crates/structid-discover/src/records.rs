@@ -137,7 +137,7 @@ pub fn simulate(
     let bounds = data.record_bounds();
     let mut out = Simulated::of(data);
     let all = match validate_records(model, maps, data, settings) {
-        Err(e) if beyond_measurability(&e) => {
+        Err(e) if e.beyond_measurability() => {
             return without_prediction(model, maps, data, settings);
         }
         other => other.map_err(|e| match e {
@@ -159,15 +159,6 @@ pub fn simulate(
         _ => (all.pooled[0].rms(), all.pooled[0].fit_percent()),
     };
     Ok(out)
-}
-
-/// Whether `e` says that z cannot be computed from u and y.
-pub(crate) fn beyond_measurability(e: &Error) -> bool {
-    match e {
-        Error::InRecord { source, .. } => beyond_measurability(source),
-        Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. } => true,
-        _ => false,
-    }
 }
 
 /// [`simulate`] by [`simulate_scored`] on each record with the scoring and settling samples
@@ -284,9 +275,11 @@ mod tests {
             .scoring(Scoring::Windowed(Windows::new(150, 20).unwrap()))
             .build()
             .unwrap();
-        assert!(beyond_measurability(
-            &validate_records(&model, &maps, &data, &windowed).unwrap_err()
-        ));
+        assert!(
+            validate_records(&model, &maps, &data, &windowed)
+                .unwrap_err()
+                .beyond_measurability()
+        );
         let win = simulate(&model, &maps, &data, &windowed).unwrap();
         let scale = structid_core::validation::metrics::rms(&win.measured);
         assert!(win.rms < 1e-8 * scale, "{} of {scale}", win.rms);

@@ -217,15 +217,6 @@ impl ScoredSimulation {
     }
 }
 
-/// Whether `e` says that z cannot be computed from u and y (the errors of
-/// [`Model::compute_z_with_maps`] for a model beyond measurability).
-fn beyond_measurability(e: &Error) -> bool {
-    matches!(
-        e,
-        Error::NotMeasurable { .. } | Error::SeriesMaps { .. } | Error::OutOfReach { .. }
-    )
-}
-
 /// The measured z of `data` for `model`: the data's own z columns, or z computed from u and y,
 /// with `maps` evaluated in order where blocks are in series ([`Model::compute_z_with_maps`]).
 pub(crate) fn measured_z(model: &Model, maps: &[&dyn Interpolant], data: &Data) -> Result<Signal> {
@@ -458,7 +449,7 @@ pub fn simulate_scored(
                     let w = opened_w(model, maps, &z)?;
                     Some((z, w))
                 }
-                Err(e) if beyond_measurability(&e) => None,
+                Err(e) if e.beyond_measurability() => None,
                 Err(e) => return Err(e),
             };
             let mut simulated = Signal::zeros(len, ny);

@@ -74,7 +74,7 @@ pub(super) fn beyond_measurability(nominal: &Nominal, location: Site, est: &Data
         .and_then(|data| super::fit::z_of(&h, &data))
         .and_then(|_| h.identification(est));
     match identification {
-        Err(e) => crate::records::beyond_measurability(&e),
+        Err(e) => e.beyond_measurability(),
         Ok((model, data)) => {
             let lft = model.lft();
             data.z().is_none()
