@@ -3,7 +3,9 @@
 //!
 //! [`gap`] simulates the model (with its maps, if any) on the record from u alone with the
 //! initial state estimated (`structid_core::validate` with
-//! [`InitialState::Estimate`]) and examines the simulation residual y − ŷ and the
+//! [`InitialState::Estimate`]; from rest for maps in series, whose z is computed from a zero
+//! state; a model without a one-step predictor, whose z the record does not give, is only
+//! simulated, and its prewhitened simulation residual stands for ε) and examines the simulation residual y − ŷ and the
 //! one-step prediction errors ε of the model's noise path (for an output-error model, whose
 //! noise is white at the output, the two are the same signal; a model with a noise model is
 //! judged by its innovations, so that coloured noise it explains is not taken for a missing
@@ -800,11 +802,17 @@ fn gap_record(
         Some(_) if one_step => (0..residual.len()).collect(),
         _ => v.scored.iter().flat_map(|r| r.clone()).collect(),
     };
-    let innovations: Vec<f64> = match &v.prediction_error {
+    let mut innovations: Vec<f64> = match &v.prediction_error {
         Some(e) if one_step => e.clone(),
         _ => tested.iter().map(|&k| residual[k]).collect(),
     };
     let n = innovations.len();
+    // Without a one-step predictor, a model whose noise model colours its residual is judged
+    // on that residual prewhitened, so that the colour it explains is not taken for a missing
+    // effect (as its innovations would be).
+    if v.prediction_error.is_none() && model.lft().t_ye().order() != 0 {
+        innovations = prewhiten(&innovations, 10.min(n / 20));
+    }
     // A quantised output (few distinct values) makes most differences exactly zero and the
     // MAD collapse; the quantisation error q/√12 is a floor for the noise level.
     let floor = quantisation_floor(&y);

@@ -221,8 +221,9 @@ impl Nominal {
             )));
         }
         self.known.push(KnownBlock { known, z, w });
-        // Fails early when the maps make an algebraic loop.
-        self.known_lft()?.check_no_algebraic_loop()?;
+        // Maps in series are simulated in order (and fitted by simulation error); a cycle of
+        // maps has no order and fails here, early.
+        self.model()?.evaluation_order()?;
         Ok(self)
     }
 

@@ -166,6 +166,15 @@ pub fn finite_columns<S: AsRef<str>>(
 ) -> Result<()> {
     for (name, c) in names.iter().zip(columns) {
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+            // Without noise, the model alone overflows: no option is to blame.
+            if noise_std == 0.0 {
+                return Err(WorkflowError::Failed(format!(
+                    "the simulated column `{}` is not finite at sample {k} ({}): the model's \
+                     simulation diverges or overflows; rescale the model. Nothing was written",
+                    name.as_ref(),
+                    c[k]
+                )));
+            }
             return Err(WorkflowError::InvalidOption {
                 option: "noise_std",
                 value: format!("{noise_std:e}"),

@@ -161,3 +161,22 @@ fn shard_usage_names_no_flag() {
         assert!(m.contains("shard"), "{m}");
     }
 }
+
+/// A non-finite simulated column blames the noise level only when there is noise; without
+/// it, the model alone overflows and the error names no option.
+#[test]
+fn a_non_finite_simulation_blames_the_noise_only_when_there_is_noise() {
+    use structid_workflow::simulate::finite_columns;
+    let columns = vec![vec![1.0, f64::INFINITY]];
+    match finite_columns(&["y"], &columns, 0.5).unwrap_err() {
+        WorkflowError::InvalidOption { option, rule, .. } => {
+            assert_eq!(option, "noise_std");
+            assert!(rule.contains("`y`") && rule.contains("sample 1"), "{rule}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let e = finite_columns(&["y"], &columns, 0.0).unwrap_err();
+    assert!(matches!(e, WorkflowError::Failed(_)), "{e:?}");
+    assert!(!e.to_string().contains("noise"), "{e}");
+    assert!(finite_columns(&["y"], &[vec![1.0, 2.0]], 0.0).is_ok());
+}
