@@ -13,6 +13,44 @@ use crate::model::lft::{Lft, LftMatrices};
 use crate::model::structure::Structure;
 use crate::paper::{Experiment, gaussian_noise};
 
+/// The model y = N₂(G·N₁(u)) + e with G = (b₀q² + b₁q + b₂)/(q² + a₁q + a₂) in
+/// controllable form: z₁ = u, z₂ = C·x + b₀·w₁ (maps in series through D_zw = b₀ when
+/// b₀ ≠ 0), y = w₂ + e, and the noise reaching the state (B_e ≠ 0), so that no z is computed
+/// from the record: a model beyond measurability, scored by simulation. Blocks `actuator`
+/// (w₁ = N₁(z₁)) and `sensor` (w₂ = N₂(z₂)), with a Gaussian kernel dispersion of width 0.5.
+///
+/// ```
+/// use structid_core::scenarios::actuator_sensor_series;
+/// let m = actuator_sensor_series([-1.8, 0.8], [0.01, 0.015, 0.005]).unwrap();
+/// assert_eq!(m.lft().matrices().dzw[(1, 0)], 0.01);
+/// assert_eq!(m.evaluation_order().unwrap(), vec![0, 1]);
+/// ```
+pub fn actuator_sensor_series(a: [f64; 2], b: [f64; 3]) -> Result<crate::Model> {
+    use nalgebra::dmatrix;
+    let lft = Lft::new(LftMatrices {
+        a: dmatrix![-a[0], -a[1]; 1.0, 0.0],
+        bu: DMatrix::zeros(2, 1),
+        be: dmatrix![0.1; 0.0],
+        bw: dmatrix![1.0, 0.0; 0.0, 0.0],
+        cy: DMatrix::zeros(1, 2),
+        dyu: dmatrix![0.0],
+        dye: dmatrix![1.0],
+        dyw: dmatrix![0.0, 1.0],
+        cz: dmatrix![0.0, 0.0; b[1] - a[0] * b[0], b[2] - a[1] * b[0]],
+        dzu: dmatrix![1.0; 0.0],
+        dze: dmatrix![0.0; 0.0],
+        dzw: dmatrix![0.0, 0.0; b[0], 0.0],
+    })?;
+    let d: Arc<dyn Dispersion> = Arc::new(KernelDispersion::gaussian(0.5)?);
+    crate::Model::new(
+        lft,
+        vec![
+            crate::NonlinearBlock::new("actuator", vec![0], 0, Arc::clone(&d)),
+            crate::NonlinearBlock::new("sensor", vec![1], 1, d),
+        ],
+    )
+}
+
 /// A SISO Hammerstein system y = G(q)·N(u) + e with a random stable G of the given order
 /// (spectral radius 0.9, reproducible from `seed`), N = tanh, u white noise squashed to
 /// (−2, 2) ([`Excitation::White`]) and white noise of standard deviation `noise_std`.

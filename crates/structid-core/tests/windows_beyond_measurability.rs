@@ -2,47 +2,17 @@
 //! integrating G with a direct term (maps in series through D_zw) and a sensor map, whose z
 //! the record does not give. Each window's state is fitted through the simulation.
 
-use std::sync::Arc;
-
-use nalgebra::{DMatrix, dmatrix};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use structid_core::validation::metrics::rms;
 use structid_core::validation::{Scoring, ValidationSettings, Windows, simulate_scored, validate};
-use structid_core::{
-    Data, Error, Interpolant, KernelDispersion, Lft, LftMatrices, Model, NonlinearBlock, Signal,
-};
+use structid_core::{Data, Error, Interpolant, Model, Signal};
 
 /// y = N₂(G·N₁(u)) + e, G = (b₀q² + b₁q + b₂)/((q − 1)(q − 0.8)) in controllable form, the
 /// noise reaching the state (not an output-error model, whose z would be simulated from rest).
 fn model() -> Model {
-    let (a1, a2) = (-1.8, 0.8);
-    let b = [0.01, 0.015, 0.005];
-    let lft = Lft::new(LftMatrices {
-        a: dmatrix![-a1, -a2; 1.0, 0.0],
-        bu: DMatrix::zeros(2, 1),
-        be: dmatrix![0.1; 0.0],
-        bw: dmatrix![1.0, 0.0; 0.0, 0.0],
-        cy: DMatrix::zeros(1, 2),
-        dyu: dmatrix![0.0],
-        dye: dmatrix![1.0],
-        dyw: dmatrix![0.0, 1.0],
-        cz: dmatrix![0.0, 0.0; b[1] - a1 * b[0], b[2] - a2 * b[0]],
-        dzu: dmatrix![1.0; 0.0],
-        dze: dmatrix![0.0; 0.0],
-        dzw: dmatrix![0.0, 0.0; b[0], 0.0],
-    })
-    .unwrap();
-    let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
-    Model::new(
-        lft,
-        vec![
-            NonlinearBlock::new("actuator", vec![0], 0, d.clone()),
-            NonlinearBlock::new("sensor", vec![1], 1, d),
-        ],
-    )
-    .unwrap()
+    structid_core::scenarios::actuator_sensor_series([-1.8, 0.8], [0.01, 0.015, 0.005]).unwrap()
 }
 
 fn actuator(z: &[f64]) -> f64 {

@@ -215,39 +215,14 @@ pub fn in_record(e: Error, r: usize, data: &Data) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{DMatrix, dmatrix};
-    use std::sync::Arc;
+    use structid_core::Signal;
     use structid_core::validation::Scoring;
     use structid_core::validation::Windows;
-    use structid_core::{KernelDispersion, Lft, LftMatrices, NonlinearBlock, Signal};
 
     /// y = N₂(G·N₁(u)) + e with an integrating G with a direct term (maps in series), the
     /// noise reaching the state: the record gives no z.
     fn series_model() -> Model {
-        let lft = Lft::new(LftMatrices {
-            a: dmatrix![1.8, -0.8; 1.0, 0.0],
-            bu: DMatrix::zeros(2, 1),
-            be: dmatrix![0.1; 0.0],
-            bw: dmatrix![1.0, 0.0; 0.0, 0.0],
-            cy: DMatrix::zeros(1, 2),
-            dyu: dmatrix![0.0],
-            dye: dmatrix![1.0],
-            dyw: dmatrix![0.0, 1.0],
-            cz: dmatrix![0.0, 0.0; 0.033, -0.003],
-            dzu: dmatrix![1.0; 0.0],
-            dze: dmatrix![0.0; 0.0],
-            dzw: dmatrix![0.0, 0.0; 0.01, 0.0],
-        })
-        .unwrap();
-        let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
-        Model::new(
-            lft,
-            vec![
-                NonlinearBlock::new("actuator", vec![0], 0, d.clone()),
-                NonlinearBlock::new("sensor", vec![1], 1, d),
-            ],
-        )
-        .unwrap()
+        structid_core::scenarios::actuator_sensor_series([-1.8, 0.8], [0.01, 0.015, 0.005]).unwrap()
     }
 
     /// A model beyond measurability is scored in windows on every record, each record and

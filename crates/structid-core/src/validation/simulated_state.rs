@@ -222,40 +222,9 @@ impl LeastSquaresProblem for StateFit<'_> {
 mod tests {
     use super::*;
     use crate::validation::windows::{Scoring, Windows, simulate_scored};
-    use crate::{KernelDispersion, Lft, LftMatrices, NonlinearBlock};
+    use crate::{Lft, LftMatrices};
     use nalgebra::dmatrix;
     use proptest::prelude::*;
-    use std::sync::Arc;
-
-    /// y = N₂(G·N₁(u)) + e with G = (b₀q² + b₁q + b₂)/(q² + a₁q + a₂) in controllable form:
-    /// z₁ = u, z₂ = C·x + b₀·w₁ (maps in series through D_zw = b₀ when b₀ ≠ 0), y = w₂ + e,
-    /// and the noise reaching the state (B_e ≠ 0), so that no z is computed from the record.
-    pub(crate) fn series_model(a: [f64; 2], b: [f64; 3]) -> Model {
-        let lft = Lft::new(LftMatrices {
-            a: dmatrix![-a[0], -a[1]; 1.0, 0.0],
-            bu: DMatrix::zeros(2, 1),
-            be: dmatrix![0.1; 0.0],
-            bw: dmatrix![1.0, 0.0; 0.0, 0.0],
-            cy: DMatrix::zeros(1, 2),
-            dyu: dmatrix![0.0],
-            dye: dmatrix![1.0],
-            dyw: dmatrix![0.0, 1.0],
-            cz: dmatrix![0.0, 0.0; b[1] - a[0] * b[0], b[2] - a[1] * b[0]],
-            dzu: dmatrix![1.0; 0.0],
-            dze: dmatrix![0.0; 0.0],
-            dzw: dmatrix![0.0, 0.0; b[0], 0.0],
-        })
-        .unwrap();
-        let d = Arc::new(KernelDispersion::gaussian(0.5).unwrap());
-        Model::new(
-            lft,
-            vec![
-                NonlinearBlock::new("actuator", vec![0], 0, d.clone()),
-                NonlinearBlock::new("sensor", vec![1], 1, d),
-            ],
-        )
-        .unwrap()
-    }
 
     pub(crate) fn actuator(z: &[f64]) -> f64 {
         (1.5 * z[0]).tanh()
@@ -290,7 +259,7 @@ mod tests {
         ) {
             let a = [-2.0 * radius * angle.cos(), radius * radius];
             prop_assume!(b.iter().map(|v| v.abs()).sum::<f64>() > 0.3);
-            let model = series_model(a, b);
+            let model = crate::scenarios::actuator_sensor_series(a, b).unwrap();
             let maps: [&dyn Interpolant; 2] = [&actuator, &sensor];
             let u = input(600, phase);
             let y = model.simulate(&maps, &u, None, Some(&x0)).unwrap().y;
@@ -314,7 +283,7 @@ mod tests {
     /// change of coordinates, that feeds nothing.
     #[test]
     fn an_unseen_direction_keeps_its_start_value() {
-        let base = series_model([-1.5, 0.7], [0.2, 0.1, 0.1]);
+        let base = crate::scenarios::actuator_sensor_series([-1.5, 0.7], [0.2, 0.1, 0.1]).unwrap();
         let m = base.lft().matrices();
         // x' = T·x with the unseen third state along (1, 1, 1)ᵀ in the new coordinates.
         let t = dmatrix![1.0, 0.0, 1.0; 0.0, 1.0, 1.0; 0.0, 0.0, 1.0];
