@@ -12,7 +12,10 @@ use crate::error::Result;
 /// A known map w = f(z) (an expression, a table, a closure) as a [`BlockMap`] without
 /// parameters. Its derivative ∂f/∂z, which the sensitivities of the maps around it need, is
 /// taken by central differences with a step of 10⁻⁶·max(1, |z|): `f` is given as a value, not
-/// as a formula.
+/// as a formula. A map with steps (a quantiser) has a zero derivative almost everywhere, and
+/// a fit through it would see no gradient: [`FixedMap::with_derivative_step`] takes the
+/// secant over a wider step instead, the map's trend at that resolution. The derivative only
+/// steers the fit's search; the simulation uses the map itself.
 ///
 /// ```
 /// use std::sync::Arc;
@@ -27,12 +30,37 @@ use crate::error::Result;
 pub struct FixedMap {
     map: Arc<dyn Interpolant>,
     inputs: usize,
+    step: Option<f64>,
 }
 
 impl FixedMap {
     /// The map `map` of `inputs` inputs.
     pub fn new(map: Arc<dyn Interpolant>, inputs: usize) -> Self {
-        Self { map, inputs }
+        Self {
+            map,
+            inputs,
+            step: None,
+        }
+    }
+
+    /// The map with its derivative taken as the central secant (f(z + h) − f(z − h))/(2h) of
+    /// the fixed step `h`, in z's units (a non-positive or non-finite `h` keeps the default).
+    ///
+    /// ```
+    /// use std::sync::Arc;
+    /// use structid_joint::{BlockJacobian, BlockMap, FixedMap};
+    /// // A quantiser of step 0.1: flat between its steps, a unit slope on average.
+    /// let q = Arc::new(|z: &[f64]| (z[0] / 0.1).round() * 0.1);
+    /// let (fine, coarse) = (FixedMap::new(q.clone(), 1), FixedMap::new(q, 1).with_derivative_step(0.5));
+    /// let (mut a, mut b) = (BlockJacobian::for_map(&fine), BlockJacobian::for_map(&coarse));
+    /// fine.eval_jacobian(&mut [], &[0.32], &mut a);
+    /// coarse.eval_jacobian(&mut [], &[0.32], &mut b);
+    /// assert_eq!(a.dw_dz[0], 0.0);
+    /// assert!((b.dw_dz[0] - 1.0).abs() < 1e-9);
+    /// ```
+    pub fn with_derivative_step(mut self, h: f64) -> Self {
+        self.step = (h.is_finite() && h > 0.0).then_some(h);
+        self
     }
 }
 
@@ -68,7 +96,7 @@ impl BlockMap for FixedMap {
     fn eval_jacobian(&self, _state: &mut [f64], z: &[f64], jac: &mut BlockJacobian) -> f64 {
         let mut at = z.to_vec();
         for i in 0..z.len() {
-            let h = 1e-6 * z[i].abs().max(1.0);
+            let h = self.step.unwrap_or(1e-6 * z[i].abs().max(1.0));
             at[i] = z[i] + h;
             let up = self.map.eval(&at);
             at[i] = z[i] - h;

@@ -14,12 +14,33 @@ use super::fit::scoring_settings;
 /// unexplained), through the noise path to the output and deconvolved to the block's output,
 /// split by the direction of z.
 pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<DirectionTest> {
+    direction_test_of(f, None, settings)
+}
+
+/// The direction test of what the static map `map` (in place of the fit's own estimate)
+/// leaves of `f`'s record: the output residual y − L_yu·u − L_yw·N(z) along the record's z
+/// is L_ye·ê + L_yw·(ŵ − N(z)), from the fit's noise estimate ê and map output ŵ. `None`
+/// tests the fit's own estimate.
+pub(super) fn direction_test_of(
+    f: &Fitted,
+    map: Option<&dyn Interpolant>,
+    settings: &DiscoverSettings,
+) -> Result<DirectionTest> {
     // The model's output residual is L_ye·ê = L_yw·δ: filter ê through the noise path first
     // (the identity for an output-error model), then invert L_yw. Record by record, each
     // from rest, and each record's first samples left out.
     let t_ye = f.hypothesis.model.lft().t_ye();
     // ê as long as the records (an estimator may return none: then nothing is tested).
     let len = f.e_hat.len().min(f.z.len());
+    let t_yw = match map {
+        Some(_) if f.w_hat.len() < len => {
+            return Err(structid_core::Error::Numerical(
+                "the fit's map output is shorter than its record".into(),
+            ));
+        }
+        Some(_) => Some(f.hypothesis.block_lft()?.t_yw()),
+        None => None,
+    };
     let records = if f.bounds.last() == Some(&len) {
         f.bounds.clone()
     } else {
@@ -28,7 +49,14 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
     let (mut z, mut kept, mut bounds) = (Vec::new(), Vec::new(), vec![0]);
     for w in records.windows(2) {
         let e = f.e_hat.slice(w[0]..w[1]);
-        let r = t_ye.simulate(&e)?.channel(0);
+        let mut r = t_ye.simulate(&e)?.channel(0);
+        if let (Some(map), Some(t_yw)) = (map, &t_yw) {
+            let d = Signal::from_fn(w[1] - w[0], 1, |k, _| {
+                f.w_hat[w[0] + k] - map.eval(&[f.z[w[0] + k]])
+            });
+            let shift = t_yw.simulate(&d)?.channel(0);
+            r.iter_mut().zip(shift).for_each(|(r, s)| *r += s);
+        }
         let delta = deconvolve(&f.hypothesis, &r)?;
         let skip = transient(delta.len(), settings);
         z.extend_from_slice(&f.z[w[0] + skip..w[1]]);
@@ -39,7 +67,7 @@ pub(super) fn direction_test(f: &Fitted, settings: &DiscoverSettings) -> Result<
         &z,
         &kept,
         &bounds,
-        acts_in_continuous_time(f.result.location).then_some(f.map.as_ref()),
+        acts_in_continuous_time(f.result.location).then_some(map.unwrap_or(f.map.as_ref())),
         settings.hysteresis_threshold,
     ))
 }

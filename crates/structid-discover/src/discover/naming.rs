@@ -9,6 +9,7 @@ use crate::hypotheses::{Hypothesis, Nominal, Site};
 use crate::hysteresis::DirectionTest;
 
 use super::context::Context;
+use super::direction::direction_test_of;
 use super::fit::{Fitted, simulation_errors};
 use super::fit::{even_indices, minmax, scoring_settings};
 use super::polish::{polish, polish_jointly};
@@ -455,9 +456,7 @@ pub(super) fn name_and_add(
     let mut rows = vec![nonparametric_row(&best, &h, &val_h, settings)];
     let g_refitted = best.linear.is_some();
     let mut row_family: Vec<Option<usize>> = vec![None];
-    if direction.dynamic {
-        classification = Classification::Dynamic;
-    } else {
+    {
         // The first families in parsimonious order whose map fit is not flagged are refined
         // and simulated; flagged ones stay in the naming table with their flags.
         let targets: Vec<usize> = (0..naming.ranked.len())
@@ -483,7 +482,37 @@ pub(super) fn name_and_add(
         }
     }
     let selection = select(&rows, None, settings.significance);
-    if let Some(i) = selection.chosen.and_then(|c| row_family[c]) {
+    let mut chosen_family = selection.chosen.and_then(|c| row_family[c]);
+    let mut direction = direction;
+    let mut static_direction_remark = None;
+    if direction.dynamic {
+        // The direction effect is the effect's memory only when the chosen static row at the
+        // site leaves it too: a smoothed kink, or a map estimated around a biased G, leaves a
+        // direction effect that the family's own curve does not.
+        let family_test = chosen_family.and_then(|i| {
+            let map = ExprMap::parse(&naming.ranked[i].expression, 1).ok()?;
+            direction_test_of(&best, Some(&map), settings).ok()
+        });
+        match family_test {
+            Some(t) if !t.dynamic => {
+                static_direction_remark = Some(format!(
+                    "the direction of z explains {:.0} % of what the nonparametric map leaves \
+                     (t = {:.1}), but only {:.0} % of what the named family leaves (t = {:.1}): \
+                     the direction effect was the estimate's misfit, not memory",
+                    100.0 * direction.explained,
+                    direction.t_statistic,
+                    100.0 * t.explained,
+                    t.t_statistic
+                ));
+                direction = t;
+            }
+            _ => {
+                classification = Classification::Dynamic;
+                chosen_family = None;
+            }
+        }
+    }
+    if let Some(i) = chosen_family {
         classification = Classification::Named(naming.ranked[i].clone());
         chosen_joint = joint_known[i].take();
     }
@@ -513,6 +542,7 @@ pub(super) fn name_and_add(
     };
     let (equivalent_locations, mut remarks) = structural_remarks(location, &classification);
     remarks.extend(joint_remark);
+    remarks.extend(static_direction_remark);
     match &classification {
         Classification::Named(_) | Classification::TimeVarying(_) => {}
         Classification::Unnamed => {

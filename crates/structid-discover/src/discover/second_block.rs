@@ -19,19 +19,19 @@
 //! The β_b are a small fixed share of the output's energy per unit of a map's dispersion:
 //! the rows compare maps, not regularisations.
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use structid_core::selection::{Criterion, SelectionSettings, select};
-use structid_core::{Data, IdentifySettings, InitialState, Signal};
-use structid_joint::{BlockMap, FixedMap, JointBlock, JointModel, fit};
+use structid_core::{Data, IdentifySettings, InitialState, Interpolant, Signal};
+use structid_joint::{BlockMap, JointBlock, JointModel, fit};
 
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
 use super::DiscoverSettings;
 use super::Finding;
 use super::by_simulation::{
-    Range, energy, features_through, joint_settings, neutral, padded, placeholder, sampled, z_range,
+    Range, energy, features_through, joint_settings, known_blocks, neutral, padded, placeholder,
+    sampled, z_range,
 };
 use super::fit::{initial_state, simulation_rms};
 use super::model::AugmentedMap;
@@ -273,14 +273,15 @@ fn joint_start(h: &Hypothesis, first: &Finding, est: &Data) -> Option<(JointMode
         block(1, "first", Box::new(first_block)),
     ];
     // Blocks 2.. are the known maps after the first finding's (h.known[1..]).
-    for (i, k) in h.known.iter().enumerate().skip(1) {
-        let name = k.name.clone();
-        blocks.push(block(
-            i + 1,
-            &name,
-            Box::new(FixedMap::new(Arc::clone(&k.map), 1)),
-        ));
-    }
+    let neutral_map = |z: &[f64]| slope * z[0];
+    let mut start: Vec<&dyn Interpolant> = vec![&neutral_map, first_map.as_ref()];
+    start.extend(
+        h.known
+            .iter()
+            .skip(1)
+            .map(|k| k.map.as_ref() as &dyn Interpolant),
+    );
+    blocks.extend(known_blocks(h, &start, est, 1));
     Some((
         JointModel::new(model.lft().clone(), blocks).ok()?,
         first_range,
