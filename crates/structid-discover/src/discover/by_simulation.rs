@@ -443,7 +443,11 @@ mod tests {
         let settings = DiscoverSettings::default();
         let before = nominal.simulate_output(val.u()).unwrap();
         let y = val.y().channel(0);
-        let nominal_rms = (y.iter().zip(&before).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
+        let nominal_rms = (y
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
             / y.len() as f64)
             .sqrt();
         let f = fitted_by_simulation(&nominal, Site::Input, &est, &val, &settings).unwrap();

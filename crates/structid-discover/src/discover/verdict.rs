@@ -123,9 +123,12 @@ pub(super) fn confirm(
         finding.remarks.push(c);
     }
     check_stationarity(&mut finding, &cx.nominal, cx.est, settings);
-    // Whatever form was chosen, a linear part that drifts under it makes the effect
-    // time-varying.
-    if !matches!(finding.classification, Classification::TimeVarying(_)) {
+    // Whatever static form was chosen, a linear part that drifts under it makes the effect
+    // time-varying. A hysteresis fitted at the input is the chosen model itself, not a static
+    // block beside which a gain could drift: the probe's static model is not the one chosen.
+    if !matches!(finding.classification, Classification::TimeVarying(_))
+        && finding.input_hysteresis.is_none()
+    {
         check_drift(&mut finding, &cx.nominal, cx.est, settings);
     }
     let verdict = confirmed(&cx, &mut finding, &noise);
