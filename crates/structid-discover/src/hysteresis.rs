@@ -37,7 +37,9 @@ use structid_core::validation::comparison::{default_bandwidth, long_run_variance
 pub struct DirectionTest {
     /// Share of the residual energy explained by the direction of z within z-bins (0…1).
     pub explained: f64,
-    /// The pooled t statistic of (mean rising − mean falling residual) within bins.
+    /// The t statistic of (mean rising − mean falling residual) within bins, its variance the
+    /// Newey–West long-run variance of the residual's contributions (the pooled variance when
+    /// no bin has both directions twice).
     pub t_statistic: f64,
     /// Samples used (those with a nonzero direction).
     pub samples: usize,
