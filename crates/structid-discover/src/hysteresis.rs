@@ -39,7 +39,7 @@ pub struct DirectionTest {
     pub explained: f64,
     /// The t statistic of (mean rising − mean falling residual) within bins, its variance the
     /// Newey–West long-run variance of the residual's contributions (the pooled variance when
-    /// no bin has both directions twice).
+    /// that long-run variance is not positive).
     pub t_statistic: f64,
     /// Samples used (those with a nonzero direction).
     pub samples: usize,
@@ -202,7 +202,8 @@ pub fn direction_dependence_records(
 /// map the products x_i = c_i·(r_i − m_(b,d)) have mean zero, and the variance of their sum
 /// is L·V̂, V̂ their Newey–West long-run variance (Andrews' bandwidth). A direction held over
 /// long runs of a slowly varying z, met by a coloured residual, thus counts as the few
-/// independent runs it is, not as its many samples. `None` when no bin has both directions.
+/// independent runs it is, not as its many samples. `None` when fewer than three samples
+/// contribute or their long-run variance is not positive.
 fn direction_t(
     r: &[f64],
     keep: &[usize],

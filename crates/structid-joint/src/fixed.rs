@@ -14,8 +14,9 @@ use crate::error::Result;
 /// taken by central differences with a step of 10⁻⁶·max(1, |z|): `f` is given as a value, not
 /// as a formula. A map with steps (a quantiser) has a zero derivative almost everywhere, and
 /// a fit through it would see no gradient: [`FixedMap::with_derivative_step`] takes the
-/// secant over a wider step instead, the map's trend at that resolution. The derivative only
-/// steers the fit's search; the simulation uses the map itself.
+/// secant over a wider step instead, the map's trend at that resolution. The simulation uses
+/// the map itself; the fit's Jacobian uses the secant, so where the fit stops moves by the
+/// secant's error (about f‴·h²/6 for a smooth map).
 ///
 /// ```
 /// use std::sync::Arc;

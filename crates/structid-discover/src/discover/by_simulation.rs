@@ -269,11 +269,14 @@ pub(super) fn known_blocks(
     skip: usize,
 ) -> Vec<JointBlock> {
     let model = &h.model;
+    // Each record simulated once; a channel's range over all of them.
+    let runs: Option<Vec<Signal>> = est
+        .records()
+        .iter()
+        .map(|r| model.simulate(maps, r.u(), None, None).ok().map(|s| s.z))
+        .collect();
     let input_range = |c: usize| {
-        let z = crate::records::stacked(est, |r| {
-            Ok(model.simulate(maps, r.u(), None, None)?.z.channel(c))
-        })
-        .ok()?;
+        let z: Vec<f64> = runs.as_ref()?.iter().flat_map(|z| z.channel(c)).collect();
         let (lo, hi) = minmax(&z);
         (hi > lo && hi.is_finite() && lo.is_finite()).then_some(hi - lo)
     };

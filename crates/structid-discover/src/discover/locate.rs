@@ -10,7 +10,7 @@ use crate::hysteresis::DirectionTest;
 use super::context::Context;
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation};
-use super::naming::name_and_add;
+use super::naming::{Memory, name_and_add};
 use super::{
     ALTERNATIVE_FACTOR, ALTERNATIVE_LOCATIONS, Classification, DIRECTION_WITHIN, DiscoverSettings,
     Finding, HYSTERESIS_OVER_STATIC, NoiseLevel, NominalRefinement, Result,
@@ -114,8 +114,20 @@ fn add(
     direction: DirectionTest,
     total_variation_rms: Option<f64>,
 ) -> Result<Finding> {
+    add_with(cx, best, direction, total_variation_rms, Memory::Tested)
+}
+
+/// [`add`], saying whether the direction test decides the effect's memory or a fitted
+/// hysteresis already showed it.
+fn add_with(
+    cx: &Context<'_>,
+    best: Fitted,
+    direction: DirectionTest,
+    total_variation_rms: Option<f64>,
+    memory: Memory,
+) -> Result<Finding> {
     let joint = best.linear.clone();
-    let mut finding = name_and_add(best, direction, total_variation_rms, cx)?;
+    let mut finding = name_and_add(best, direction, total_variation_rms, memory, cx)?;
     if let (Some(j), Some(g)) = (joint, cx.given.polynomial()) {
         // In the structure's form, as the refinement after naming records it.
         let form = |g: &structid_linear::PolynomialModel| {
@@ -351,7 +363,8 @@ pub(super) fn hysteresis_at_input(
             .ok()
             .unwrap_or_else(DirectionTest::none);
         direction.dynamic = true;
-        if let Ok(f) = add_at(cx, fitted, i, direction) {
+        let tv = total_variation_rms(fitted, i);
+        if let Ok(f) = add_with(cx, fitted.remove(i), direction, tv, Memory::Shown) {
             finding = f;
         }
     }

@@ -423,6 +423,16 @@ fn refit_with_known(
     Some((new_fit, joint, errors))
 }
 
+/// Whether the direction test decides if an effect has memory, or a fitted hysteresis
+/// operator already showed it (and the finding is dynamic whatever the test says).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Memory {
+    /// The direction test decides.
+    Tested,
+    /// A fitted hysteresis showed it.
+    Shown,
+}
+
 /// The direction test of what the family `map` leaves of the fit `best`, whose own test is
 /// `own`. Its share is of the residual energy the nonparametric estimate leaves: a family
 /// refined by simulation can sit far from the estimate's ŵ along the record's z (a linear
@@ -457,6 +467,7 @@ pub(super) fn name_and_add(
     best: Fitted,
     direction: DirectionTest,
     total_variation_rms: Option<f64>,
+    memory: Memory,
     cx: &Context<'_>,
 ) -> Result<Finding> {
     let (est, val, settings) = (cx.est, cx.val, &cx.settings);
@@ -505,7 +516,7 @@ pub(super) fn name_and_add(
             family(i, &mut naming);
         }
     }
-    let selection = select(&rows, None, settings.significance);
+    let mut selection = select(&rows, None, settings.significance);
     let mut chosen_family = selection.chosen.and_then(|c| row_family[c]);
     let mut direction = direction;
     let mut static_direction_remark = None;
@@ -513,10 +524,14 @@ pub(super) fn name_and_add(
         // The direction effect is the effect's memory only when the chosen static row at the
         // site leaves it too: a smoothed kink, or a map estimated around a biased G, leaves a
         // direction effect that the family's own curve does not.
-        let family_test = chosen_family.and_then(|i| {
-            let map = ExprMap::parse(&naming.ranked[i].expression, 1).ok()?;
-            family_direction(&best, &map, &direction, settings)
-        });
+        // Only a family refined around the fit's own known maps leaves a residual the fit's ê
+        // and ŵ describe; a memory a fitted hysteresis showed is not re-tested.
+        let family_test = chosen_family
+            .filter(|&i| memory == Memory::Tested && joint_known[i].is_none())
+            .and_then(|i| {
+                let map = ExprMap::parse(&naming.ranked[i].expression, 1).ok()?;
+                family_direction(&best, &map, &direction, settings)
+            });
         match family_test {
             Some(t) if !t.dynamic => {
                 static_direction_remark = Some(format!(
@@ -534,6 +549,8 @@ pub(super) fn name_and_add(
             _ => {
                 classification = Classification::Dynamic;
                 chosen_family = None;
+                // The augmented model carries the nonparametric map (row 0).
+                selection.chosen = Some(0);
             }
         }
     }
