@@ -65,7 +65,7 @@ pub fn parts<'a, T>(signal: &'a [T], bounds: &[usize]) -> Vec<&'a [T]> {
 }
 
 /// The simulation of a model with its maps in the loop on every record of a [`Data`], each
-/// record scored as [`validate`] scores it (its own initial state, its own windows), pooled.
+/// record scored as [`validate`](structid_core::validation::validate) scores it (its own initial state, its own windows), pooled.
 #[derive(Clone, Debug)]
 pub struct Simulated {
     /// The simulated output (first output), records stacked.
@@ -119,11 +119,11 @@ impl Simulated {
     }
 }
 
-/// Simulates `model` with `maps` on every record of `data` ([`validate`] record by record,
+/// Simulates `model` with `maps` on every record of `data` ([`validate`](structid_core::validation::validate) record by record,
 /// with `settings`) and pools the simulation RMS and fit over the records' scored samples.
 ///
 /// A model beyond measurability (maps in series, a map of a latent signal) has no one-step
-/// predictor, which [`validate`] fits the initial state with; it is scored by
+/// predictor, which [`validate`](structid_core::validation::validate) fits the initial state with; it is scored by
 /// [`simulate_scored`] alone instead: under free-run scoring simulated from rest, as the
 /// sensor site always is; under windowed scoring each window from its own state, fitted to z
 /// as [`Model::compute_z_with_maps`] gives it (the noise-free simulation's for an

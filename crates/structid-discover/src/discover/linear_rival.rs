@@ -59,7 +59,7 @@ pub struct LinearRival {
     pub explains: bool,
     /// For a dynamic finding: whether this G's own residual, deconvolved to the finding's
     /// block, still depends on the direction of the block's input
-    /// ([`leaves_direction_effect`]); `None` when not assessed.
+    /// (see `leaves_direction_effect` in this module); `None` when not assessed.
     pub leaves_direction_effect: Option<bool>,
 }
 

@@ -59,7 +59,7 @@ pub struct SecondBlock {
 
 /// The second-block rows: for each site of `nominal` other than the first finding's, the
 /// first block's map and a map at that site fitted together on `est` and scored on `val` (see
-/// the [module docs](self)). `nominal` is the model the first finding was found on, and
+/// the module docs of `second_block`). `nominal` is the model the first finding was found on, and
 /// `settings` those it was found with, their scoring resolved ([`super::Discovery::scoring`]).
 /// Rows whose model cannot be built or fitted are left out.
 ///
