@@ -1033,8 +1033,8 @@ fn effect_free_cases_of_the_tuning_seeds() {
 
 /// The speed goal: on records of 5000 samples, one discovery takes at most 10 s in
 /// the median and 30 s in every case (run with `--ignored --test-threads 1`, nothing else
-/// running: wall times; a timed test, so not run by default). Measured: median 4.9 s, slowest
-/// 21.6 s. The criterion bench `discover_25k` times one case at 5000 samples.
+/// running: wall times; a timed test, so not run by default). Measured: median 3.7 s, slowest
+/// 24.3 s. The criterion bench `discover_25k` times one case at 5000 samples.
 #[test]
 #[ignore]
 fn discovery_speed_on_5000_samples() {
