@@ -457,6 +457,45 @@ fn family_direction(
     Some(t)
 }
 
+/// A direction-dependent residual of the nonparametric map at the table's choice: the effect
+/// has memory only when the chosen static row at the site leaves the direction effect too (a
+/// smoothed kink, or a map estimated around a biased G, leaves one that the family's own
+/// curve does not). Only a family refined around the fit's own known maps leaves a residual
+/// the fit's ê and ŵ describe, and a memory a fitted hysteresis showed is not re-tested.
+/// Returns the direction test that stands, the family still chosen (`None` when the effect
+/// has memory) and the remark of a direction effect the family removed.
+fn weigh_direction(
+    best: &Fitted,
+    naming: &Naming,
+    joint_known: &[Option<Hypothesis>],
+    chosen_family: Option<usize>,
+    direction: DirectionTest,
+    memory: Memory,
+    settings: &DiscoverSettings,
+) -> (DirectionTest, Option<usize>, Option<String>) {
+    let family_test = chosen_family
+        .filter(|&i| memory == Memory::Tested && joint_known[i].is_none())
+        .and_then(|i| {
+            let map = ExprMap::parse(&naming.ranked[i].expression, 1).ok()?;
+            family_direction(best, &map, &direction, settings)
+        });
+    match family_test {
+        Some(t) if !t.dynamic => {
+            let remark = format!(
+                "the direction of z explains {:.0} % of what the nonparametric map leaves (t = \
+                 {:.1}); what the named family leaves depends on it by {:.0} % of that (t = \
+                 {:.1}): the direction effect was the estimate's misfit, not memory",
+                100.0 * direction.explained,
+                direction.t_statistic,
+                100.0 * t.explained,
+                t.t_statistic
+            );
+            (t, chosen_family, Some(remark))
+        }
+        _ => (direction, None, None),
+    }
+}
+
 /// The most breakpoints a written table gets, whatever the kernel's width.
 const MAX_TABLE_POINTS: usize = 20_001;
 
@@ -491,68 +530,48 @@ pub(super) fn name_and_add(
     let mut rows = vec![nonparametric_row(&best, &h, &val_h, settings)];
     let g_refitted = best.linear.is_some();
     let mut row_family: Vec<Option<usize>> = vec![None];
-    {
-        // The first families in parsimonious order whose map fit is not flagged are refined
-        // and simulated; flagged ones stay in the naming table with their flags.
-        let targets: Vec<usize> = (0..naming.ranked.len())
-            .filter(|&i| naming.ranked[i].nameable())
-            .take(REFINED_FAMILIES)
-            .collect();
-        let mut family = |i: usize, naming: &mut Naming| {
-            let (mut row, joint) = family_row(&mut naming.ranked[i], &h, &est_h, &val_h, settings);
-            row.g_refitted = g_refitted;
-            family_rms[i] = Some(row.validation_rms);
-            joint_known[i] = joint;
-            rows.push(row);
-            row_family.push(Some(i));
-        };
-        for &i in &targets {
-            family(i, &mut naming);
-        }
-        // A saturation flagged as a relay says "Coulomb" with its level and offset: the relay
-        // itself is refined from there (its map fit to a smoothed jump is poor, its refit is
-        // not).
-        if let Some(i) = relay_family(&mut naming, &targets, &zs, &ws, location) {
-            family(i, &mut naming);
-        }
+    // The first families in parsimonious order whose map fit is not flagged are refined
+    // and simulated; flagged ones stay in the naming table with their flags.
+    let targets: Vec<usize> = (0..naming.ranked.len())
+        .filter(|&i| naming.ranked[i].nameable())
+        .take(REFINED_FAMILIES)
+        .collect();
+    let mut family = |i: usize, naming: &mut Naming| {
+        let (mut row, joint) = family_row(&mut naming.ranked[i], &h, &est_h, &val_h, settings);
+        row.g_refitted = g_refitted;
+        family_rms[i] = Some(row.validation_rms);
+        joint_known[i] = joint;
+        rows.push(row);
+        row_family.push(Some(i));
+    };
+    for &i in &targets {
+        family(i, &mut naming);
+    }
+    // A saturation flagged as a relay says "Coulomb" with its level and offset: the relay
+    // itself is refined from there (its map fit to a smoothed jump is poor, its refit is
+    // not).
+    if let Some(i) = relay_family(&mut naming, &targets, &zs, &ws, location) {
+        family(i, &mut naming);
     }
     let mut selection = select(&rows, None, settings.significance);
-    let mut chosen_family = selection.chosen.and_then(|c| row_family[c]);
-    let mut direction = direction;
-    let mut static_direction_remark = None;
+    let chosen_family = selection.chosen.and_then(|c| row_family[c]);
+    let (direction, chosen_family, static_direction_remark) = if direction.dynamic {
+        weigh_direction(
+            &best,
+            &naming,
+            &joint_known,
+            chosen_family,
+            direction,
+            memory,
+            settings,
+        )
+    } else {
+        (direction, chosen_family, None)
+    };
     if direction.dynamic {
-        // The direction effect is the effect's memory only when the chosen static row at the
-        // site leaves it too: a smoothed kink, or a map estimated around a biased G, leaves a
-        // direction effect that the family's own curve does not.
-        // Only a family refined around the fit's own known maps leaves a residual the fit's ê
-        // and ŵ describe; a memory a fitted hysteresis showed is not re-tested.
-        let family_test = chosen_family
-            .filter(|&i| memory == Memory::Tested && joint_known[i].is_none())
-            .and_then(|i| {
-                let map = ExprMap::parse(&naming.ranked[i].expression, 1).ok()?;
-                family_direction(&best, &map, &direction, settings)
-            });
-        match family_test {
-            Some(t) if !t.dynamic => {
-                static_direction_remark = Some(format!(
-                    "the direction of z explains {:.0} % of what the nonparametric map leaves \
-                     (t = {:.1}); what the named family leaves depends on it by {:.0} % of that \
-                     (t = {:.1}): \
-                     the direction effect was the estimate's misfit, not memory",
-                    100.0 * direction.explained,
-                    direction.t_statistic,
-                    100.0 * t.explained,
-                    t.t_statistic
-                ));
-                direction = t;
-            }
-            _ => {
-                classification = Classification::Dynamic;
-                chosen_family = None;
-                // The augmented model carries the nonparametric map (row 0).
-                selection.chosen = Some(0);
-            }
-        }
+        classification = Classification::Dynamic;
+        // The augmented model carries the nonparametric map (row 0).
+        selection.chosen = Some(0);
     }
     if let Some(i) = chosen_family {
         classification = Classification::Named(naming.ranked[i].clone());
