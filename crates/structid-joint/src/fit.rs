@@ -115,14 +115,14 @@ impl JointSettingsBuilder {
         self.0.continuity_weight = mu;
         self
     }
-    /// Iterations per stage (≥ 1).
-    pub fn max_iterations(mut self, n: usize) -> Self {
-        self.0.max_iterations = n;
-        self
-    }
     /// Relative tolerance (in (0, 1)).
     pub fn tolerance(mut self, tol: f64) -> Self {
         self.0.tolerance = tol;
+        self
+    }
+    /// Iterations per stage (≥ 1).
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.0.max_iterations = n;
         self
     }
     /// Whether initial states are fitted.

@@ -152,14 +152,14 @@ pub fn forward_jacobian(
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct LmSettings {
-    max_iterations: usize,
-    tolerance: f64,
-    initial_damping: f64,
-    damping_increase: f64,
-    damping_decrease: f64,
-    min_damping: f64,
-    max_damping: f64,
-    max_step_attempts: usize,
+    pub(crate) max_iterations: usize,
+    pub(crate) tolerance: f64,
+    pub(crate) initial_damping: f64,
+    pub(crate) damping_increase: f64,
+    pub(crate) damping_decrease: f64,
+    pub(crate) min_damping: f64,
+    pub(crate) max_damping: f64,
+    pub(crate) max_step_attempts: usize,
 }
 
 impl Default for LmSettings {
@@ -281,7 +281,7 @@ impl LmSettings {
 /// assert_eq!((s.max_step_attempts(), s.min_damping()), (10, 1e-12));
 /// ```
 #[derive(Clone, Debug)]
-pub struct LmSettingsBuilder(LmSettings);
+pub struct LmSettingsBuilder(pub(crate) LmSettings);
 
 impl LmSettingsBuilder {
     /// Iteration limit (≥ 1).

@@ -4,12 +4,10 @@ use nalgebra::{DMatrix, DVector};
 use structid_lti::{Signal, filter_row};
 
 use crate::arx::{ArxSettings, check_integrators, fit_arx_records, prepare_data, std_from};
-use crate::error::{
-    LinearError, check_at_least_one, check_non_negative, check_positive, check_sample_time,
-};
+use crate::error::{LinearError, check_sample_time};
 use crate::integrators::{convolve, deflate, difference, full_covariance, integrator_polynomial};
 use crate::levenberg_marquardt::{
-    LeastSquaresProblem, LevenbergMarquardt, LmFit, LmSettings, LmStatus,
+    LeastSquaresProblem, LevenbergMarquardt, LmFit, LmSettings, LmSettingsBuilder, LmStatus,
 };
 use crate::normal_equations::NormalEquations;
 use crate::orders::Orders;
@@ -26,25 +24,28 @@ use crate::polynomial::{PolynomialModel, root_radius, schur_stable, split_parame
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct OeSettings {
-    max_iterations: usize,
-    tolerance: f64,
+    /// The refinement's Levenberg–Marquardt settings; the builder sets the iterations, the
+    /// tolerance and μ₀, the rest is fixed (see [`Default`]).
+    lm: LmSettings,
     transient: usize,
     sample_time: Option<f64>,
-    initial_damping: f64,
     arx: ArxSettings,
     integrators: usize,
 }
 
 impl Default for OeSettings {
     /// 100 iterations, relative cost decrease 1e-10, no transient, sample time from the
-    /// initial model, initial damping μ₀ = 1e-3, default ARX settings for [`oe`].
+    /// initial model, initial damping μ₀ = 1e-3, default ARX settings for [`oe`]. The damping
+    /// grows × 10 after a failed trial and shrinks ÷ 10 (floor 1e-15) after an accepted step,
+    /// up to 1e20, with no limit on the trials of an iteration.
     fn default() -> Self {
         OeSettings {
-            max_iterations: 100,
-            tolerance: 1e-10,
+            lm: LmSettings {
+                max_step_attempts: usize::MAX,
+                ..LmSettings::default()
+            },
             transient: 0,
             sample_time: None,
-            initial_damping: 1e-3,
             arx: ArxSettings::default(),
             integrators: 0,
         }
@@ -68,7 +69,7 @@ impl OeSettings {
     /// assert_eq!(OeSettings::default().max_iterations(), 100);
     /// ```
     pub fn max_iterations(&self) -> usize {
-        self.max_iterations
+        self.lm.max_iterations()
     }
     /// Convergence threshold on the relative cost decrease of an accepted step.
     ///
@@ -77,7 +78,7 @@ impl OeSettings {
     /// assert_eq!(OeSettings::default().tolerance(), 1e-10);
     /// ```
     pub fn tolerance(&self) -> f64 {
-        self.tolerance
+        self.lm.tolerance()
     }
     /// Number of samples excluded at the start of the cost (the simulation still starts at
     /// sample 0 from zero initial conditions).
@@ -105,7 +106,7 @@ impl OeSettings {
     /// assert_eq!(OeSettings::default().initial_damping(), 1e-3);
     /// ```
     pub fn initial_damping(&self) -> f64 {
-        self.initial_damping
+        self.lm.initial_damping()
     }
     /// ARX settings used by [`oe`] for the initial model (its sample time is replaced by
     /// [`sample_time`](Self::sample_time) when that is set).
@@ -128,21 +129,6 @@ impl OeSettings {
     /// ```
     pub fn integrators(&self) -> usize {
         self.integrators
-    }
-
-    /// The solver settings of the refinement: these limits with damping × 10 after a failed
-    /// trial, ÷ 10 (floor 1e-15) after an accepted step, up to 1e20.
-    pub(crate) fn lm(&self) -> Result<LmSettings, LinearError> {
-        LmSettings::builder()
-            .max_iterations(self.max_iterations)
-            .tolerance(self.tolerance)
-            .initial_damping(self.initial_damping)
-            .damping_increase(10.0)
-            .damping_decrease(10.0)
-            .min_damping(1e-15)
-            .max_damping(1e20)
-            .max_step_attempts(usize::MAX)
-            .build()
     }
 }
 
@@ -169,7 +155,7 @@ impl OeSettingsBuilder {
     /// assert!(OeSettings::builder().max_iterations(0).build().is_err());
     /// ```
     pub fn max_iterations(mut self, n: usize) -> Self {
-        self.0.max_iterations = n;
+        self.0.lm.max_iterations = n;
         self
     }
     /// Relative cost-decrease tolerance (≥ 0, finite).
@@ -179,7 +165,7 @@ impl OeSettingsBuilder {
     /// assert!(OeSettings::builder().tolerance(0.0).build().is_ok());
     /// ```
     pub fn tolerance(mut self, tol: f64) -> Self {
-        self.0.tolerance = tol;
+        self.0.lm.tolerance = tol;
         self
     }
     /// Samples excluded at the start of the cost.
@@ -209,7 +195,7 @@ impl OeSettingsBuilder {
     /// assert!(OeSettings::builder().initial_damping(0.0).build().is_err());
     /// ```
     pub fn initial_damping(mut self, mu: f64) -> Self {
-        self.0.initial_damping = mu;
+        self.0.lm.initial_damping = mu;
         self
     }
     /// ARX settings for the initial model of [`oe`].
@@ -244,9 +230,7 @@ impl OeSettingsBuilder {
     /// ```
     pub fn build(self) -> Result<OeSettings, LinearError> {
         let s = self.0;
-        check_at_least_one("max_iterations", s.max_iterations)?;
-        check_non_negative("tolerance", s.tolerance)?;
-        check_positive("initial_damping", s.initial_damping)?;
+        LmSettingsBuilder(s.lm.clone()).build()?;
         check_sample_time(s.sample_time)?;
         check_integrators(s.integrators)?;
         Ok(s)
@@ -613,7 +597,7 @@ fn refine(
         fixed: integrator_polynomial(n_int),
         last: None,
     };
-    let fit = LevenbergMarquardt::new(settings.lm()?)
+    let fit = LevenbergMarquardt::new(settings.lm.clone())
         .minimize(&mut problem, &parameters_for(initial, orders))
         .map_err(|e| match e {
             // the initial model is finite and stable, so only its simulation can fail
@@ -696,14 +680,13 @@ pub fn oe(
 /// ```
 /// use structid_linear::{oe_records, OeSettings, Orders, PolynomialModel};
 /// use structid_lti::Signal;
-/// let truth = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None)?;
-/// let rec = |len: usize, shift: usize| {
-///     let u = Signal::from_fn(len, 1, |k, _| (((k + shift) * (k + shift)) as f64 * 0.37).sin());
-///     let y = Signal::new(1, truth.simulate(&u).unwrap()).unwrap();
-///     (u, y)
-/// };
-/// let (a, b) = (rec(200, 0), rec(150, 11));
-/// let fit = oe_records(&[(&a.0, &a.1), (&b.0, &b.1)], &Orders::siso(2, 2, 1), &OeSettings::default())?;
+/// // A chirp and a square wave through G = (q⁻¹ + 0.5q⁻²)/(1 − 1.5q⁻¹ + 0.7q⁻²).
+/// let g = PolynomialModel::new(vec![vec![0.0, 1.0, 0.5]], vec![1.0, -1.5, 0.7], None)?;
+/// let chirp = Signal::from_fn(200, 1, |k, _| (0.002 * (k * k) as f64).sin());
+/// let square = Signal::from_fn(150, 1, |k, _| if (k / 7) % 2 == 0 { 1.0 } else { -1.0 });
+/// let outputs = [&chirp, &square].map(|u| Signal::new(1, g.simulate(u).unwrap()).unwrap());
+/// let records = [(&chirp, &outputs[0]), (&square, &outputs[1])];
+/// let fit = oe_records(&records, &Orders::siso(2, 2, 1), &OeSettings::default())?;
 /// assert!((fit.model.den[1] + 1.5).abs() < 1e-8);
 /// # Ok::<(), structid_linear::LinearError>(())
 /// ```

@@ -29,6 +29,19 @@ class Refinement:
     stop_reason: str
 
 
+def _checked_beta_and_validation(model: Model, beta: object,
+                                 validation: Optional[Tuple[object, object]]) -> object:
+    """Checks that ``beta`` is a number or ``"auto"``, and returns the validation records'
+    columns (``None`` without validation)."""
+    if isinstance(beta, str) and beta != "auto":
+        raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")
+    if validation is None:
+        return None
+    if len(validation) != 2:
+        raise _structid.StructidError("validation is a pair (u_val, y_val)")
+    return _records_columns(model, validation[0], validation[1], "validation ")
+
+
 def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[object, object]] = None,
            beta: Union[float, str] = "auto", sigma: Union[None, float, str] = None,
            selection: str = "ml", iterations: int = 10, tolerance: float = 1e-3, settle: int = 0,
@@ -49,13 +62,7 @@ def refine(model: Model, u: object, y: object, *, validation: Optional[Tuple[obj
     sigma_auto = isinstance(sigma, str)
     if sigma_auto and sigma != "auto":
         raise _structid.StructidError(f"sigma `{sigma}` is neither a number nor \"auto\"")
-    if isinstance(beta, str) and beta != "auto":
-        raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")
-    val = None
-    if validation is not None:
-        if len(validation) != 2:
-            raise _structid.StructidError("validation is a pair (u_val, y_val)")
-        val = _records_columns(model, validation[0], validation[1], "validation ")
+    val = _checked_beta_and_validation(model, beta, validation)
     out = _structid.refine_columns(
         model._native, _records_columns(model, u, y, ""), val,
         None if isinstance(beta, str) else float(beta),
@@ -106,45 +113,34 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
     best of 10⁻¹⁰ … 10⁻² by the validation simulation RMS. ``initial_state`` is ``"zero"``
     (each record starts at rest) or ``"estimate"`` (fitted). ``out`` writes the CLI's output
     directory (model.toml, the map tables, joint.json)."""
-    if isinstance(beta, str) and beta != "auto":
-        raise _structid.StructidError(f"beta `{beta}` is neither a number nor \"auto\"")
-    val = None
-    if validation is not None:
-        if len(validation) != 2:
-            raise _structid.StructidError("validation is a pair (u_val, y_val)")
-        val = _records_columns(model, validation[0], validation[1], "validation ")
+    val = _checked_beta_and_validation(model, beta, validation)
     o = _structid.refine_joint_columns(
         model._native, _records_columns(model, u, y, ""), val,
         None if isinstance(beta, str) else float(beta), [str(f) for f in free], int(centres),
         None if segment_length is None else int(segment_length), int(iterations), initial_state,
         None if out is None else os.fspath(out))
-    return JointRefinement(model=Model(o["model"]), beta=o["beta"], trials=o["trials"], cost=o["cost"],
-                           initial_cost=o["initial_cost"], rms=o["rms"],
-                           initial_states=o["initial_states"], free=o["free"], stages=o["stages"])
+    return JointRefinement(**_joint_fields(o))
+
+
+def _joint_fields(o: Dict[str, Any]) -> Dict[str, Any]:
+    """The fields of :class:`JointRefinement` from the native result ``o``."""
+    keys = ("beta", "trials", "cost", "initial_cost", "rms", "initial_states", "free", "stages")
+    return dict(model=Model(o["model"]), **{k: o[k] for k in keys})
 
 
 @dataclass
-class BlockStructured:
+class BlockStructured(JointRefinement):
     """The result of :func:`wiener_hammerstein` (y = G₂·N(G₁·u) + e) and
-    :func:`hammerstein_wiener` (y = N₂(G·N₁(u)) + e), every block fitted."""
+    :func:`hammerstein_wiener` (y = N₂(G·N₁(u)) + e), every block fitted: the fields of
+    :class:`JointRefinement` (``model`` is the LTI block(s) in one LFT, each map as a table of
+    its values, ``N``; or ``input`` and ``output``), and the two below."""
 
-    model: Model
-    """The fitted model (the CLI's model.toml): the LTI block(s) in one LFT, each map as a table
-    of its values (``N``; or ``input`` and ``output``)."""
-    bla: Tuple[List[float], List[float]]
+    bla: Tuple[List[float], List[float]] = ((), ())
     """The best linear approximation (num, den) in q⁻¹."""
-    divisions: List[Dict[str, Any]]
+    divisions: List[Dict[str, Any]] = field(default_factory=list)
     """Wiener–Hammerstein: every division of its poles and zeros, best first: ``front`` and
     ``back`` as (num, den), and ``rms``, the error left by a map fitted behind it. Empty for
     Hammerstein–Wiener."""
-    beta: float
-    trials: List[Tuple[float, List[float]]]
-    cost: float
-    initial_cost: float
-    rms: List[float]
-    initial_states: List[List[float]]
-    free: List[Tuple[str, int, int, float]]
-    stages: List[Tuple[str, int, List[float], str]]
 
 
 def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, int, int],
@@ -170,11 +166,7 @@ def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, i
         None if out is None else os.fspath(out), structure)
     divisions = [{"front": (fn, fd), "back": (bn, bd), "rms": r}
                  for fn, fd, bn, bd, r in o["divisions"]]
-    return BlockStructured(model=Model(o["model"]), bla=o["bla"], divisions=divisions,
-                           beta=o["beta"], trials=o["trials"], cost=o["cost"],
-                           initial_cost=o["initial_cost"], rms=o["rms"],
-                           initial_states=o["initial_states"], free=o["free"],
-                           stages=o["stages"])
+    return BlockStructured(bla=o["bla"], divisions=divisions, **_joint_fields(o))
 
 
 def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,

@@ -552,18 +552,10 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
     let ne = noise.inputs();
     let r = problem.residual().as_slice();
     let free = problem.free_response();
-    let FeatureGram {
-        maps,
-        dims,
-        offsets,
-        m,
-        nx,
-        g,
-        whitening,
-        chunk,
-        t_prepared,
-        t_assembled,
-    } = gram(problem, true, problem.held_out())?;
+    let gram = gram(problem, true, problem.held_out())?;
+    let (maps, dims, offsets) = (&gram.maps, &gram.dims, &gram.offsets);
+    let (m, nx, g, whitening) = (gram.m, gram.nx, &gram.g, &gram.whitening);
+    let (chunk, t_prepared, t_assembled) = (gram.chunk, gram.t_prepared, gram.t_assembled);
     let cols = m + nx + 1;
 
     // --- ridge least squares in (b, x₀): (G_XX + L·β·[I 0; 0 0])·v = G_Xr --------------------

@@ -270,20 +270,25 @@ pub fn discover_effects(
     let t0 = Instant::now();
     let mut steps: Vec<Step> = Vec::new();
     let mut current = nominal.clone();
-    let mut settings = settings.clone();
+    let mut run = Run {
+        est,
+        val,
+        settings: settings.clone(),
+        effects,
+    };
     // The step whose map a second-block row replaced, or whose dynamic discovery a static
     // reading replaced, until the next step confirms it by adopting an effect: a row, or a
     // reading, stands as a pair, not as its first map alone.
     let mut unconfirmed: Option<usize> = None;
     let stop = loop {
-        let d = match discover(&current, est, val, &settings) {
+        let d = match discover(&current, est, val, &run.settings) {
             Ok(d) => d,
             Err(e) => {
                 let Some(i) = unconfirmed.take() else {
                     return Err(e);
                 };
                 // The step that was to confirm a pair failed: the pair is not confirmed.
-                match unconfirm(&mut steps[i], est, val, &settings, effects) {
+                match unconfirm(&mut steps[i], &run) {
                     Unconfirmed::Retry(next) => {
                         unconfirmed = Some(i);
                         current = *next;
@@ -294,7 +299,7 @@ pub fn discover_effects(
                 }
             }
         };
-        settings.scoring = Some(d.scoring);
+        run.settings.scoring = Some(d.scoring);
         let adopted_so_far = steps.iter().filter(|s| s.adopted).count();
         let more = adopted_so_far + 1 < effects.max_effects;
         let mut step = Step {
@@ -315,7 +320,7 @@ pub fn discover_effects(
             unconfirmed = None;
         } else if let Some(i) = unconfirmed.take() {
             steps.push(step);
-            match unconfirm(&mut steps[i], est, val, &settings, effects) {
+            match unconfirm(&mut steps[i], &run) {
                 Unconfirmed::Retry(next) => {
                     unconfirmed = Some(i);
                     current = *next;
@@ -330,8 +335,8 @@ pub fn discover_effects(
             Ok(()) => step.adopted = true,
             Err(StopReason::Dynamic) if more => {
                 // Is the direction dependence a second, static effect?
-                let next = with_static_reading(&mut step, est, val, &settings)
-                    .or_else(|| with_second_block(&mut step, est, val, &settings, effects));
+                let next = with_static_reading(&mut step, &run)
+                    .or_else(|| with_second_block(&mut step, &run));
                 let Some(next) = next else {
                     steps.push(step);
                     break StopReason::Dynamic;
@@ -347,8 +352,7 @@ pub fn discover_effects(
                     .iter()
                     .rposition(|s| s.adopted && s.second_block.is_none());
                 let retry = last.and_then(|i| {
-                    retry_with_second_block(&mut steps[i], est, val, &settings, effects)
-                        .map(|next| (i, next))
+                    retry_with_second_block(&mut steps[i], &run).map(|next| (i, next))
                 });
                 steps.push(step);
                 match retry {
@@ -380,6 +384,15 @@ pub fn discover_effects(
     })
 }
 
+/// What every step of the iteration runs with: the records, the discovery settings (with
+/// the scoring the first step resolved, once it has) and the iteration's own settings.
+struct Run<'a> {
+    est: &'a Data,
+    val: &'a Data,
+    settings: DiscoverSettings,
+    effects: &'a EffectsSettings,
+}
+
 /// What becomes of a step whose pair (its static reading, or its second-block row) the next
 /// step did not confirm.
 enum Unconfirmed {
@@ -394,15 +407,9 @@ enum Unconfirmed {
 /// Puts `step` back as it was before its unconfirmed pair. A row is dropped (a dynamic step
 /// is then not adopted). A static reading gives way to the dynamic discovery it replaced,
 /// which the second-block rows then decide, as they decide a dynamic step without a reading.
-fn unconfirm(
-    step: &mut Step,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-    effects: &EffectsSettings,
-) -> Unconfirmed {
+fn unconfirm(step: &mut Step, run: &Run) -> Unconfirmed {
     if step.second_block.take().is_some() {
-        let dynamic = judge(step, effects) == Err(StopReason::Dynamic);
+        let dynamic = judge(step, run.effects) == Err(StopReason::Dynamic);
         step.adopted &= !dynamic;
         return Unconfirmed::Stop(dynamic.then_some(StopReason::Dynamic));
     }
@@ -411,7 +418,7 @@ fn unconfirm(
     };
     step.discovery = dynamic;
     step.adopted = false;
-    match with_second_block(step, est, val, settings, effects) {
+    match with_second_block(step, run) {
         Some(next) => Unconfirmed::Retry(Box::new(next)),
         None => Unconfirmed::Stop(Some(StopReason::Dynamic)),
     }
@@ -422,13 +429,8 @@ fn unconfirm(
 /// the next step runs from, or `None` (the step unchanged) without a reading. The reading is
 /// the first of a pair: it is adopted without a gain of its own, and the next step confirms
 /// the pair ([`confirms_static_reading`]).
-fn with_static_reading(
-    step: &mut Step,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-) -> Option<Nominal> {
-    let reading = static_reading(&step.nominal, step, est, val, settings)?;
+fn with_static_reading(step: &mut Step, run: &Run) -> Option<Nominal> {
+    let reading = static_reading(&step.nominal, step, run)?;
     let next = reading
         .finding
         .as_ref()?
@@ -444,20 +446,14 @@ fn with_static_reading(
 /// its static approximation (or of the model it started from, when lower) by the required
 /// share, and adopts the step; returns the nominal model the next step runs from (the step's
 /// map replaced by the row's first map), or `None` (the step unchanged).
-fn with_second_block(
-    step: &mut Step,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-    effects: &EffectsSettings,
-) -> Option<Nominal> {
+fn with_second_block(step: &mut Step, run: &Run) -> Option<Nominal> {
     let f = step.discovery.finding.as_ref()?;
     let reference = f
         .augmented
         .validation_gap
         .rms
         .min(step.discovery.validation_gap.rms);
-    let next = with_row(step, reference, est, val, settings, effects)?;
+    let next = with_row(step, reference, run)?;
     step.adopted = true;
     Some(next)
 }
@@ -468,18 +464,12 @@ fn with_second_block(
 /// direction dependence at one site is also what a second static effect leaves that the
 /// first map cannot carry (friction beside a spring); the reading is the first map of that
 /// explanation, and the next step must find the second ([`confirms_static_reading`]).
-fn static_reading(
-    nominal: &Nominal,
-    step: &Step,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-) -> Option<Discovery> {
+fn static_reading(nominal: &Nominal, step: &Step, run: &Run) -> Option<Discovery> {
     let site = step.discovery.finding.as_ref()?.location;
-    let mut at_site = settings.clone();
+    let mut at_site = run.settings.clone();
     at_site.locations = Some(vec![site]);
     at_site.hysteresis_threshold = 1.0;
-    let mut d = discover(nominal, est, val, &at_site).ok()?;
+    let mut d = discover(nominal, run.est, run.val, &at_site).ok()?;
     if let Some(f) = d.finding.as_mut() {
         f.remarks.push(
             "the direction dependence first found here (hysteresis or backlash suspected) was \
@@ -552,13 +542,7 @@ fn judge(step: &Step, effects: &EffectsSettings) -> std::result::Result<(), Stop
 /// Sets the second-block row of an adopted step that hid the next effect, when one beats it,
 /// and returns the nominal model the step is run again from (the step's map replaced by the
 /// row's first map).
-fn retry_with_second_block(
-    last: &mut Step,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-    effects: &EffectsSettings,
-) -> Option<Nominal> {
+fn retry_with_second_block(last: &mut Step, run: &Run) -> Option<Nominal> {
     let reference = last
         .discovery
         .finding
@@ -566,22 +550,15 @@ fn retry_with_second_block(
         .augmented
         .validation_gap
         .rms;
-    with_row(last, reference, est, val, settings, effects)
+    with_row(last, reference, run)
 }
 
 /// Sets the best second-block row of `step`'s finding when it cuts `reference` by the
 /// required share, and returns the nominal model with the row's first map in place of the
 /// step's; `None` (no row set) when no row does or that model cannot be built.
-fn with_row(
-    step: &mut Step,
-    reference: f64,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-    effects: &EffectsSettings,
-) -> Option<Nominal> {
+fn with_row(step: &mut Step, reference: f64, run: &Run) -> Option<Nominal> {
     let f = step.discovery.finding.as_ref()?;
-    let row = best_second_block(&step.nominal, f, reference, est, val, settings, effects)?;
+    let row = best_second_block(&step.nominal, f, reference, run)?;
     step.second_block = Some(row);
     let next = step.adopted_finding()?.augmented.as_nominal(&step.nominal);
     if next.is_err() {
@@ -596,13 +573,10 @@ fn best_second_block(
     nominal: &Nominal,
     first: &Finding,
     reference: f64,
-    est: &Data,
-    val: &Data,
-    settings: &DiscoverSettings,
-    effects: &EffectsSettings,
+    run: &Run,
 ) -> Option<SecondBlock> {
-    second_blocks(nominal, first, est, val, settings)
+    second_blocks(nominal, first, run.est, run.val, &run.settings)
         .into_iter()
-        .filter(|r| r.validation_rms <= (1.0 - effects.min_improvement) * reference)
+        .filter(|r| r.validation_rms <= (1.0 - run.effects.min_improvement) * reference)
         .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
 }

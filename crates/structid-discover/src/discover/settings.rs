@@ -310,47 +310,47 @@ impl DiscoverSettingsBuilder {
                 "discovery needs at least one effect family to name".into(),
             ));
         }
-        if !(s.sigma_fraction.is_finite() && s.sigma_fraction > 0.0) {
-            return Err(bad(
+        // (parameter, its value, whether it is valid, what it must be)
+        let checks = [
+            (
                 "sigma_fraction",
                 s.sigma_fraction,
+                s.sigma_fraction.is_finite() && s.sigma_fraction > 0.0,
                 "must be a positive fraction of the range of z",
-            ));
-        }
-        if !(s.significance > 0.0 && s.significance <= 0.5) {
-            return Err(bad(
+            ),
+            (
                 "significance",
                 s.significance,
+                s.significance > 0.0 && s.significance <= 0.5,
                 "must be a probability in (0, 0.5]",
-            ));
-        }
-        if s.naming_points < 20 {
-            return Err(bad(
+            ),
+            (
                 "naming_points",
                 s.naming_points as f64,
+                s.naming_points >= 20,
                 "must be at least 20",
-            ));
-        }
-        if !(s.hysteresis_threshold > 0.0 && s.hysteresis_threshold < 1.0) {
-            return Err(bad(
+            ),
+            (
                 "hysteresis_threshold",
                 s.hysteresis_threshold,
+                s.hysteresis_threshold > 0.0 && s.hysteresis_threshold < 1.0,
                 "must be a share between 0 and 1",
-            ));
-        }
-        if s.table_points < 2 {
-            return Err(bad(
+            ),
+            (
                 "table_points",
                 s.table_points as f64,
+                s.table_points >= 2,
                 "must be at least 2",
-            ));
-        }
-        if s.trend_degree > 64 {
-            return Err(bad(
+            ),
+            (
                 "trend_degree",
                 s.trend_degree as f64,
+                s.trend_degree <= 64,
                 "must be at most 64",
-            ));
+            ),
+        ];
+        if let Some(&(name, value, _, reason)) = checks.iter().find(|c| !c.2) {
+            return Err(bad(name, value, reason));
         }
         Ok(s)
     }

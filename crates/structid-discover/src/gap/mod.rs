@@ -387,14 +387,9 @@ fn pool(
                 .map(|r| r.start + b..r.end + b),
         );
     }
-    let signals: Vec<(&str, &[f64])> = candidates
-        .iter()
-        .map(|(name, s)| (name.as_str(), s.as_slice()))
-        .collect();
-    let regions = operating_regions(&residual, &signals, settings.min_region_share);
     let y_parts = crate::records::parts(&y, bounds);
-    let verdict = conclude(tests, prediction_rms, noise_std, &y_parts, settings);
-    Gap {
+    let measured = Measured {
+        records: parts.into_iter().flat_map(|p| p.gap.records).collect(),
         residual,
         simulated,
         rms,
@@ -403,13 +398,59 @@ fn pool(
         fit_percent,
         noise_std,
         noise,
-        tests: verdict.tests,
+        tests,
         windows,
+    };
+    judge(measured, &y_parts, candidates, settings)
+}
+
+/// What a gap measures before its verdict, on one record or pooled over several (the fields
+/// of [`Gap`] with the same names).
+struct Measured {
+    residual: Vec<f64>,
+    simulated: Vec<f64>,
+    rms: f64,
+    scored: Vec<Range<usize>>,
+    prediction_rms: f64,
+    fit_percent: f64,
+    noise_std: f64,
+    noise: NoiseFit,
+    tests: Vec<Portmanteau>,
+    windows: Vec<Range<usize>>,
+    records: Vec<RecordGap>,
+}
+
+/// The gap of what was `measured`: the operating regions where its residual concentrates
+/// among the `candidates`, and the tests' verdict on the outputs `y_parts` (one per record).
+fn judge(
+    measured: Measured,
+    y_parts: &[&[f64]],
+    candidates: &[(String, Vec<f64>)],
+    settings: &GapSettings,
+) -> Gap {
+    let m = measured;
+    let signals: Vec<(&str, &[f64])> = candidates
+        .iter()
+        .map(|(name, s)| (name.as_str(), s.as_slice()))
+        .collect();
+    let regions = operating_regions(&m.residual, &signals, settings.min_region_share);
+    let verdict = conclude(m.tests, m.prediction_rms, m.noise_std, y_parts, settings);
+    Gap {
+        residual: m.residual,
+        simulated: m.simulated,
+        rms: m.rms,
+        scored: m.scored,
+        prediction_rms: m.prediction_rms,
+        fit_percent: m.fit_percent,
+        noise_std: m.noise_std,
+        noise: m.noise,
+        tests: verdict.tests,
+        windows: m.windows,
         regions,
         missing_effect: verdict.missing_effect,
         lattice: verdict.lattice,
         verdict: verdict.text,
-        records: parts.into_iter().flat_map(|p| p.gap.records).collect(),
+        records: m.records,
     }
 }
 
@@ -575,36 +616,24 @@ fn gap_record(
     }
     let window = settings.window.unwrap_or((n / 50).max(20));
     let windows = exceedance_windows(&residual, noise_std, settings.band, window);
-    let signals: Vec<(&str, &[f64])> = candidates
-        .iter()
-        .map(|(name, s)| (name.as_str(), s.as_slice()))
-        .collect();
-    let regions = operating_regions(&residual, &signals, settings.min_region_share);
-    let rms = v.rms;
-    let prediction_rms = structid_core::validation::metrics::rms(&innovations);
-    let verdict = conclude(tests, prediction_rms, noise_std, &[&y], settings);
-    let scored_samples = v.scored.iter().map(|r| r.len()).sum();
-    let gap = Gap {
+    let measured = Measured {
+        records: vec![RecordGap {
+            rms: v.rms,
+            fit_percent: v.fit_percent,
+            samples: v.scored.iter().map(|r| r.len()).sum(),
+        }],
         residual,
         simulated,
-        rms,
+        rms: v.rms,
         scored: v.scored.clone(),
-        prediction_rms,
+        prediction_rms: structid_core::validation::metrics::rms(&innovations),
         fit_percent: v.fit_percent,
         noise_std,
         noise,
-        tests: verdict.tests,
+        tests,
         windows,
-        regions,
-        missing_effect: verdict.missing_effect,
-        lattice: verdict.lattice,
-        verdict: verdict.text,
-        records: vec![RecordGap {
-            rms,
-            fit_percent: v.fit_percent,
-            samples: scored_samples,
-        }],
     };
+    let gap = judge(measured, &[&y], candidates, settings);
     Ok(RecordPart {
         gap,
         innovations,
