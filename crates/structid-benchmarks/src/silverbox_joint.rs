@@ -23,6 +23,7 @@ use std::time::Instant;
 
 use structid_core::{Data, Interpolant, Result, Signal};
 use structid_io::{Silverbox, SilverboxSplit};
+use structid_joint::LinearInParameters;
 use structid_joint::{
     GaussianFeatures, JointBlock, JointError, JointFit, JointModel, JointSettings, LftMatrix, fit,
     fit_initial_state,

@@ -40,6 +40,7 @@ use nalgebra::DMatrix;
 use structid_core::Monotonicity;
 use structid_core::{Data, Lft, LftMatrices, Signal};
 use structid_io::CascadedTanks;
+use structid_joint::LinearInParameters;
 use structid_joint::{
     BlockMap, GaussianFeatures, JointBlock, JointError, JointFit, JointModel, JointSettings,
     LftMatrix, MonotoneFeatures, fit,

@@ -148,63 +148,6 @@ impl GaussianFeatures {
         DMatrix::from_fn(m, m, |i, j| self.kernel(&self.centres[i], &self.centres[j]))
     }
 
-    /// The coefficients that fit the values `w` at the points `z` (one point per entry) in
-    /// the least-squares sense with this map's dispersion:
-    /// min Σ_k (N(z_k) − w_k)² + n·β·θᵀK_ccθ, n the number of points. This is how an
-    /// estimated map (a table, an interpolant) becomes a starting point of the joint fit.
-    ///
-    /// ```
-    /// use structid_joint::{BlockMap, GaussianFeatures};
-    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-8).unwrap();
-    /// let z: Vec<Vec<f64>> = (0..81).map(|k| vec![-2.0 + 0.05 * k as f64]).collect();
-    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
-    /// let f = f.fitted_to(&z, &w).unwrap();
-    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
-    /// ```
-    pub fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
-        self.fitted_through(z, w, &mut |column| column.to_vec())
-    }
-
-    /// The coefficients for which the map's output seen through the linear operator `filter`
-    /// fits `y`: min Σ_k (y_k − (H·N(z))_k)² + n·β·θᵀK_ccθ, where `filter` applies H to one
-    /// signal (a block G₂ behind the map, simulated from rest). N is linear in its
-    /// coefficients, so H·N(z) is the sum of the filtered regressor columns and the fit is one
-    /// least-squares solve; this is how a Hammerstein or Wiener–Hammerstein start gets its map.
-    ///
-    /// ```
-    /// use structid_joint::{BlockMap, GaussianFeatures};
-    /// // y = (0.5 + 0.5 q⁻¹)·tanh(z): the map is found behind the known filter.
-    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-10).unwrap();
-    /// let z: Vec<Vec<f64>> = (0..300).map(|k| vec![2.0 * (0.37 * k as f64).sin()]).collect();
-    /// let avg = |s: &[f64]| -> Vec<f64> {
-    ///     (0..s.len()).map(|k| 0.5 * s[k] + if k > 0 { 0.5 * s[k - 1] } else { 0.0 }).collect()
-    /// };
-    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
-    /// let f = f.fitted_through(&z, &avg(&w), &mut |s| avg(s)).unwrap();
-    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
-    /// ```
-    ///
-    /// # Errors
-    /// Mismatched lengths, non-finite values, or normal equations that are not positive
-    /// definite.
-    pub fn fitted_through(
-        &self,
-        z: &[Vec<f64>],
-        y: &[f64],
-        filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
-    ) -> Result<Self> {
-        let (m, p) = (self.centres.len(), self.centres[0].len());
-        let np = m + self.affine.len();
-        let penalty = self.gram() * (self.beta * z.len() as f64);
-        let features = |zk: &[f64], row: &mut [f64]| self.features(zk, row);
-        let (theta, affine) = fit_linear_map(z, y, p, np, &features, filter, &penalty)?;
-        Ok(Self {
-            theta,
-            affine,
-            ..self.clone()
-        })
-    }
-
     /// The regressors [K(z, c_1) … K(z, c_m), 1, z₁ … z_p] of the parameters at `z`.
     pub(crate) fn features(&self, z: &[f64], out: &mut [f64]) {
         let m = self.centres.len();
@@ -243,6 +186,107 @@ impl GaussianFeatures {
         }
         grad[0] = slope;
         value
+    }
+}
+
+/// A block map linear in its parameters, N(z) = Σ_i θ_i·φ_i(z), whose dispersion is a
+/// quadratic form in its first (penalised) parameters and leaves the trend after them free:
+/// such a map is fitted to values, or through a linear operator, by one regularised
+/// least-squares solve. What varies between maps is their regressors and their penalty.
+pub trait LinearInParameters: Sized {
+    /// Number p of the map's inputs.
+    fn input_count(&self) -> usize;
+
+    /// Number of parameters, the penalised ones first.
+    fn parameter_count(&self) -> usize;
+
+    /// The regressors φ(z) at the point `z` (`parameter_count` values into `out`).
+    fn regressors(&self, z: &[f64], out: &mut [f64]);
+
+    /// n·β times the dispersion's matrix over the penalised parameters, for n points.
+    fn penalty(&self, points: usize) -> DMatrix<f64>;
+
+    /// This map with the fitted parameters: the penalised ones, then the trend.
+    fn with_fit(&self, penalised: Vec<f64>, trend: Vec<f64>) -> Self;
+
+    /// The coefficients that fit the values `w` at the points `z` (one point per entry) in
+    /// the least-squares sense with this map's dispersion:
+    /// min Σ_k (N(z_k) − w_k)² + n·β·D, n the number of points (D = θᵀK_ccθ for
+    /// [`GaussianFeatures`]). This is how an
+    /// estimated map (a table, an interpolant) becomes a starting point of the joint fit.
+    ///
+    /// ```
+    /// use structid_joint::{BlockMap, GaussianFeatures, LinearInParameters};
+    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-8).unwrap();
+    /// let z: Vec<Vec<f64>> = (0..81).map(|k| vec![-2.0 + 0.05 * k as f64]).collect();
+    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
+    /// let f = f.fitted_to(&z, &w).unwrap();
+    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
+    /// ```
+    fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
+        self.fitted_through(z, w, &mut |column| column.to_vec())
+    }
+
+    /// The coefficients for which the map's output seen through the linear operator `filter`
+    /// fits `y`: min Σ_k (y_k − (H·N(z))_k)² + n·β·D, where `filter` applies H to one
+    /// signal (a block G₂ behind the map, simulated from rest). N is linear in its
+    /// coefficients, so H·N(z) is the sum of the filtered regressor columns and the fit is one
+    /// least-squares solve; this is how a Hammerstein or Wiener–Hammerstein start gets its map.
+    ///
+    /// ```
+    /// use structid_joint::{BlockMap, GaussianFeatures, LinearInParameters};
+    /// // y = (0.5 + 0.5 q⁻¹)·tanh(z): the map is found behind the known filter.
+    /// let f = GaussianFeatures::on_interval(-2.0, 2.0, 9, 0.5, 1e-10).unwrap();
+    /// let z: Vec<Vec<f64>> = (0..300).map(|k| vec![2.0 * (0.37 * k as f64).sin()]).collect();
+    /// let avg = |s: &[f64]| -> Vec<f64> {
+    ///     (0..s.len()).map(|k| 0.5 * s[k] + if k > 0 { 0.5 * s[k - 1] } else { 0.0 }).collect()
+    /// };
+    /// let w: Vec<f64> = z.iter().map(|z| z[0].tanh()).collect();
+    /// let f = f.fitted_through(&z, &avg(&w), &mut |s| avg(s)).unwrap();
+    /// assert!((f.eval(&mut [], &[0.7]) - 0.7f64.tanh()).abs() < 1e-3);
+    /// ```
+    ///
+    /// # Errors
+    /// Mismatched lengths, non-finite values, or normal equations that are not positive
+    /// definite.
+    fn fitted_through(
+        &self,
+        z: &[Vec<f64>],
+        y: &[f64],
+        filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
+    ) -> Result<Self> {
+        let penalty = self.penalty(z.len());
+        let (p, np) = (self.input_count(), self.parameter_count());
+        let features = |zk: &[f64], row: &mut [f64]| self.regressors(zk, row);
+        let (penalised, trend) = fit_linear_map(z, y, p, np, &features, filter, &penalty)?;
+        Ok(self.with_fit(penalised, trend))
+    }
+}
+
+impl LinearInParameters for GaussianFeatures {
+    fn input_count(&self) -> usize {
+        self.centres[0].len()
+    }
+
+    fn parameter_count(&self) -> usize {
+        self.centres.len() + self.affine.len()
+    }
+
+    fn regressors(&self, z: &[f64], out: &mut [f64]) {
+        self.features(z, out);
+    }
+
+    /// n·β·K_cc.
+    fn penalty(&self, points: usize) -> DMatrix<f64> {
+        self.gram() * (self.beta * points as f64)
+    }
+
+    fn with_fit(&self, theta: Vec<f64>, affine: Vec<f64>) -> Self {
+        Self {
+            theta,
+            affine,
+            ..self.clone()
+        }
     }
 }
 

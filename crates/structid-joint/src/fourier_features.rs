@@ -20,7 +20,7 @@ use structid_core::{Combination, FeatureMap, FourierKernel, FourierWeights};
 
 use crate::block::{BlockJacobian, BlockMap};
 use crate::error::{Result, invalid};
-use crate::features::{fit_linear_map, split_parameters};
+use crate::features::{LinearInParameters, split_parameters};
 
 /// A Fourier-feature map plus an unpenalised affine part.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,7 +50,7 @@ impl FourierFeatures {
     /// of z) and `harmonics` (by default, as many as the weights resolve).
     ///
     /// ```
-    /// use structid_joint::{BlockMap, FourierFeatures};
+    /// use structid_joint::{BlockMap, FourierFeatures, LinearInParameters};
     /// let f = FourierFeatures::on_interval(-2.0, 2.0, 0.4, Some(6), 1e-8).unwrap();
     /// assert_eq!(f.parameters().len(), 12 + 2); // 2·6 harmonics (ψ₀ is a₀) and a₁
     /// let z: Vec<Vec<f64>> = (0..81).map(|k| vec![-2.0 + 0.05 * k as f64]).collect();
@@ -97,36 +97,6 @@ impl FourierFeatures {
         self.beta
     }
 
-    /// The coefficients that fit the values `w` at the points `z` with this map's dispersion,
-    /// min Σ_k (N(z_k) − w_k)² + n·β·D (as [`crate::GaussianFeatures::fitted_to`]).
-    pub fn fitted_to(&self, z: &[Vec<f64>], w: &[f64]) -> Result<Self> {
-        self.fitted_through(z, w, &mut |column| column.to_vec())
-    }
-
-    /// The coefficients for which the map's output seen through the linear operator `filter`
-    /// fits `y` (as [`crate::GaussianFeatures::fitted_through`]).
-    pub fn fitted_through(
-        &self,
-        z: &[Vec<f64>],
-        y: &[f64],
-        filter: &mut dyn FnMut(&[f64]) -> Vec<f64>,
-    ) -> Result<Self> {
-        let (m, p) = (self.coef.len(), self.kernel.inputs());
-        let np = m + self.affine.len();
-        let n = z.len() as f64;
-        let penalty = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
-            m,
-            self.kernel.weights()[1..].iter().map(|l| self.beta * n / l),
-        ));
-        let features = |zk: &[f64], row: &mut [f64]| self.features(zk, row);
-        let (coef, affine) = fit_linear_map(z, y, p, np, &features, filter, &penalty)?;
-        Ok(Self {
-            coef,
-            affine,
-            ..self.clone()
-        })
-    }
-
     /// The regressors [ψ₁(z) … ψ_(m−1)(z), 1, z₁ … z_p].
     fn features(&self, z: &[f64], out: &mut [f64]) {
         let m = self.coef.len();
@@ -154,6 +124,37 @@ impl FourierFeatures {
                 .zip(&self.affine[1..])
                 .map(|(a, b)| a * b)
                 .sum::<f64>()
+    }
+}
+
+impl LinearInParameters for FourierFeatures {
+    fn input_count(&self) -> usize {
+        self.kernel.inputs()
+    }
+
+    fn parameter_count(&self) -> usize {
+        self.coef.len() + self.affine.len()
+    }
+
+    fn regressors(&self, z: &[f64], out: &mut [f64]) {
+        self.features(z, out);
+    }
+
+    /// n·β·diag(1/λ_j), j ≥ 1.
+    fn penalty(&self, points: usize) -> DMatrix<f64> {
+        let n = points as f64;
+        DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+            self.coef.len(),
+            self.kernel.weights()[1..].iter().map(|l| self.beta * n / l),
+        ))
+    }
+
+    fn with_fit(&self, coef: Vec<f64>, affine: Vec<f64>) -> Self {
+        Self {
+            coef,
+            affine,
+            ..self.clone()
+        }
     }
 }
 

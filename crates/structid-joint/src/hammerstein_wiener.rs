@@ -22,6 +22,7 @@ use structid_lti::Signal;
 use crate::block::BlockMap;
 use crate::error::{JointError, Result};
 use crate::features::GaussianFeatures;
+use crate::features::LinearInParameters;
 use crate::model::{JointBlock, JointModel, LftMatrix};
 use crate::wiener_hammerstein::{WienerHammersteinSettings, free_canonical, leading_delay};
 

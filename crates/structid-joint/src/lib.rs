@@ -76,7 +76,7 @@ pub mod wiener_hammerstein;
 pub use block::{BlockJacobian, BlockMap};
 pub use error::{JointError, Result};
 pub use family::FamilyMap;
-pub use features::GaussianFeatures;
+pub use features::{GaussianFeatures, LinearInParameters};
 pub use fit::{JointFit, JointSettings, JointSettingsBuilder, Stage, fit, fit_initial_state};
 pub use fixed::{FixedMap, HeldMap};
 pub use fourier_features::FourierFeatures;

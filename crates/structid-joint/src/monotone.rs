@@ -33,6 +33,7 @@ use structid_core::Monotonicity;
 
 use crate::block::{BlockJacobian, BlockMap};
 use crate::error::Result;
+use crate::features::LinearInParameters;
 use crate::features::{GaussianFeatures, evenly_spaced, regularised_fit, split_parameters};
 
 /// One product K(t, c_i)·K(t, c_j), i ≤ j: its weight exp(−(c_i − c_j)²/4σ²)/(2σ√π) (doubled

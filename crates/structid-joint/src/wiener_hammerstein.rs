@@ -33,6 +33,7 @@ use structid_lti::Signal;
 
 use crate::error::{JointError, Result, invalid};
 use crate::features::GaussianFeatures;
+use crate::features::LinearInParameters;
 use crate::model::{JointBlock, JointModel, LftMatrix};
 
 /// How the start's map is laid out: centres, width and dispersion weight.

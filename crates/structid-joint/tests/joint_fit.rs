@@ -6,6 +6,7 @@ use proptest::prelude::*;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
 use structid_core::{Data, Lft, LftMatrices, MapBinding, Signal};
+use structid_joint::LinearInParameters;
 use structid_joint::{
     BlockMap, GaussianFeatures, JointBlock, JointModel, JointSettings, LftMatrix, fit,
 };

@@ -4,6 +4,7 @@
 
 use nalgebra::DMatrix;
 use structid_core::{Data, Lft, LftMatrices, MapBinding, Signal};
+use structid_joint::LinearInParameters;
 use structid_joint::{GaussianFeatures, JointBlock, JointModel, smooth_maps};
 
 fn lft() -> Lft {

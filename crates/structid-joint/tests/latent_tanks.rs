@@ -5,6 +5,7 @@ use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
 use structid_core::{Data, Lft, LftMatrices, Signal};
+use structid_joint::LinearInParameters;
 use structid_joint::{GaussianFeatures, JointBlock, JointModel, JointSettings, fit};
 
 const TS: f64 = 0.1;

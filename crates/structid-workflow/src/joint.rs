@@ -30,6 +30,7 @@ use std::sync::Arc;
 
 use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, TruthSpec};
+use structid_joint::LinearInParameters;
 use structid_joint::{
     BlockMap, FamilyMap, FixedMap, FourierFeatures, GaussianFeatures, JointBlock, JointFit,
     JointModel, JointSettings, MonotoneFeatures, OperatorBlock, fit,

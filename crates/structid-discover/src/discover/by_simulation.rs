@@ -24,6 +24,7 @@ use std::time::Instant;
 
 use structid_core::validation::Scoring;
 use structid_core::{Data, Error, Interpolant, LookupTable, PolynomialDispersion, Result, Signal};
+use structid_joint::LinearInParameters;
 use structid_joint::{
     BlockMap, FixedMap, GaussianFeatures, JointBlock, JointModel, JointSettings, fit,
 };
