@@ -109,15 +109,15 @@ impl JointSettingsBuilder {
         self.0.segment_length = Some(len);
         self
     }
+    /// Relative tolerance (in (0, 1)).
+    pub fn tolerance(mut self, tol: f64) -> Self {
+        self.0.tolerance = tol;
+        self
+    }
     /// Continuity weight μ (> 0; 0 for independent windows, allowed only without the
     /// single-shooting polish).
     pub fn continuity_weight(mut self, mu: f64) -> Self {
         self.0.continuity_weight = mu;
-        self
-    }
-    /// Relative tolerance (in (0, 1)).
-    pub fn tolerance(mut self, tol: f64) -> Self {
-        self.0.tolerance = tol;
         self
     }
     /// Iterations per stage (≥ 1).

@@ -77,14 +77,12 @@ impl OperatorSpec {
                 weights.clone(),
             )?),
             Self::BoucWen {
-                gain,
-                weight,
+                gain: a,
+                weight: b,
                 beta,
                 gamma,
-                exponent,
-            } => Box::new(BoucWen::with_exponent(
-                *gain, *weight, *beta, *gamma, *exponent,
-            )?),
+                exponent: n,
+            } => Box::new(BoucWen::with_exponent(*a, *b, *beta, *gamma, *n)?),
         })
     }
 

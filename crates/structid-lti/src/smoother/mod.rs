@@ -718,16 +718,16 @@ impl DisturbanceSmoother {
         self.len
     }
 
-    /// `true` for a smoother of empty records.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
     /// Number of samples with stored (time-varying) gains; from this sample on the
     /// steady-state gains are used. `len` when the Riccati recursion did not converge
     /// within the record; 0 when the gains are constant from the start (e.g. `n = 0`).
     pub fn transient_len(&self) -> usize {
         self.transient
+    }
+
+    /// `true` for a smoother of empty records.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
 
     /// The largest spectral radius of the filter's closed loops `A - K_k C` over the samples
