@@ -469,11 +469,7 @@ impl BlockMap for GaussianFeatures {
 
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
         let (theta, affine) = split_parameters(p, self.centres.len(), self.affine.len())?;
-        Ok(Box::new(Self {
-            theta,
-            affine,
-            ..self.clone()
-        }))
+        Ok(Box::new(self.with_fit(theta, affine)))
     }
 
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {

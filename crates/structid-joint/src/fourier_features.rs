@@ -173,11 +173,7 @@ impl BlockMap for FourierFeatures {
 
     fn with_parameters(&self, p: &[f64]) -> Result<Box<dyn BlockMap>> {
         let (coef, affine) = split_parameters(p, self.coef.len(), self.affine.len())?;
-        Ok(Box::new(Self {
-            coef,
-            affine,
-            ..self.clone()
-        }))
+        Ok(Box::new(self.with_fit(coef, affine)))
     }
 
     fn eval(&self, _state: &mut [f64], z: &[f64]) -> f64 {
