@@ -6,8 +6,9 @@ use std::path::PathBuf;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use structid_io::{ModelFile, OutputGuard};
-use structid_joint::{JointSettings, JointSettingsBuilder};
+use structid_core::validation::Windows;
 use structid_workflow::{
+    FitOptions,
     BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs,
 };
 
@@ -27,19 +28,23 @@ fn estimate_initial_state(initial_state: &str) -> PyResult<bool> {
     }
 }
 
-/// The joint fit's settings from the Python arguments (checked when built).
-fn joint_settings(
+/// The joint fit's options from the Python arguments; `windows` is (LENGTH, INIT).
+fn fit_options(
     iterations: usize,
     estimate_x0: bool,
     segment_length: Option<usize>,
-) -> JointSettingsBuilder {
-    let fit = JointSettings::builder()
-        .max_iterations(iterations)
-        .estimate_initial_state(estimate_x0);
-    match segment_length {
-        Some(l) => fit.segment_length(l),
-        None => fit,
-    }
+    windows: Option<(usize, usize)>,
+) -> PyResult<FitOptions> {
+    let windows = windows
+        .map(|(length, init)| Windows::new(length, init))
+        .transpose()
+        .map_err(error)?;
+    Ok(FitOptions {
+        iterations,
+        estimate_initial_state: estimate_x0,
+        segment_length,
+        windows,
+    })
 }
 
 fn records(mf: &ModelFile, named: Vec<Named>, what: &str) -> PyResult<structid_core::Data> {
@@ -58,7 +63,7 @@ fn records(mf: &ModelFile, named: Vec<Named>, what: &str) -> PyResult<structid_c
 /// `initial_states`, `free` (each free entry with its value) and `stages`; writes the output
 /// directory `out` when given.
 #[pyfunction]
-#[pyo3(signature = (model, columns, validation=None, beta=None, free=Vec::new(), centres=15, segment_length=None, iterations=100, initial_state="zero", out=None))]
+#[pyo3(signature = (model, columns, validation=None, beta=None, free=Vec::new(), centres=15, segment_length=None, iterations=100, initial_state="zero", out=None, windows=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn refine_joint_columns<'py>(
     py: Python<'py>,
@@ -72,6 +77,7 @@ pub fn refine_joint_columns<'py>(
     iterations: usize,
     initial_state: &str,
     out: Option<PathBuf>,
+    windows: Option<(usize, usize)>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mf = model.file.clone();
     let data = records(&mf, columns, "estimation")?;
@@ -80,12 +86,12 @@ pub fn refine_joint_columns<'py>(
         .transpose()?;
     let beta = BetaChoice::from_options(beta, validation).map_err(error)?;
     let estimate_x0 = estimate_initial_state(initial_state)?;
-    let fit = joint_settings(iterations, estimate_x0, segment_length);
+    let fit = fit_options(iterations, estimate_x0, segment_length, windows)?;
     let settings = JointWorkflowSettings {
         beta,
         centres,
         free,
-        fit: fit.build().map_err(error)?,
+        fit: fit.settings().map_err(error)?,
         ..JointWorkflowSettings::default()
     };
     let outcome = py
@@ -177,7 +183,7 @@ type Division = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
 /// (num, den), `divisions` (front num/den, back num/den, rms; best first), `beta`, `trials`,
 /// `cost`, `initial_cost`, `rms`, `initial_states`, `free` and `stages`; writes `out` when given.
 #[pyfunction]
-#[pyo3(signature = (records, orders, validation=None, beta=None, centres=15, segment_length=None, iterations=100, initial_state="zero", out=None, structure="wiener-hammerstein"))]
+#[pyo3(signature = (records, orders, validation=None, beta=None, centres=15, segment_length=None, iterations=100, initial_state="zero", out=None, structure="wiener-hammerstein", windows=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn wiener_hammerstein_records<'py>(
     py: Python<'py>,
@@ -191,6 +197,7 @@ pub fn wiener_hammerstein_records<'py>(
     initial_state: &str,
     out: Option<PathBuf>,
     structure: &str,
+    windows: Option<(usize, usize)>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use structid_joint::WienerHammersteinSettings;
     use structid_workflow::BlockStructure;
@@ -215,7 +222,7 @@ pub fn wiener_hammerstein_records<'py>(
         .centres(centres)
         .build()
         .map_err(error)?;
-    let fit = joint_settings(iterations, estimate_x0, segment_length);
+    let fit = fit_options(iterations, estimate_x0, segment_length, windows)?;
     let req = WienerHammersteinRequest {
         structure,
         data: &data,
@@ -227,7 +234,7 @@ pub fn wiener_hammerstein_records<'py>(
         orders: [orders.0, orders.1, orders.2],
         beta: BetaChoice::from_options_or(beta, validation, start.beta()),
         start,
-        fit: fit.build().map_err(error)?,
+        fit: fit.settings().map_err(error)?,
     };
     let outcome = py.detach(|| wiener_hammerstein(&req)).map_err(error)?;
     if let Some(dir) = &out {

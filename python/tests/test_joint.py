@@ -165,6 +165,55 @@ shape = "increasing"
         structid.identify(static, u, np.tanh(u))
 
 
+INTEGRATOR = """
+[lft]
+A = [[1.0]]
+Bu = [[0.0]]
+Be = [[0.0]]
+Bw = [[0.05]]
+Cy = [[1.0]]
+Dyu = [[0.0]]
+Dye = [[1.0]]
+Dyw = [[0.0]]
+Cz = [[0.0]]
+Dzu = [[1.0]]
+Dze = [[0.0]]
+Dzw = [[0.0]]
+
+[signals]
+u = ["u"]
+y = ["y"]
+
+[[nonlinearity]]
+name = "N"
+inputs = [0]
+output = 0
+"""
+
+
+def test_an_integrating_plant_is_fitted_in_windows_as_in_the_cli(cli, tmp_path):
+    # y = (0.05·q⁻¹/(1 − q⁻¹))·tanh(2u), written out in numpy; its free run drifts, so the fit
+    # is by the score of windows, and the CLI gives the same numbers.
+    u = inputs(1600, 0.3)
+    w = np.tanh(2.0 * u)
+    y = np.concatenate([[0.0], 0.05 * np.cumsum(w)[:-1]])
+    y = y + 0.005 * np.sin(2.9 * np.arange(len(u)))
+    model = structid.Model.from_toml(INTEGRATOR)
+    r = structid.refine_joint(model, u, y, beta=1e-8, windows=(200, 20))
+    assert r.stages[0][0] == "windows" and r.cost <= r.initial_cost
+    est = write_csv(tmp_path / "est.csv", {"u": u, "y": y})
+    start = tmp_path / "start.toml"
+    start.write_text(INTEGRATOR)
+    cli("refine", "--joint", "--model", start, "--data", est, "--beta", "1e-8",
+        "--windows", "200:20", "--out", tmp_path / "cli")
+    np.testing.assert_allclose(r.cost, read_json(tmp_path / "cli" / "joint.json")["cost"],
+                               rtol=1e-12)
+    with pytest.raises(structid.StructidError, match="windows"):
+        structid.refine_joint(model, u, y, beta=1e-8, windows=(200, 20), segment_length=50)
+    with pytest.raises(structid.StructidError, match="pair"):
+        structid.refine_joint(model, u, y, beta=1e-8, windows=(200,))
+
+
 def test_refine_joint_errors_are_python_exceptions():
     model = structid.Model.from_toml(START)
     u = inputs(200, 0.0)

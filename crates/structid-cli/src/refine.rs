@@ -97,6 +97,19 @@ pub struct RefineArgs {
     /// With --joint: samples per multiple-shooting segment (default: single shooting).
     #[arg(long, value_name = "N", requires = "joint")]
     segment_length: Option<usize>,
+    /// With --joint: fit by the score of a simulation in windows of LENGTH samples, each from
+    /// a state fitted to its first half and scored after its first INIT samples (plants with
+    /// integrators, as `--scoring LENGTH:INIT` scores them).
+    #[arg(long, value_name = "LENGTH:INIT", requires = "joint", value_parser = crate::refine::parse_windows)]
+    windows: Option<structid_core::validation::Windows>,
+}
+
+/// `LENGTH:INIT` as windows (the syntax of `--scoring`).
+pub(crate) fn parse_windows(s: &str) -> Result<structid_core::validation::Windows, String> {
+    match structid_workflow::discover::parse_scoring(s)? {
+        structid_core::validation::Scoring::Windowed(w) => Ok(w),
+        _ => Err(format!("`{s}` is not LENGTH:INIT (e.g. 500:25)")),
+    }
 }
 
 /// Values of `refine --selection`.
@@ -244,17 +257,17 @@ fn run_joint(a: RefineArgs) -> Result<(), CliError> {
     let beta = BetaChoice::from_options(given, validation).map_err(|e| {
         CliError::from(e).context("--joint: give --beta B or --validation-data V.csv")
     })?;
-    let mut fit = structid_joint::JointSettings::builder()
-        .max_iterations(a.iterations.unwrap_or(100))
-        .estimate_initial_state(matches!(a.initial_state, InitialStateArg::Estimate));
-    if let Some(l) = a.segment_length {
-        fit = fit.segment_length(l);
-    }
+    let fit = structid_workflow::FitOptions {
+        iterations: a.iterations.unwrap_or(100),
+        estimate_initial_state: matches!(a.initial_state, InitialStateArg::Estimate),
+        segment_length: a.segment_length,
+        windows: a.windows,
+    };
     let settings = JointWorkflowSettings {
         beta,
         centres: a.centres,
         free: a.free.clone(),
-        fit: fit.build().map_err(|e| CliError::input(e.to_string()))?,
+        fit: fit.settings().map_err(CliError::from)?,
         ..JointWorkflowSettings::default()
     };
     let out = structid_workflow::refine_joint(&JointRequest {

@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Args;
 use structid_core::Data;
 use structid_io::{OutputGuard, SignalNames};
-use structid_joint::{JointSettings, WienerHammersteinSettings};
+use structid_joint::WienerHammersteinSettings;
 use structid_workflow::{BetaChoice, BlockStructure, WienerHammersteinRequest};
 
 use crate::InitialStateArg;
@@ -45,6 +45,10 @@ pub struct WienerHammersteinArgs {
     /// Samples per multiple-shooting segment (default: single shooting).
     #[arg(long, value_name = "N")]
     segment_length: Option<usize>,
+    /// Fit by the score of a simulation in windows of LENGTH samples, each from a state
+    /// fitted to its first half and scored after its first INIT samples.
+    #[arg(long, value_name = "LENGTH:INIT", value_parser = crate::refine::parse_windows)]
+    windows: Option<structid_core::validation::Windows>,
     /// `zero` (each record starts at rest) or `estimate` (each record's initial state fitted).
     #[arg(long, value_name = "zero|estimate", default_value = "zero")]
     initial_state: InitialStateArg,
@@ -82,12 +86,12 @@ pub fn run(a: WienerHammersteinArgs, structure: BlockStructure) -> Result<(), Cl
         .centres(a.centres)
         .build()
         .map_err(|e| CliError::input(format!("--centres: {e}")))?;
-    let mut fit = JointSettings::builder()
-        .max_iterations(a.iterations)
-        .estimate_initial_state(matches!(a.initial_state, InitialStateArg::Estimate));
-    if let Some(l) = a.segment_length {
-        fit = fit.segment_length(l);
-    }
+    let fit = structid_workflow::FitOptions {
+        iterations: a.iterations,
+        estimate_initial_state: matches!(a.initial_state, InitialStateArg::Estimate),
+        segment_length: a.segment_length,
+        windows: a.windows,
+    };
     let req = WienerHammersteinRequest {
         structure,
         data: &data,
@@ -99,7 +103,7 @@ pub fn run(a: WienerHammersteinArgs, structure: BlockStructure) -> Result<(), Cl
         orders: a.orders,
         beta: BetaChoice::from_options_or(a.beta, validation, start.beta()),
         start,
-        fit: fit.build().map_err(|e| CliError::input(e.to_string()))?,
+        fit: fit.settings().map_err(CliError::from)?,
     };
     let out = structid_workflow::wiener_hammerstein(&req)
         .map_err(|e| CliError::from(e).context("cannot identify the block-structured model"))?;

@@ -631,3 +631,79 @@ fn a_shaped_map_is_refined_then_validated_from_the_written_file() {
     let rms = v["outputs"][0]["rms"].as_f64().unwrap();
     assert!(rms < 0.0075, "{rms}");
 }
+
+/// An integrating plant behind an unknown input map, y = (0.05·q⁻¹/(1 − q⁻¹))·tanh(u) + e:
+/// its free run drifts, so it is fitted (`refine --joint --windows`) and scored
+/// (`validate --scoring`) in the same windows, and the windowed fit reaches the noise.
+#[test]
+fn an_integrating_plant_is_fitted_by_its_windowed_score() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = "[lft]\nA = [[1.0]]\nBu = [[0.0]]\nBe = [[0.0]]\nBw = [[0.05]]\nCy = [[1.0]]\n\
+                 Dyu = [[0.0]]\nDye = [[1.0]]\nDyw = [[0.0]]\nCz = [[0.0]]\nDzu = [[1.0]]\n\
+                 Dze = [[0.0]]\nDzw = [[0.0]]\n\n[signals]\nu = [\"u\"]\ny = [\"y\"]\n\n\
+                 [[nonlinearity]]\nname = \"N\"\ninputs = [0]\noutput = 0\n";
+    let est = simulated(
+        d,
+        "est",
+        &format!("{truth}truth = \"tanh(2*z0)\"\n"),
+        2000,
+        0.0,
+        5,
+    );
+    let val = simulated(
+        d,
+        "val",
+        &format!("{truth}truth = \"tanh(2*z0)\"\n"),
+        1000,
+        1.1,
+        6,
+    );
+    let start = d.join("start.toml");
+    std::fs::write(&start, truth).unwrap();
+    let out = d.join("fit");
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "refine",
+            "--joint",
+            "--model",
+            p(&start),
+            "--data",
+            p(&est),
+            "--beta",
+            "1e-8",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let run = args(&["--windows", "200:20", "--out", p(&out)]);
+    ok(&run.iter().map(String::as_str).collect::<Vec<_>>());
+    let j = json(&out.join("joint.json"));
+    assert!(j["cost"].as_f64().unwrap() <= j["initial_cost"].as_f64().unwrap());
+    assert!(j.to_string().contains("\"windows\""), "{j}");
+    let scored = d.join("v");
+    ok(&[
+        "validate",
+        "--model",
+        p(&out.join("model.toml")),
+        "--data",
+        p(&val),
+        "--scoring",
+        "200:20",
+        "--out",
+        p(&scored),
+    ]);
+    let v = json(&scored.join("validation.json"));
+    let rms = v["outputs"][0]["rms"].as_f64().unwrap();
+    assert!(rms < 2.0 * 0.005, "windowed validation RMS {rms}");
+    // Windows and segments are two criteria; a window needs LENGTH:INIT.
+    let both = args(&["--windows", "200:20", "--segment-length", "50"]);
+    let e = input_error(&both.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(e.contains("segment") && e.contains("windows"), "{e}");
+    let bad = args(&["--windows", "200"]);
+    let e = input_error(&bad.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(e.contains("LENGTH:INIT"), "{e}");
+}

@@ -17,8 +17,13 @@
 //! single-shooting criterion therefore measures the drift, not the fit. That criterion is
 //! then the fit's own, and the result is the start or the windows' fit, whichever has the
 //! lower cost by it.
+//!
+//! With [`JointSettingsBuilder::windows`] the criterion is instead exactly the score of a
+//! windowed simulation ([`crate::windowed`]): each window's state fitted to its first half
+//! and projected out of the search, the samples after its first `init` scored.
 
 use structid_core::Data;
+use structid_core::validation::Windows;
 use structid_linear::levenberg_marquardt::{
     LeastSquaresProblem, LevenbergMarquardt, LmSettings, LmStatus,
 };
@@ -27,6 +32,7 @@ use crate::error::{JointError, Result, invalid};
 use crate::model::JointModel;
 use crate::shooting::{Segment, Shooting};
 use crate::step::Stepper;
+use crate::windowed::Windowed;
 
 /// Settings of [`fit`], built by [`JointSettings::builder`] with validated values.
 ///
@@ -44,6 +50,7 @@ pub struct JointSettings {
     tolerance: f64,
     estimate_initial_state: bool,
     polish: bool,
+    windows: Option<Windows>,
 }
 
 impl Default for JointSettings {
@@ -55,6 +62,7 @@ impl Default for JointSettings {
             tolerance: 1e-9,
             estimate_initial_state: true,
             polish: true,
+            windows: None,
         }
     }
 }
@@ -97,6 +105,12 @@ impl JointSettings {
     pub fn polish(&self) -> bool {
         self.polish
     }
+
+    /// The windows whose scoring is the fit's criterion (see [`crate::windowed`]); `None`:
+    /// single or multiple shooting.
+    pub fn windows(&self) -> Option<Windows> {
+        self.windows
+    }
 }
 
 /// Builder of [`JointSettings`].
@@ -135,6 +149,13 @@ impl JointSettingsBuilder {
         self.0.polish = yes;
         self
     }
+    /// Fit by the score of a simulation in `windows` (each window from a state fitted to its
+    /// first half, scored after its first `init` samples; see [`crate::windowed`]) instead of
+    /// by shooting: that criterion alone, without segments or the polish.
+    pub fn windows(mut self, windows: Windows) -> Self {
+        self.0.windows = Some(windows);
+        self
+    }
     /// Validates and returns the settings.
     pub fn build(self) -> Result<JointSettings> {
         let s = self.0;
@@ -154,6 +175,13 @@ impl JointSettingsBuilder {
                 s.continuity_weight,
                 "must be finite and positive (zero, for independent windows, only with segments \
                  and without the single-shooting polish)",
+            ));
+        }
+        if let (Some(_), Some(l)) = (s.windows, s.segment_length) {
+            return Err(invalid(
+                "segment_length",
+                l as f64,
+                "cannot be set with windows, whose length is the segments'",
             ));
         }
         if s.max_iterations == 0 {
@@ -265,6 +293,9 @@ pub fn fit(
         )));
     }
     let starts = start_states(model, data, x0)?;
+    if let Some(windows) = settings.windows {
+        return windowed_fit(model, data, &starts, windows, settings);
+    }
     let initial_cost = single_cost(model, data, &starts).ok_or_else(|| JointError::NoStart {
         record: 1,
         detail: "the simulation diverged or a block returned a non-finite value".into(),
@@ -312,6 +343,65 @@ pub fn fit(
     })
 }
 
+/// The fit by the criterion of a simulation in `windows` ([`crate::windowed`]): the start or
+/// the fitted model, whichever scores lower by it.
+fn windowed_fit(
+    model: &JointModel,
+    data: &Data,
+    starts: &[Vec<f64>],
+    windows: Windows,
+    settings: &JointSettings,
+) -> Result<JointFit> {
+    let mut problem = Windowed::new(model, data, windows, starts);
+    let theta = model.parameters();
+    let no_start = || JointError::NoStart {
+        record: 1,
+        detail: "the windowed simulation diverged or a block returned a non-finite value".into(),
+    };
+    let initial_cost = problem
+        .residuals(&theta)
+        .ok_or_else(no_start)?
+        .norm_squared();
+    let out = LevenbergMarquardt::new(lm_settings(settings)?)
+        .minimize(&mut problem, &theta)
+        .map_err(|e| JointError::InvalidModel(e.to_string()))?;
+    // The window states of the model kept (the last evaluation may have been a rejected trial).
+    let keep = if out.cost < initial_cost {
+        &out.theta
+    } else {
+        &theta
+    };
+    let cost = problem.residuals(keep).ok_or_else(no_start)?.norm_squared();
+    let fitted = model.with_parameters(&keep[..problem.globals])?;
+    let initial_states = problem.record_starts();
+    let rms = simulation_rms(&fitted, data, &initial_states);
+    let stage = Stage {
+        name: "windows",
+        segments: problem.states.len(),
+        costs: std::iter::once(out.initial_cost)
+            .chain(out.costs.iter().copied())
+            .collect(),
+        status: out.status,
+    };
+    Ok(JointFit {
+        model: fitted,
+        initial_states,
+        initial_cost,
+        cost,
+        rms,
+        stages: vec![stage],
+    })
+}
+
+/// The Levenberg–Marquardt settings of a stage: `settings`' iterations and tolerance.
+fn lm_settings(settings: &JointSettings) -> Result<LmSettings> {
+    LmSettings::builder()
+        .max_iterations(settings.max_iterations)
+        .tolerance(settings.tolerance)
+        .build()
+        .map_err(|e| JointError::InvalidModel(e.to_string()))
+}
+
 /// Each record's starting stacked state: the given x₀ (or zero), blocks at rest.
 fn start_states(model: &JointModel, data: &Data, x0: Option<&[Vec<f64>]>) -> Result<Vec<Vec<f64>>> {
     let bounds = data.record_bounds();
@@ -348,12 +438,7 @@ fn run_stage(
             theta.extend(&s.fixed);
         }
     }
-    let lm = LmSettings::builder()
-        .max_iterations(settings.max_iterations)
-        .tolerance(settings.tolerance)
-        .build()
-        .map_err(|e| JointError::InvalidModel(e.to_string()))?;
-    let out = LevenbergMarquardt::new(lm)
+    let out = LevenbergMarquardt::new(lm_settings(settings)?)
         .minimize(&mut problem, &theta)
         .map_err(|e| JointError::InvalidModel(e.to_string()))?;
     let fitted = model.with_parameters(&out.theta[..problem.globals])?;

@@ -72,6 +72,7 @@ pub mod operator;
 pub mod shooting;
 pub mod step;
 pub mod wiener_hammerstein;
+pub mod windowed;
 
 pub use block::{BlockJacobian, BlockMap};
 pub use error::{JointError, Result};

@@ -28,6 +28,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
+use structid_core::validation::Windows;
 use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, TruthSpec};
 use structid_joint::LinearInParameters;
@@ -123,6 +124,71 @@ impl Default for JointWorkflowSettings {
             free: Vec::new(),
             fit: JointSettings::default(),
         }
+    }
+}
+
+/// The joint fit as the front ends ask for it: its iterations, whether each record's initial
+/// state is fitted, and its criterion: single shooting (the default), multiple shooting on
+/// segments of `segment_length` samples, or the score of a simulation in `windows` (each
+/// window from a state fitted to its first half, scored after its first `init` samples; see
+/// [`structid_joint::windowed`]).
+///
+/// ```
+/// use structid_core::validation::Windows;
+/// use structid_workflow::joint::FitOptions;
+/// let o = FitOptions { windows: Some(Windows::new(200, 20).unwrap()), ..FitOptions::default() };
+/// let s = o.settings().unwrap();
+/// assert_eq!((s.windows(), s.polish(), s.max_iterations()), (o.windows, false, 100));
+/// let both = FitOptions { segment_length: Some(100), ..o };
+/// assert!(both.settings().is_err());
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Levenberg–Marquardt iterations per stage.
+    pub iterations: usize,
+    /// Whether each record's initial state is fitted (otherwise each starts at rest).
+    pub estimate_initial_state: bool,
+    /// Samples per multiple-shooting segment.
+    pub segment_length: Option<usize>,
+    /// The windows whose score is the criterion (not with `segment_length`).
+    pub windows: Option<Windows>,
+}
+
+impl Default for FitOptions {
+    /// 100 iterations, initial states at rest, single shooting.
+    fn default() -> Self {
+        Self {
+            iterations: 100,
+            estimate_initial_state: false,
+            segment_length: None,
+            windows: None,
+        }
+    }
+}
+
+impl FitOptions {
+    /// The joint fit's settings (the windowed criterion without the single-shooting polish).
+    ///
+    /// # Errors
+    /// [`WorkflowError::OptionConflict`] for both segments and windows; the fit's own error
+    /// for a value it refuses (fewer than 2 samples a segment, no iteration).
+    pub fn settings(&self) -> Result<JointSettings> {
+        if self.segment_length.is_some() && self.windows.is_some() {
+            return Err(WorkflowError::OptionConflict {
+                options: vec!["segment_length", "windows"],
+                rule: "the windows are the segments of a windowed fit: give one of them".into(),
+            });
+        }
+        let mut fit = JointSettings::builder()
+            .max_iterations(self.iterations)
+            .estimate_initial_state(self.estimate_initial_state);
+        if let Some(l) = self.segment_length {
+            fit = fit.segment_length(l);
+        }
+        if let Some(w) = self.windows {
+            fit = fit.polish(false).windows(w);
+        }
+        Ok(fit.build()?)
     }
 }
 

@@ -67,7 +67,7 @@ pub use identify::{
     IdentifyOutcome, IdentifyRequest, core_model, default_criterion, identify_model_file,
 };
 pub use joint::{
-    BetaChoice, BetaTrial, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
+    BetaChoice, BetaTrial, FitOptions, JointOutcome, JointRequest, JointWorkflowSettings, MapTable,
     refine_joint, simulate_model_file, simulate_model_file_noisy, write_joint_outputs,
 };
 pub use linear::{

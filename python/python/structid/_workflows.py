@@ -102,7 +102,8 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
                  beta: Union[float, str] = "auto", free: Sequence[str] = (), centres: int = 15,
                  segment_length: Optional[int] = None, iterations: int = 100,
                  initial_state: str = "zero",
-                 out: Optional[Union[str, os.PathLike]] = None) -> JointRefinement:
+                 out: Optional[Union[str, os.PathLike]] = None,
+                 windows: Optional[Tuple[int, int]] = None) -> JointRefinement:
     """Fits the whole model at once by its simulation error (``structid refine --joint``):
     the entries of G named in ``free`` (``"A"`` for every non-zero entry of A, ``"Bw[1][0]"``
     for one), every static map as a Gaussian kernel expansion (or, when its ``truth`` declares
@@ -111,15 +112,27 @@ def refine_joint(model: Model, u: object, y: object, *, validation: Optional[Tup
     with ``segment_length``). It takes maps in series, maps of unmeasured states and
     operators. ``beta`` is a number, or ``"auto"`` with ``validation=(u_val, y_val)``: the
     best of 10⁻¹⁰ … 10⁻² by the validation simulation RMS. ``initial_state`` is ``"zero"``
-    (each record starts at rest) or ``"estimate"`` (fitted). ``out`` writes the CLI's output
-    directory (model.toml, the map tables, joint.json)."""
+    (each record starts at rest) or ``"estimate"`` (fitted). ``windows=(LENGTH, INIT)`` fits by
+    the score of a simulation in windows of LENGTH samples, each from a state fitted to its
+    first half and scored after its first INIT samples (``--windows``; plants with
+    integrators), instead of by shooting. ``out`` writes the CLI's output directory
+    (model.toml, the map tables, joint.json)."""
     val = _checked_beta_and_validation(model, beta, validation)
     o = _structid.refine_joint_columns(
         model._native, _records_columns(model, u, y, ""), val,
         None if isinstance(beta, str) else float(beta), [str(f) for f in free], int(centres),
         None if segment_length is None else int(segment_length), int(iterations), initial_state,
-        None if out is None else os.fspath(out))
+        None if out is None else os.fspath(out), _windows(windows))
     return JointRefinement(**_joint_fields(o))
+
+
+def _windows(windows: Optional[Tuple[int, int]]) -> Optional[Tuple[int, int]]:
+    """``(LENGTH, INIT)`` as whole numbers, or ``None``."""
+    if windows is None:
+        return None
+    if len(windows) != 2:
+        raise _structid.StructidError("windows is a pair (LENGTH, INIT)")
+    return (int(windows[0]), int(windows[1]))
 
 
 def _joint_fields(o: Dict[str, Any]) -> Dict[str, Any]:
@@ -146,8 +159,8 @@ class BlockStructured(JointRefinement):
 def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, int, int],
                       validation: Optional[Tuple[object, object]], beta: Optional[float],
                       centres: int, segment_length: Optional[int], iterations: int,
-                      initial_state: str,
-                      out: Optional[Union[str, os.PathLike]]) -> BlockStructured:
+                      initial_state: str, out: Optional[Union[str, os.PathLike]],
+                      windows: Optional[Tuple[int, int]]) -> BlockStructured:
     def pairs(a: object, b: object, what: str) -> List[Tuple[List[float], List[float]]]:
         recs = records_of(a, b, what) or [(a, b)]
         return [(as_signal(ua, f"{what}u", 1)[:, 0].tolist(), as_signal(ya, f"{what}y", 1)[:, 0].tolist())
@@ -163,7 +176,7 @@ def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, i
         pairs(u, y, ""), tuple(int(v) for v in orders), val,
         None if beta is None else float(beta), int(centres),
         None if segment_length is None else int(segment_length), int(iterations), initial_state,
-        None if out is None else os.fspath(out), structure)
+        None if out is None else os.fspath(out), structure, _windows(windows))
     divisions = [{"front": (fn, fd), "back": (bn, bd), "rms": r}
                  for fn, fd, bn, bd, r in o["divisions"]]
     return BlockStructured(bla=o["bla"], divisions=divisions, **_joint_fields(o))
@@ -174,15 +187,16 @@ def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
                        beta: Optional[float] = None, centres: int = 15,
                        segment_length: Optional[int] = None, iterations: int = 100,
                        initial_state: str = "zero",
-                       out: Optional[Union[str, os.PathLike]] = None) -> BlockStructured:
+                       out: Optional[Union[str, os.PathLike]] = None,
+                       windows: Optional[Tuple[int, int]] = None) -> BlockStructured:
     """A Wiener–Hammerstein model with both LTI blocks unknown (``structid
     wiener-hammerstein``): the best linear approximation of ``orders`` = (NA, NB, NK) (both
     blocks together), every division of its poles and zeros scored by a map fitted behind it,
     then both blocks, the map and the initial states fitted from the best by simulation error.
-    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``.
-    u and y are 1-D arrays, or lists of them for several records."""
+    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``;
+    ``windows`` as in :func:`refine_joint`. u and y are 1-D arrays, or lists of them for several records."""
     return _block_structured("wiener-hammerstein", u, y, orders, validation, beta, centres,
-                             segment_length, iterations, initial_state, out)
+                             segment_length, iterations, initial_state, out, windows)
 
 
 def hammerstein_wiener(u: object, y: object, orders: Tuple[int, int, int], *,
@@ -190,13 +204,14 @@ def hammerstein_wiener(u: object, y: object, orders: Tuple[int, int, int], *,
                        beta: Optional[float] = None, centres: int = 15,
                        segment_length: Optional[int] = None, iterations: int = 100,
                        initial_state: str = "zero",
-                       out: Optional[Union[str, os.PathLike]] = None) -> BlockStructured:
+                       out: Optional[Union[str, os.PathLike]] = None,
+                       windows: Optional[Tuple[int, int]] = None) -> BlockStructured:
     """A Hammerstein–Wiener model y = N₂(G·N₁(u)) + e with G and both maps unknown
     (``structid hammerstein-wiener``, MATLAB's ``nlhw``): G starts as the best linear
     approximation of ``orders`` = (NA, NB, NK), both maps as the identity, then everything is
     fitted by simulation error. Options as :func:`wiener_hammerstein`."""
     return _block_structured("hammerstein-wiener", u, y, orders, validation, beta, centres,
-                             segment_length, iterations, initial_state, out)
+                             segment_length, iterations, initial_state, out, windows)
 
 
 def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:

@@ -712,8 +712,8 @@ pub fn solve(problem: &Problem, settings: &IdentifySettings) -> Result<Identific
         .then(|| {
             feature_posterior(
                 &chol,
-                &maps,
-                &offsets,
+                maps,
+                offsets,
                 &sqrt_w,
                 weighted_sse,
                 lb,

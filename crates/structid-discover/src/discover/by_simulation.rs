@@ -12,8 +12,9 @@
 //! ```
 //!
 //! from the neutral map (the identity in the signal path, zero in feedback), ŷ the free-run
-//! simulation or, for a model scored in windows, a multiple-shooting simulation on segments
-//! of the window length. β is a small fixed share of the output's energy per unit of the
+//! simulation or, for a model scored in windows, the scoring's own windowed simulation (each
+//! window from a state fitted to its first half, [`structid_joint::windowed`]), so that the
+//! fit and its score are one criterion. β is a small fixed share of the output's energy per unit of the
 //! map's dispersion: the data decide the map. The result is a candidate like any other,
 //! scored on the validation record the same way, and named from its curve along the
 //! simulated z. The same expansions serve the second-block rows
@@ -220,16 +221,14 @@ fn along_simulation(
 
 /// The joint settings of a fit by simulation error, scored as the workflow scores.
 pub(super) fn joint_settings(settings: &DiscoverSettings) -> Result<JointSettings> {
-    let mut joint = JointSettings::builder()
-        .max_iterations(ITERATIONS)
-        .polish(segment_length(settings).is_none());
-    if let Some(len) = segment_length(settings) {
-        // Independent windows, as the model is scored.
-        joint = joint.segment_length(len).continuity_weight(0.0);
+    let joint = JointSettings::builder().max_iterations(ITERATIONS);
+    match settings.scoring {
+        // The fit's criterion is the scoring's: windows from states fitted to their first half.
+        Some(Scoring::Windowed(w)) => joint.polish(false).windows(w),
+        _ => joint,
     }
-    joint
-        .build()
-        .map_err(|e| Error::InvalidStructure(format!("joint settings: {e}")))
+    .build()
+    .map_err(|e| Error::InvalidStructure(format!("joint settings: {e}")))
 }
 
 /// The joint model of `h` with `unknown` in its unknown block and its known maps held fixed.
@@ -306,15 +305,6 @@ pub(super) fn energy(data: &Data) -> f64 {
 /// The dispersion of a hypothesis built only for its structure.
 pub(super) fn placeholder() -> Result<Arc<dyn structid_core::Dispersion>> {
     Ok(Arc::new(PolynomialDispersion::new(1)?))
-}
-
-/// Multiple shooting on the scoring's windows for a model scored in windows (its free run
-/// drifts); single shooting otherwise.
-fn segment_length(settings: &DiscoverSettings) -> Option<usize> {
-    match settings.scoring {
-        Some(Scoring::Windowed(w)) => Some(w.length()),
-        _ => None,
-    }
 }
 
 /// An interval of z.

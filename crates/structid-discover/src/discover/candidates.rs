@@ -36,6 +36,8 @@ pub(super) struct Search<'a> {
     pub cancelled: bool,
     /// The nominal model's validation RMS.
     pub gap_rms: f64,
+    /// The nominal model's simulation RMS on the estimation record.
+    pub estimation_rms: f64,
 }
 
 impl<'a> Search<'a> {
@@ -52,6 +54,7 @@ impl<'a> Search<'a> {
             uncertain_g,
             cancelled: cx.cancelled.is_some(),
             gap_rms: cx.validation_gap.rms,
+            estimation_rms: cx.estimation_gap.rms,
         }
     }
 
@@ -67,7 +70,7 @@ impl<'a> Search<'a> {
         for (i, &location) in locations.iter().enumerate() {
             let t = Instant::now();
             match self.identify_at(location, self.settings, true) {
-                Ok(f) => fitted.push(f),
+                Ok(f) => fitted.push(self.or_by_simulation(f)),
                 Err(e) => failed.push(failure(location, "", t, &e)),
             }
             self.settings
@@ -112,6 +115,24 @@ impl<'a> Search<'a> {
                 })
             }
             other => other,
+        }
+    }
+
+    /// A hypothesis nests the nominal model (its map the neutral one: the identity in the
+    /// signal path, zero in feedback), so an estimate that simulates the estimation record
+    /// worse than the nominal model does has failed as an estimate of its own criterion's
+    /// model: the measured z misled it (a rate differentiated from a noisy y, a z that the
+    /// noise reaches around a loop). The location is then fitted by simulation error from the
+    /// neutral map ([`fitted_by_simulation`]), and that fit replaces the estimate when it
+    /// simulates the estimation record better.
+    fn or_by_simulation(&self, f: Fitted) -> Fitted {
+        if f.result.estimation_rms <= self.estimation_rms {
+            return f;
+        }
+        let location = f.result.location;
+        match fitted_by_simulation(self.given, location, self.est, self.val, self.settings) {
+            Ok(s) if s.result.estimation_rms < f.result.estimation_rms => s,
+            _ => f,
         }
     }
 

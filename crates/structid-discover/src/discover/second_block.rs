@@ -14,7 +14,7 @@
 //!
 //! from N_A as found and N_B neutral (the identity for a map in the signal path, zero for a
 //! map in feedback), G as given. ŷ is the free-run simulation, or for a model scored in
-//! windows, a multiple-shooting simulation on segments of the window length. Each row is then
+//! windows, the scoring's windowed simulation ([`structid_joint::windowed`]). Each row is then
 //! scored on the validation record the same way as every other simulation of the workflow.
 //! The β_b are a small fixed share of the output's energy per unit of a map's dispersion:
 //! the rows compare maps, not regularisations.
