@@ -48,8 +48,49 @@ pub(crate) struct Shooting<'a> {
     pub(crate) segments: Vec<Segment>,
     pub(crate) globals: usize,
     pub(crate) weight: f64,
-    /// Regulariser rows (√L·R_b) with the parameter column where block b's parameters start.
-    pub(crate) regularisers: Vec<(usize, DMatrix<f64>)>,
+    pub(crate) regularisers: Regularisers,
+}
+
+/// The regulariser rows √L·R_b of every regularised block, each with the parameter column
+/// where its block's parameters start: the residuals √L·R_b·θ_b whose squares are
+/// L·β_b·D_b(θ_b).
+pub(crate) struct Regularisers(Vec<(usize, DMatrix<f64>)>);
+
+impl Regularisers {
+    /// The rows of `model`'s blocks, scaled by √L for the samples of `data`.
+    pub(crate) fn of(model: &JointModel, data: &Data) -> Self {
+        let offsets = model.parameter_offsets();
+        let scale = (data.len() as f64).sqrt();
+        Self(
+            model
+                .blocks()
+                .iter()
+                .enumerate()
+                .filter_map(|(i, b)| b.map.regulariser().map(|r| (offsets[i], r * scale)))
+                .collect(),
+        )
+    }
+
+    /// Appends the residuals √L·R_b·θ_b to `out`.
+    pub(crate) fn residuals(&self, theta: &[f64], out: &mut Vec<f64>) {
+        for (at, r) in &self.0 {
+            let th = DVector::from_column_slice(&theta[*at..*at + r.ncols()]);
+            out.extend((r * th).iter());
+        }
+    }
+
+    /// Adds their rows (J = R_b on block b's columns) to the normal equations.
+    pub(crate) fn add_to(&self, normal: &mut NormalEquations, theta: &[f64]) {
+        for (at, r) in &self.0 {
+            let th = DVector::from_column_slice(&theta[*at..*at + r.ncols()]);
+            let res = r * &th;
+            let cols: Vec<usize> = (*at..*at + r.ncols()).collect();
+            for i in 0..r.nrows() {
+                let row: Vec<f64> = r.row(i).iter().copied().collect();
+                normal.add_sparse_row(&cols, &row, res[i]);
+            }
+        }
+    }
 }
 
 impl<'a> Shooting<'a> {
@@ -60,20 +101,13 @@ impl<'a> Shooting<'a> {
         weight: f64,
     ) -> Self {
         let offsets = model.parameter_offsets();
-        let scale = (data.len() as f64).sqrt();
-        let regularisers = model
-            .blocks()
-            .iter()
-            .enumerate()
-            .filter_map(|(i, b)| b.map.regulariser().map(|r| (offsets[i], r * scale)))
-            .collect();
         Self {
             model,
             data,
             segments,
             globals: *offsets.last().expect("non-empty"),
             weight,
-            regularisers,
+            regularisers: Regularisers::of(model, data),
         }
     }
 
@@ -93,13 +127,6 @@ impl<'a> Shooting<'a> {
         match s.state_at {
             Some(at) => theta[at..at + nxi].to_vec(),
             None => s.fixed.clone(),
-        }
-    }
-
-    fn regulariser_residuals(&self, theta: &[f64], out: &mut Vec<f64>) {
-        for (at, r) in &self.regularisers {
-            let th = DVector::from_column_slice(&theta[*at..*at + r.ncols()]);
-            out.extend((r * th).iter());
         }
     }
 }
@@ -129,7 +156,7 @@ impl LeastSquaresProblem for Shooting<'_> {
                 );
             }
         }
-        self.regulariser_residuals(theta, &mut r);
+        self.regularisers.residuals(theta, &mut r);
         r.iter()
             .all(|v| v.is_finite())
             .then(|| DVector::from_vec(r))
@@ -215,15 +242,7 @@ impl LeastSquaresProblem for Shooting<'_> {
                 normal.add_sparse_row(&cols, &vals, res);
             }
         }
-        for (at, r) in &self.regularisers {
-            let th = DVector::from_column_slice(&theta[*at..*at + r.ncols()]);
-            let res = r * &th;
-            let cols: Vec<usize> = (*at..*at + r.ncols()).collect();
-            for i in 0..r.nrows() {
-                let row: Vec<f64> = r.row(i).iter().copied().collect();
-                normal.add_sparse_row(&cols, &row, res[i]);
-            }
-        }
+        self.regularisers.add_to(&mut normal, theta);
         Some(normal.finish())
     }
 }

@@ -24,6 +24,7 @@ use structid_linear::levenberg_marquardt::LeastSquaresProblem;
 use structid_linear::normal_equations::NormalEquations;
 
 use crate::model::JointModel;
+use crate::shooting::Regularisers;
 use crate::step::Stepper;
 
 /// Gauss–Newton steps of a window's state per evaluation (it starts from the last one).
@@ -47,7 +48,7 @@ pub(crate) struct Windowed<'a> {
     /// Each window's state at the last evaluation (the next one starts there).
     pub(crate) states: Vec<Vec<f64>>,
     pub(crate) globals: usize,
-    regularisers: Vec<(usize, DMatrix<f64>)>,
+    regularisers: Regularisers,
 }
 
 impl<'a> Windowed<'a> {
@@ -83,21 +84,13 @@ impl<'a> Windowed<'a> {
                 }
             }
         }
-        let offsets = model.parameter_offsets();
-        let scale = (data.len() as f64).sqrt();
-        let regularisers = model
-            .blocks()
-            .iter()
-            .enumerate()
-            .filter_map(|(i, b)| b.map.regulariser().map(|r| (offsets[i], r * scale)))
-            .collect();
         Self {
             model,
             data,
             spans,
             states,
-            globals: *offsets.last().expect("non-empty"),
-            regularisers,
+            globals: *model.parameter_offsets().last().expect("non-empty"),
+            regularisers: Regularisers::of(model, data),
         }
     }
 
@@ -228,10 +221,7 @@ impl LeastSquaresProblem for Windowed<'_> {
                 }
             })?;
         }
-        for (at, reg) in &self.regularisers {
-            let th = DVector::from_column_slice(&theta[*at..*at + reg.ncols()]);
-            r.extend((reg * th).iter());
-        }
+        self.regularisers.residuals(theta, &mut r);
         r.iter()
             .all(|v| v.is_finite())
             .then(|| DVector::from_vec(r))
@@ -279,15 +269,7 @@ impl LeastSquaresProblem for Windowed<'_> {
                 normal.add_row(total.as_slice(), -res[i]);
             }
         }
-        for (at, reg) in &self.regularisers {
-            let th = DVector::from_column_slice(&theta[*at..*at + reg.ncols()]);
-            let res = reg * &th;
-            let cols: Vec<usize> = (*at..*at + reg.ncols()).collect();
-            for i in 0..reg.nrows() {
-                let row: Vec<f64> = reg.row(i).iter().copied().collect();
-                normal.add_sparse_row(&cols, &row, res[i]);
-            }
-        }
+        self.regularisers.add_to(&mut normal, theta);
         Some(normal.finish())
     }
 }

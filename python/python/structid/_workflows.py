@@ -182,36 +182,35 @@ def _block_structured(structure: str, u: object, y: object, orders: Tuple[int, i
     return BlockStructured(bla=o["bla"], divisions=divisions, **_joint_fields(o))
 
 
-def wiener_hammerstein(u: object, y: object, orders: Tuple[int, int, int], *,
-                       validation: Optional[Tuple[object, object]] = None,
-                       beta: Optional[float] = None, centres: int = 15,
-                       segment_length: Optional[int] = None, iterations: int = 100,
-                       initial_state: str = "zero",
-                       out: Optional[Union[str, os.PathLike]] = None,
-                       windows: Optional[Tuple[int, int]] = None) -> BlockStructured:
-    """A Wiener–Hammerstein model with both LTI blocks unknown (``structid
-    wiener-hammerstein``): the best linear approximation of ``orders`` = (NA, NB, NK) (both
-    blocks together), every division of its poles and zeros scored by a map fitted behind it,
-    then both blocks, the map and the initial states fitted from the best by simulation error.
-    ``beta`` defaults to 10⁻⁸, or is chosen from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``;
-    ``windows`` as in :func:`refine_joint`. u and y are 1-D arrays, or lists of them for several records."""
-    return _block_structured("wiener-hammerstein", u, y, orders, validation, beta, centres,
-                             segment_length, iterations, initial_state, out, windows)
+def _block_structured_fit(structure: str, doc: str) -> Any:
+    """The public function of one block structure: its options, and its docstring ``doc``."""
+    def fit(u: object, y: object, orders: Tuple[int, int, int], *,
+            validation: Optional[Tuple[object, object]] = None,
+            beta: Optional[float] = None, centres: int = 15,
+            segment_length: Optional[int] = None, iterations: int = 100,
+            initial_state: str = "zero",
+            out: Optional[Union[str, os.PathLike]] = None,
+            windows: Optional[Tuple[int, int]] = None) -> BlockStructured:
+        return _block_structured(structure, u, y, orders, validation, beta, centres,
+                                 segment_length, iterations, initial_state, out, windows)
+    fit.__name__ = fit.__qualname__ = structure.replace("-", "_")
+    fit.__doc__ = doc
+    return fit
 
 
-def hammerstein_wiener(u: object, y: object, orders: Tuple[int, int, int], *,
-                       validation: Optional[Tuple[object, object]] = None,
-                       beta: Optional[float] = None, centres: int = 15,
-                       segment_length: Optional[int] = None, iterations: int = 100,
-                       initial_state: str = "zero",
-                       out: Optional[Union[str, os.PathLike]] = None,
-                       windows: Optional[Tuple[int, int]] = None) -> BlockStructured:
-    """A Hammerstein–Wiener model y = N₂(G·N₁(u)) + e with G and both maps unknown
-    (``structid hammerstein-wiener``, MATLAB's ``nlhw``): G starts as the best linear
-    approximation of ``orders`` = (NA, NB, NK), both maps as the identity, then everything is
-    fitted by simulation error. Options as :func:`wiener_hammerstein`."""
-    return _block_structured("hammerstein-wiener", u, y, orders, validation, beta, centres,
-                             segment_length, iterations, initial_state, out, windows)
+wiener_hammerstein = _block_structured_fit("wiener-hammerstein", """A Wiener–Hammerstein
+    model with both LTI blocks unknown (``structid wiener-hammerstein``): the best linear
+    approximation of ``orders`` = (NA, NB, NK) (both blocks together), every division of its
+    poles and zeros scored by a map fitted behind it, then both blocks, the map and the initial
+    states fitted from the best by simulation error. ``beta`` defaults to 10⁻⁸, or is chosen
+    from 10⁻¹⁰ … 10⁻² on ``validation=(u_val, y_val)``; ``windows`` as in
+    :func:`refine_joint`. u and y are 1-D arrays, or lists of them for several records.""")
+
+hammerstein_wiener = _block_structured_fit("hammerstein-wiener", """A Hammerstein–Wiener
+    model y = N₂(G·N₁(u)) + e with G and both maps unknown (``structid hammerstein-wiener``,
+    MATLAB's ``nlhw``): G starts as the best linear approximation of ``orders`` = (NA, NB,
+    NK), both maps as the identity, then everything is fitted by simulation error. Options as
+    :func:`wiener_hammerstein`.""")
 
 
 def _records_columns(model: Model, u: object, y: object, what: str) -> List[Any]:
