@@ -23,7 +23,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use structid_core::validation::Scoring;
+use structid_core::validation::{Scoring, simulate_scored};
 use structid_core::{Data, Error, Interpolant, LookupTable, PolynomialDispersion, Result, Signal};
 use structid_joint::LinearInParameters;
 use structid_joint::{
@@ -207,13 +207,26 @@ fn along_simulation(
         .zip(&sim.simulated)
         .map(|(y, s)| y - s)
         .collect();
-    // z along the free run of each record from rest: where the scoring runs in windows, the
-    // free run covers the same operating range, which is what the naming points sample.
-    let z = crate::records::stacked(data, |r| {
-        Ok(h.model
-            .simulate(&h.maps(map), r.u(), None, None)?
-            .z
-            .channel(0))
+    // z along the simulation the residual is of: each window from its own state where the
+    // scoring runs in windows (the direction test pairs them sample by sample), else the free
+    // run of each record from rest.
+    let maps = h.maps(map);
+    let z = crate::records::stacked(data, |r| match settings.scoring {
+        Some(Scoring::Windowed(w)) => {
+            let sim = simulate_scored(&h.model, &maps, r, Scoring::Windowed(w), None, 0)?;
+            let mut z = Vec::with_capacity(r.len());
+            for (range, x0) in w.ranges(r.len()).into_iter().zip(&sim.states) {
+                let u = r.u().slice(range);
+                z.extend(
+                    h.model
+                        .simulate(&maps, &u, None, x0.as_deref())?
+                        .z
+                        .channel(0),
+                );
+            }
+            Ok(z)
+        }
+        _ => Ok(h.model.simulate(&maps, r.u(), None, None)?.z.channel(0)),
     })
     .ok()?;
     (z.len() == e.len() && z.iter().all(|v| v.is_finite())).then_some((z, e))
