@@ -267,7 +267,7 @@ fn run_joint(a: RefineArgs) -> Result<(), CliError> {
         beta,
         centres: a.centres,
         free: a.free.clone(),
-        fit: fit.settings().map_err(CliError::from)?,
+        fit: fit.settings().map_err(|e| CliError::input(e.to_string()))?,
         ..JointWorkflowSettings::default()
     };
     let out = structid_workflow::refine_joint(&JointRequest {

@@ -103,7 +103,7 @@ pub fn run(a: WienerHammersteinArgs, structure: BlockStructure) -> Result<(), Cl
         orders: a.orders,
         beta: BetaChoice::from_options_or(a.beta, validation, start.beta()),
         start,
-        fit: fit.settings().map_err(CliError::from)?,
+        fit: fit.settings().map_err(|e| CliError::input(e.to_string()))?,
     };
     let out = structid_workflow::wiener_hammerstein(&req)
         .map_err(|e| CliError::from(e).context("cannot identify the block-structured model"))?;

@@ -700,10 +700,24 @@ fn an_integrating_plant_is_fitted_by_its_windowed_score() {
     let rms = v["outputs"][0]["rms"].as_f64().unwrap();
     assert!(rms < 2.0 * 0.005, "windowed validation RMS {rms}");
     // Windows and segments are two criteria; a window needs LENGTH:INIT.
-    let both = args(&["--windows", "200:20", "--segment-length", "50"]);
+    let both = args(&[
+        "--windows",
+        "200:20",
+        "--segment-length",
+        "50",
+        "--out",
+        p(&d.join("b")),
+    ]);
     let e = input_error(&both.iter().map(String::as_str).collect::<Vec<_>>());
-    assert!(e.contains("segment") && e.contains("windows"), "{e}");
-    let bad = args(&["--windows", "200"]);
+    assert!(
+        e.contains("segment_length") && e.contains("windows") && !e.contains("required"),
+        "{e}"
+    );
+    let bad = args(&["--windows", "200", "--out", p(&d.join("b"))]);
     let e = input_error(&bad.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(e.contains("LENGTH:INIT"), "{e}");
+    // A setting the fit refuses is the user's input error too.
+    let short = args(&["--segment-length", "1", "--out", p(&d.join("short"))]);
+    let e = input_error(&short.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(e.contains("segment_length"), "{e}");
 }

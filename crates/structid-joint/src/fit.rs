@@ -18,9 +18,9 @@
 //! then the fit's own, and the result is the start or the windows' fit, whichever has the
 //! lower cost by it.
 //!
-//! With [`JointSettingsBuilder::windows`] the criterion is instead exactly the score of a
-//! windowed simulation ([`crate::windowed`]): each window's state fitted to its first half
-//! and projected out of the search, the samples after its first `init` scored.
+//! With [`JointSettingsBuilder::windows`] the criterion is instead the score of a windowed
+//! simulation ([`crate::windowed`]): each window's state fitted to its first half and
+//! projected out of the search, the samples after its first `init` scored.
 
 use structid_core::Data;
 use structid_core::validation::Windows;
@@ -264,6 +264,7 @@ pub fn fit_initial_state(
     }
     let settings = JointSettings {
         segment_length: None,
+        windows: None,
         estimate_initial_state: true,
         ..settings.clone()
     };
@@ -365,16 +366,17 @@ fn windowed_fit(
     let out = LevenbergMarquardt::new(lm_settings(settings)?)
         .minimize(&mut problem, &theta)
         .map_err(|e| JointError::InvalidModel(e.to_string()))?;
-    // The window states of the model kept (the last evaluation may have been a rejected trial).
-    let keep = if out.cost < initial_cost {
-        &out.theta
-    } else {
-        &theta
+    // The criterion is a function of θ alone, so the fitted θ is kept only when it scores
+    // lower than the start; evaluating the kept one last leaves its window states in place.
+    let fitted_cost = problem.residuals(&out.theta).map(|r| r.norm_squared());
+    let keep = match fitted_cost {
+        Some(c) if c < initial_cost => &out.theta,
+        _ => &theta,
     };
     let cost = problem.residuals(keep).ok_or_else(no_start)?.norm_squared();
     let fitted = model.with_parameters(&keep[..problem.globals])?;
     let initial_states = problem.record_starts();
-    let rms = simulation_rms(&fitted, data, &initial_states);
+    let rms = problem.scored_rms(&fitted)?;
     let stage = Stage {
         name: "windows",
         segments: problem.states.len(),

@@ -12,17 +12,26 @@
 //!
 //! The window states are not parameters of the outer search (a state fitted over the whole
 //! window would absorb within it what the maps should explain). They are variables projected
-//! out: for each θ a few Gauss–Newton steps find ξ̂_s from the previous one, and the outer
-//! Jacobian is the scored rows' total derivative,
-//! J = A_S − B_S·(B_Fᵀ B_F)⁻¹·B_Fᵀ A_F, with A and B the sensitivities of ŷ to θ and to ξ on
-//! the scored (S) and fitted (F) samples (Kaufman's variable projection).
+//! out: for each θ, Gauss–Newton steps find ξ̂_s, searched for each record's first window from
+//! its given start and for each later one from the state the previous window's simulation
+//! reached, so that the criterion is a function of θ alone. The outer Jacobian is the scored
+//! rows' total derivative, J = A_S − B_S·(B_Fᵀ B_F)⁻¹·B_Fᵀ A_F, with A and B the
+//! sensitivities of ŷ to θ and to ξ on the scored (S) and fitted (F) samples (Kaufman's
+//! variable projection).
+//!
+//! The windows, the fitted and the scored samples are the scoring's. The window state is
+//! fitted through the simulation with the maps in the loop, as the scoring fits it for a model
+//! beyond measurability; for a measurable model the scoring fits it linearly with the maps'
+//! outputs held at the measured z, which agrees with this fit when the model fits the data,
+//! not to the last digit otherwise. Settling samples are not left out.
 
 use nalgebra::{DMatrix, DVector};
-use structid_core::Data;
 use structid_core::validation::Windows;
+use structid_core::{Data, Signal};
 use structid_linear::levenberg_marquardt::LeastSquaresProblem;
 use structid_linear::normal_equations::NormalEquations;
 
+use crate::error::{JointError, Result};
 use crate::model::JointModel;
 use crate::shooting::Regularisers;
 use crate::step::Stepper;
@@ -31,13 +40,14 @@ use crate::step::Stepper;
 const STATE_STEPS: usize = 8;
 
 /// One window: its samples, the first `fitted` of them fit its state, those from `scored`
-/// on are scored (absolute sample indices).
+/// on are scored (absolute sample indices); `first` for the first window of a record.
 #[derive(Clone, Debug)]
 struct Span {
     start: usize,
     fitted: usize,
     scored: usize,
     end: usize,
+    first: bool,
 }
 
 /// The windowed least-squares problem over the model's parameters.
@@ -45,49 +55,50 @@ pub(crate) struct Windowed<'a> {
     model: &'a JointModel,
     data: &'a Data,
     spans: Vec<Span>,
-    /// Each window's state at the last evaluation (the next one starts there).
+    /// Each record's given start, where its first window's search begins.
+    starts: Vec<Vec<f64>>,
+    /// Each window's state at the last evaluation.
     pub(crate) states: Vec<Vec<f64>>,
     pub(crate) globals: usize,
     regularisers: Regularisers,
 }
 
 impl<'a> Windowed<'a> {
-    /// The windows of every record of `data`, their states started where a simulation of
-    /// `model` from each record's `starts` passes.
+    /// The windows of every record of `data` (as [`Windows::ranges`] cuts them, each scored
+    /// after min(init, its length − 1) samples, as the scoring does), each record's first
+    /// window searched from its `starts`.
     pub(crate) fn new(
         model: &'a JointModel,
         data: &'a Data,
         windows: Windows,
         starts: &[Vec<f64>],
     ) -> Self {
-        let stepper = Stepper::new(model);
         let bounds = data.record_bounds();
-        let (mut spans, mut states) = (Vec::new(), Vec::new());
+        let mut spans = Vec::new();
         for r in 0..bounds.len() - 1 {
-            let mut xi = starts[r].clone();
-            for w in windows.ranges(bounds[r + 1] - bounds[r]) {
+            for (i, w) in windows
+                .ranges(bounds[r + 1] - bounds[r])
+                .into_iter()
+                .enumerate()
+            {
                 let (start, end) = (bounds[r] + w.start, bounds[r] + w.end);
-                let half = (w.len() / 2).max(windows.init()).min(w.len());
+                let init = windows.init().min(w.len().saturating_sub(1));
+                let half = (w.len() / 2).max(init);
                 spans.push(Span {
                     start,
                     fitted: start + half,
-                    scored: (start + windows.init()).min(end),
+                    scored: start + init,
                     end,
+                    first: i == 0,
                 });
-                states.push(xi.clone());
-                let mut trial = xi.clone();
-                if stepper
-                    .run(data.u(), start..end, &mut trial, |_, _| {})
-                    .is_some()
-                {
-                    xi = trial;
-                }
             }
         }
+        let states = vec![Vec::new(); spans.len()];
         Self {
             model,
             data,
             spans,
+            starts: starts.to_vec(),
             states,
             globals: *model.parameter_offsets().last().expect("non-empty"),
             regularisers: Regularisers::of(model, data),
@@ -96,11 +107,10 @@ impl<'a> Windowed<'a> {
 
     /// Each record's first window state.
     pub(crate) fn record_starts(&self) -> Vec<Vec<f64>> {
-        let firsts = self.data.record_bounds();
         self.spans
             .iter()
             .zip(&self.states)
-            .filter(|(s, _)| firsts.contains(&s.start))
+            .filter(|(s, _)| s.first)
             .map(|(_, x)| x.clone())
             .collect()
     }
@@ -192,25 +202,130 @@ impl<'a> Windowed<'a> {
         sum.is_finite().then_some(sum)
     }
 
-    /// Every window's state for `theta`, from the last ones.
+    /// Every window's state for the model of `stepper`: a function of the parameters alone.
+    /// Each record's first window is searched from the record's given start, each later one
+    /// from the state the previous window's simulation reached (as the scoring of a model
+    /// beyond measurability searches it).
     fn project(&mut self, stepper: &Stepper<'_>) -> Option<()> {
-        for (i, span) in self.spans.iter().enumerate() {
-            let x = self.window_state(stepper, span, &self.states[i])?;
+        let mut record = 0;
+        let mut reached: Vec<f64> = Vec::new();
+        for i in 0..self.spans.len() {
+            let span = &self.spans[i];
+            let from = if span.first {
+                record += 1;
+                self.starts[record - 1].clone()
+            } else {
+                reached.clone()
+            };
+            let x = self.window_state(stepper, span, &from)?;
+            reached = x.clone();
+            stepper.run(self.data.u(), span.start..span.end, &mut reached, |_, _| {})?;
             self.states[i] = x;
         }
         Some(())
     }
 }
 
+impl Windowed<'_> {
+    /// The RMS per output of `model` (the problem's with the parameters of the last
+    /// evaluation) over the scored samples, from the window states of that evaluation.
+    pub(crate) fn scored_rms(&self, model: &JointModel) -> Result<Vec<f64>> {
+        Ok(self.simulation(&Stepper::new(model))?.rms)
+    }
+
+    /// The simulation at the window states of the last evaluation (see [`simulate_windows`]).
+    fn simulation(&self, stepper: &Stepper<'_>) -> Result<WindowedSimulation> {
+        let (len, ny) = (self.data.len(), stepper.outputs());
+        let nz = self.model.lft().dims().z;
+        let (mut y, mut z) = (Signal::zeros(len, ny), Signal::zeros(len, nz));
+        let (mut sum, mut count) = (vec![0.0; ny], 0usize);
+        for (span, xi) in self.spans.iter().zip(&self.states) {
+            let u = self.data.u().slice(span.start..span.end);
+            let sim = stepper.simulate(&u, None, xi)?;
+            for k in 0..u.len() {
+                let at = span.start + k;
+                y.sample_mut(at).copy_from_slice(sim.y.sample(k));
+                z.sample_mut(at).copy_from_slice(sim.z.sample(k));
+                if at >= span.scored {
+                    count += 1;
+                    for (c, s) in sum.iter_mut().enumerate() {
+                        *s += (self.data.y().sample(at)[c] - sim.y.sample(k)[c]).powi(2);
+                    }
+                }
+            }
+        }
+        let rms = sum
+            .iter()
+            .map(|s| (s / count.max(1) as f64).sqrt())
+            .collect();
+        Ok(WindowedSimulation { y, z, rms })
+    }
+}
+
+/// A model's simulation in windows: ŷ and z at every sample of every record (stacked), each
+/// window from the state fitted to its first half, and the RMS of y − ŷ per output over the
+/// scored samples (those after each window's first `init`).
+#[derive(Clone, Debug)]
+pub struct WindowedSimulation {
+    /// ŷ, L × n_y.
+    pub y: Signal,
+    /// z, L × n_z.
+    pub z: Signal,
+    /// RMS of y − ŷ per output over the scored samples.
+    pub rms: Vec<f64>,
+}
+
+/// `model` simulated on `data` in `windows`, each record's first window searched from rest:
+/// how a model fitted by the windowed criterion is scored and where its maps' inputs go.
+///
+/// ```
+/// use nalgebra::dmatrix;
+/// use structid_core::validation::Windows;
+/// use structid_core::{Data, Lft, LftMatrices, Signal};
+/// use structid_joint::{FixedMap, JointBlock, JointModel};
+/// use structid_joint::windowed::simulate_windows;
+/// // An integrator behind tanh: its own output is simulated exactly in every window.
+/// let lft = Lft::new(LftMatrices {
+///     a: dmatrix![1.0], bu: dmatrix![0.0], be: dmatrix![0.0], bw: dmatrix![0.1],
+///     cy: dmatrix![1.0], dyu: dmatrix![0.0], dye: dmatrix![1.0], dyw: dmatrix![0.0],
+///     cz: dmatrix![0.0], dzu: dmatrix![1.0], dze: dmatrix![0.0], dzw: dmatrix![0.0],
+/// }).unwrap();
+/// let n = FixedMap::new(std::sync::Arc::new(|z: &[f64]| z[0].tanh()), 1);
+/// let model = JointModel::new(lft, vec![JointBlock::new("N", vec![0], 0, Box::new(n))]).unwrap();
+/// let u = Signal::from_fn(300, 1, |k, _| (0.05 * k as f64).sin());
+/// let y = model.simulate(&u, Some(&[3.0])).unwrap().y;
+/// let s = simulate_windows(&model, &Data::new(u, y).unwrap(), Windows::new(100, 10).unwrap()).unwrap();
+/// assert!(s.rms[0] < 1e-8);
+/// ```
+///
+/// # Errors
+/// [`JointError::NoStart`] when a window's simulation diverges; a record whose channels do
+/// not match the model.
+pub fn simulate_windows(
+    model: &JointModel,
+    data: &Data,
+    windows: Windows,
+) -> Result<WindowedSimulation> {
+    let bounds = data.record_bounds();
+    let starts = (0..bounds.len() - 1)
+        .map(|r| model.rest_state(data.u().sample(bounds[r]), None))
+        .collect::<Result<Vec<_>>>()?;
+    let mut problem = Windowed::new(model, data, windows, &starts);
+    let stepper = Stepper::new(model);
+    problem
+        .project(&stepper)
+        .ok_or_else(|| JointError::NoStart {
+            record: 1,
+            detail: "a window's simulation diverged".into(),
+        })?;
+    problem.simulation(&stepper)
+}
+
 impl LeastSquaresProblem for Windowed<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
-        let saved = self.states.clone();
-        if self.project(&stepper).is_none() {
-            self.states = saved;
-            return None;
-        }
+        self.project(&stepper)?;
         let y = self.data.y();
         let mut r = Vec::new();
         for (span, xi) in self.spans.iter().zip(&self.states) {
@@ -412,6 +527,25 @@ mod tests {
             let scale = fd.amax().max(1.0);
             prop_assert!((&jtj - &fd).amax() < 1e-4 * scale, "JᵀJ off by {} of {scale}", (&jtj - &fd).amax());
         }
+    }
+
+    /// The criterion is a function of θ alone: evaluated at θ₁, then far away, then at θ₁
+    /// again, it gives the same residuals to the last bit.
+    #[test]
+    fn the_criterion_does_not_depend_on_the_evaluations_before() {
+        let m = model([0.7, 0.5], 0.6);
+        let d = records(&model([0.75, 0.5], 0.9), 2, 0.02);
+        let w = Windows::new(25, 5).unwrap();
+        let mut p = Windowed::new(&m, &d, w, &[vec![0.0, 0.0], vec![0.0, 0.0]]);
+        let th = m.parameters();
+        let far: Vec<f64> = th
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.3 * (i as f64).cos())
+            .collect();
+        let first = p.residuals(&th).unwrap();
+        p.residuals(&far).unwrap();
+        assert_eq!(p.residuals(&th).unwrap(), first);
     }
 
     /// The fit by the windowed criterion ends no higher than it starts, and from a wrong

@@ -32,6 +32,7 @@ use structid_core::validation::Windows;
 use structid_core::{Data, Interpolant, LookupTable, Signal, Simulation};
 use structid_io::{BlockSpec, DispersionSpec, ModelFile, OutputGuard, TruthSpec};
 use structid_joint::LinearInParameters;
+use structid_joint::windowed::simulate_windows;
 use structid_joint::{
     BlockMap, FamilyMap, FixedMap, FourierFeatures, GaussianFeatures, JointBlock, JointFit,
     JointModel, JointSettings, MonotoneFeatures, OperatorBlock, fit,
@@ -660,8 +661,13 @@ const PINNED_BETA: f64 = 1e6;
 /// barely moves between 0.01 and 0.3).
 const NOISE_SHARE: f64 = 0.1;
 
-fn validation_rms(model: &JointModel, validation: &Data) -> Vec<f64> {
+fn validation_rms(model: &JointModel, validation: &Data, windows: Option<Windows>) -> Vec<f64> {
     let ny = validation.y().channels();
+    if let Some(w) = windows {
+        // A model fitted in windows is scored in the same windows.
+        return simulate_windows(model, validation, w)
+            .map_or_else(|_| vec![f64::INFINITY; ny], |s| s.rms);
+    }
     let mut sum = vec![0.0; ny];
     for r in validation.records() {
         let Ok(sim) = model.simulate(r.u(), None) else {
@@ -707,11 +713,11 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
         ));
     }
     let base = Base::of(mf, req.data, s)?;
-    let (beta, fit, trials) = over_betas(&s.beta, |beta| {
+    let (beta, fit, trials) = over_betas(&s.beta, s.fit.windows(), |beta| {
         let (start, x0) = base.start(mf, s, beta)?;
         Ok(fit(&start, req.data, x0.as_deref(), &s.fit)?)
     })?;
-    let (model_file, tables) = written(mf, &fit, req.data)?;
+    let (model_file, tables) = written(mf, &fit, req.data, s.fit.windows())?;
     Ok(JointOutcome {
         fit,
         beta,
@@ -725,6 +731,7 @@ pub fn refine_joint(req: &JointRequest<'_>) -> Result<JointOutcome> {
 /// (summed over outputs), or the only one for a fixed β: the chosen β, its fit and every trial.
 pub(crate) fn over_betas(
     choice: &BetaChoice,
+    windows: Option<Windows>,
     mut fit_with: impl FnMut(f64) -> Result<JointFit>,
 ) -> Result<(f64, JointFit, Vec<BetaTrial>)> {
     let (grid, validation) = match choice {
@@ -737,7 +744,7 @@ pub(crate) fn over_betas(
         let f = fit_with(beta)?;
         let score = match validation {
             Some(v) => {
-                let rms = validation_rms(&f.model, v);
+                let rms = validation_rms(&f.model, v, windows);
                 let total = rms.iter().map(|r| r * r).sum::<f64>();
                 trials.push(BetaTrial {
                     beta,
@@ -763,14 +770,24 @@ pub(crate) fn written(
     mf: &ModelFile,
     f: &JointFit,
     data: &Data,
+    windows: Option<Windows>,
 ) -> Result<(ModelFile, Vec<MapTable>)> {
     let mut ranges = vec![(f64::INFINITY, f64::NEG_INFINITY); f.model.lft().dims().z];
-    for (r, rec) in data.records().iter().enumerate() {
-        let sim = f.model.simulate(rec.u(), Some(&f.initial_states[r]))?;
+    let mut widen = |z: &Signal| {
         for (c, range) in ranges.iter_mut().enumerate() {
-            for v in sim.z.channel(c) {
+            for v in z.channel(c) {
                 range.0 = range.0.min(v);
                 range.1 = range.1.max(v);
+            }
+        }
+    };
+    // The z of the simulation the fit was scored by: a model fitted in windows may drift in a
+    // free run, away from the z its windows visit.
+    match windows {
+        Some(w) => widen(&simulate_windows(&f.model, data, w)?.z),
+        None => {
+            for (r, rec) in data.records().iter().enumerate() {
+                widen(&f.model.simulate(rec.u(), Some(&f.initial_states[r]))?.z);
             }
         }
     }

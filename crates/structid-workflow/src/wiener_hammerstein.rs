@@ -102,7 +102,7 @@ pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHa
         .map_err(|e| WorkflowError::Request(format!("the best linear approximation: {e}")))?
         .model;
     let mut divisions = Vec::new();
-    let (beta, fitted, trials) = over_betas(&req.beta, |beta| {
+    let (beta, fitted, trials) = over_betas(&req.beta, req.fit.windows(), |beta| {
         let settings = WienerHammersteinSettings::builder()
             .centres(req.start.centres())
             .margin(req.start.margin())
@@ -144,7 +144,7 @@ pub fn wiener_hammerstein(req: &WienerHammersteinRequest<'_>) -> Result<WienerHa
         discover: None,
         path: None,
     };
-    let (model_file, tables) = written(&mf, &fitted, data)?;
+    let (model_file, tables) = written(&mf, &fitted, data, req.fit.windows())?;
     Ok(WienerHammersteinOutcome {
         bla,
         divisions,

@@ -9,7 +9,9 @@ use structid_core::{Data, Result};
 use crate::effects::name_effect;
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
-use super::by_simulation::{beyond_measurability, fitted_by_simulation};
+use super::by_simulation::{
+    ESTIMATOR as BY_SIMULATION, beyond_measurability, fitted_by_simulation,
+};
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation, identify_hypothesis};
 use super::naming::{naming_settings, non_smooth, subsample};
@@ -124,9 +126,12 @@ impl<'a> Search<'a> {
     /// model: the measured z misled it (a rate differentiated from a noisy y, a z that the
     /// noise reaches around a loop). The location is then fitted by simulation error from the
     /// neutral map ([`fitted_by_simulation`]), and that fit replaces the estimate when it
-    /// simulates the estimation record better.
+    /// simulates the estimation record better. (The two hypotheses are compared by the same
+    /// measure; the trigger compares with the nominal model's gap, whose free run may start
+    /// from an estimated state where a sensor map's hypothesis starts from rest, so it can
+    /// cost a fit that is then not taken, never a wrong choice.)
     fn or_by_simulation(&self, f: Fitted) -> Fitted {
-        if f.result.estimation_rms <= self.estimation_rms {
+        if f.result.estimation_rms <= self.estimation_rms || f.estimator == BY_SIMULATION {
             return f;
         }
         let location = f.result.location;
