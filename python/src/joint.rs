@@ -5,11 +5,10 @@ use std::path::PathBuf;
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use structid_io::{ModelFile, OutputGuard};
 use structid_core::validation::Windows;
+use structid_io::{ModelFile, OutputGuard};
 use structid_workflow::{
-    FitOptions,
-    BetaChoice, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs,
+    BetaChoice, FitOptions, JointRequest, JointWorkflowSettings, refine_joint, write_joint_outputs,
 };
 
 use crate::convert::{self, error, invalid};
