@@ -9,9 +9,7 @@ use structid_core::{Data, Result};
 use crate::effects::name_effect;
 use crate::hypotheses::{Hypothesis, Nominal, Site};
 
-use super::by_simulation::{
-    ESTIMATOR as BY_SIMULATION, beyond_measurability, fitted_by_simulation,
-};
+use super::by_simulation::{beyond_measurability, fitted_by_simulation};
 use super::direction::direction_test;
 use super::fit::{Fitted, by_validation, identify_hypothesis};
 use super::naming::{naming_settings, non_smooth, subsample};
@@ -38,8 +36,6 @@ pub(super) struct Search<'a> {
     pub cancelled: bool,
     /// The nominal model's validation RMS.
     pub gap_rms: f64,
-    /// The nominal model's simulation RMS on the estimation record.
-    pub estimation_rms: f64,
 }
 
 impl<'a> Search<'a> {
@@ -56,7 +52,6 @@ impl<'a> Search<'a> {
             uncertain_g,
             cancelled: cx.cancelled.is_some(),
             gap_rms: cx.validation_gap.rms,
-            estimation_rms: cx.estimation_gap.rms,
         }
     }
 
@@ -72,7 +67,7 @@ impl<'a> Search<'a> {
         for (i, &location) in locations.iter().enumerate() {
             let t = Instant::now();
             match self.identify_at(location, self.settings, true) {
-                Ok(f) => fitted.push(self.or_by_simulation(f)),
+                Ok(f) => fitted.push(f),
                 Err(e) => failed.push(failure(location, "", t, &e)),
             }
             self.settings
@@ -117,27 +112,6 @@ impl<'a> Search<'a> {
                 })
             }
             other => other,
-        }
-    }
-
-    /// A hypothesis nests the nominal model (its map the neutral one: the identity in the
-    /// signal path, zero in feedback), so an estimate that simulates the estimation record
-    /// worse than the nominal model does has failed as an estimate of its own criterion's
-    /// model: the measured z misled it (a rate differentiated from a noisy y, a z that the
-    /// noise reaches around a loop). The location is then fitted by simulation error from the
-    /// neutral map ([`fitted_by_simulation`]), and that fit replaces the estimate when it
-    /// simulates the estimation record better. (The two hypotheses are compared by the same
-    /// measure; the trigger compares with the nominal model's gap, whose free run may start
-    /// from an estimated state where a sensor map's hypothesis starts from rest, so it can
-    /// cost a fit that is then not taken, never a wrong choice.)
-    fn or_by_simulation(&self, f: Fitted) -> Fitted {
-        if f.result.estimation_rms <= self.estimation_rms || f.estimator == BY_SIMULATION {
-            return f;
-        }
-        let location = f.result.location;
-        match fitted_by_simulation(self.given, location, self.est, self.val, self.settings) {
-            Ok(s) if s.result.estimation_rms < f.result.estimation_rms => s,
-            _ => f,
         }
     }
 
