@@ -59,6 +59,9 @@ pub(crate) struct Windowed<'a> {
     starts: Vec<Vec<f64>>,
     /// Each window's state at the last evaluation.
     pub(crate) states: Vec<Vec<f64>>,
+    /// The parameters `states` were projected for (LM asks for the normal equations at the θ
+    /// whose residuals it has just evaluated: the projection is not repeated).
+    projected_at: Option<Vec<f64>>,
     pub(crate) globals: usize,
     regularisers: Regularisers,
 }
@@ -100,6 +103,7 @@ impl<'a> Windowed<'a> {
             spans,
             starts: starts.to_vec(),
             states,
+            projected_at: None,
             globals: *model.parameter_offsets().last().expect("non-empty"),
             regularisers: Regularisers::of(model, data),
         }
@@ -200,6 +204,18 @@ impl<'a> Windowed<'a> {
                 .sum::<f64>();
         })?;
         sum.is_finite().then_some(sum)
+    }
+
+    /// [`Self::project`] for the parameters `theta` of `stepper`'s model, unless the states
+    /// are already theirs.
+    fn project_at(&mut self, theta: &[f64], stepper: &Stepper<'_>) -> Option<()> {
+        if self.projected_at.as_deref() == Some(theta) {
+            return Some(());
+        }
+        self.projected_at = None;
+        self.project(stepper)?;
+        self.projected_at = Some(theta.to_vec());
+        Some(())
     }
 
     /// Every window's state for the model of `stepper`: a function of the parameters alone.
@@ -325,7 +341,7 @@ impl LeastSquaresProblem for Windowed<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
-        self.project(&stepper)?;
+        self.project_at(&theta[..self.globals], &stepper)?;
         let y = self.data.y();
         let mut r = Vec::new();
         for (span, xi) in self.spans.iter().zip(&self.states) {
@@ -354,7 +370,7 @@ impl LeastSquaresProblem for Windowed<'_> {
     ) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
-        self.project(&stepper)?;
+        self.project_at(&theta[..self.globals], &stepper)?;
         let (ny, nxi, pg) = (stepper.outputs(), model.stacked_state_len(), self.globals);
         let p = pg + nxi;
         let mut normal = NormalEquations::new(pg);
