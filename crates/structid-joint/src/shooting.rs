@@ -22,7 +22,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use structid_core::Data;
-use structid_linear::levenberg_marquardt::LeastSquaresProblem;
+use structid_linear::levenberg_marquardt::NormalEquationsProblem;
 use structid_linear::normal_equations::NormalEquations;
 
 use crate::model::JointModel;
@@ -71,12 +71,16 @@ impl Regularisers {
         )
     }
 
-    /// Appends the residuals √L·R_b·θ_b to `out`.
-    pub(crate) fn residuals(&self, theta: &[f64], out: &mut Vec<f64>) {
+    /// The residual vector: the data's residuals `out`, then √L·R_b·θ_b; `None` when any
+    /// is not finite, for a diverged simulation rejects θ.
+    pub(crate) fn residuals(&self, theta: &[f64], mut out: Vec<f64>) -> Option<DVector<f64>> {
         for (at, r) in &self.0 {
             let th = DVector::from_column_slice(&theta[*at..*at + r.ncols()]);
             out.extend((r * th).iter());
         }
+        out.iter()
+            .all(|v| v.is_finite())
+            .then(|| DVector::from_vec(out))
     }
 
     /// Adds their rows (J = R_b on block b's columns) to the normal equations.
@@ -131,7 +135,7 @@ impl<'a> Shooting<'a> {
     }
 }
 
-impl LeastSquaresProblem for Shooting<'_> {
+impl NormalEquationsProblem for Shooting<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
@@ -156,22 +160,11 @@ impl LeastSquaresProblem for Shooting<'_> {
                 );
             }
         }
-        self.regularisers.residuals(theta, &mut r);
-        r.iter()
-            .all(|v| v.is_finite())
-            .then(|| DVector::from_vec(r))
+        self.regularisers.residuals(theta, r)
     }
 
-    fn jacobian(&mut self, _theta: &[f64], _r: &DVector<f64>) -> Option<DMatrix<f64>> {
-        // The normal equations are accumulated directly; a stored Jacobian would be L × P.
-        None
-    }
-
-    fn normal_equations(
-        &mut self,
-        theta: &[f64],
-        _r: &DVector<f64>,
-    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    /// Accumulated segment by segment, each on the columns its rows reach.
+    fn normal_equations(&mut self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
         let (ny, nxi, pg) = (stepper.outputs(), model.stacked_state_len(), self.globals);
@@ -356,7 +349,7 @@ mod tests {
                 }
             }
             let r = p.residuals(&full).unwrap();
-            let (jtj, jtr) = p.normal_equations(&full, &r).unwrap();
+            let (jtj, jtr) = p.normal_equations(&full).unwrap();
             let h = 1e-6;
             let mut jac = DMatrix::zeros(r.len(), full.len());
             for c in 0..full.len() {

@@ -28,7 +28,7 @@
 use nalgebra::{DMatrix, DVector};
 use structid_core::validation::Windows;
 use structid_core::{Data, Signal};
-use structid_linear::levenberg_marquardt::LeastSquaresProblem;
+use structid_linear::levenberg_marquardt::NormalEquationsProblem;
 use structid_linear::normal_equations::NormalEquations;
 
 use crate::error::{JointError, Result};
@@ -337,7 +337,7 @@ pub fn simulate_windows(
     problem.simulation(&stepper)
 }
 
-impl LeastSquaresProblem for Windowed<'_> {
+impl NormalEquationsProblem for Windowed<'_> {
     fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
@@ -352,22 +352,11 @@ impl LeastSquaresProblem for Windowed<'_> {
                 }
             })?;
         }
-        self.regularisers.residuals(theta, &mut r);
-        r.iter()
-            .all(|v| v.is_finite())
-            .then(|| DVector::from_vec(r))
+        self.regularisers.residuals(theta, r)
     }
 
-    fn jacobian(&mut self, _theta: &[f64], _r: &DVector<f64>) -> Option<DMatrix<f64>> {
-        // The normal equations are accumulated window by window.
-        None
-    }
-
-    fn normal_equations(
-        &mut self,
-        theta: &[f64],
-        _r: &DVector<f64>,
-    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    /// Accumulated window by window.
+    fn normal_equations(&mut self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let model = self.model.with_parameters(&theta[..self.globals]).ok()?;
         let stepper = Stepper::new(&model);
         self.project_at(&theta[..self.globals], &stepper)?;
@@ -529,7 +518,7 @@ mod tests {
             let mut p = Windowed::new(&m, &d, w, &starts);
             let th = m.parameters();
             let r = p.residuals(&th).unwrap();
-            let (jtj, _) = p.normal_equations(&th, &r).unwrap();
+            let (jtj, _) = p.normal_equations(&th).unwrap();
             let h = 1e-6;
             let mut jac = DMatrix::zeros(r.len(), th.len());
             for c in 0..th.len() {

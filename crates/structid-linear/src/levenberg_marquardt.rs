@@ -1,7 +1,7 @@
 //! Levenberg–Marquardt for nonlinear least squares: the one implementation of the workspace.
 //!
 //! A problem ([`LeastSquaresProblem`]) gives residuals `r(θ) ∈ ℝᵐ` and their Jacobian
-//! `J = ∂r/∂θ`; the solver ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises
+//! `J = ∂r/∂θ` (or only the normal equations, [`NormalEquationsProblem`]); the solver ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises
 //! the cost `C(θ) = Σ_k r_k(θ)²`. Each iteration forms the normal equations at the current
 //! θ and tries damped steps with Marquardt scaling,
 //!
@@ -103,6 +103,61 @@ pub trait LeastSquaresProblem {
         let jtj = j.transpose() * &j;
         let jtr = j.transpose() * residuals;
         Some((jtj, jtr))
+    }
+}
+
+/// A least-squares problem that accumulates its normal equations `(JᵀJ, Jᵀr)` without ever
+/// forming `J` (for a simulation over a long record, `J` would be samples × parameters).
+/// Implementing it makes the type a [`LeastSquaresProblem`] whose
+/// [`jacobian`](LeastSquaresProblem::jacobian) is `None`, so that no such problem has to
+/// spell out a Jacobian it never has.
+///
+/// ```
+/// use nalgebra::{DMatrix, DVector};
+/// use structid_linear::levenberg_marquardt::{LevenbergMarquardt, LmSettings, NormalEquationsProblem};
+///
+/// /// Fits the mean c of the values: r_k = c − v_k, JᵀJ = n, Jᵀr = Σ r_k.
+/// struct Mean(Vec<f64>);
+/// impl NormalEquationsProblem for Mean {
+///     fn residuals(&mut self, th: &[f64]) -> Option<DVector<f64>> {
+///         Some(DVector::from_iterator(self.0.len(), self.0.iter().map(|v| th[0] - v)))
+///     }
+///     fn normal_equations(&mut self, th: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+///         let n = self.0.len() as f64;
+///         let sum = self.0.iter().map(|v| th[0] - v).sum::<f64>();
+///         Some((DMatrix::from_element(1, 1, n), DVector::from_element(1, sum)))
+///     }
+/// }
+/// let mut problem = Mean(vec![1.0, 2.0, 6.0]);
+/// let fit = LevenbergMarquardt::new(LmSettings::default()).minimize(&mut problem, &[0.0])?;
+/// assert!((fit.theta[0] - 3.0).abs() < 1e-9);
+/// # Ok::<(), structid_linear::LinearError>(())
+/// ```
+pub trait NormalEquationsProblem {
+    /// As [`LeastSquaresProblem::residuals`].
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>>;
+
+    /// The normal equations `(JᵀJ, Jᵀr)` at θ, whose residuals the solver has just evaluated
+    /// (a problem may reuse what that evaluation computed); `None` when they cannot be
+    /// evaluated.
+    fn normal_equations(&mut self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)>;
+}
+
+impl<P: NormalEquationsProblem> LeastSquaresProblem for P {
+    fn residuals(&mut self, theta: &[f64]) -> Option<DVector<f64>> {
+        NormalEquationsProblem::residuals(self, theta)
+    }
+
+    fn jacobian(&mut self, _theta: &[f64], _residuals: &DVector<f64>) -> Option<DMatrix<f64>> {
+        None
+    }
+
+    fn normal_equations(
+        &mut self,
+        theta: &[f64],
+        _residuals: &DVector<f64>,
+    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        NormalEquationsProblem::normal_equations(self, theta)
     }
 }
 

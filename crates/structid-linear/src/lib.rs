@@ -110,7 +110,7 @@ pub use error::LinearError;
 pub use integrators::Stability;
 pub use levenberg_marquardt::{
     LeastSquaresProblem, LevenbergMarquardt, LmConvergence, LmFit, LmSettings, LmSettingsBuilder,
-    LmStatus, covariance_from_normal,
+    LmStatus, NormalEquationsProblem, covariance_from_normal,
 };
 pub use normal_equations::NormalEquations;
 pub use orders::Orders;
