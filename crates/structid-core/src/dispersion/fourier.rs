@@ -221,11 +221,7 @@ impl Dispersion for FourierDispersion {
     }
 
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
-        let kernel = Arc::new(self.kernel_for(z)?);
-        Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
-            map: kernel,
-            z: z.clone(),
-        })))
+        Ok(FeaturePenalty::of(self.kernel_for(z)?, z))
     }
 }
 
@@ -841,19 +837,34 @@ impl FourierKernel {
 /// written in another language pays per call, not per sample).
 const FEATURE_BLOCK: usize = 1024;
 
-/// A quadratic penalty given by a feature map at fixed sample points: K = Ψ Λ Ψᵀ.
-pub(crate) struct FeaturePenalty<F: FeatureMap + Kernel> {
+/// A quadratic penalty given by a feature map at fixed sample points: K = Ψ Λ Ψᵀ, whose Gram
+/// columns come from `kernel`: the map itself for the built-in maps, a kernel wrapped around
+/// it for a user's map (which need not be a [`Kernel`]).
+pub(crate) struct FeaturePenalty<F: FeatureMap, K: Kernel> {
     pub(crate) map: Arc<F>,
+    pub(crate) kernel: Arc<K>,
     pub(crate) z: Signal,
 }
 
-impl<F: FeatureMap + Kernel + 'static> QuadraticPenalty for FeaturePenalty<F> {
+impl<F: FeatureMap + Kernel + 'static> FeaturePenalty<F, F> {
+    /// The penalty at the points `z` of a map that is its own kernel.
+    pub(crate) fn of(map: F, z: &Signal) -> Penalty {
+        let map = Arc::new(map);
+        Penalty::Quadratic(Box::new(Self {
+            kernel: Arc::clone(&map),
+            map,
+            z: z.clone(),
+        }))
+    }
+}
+
+impl<F: FeatureMap + 'static, K: Kernel + 'static> QuadraticPenalty for FeaturePenalty<F, K> {
     fn len(&self) -> usize {
         self.z.len()
     }
 
     fn fill_columns(&self, cols: Range<usize>, out: faer::MatMut<'_, f64>) {
-        self.map.fill_gram_columns(&self.z, cols, out);
+        self.kernel.fill_gram_columns(&self.z, cols, out);
     }
 
     fn interpolant(&self, alpha: Vec<f64>) -> Box<dyn Interpolant> {

@@ -153,10 +153,7 @@ impl Dispersion for LowRankGaussian {
     }
 
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
-        Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
-            map: Arc::new(self.features_for(z)?),
-            z: z.clone(),
-        })))
+        Ok(FeaturePenalty::of(self.features_for(z)?, z))
     }
 }
 

@@ -18,8 +18,6 @@
 //! The normalisation is fixed when the data are seen and travels with the estimate, so N̂ is
 //! evaluated with the same t at new points.
 
-use std::sync::Arc;
-
 use structid_lti::Signal;
 
 use crate::dispersion::fourier::FeaturePenalty;
@@ -111,10 +109,7 @@ impl Dispersion for PolynomialDispersion {
     }
 
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
-        Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
-            map: Arc::new(self.features_for(z)?),
-            z: z.clone(),
-        })))
+        Ok(FeaturePenalty::of(self.features_for(z)?, z))
     }
 }
 

@@ -130,10 +130,10 @@ impl Dispersion for SumDispersion {
             parts.iter().map(|q| q.features().map(|(m, _)| m)).collect();
         if let Some(maps) = maps {
             let width_part = self.width_part();
-            return Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
-                map: Arc::new(StackedFeatures::new(maps, width_part)),
-                z: z.clone(),
-            })));
+            return Ok(FeaturePenalty::of(
+                StackedFeatures::new(maps, width_part),
+                z,
+            ));
         }
         Ok(Penalty::Quadratic(Box::new(SumGram { parts })))
     }

@@ -247,7 +247,7 @@ impl<F: FeatureMap + 'static> FeatureDispersion<F> {
     pub fn new(name: impl Into<String>, map: F) -> Self {
         Self {
             map: Arc::new(Features {
-                map,
+                map: Arc::new(map),
                 name: name.into(),
             }),
         }
@@ -266,25 +266,25 @@ impl<F: FeatureMap + 'static> Dispersion for FeatureDispersion<F> {
 
     fn penalty(&self, z: &Signal) -> Result<Penalty> {
         Ok(Penalty::Quadratic(Box::new(FeaturePenalty {
-            map: Arc::clone(&self.map),
+            map: Arc::clone(&self.map.map),
+            kernel: Arc::clone(&self.map),
             z: z.clone(),
         })))
     }
 
     fn user_kernels(&self) -> UserKernels {
         match self.map.map.stored_features() {
-            Some(StoredKernel::User { name, .. }) => {
-                UserKernels::new().with_features(name, Arc::clone(&self.map) as Arc<dyn FeatureMap>)
-            }
+            Some(StoredKernel::User { name, .. }) => UserKernels::new()
+                .with_features(name, Arc::clone(&self.map.map) as Arc<dyn FeatureMap>),
             _ => UserKernels::new(),
         }
     }
 }
 
-/// A feature map with its name, also a [`Kernel`] K(a, b) = ψ(a)ᵀΛψ(b) (what the feature
-/// penalty needs). Every feature method forwards, so batched overrides keep working.
+/// A user's feature map with its name, as the [`Kernel`] K(a, b) = ψ(a)ᵀΛψ(b) that the
+/// feature penalty takes its Gram columns from.
 struct Features<F: FeatureMap> {
-    map: F,
+    map: Arc<F>,
     name: String,
 }
 
@@ -296,7 +296,7 @@ impl<F: FeatureMap> fmt::Debug for Features<F> {
 
 impl<F: FeatureMap> Kernel for Features<F> {
     fn eval(&self, a: &[f64], b: &[f64]) -> f64 {
-        crate::dispersion::feature_kernel(&self.map, a, b)
+        crate::dispersion::feature_kernel(&*self.map, a, b)
     }
 
     /// K(a_i, b_j) = ψ(a_i)ᵀΛψ(b_j) as one product of the two feature matrices (each
@@ -327,58 +327,6 @@ impl<F: FeatureMap> Kernel for Features<F> {
         self.name.clone()
     }
     fn stored_kernel(&self) -> Option<StoredKernel> {
-        self.map.stored_features()
-    }
-}
-
-impl<F: FeatureMap> FeatureMap for Features<F> {
-    fn dim(&self) -> usize {
-        self.map.dim()
-    }
-    fn weights(&self) -> &[f64] {
-        self.map.weights()
-    }
-    fn eval_into(&self, z: &[f64], out: &mut [f64]) {
-        self.map.eval_into(z, out)
-    }
-    fn eval_rows(&self, z: &Signal, t0: usize, scale: &[f64], rows: &mut [f64]) {
-        self.map.eval_rows(z, t0, scale, rows)
-    }
-    fn eval_cols(
-        &self,
-        z: &Signal,
-        t0: usize,
-        cols: Range<usize>,
-        scale: &[f64],
-        rows: &mut [f64],
-    ) {
-        self.map.eval_cols(z, t0, cols, scale, rows)
-    }
-    fn prepared_len(&self) -> usize {
-        self.map.prepared_len()
-    }
-    fn prepare_rows(&self, z: &Signal, t0: usize, out: &mut [f64]) {
-        self.map.prepare_rows(z, t0, out)
-    }
-    fn eval_cols_prepared(
-        &self,
-        z: &Signal,
-        t0: usize,
-        cols: Range<usize>,
-        scale: &[f64],
-        prepared: &[f64],
-        rows: &mut [f64],
-    ) {
-        self.map
-            .eval_cols_prepared(z, t0, cols, scale, prepared, rows)
-    }
-    fn combine_rows(&self, z: &Signal, t0: usize, coef: &[f64], out: &mut [f64]) {
-        self.map.combine_rows(z, t0, coef, out)
-    }
-    fn weights_at_width(&self, width: f64) -> Option<Vec<f64>> {
-        self.map.weights_at_width(width)
-    }
-    fn stored_features(&self) -> Option<StoredKernel> {
         self.map.stored_features()
     }
 }
