@@ -1,8 +1,8 @@
 //! Levenberg–Marquardt for nonlinear least squares: the one implementation of the workspace.
 //!
 //! A problem ([`LeastSquaresProblem`]) gives residuals `r(θ) ∈ ℝᵐ` and their Jacobian
-//! `J = ∂r/∂θ` (or only the normal equations, [`NormalEquationsProblem`]); the solver ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises
-//! the cost `C(θ) = Σ_k r_k(θ)²`. Each iteration forms the normal equations at the current
+//! `J = ∂r/∂θ` (or only the normal equations, [`NormalEquationsProblem`]); the solver
+//! ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises the cost `C(θ) = Σ_k r_k(θ)²`. Each iteration forms the normal equations at the current
 //! θ and tries damped steps with Marquardt scaling,
 //!
 //! ```text
@@ -110,7 +110,9 @@ pub trait LeastSquaresProblem {
 /// forming `J` (for a simulation over a long record, `J` would be samples × parameters).
 /// Implementing it makes the type a [`LeastSquaresProblem`] whose
 /// [`jacobian`](LeastSquaresProblem::jacobian) is `None`, so that no such problem has to
-/// spell out a Jacobian it never has.
+/// spell out a Jacobian it never has. Where both traits are in scope, call its methods
+/// through the trait (`NormalEquationsProblem::residuals(&mut p, θ)`): both name a
+/// `residuals`.
 ///
 /// ```
 /// use nalgebra::{DMatrix, DVector};
@@ -139,7 +141,7 @@ pub trait NormalEquationsProblem {
 
     /// The normal equations `(JᵀJ, Jᵀr)` at θ, whose residuals the solver has just evaluated
     /// (a problem may reuse what that evaluation computed); `None` when they cannot be
-    /// evaluated.
+    /// evaluated, which stops the search with [`LmStatus::JacobianFailed`].
     fn normal_equations(&mut self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)>;
 }
 
