@@ -2,8 +2,9 @@
 //!
 //! A problem ([`LeastSquaresProblem`]) gives residuals `r(θ) ∈ ℝᵐ` and their Jacobian
 //! `J = ∂r/∂θ` (or only the normal equations, [`NormalEquationsProblem`]); the solver
-//! ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises the cost `C(θ) = Σ_k r_k(θ)²`. Each iteration forms the normal equations at the current
-//! θ and tries damped steps with Marquardt scaling,
+//! ([`LevenbergMarquardt`], configured by [`LmSettings`]) minimises the cost
+//! `C(θ) = Σ_k r_k(θ)²`. Each iteration forms the normal equations at the current θ and
+//! tries damped steps with Marquardt scaling,
 //!
 //! ```text
 //! (JᵀJ + μ diag(JᵀJ)) δ = −Jᵀr,        θ_trial = θ + δ,
